@@ -1,0 +1,101 @@
+"""Static coarse alignment: levelling from the accelerometers, heading from the gyros.
+
+With the vehicle at rest the accelerometers sense ``-g`` and the gyros the
+Earth rate. Solving Wahba's problem with the specific force as the exact
+primary direction (scipy's ``Rotation.align_vectors`` with an infinite
+weight, i.e. TRIAD) gives roll and pitch from gravity alone and the heading
+from the horizontal Earth rate. MEMS gyros cannot sense the Earth rate
+(15 deg/h against biases of 10-1000 deg/h): for them pass
+``use_gyro_heading=False`` and get the heading elsewhere (GNSS velocity).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..attitude import dcm_to_euler, dcm_to_quat
+from ..data import ImuData
+from ..errors import DataError
+from ..geodesy import earth
+
+
+@dataclass(frozen=True)
+class CoarseAlignment:
+    """Result of a static coarse alignment.
+
+    Attributes
+    ----------
+    q_nb : ndarray (4,)
+    rpy : ndarray (3,)
+        Roll, pitch, yaw [rad] (yaw NED, clockwise from north).
+    yaw_sigma_noise : float
+        1-sigma heading error from the gyro white noise over the window [rad]
+        (``sigma_w / (Omega cos lat)`` with ``sigma_w`` the noise of the mean
+        rate, estimated from the data). Gyro bias adds ``b_east / (Omega cos
+        lat)`` on top, which a static alignment cannot separate.
+    level_sigma_noise : float
+        1-sigma roll/pitch error from the accelerometer white noise [rad].
+    mean_f_b, mean_w_b : ndarray (3,)
+        Mean specific force [m/s^2] and angular rate [rad/s] in the body frame.
+    duration : float
+        Window length [s].
+    """
+
+    q_nb: np.ndarray
+    rpy: np.ndarray
+    yaw_sigma_noise: float
+    level_sigma_noise: float
+    mean_f_b: np.ndarray
+    mean_w_b: np.ndarray
+    duration: float
+
+
+def coarse_align(imu: ImuData, lat: float, h: float = 0.0, use_gyro_heading: bool = True,
+                 yaw: float = 0.0) -> CoarseAlignment:
+    """Align a static IMU.
+
+    Parameters
+    ----------
+    imu : ImuData
+        Increments recorded at rest (body frame).
+    lat : float
+        Latitude [rad]; ``h`` height [m].
+    use_gyro_heading : bool
+        Take the heading from the Earth rate (navigation/tactical gyros). If
+        False, only level: the heading is set to ``yaw`` [rad].
+
+    Raises
+    ------
+    DataError
+        If the mean specific force is not within 5 % of gravity (the IMU was
+        moving, or its units are wrong).
+    """
+    T = float(np.sum(imu.dt))
+    f_b = imu.dvel.sum(0) / T
+    w_b = imu.dtheta.sum(0) / T
+    g = earth.normal_gravity(lat, h)
+    if abs(np.linalg.norm(f_b) / g - 1.0) > 0.05:
+        raise DataError(f"mean specific force {np.linalg.norm(f_b):.3f} m/s^2 is not gravity "
+                        f"({g:.3f}): the IMU is not static or its accelerometer units are wrong",
+                        file=imu.source)
+    f_n = np.array([0.0, 0.0, -g])
+    # Noise of the mean: sample std of the per-interval rates / sqrt(count).
+    n = len(imu)
+    sw = np.std(imu.dtheta / imu.dt[:, None], axis=0).mean() / np.sqrt(n)
+    sf = np.std(imu.dvel / imu.dt[:, None], axis=0).mean() / np.sqrt(n)
+    if use_gyro_heading:
+        w_n = earth.earth_rate_ned(lat)
+        rot, _ = Rotation.align_vectors([f_n, w_n], [f_b, w_b], weights=[np.inf, 1.0])
+        c_nb = rot.as_matrix()
+    else:
+        # Level only: roll and pitch from gravity, heading given.
+        roll = np.arctan2(-f_b[1], -f_b[2])
+        pitch = np.arctan2(f_b[0], np.hypot(f_b[1], f_b[2]))
+        c_nb = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
+    return CoarseAlignment(
+        q_nb=dcm_to_quat(c_nb), rpy=dcm_to_euler(c_nb),
+        yaw_sigma_noise=float(sw / (earth.OMEGA_EARTH * np.cos(lat))) if use_gyro_heading else np.nan,
+        level_sigma_noise=float(sf / g), mean_f_b=f_b, mean_w_b=w_b, duration=T)

@@ -1,0 +1,101 @@
+"""Load scenario files (TOML) by shipped name or by path, with located errors."""
+
+from __future__ import annotations
+
+import tomllib
+from importlib import resources
+from pathlib import Path
+
+from pydantic import ValidationError
+
+from ..errors import ConfigError
+from ..ins.imu_model import ImuErrorModel
+from .schema import Scenario
+
+_SHIPPED = "scenarios"
+
+
+def _shipped_dir():
+    return resources.files("mixnav.config").joinpath(_SHIPPED)
+
+
+def list_scenarios() -> dict[str, str]:
+    """Names and one-line descriptions of the scenarios shipped with mixnav."""
+    out = {}
+    for entry in sorted(_shipped_dir().iterdir(), key=lambda p: p.name):
+        if entry.name.endswith(".toml"):
+            data = tomllib.loads(entry.read_text(encoding="utf-8"))
+            out[entry.name[:-5]] = data.get("scenario", {}).get("description", "")
+    return out
+
+
+def resolve(name_or_path: str) -> tuple[str, str]:
+    """The text of a scenario and the name to cite it by in errors."""
+    p = Path(name_or_path)
+    if p.suffix == ".toml" or p.exists():
+        if not p.is_file():
+            raise ConfigError("no such scenario file", file=str(p))
+        return p.read_text(encoding="utf-8"), str(p)
+    entry = _shipped_dir().joinpath(f"{name_or_path}.toml")
+    if not entry.is_file():
+        known = ", ".join(list_scenarios())
+        raise ConfigError(f"unknown scenario '{name_or_path}'; shipped scenarios: {known} "
+                          "(or give the path of a .toml file)")
+    return entry.read_text(encoding="utf-8"), f"{name_or_path}.toml (shipped)"
+
+
+def _key(loc) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif part in ("static", "uniform", "accelerate", "turn", "climb") and out.endswith("]"):
+            continue  # the discriminated-union tag pydantic puts in the path
+        else:
+            out += ("." if out else "") + str(part)
+    return out
+
+
+def load_scenario(name_or_path: str) -> tuple[Scenario, str, str]:
+    """Parse and validate a scenario.
+
+    Returns
+    -------
+    scenario : Scenario
+        Validated, in SI units.
+    source : str
+        The file it came from (for messages and reports).
+    text : str
+        The file's text (for the report).
+
+    Raises
+    ------
+    ConfigError
+        Naming the file and the dotted key of the first problem.
+    """
+    text, source = resolve(name_or_path)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"not valid TOML: {exc}", file=source) from None
+    try:
+        sc = Scenario.model_validate(data)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        key = _key(err["loc"])
+        msg = {"extra_forbidden": "unknown key (check the spelling against docs/scenarios.md)",
+               "missing": "required key is missing"}.get(err["type"], err["msg"])
+        if msg.startswith("Value error, "):
+            msg = msg[len("Value error, "):]
+        more = f" (and {len(exc.errors()) - 1} more problem(s))" if len(exc.errors()) > 1 else ""
+        raise ConfigError(msg + more, file=source, key=key) from None
+    # IMU errors are checked here too so that a bad value fails at load time.
+    imu_model(sc.imu.grade, sc.imu.errors, source, "imu.errors")
+    for i, m in enumerate(sc.methods):
+        if m.imu_grade is not None or m.imu_errors is not None:
+            imu_model(m.imu_grade, m.imu_errors or {}, source, f"methods[{i}].imu_errors")
+    return sc, source, text
+
+
+def imu_model(grade, errors, source, prefix) -> ImuErrorModel:
+    return ImuErrorModel.from_datasheet(errors, grade=grade, source=source, key_prefix=prefix)

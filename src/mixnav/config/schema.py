@@ -1,0 +1,194 @@
+"""The strict schema of scenario files.
+
+Every key is known (an unknown key is an error), every value with a unit
+carries it as text (``"2 deg/h"``) and is converted to SI here, through
+:mod:`mixnav.units`, once, at load time. The models hold SI floats after
+validation, so nothing downstream parses units again.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal, Union
+
+import numpy as np
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
+
+from .. import units as u
+
+
+def _quantity(dim, positive: bool = False, nonnegative: bool = False):
+    def parse(v):
+        if isinstance(v, bool):
+            raise ValueError("expected a quantity with a unit, e.g. '2 deg/h'")
+        x = u.parse_quantity(v, dim)
+        if positive and not x > 0:
+            raise ValueError(f"must be positive, got {v!r}")
+        if nonnegative and not x >= 0:
+            raise ValueError(f"must not be negative, got {v!r}")
+        return x
+    return Annotated[float, BeforeValidator(parse)]
+
+
+def _vector(dim, positive: bool = False):
+    item = _quantity(dim, positive=positive)
+
+    def check_len(v):
+        if not isinstance(v, (list, tuple)) or len(v) != 3:
+            raise ValueError("expected a list of three quantities, e.g. [\"1 m\", \"1 m\", \"2 m\"]")
+        return v
+    return Annotated[tuple[item, item, item], BeforeValidator(check_len)]
+
+
+Angle = _quantity(u.ANGLE)
+Rate = _quantity(u.ANGULAR_RATE)
+Length = _quantity(u.LENGTH)
+Speed = _quantity(u.VELOCITY, nonnegative=True)
+Accel = _quantity(u.ACCELERATION)
+Duration = _quantity(u.TIME, positive=True)
+Time = _quantity(u.TIME, nonnegative=True)
+Frequency = _quantity(u.FREQUENCY, positive=True)
+PosSigma = _vector(u.LENGTH, positive=True)
+VelSigma = _vector(u.VELOCITY, positive=True)
+AngSigma = _vector(u.ANGLE, positive=True)
+LengthVec = _vector(u.LENGTH)
+AngleVec = _vector(u.ANGLE)
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class ScenarioInfo(Strict):
+    name: str
+    description: str = ""
+    seed: Annotated[int, Field(ge=0)] = 0
+
+
+class StaticSegment(Strict):
+    type: Literal["static"]
+    duration: Duration
+
+
+class UniformSegment(Strict):
+    type: Literal["uniform"]
+    duration: Duration
+
+
+class AccelerateSegment(Strict):
+    type: Literal["accelerate"]
+    duration: Duration
+    acceleration: Accel
+
+
+class TurnSegment(Strict):
+    """A level turn: give the yaw rate or the total heading change."""
+
+    type: Literal["turn"]
+    duration: Duration
+    yaw_rate: Rate | None = None
+    angle: Angle | None = None
+
+    @model_validator(mode="after")
+    def _one_of(self):
+        if (self.yaw_rate is None) == (self.angle is None):
+            raise ValueError("give exactly one of 'yaw_rate' or 'angle'")
+        return self
+
+    @property
+    def rate(self) -> float:
+        return self.yaw_rate if self.yaw_rate is not None else self.angle / self.duration
+
+
+class ClimbSegment(Strict):
+    """A pitch change (negative to descend): give the pitch rate or the angle."""
+
+    type: Literal["climb"]
+    duration: Duration
+    pitch_rate: Rate | None = None
+    angle: Angle | None = None
+
+    @model_validator(mode="after")
+    def _one_of(self):
+        if (self.pitch_rate is None) == (self.angle is None):
+            raise ValueError("give exactly one of 'pitch_rate' or 'angle'")
+        return self
+
+    @property
+    def rate(self) -> float:
+        return self.pitch_rate if self.pitch_rate is not None else self.angle / self.duration
+
+
+Segment = Annotated[
+    Union[StaticSegment, UniformSegment, AccelerateSegment, TurnSegment, ClimbSegment],
+    Field(discriminator="type"),
+]
+
+
+class TrajectoryConfig(Strict):
+    start: Annotated[tuple[Angle, Angle, Length], BeforeValidator(
+        lambda v: v if isinstance(v, (list, tuple)) and len(v) == 3 else
+        (_ for _ in ()).throw(ValueError("expected [latitude, longitude, height] with units")))]
+    attitude: AngleVec = (0.0, 0.0, 0.0)
+    speed: Speed = 0.0
+    segments: list[Segment]
+
+
+class ImuConfig(Strict):
+    rate: Frequency
+    grade: str | None = None
+    errors: dict[str, str] = Field(default_factory=dict)
+
+
+class GnssConfig(Strict):
+    rate: Frequency
+    position_sigma: PosSigma
+    velocity_sigma: VelSigma | None = None
+    lever_arm: LengthVec = (0.0, 0.0, 0.0)
+    outages: list[tuple[Time, Time]] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _outages_ordered(self):
+        for i, (a, b) in enumerate(self.outages):
+            if not b > a:
+                raise ValueError(f"outage {i} ends ({b:g} s) before it starts ({a:g} s)")
+        return self
+
+
+class InitConfig(Strict):
+    """1-sigma initial errors: the filter starts at truth plus a draw of these."""
+
+    attitude_sigma: AngSigma
+    velocity_sigma: VelSigma
+    position_sigma: PosSigma
+
+
+class MethodConfig(Strict):
+    name: str
+    type: Literal["loose-ekf"]
+    states: Literal[15, 17, 21] = 15
+    covariance_interval: Duration = 1.0
+    imu_grade: str | None = None
+    imu_errors: dict[str, str] | None = None
+
+
+class Scenario(Strict):
+    scenario: ScenarioInfo
+    trajectory: TrajectoryConfig
+    imu: ImuConfig
+    gnss: GnssConfig
+    init: InitConfig
+    methods: list[MethodConfig] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _unique_methods(self):
+        names = [m.name for m in self.methods]
+        if len(set(names)) != len(names):
+            raise ValueError(f"method names must be unique, got {names}")
+        return self
+
+    @property
+    def duration(self) -> float:
+        return float(sum(s.duration for s in self.trajectory.segments))
+
+    def vector(self, v) -> np.ndarray:
+        return np.asarray(v, dtype=float)

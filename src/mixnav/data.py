@@ -1,0 +1,143 @@
+"""In-memory data types shared by the simulator, the readers and the filters.
+
+Plain frozen dataclasses of numpy arrays, validated once when built, so the
+filters can trust them. Times are seconds on one time axis (GPS time of week
+for real data, seconds since start for simulation).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .attitude import quat_to_euler
+from .errors import DataError
+
+
+def _check(cond: bool, msg: str, source: str | None) -> None:
+    if not cond:
+        raise DataError(msg, file=source)
+
+
+def _finite(name: str, a: np.ndarray, source: str | None) -> None:
+    if not np.all(np.isfinite(a)):
+        bad = np.argwhere(~np.isfinite(a))[0]
+        raise DataError(f"{name} has a non-finite value at index {tuple(int(i) for i in bad)}", file=source)
+
+
+@dataclass(frozen=True)
+class ImuData:
+    """IMU angle and velocity increments.
+
+    Attributes
+    ----------
+    time : ndarray (N,)
+        End time of each increment [s], strictly increasing.
+    dt : ndarray (N,)
+        Length of each increment's interval [s]; the interval is
+        ``(time - dt, time]``.
+    dtheta : ndarray (N, 3)
+        Angle increments in the IMU (body) frame [rad].
+    dvel : ndarray (N, 3)
+        Velocity increments of specific force in the body frame [m/s].
+    source : str or None
+        Where the data came from (file name), for error messages.
+    """
+
+    time: np.ndarray
+    dt: np.ndarray
+    dtheta: np.ndarray
+    dvel: np.ndarray
+    source: str | None = None
+
+    def __post_init__(self):
+        n = len(self.time)
+        _check(self.dt.shape == (n,) and self.dtheta.shape == (n, 3) and self.dvel.shape == (n, 3),
+               f"IMU arrays disagree in shape: time {self.time.shape}, dt {self.dt.shape}, "
+               f"dtheta {self.dtheta.shape}, dvel {self.dvel.shape}", self.source)
+        for name in ("time", "dt", "dtheta", "dvel"):
+            _finite(name, getattr(self, name), self.source)
+        _check(bool(np.all(self.dt > 0)), "IMU dt must be positive", self.source)
+
+    @property
+    def start_time(self) -> float:
+        return float(self.time[0] - self.dt[0])
+
+    def __len__(self) -> int:
+        return len(self.time)
+
+
+@dataclass(frozen=True)
+class GnssFixes:
+    """GNSS position (and optionally velocity) fixes of the antenna.
+
+    Attributes
+    ----------
+    time : ndarray (M,)
+        Fix times [s], strictly increasing.
+    lla : ndarray (M, 3)
+        Latitude, longitude [rad], ellipsoidal height [m].
+    pos_sigma : ndarray (M, 3)
+        1-sigma position error north, east, down [m].
+    vel_n : ndarray (M, 3) or None
+        Velocity north, east, down [m/s].
+    vel_sigma : ndarray (M, 3) or None
+        1-sigma velocity error [m/s].
+    """
+
+    time: np.ndarray
+    lla: np.ndarray
+    pos_sigma: np.ndarray
+    vel_n: np.ndarray | None = None
+    vel_sigma: np.ndarray | None = None
+    source: str | None = None
+
+    def __post_init__(self):
+        m = len(self.time)
+        _check(self.lla.shape == (m, 3) and self.pos_sigma.shape == (m, 3),
+               "GNSS time, lla and pos_sigma disagree in shape", self.source)
+        _check((self.vel_n is None) == (self.vel_sigma is None),
+               "GNSS velocity and its sigma must be given together", self.source)
+        _finite("lla", self.lla, self.source)
+        _check(bool(np.all(self.pos_sigma > 0)), "GNSS position sigma must be positive", self.source)
+        if self.vel_n is not None:
+            _check(self.vel_n.shape == (m, 3) and self.vel_sigma.shape == (m, 3),
+                   "GNSS velocity arrays disagree in shape", self.source)
+            _finite("vel_n", self.vel_n, self.source)
+            _check(bool(np.all(self.vel_sigma > 0)), "GNSS velocity sigma must be positive", self.source)
+        if m > 1:
+            _check(bool(np.all(np.diff(self.time) > 0)), "GNSS times must increase strictly", self.source)
+
+    def __len__(self) -> int:
+        return len(self.time)
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """Navigation states over time (truth, reference or solution).
+
+    Attributes
+    ----------
+    time : ndarray (N,)
+    lla : ndarray (N, 3)
+        Latitude, longitude [rad], ellipsoidal height [m].
+    v_n : ndarray (N, 3)
+        Velocity north, east, down [m/s].
+    q_nb : ndarray (N, 4)
+        Attitude quaternion, body to NED, scalar first.
+    """
+
+    time: np.ndarray
+    lla: np.ndarray
+    v_n: np.ndarray
+    q_nb: np.ndarray
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def rpy(self) -> np.ndarray:
+        """Roll, pitch, yaw [rad], shape (N, 3)."""
+        return quat_to_euler(self.q_nb)
+
+    def __len__(self) -> int:
+        return len(self.time)

@@ -1,0 +1,279 @@
+"""The closed-loop error-state EKF (method M1) and its run loop.
+
+The loop is the same for every error-state filter in mixnav:
+
+1. collect event times (measurement epochs, output epochs, and a covariance
+   step at least every ``covariance_interval``), split the IMU increments at
+   them (:mod:`mixnav.filters.timing`);
+2. for each event: mechanize the increments up to it and propagate the
+   covariance in one compiled call (:func:`propagate_block`);
+3. at a measurement epoch: form ``(z, H, R)``, apply the Kalman correction,
+   feed the error estimate back into the INS and the sensor-error estimates,
+   and reset the error state to zero (closed loop);
+4. at an output epoch: record the state and its 1-sigma.
+
+Numerical recoveries (each counted in ``FilterResult.recoveries``):
+
+``rejected_not_pd``   innovation covariance not positive definite: epoch skipped
+``rejected_absurd``   innovation beyond ``absurd_sigma`` standard deviations
+                      (default 1e4, i.e. a units or timing blunder, not noise):
+                      epoch skipped
+``covariance_repair`` a variance of P went non-positive: P rebuilt from its
+                      symmetric eigen-decomposition with eigenvalues floored
+                      at 1e-12 of its largest
+
+A non-finite value in P or the state raises :class:`NumericalError` naming
+the epoch: results never silently carry NaN.
+"""
+
+from __future__ import annotations
+
+import time as _time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..data import ImuData
+from ..errors import ConfigError, NumericalError
+from ..ins._error_kernels import apply_feedback, propagate_block
+from ..ins.error_model import ClockModel, StateLayout, process_noise
+from ..ins.imu_model import ImuErrorModel
+from .kalman import OK, innovation_is_absurd, kalman_update
+from .timing import split_at_times
+
+
+@dataclass(frozen=True)
+class InitialState:
+    """Initial navigation estimate and its 1-sigma uncertainty.
+
+    Attributes
+    ----------
+    time : float
+        [s]; must be the start of the IMU data or later.
+    nav : ndarray (10,)
+        ``[q_nb(4), v_n(3), lat, lon, h]``.
+    sigma_att : ndarray (3,)
+        Attitude error sigma as a rotation vector in NED [rad].
+    sigma_vel, sigma_pos : ndarray (3,)
+        [m/s], NED [m].
+    sigma_clock : ndarray (2,)
+        Clock bias [m] and drift [m/s] sigma (17-state layout only).
+    """
+
+    time: float
+    nav: np.ndarray
+    sigma_att: np.ndarray
+    sigma_vel: np.ndarray
+    sigma_pos: np.ndarray
+    sigma_clock: np.ndarray = field(default_factory=lambda: np.array([10.0, 1.0]))
+
+
+@dataclass
+class FilterResult:
+    """What a filter run produces.
+
+    Attributes
+    ----------
+    time : ndarray (K,)
+        Output epochs [s].
+    nav : ndarray (K, 10)
+        State at each output epoch (after any update there).
+    sigma : ndarray (K, n)
+        1-sigma of each error state.
+    gnss_used : ndarray of bool (K,)
+        An update was applied at this epoch.
+    sensor : ndarray (K, 12)
+        Sensor-error estimates ``[bg, ba, sg, sa]``.
+    pv_cov : ndarray (K, 6, 6)
+        Covariance of the velocity and position errors (for NEES).
+    nis : ndarray (M,)
+        NIS of each applied update, and ``nis_dim`` its dimension.
+    recoveries : dict
+        Counts of each numerical recovery (see module docstring).
+    timing : dict
+        ``epoch_time_mean_us`` (all filter work, mechanization included,
+        divided by the number of measurement epochs), ``update_time_mean_us``
+        (measurement model, correction and feedback only), ``wall_time_s``.
+    """
+
+    time: np.ndarray
+    nav: np.ndarray
+    sigma: np.ndarray
+    gnss_used: np.ndarray
+    sensor: np.ndarray
+    nis: np.ndarray
+    nis_dim: np.ndarray
+    pv_cov: np.ndarray
+    recoveries: dict
+    timing: dict
+    layout: StateLayout
+    P: np.ndarray | None = None
+
+
+class ErrorStateEkf:
+    """Closed-loop error-state EKF on the strapdown INS (method M1).
+
+    Parameters
+    ----------
+    layout : StateLayout
+        Which error states to carry (15, 17 or 21).
+    imu_model : ImuErrorModel
+        The filter's model of the IMU (sets Q and the initial sensor sigma).
+    covariance_interval : float
+        Longest covariance propagation step [s] (at most 1 s; see
+        :func:`mixnav.ins._error_kernels.discretize`).
+    absurd_sigma : float
+        Innovations beyond this many standard deviations are rejected as
+        blunders (counted).
+    clock : ClockModel, optional
+        Receiver clock noise (17-state layout).
+    """
+
+    def __init__(self, layout: StateLayout, imu_model: ImuErrorModel,
+                 covariance_interval: float = 1.0, absurd_sigma: float = 1e4,
+                 clock: ClockModel | None = None):
+        if not 0.0 < covariance_interval <= 1.0:
+            raise ConfigError("must be in (0, 1] s", key="covariance_interval")
+        self.layout = layout
+        self.imu_model = imu_model
+        self.covariance_interval = float(covariance_interval)
+        self.absurd_sigma = float(absurd_sigma)
+        self.qc, self.tau, self.sensor_sigma0 = process_noise(layout, imu_model, clock)
+
+    def initial_covariance(self, init: InitialState) -> np.ndarray:
+        lay = self.layout
+        s = self.sensor_sigma0.copy()
+        s[lay.att] = init.sigma_att
+        s[lay.vel] = init.sigma_vel
+        s[lay.pos] = init.sigma_pos
+        if lay.clk >= 0:
+            s[lay.clk:lay.clk + 2] = init.sigma_clock
+        return np.diag(s ** 2)
+
+    def run(self, imu: ImuData, init: InitialState, measurements=(),
+            output_times: np.ndarray | None = None) -> FilterResult:
+        """Run the filter over the IMU data.
+
+        Parameters
+        ----------
+        imu : ImuData
+            Raw increments.
+        init : InitialState
+        measurements : sequence of measurement models
+            Each has ``times`` and ``measure(i, nav, w_b, clock) -> (z, H, R) | None``
+            (``R`` full, or its diagonal as a 1-D array).
+        output_times : ndarray, optional
+            Where to record the state; default: every measurement epoch and
+            every ``covariance_interval``.
+        """
+        lay = self.layout
+        t0, t1 = init.time, float(imu.time[-1])
+        if t0 < imu.start_time - 1e-9:
+            raise ConfigError(f"initial time {t0} is before the first IMU sample {imu.start_time}",
+                              key="init.time")
+        grid = np.arange(t0 + self.covariance_interval, t1 + 1e-9, self.covariance_interval)
+        meas_events = []  # (time, model index, sample index)
+        for mi, model in enumerate(measurements):
+            mt = np.asarray(model.times)
+            sel = np.nonzero((mt > t0) & (mt <= t1))[0]
+            meas_events += [(float(mt[i]), mi, int(i)) for i in sel]
+        meas_events.sort()
+        out_t = grid if output_times is None else np.asarray(output_times, dtype=float)
+        out_t = out_t[(out_t > t0) & (out_t <= t1)]
+        if output_times is None and meas_events:
+            out_t = np.union1d(out_t, [e[0] for e in meas_events])
+        times = np.union1d(np.union1d(grid, out_t), [e[0] for e in meas_events])
+        times = times[np.concatenate([[True], np.diff(times) > 1e-6])] if len(times) else times
+        # Start at the first IMU sample at or after t0.
+        k0 = int(np.searchsorted(imu.time, t0 - 1e-6))
+        if k0 > 0 and abs(imu.time[k0 - 1] - t0) > 1e-6 and abs(imu.time[k0] - t0) > 1e-6:
+            imu, _ = split_at_times(imu, np.array([t0]))
+            k0 = int(np.searchsorted(imu.time, t0 - 1e-6))
+        elif abs(imu.time[k0] - t0) <= 1e-6:
+            k0 += 1
+        imu_s, ends = split_at_times(imu, times)
+
+        nav = np.array(init.nav, dtype=float)
+        prev = np.zeros(6)
+        sensor = np.zeros(12)
+        clock = np.zeros(2)
+        P = self.initial_covariance(init)
+        work = np.empty((4, lay.n, lay.n))
+        layout_arr = lay.as_array()
+        recov = {"rejected_not_pd": 0, "rejected_absurd": 0, "covariance_repair": 0}
+        n_out = len(out_t)
+        rec_nav = np.empty((n_out, 10))
+        rec_sig = np.empty((n_out, lay.n))
+        rec_used = np.zeros(n_out, dtype=bool)
+        rec_sensor = np.empty((n_out, 12))
+        rec_pv = np.empty((n_out, 6, 6))
+        nis_list, nis_dim = [], []
+        is_out = np.isin(times, out_t)
+        ev_by_time = {}
+        for e in meas_events:
+            ev_by_time.setdefault(round(e[0], 6), []).append(e)
+        x0 = np.zeros(lay.n)
+        update_time = 0.0
+        n_updates = 0
+        io = 0
+        start = k0
+        wall0 = _time.perf_counter()
+        for ti, t in enumerate(times):
+            end = int(ends[ti]) + 1
+            T = propagate_block(nav, prev, sensor, imu_s.dtheta[start:end], imu_s.dvel[start:end],
+                                imu_s.dt[start:end], P, self.qc, layout_arr, self.tau, work)
+            if lay.clk >= 0:
+                clock[0] += clock[1] * T
+            start = end
+            used = False
+            for (_, mi, i) in ev_by_time.get(round(t, 6), ()):
+                tu = _time.perf_counter()
+                w_b = prev[0:3] / imu_s.dt[end - 1]
+                zhr = measurements[mi].measure(i, nav, w_b, clock)
+                if zhr is not None:
+                    z, H, r = zhr
+                    R = np.diag(r) if r.ndim == 1 else r
+                    if innovation_is_absurd(z, H, P, np.diag(R).copy(), self.absurd_sigma):
+                        recov["rejected_absurd"] += 1
+                    else:
+                        dx, P_new, nis, status = kalman_update(x0, P, z, H, R)
+                        if status == OK:
+                            P = P_new
+                            apply_feedback(nav, sensor, clock, dx, layout_arr)
+                            self._check_covariance(P, t, recov)
+                            nis_list.append(nis)
+                            nis_dim.append(len(z))
+                            used = True
+                        else:
+                            recov["rejected_not_pd"] += 1
+                update_time += _time.perf_counter() - tu
+                n_updates += 1
+            if not np.isfinite(nav).all():
+                raise NumericalError(f"INS state became non-finite at t = {t:.3f} s")
+            if is_out[ti]:
+                rec_nav[io] = nav
+                rec_sig[io] = np.sqrt(np.diag(P))
+                rec_used[io] = used
+                rec_sensor[io] = sensor
+                rec_pv[io] = P[3:9, 3:9]
+                io += 1
+        wall = _time.perf_counter() - wall0
+        n_ep = max(n_updates, 1)
+        return FilterResult(
+            time=out_t[:io], nav=rec_nav[:io], sigma=rec_sig[:io], gnss_used=rec_used[:io],
+            sensor=rec_sensor[:io], pv_cov=rec_pv[:io], nis=np.array(nis_list), nis_dim=np.array(nis_dim, dtype=int),
+            recoveries=recov, layout=lay, P=P,
+            timing={"epoch_time_mean_us": wall / n_ep * 1e6,
+                    "update_time_mean_us": update_time / n_ep * 1e6,
+                    "wall_time_s": wall, "measurement_epochs": n_updates},
+        )
+
+    @staticmethod
+    def _check_covariance(P, t, recov) -> None:
+        if not np.isfinite(P).all():
+            raise NumericalError(f"covariance became non-finite at t = {t:.3f} s")
+        if np.any(np.diag(P) <= 0.0):
+            w, v = np.linalg.eigh(P)
+            w = np.maximum(w, 1e-12 * w.max())
+            P[:, :] = (v * w) @ v.T
+            recov["covariance_repair"] += 1

@@ -1,0 +1,211 @@
+"""IMU error models and named grades in datasheet units.
+
+The sensor model (per axis, every IMU interval of length dt)::
+
+    dtheta_meas = (1 + sg) dtheta + (bg0 + bg_t) dt + ARW-noise
+    dvel_meas   = (1 + sa) dvel   + (ba0 + ba_t) dt + VRW-noise
+
+with the turn-on biases ``bg0, ba0`` and scale factors ``sg, sa`` drawn once
+per run, the in-run biases ``bg_t, ba_t`` first-order Gauss-Markov processes
+(steady-state sigma = bias instability, correlation time tau) plus an optional
+random walk, and white noise whose increment variance is ``ARW^2 dt``.
+
+Grades are written as a datasheet writes them and parsed by
+:mod:`mixnav.units`, the one place units are converted.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+from scipy.signal import lfilter
+
+from .. import units as u
+from ..data import ImuData
+from ..errors import ConfigError
+
+#: Datasheet text and dimension of every field, in field order.
+FIELD_UNITS = {
+    "gyro_bias": u.ANGULAR_RATE,
+    "gyro_bias_instability": u.ANGULAR_RATE,
+    "gyro_bias_tau": u.TIME,
+    "gyro_bias_walk": u.GYRO_BIAS_DRIFT,
+    "arw": u.ANGLE_RANDOM_WALK,
+    "gyro_scale": u.DIMENSIONLESS,
+    "accel_bias": u.ACCELERATION,
+    "accel_bias_instability": u.ACCELERATION,
+    "accel_bias_tau": u.TIME,
+    "accel_bias_walk": u.ACCEL_BIAS_DRIFT,
+    "vrw": u.VELOCITY_RANDOM_WALK,
+    "accel_scale": u.DIMENSIONLESS,
+}
+
+GRADES: dict[str, dict[str, str]] = {
+    # Ring-laser-gyro navigation grade (the P1 "RLG" row is of this class).
+    "navigation": {
+        "gyro_bias": "0.005 deg/h", "gyro_bias_instability": "0.003 deg/h", "gyro_bias_tau": "3600 s",
+        "arw": "0.002 deg/sqrt(h)", "gyro_scale": "5 ppm",
+        "accel_bias": "25 ug", "accel_bias_instability": "10 ug", "accel_bias_tau": "3600 s",
+        "vrw": "5 ug/sqrt(Hz)", "accel_scale": "20 ppm",
+    },
+    # Fibre-optic / high-end MEMS tactical grade.
+    "tactical": {
+        "gyro_bias": "1 deg/h", "gyro_bias_instability": "0.5 deg/h", "gyro_bias_tau": "3600 s",
+        "arw": "0.1 deg/sqrt(h)", "gyro_scale": "100 ppm",
+        "accel_bias": "300 ug", "accel_bias_instability": "50 ug", "accel_bias_tau": "3600 s",
+        "vrw": "50 ug/sqrt(Hz)", "accel_scale": "300 ppm",
+    },
+    # Industrial / automotive MEMS.
+    "mems": {
+        "gyro_bias": "10 deg/h", "gyro_bias_instability": "5 deg/h", "gyro_bias_tau": "3600 s",
+        "arw": "0.3 deg/sqrt(h)", "gyro_scale": "1000 ppm",
+        "accel_bias": "1 mg", "accel_bias_instability": "100 ug", "accel_bias_tau": "3600 s",
+        "vrw": "100 ug/sqrt(Hz)", "accel_scale": "1000 ppm",
+    },
+}
+
+
+@dataclass(frozen=True)
+class ImuErrorModel:
+    """IMU error parameters in SI units (rad, m, s); 1-sigma values.
+
+    Attributes
+    ----------
+    gyro_bias : float
+        Turn-on bias, drawn per run [rad/s].
+    gyro_bias_instability : float
+        Steady-state sigma of the in-run Gauss-Markov bias [rad/s].
+    gyro_bias_tau : float
+        Its correlation time [s] (``inf``: no Gauss-Markov part).
+    gyro_bias_walk : float
+        Bias random-walk density [rad/s^1.5].
+    arw : float
+        Angle random walk [rad/sqrt(s)].
+    gyro_scale : float
+        Scale-factor error, drawn per run [-].
+    accel_* , vrw :
+        The accelerometer counterparts [m/s^2, s, m/s^2.5, m/s^1.5, -].
+    """
+
+    gyro_bias: float = 0.0
+    gyro_bias_instability: float = 0.0
+    gyro_bias_tau: float = 3600.0
+    gyro_bias_walk: float = 0.0
+    arw: float = 0.0
+    gyro_scale: float = 0.0
+    accel_bias: float = 0.0
+    accel_bias_instability: float = 0.0
+    accel_bias_tau: float = 3600.0
+    accel_bias_walk: float = 0.0
+    vrw: float = 0.0
+    accel_scale: float = 0.0
+
+    def __post_init__(self):
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if not (v >= 0.0):  # also catches NaN
+                raise ConfigError(f"must be non-negative, got {v!r}", key=f.name)
+        for tau in ("gyro_bias_tau", "accel_bias_tau"):
+            if getattr(self, tau) <= 0.0:
+                raise ConfigError("correlation time must be positive", key=tau)
+
+    @classmethod
+    def from_datasheet(cls, values: dict[str, str], grade: str | None = None,
+                       source: str | None = None, key_prefix: str = "imu") -> "ImuErrorModel":
+        """Build from datasheet strings (``"2 deg/h"``), optionally over a grade.
+
+        Parameters
+        ----------
+        values : dict
+            Field name to quantity text; overrides the grade's entries.
+        grade : str, optional
+            One of :data:`GRADES`.
+        """
+        texts: dict[str, str] = {}
+        if grade is not None:
+            if grade not in GRADES:
+                raise ConfigError(f"unknown IMU grade '{grade}'; known: {', '.join(GRADES)}",
+                                  file=source, key=f"{key_prefix}.grade")
+            texts.update(GRADES[grade])
+        texts.update(values)
+        si = {}
+        for name, text in texts.items():
+            if name not in FIELD_UNITS:
+                raise ConfigError(f"unknown IMU error field; known: {', '.join(FIELD_UNITS)}",
+                                  file=source, key=f"{key_prefix}.{name}")
+            try:
+                si[name] = u.parse_quantity(text, FIELD_UNITS[name])
+            except u.UnitError as exc:
+                raise ConfigError(str(exc), file=source, key=f"{key_prefix}.{name}") from None
+        try:
+            return cls(**si)
+        except ConfigError as exc:
+            raise ConfigError(exc.message, file=source, key=f"{key_prefix}.{exc.key}") from None
+
+    def scaled_noise(self, factor: float) -> "ImuErrorModel":
+        """The same model with white noise (ARW, VRW) scaled by ``factor``."""
+        return replace(self, arw=self.arw * factor, vrw=self.vrw * factor)
+
+
+@dataclass(frozen=True)
+class ImuErrorDraw:
+    """The per-run constants drawn from an :class:`ImuErrorModel` (SI)."""
+
+    gyro_bias: np.ndarray
+    accel_bias: np.ndarray
+    gyro_scale: np.ndarray
+    accel_scale: np.ndarray
+
+
+def _gauss_markov(rng, n, dt, sigma, tau):
+    """Stationary first-order Gauss-Markov samples, shape (n, 3)."""
+    if sigma == 0.0 or not np.isfinite(tau):
+        return np.zeros((n, 3))
+    a = np.exp(-dt / tau)
+    w = rng.standard_normal((n, 3)) * sigma * np.sqrt(1.0 - a * a)
+    x0 = rng.standard_normal(3) * sigma
+    # x_k = a x_{k-1} + w_k, started in steady state.
+    y, _ = lfilter([1.0], [1.0, -a], w, axis=0, zi=(a * x0)[None, :])
+    return y
+
+
+def corrupt(imu: ImuData, model: ImuErrorModel, rng: np.random.Generator,
+            white_noise: "callable | None" = None) -> tuple[ImuData, ImuErrorDraw]:
+    """Apply the error model to ideal increments.
+
+    Parameters
+    ----------
+    imu : ImuData
+        Ideal increments at a constant rate.
+    model : ImuErrorModel
+    rng : numpy.random.Generator
+        The run's ``imu`` stream.
+    white_noise : callable, optional
+        ``white_noise(rng, shape) -> ndarray`` of unit-variance samples, to
+        replace the standard normal (non-Gaussian process noise scenarios).
+
+    Returns
+    -------
+    ImuData, ImuErrorDraw
+        The measured increments and the constants that were drawn.
+    """
+    n = len(imu)
+    dt = float(np.median(imu.dt))
+    draw = ImuErrorDraw(
+        gyro_bias=rng.standard_normal(3) * model.gyro_bias,
+        accel_bias=rng.standard_normal(3) * model.accel_bias,
+        gyro_scale=rng.standard_normal(3) * model.gyro_scale,
+        accel_scale=rng.standard_normal(3) * model.accel_scale,
+    )
+    noise = white_noise or (lambda g, shape: g.standard_normal(shape))
+    bg = draw.gyro_bias + _gauss_markov(rng, n, dt, model.gyro_bias_instability, model.gyro_bias_tau)
+    ba = draw.accel_bias + _gauss_markov(rng, n, dt, model.accel_bias_instability, model.accel_bias_tau)
+    if model.gyro_bias_walk > 0:
+        bg = bg + np.cumsum(rng.standard_normal((n, 3)) * model.gyro_bias_walk * np.sqrt(dt), axis=0)
+    if model.accel_bias_walk > 0:
+        ba = ba + np.cumsum(rng.standard_normal((n, 3)) * model.accel_bias_walk * np.sqrt(dt), axis=0)
+    sdt = np.sqrt(imu.dt)[:, None]
+    dtheta = (1.0 + draw.gyro_scale) * imu.dtheta + bg * imu.dt[:, None] + noise(rng, (n, 3)) * model.arw * sdt
+    dvel = (1.0 + draw.accel_scale) * imu.dvel + ba * imu.dt[:, None] + noise(rng, (n, 3)) * model.vrw * sdt
+    return ImuData(time=imu.time, dt=imu.dt, dtheta=dtheta, dvel=dvel, source=imu.source), draw

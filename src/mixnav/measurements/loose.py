@@ -1,0 +1,72 @@
+"""Loosely coupled GNSS position and velocity, with the antenna lever arm."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..attitude import quat_to_dcm
+from ..data import GnssFixes
+from ..geodesy import earth
+from ..ins.error_model import StateLayout
+from ._loose_kernel import loose_zhr
+
+
+def antenna_lla(nav: np.ndarray, lever_b: np.ndarray) -> np.ndarray:
+    """Geodetic position of a point at ``lever_b`` (body frame, [m]) from the IMU."""
+    c_nb = quat_to_dcm(nav[0:4])
+    d_n = c_nb @ lever_b
+    lat, lon, h = nav[7], nav[8], nav[9]
+    rm, rn = earth.radii(lat)
+    return np.array([lat + d_n[0] / (rm + h), lon + d_n[1] / ((rn + h) * np.cos(lat)), h - d_n[2]])
+
+
+class LooseGnss:
+    """GNSS position (and velocity, when the fixes have it) in the error-state EKF.
+
+    Innovations (true minus estimated antenna quantities)::
+
+        z_pos = p_gnss - (p_ins + C_nb l_b)           in NED [m]
+        z_vel = v_gnss - (v_ins + C_nb (w_ib^b x l_b))  [m/s]
+
+    Jacobians (``dx = x_true - x_est``, ``C_true = exp(phi) C_est``)::
+
+        H_pos = [ -[(C l) x],        0, I, 0,        0 ]
+        H_vel = [ -[(C (w x l)) x],  I, 0, C [l x],  0 ]
+
+    The term ``-w_in^n x (C l)`` of the antenna velocity (Earth and transport
+    rate acting on the lever arm, below 1e-4 m/s for metre-size arms) is left
+    out of both the prediction and the Jacobian.
+
+    Parameters
+    ----------
+    fixes : GnssFixes
+    lever_arm : ndarray (3,)
+        Antenna position in the body frame relative to the IMU [m].
+    layout : StateLayout
+    use_velocity : bool
+        Use the velocity of the fixes when they have one.
+    """
+
+    def __init__(self, fixes: GnssFixes, lever_arm, layout: StateLayout, use_velocity: bool = True):
+        self.fixes = fixes
+        self.lever = np.asarray(lever_arm, dtype=float).reshape(3)
+        self.layout = layout
+        self.use_velocity = use_velocity and fixes.vel_n is not None
+        self._zero3 = np.zeros(3)
+
+    @property
+    def times(self) -> np.ndarray:
+        return self.fixes.time
+
+    def measure(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock=None):
+        """``(z, H, R)`` of fix ``i`` given the INS state ``nav`` and body rate ``w_b``.
+
+        ``R`` is returned as its diagonal (the fixes' errors are independent
+        per axis), shape ``(m,)``.
+        """
+        f = self.fixes
+        return loose_zhr(nav, self.lever, f.lla[i], f.pos_sigma[i],
+                         f.vel_n[i] if self.use_velocity else self._zero3,
+                         f.vel_sigma[i] if self.use_velocity else self._zero3,
+                         np.asarray(w_b, dtype=float), self.use_velocity, self.layout.n,
+                         self.layout.bg.start)

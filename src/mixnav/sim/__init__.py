@@ -1,0 +1,1 @@
+"""Simulation: trajectories from motion segments, IMU and GNSS measurements."""

@@ -1,0 +1,94 @@
+"""Turn a validated scenario into simulated data for one seeded run."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..attitude import quat_multiply, rotvec_to_quat
+from ..config.loader import imu_model
+from ..config.schema import (AccelerateSegment, ClimbSegment, Scenario, StaticSegment,
+                             TurnSegment, UniformSegment)
+from ..data import GnssFixes, ImuData, Trajectory
+from ..filters.ekf import InitialState
+from ..geodesy import earth
+from ..ins.imu_model import ImuErrorDraw, ImuErrorModel, corrupt
+from .gnss import GnssFixModel, simulate_fixes
+from .rng import Streams
+from .trajectory import InitialState as TrajectoryStart
+from .trajectory import MotionSegment, generate
+
+
+@dataclass(frozen=True)
+class SimulatedRun:
+    """Everything one seeded run of a scenario needs and knows."""
+
+    seed: int
+    truth: Trajectory
+    imu_ideal: ImuData
+    imu: ImuData
+    imu_draw: ImuErrorDraw
+    imu_model: ImuErrorModel
+    fixes: GnssFixes
+    init: InitialState
+    outages: tuple
+
+
+def motion_segments(sc: Scenario) -> list[MotionSegment]:
+    """The scenario's segments as :class:`MotionSegment` (SI)."""
+    out = []
+    for s in sc.trajectory.segments:
+        if isinstance(s, (StaticSegment, UniformSegment)):
+            out.append(MotionSegment(s.type, s.duration))
+        elif isinstance(s, AccelerateSegment):
+            out.append(MotionSegment(s.type, s.duration, acceleration=s.acceleration))
+        elif isinstance(s, TurnSegment):
+            out.append(MotionSegment(s.type, s.duration, yaw_rate=s.rate))
+        elif isinstance(s, ClimbSegment):
+            out.append(MotionSegment(s.type, s.duration, pitch_rate=s.rate))
+    return out
+
+
+def truth_and_ideal_imu(sc: Scenario, source: str | None = None):
+    """The deterministic part of a scenario: truth and ideal increments."""
+    tr = sc.trajectory
+    start = TrajectoryStart(lla=tuple(tr.start), speed=tr.speed, rpy=tuple(tr.attitude))
+    return generate(motion_segments(sc), start, sc.imu.rate, source=source)
+
+
+def simulate(sc: Scenario, seed: int, source: str | None = None, ideal=None) -> SimulatedRun:
+    """Draw one run: IMU errors, GNSS noise and the initial estimation error.
+
+    Streams (independent, from ``seed``): ``imu``, ``gnss``, ``init``.
+    ``ideal`` may pass a precomputed ``(truth, imu_ideal)`` for Monte Carlo.
+    """
+    streams = Streams(seed)
+    truth, imu_ideal = ideal if ideal is not None else truth_and_ideal_imu(sc, source)
+    model = imu_model(sc.imu.grade, sc.imu.errors, source, "imu.errors")
+    imu, draw = corrupt(imu_ideal, model, streams.get("imu"))
+    g = sc.gnss
+    fix_model = GnssFixModel(
+        rate=g.rate, pos_sigma=np.asarray(g.position_sigma),
+        vel_sigma=None if g.velocity_sigma is None else np.asarray(g.velocity_sigma),
+        lever_arm=np.asarray(g.lever_arm), outages=tuple(tuple(o) for o in g.outages))
+    fixes = simulate_fixes(truth, fix_model, streams.get("gnss"))
+    init = initial_estimate(truth, sc, streams.get("init"))
+    return SimulatedRun(seed, truth, imu_ideal, imu, draw, model, fixes, init, fix_model.outages)
+
+
+def initial_estimate(truth: Trajectory, sc: Scenario, rng: np.random.Generator) -> InitialState:
+    """Truth at the start plus a draw of the configured 1-sigma errors."""
+    ic = sc.init
+    s_att, s_vel, s_pos = (np.asarray(v) for v in (ic.attitude_sigma, ic.velocity_sigma, ic.position_sigma))
+    phi = rng.standard_normal(3) * s_att
+    dv = rng.standard_normal(3) * s_vel
+    dr = rng.standard_normal(3) * s_pos
+    # Estimate = truth - error (dx = x_true - x_est).
+    q = quat_multiply(rotvec_to_quat(-phi), truth.q_nb[0])
+    lat, lon, h = truth.lla[0]
+    rm, rn = earth.radii(lat)
+    lla = np.array([lat - dr[0] / (rm + h), lon - dr[1] / ((rn + h) * np.cos(lat)), h + dr[2]])
+    nav = np.concatenate([q, truth.v_n[0] - dv, lla])
+    return InitialState(time=float(truth.time[0]), nav=nav, sigma_att=s_att, sigma_vel=s_vel,
+                        sigma_pos=s_pos)
