@@ -32,12 +32,16 @@ class CoarseAlignment:
     rpy : ndarray (3,)
         Roll, pitch, yaw [rad] (yaw NED, clockwise from north).
     yaw_sigma_noise : float
-        1-sigma heading error from the gyro white noise over the window [rad]
-        (``sigma_w / (Omega cos lat)`` with ``sigma_w`` the noise of the mean
-        rate, estimated from the data). Gyro bias adds ``b_east / (Omega cos
-        lat)`` on top, which a static alignment cannot separate.
+        1-sigma heading error from the scatter of the gyro signal [rad]:
+        ``sigma_east / (Omega cos lat)``, with ``sigma_east`` the standard
+        error of the mean east rate estimated from the scatter of block means
+        (blocks of ``block`` seconds, so quantisation, which does not
+        accumulate, and slow base motion, which does, are both counted
+        right). Gyro bias adds ``b_east / (Omega cos lat)`` on top, which a
+        static alignment cannot separate.
     level_sigma_noise : float
-        1-sigma roll/pitch error from the accelerometer white noise [rad].
+        1-sigma roll/pitch error from the scatter of the specific force [rad],
+        estimated the same way.
     mean_f_b, mean_w_b : ndarray (3,)
         Mean specific force [m/s^2] and angular rate [rad/s] in the body frame.
     duration : float
@@ -53,8 +57,18 @@ class CoarseAlignment:
     duration: float
 
 
+def _mean_sigma(x: np.ndarray, dt: np.ndarray, block: float, c_nb: np.ndarray) -> np.ndarray:
+    """Standard error of the mean rate of ``x`` increments, per NED axis."""
+    nb = max(int(round(block / np.median(dt))), 1)
+    k = len(x) // nb
+    if k < 3:
+        return np.full(3, np.nan)
+    means = x[:k * nb].reshape(k, nb, 3).sum(1) / dt[:k * nb].reshape(k, nb).sum(1)[:, None]
+    return np.std(means @ c_nb.T, axis=0, ddof=1) / np.sqrt(k)
+
+
 def coarse_align(imu: ImuData, lat: float, h: float = 0.0, use_gyro_heading: bool = True,
-                 yaw: float = 0.0) -> CoarseAlignment:
+                 yaw: float = 0.0, block: float = 30.0) -> CoarseAlignment:
     """Align a static IMU.
 
     Parameters
@@ -66,6 +80,8 @@ def coarse_align(imu: ImuData, lat: float, h: float = 0.0, use_gyro_heading: boo
     use_gyro_heading : bool
         Take the heading from the Earth rate (navigation/tactical gyros). If
         False, only level: the heading is set to ``yaw`` [rad].
+    block : float
+        Block length [s] for the uncertainty estimate.
 
     Raises
     ------
@@ -82,10 +98,6 @@ def coarse_align(imu: ImuData, lat: float, h: float = 0.0, use_gyro_heading: boo
                         f"({g:.3f}): the IMU is not static or its accelerometer units are wrong",
                         file=imu.source)
     f_n = np.array([0.0, 0.0, -g])
-    # Noise of the mean: sample std of the per-interval rates / sqrt(count).
-    n = len(imu)
-    sw = np.std(imu.dtheta / imu.dt[:, None], axis=0).mean() / np.sqrt(n)
-    sf = np.std(imu.dvel / imu.dt[:, None], axis=0).mean() / np.sqrt(n)
     if use_gyro_heading:
         w_n = earth.earth_rate_ned(lat)
         rot, _ = Rotation.align_vectors([f_n, w_n], [f_b, w_b], weights=[np.inf, 1.0])
@@ -95,7 +107,10 @@ def coarse_align(imu: ImuData, lat: float, h: float = 0.0, use_gyro_heading: boo
         roll = np.arctan2(-f_b[1], -f_b[2])
         pitch = np.arctan2(f_b[0], np.hypot(f_b[1], f_b[2]))
         c_nb = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
+    sw = _mean_sigma(imu.dtheta, imu.dt, block, c_nb)
+    sf = _mean_sigma(imu.dvel, imu.dt, block, c_nb)
     return CoarseAlignment(
         q_nb=dcm_to_quat(c_nb), rpy=dcm_to_euler(c_nb),
-        yaw_sigma_noise=float(sw / (earth.OMEGA_EARTH * np.cos(lat))) if use_gyro_heading else np.nan,
-        level_sigma_noise=float(sf / g), mean_f_b=f_b, mean_w_b=w_b, duration=T)
+        yaw_sigma_noise=float(sw[1] / (earth.OMEGA_EARTH * np.cos(lat))) if use_gyro_heading else np.nan,
+        level_sigma_noise=float(np.hypot(sf[0], sf[1]) / np.sqrt(2) / g), mean_f_b=f_b, mean_w_b=w_b,
+        duration=T)
