@@ -90,12 +90,15 @@ def load_scenario(name_or_path: str) -> tuple[Scenario, str, str]:
         more = f" (and {len(exc.errors()) - 1} more problem(s))" if len(exc.errors()) > 1 else ""
         raise ConfigError(msg + more, file=source, key=key) from None
     # IMU errors are checked here too so that a bad value fails at load time.
-    imu_model(sc.imu.grade, sc.imu.errors, source, "imu.errors")
+    imu_model(sc.imu.grade, sc.imu.errors, source, "imu.errors", "imu.grade")
     for i, m in enumerate(sc.methods):
         if m.imu_grade is not None or m.imu_errors is not None:
-            imu_model(m.imu_grade, m.imu_errors or {}, source, f"methods[{i}].imu_errors")
+            imu_model(m.imu_grade, m.imu_errors or {}, source, f"methods[{i}].imu_errors",
+                      f"methods[{i}].imu_grade")
     return sc, source, text
 
 
-def imu_model(grade, errors, source, prefix) -> ImuErrorModel:
-    return ImuErrorModel.from_datasheet(errors, grade=grade, source=source, key_prefix=prefix)
+def imu_model(grade, errors, source, prefix, grade_key) -> ImuErrorModel:
+    """The IMU error model of a grade plus overrides, errors located at ``prefix``."""
+    return ImuErrorModel.from_datasheet(errors, grade=grade, source=source, key_prefix=prefix,
+                                        grade_key=grade_key)

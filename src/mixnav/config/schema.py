@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import Annotated, Literal, Union
 
 import numpy as np
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator, model_validator
 
 from .. import units as u
 
@@ -146,12 +146,13 @@ class GnssConfig(Strict):
     lever_arm: LengthVec = (0.0, 0.0, 0.0)
     outages: list[tuple[Time, Time]] = Field(default_factory=list)
 
-    @model_validator(mode="after")
-    def _outages_ordered(self):
-        for i, (a, b) in enumerate(self.outages):
+    @field_validator("outages")
+    @classmethod
+    def _outages_ordered(cls, v):
+        for i, (a, b) in enumerate(v):
             if not b > a:
                 raise ValueError(f"outage {i} ends ({b:g} s) before it starts ({a:g} s)")
-        return self
+        return v
 
 
 class InitConfig(Strict):

@@ -25,7 +25,7 @@ def build(method: MethodConfig, run, lever_arm, source=None):
         model = run.imu_model
         if method.imu_grade is not None or method.imu_errors is not None:
             model = imu_model(method.imu_grade, method.imu_errors or {}, source,
-                              f"methods.{method.name}.imu_errors")
+                              f"methods.{method.name}.imu_errors", f"methods.{method.name}.imu_grade")
         ekf = ErrorStateEkf(layout, model, covariance_interval=method.covariance_interval)
         return ekf, [LooseGnss(run.fixes, lever_arm, layout)]
     raise KeyError(method.type)  # unreachable: the schema admits only known types

@@ -112,7 +112,8 @@ class ImuErrorModel:
 
     @classmethod
     def from_datasheet(cls, values: dict[str, str], grade: str | None = None,
-                       source: str | None = None, key_prefix: str = "imu") -> "ImuErrorModel":
+                       source: str | None = None, key_prefix: str = "imu",
+                       grade_key: str = "imu.grade") -> "ImuErrorModel":
         """Build from datasheet strings (``"2 deg/h"``), optionally over a grade.
 
         Parameters
@@ -126,7 +127,7 @@ class ImuErrorModel:
         if grade is not None:
             if grade not in GRADES:
                 raise ConfigError(f"unknown IMU grade '{grade}'; known: {', '.join(GRADES)}",
-                                  file=source, key=f"{key_prefix}.grade")
+                                  file=source, key=grade_key)
             texts.update(GRADES[grade])
         texts.update(values)
         si = {}

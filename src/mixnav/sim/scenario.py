@@ -65,7 +65,7 @@ def simulate(sc: Scenario, seed: int, source: str | None = None, ideal=None) -> 
     """
     streams = Streams(seed)
     truth, imu_ideal = ideal if ideal is not None else truth_and_ideal_imu(sc, source)
-    model = imu_model(sc.imu.grade, sc.imu.errors, source, "imu.errors")
+    model = imu_model(sc.imu.grade, sc.imu.errors, source, "imu.errors", "imu.grade")
     imu, draw = corrupt(imu_ideal, model, streams.get("imu"))
     g = sc.gnss
     fix_model = GnssFixModel(

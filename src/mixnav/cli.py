@@ -1,0 +1,80 @@
+"""The ``mixnav`` command."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from . import __version__
+from .errors import MixnavError
+
+app = typer.Typer(add_completion=False, no_args_is_help=True,
+                  help="GNSS/INS integrated navigation under non-Gaussian noise.")
+err = Console(stderr=True)
+out = Console()
+
+
+def _fail(exc: Exception) -> None:
+    err.print(f"[bold red]error:[/] {exc}", highlight=False, markup=True)
+    raise typer.Exit(code=2)
+
+
+def _version(value: bool):
+    if value:
+        out.print(f"mixnav {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def main(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                      help="Print the version and exit.")):
+    """GNSS/INS integrated navigation under non-Gaussian noise."""
+
+
+@app.command()
+def scenarios():
+    """List the scenarios shipped with mixnav."""
+    from .config import list_scenarios
+    from .filters.registry import METHODS
+
+    t = Table("scenario", "description", title="shipped scenarios")
+    for name, desc in list_scenarios().items():
+        t.add_row(name, desc)
+    out.print(t)
+    m = Table("method type", "what it is", title="methods usable in scenario files")
+    for name, desc in METHODS.items():
+        m.add_row(name, desc)
+    out.print(m)
+
+
+@app.command()
+def run(scenario: str = typer.Argument(..., help="Shipped scenario name or path of a .toml file."),
+        out_dir: Path = typer.Option(..., "--out", help="Folder for the solution, metrics, figures and report."),
+        seed: int = typer.Option(None, help="Seed of this run (default: the scenario's seed).")):
+    """Simulate one run of a scenario, filter it with every method, write the report."""
+    from .config import load_scenario
+    from .experiment.run import run_scenario, write_run
+
+    try:
+        sc, source, text = load_scenario(scenario)
+        with err.status(f"running {sc.scenario.name}"):
+            result = run_scenario(sc, source, seed=seed)
+            metrics = write_run(out_dir, result, config_text=text)
+    except MixnavError as exc:
+        _fail(exc)
+    t = Table("method", "horiz. RMSE [m]", "horiz. max [m]", "yaw RMSE [deg]", "vel. RMSE [m/s]",
+              "time/epoch [us]", title=f"{sc.scenario.name} (seed {metrics['seed']})")
+    for name, m in metrics["methods"].items():
+        t.add_row(name, f"{m['horizontal_rmse_m']:.3g}", f"{m['horizontal_max_m']:.3g}",
+                  f"{m['yaw_rmse_deg']:.3g}", f"{m['velocity_rmse_mps']:.3g}",
+                  f"{m['epoch_time_mean_us']:.3g}")
+    out.print(t)
+    out.print(f"report: {Path(out_dir) / 'report.html'}")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(app())

@@ -1,0 +1,1 @@
+"""Runs, metrics, figures and reports."""

@@ -1,0 +1,96 @@
+"""Accuracy metrics of a solution table (column names in docs/outputs.md)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+#: Every key :func:`compute_metrics` returns, with its meaning and unit.
+METRIC_KEYS_DOC: dict[str, str] = {
+    "roll_rmse_deg": "RMS of the roll error [deg]",
+    "roll_max_deg": "largest absolute roll error [deg]",
+    "pitch_rmse_deg": "RMS of the pitch error [deg]",
+    "pitch_max_deg": "largest absolute pitch error [deg]",
+    "yaw_rmse_deg": "RMS of the yaw error, wrapped to [-180, 180) [deg]",
+    "yaw_max_deg": "largest absolute yaw error [deg]",
+    "horizontal_rmse_m": "RMS of the horizontal position error hypot(north, east) [m]",
+    "horizontal_max_m": "largest horizontal position error [m]",
+    "horizontal_p95_m": "95th percentile of the horizontal position error [m]",
+    "vertical_rmse_m": "RMS of the vertical position error [m]",
+    "vertical_max_m": "largest absolute vertical position error [m]",
+    "velocity_rmse_mps": "RMS of the 3-D velocity error norm [m/s]",
+    "velocity_max_mps": "largest 3-D velocity error norm [m/s]",
+    "n_epochs": "number of epochs scored",
+    "outages": "per GNSS outage window: start_s, end_s, horizontal_max_m, vertical_max_m, "
+               "horizontal_final_m (at the window's last epoch)",
+    "nees_pos_mean": "mean NEES of the 3-D position error (3 for a consistent filter)",
+    "nees_vel_mean": "mean NEES of the 3-D velocity error (3 for a consistent filter)",
+    "epoch_time_mean_us": "filter wall time per GNSS epoch, mechanization included [us]",
+    "update_time_mean_us": "measurement model + correction + feedback per GNSS epoch [us]",
+    "wall_time_s": "wall time of the filter run [s]",
+    "measurement_epochs": "number of GNSS epochs processed",
+    "recoveries": "counts of numerical recoveries (see mixnav.filters.ekf)",
+    "nis_mean_per_dof": "mean NIS divided by the measurement dimension (1 if consistent)",
+}
+
+_NEEDED = ["time_s", "err_n_m", "err_e_m", "err_d_m", "err_vn_mps", "err_ve_mps", "err_vd_mps",
+           "err_roll_deg", "err_pitch_deg", "err_yaw_deg"]
+
+
+def _col(df: pd.DataFrame, name: str) -> np.ndarray:
+    if name not in df.columns:
+        raise ValueError(f"solution table has no column '{name}'")
+    a = df[name].to_numpy(dtype=float)
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"solution column '{name}' has a non-finite value at row "
+                         f"{int(np.argmax(~np.isfinite(a)))}")
+    return a
+
+
+def _rms(x):
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+def compute_metrics(solution: pd.DataFrame, outages=()) -> dict:
+    """RMSE, maxima and outage maxima of a solution table with error columns.
+
+    Parameters
+    ----------
+    solution : DataFrame
+        One row per epoch, with the ``err_*`` columns.
+    outages : sequence of (start, end)
+        GNSS outage windows [s]; rows with ``start <= time_s <= end`` count.
+    """
+    c = {k: _col(solution, k) for k in _NEEDED}
+    if len(c["time_s"]) == 0:
+        raise ValueError("solution table is empty")
+    hor = np.hypot(c["err_n_m"], c["err_e_m"])
+    ver = np.abs(c["err_d_m"])
+    vel = np.sqrt(c["err_vn_mps"] ** 2 + c["err_ve_mps"] ** 2 + c["err_vd_mps"] ** 2)
+    m: dict = {}
+    for a in ("roll", "pitch", "yaw"):
+        e = c[f"err_{a}_deg"]
+        m[f"{a}_rmse_deg"] = _rms(e)
+        m[f"{a}_max_deg"] = float(np.max(np.abs(e)))
+    m["horizontal_rmse_m"] = _rms(hor)
+    m["horizontal_max_m"] = float(hor.max())
+    m["horizontal_p95_m"] = float(np.percentile(hor, 95))
+    m["vertical_rmse_m"] = _rms(ver)
+    m["vertical_max_m"] = float(ver.max())
+    m["velocity_rmse_mps"] = _rms(vel)
+    m["velocity_max_mps"] = float(vel.max())
+    m["n_epochs"] = int(len(hor))
+    t = c["time_s"]
+    out = []
+    for a, b in outages:
+        sel = (t >= a) & (t <= b)
+        if not sel.any():
+            raise ValueError(f"outage window [{a}, {b}] s holds no solution epoch")
+        out.append({"start_s": float(a), "end_s": float(b),
+                    "horizontal_max_m": float(hor[sel].max()), "vertical_max_m": float(ver[sel].max()),
+                    "horizontal_final_m": float(hor[sel][-1])})
+    m["outages"] = out
+    for k in ("nees_pos", "nees_vel"):
+        if k in solution.columns:
+            m[f"{k}_mean"] = float(np.mean(_col(solution, k)))
+    return m
