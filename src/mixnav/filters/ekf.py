@@ -35,10 +35,10 @@ import numpy as np
 
 from ..data import ImuData
 from ..errors import ConfigError, NumericalError
-from ..ins._error_kernels import apply_feedback, propagate_block
+from ..ins._error_kernels import propagate_block
 from ..ins.error_model import ClockModel, StateLayout, process_noise
 from ..ins.imu_model import ImuErrorModel
-from .kalman import OK, innovation_is_absurd, kalman_update
+from ._ekf_kernels import ABSURD, NON_FINITE, NEEDS_REPAIR, S_NOT_POSITIVE_DEFINITE, ekf_correct
 from .timing import split_at_times
 
 
@@ -126,9 +126,8 @@ def _warm_up(layout: StateLayout) -> None:
                     np.zeros(n), layout.as_array(), np.full(4, np.inf), np.empty((4, n, n)))
     H = np.zeros((3, n))
     H[:, 6:9] = np.eye(3)
-    innovation_is_absurd(np.zeros(3), H, np.eye(n), np.ones(3), 1e4)
-    dx, _, _, _ = kalman_update(np.zeros(n), np.eye(n), np.zeros(3), H, np.eye(3))
-    apply_feedback(nav, np.zeros(12), np.zeros(2), dx, layout.as_array())
+    ekf_correct(np.eye(n), np.zeros(3), H, np.ones(3), 1e4, nav, np.zeros(12), np.zeros(2),
+                layout.as_array())
     _WARM.add(n)
 
 
@@ -255,20 +254,22 @@ class ErrorStateEkf:
                 zhr = measurements[mi].measure(i, nav, w_b, clock)
                 if zhr is not None:
                     z, H, r = zhr
-                    R = np.diag(r) if r.ndim == 1 else r
-                    if innovation_is_absurd(z, H, P, np.diag(R).copy(), self.absurd_sigma):
+                    P_new, nis, status = ekf_correct(P, z, H, r, self.absurd_sigma, nav, sensor,
+                                                     clock, layout_arr)
+                    if status == ABSURD:
                         recov["rejected_absurd"] += 1
+                    elif status == S_NOT_POSITIVE_DEFINITE:
+                        recov["rejected_not_pd"] += 1
+                    elif status == NON_FINITE:
+                        raise NumericalError(f"the update at t = {t:.3f} s gave a non-finite "
+                                             "covariance or correction")
                     else:
-                        dx, P_new, nis, status = kalman_update(x0, P, z, H, R)
-                        if status == OK:
-                            P = P_new
-                            apply_feedback(nav, sensor, clock, dx, layout_arr)
-                            self._check_covariance(P, t, recov)
-                            nis_list.append(nis)
-                            nis_dim.append(len(z))
-                            used = True
-                        else:
-                            recov["rejected_not_pd"] += 1
+                        P = P_new
+                        if status == NEEDS_REPAIR:
+                            self._repair_covariance(P, recov)
+                        nis_list.append(nis)
+                        nis_dim.append(len(z))
+                        used = True
                 update_time += _time.perf_counter() - tu
                 n_updates += 1
             if not np.isfinite(nav).all():
@@ -292,11 +293,9 @@ class ErrorStateEkf:
         )
 
     @staticmethod
-    def _check_covariance(P, t, recov) -> None:
-        if not np.isfinite(P).all():
-            raise NumericalError(f"covariance became non-finite at t = {t:.3f} s")
-        if np.any(np.diag(P) <= 0.0):
-            w, v = np.linalg.eigh(P)
-            w = np.maximum(w, 1e-12 * w.max())
-            P[:, :] = (v * w) @ v.T
-            recov["covariance_repair"] += 1
+    def _repair_covariance(P, recov) -> None:
+        """Rebuild P from its eigen-decomposition with floored eigenvalues (counted)."""
+        w, v = np.linalg.eigh(P)
+        w = np.maximum(w, 1e-12 * w.max())
+        P[:, :] = (v * w) @ v.T
+        recov["covariance_repair"] += 1

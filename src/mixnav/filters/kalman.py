@@ -85,35 +85,91 @@ def kalman_update(x, P, z, H, R):
     x_post : ndarray (n,)
     P_post : ndarray (n, n)
     nis : float
-        Normalised innovation squared ``z^T S^-1 z``.
+        Normalised innovation squared ``y^T S^-1 y``, ``y = z - H x``.
     status : int
         :data:`OK`, or :data:`S_NOT_POSITIVE_DEFINITE` in which case the
         prior is returned unchanged (the caller counts a rejected epoch).
+
+    Notes
+    -----
+    Written as loops rather than ``@`` because numba's matmul of 15x6
+    matrices pays a BLAS call and an allocation each (11 us -> 4 us here).
+    The Joseph form is factored as ``A = P - K (H P)``,
+    ``P+ = A - (A H^T) K^T + K R K^T``, which equals
+    ``(I - K H) P (I - K H)^T + K R K^T`` and costs O(n^2 m).
     """
     n = P.shape[0]
     m = z.shape[0]
-    PHt = P @ H.T
-    S = H @ PHt + R
+    HP = np.zeros((m, n))  # H P; (P H^T) = HP^T since P is symmetric
+    for i in range(m):
+        for k in range(n):
+            h = H[i, k]
+            if h != 0.0:
+                for j in range(n):
+                    HP[i, j] += h * P[k, j]
+    S = R.copy()
+    for i in range(m):
+        for j in range(m):
+            s = 0.0
+            for k in range(n):
+                s += HP[i, k] * H[j, k]
+            S[i, j] += s
     L = np.empty((m, m))
     if not cholesky_lower(S, L):
         return x.copy(), P.copy(), np.inf, S_NOT_POSITIVE_DEFINITE
-    # K^T = S^-1 (P H^T)^T, via L L^T.
-    Kt = PHt.T.copy()
+    # K^T = S^-1 (H P), via L L^T.
+    Kt = HP.copy()
     _solve_lower(L, Kt)
     _solve_upper_t(L, Kt)
-    y = z - H @ x
+    y = z.copy()
+    for i in range(m):
+        for k in range(n):
+            y[i] -= H[i, k] * x[k]
     w = y.reshape(m, 1).copy()
     _solve_lower(L, w)
     nis = 0.0
     for i in range(m):
         nis += w[i, 0] * w[i, 0]
-    K = Kt.T
-    x_post = x + K @ y
-    IKH = -K @ H
+    x_post = x.copy()
+    for k in range(n):
+        for i in range(m):
+            x_post[k] += Kt[i, k] * y[i]
+    # A = P - K (H P)
+    A = P.copy()
     for i in range(n):
-        IKH[i, i] += 1.0
-    P_post = IKH @ P @ IKH.T + K @ R @ K.T
-    P_post = 0.5 * (P_post + P_post.T)
+        for c in range(m):
+            kc = Kt[c, i]
+            for j in range(n):
+                A[i, j] -= kc * HP[c, j]
+    # B = A H^T  (n x m)
+    B = np.zeros((n, m))
+    for i in range(n):
+        for c in range(m):
+            s = 0.0
+            for k in range(n):
+                if H[c, k] != 0.0:
+                    s += A[i, k] * H[c, k]
+            B[i, c] = s
+    # KR = K R  (n x m)
+    KR = np.zeros((n, m))
+    for i in range(n):
+        for c in range(m):
+            s = 0.0
+            for d in range(m):
+                s += Kt[d, i] * R[d, c]
+            KR[i, c] = s
+    P_post = np.empty((n, n))
+    for i in range(n):
+        for j in range(i, n):
+            s = A[i, j]
+            for c in range(m):
+                s += (KR[i, c] - B[i, c]) * Kt[c, j]
+            P_post[i, j] = s
+    # symmetrise from the upper triangle (the lower one carries the same
+    # value up to round-off)
+    for i in range(n):
+        for j in range(i):
+            P_post[i, j] = P_post[j, i]
     return x_post, P_post, nis, OK
 
 

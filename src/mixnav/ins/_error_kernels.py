@@ -167,26 +167,35 @@ def discretize(F, qc, T, phi, qd, tmp):
     a second at vehicle dynamics; the engine never propagates longer steps.
     """
     n = F.shape[0]
+    # F is sparse (about a quarter of its entries are non-zero): the products
+    # skip its zeros.
     # tmp <- (F T)^2 / 2
+    tmp[:, :] = 0.0
+    for i in range(n):
+        for k in range(n):
+            f = F[i, k]
+            if f != 0.0:
+                for j in range(n):
+                    tmp[i, j] += f * F[k, j]
     for i in range(n):
         for j in range(n):
-            s = 0.0
-            for k in range(n):
-                s += F[i, k] * F[k, j]
-            tmp[i, j] = 0.5 * s * T * T
+            tmp[i, j] *= 0.5 * T * T
     # phi <- I + F T + tmp + F tmp T / 3
     for i in range(n):
         for j in range(n):
-            s = 0.0
-            for k in range(n):
-                s += F[i, k] * tmp[k, j]
-            phi[i, j] = F[i, j] * T + tmp[i, j] + s * T / 3.0
+            phi[i, j] = F[i, j] * T + tmp[i, j]
+        for k in range(n):
+            f = F[i, k]
+            if f != 0.0:
+                for j in range(n):
+                    phi[i, j] += f * tmp[k, j] * T / 3.0
         phi[i, i] += 1.0
     for i in range(n):
         for j in range(i, n):
             s = 0.0
             for k in range(n):
-                s += F[i, k] * qc[k] * F[j, k]
+                if qc[k] != 0.0:
+                    s += F[i, k] * qc[k] * F[j, k]
             v = (F[i, j] * qc[j] + qc[i] * F[j, i]) * 0.5 * T * T + s * T * T * T / 3.0
             if i == j:
                 v += qc[i] * T
@@ -198,12 +207,13 @@ def discretize(F, qc, T, phi, qd, tmp):
 def covariance_predict(P, phi, qd, tmp):
     """``P <- Phi P Phi^T + Qd`` in place, symmetric by construction."""
     n = P.shape[0]
+    tmp[:, :] = 0.0
     for i in range(n):
-        for j in range(n):
-            s = 0.0
-            for k in range(n):
-                s += phi[i, k] * P[k, j]
-            tmp[i, j] = s
+        for k in range(n):
+            f = phi[i, k]
+            if f != 0.0:
+                for j in range(n):
+                    tmp[i, j] += f * P[k, j]
     for i in range(n):
         for j in range(i, n):
             s = 0.0

@@ -11,12 +11,17 @@ from ..ins._kernels import quat_to_dcm_into, radii
 
 
 @njit(cache=True)
-def loose_zhr(nav, lever, lla_fix, pos_sig, vel_fix, vel_sig, w_b, use_vel, n, i_bg):
+def loose_zhr(nav, lever, fix, w_b, use_vel, n, i_bg):
     """Innovation, Jacobian and noise variances of one GNSS fix.
 
-    Returns ``z (m,)``, ``H (m, n)``, ``r (m,)`` with ``m = 6`` when
-    ``use_vel`` else 3.
+    ``fix`` is one row ``[lat, lon, h, sN, sE, sD, vN, vE, vD, svN, svE, svD]``
+    (rad, m, m/s). Returns ``z (m,)``, ``H (m, n)``, ``r (m,)`` with
+    ``m = 6`` when ``use_vel`` else 3.
     """
+    lla_fix = fix[0:3]
+    pos_sig = fix[3:6]
+    vel_fix = fix[6:9]
+    vel_sig = fix[9:12]
     c = np.empty((3, 3))
     quat_to_dcm_into(nav[0:4], c)
     cl = np.empty(3)

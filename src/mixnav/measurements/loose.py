@@ -52,7 +52,13 @@ class LooseGnss:
         self.lever = np.asarray(lever_arm, dtype=float).reshape(3)
         self.layout = layout
         self.use_velocity = use_velocity and fixes.vel_n is not None
-        self._zero3 = np.zeros(3)
+        # one row per fix for the compiled model: lla, pos sigma, vel, vel sigma
+        m = len(fixes)
+        vel = fixes.vel_n if self.use_velocity else np.zeros((m, 3))
+        vsig = fixes.vel_sigma if self.use_velocity else np.ones((m, 3))
+        self._rows = np.ascontiguousarray(np.hstack([fixes.lla, fixes.pos_sigma, vel, vsig]))
+        self._n = layout.n
+        self._i_bg = layout.bg.start
 
     @property
     def times(self) -> np.ndarray:
@@ -64,9 +70,4 @@ class LooseGnss:
         ``R`` is returned as its diagonal (the fixes' errors are independent
         per axis), shape ``(m,)``.
         """
-        f = self.fixes
-        return loose_zhr(nav, self.lever, f.lla[i], f.pos_sigma[i],
-                         f.vel_n[i] if self.use_velocity else self._zero3,
-                         f.vel_sigma[i] if self.use_velocity else self._zero3,
-                         np.asarray(w_b, dtype=float), self.use_velocity, self.layout.n,
-                         self.layout.bg.start)
+        return loose_zhr(nav, self.lever, self._rows[i], w_b, self.use_velocity, self._n, self._i_bg)
