@@ -1,0 +1,79 @@
+"""The mixnav command end to end: the demo writes a complete, consistent folder."""
+
+import base64
+import json
+import re
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from mixnav.cli import app
+from mixnav.experiment.metrics import METRIC_KEYS_DOC
+
+runner = CliRunner()
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+
+
+@pytest.fixture(scope="module")
+def demo_out(tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo")
+    res = runner.invoke(app, ["run", "loose-demo", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    return out
+
+
+def test_demo_writes_solution_metrics_figures_report(demo_out):
+    names = {p.name for p in demo_out.iterdir()}
+    for f in ("solution_ekf.csv", "solution_ekf.parquet", "metrics.json", "report.html",
+              "errors_position.png", "trajectory.png"):
+        assert f in names
+    assert not [n for n in names if n.endswith(".tmp")]
+    csv = pd.read_csv(demo_out / "solution_ekf.csv")
+    pq = pd.read_parquet(demo_out / "solution_ekf.parquet")
+    assert list(csv.columns) == list(pq.columns)
+    pd.testing.assert_frame_equal(csv[["time_s", "err_n_m"]], pq[["time_s", "err_n_m"]], rtol=1e-9,
+                                  check_dtype=False)
+    metrics = json.loads((demo_out / "metrics.json").read_text())
+    m = metrics["methods"]["ekf"]
+    # every key is documented, and the documented accuracy keys are present
+    assert set(m) - {"outages"} <= set(METRIC_KEYS_DOC)
+    for k in ("roll_rmse_deg", "pitch_max_deg", "yaw_rmse_deg", "horizontal_rmse_m", "horizontal_max_m",
+              "vertical_rmse_m", "velocity_max_mps", "epoch_time_mean_us"):
+        assert k in m
+    # metrics agree with the solution file
+    h = (csv.err_n_m ** 2 + csv.err_e_m ** 2) ** 0.5
+    assert m["horizontal_max_m"] == pytest.approx(h.max(), rel=1e-8)
+    assert m["outages"][0]["start_s"] == 300.0
+    assert sum(m["recoveries"].values()) == 0
+
+
+def test_report_embeds_every_figure(demo_out):
+    html = (demo_out / "report.html").read_text()
+    imgs = re.findall(r"src='data:image/png;base64,([^']+)'", html)
+    pngs = sorted(demo_out.glob("*.png"))
+    assert len(imgs) == len(pngs) >= 5
+    for b in imgs:
+        assert base64.b64decode(b)[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "ekf" in html and "GNSS outages" in html
+
+
+def test_docs_list_every_metric_key():
+    text = (DOCS / "outputs.md").read_text()
+    for key in METRIC_KEYS_DOC:
+        assert f"`{key}`" in text, key
+
+
+def test_scenarios_lists_the_demo():
+    res = runner.invoke(app, ["scenarios"])
+    assert res.exit_code == 0 and "loose-demo" in res.output
+
+
+def test_bad_scenario_exits_2_with_located_message(tmp_path):
+    p = tmp_path / "bad.toml"
+    p.write_text('[scenario]\nname = "x"\nsede = 3\n')
+    res = runner.invoke(app, ["run", str(p), "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2
+    assert "bad.toml" in res.output and "scenario.sede" in res.output
+    assert not (tmp_path / "o").exists()
