@@ -7,7 +7,7 @@ import html
 import io
 from pathlib import Path
 
-from ..io.atomic import atomic_savefig, atomic_write_text
+from ..io.atomic import atomic_write_bytes, atomic_write_text
 
 _COLUMNS = [
     ("horizontal_rmse_m", "horiz. RMSE [m]"), ("horizontal_max_m", "horiz. max [m]"),
@@ -74,9 +74,10 @@ def write_report(out_dir: Path, title: str, metrics: dict, figures: dict, notes=
         parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in notes) + "</ul>")
     parts.append("<h2>Figures</h2>")
     for name, fig in figures.items():
-        atomic_savefig(fig, out_dir / f"{name}.png", dpi=110)
+        # render once: the same bytes go to the PNG file and into the page
         buf = io.BytesIO()
         fig.savefig(buf, format="png", dpi=110)
+        atomic_write_bytes(out_dir / f"{name}.png", buf.getvalue())
         b64 = base64.b64encode(buf.getvalue()).decode("ascii")
         parts.append(f"<h3>{html.escape(name)}</h3><img alt='{html.escape(name)}' src='data:image/png;base64,{b64}'>")
     if config_text:

@@ -78,10 +78,3 @@ def atomic_write_dataframe(path, df) -> None:
             df.to_parquet(fh, index=False)
     else:
         raise ValueError(f"unknown table format '{path.suffix}' for {path}; use .csv or .parquet")
-
-
-def atomic_savefig(fig, path, **kw) -> None:
-    """Save a matplotlib figure atomically (format from the suffix)."""
-    path = Path(path)
-    with _atomic(path, "wb") as (fh, _):
-        fig.savefig(fh, format=path.suffix.lstrip(".") or "png", **kw)
