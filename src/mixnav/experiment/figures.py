@@ -1,10 +1,16 @@
 """Figures of solution tables.
 
 Built on ``matplotlib.figure.Figure`` directly, never pyplot: no global
-state, no backend selection, safe in worker processes.
+state, no backend selection, safe in worker processes. ``Figure.savefig``
+renders through the Agg canvas on its own.
+
+Each method keeps one colour (``C0``, ``C1``, ... in the order of the
+``solutions`` dict) across all figures.
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
@@ -12,6 +18,9 @@ from matplotlib.figure import Figure
 
 from ..geodesy import earth
 
+__all__ = ["error_figure", "horizontal_error_figure", "trajectory_figure"]
+
+# kind -> (column stems, column unit suffix, title)
 _KINDS = {
     "attitude": (("roll", "pitch", "yaw"), "deg", "attitude error"),
     "velocity": (("vn", "ve", "vd"), "mps", "velocity error"),
@@ -20,75 +29,148 @@ _KINDS = {
 _LABEL_UNIT = {"deg": "deg", "mps": "m/s", "m": "m"}
 _AXIS_NAME = {"roll": "roll", "pitch": "pitch", "yaw": "yaw", "vn": "north", "ve": "east",
               "vd": "down", "n": "north", "e": "east", "d": "down"}
+_OUTAGE_GREY = "0.85"
 
 
-def _shade(ax, outages):
+def _shade(ax, outages: Sequence[tuple[float, float]]) -> None:
+    """Grey bands behind the data for the GNSS outage windows [s]."""
     for a, b in outages:
-        ax.axvspan(a, b, color="0.85", zorder=0, lw=0)
+        ax.axvspan(a, b, color=_OUTAGE_GREY, zorder=0, lw=0)
 
 
-def error_figure(solutions: dict[str, pd.DataFrame], kind: str, outages=()) -> Figure:
-    """Errors of each method with their +-3-sigma envelopes, three stacked axes."""
+def _need(df: pd.DataFrame, name: str, method: str) -> None:
+    if name not in df.columns:
+        raise ValueError(f"solution of method '{method}' has no column '{name}'")
+
+
+def error_figure(solutions: dict[str, pd.DataFrame], kind: str,
+                 outages: Sequence[tuple[float, float]] = ()) -> Figure:
+    """Errors of each method with their +-3-sigma envelopes, three stacked axes.
+
+    Parameters
+    ----------
+    solutions : dict of str -> pandas.DataFrame
+        Solution table of each method; needs ``time_s`` [s] and the
+        ``err_*`` columns of ``kind``; ``sig_*`` columns are drawn when present.
+    kind : {"attitude", "velocity", "position"}
+        roll/pitch/yaw [deg], vn/ve/vd [m/s] or north/east/down [m].
+    outages : sequence of (start_s, end_s)
+        GNSS outage windows [s], shaded grey.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     if kind not in _KINDS:
         raise ValueError(f"unknown figure kind '{kind}'; choose one of {list(_KINDS)}")
-    axes_names, unit, title = _KINDS[kind]
+    stems, unit, title = _KINDS[kind]
     fig = Figure(figsize=(9, 7), layout="constrained")
     axs = fig.subplots(3, 1, sharex=True)
-    for i, (ax, a) in enumerate(zip(axs, axes_names)):
+    for ax, a in zip(axs, stems):
         _shade(ax, outages)
         for j, (name, df) in enumerate(solutions.items()):
             color = f"C{j}"
-            t = df["time_s"].to_numpy()
-            ax.plot(t, df[f"err_{a}_{unit}"], color=color, lw=1.0, label=name)
+            err = f"err_{a}_{unit}"
+            _need(df, "time_s", name)
+            _need(df, err, name)
+            t = df["time_s"].to_numpy(dtype=float)
+            ax.plot(t, df[err].to_numpy(dtype=float), color=color, lw=1.0, label=name)
             sig = f"sig_{a}_{unit}"
-            if sig in df.columns:
-                s = 3 * df[sig].to_numpy()
+            if sig in df.columns:  # methods without a covariance have no envelope
+                s = 3.0 * df[sig].to_numpy(dtype=float)
                 ax.plot(t, s, color=color, lw=0.8, ls="--")
                 ax.plot(t, -s, color=color, lw=0.8, ls="--")
         ax.set_ylabel(f"{_AXIS_NAME[a]} [{_LABEL_UNIT[unit]}]")
         ax.grid(alpha=0.3)
     axs[0].set_title(f"{title} (estimate - truth); dashed: filter 3-sigma; grey: GNSS outage")
-    axs[0].legend(loc="upper right", fontsize="small")
+    if solutions:
+        axs[0].legend(loc="upper right", fontsize="small")
     axs[-1].set_xlabel("time [s]")
     return fig
 
 
-def horizontal_error_figure(solutions: dict[str, pd.DataFrame], outages=()) -> Figure:
-    """Horizontal position error against time, one line per method."""
+def horizontal_error_figure(solutions: dict[str, pd.DataFrame],
+                            outages: Sequence[tuple[float, float]] = ()) -> Figure:
+    """Horizontal position error ``hypot(err_n, err_e)`` [m] against time, one line per method.
+
+    Parameters
+    ----------
+    solutions : dict of str -> pandas.DataFrame
+        Solution tables with ``time_s`` [s], ``err_n_m`` and ``err_e_m`` [m].
+    outages : sequence of (start_s, end_s)
+        GNSS outage windows [s], shaded grey.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     fig = Figure(figsize=(9, 3.5), layout="constrained")
     ax = fig.subplots()
     _shade(ax, outages)
     for j, (name, df) in enumerate(solutions.items()):
-        ax.plot(df["time_s"], np.hypot(df["err_n_m"], df["err_e_m"]), color=f"C{j}", lw=1.0, label=name)
+        for col in ("time_s", "err_n_m", "err_e_m"):
+            _need(df, col, name)
+        h = np.hypot(df["err_n_m"].to_numpy(dtype=float), df["err_e_m"].to_numpy(dtype=float))
+        ax.plot(df["time_s"].to_numpy(dtype=float), h, color=f"C{j}", lw=1.0, label=name)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("horizontal error [m]")
+    ax.set_title("horizontal position error; grey: GNSS outage")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize="small")
+    if solutions:
+        ax.legend(fontsize="small")
     return fig
 
 
-def _local_ne(lat_deg, lon_deg, lat0, lon0):
-    rm, rn = earth.radii(np.radians(lat0))
-    n = np.radians(np.asarray(lat_deg) - lat0) * rm
-    e = np.radians(np.asarray(lon_deg) - lon0) * rn * np.cos(np.radians(lat0))
+def _local_ne(lat_deg, lon_deg, lat0_deg: float, lon0_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """North, east [m] of points about (lat0, lon0) [deg], flat Earth with WGS-84 radii there.
+
+    Good to well under a metre over a few kilometres, which is all a plan view needs.
+    """
+    rm, rn = earth.radii(np.radians(lat0_deg))
+    n = np.radians(np.asarray(lat_deg, dtype=float) - lat0_deg) * rm
+    e = np.radians(np.asarray(lon_deg, dtype=float) - lon0_deg) * rn * np.cos(np.radians(lat0_deg))
     return n, e
 
 
 def trajectory_figure(solutions: dict[str, pd.DataFrame], reference: pd.DataFrame | None = None,
-                      gnss: pd.DataFrame | None = None, outages=()) -> Figure:
-    """Plan view (north against east, metres about the first point)."""
+                      gnss: pd.DataFrame | None = None,
+                      outages: Sequence[tuple[float, float]] = ()) -> Figure:
+    """Plan view: north against east [m] about the first reference (or solution) point.
+
+    Parameters
+    ----------
+    solutions : dict of str -> pandas.DataFrame
+        Solution tables with ``lat_deg``, ``lon_deg`` [deg]; one line each.
+    reference : pandas.DataFrame, optional
+        Truth or reference trajectory (``time_s`` [s], ``lat_deg``,
+        ``lon_deg`` [deg]), drawn black; its stretches inside the outage
+        windows are highlighted.
+    gnss : pandas.DataFrame, optional
+        GNSS fixes (``time_s``, ``lat_deg``, ``lon_deg``), drawn as dots.
+    outages : sequence of (start_s, end_s)
+        GNSS outage windows [s].
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    if reference is not None:
+        first = reference
+    elif solutions:
+        first = next(iter(solutions.values()))
+    else:
+        raise ValueError("trajectory_figure needs a reference or at least one solution")
     fig = Figure(figsize=(7, 7), layout="constrained")
     ax = fig.subplots()
-    first = reference if reference is not None else next(iter(solutions.values()))
     lat0, lon0 = float(first["lat_deg"].iloc[0]), float(first["lon_deg"].iloc[0])
     if reference is not None:
         n, e = _local_ne(reference["lat_deg"], reference["lon_deg"], lat0, lon0)
-        ax.plot(e, n, color="k", lw=1.5, label="truth / reference")
-        t = reference["time_s"].to_numpy()
-        for a, b in outages:
+        ax.plot(e, n, color="k", lw=1.5, label="reference")
+        t = reference["time_s"].to_numpy(dtype=float)
+        for i, (a, b) in enumerate(outages):
             sel = (t >= a) & (t <= b)
-            ax.plot(e[sel], n[sel], color="orange", lw=4, alpha=0.6,
-                    label="GNSS outage" if a == outages[0][0] else None)
+            ax.plot(e[sel], n[sel], color="orange", lw=4, alpha=0.6, zorder=1.5,
+                    label="GNSS outage" if i == 0 else None)
     if gnss is not None and len(gnss):
         n, e = _local_ne(gnss["lat_deg"], gnss["lon_deg"], lat0, lon0)
         ax.plot(e, n, ".", color="0.5", ms=2, label="GNSS fixes")
@@ -97,6 +179,8 @@ def trajectory_figure(solutions: dict[str, pd.DataFrame], reference: pd.DataFram
         ax.plot(e, n, color=f"C{j}", lw=1.0, label=name)
     ax.set_xlabel("east [m]")
     ax.set_ylabel("north [m]")
+    ax.set_title(f"plan view about {lat0:.6f} deg, {lon0:.6f} deg")
+    # datalim keeps the box size and stretches the limits, so metres look like metres
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(alpha=0.3)
     ax.legend(fontsize="small")

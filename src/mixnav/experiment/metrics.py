@@ -1,11 +1,19 @@
-"""Accuracy metrics of a solution table (column names in docs/outputs.md)."""
+"""Accuracy metrics of a solution table (column names in docs/outputs.md).
+
+Errors in the table are estimate minus truth. Every metric is a plain Python
+number so the result can go straight into ``metrics.json``.
+"""
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
 
-#: Every key :func:`compute_metrics` returns, with its meaning and unit.
+#: Every key :func:`compute_metrics` returns, with its meaning and unit, plus the
+#: timing and consistency keys :mod:`mixnav.experiment.run` adds per method.
+#: docs/outputs.md lists the same keys (checked by tests/test_cli.py).
 METRIC_KEYS_DOC: dict[str, str] = {
     "roll_rmse_deg": "RMS of the roll error [deg]",
     "roll_max_deg": "largest absolute roll error [deg]",
@@ -33,33 +41,61 @@ METRIC_KEYS_DOC: dict[str, str] = {
     "nis_mean_per_dof": "mean NIS divided by the measurement dimension (1 if consistent)",
 }
 
-_NEEDED = ["time_s", "err_n_m", "err_e_m", "err_d_m", "err_vn_mps", "err_ve_mps", "err_vd_mps",
-           "err_roll_deg", "err_pitch_deg", "err_yaw_deg"]
+_NEEDED = ("time_s", "err_n_m", "err_e_m", "err_d_m", "err_vn_mps", "err_ve_mps", "err_vd_mps",
+           "err_roll_deg", "err_pitch_deg", "err_yaw_deg")
 
 
 def _col(df: pd.DataFrame, name: str) -> np.ndarray:
+    """Column ``name`` as floats; ValueError naming it when missing or not finite."""
     if name not in df.columns:
         raise ValueError(f"solution table has no column '{name}'")
     a = df[name].to_numpy(dtype=float)
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"solution column '{name}' has a non-finite value at row "
-                         f"{int(np.argmax(~np.isfinite(a)))}")
+    bad = ~np.isfinite(a)
+    if bad.any():
+        raise ValueError(f"solution column '{name}' has a NaN or infinite value at row "
+                         f"{int(np.argmax(bad))}")
     return a
 
 
-def _rms(x):
+def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(x))))
 
 
-def compute_metrics(solution: pd.DataFrame, outages=()) -> dict:
-    """RMSE, maxima and outage maxima of a solution table with error columns.
+def compute_metrics(solution: pd.DataFrame,
+                    outages: Sequence[tuple[float, float]] = ()) -> dict:
+    """RMSE, maxima and per-outage maxima of a solution table.
 
     Parameters
     ----------
-    solution : DataFrame
-        One row per epoch, with the ``err_*`` columns.
-    outages : sequence of (start, end)
-        GNSS outage windows [s]; rows with ``start <= time_s <= end`` count.
+    solution : pandas.DataFrame
+        One row per epoch with ``time_s`` [s] and the error columns
+        ``err_n_m, err_e_m, err_d_m`` [m], ``err_vn_mps, err_ve_mps,
+        err_vd_mps`` [m/s] and ``err_roll_deg, err_pitch_deg, err_yaw_deg``
+        [deg] (yaw already wrapped to [-180, 180)); optionally ``nees_pos``
+        and ``nees_vel`` [-].
+    outages : sequence of (start_s, end_s)
+        GNSS outage windows [s]; a row belongs to a window when
+        ``start_s <= time_s <= end_s``.
+
+    Returns
+    -------
+    dict
+        ``{roll,pitch,yaw}_{rmse,max}_deg``, ``horizontal_{rmse,max,p95}_m``,
+        ``vertical_{rmse,max}_m``, ``velocity_{rmse,max}_mps`` (floats),
+        ``n_epochs`` (int), ``outages`` (one dict per window with
+        ``start_s, end_s, horizontal_max_m, vertical_max_m,
+        horizontal_final_m``) and, when the NEES columns exist,
+        ``nees_pos_mean``, ``nees_vel_mean``. See :data:`METRIC_KEYS_DOC`.
+        Horizontal error is ``hypot(err_n, err_e)``, vertical ``|err_d|``,
+        velocity the 3-D norm; RMSE is over all rows, max of the absolute
+        error.
+
+    Raises
+    ------
+    ValueError
+        If a needed column is missing or holds a NaN/infinity (the message
+        names the column), if the table is empty, or if an outage window
+        holds no row (the message names the window).
     """
     c = {k: _col(solution, k) for k in _NEEDED}
     if len(c["time_s"]) == 0:
@@ -80,16 +116,23 @@ def compute_metrics(solution: pd.DataFrame, outages=()) -> dict:
     m["velocity_rmse_mps"] = _rms(vel)
     m["velocity_max_mps"] = float(vel.max())
     m["n_epochs"] = int(len(hor))
+
     t = c["time_s"]
-    out = []
+    windows = []
     for a, b in outages:
+        a, b = float(a), float(b)
         sel = (t >= a) & (t <= b)
         if not sel.any():
-            raise ValueError(f"outage window [{a}, {b}] s holds no solution epoch")
-        out.append({"start_s": float(a), "end_s": float(b),
-                    "horizontal_max_m": float(hor[sel].max()), "vertical_max_m": float(ver[sel].max()),
-                    "horizontal_final_m": float(hor[sel][-1])})
-    m["outages"] = out
+            # An empty window would give NaN maxima; refuse rather than write them.
+            raise ValueError(f"outage window [{a:g}, {b:g}] s holds no solution epoch")
+        h = hor[sel]
+        windows.append({"start_s": a, "end_s": b,
+                        "horizontal_max_m": float(h.max()),
+                        "vertical_max_m": float(ver[sel].max()),
+                        # rows are in time order: the last selected row ends the window
+                        "horizontal_final_m": float(h[-1])})
+    m["outages"] = windows
+
     for k in ("nees_pos", "nees_vel"):
         if k in solution.columns:
             m[f"{k}_mean"] = float(np.mean(_col(solution, k)))

@@ -1,88 +1,141 @@
-"""One self-contained HTML report: tables and figures (embedded PNG), no scripts."""
+"""One self-contained HTML report: tables and figures (embedded PNG), no scripts.
+
+The page has no JavaScript and no external resource, so it can be mailed or
+archived as a single file. Every piece of text is escaped with
+``html.escape``.
+"""
 
 from __future__ import annotations
 
 import base64
 import html
-import io
+import numbers
+from collections.abc import Sequence
 from pathlib import Path
 
-from ..io.atomic import atomic_write_bytes, atomic_write_text
+from matplotlib.figure import Figure
 
+from ..io.atomic import atomic_savefig, atomic_write_text
+
+__all__ = ["write_report"]
+
+#: Columns of the metrics table: metric key -> header (with unit).
 _COLUMNS = [
     ("horizontal_rmse_m", "horiz. RMSE [m]"), ("horizontal_max_m", "horiz. max [m]"),
     ("vertical_rmse_m", "vert. RMSE [m]"), ("vertical_max_m", "vert. max [m]"),
     ("velocity_rmse_mps", "vel. RMSE [m/s]"), ("velocity_max_mps", "vel. max [m/s]"),
-    ("roll_rmse_deg", "roll RMSE [deg]"), ("pitch_rmse_deg", "pitch RMSE [deg]"),
+    ("roll_rmse_deg", "roll RMSE [deg]"), ("roll_max_deg", "roll max [deg]"),
+    ("pitch_rmse_deg", "pitch RMSE [deg]"), ("pitch_max_deg", "pitch max [deg]"),
     ("yaw_rmse_deg", "yaw RMSE [deg]"), ("yaw_max_deg", "yaw max [deg]"),
     ("epoch_time_mean_us", "time/epoch [us]"),
 ]
 
-_CSS = """body{font-family:system-ui,sans-serif;margin:2em auto;max-width:1100px;color:#222}
-table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #bbb;padding:4px 8px;text-align:right}
-th{background:#eee}td:first-child,th:first-child{text-align:left}img{max-width:100%;display:block;margin:1em 0}
+_DPI = 110
+
+_CSS = """body{font-family:system-ui,sans-serif;margin:2em auto;max-width:1100px;padding:0 1em;color:#222}
+table{border-collapse:collapse;margin:1em 0;font-size:90%}
+td,th{border:1px solid #bbb;padding:4px 8px;text-align:right}
+th{background:#eee}td:first-child,th:first-child{text-align:left}
+img{max-width:100%;display:block;margin:1em 0}
 pre{background:#f6f6f6;padding:1em;overflow:auto;font-size:85%}"""
 
 
+def _esc(x) -> str:
+    return html.escape(str(x), quote=True)
+
+
 def _fmt(v) -> str:
-    if isinstance(v, (int, float)):
-        return f"{v:.3g}"
-    return html.escape(str(v))
+    """A number with 3 significant digits; anything else escaped as text."""
+    if isinstance(v, numbers.Real) and not isinstance(v, bool):
+        return f"{float(v):.3g}"
+    return _esc(v)
 
 
-def write_report(out_dir: Path, title: str, metrics: dict, figures: dict, notes=(),
-                 config_text: str | None = None) -> Path:
+def _metrics_table(methods: dict) -> str:
+    # Only columns some method has: e.g. epoch_time_mean_us is absent without timing.
+    cols = [(k, h) for k, h in _COLUMNS if any(k in m for m in methods.values())]
+    rows = ["<table><tr><th>method</th>" + "".join(f"<th>{_esc(h)}</th>" for _, h in cols) + "</tr>"]
+    for name, m in methods.items():
+        cells = "".join(f"<td>{_fmt(m[k]) if k in m else ''}</td>" for k, _ in cols)
+        rows.append(f"<tr><td>{_esc(name)}</td>{cells}</tr>")
+    rows.append("</table>")
+    return "".join(rows)
+
+
+def _outage_table(methods: dict) -> str:
+    rows = ["<table><tr><th>method</th><th>window [s]</th><th>horiz. max [m]</th>"
+            "<th>vert. max [m]</th><th>horiz. at end [m]</th></tr>"]
+    for name, m in methods.items():
+        for o in m.get("outages", []):
+            rows.append(f"<tr><td>{_esc(name)}</td><td>{o['start_s']:g} - {o['end_s']:g}</td>"
+                        f"<td>{_fmt(o['horizontal_max_m'])}</td><td>{_fmt(o['vertical_max_m'])}</td>"
+                        f"<td>{_fmt(o['horizontal_final_m'])}</td></tr>")
+    rows.append("</table>")
+    return "".join(rows)
+
+
+def write_report(out_dir: Path, title: str, metrics: dict, figures: dict[str, Figure],
+                 notes: Sequence[str] = (), config_text: str | None = None) -> Path:
     """Save the figures as PNG and write ``report.html`` with them embedded.
 
     Parameters
     ----------
     out_dir : Path
+        Output folder, created if missing.
     title : str
+        Page title and heading.
     metrics : dict
-        ``{"methods": {name: {metric: value, ..., "outages": [...]}}, ...}``.
-    figures : dict of name -> matplotlib Figure
+        ``{"scenario": str, "methods": {name: metrics}, ...}`` where each
+        method's metrics come from
+        :func:`mixnav.experiment.metrics.compute_metrics`, optionally with
+        ``epoch_time_mean_us`` [us] and ``recoveries`` added.
+    figures : dict of str -> matplotlib.figure.Figure
+        Each is saved as ``<name>.png`` (dpi 110) and embedded in the page.
     notes : sequence of str
+        Shown as a bullet list.
     config_text : str, optional
-        The scenario file, shown at the end.
+        The scenario file, shown verbatim at the end.
+
+    Returns
+    -------
+    Path
+        Path of ``report.html``.
     """
     out_dir = Path(out_dir)
-    parts = [f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
-             f"<style>{_CSS}</style></head><body><h1>{html.escape(title)}</h1>"]
+    out_dir.mkdir(parents=True, exist_ok=True)
     methods = metrics.get("methods", {})
-    cols = [(k, h) for k, h in _COLUMNS if any(k in m for m in methods.values())]
-    parts.append("<h2>Accuracy and cost</h2><table><tr><th>method</th>"
-                 + "".join(f"<th>{html.escape(h)}</th>" for _, h in cols) + "</tr>")
-    for name, m in methods.items():
-        parts.append(f"<tr><td>{html.escape(name)}</td>" + "".join(f"<td>{_fmt(m.get(k, ''))}</td>" for k, _ in cols)
-                     + "</tr>")
-    parts.append("</table>")
+    parts = ["<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
+             f"<title>{_esc(title)}</title><style>{_CSS}</style></head><body>",
+             f"<h1>{_esc(title)}</h1>"]
+    if "scenario" in metrics:
+        parts.append(f"<p>Scenario: <b>{_esc(metrics['scenario'])}</b></p>")
+
+    parts.append("<h2>Accuracy and cost</h2>")
+    parts.append(_metrics_table(methods))
     if any(m.get("outages") for m in methods.values()):
-        parts.append("<h2>GNSS outages</h2><table><tr><th>method</th><th>window [s]</th>"
-                     "<th>horiz. max [m]</th><th>vert. max [m]</th><th>horiz. at end [m]</th></tr>")
-        for name, m in methods.items():
-            for o in m.get("outages", []):
-                parts.append(f"<tr><td>{html.escape(name)}</td><td>{o['start_s']:g}-{o['end_s']:g}</td>"
-                             f"<td>{_fmt(o['horizontal_max_m'])}</td><td>{_fmt(o['vertical_max_m'])}</td>"
-                             f"<td>{_fmt(o['horizontal_final_m'])}</td></tr>")
-        parts.append("</table>")
-    rec = {n: m["recoveries"] for n, m in methods.items() if "recoveries" in m}
+        parts.append("<h2>GNSS outages</h2>")
+        parts.append(_outage_table(methods))
+    rec = {n: m["recoveries"] for n, m in methods.items() if m.get("recoveries")}
     if rec:
         parts.append("<h2>Numerical recoveries</h2><ul>" + "".join(
-            f"<li>{html.escape(n)}: " + ", ".join(f"{html.escape(k)} {v}" for k, v in r.items()) + "</li>"
+            f"<li>{_esc(n)}: " + ", ".join(f"{_esc(k)} {_esc(v)}" for k, v in r.items()) + "</li>"
             for n, r in rec.items()) + "</ul>")
     if notes:
-        parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in notes) + "</ul>")
-    parts.append("<h2>Figures</h2>")
+        parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{_esc(n)}</li>" for n in notes) + "</ul>")
+
+    if figures:
+        parts.append("<h2>Figures</h2>")
     for name, fig in figures.items():
-        # render once: the same bytes go to the PNG file and into the page
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=110)
-        atomic_write_bytes(out_dir / f"{name}.png", buf.getvalue())
-        b64 = base64.b64encode(buf.getvalue()).decode("ascii")
-        parts.append(f"<h3>{html.escape(name)}</h3><img alt='{html.escape(name)}' src='data:image/png;base64,{b64}'>")
+        png = out_dir / f"{name}.png"
+        atomic_savefig(fig, png, dpi=_DPI)
+        # Embed the bytes of the file just written, so page and PNG are identical.
+        b64 = base64.b64encode(png.read_bytes()).decode("ascii")
+        parts.append(f"<h3>{_esc(name)}</h3>"
+                     f"<img src='data:image/png;base64,{b64}' alt='{_esc(name)}'>")
+
     if config_text:
-        parts.append(f"<h2>Scenario</h2><pre>{html.escape(config_text)}</pre>")
+        parts.append(f"<h2>Scenario file</h2><pre>{_esc(config_text)}</pre>")
     parts.append("</body></html>\n")
     path = out_dir / "report.html"
-    atomic_write_text(path, "".join(parts))
+    atomic_write_text(path, "\n".join(parts))
     return path

@@ -2,8 +2,9 @@
 
 Each writer writes a temporary file in the target's folder, flushes and
 fsyncs it, then renames it over the target (``os.replace`` is atomic on
-POSIX and Windows); on any error the temporary file is removed and the target
-is left as it was.
+POSIX and Windows when both names are on the same file system, hence the
+same folder). On any error the temporary file is removed and the target is
+left as it was.
 """
 
 from __future__ import annotations
@@ -14,67 +15,161 @@ import os
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any, BinaryIO, Iterator
+
+import numpy as np
+
+__all__ = [
+    "atomic_write_bytes",
+    "atomic_write_text",
+    "atomic_write_json",
+    "atomic_write_dataframe",
+    "atomic_savefig",
+]
 
 
 @contextmanager
-def _atomic(path, mode="wb"):
+def _atomic(path: str | os.PathLike) -> Iterator[BinaryIO]:
+    """Yield a binary file that replaces ``path`` only if the block succeeds."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    # Same folder as the target: os.replace must not cross file systems.
+    tmp = tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp",
+                                      delete=False)
     try:
-        with os.fdopen(fd, mode) as fh:
-            yield fh, tmp
+        with tmp as fh:
+            yield fh
             fh.flush()
             os.fsync(fh.fileno())
-        os.replace(tmp, path)
+        os.replace(tmp.name, path)
     except BaseException:
+        # BaseException: a KeyboardInterrupt must not leave a stray temp file either.
         try:
-            os.unlink(tmp)
+            os.unlink(tmp.name)
         except FileNotFoundError:
             pass
         raise
 
 
-def atomic_write_bytes(path, data: bytes) -> None:
-    with _atomic(path, "wb") as (fh, _):
+def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Target file; its folder is created if missing.
+    data : bytes
+        The whole content of the file.
+    """
+    with _atomic(path) as fh:
         fh.write(data)
 
 
-def atomic_write_text(path, text: str) -> None:
+def atomic_write_text(path: str | os.PathLike, text: str) -> None:
+    """Write ``text`` to ``path`` atomically, UTF-8 encoded.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Target file.
+    text : str
+        The whole content of the file.
+    """
     atomic_write_bytes(path, text.encode("utf-8"))
 
 
-def _find_nan(obj, where="$"):
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return where
+def _find_non_finite(obj: Any, where: str = "$") -> str | None:
+    """Key path (``$.a.b[2]``) of the first NaN or infinity in ``obj``, or None."""
+    if isinstance(obj, (float, np.floating)):
+        return where if not math.isfinite(obj) else None
+    if isinstance(obj, np.ndarray):
+        obj = obj.tolist()
     if isinstance(obj, dict):
         for k, v in obj.items():
-            hit = _find_nan(v, f"{where}.{k}")
-            if hit:
+            hit = _find_non_finite(v, f"{where}.{k}")
+            if hit is not None:
                 return hit
-    if isinstance(obj, (list, tuple)):
+    elif isinstance(obj, (list, tuple)):
         for i, v in enumerate(obj):
-            hit = _find_nan(v, f"{where}[{i}]")
-            if hit:
+            hit = _find_non_finite(v, f"{where}[{i}]")
+            if hit is not None:
                 return hit
     return None
 
 
-def atomic_write_json(path, obj) -> None:
-    """Write JSON; a NaN or infinity anywhere is an error naming its key path."""
-    bad = _find_nan(obj)
-    if bad:
+def _json_default(obj: Any) -> Any:
+    # numpy scalars and arrays slip into results easily; store them as plain numbers.
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    raise TypeError(f"object of type {type(obj).__name__} is not JSON serializable")
+
+
+def atomic_write_json(path: str | os.PathLike, obj: Any) -> None:
+    """Write ``obj`` as JSON (indent 2, keys in insertion order) atomically.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Target file.
+    obj : JSON-serialisable object
+        numpy scalars and arrays are converted to plain numbers and lists.
+
+    Raises
+    ------
+    ValueError
+        If a NaN or infinity occurs anywhere in ``obj``; the message names its
+        key path (e.g. ``$.methods.ekf.horizontal_rmse_m``). Nothing is written.
+    """
+    bad = _find_non_finite(obj)
+    if bad is not None:
         raise ValueError(f"refusing to write {path}: non-finite number at {bad}")
-    atomic_write_text(path, json.dumps(obj, indent=2, allow_nan=False) + "\n")
+    text = json.dumps(obj, indent=2, sort_keys=False, allow_nan=False, default=_json_default)
+    atomic_write_text(path, text + "\n")
 
 
-def atomic_write_dataframe(path, df) -> None:
-    """CSV or Parquet by the suffix of ``path``."""
+def atomic_write_dataframe(path: str | os.PathLike, df) -> None:
+    """Write a table atomically as CSV or Parquet, chosen by the suffix of ``path``.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Target file ending in ``.csv`` (``float_format='%.10g'``, no index) or
+        ``.parquet`` (pyarrow, no index).
+    df : pandas.DataFrame
+        The table.
+
+    Raises
+    ------
+    ValueError
+        For any other suffix.
+    """
     path = Path(path)
-    if path.suffix == ".csv":
+    suffix = path.suffix.lower()
+    if suffix == ".csv":
         atomic_write_text(path, df.to_csv(index=False, float_format="%.10g"))
-    elif path.suffix == ".parquet":
-        with _atomic(path, "wb") as (fh, _):
-            df.to_parquet(fh, index=False)
+    elif suffix == ".parquet":
+        with _atomic(path) as fh:
+            df.to_parquet(fh, engine="pyarrow", index=False)
     else:
         raise ValueError(f"unknown table format '{path.suffix}' for {path}; use .csv or .parquet")
+
+
+def atomic_savefig(fig, path: str | os.PathLike, **kw) -> None:
+    """Save a matplotlib figure atomically.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure.
+    path : str or PathLike
+        Target file; its suffix selects the format unless ``format`` is given.
+    **kw
+        Passed on to ``Figure.savefig`` (``dpi``, ``bbox_inches``, ...).
+    """
+    path = Path(path)
+    # Writing into a file object loses the suffix, so pass the format explicitly.
+    kw.setdefault("format", path.suffix.lstrip(".").lower() or "png")
+    with _atomic(path) as fh:
+        fig.savefig(fh, **kw)

@@ -1,0 +1,131 @@
+"""compute_metrics against closed-form answers, and its refusals."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from mixnav.experiment.metrics import METRIC_KEYS_DOC, compute_metrics
+
+ERR_COLS = ["err_n_m", "err_e_m", "err_d_m", "err_vn_mps", "err_ve_mps", "err_vd_mps",
+            "err_roll_deg", "err_pitch_deg", "err_yaw_deg"]
+
+
+def table(n=101, dt=1.0, **cols):
+    """A solution table with zero errors except the columns given."""
+    d = {"time_s": np.arange(n) * dt}
+    for c in ERR_COLS:
+        d[c] = np.zeros(n)
+    for k, v in cols.items():
+        d[k] = np.broadcast_to(np.asarray(v, dtype=float), (n,)).copy()
+    return pd.DataFrame(d)
+
+
+def test_constant_3_4_error_gives_5m_horizontal():
+    m = compute_metrics(table(err_n_m=3.0, err_e_m=4.0))
+    assert m["horizontal_rmse_m"] == pytest.approx(5.0, abs=1e-12)
+    assert m["horizontal_max_m"] == pytest.approx(5.0, abs=1e-12)
+    assert m["horizontal_p95_m"] == pytest.approx(5.0, abs=1e-12)
+    assert m["vertical_rmse_m"] == 0.0 and m["velocity_max_mps"] == 0.0
+    assert m["n_epochs"] == 101
+
+
+def test_sinusoid_over_whole_periods_has_rms_a_over_sqrt2():
+    a, period, n_periods, n = 2.5, 10.0, 7, 7000
+    t = np.arange(n) * (n_periods * period / n)  # whole periods, end point excluded
+    df = table(n=n, err_d_m=a * np.sin(2 * np.pi * t / period), err_roll_deg=a * np.sin(2 * np.pi * t / period))
+    df["time_s"] = t
+    m = compute_metrics(df)
+    assert m["vertical_rmse_m"] == pytest.approx(a / np.sqrt(2), abs=1e-3)
+    assert m["roll_rmse_deg"] == pytest.approx(a / np.sqrt(2), abs=1e-3)
+    assert m["vertical_max_m"] == pytest.approx(a, abs=1e-3)
+
+
+def test_vertical_uses_absolute_error():
+    m = compute_metrics(table(n=4, err_d_m=[-3.0, 1.0, -1.0, 1.0]))
+    assert m["vertical_max_m"] == 3.0
+    assert m["vertical_rmse_m"] == pytest.approx(np.sqrt(12 / 4))
+
+
+def test_velocity_error_is_3d_norm():
+    m = compute_metrics(table(err_vn_mps=1.0, err_ve_mps=-2.0, err_vd_mps=2.0))
+    assert m["velocity_rmse_mps"] == pytest.approx(3.0)
+    assert m["velocity_max_mps"] == pytest.approx(3.0)
+
+
+def test_yaw_errors_signed_and_near_wrap():
+    # wrapped errors near +-180 must count as large, and signs must not cancel
+    m = compute_metrics(table(n=4, err_yaw_deg=[-179.5, 2.0, -2.0, 0.5], err_pitch_deg=[1, -1, 1, -1]))
+    assert m["yaw_max_deg"] == 179.5
+    assert m["yaw_rmse_deg"] == pytest.approx(np.sqrt((179.5**2 + 4 + 4 + 0.25) / 4))
+    assert m["pitch_rmse_deg"] == pytest.approx(1.0) and m["pitch_max_deg"] == 1.0
+    assert m["roll_max_deg"] == 0.0
+
+
+def test_p95_of_a_ramp():
+    m = compute_metrics(table(n=101, err_e_m=np.arange(101.0)))
+    assert m["horizontal_p95_m"] == pytest.approx(95.0)
+    assert m["horizontal_max_m"] == 100.0
+
+
+def test_outage_windows_pick_their_rows():
+    # horizontal error = time, vertical error = 2 * time, one row per second 0..100
+    t = np.arange(101.0)
+    df = table(err_n_m=t, err_d_m=-2 * t)
+    m = compute_metrics(df, outages=[(10.0, 20.0), (30.5, 39.5)])
+    o1, o2 = m["outages"]
+    assert (o1["start_s"], o1["end_s"]) == (10.0, 20.0)
+    assert o1["horizontal_max_m"] == 20.0  # the end point is inside
+    assert o1["vertical_max_m"] == 40.0
+    assert o1["horizontal_final_m"] == 20.0
+    assert o2["horizontal_max_m"] == 39.0 and o2["horizontal_final_m"] == 39.0
+    assert o2["vertical_max_m"] == 78.0
+    # an error peaking inside the window: max and final differ
+    df2 = table(n=11, err_e_m=[0, 0, 1, 5, 2, 0, 0, 0, 0, 0, 0])
+    (o,) = compute_metrics(df2, outages=[(2.0, 4.0)])["outages"]
+    assert o["horizontal_max_m"] == 5.0 and o["horizontal_final_m"] == 2.0
+    assert compute_metrics(df)["outages"] == []
+
+
+def test_empty_outage_window_is_refused_by_name():
+    with pytest.raises(ValueError, match=r"\[10\.2, 10\.8\]"):
+        compute_metrics(table(), outages=[(10.2, 10.8)])
+
+
+@pytest.mark.parametrize("col", ["time_s", "err_e_m", "err_vd_mps", "err_yaw_deg"])
+def test_missing_column_is_named(col):
+    with pytest.raises(ValueError, match=col):
+        compute_metrics(table().drop(columns=col))
+
+
+@pytest.mark.parametrize("col", ["err_n_m", "err_pitch_deg", "nees_pos"])
+def test_nan_column_is_named(col):
+    df = table(nees_pos=3.0)
+    df.loc[7, col] = np.nan
+    with pytest.raises(ValueError, match=col):
+        compute_metrics(df)
+
+
+def test_nees_means_only_when_columns_exist():
+    assert "nees_pos_mean" not in compute_metrics(table())
+    m = compute_metrics(table(n=4, nees_pos=[1.0, 2.0, 3.0, 6.0], nees_vel=3.0))
+    assert m["nees_pos_mean"] == pytest.approx(3.0) and m["nees_vel_mean"] == pytest.approx(3.0)
+
+
+def test_values_are_plain_documented_and_json_ready():
+    m = compute_metrics(table(err_n_m=1.0, nees_pos=3.0, nees_vel=3.0), outages=[(5, 6)])
+    assert set(m) <= set(METRIC_KEYS_DOC)
+    for k, v in m.items():
+        if k == "outages":
+            assert all(type(x) is float for o in v for x in o.values())
+        elif k == "n_epochs":
+            assert type(v) is int
+        else:
+            assert type(v) is float, k
+    json.dumps(m, allow_nan=False)
+
+
+def test_empty_table_is_refused():
+    with pytest.raises(ValueError, match="empty"):
+        compute_metrics(table(n=0))
