@@ -129,3 +129,20 @@ def test_values_are_plain_documented_and_json_ready():
 def test_empty_table_is_refused():
     with pytest.raises(ValueError, match="empty"):
         compute_metrics(table(n=0))
+
+
+def test_a_reference_without_velocity_and_attitude_scores_position_only():
+    df = table().drop(columns=["err_vn_mps", "err_ve_mps", "err_vd_mps",
+                               "err_roll_deg", "err_pitch_deg", "err_yaw_deg"])
+    m = compute_metrics(df)
+    assert "horizontal_rmse_m" in m and "velocity_rmse_mps" not in m and "yaw_rmse_deg" not in m
+
+
+def test_rmse_outside_the_outages():
+    df = table()
+    t = df["time_s"].to_numpy()
+    df["err_n_m"] = np.where((t >= 2.0) & (t <= 4.0), 10.0, 1.0)
+    df["err_e_m"] = 0.0
+    m = compute_metrics(df, outages=[(2.0, 4.0)])
+    assert m["horizontal_rmse_outside_outages_m"] == pytest.approx(1.0)
+    assert m["outages"][0]["horizontal_max_m"] == pytest.approx(10.0)

@@ -73,3 +73,18 @@ def test_ekf_stays_consistent_with_fixes_between_imu_samples():
     # velocity fixes NIS/dof reaches 1.17 with or without the offset: the
     # process model, not the alignment, is the limit at that precision.
     assert nis == pytest.approx(1.0, abs=0.15)
+
+
+@pytest.mark.parametrize("interval", [0.05, 0.3, 1.0])
+def test_every_fix_is_used_and_every_output_recorded_whatever_the_grid(interval):
+    # Event times from a float grid (k * 0.05) and from the fixes can differ
+    # by round-off; each fix must still be applied once and each output kept.
+    sc, src, _ = load_scenario("loose-demo")
+    run = simulate(sc, 0, src)
+    lay = get_layout(15)
+    out = np.arange(0.35, 598.0, 0.7)
+    res = ErrorStateEkf(lay, run.imu_model, covariance_interval=interval).run(
+        run.imu, run.init, [LooseGnss(run.fixes, np.asarray(sc.gnss.lever_arm), lay)], output_times=out)
+    assert res.timing["measurement_epochs"] == len(run.fixes) - (run.fixes.time[-1] > run.imu.time[-1])
+    assert len(res.nis) == res.timing["measurement_epochs"]
+    np.testing.assert_allclose(res.time, out)

@@ -38,13 +38,17 @@ def main(version: bool = typer.Option(False, "--version", callback=_version, is_
 @app.command()
 def scenarios():
     """List the scenarios shipped with mixnav."""
-    from .config import list_scenarios
+    from .config import list_datasets, list_scenarios
     from .filters.registry import METHODS
 
-    t = Table("scenario", "description", title="shipped scenarios")
+    t = Table("scenario", "description", title="shipped scenarios (mixnav run)")
     for name, desc in list_scenarios().items():
         t.add_row(name, desc)
     out.print(t)
+    d = Table("dataset", "description", title="shipped real-data configs (mixnav process)")
+    for name, desc in list_datasets().items():
+        d.add_row(name, desc)
+    out.print(d)
     m = Table("method type", "what it is", title="methods usable in scenario files")
     for name, desc in METHODS.items():
         m.add_row(name, desc)
@@ -72,6 +76,35 @@ def run(scenario: str = typer.Argument(..., help="Shipped scenario name or path 
         t.add_row(name, f"{m['horizontal_rmse_m']:.3g}", f"{m['horizontal_max_m']:.3g}",
                   f"{m['yaw_rmse_deg']:.3g}", f"{m['velocity_rmse_mps']:.3g}",
                   f"{m['epoch_time_mean_us']:.3g}")
+    out.print(t)
+    out.print(f"report: {Path(out_dir) / 'report.html'}")
+
+
+@app.command()
+def process(dataset: str = typer.Argument(..., help="Shipped dataset config name or path of a .toml file."),
+            out_dir: Path = typer.Option(..., "--out", help="Folder for the solution, metrics, figures and report."),
+            data: Path = typer.Option(None, "--data", help="Folder holding the data files "
+                                      "(default: the config's data_dir).")):
+    """Run the methods of a dataset config on real recorded data and score them."""
+    from .config import load_dataset
+    from .experiment.process import process as run_process
+    from .experiment.process import write_process
+
+    try:
+        ds, source, text = load_dataset(dataset)
+        with err.status(f"processing {ds.dataset.name}"):
+            po = run_process(ds, source, None if data is None else str(data))
+            metrics = write_process(out_dir, po, config_text=text)
+    except MixnavError as exc:
+        _fail(exc)
+    t = Table("method", "horiz. RMSE [m]", "horiz. max [m]", "outage max [m]", "time/epoch [us]",
+              title=f"{ds.dataset.name}: {metrics['duration_s']:.0f} s in "
+                    f"{metrics['read_time_s'] + metrics['filter_time_s']:.2f} s "
+                    f"(x{metrics['real_time_factor']:.0f} real time)")
+    for name, m in metrics["methods"].items():
+        outs = ", ".join(f"{o['horizontal_max_m']:.3g}" for o in m.get("outages", [])) or "-"
+        t.add_row(name, f"{m.get('horizontal_rmse_m', float('nan')):.3g}",
+                  f"{m.get('horizontal_max_m', float('nan')):.3g}", outs, f"{m['epoch_time_mean_us']:.3g}")
     out.print(t)
     out.print(f"report: {Path(out_dir) / 'report.html'}")
 

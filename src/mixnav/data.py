@@ -122,22 +122,23 @@ class Trajectory:
     time : ndarray (N,)
     lla : ndarray (N, 3)
         Latitude, longitude [rad], ellipsoidal height [m].
-    v_n : ndarray (N, 3)
-        Velocity north, east, down [m/s].
-    q_nb : ndarray (N, 4)
-        Attitude quaternion, body to NED, scalar first.
+    v_n : ndarray (N, 3) or None
+        Velocity north, east, down [m/s]; None when unknown (e.g. a
+        position-only reference).
+    q_nb : ndarray (N, 4) or None
+        Attitude quaternion, body to NED, scalar first; None when unknown.
     """
 
     time: np.ndarray
     lla: np.ndarray
-    v_n: np.ndarray
-    q_nb: np.ndarray
+    v_n: np.ndarray | None
+    q_nb: np.ndarray | None
     extra: dict = field(default_factory=dict)
 
     @property
-    def rpy(self) -> np.ndarray:
-        """Roll, pitch, yaw [rad], shape (N, 3)."""
-        return quat_to_euler(self.q_nb)
+    def rpy(self) -> np.ndarray | None:
+        """Roll, pitch, yaw [rad], shape (N, 3), or None."""
+        return None if self.q_nb is None else quat_to_euler(self.q_nb)
 
     def __len__(self) -> int:
         return len(self.time)

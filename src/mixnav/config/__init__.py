@@ -1,5 +1,5 @@
-"""Scenario files: the strict schema, the loader, and the shipped scenarios."""
+"""Scenario and dataset files: the strict schemas, the loader, and the shipped configs."""
 
-from .loader import list_scenarios, load_scenario
+from .loader import list_datasets, list_scenarios, load_dataset, load_scenario
 
-__all__ = ["list_scenarios", "load_scenario"]
+__all__ = ["list_datasets", "list_scenarios", "load_dataset", "load_scenario"]

@@ -12,34 +12,40 @@ from ..errors import ConfigError
 from ..ins.imu_model import ImuErrorModel
 from .schema import Scenario
 
-_SHIPPED = "scenarios"
+def _shipped_dir(folder: str = "scenarios"):
+    return resources.files("mixnav.config").joinpath(folder)
 
 
-def _shipped_dir():
-    return resources.files("mixnav.config").joinpath(_SHIPPED)
+def _list(folder: str, table: str) -> dict[str, str]:
+    out = {}
+    for entry in sorted(_shipped_dir(folder).iterdir(), key=lambda p: p.name):
+        if entry.name.endswith(".toml"):
+            data = tomllib.loads(entry.read_text(encoding="utf-8"))
+            out[entry.name[:-5]] = data.get(table, {}).get("description", "")
+    return out
 
 
 def list_scenarios() -> dict[str, str]:
     """Names and one-line descriptions of the scenarios shipped with mixnav."""
-    out = {}
-    for entry in sorted(_shipped_dir().iterdir(), key=lambda p: p.name):
-        if entry.name.endswith(".toml"):
-            data = tomllib.loads(entry.read_text(encoding="utf-8"))
-            out[entry.name[:-5]] = data.get("scenario", {}).get("description", "")
-    return out
+    return _list("scenarios", "scenario")
 
 
-def resolve(name_or_path: str) -> tuple[str, str]:
-    """The text of a scenario and the name to cite it by in errors."""
+def list_datasets() -> dict[str, str]:
+    """Names and descriptions of the real-data configs shipped with mixnav."""
+    return _list("datasets", "dataset")
+
+
+def resolve(name_or_path: str, folder: str = "scenarios", kind: str = "scenario") -> tuple[str, str]:
+    """The text of a config and the name to cite it by in errors."""
     p = Path(name_or_path)
     if p.suffix == ".toml" or p.exists():
         if not p.is_file():
-            raise ConfigError("no such scenario file", file=str(p))
+            raise ConfigError(f"no such {kind} file", file=str(p))
         return p.read_text(encoding="utf-8"), str(p)
-    entry = _shipped_dir().joinpath(f"{name_or_path}.toml")
+    entry = _shipped_dir(folder).joinpath(f"{name_or_path}.toml")
     if not entry.is_file():
-        known = ", ".join(list_scenarios())
-        raise ConfigError(f"unknown scenario '{name_or_path}'; shipped scenarios: {known} "
+        known = ", ".join(_list(folder, kind))
+        raise ConfigError(f"unknown {kind} '{name_or_path}'; shipped: {known} "
                           "(or give the path of a .toml file)")
     return entry.read_text(encoding="utf-8"), f"{name_or_path}.toml (shipped)"
 
@@ -74,12 +80,24 @@ def load_scenario(name_or_path: str) -> tuple[Scenario, str, str]:
         Naming the file and the dotted key of the first problem.
     """
     text, source = resolve(name_or_path)
+    sc = _validate(Scenario, text, source)
+    # IMU errors are checked here too so that a bad value fails at load time.
+    imu_model(sc.imu.grade, sc.imu.errors, source, "imu.errors", "imu.grade")
+    for i, m in enumerate(sc.methods):
+        if m.imu_grade is not None or m.imu_errors is not None:
+            imu_model(m.imu_grade, m.imu_errors or {}, source, f"methods[{i}].imu_errors",
+                      f"methods[{i}].imu_grade")
+    return sc, source, text
+
+
+def _validate(model, text: str, source: str):
+    """Parse TOML text and validate it against ``model``; errors name file and key."""
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"not valid TOML: {exc}", file=source) from None
     try:
-        sc = Scenario.model_validate(data)
+        return model.model_validate(data)
     except ValidationError as exc:
         err = exc.errors()[0]
         key = _key(err["loc"])
@@ -89,13 +107,22 @@ def load_scenario(name_or_path: str) -> tuple[Scenario, str, str]:
             msg = msg[len("Value error, "):]
         more = f" (and {len(exc.errors()) - 1} more problem(s))" if len(exc.errors()) > 1 else ""
         raise ConfigError(msg + more, file=source, key=key) from None
-    # IMU errors are checked here too so that a bad value fails at load time.
-    imu_model(sc.imu.grade, sc.imu.errors, source, "imu.errors", "imu.grade")
-    for i, m in enumerate(sc.methods):
+
+
+def load_dataset(name_or_path: str):
+    """Parse and validate a real-data config (``mixnav process``).
+
+    Returns ``(dataset, source, text)`` like :func:`load_scenario`.
+    """
+    from .dataset_schema import Dataset
+    text, source = resolve(name_or_path, "datasets", "dataset")
+    ds = _validate(Dataset, text, source)
+    imu_model(ds.imu.grade, ds.imu.errors, source, "imu.errors", "imu.grade")
+    for i, m in enumerate(ds.methods):
         if m.imu_grade is not None or m.imu_errors is not None:
             imu_model(m.imu_grade, m.imu_errors or {}, source, f"methods[{i}].imu_errors",
                       f"methods[{i}].imu_grade")
-    return sc, source, text
+    return ds, source, text
 
 
 def imu_model(grade, errors, source, prefix, grade_key) -> ImuErrorModel:

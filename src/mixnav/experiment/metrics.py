@@ -31,6 +31,9 @@ METRIC_KEYS_DOC: dict[str, str] = {
     "n_epochs": "number of epochs scored",
     "outages": "per GNSS outage window: start_s, end_s, horizontal_max_m, vertical_max_m, "
                "horizontal_final_m (at the window's last epoch)",
+    "horizontal_rmse_outside_outages_m": "RMS of the horizontal error over the epochs outside every "
+                                         "outage window [m] (only when there are outages)",
+    "vertical_rmse_outside_outages_m": "RMS of the vertical error outside every outage window [m]",
     "nees_pos_mean": "mean NEES of the 3-D position error (3 for a consistent filter)",
     "nees_vel_mean": "mean NEES of the 3-D velocity error (3 for a consistent filter)",
     "epoch_time_mean_us": "filter wall time per GNSS epoch, mechanization included [us]",
@@ -41,8 +44,11 @@ METRIC_KEYS_DOC: dict[str, str] = {
     "nis_mean_per_dof": "mean NIS divided by the measurement dimension (1 if consistent)",
 }
 
-_NEEDED = ("time_s", "err_n_m", "err_e_m", "err_d_m", "err_vn_mps", "err_ve_mps", "err_vd_mps",
-           "err_roll_deg", "err_pitch_deg", "err_yaw_deg")
+_NEEDED = ("time_s", "err_n_m", "err_e_m", "err_d_m")
+# Optional as whole groups: a reference may carry no velocity or no attitude
+# (RTK positions), but a group present in part is an error.
+_VEL = ("err_vn_mps", "err_ve_mps", "err_vd_mps")
+_ATT = ("err_roll_deg", "err_pitch_deg", "err_yaw_deg")
 
 
 def _col(df: pd.DataFrame, name: str) -> np.ndarray:
@@ -97,24 +103,27 @@ def compute_metrics(solution: pd.DataFrame,
         names the column), if the table is empty, or if an outage window
         holds no row (the message names the window).
     """
-    c = {k: _col(solution, k) for k in _NEEDED}
+    groups = [g for g in (_VEL, _ATT) if any(k in solution.columns for k in g)]
+    c = {k: _col(solution, k) for k in _NEEDED + sum(groups, ())}
     if len(c["time_s"]) == 0:
         raise ValueError("solution table is empty")
     hor = np.hypot(c["err_n_m"], c["err_e_m"])
     ver = np.abs(c["err_d_m"])
-    vel = np.sqrt(c["err_vn_mps"] ** 2 + c["err_ve_mps"] ** 2 + c["err_vd_mps"] ** 2)
     m: dict = {}
-    for a in ("roll", "pitch", "yaw"):
-        e = c[f"err_{a}_deg"]
-        m[f"{a}_rmse_deg"] = _rms(e)
-        m[f"{a}_max_deg"] = float(np.max(np.abs(e)))
+    if _ATT in groups:
+        for a in ("roll", "pitch", "yaw"):
+            e = c[f"err_{a}_deg"]
+            m[f"{a}_rmse_deg"] = _rms(e)
+            m[f"{a}_max_deg"] = float(np.max(np.abs(e)))
     m["horizontal_rmse_m"] = _rms(hor)
     m["horizontal_max_m"] = float(hor.max())
     m["horizontal_p95_m"] = float(np.percentile(hor, 95))
     m["vertical_rmse_m"] = _rms(ver)
     m["vertical_max_m"] = float(ver.max())
-    m["velocity_rmse_mps"] = _rms(vel)
-    m["velocity_max_mps"] = float(vel.max())
+    if _VEL in groups:
+        vel = np.sqrt(c["err_vn_mps"] ** 2 + c["err_ve_mps"] ** 2 + c["err_vd_mps"] ** 2)
+        m["velocity_rmse_mps"] = _rms(vel)
+        m["velocity_max_mps"] = float(vel.max())
     m["n_epochs"] = int(len(hor))
 
     t = c["time_s"]
@@ -132,6 +141,13 @@ def compute_metrics(solution: pd.DataFrame,
                         # rows are in time order: the last selected row ends the window
                         "horizontal_final_m": float(h[-1])})
     m["outages"] = windows
+    if windows:
+        outside = np.ones(len(t), dtype=bool)
+        for a, b in outages:
+            outside &= ~((t >= float(a)) & (t <= float(b)))
+        if outside.any():
+            m["horizontal_rmse_outside_outages_m"] = _rms(hor[outside])
+            m["vertical_rmse_outside_outages_m"] = _rms(ver[outside])
 
     for k in ("nees_pos", "nees_vel"):
         if k in solution.columns:

@@ -20,12 +20,13 @@ import numpy as np
 import pandas as pd
 
 from .. import __version__
-from ..attitude import attitude_error, quat_to_euler, wrap_angle
+from ..attitude import attitude_error, quat_to_dcm, quat_to_euler, wrap_angle
 from ..config.schema import Scenario
 from ..data import Trajectory
 from ..filters import registry
 from ..filters.ekf import FilterResult
 from ..geodesy.frames import ned_displacement
+from ..measurements.loose import antenna_lla
 from ..io.atomic import atomic_write_dataframe, atomic_write_json
 from ..sim.gnss import in_windows
 from ..sim.scenario import SimulatedRun, simulate
@@ -59,26 +60,33 @@ def truth_at(truth: Trajectory, times: np.ndarray) -> Trajectory:
     """The truth at ``times``: exact where they fall on its samples, else interpolated.
 
     Linear in position and velocity, normalised-linear in the quaternion:
-    between 100 Hz samples this is far below any filter's error.
+    between 100 Hz samples this is far below any filter's error. Missing
+    velocity or attitude stays missing.
     """
     k = np.clip(np.searchsorted(truth.time, times), 1, len(truth.time) - 1)
     t0, t1 = truth.time[k - 1], truth.time[k]
     w = ((times - t0) / (t1 - t0))[:, None]
-    lerp = lambda a: a[k - 1] * (1 - w) + a[k] * w  # noqa: E731
-    q0, q1 = truth.q_nb[k - 1], truth.q_nb[k]
-    q1 = np.where(np.sum(q0 * q1, 1, keepdims=True) < 0, -q1, q1)
-    q = q0 * (1 - w) + q1 * w
-    return Trajectory(time=np.asarray(times), lla=lerp(truth.lla), v_n=lerp(truth.v_n),
-                      q_nb=q / np.linalg.norm(q, axis=1, keepdims=True))
+    lerp = lambda a: None if a is None else a[k - 1] * (1 - w) + a[k] * w  # noqa: E731
+    q = None
+    if truth.q_nb is not None:
+        q0, q1 = truth.q_nb[k - 1], truth.q_nb[k]
+        q1 = np.where(np.sum(q0 * q1, 1, keepdims=True) < 0, -q1, q1)
+        q = q0 * (1 - w) + q1 * w
+        q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    return Trajectory(time=np.asarray(times), lla=lerp(truth.lla), v_n=lerp(truth.v_n), q_nb=q)
 
 
-def solution_table(res: FilterResult, truth: Trajectory | None = None, outages=()) -> pd.DataFrame:
+def solution_table(res: FilterResult, truth: Trajectory | None = None, outages=(),
+                   lever=None) -> pd.DataFrame:
     """The solution table of one method (columns in docs/outputs.md).
 
     Errors are estimate minus truth; ``sig_roll/pitch/yaw_deg`` are the
     1-sigma of the attitude error about north, east and down, which equal
     the roll, pitch and yaw sigma for a near-level vehicle heading north and
-    bound them otherwise.
+    bound them otherwise. When ``lever`` (body frame [m]) is given, the
+    truth is of that point (a GNSS antenna serving as reference) and the
+    solution is moved there before the errors are taken. Error columns of a
+    quantity the truth lacks (velocity, attitude) are left out.
     """
     lay = res.layout
     rpy = quat_to_euler(res.nav[:, 0:4])
@@ -90,23 +98,31 @@ def solution_table(res: FilterResult, truth: Trajectory | None = None, outages=(
          "yaw_deg": np.degrees(rpy[:, 2])}
     if truth is not None:
         tt = truth_at(truth, res.time)
-        e_pos = -ned_displacement(tt.lla, res.nav[:, 7:10])  # estimate - truth
-        e_vel = res.nav[:, 4:7] - tt.v_n
-        e_rpy = wrap_angle(rpy - tt.rpy)
+        pos, vel = res.nav[:, 7:10], res.nav[:, 4:7]
+        if lever is not None:
+            lever = np.asarray(lever, dtype=float)
+            pos = np.array([antenna_lla(n, lever) for n in res.nav])
+            vel = vel + np.einsum("kij,kj->ki", quat_to_dcm(res.nav[:, 0:4]), np.cross(res.w_b, lever))
+        e_pos = -ned_displacement(tt.lla, pos)  # estimate - truth
         for i, ax in enumerate("ned"):
             d[f"err_{ax}_m"] = e_pos[:, i]
-        for i, ax in enumerate(("vn", "ve", "vd")):
-            d[f"err_{ax}_mps"] = e_vel[:, i]
-        for i, ax in enumerate(("roll", "pitch", "yaw")):
-            d[f"err_{ax}_deg"] = np.degrees(e_rpy[:, i])
-        # NEES of the 3-D position and velocity errors, with the filter's own covariance.
-        ev = np.concatenate([e_vel, e_pos], axis=1)
         cov = res.pv_cov
-        d["nees_vel"] = np.einsum("ki,ki->k", e_vel, np.linalg.solve(cov[:, :3, :3], e_vel[..., None])[..., 0])
         d["nees_pos"] = np.einsum("ki,ki->k", e_pos, np.linalg.solve(cov[:, 3:, 3:], e_pos[..., None])[..., 0])
-        d["nees_pv"] = np.einsum("ki,ki->k", ev, np.linalg.solve(cov, ev[..., None])[..., 0])
-        d["att_err_n_deg"], d["att_err_e_deg"], d["att_err_d_deg"] = np.degrees(
-            -attitude_error(res.nav[:, 0:4], tt.q_nb)).T
+        if tt.v_n is not None:
+            e_vel = vel - tt.v_n
+            for i, ax in enumerate(("vn", "ve", "vd")):
+                d[f"err_{ax}_mps"] = e_vel[:, i]
+            # NEES of the 3-D position and velocity errors, with the filter's own covariance.
+            ev = np.concatenate([e_vel, e_pos], axis=1)
+            d["nees_vel"] = np.einsum("ki,ki->k", e_vel,
+                                      np.linalg.solve(cov[:, :3, :3], e_vel[..., None])[..., 0])
+            d["nees_pv"] = np.einsum("ki,ki->k", ev, np.linalg.solve(cov, ev[..., None])[..., 0])
+        if tt.q_nb is not None:
+            e_rpy = wrap_angle(rpy - tt.rpy)
+            for i, ax in enumerate(("roll", "pitch", "yaw")):
+                d[f"err_{ax}_deg"] = np.degrees(e_rpy[:, i])
+            d["att_err_n_deg"], d["att_err_e_deg"], d["att_err_d_deg"] = np.degrees(
+                -attitude_error(res.nav[:, 0:4], tt.q_nb)).T
     s = res.sigma
     for i, ax in enumerate("ned"):
         d[f"sig_{ax}_m"] = s[:, lay.pos][:, i]
@@ -121,7 +137,8 @@ def solution_table(res: FilterResult, truth: Trajectory | None = None, outages=(
 
 def method_metrics(res: FilterResult, table: pd.DataFrame, outages) -> dict:
     """Accuracy metrics plus timing, recoveries and NIS of one method."""
-    m = compute_metrics(table, outages=list(outages))
+    # without a reference there is nothing to score: timing and health only
+    m = compute_metrics(table, outages=list(outages)) if "err_n_m" in table else {}
     m.update({k: float(v) for k, v in res.timing.items()})
     m["recoveries"] = dict(res.recoveries)
     if len(res.nis):
@@ -129,38 +146,57 @@ def method_metrics(res: FilterResult, table: pd.DataFrame, outages) -> dict:
     return m
 
 
-def write_run(out_dir: Path, run: RunOutput, config_text: str | None = None) -> dict:
-    """Write solutions, metrics, figures and the report of one run; returns the metrics."""
+def write_outputs(out_dir: Path, title: str, header: dict, results: dict[str, FilterResult],
+                  tables: dict[str, pd.DataFrame], outages, reference: pd.DataFrame | None,
+                  gnss: pd.DataFrame | None, notes=(), config_text: str | None = None) -> dict:
+    """Write solution tables, metrics.json, figures and report.html; returns the metrics.
+
+    Shared by ``mixnav run`` (simulation, truth as reference) and ``mixnav
+    process`` (real data, e.g. RTK fixes as reference).
+    """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    sim = run.sim
-    tables = {name: solution_table(res, sim.truth, sim.outages) for name, res in run.results.items()}
-    metrics = {"scenario": run.scenario.scenario.name, "source": run.source, "seed": sim.seed,
-               "mixnav_version": __version__, "outages_s": [list(o) for o in sim.outages],
-               "methods": {name: method_metrics(run.results[name], tables[name], sim.outages)
-                           for name in tables}}
+    metrics = dict(header)
+    metrics["mixnav_version"] = __version__
+    metrics["outages_s"] = [list(map(float, o)) for o in outages]
+    metrics["methods"] = {name: method_metrics(results[name], tables[name], outages) for name in tables}
     for name, table in tables.items():
         atomic_write_dataframe(out_dir / f"solution_{name}.csv", table)
         atomic_write_dataframe(out_dir / f"solution_{name}.parquet", table)
-    ref = pd.DataFrame({"time_s": sim.truth.time, "lat_deg": np.degrees(sim.truth.lla[:, 0]),
-                        "lon_deg": np.degrees(sim.truth.lla[:, 1]), "height_m": sim.truth.lla[:, 2]})
-    gnss = pd.DataFrame({"time_s": sim.fixes.time, "lat_deg": np.degrees(sim.fixes.lla[:, 0]),
-                         "lon_deg": np.degrees(sim.fixes.lla[:, 1]), "height_m": sim.fixes.lla[:, 2]})
-    atomic_write_dataframe(out_dir / "truth.parquet", ref)
-    atomic_write_dataframe(out_dir / "gnss.csv", gnss)
-    figs = {
-        "errors_attitude": figures.error_figure(tables, "attitude", sim.outages),
-        "errors_velocity": figures.error_figure(tables, "velocity", sim.outages),
-        "errors_position": figures.error_figure(tables, "position", sim.outages),
-        "horizontal_error": figures.horizontal_error_figure(tables, sim.outages),
-        "trajectory": figures.trajectory_figure(tables, ref[::10], gnss, sim.outages),
-    }
+    if reference is not None:
+        atomic_write_dataframe(out_dir / "reference.parquet", reference)
+    if gnss is not None:
+        atomic_write_dataframe(out_dir / "gnss.csv", gnss)
+    first = next(iter(tables.values()))
+    figs = {}
+    if "err_n_m" in first:
+        figs["horizontal_error"] = figures.horizontal_error_figure(tables, outages)
+        figs["errors_position"] = figures.error_figure(tables, "position", outages)
+    if "err_vn_mps" in first:
+        figs["errors_velocity"] = figures.error_figure(tables, "velocity", outages)
+    if "err_roll_deg" in first:
+        figs["errors_attitude"] = figures.error_figure(tables, "attitude", outages)
+    figs["trajectory"] = figures.trajectory_figure(tables, reference, gnss, outages)
+    # metrics.json last: its presence marks a complete output folder.
+    write_report(out_dir, title, metrics, figs, notes=list(notes), config_text=config_text)
+    atomic_write_json(out_dir / "metrics.json", metrics)
+    return metrics
+
+
+def _lla_frame(time, lla) -> pd.DataFrame:
+    return pd.DataFrame({"time_s": time, "lat_deg": np.degrees(lla[:, 0]),
+                         "lon_deg": np.degrees(lla[:, 1]), "height_m": lla[:, 2]})
+
+
+def write_run(out_dir: Path, run: RunOutput, config_text: str | None = None) -> dict:
+    """Write solutions, metrics, figures and the report of one simulated run."""
+    sim = run.sim
+    tables = {name: solution_table(res, sim.truth, sim.outages) for name, res in run.results.items()}
     notes = [f"Seed {sim.seed}; IMU errors drawn: gyro bias "
              f"{np.round(np.degrees(sim.imu_draw.gyro_bias) * 3600, 2).tolist()} deg/h, "
              f"accelerometer bias {np.round(sim.imu_draw.accel_bias / 9.80665e-6, 1).tolist()} ug.",
              "Errors are estimate minus truth; bounds are the filter's own 3-sigma."]
-    # metrics.json last: its presence marks a complete output folder.
-    write_report(out_dir, f"mixnav run: {run.scenario.scenario.name}", metrics, figs,
-                 notes=notes, config_text=config_text)
-    atomic_write_json(out_dir / "metrics.json", metrics)
-    return metrics
+    header = {"scenario": run.scenario.scenario.name, "source": run.source, "seed": sim.seed}
+    return write_outputs(out_dir, f"mixnav run: {run.scenario.scenario.name}", header, run.results, tables,
+                         sim.outages, _lla_frame(sim.truth.time, sim.truth.lla)[::10],
+                         _lla_frame(sim.fixes.time, sim.fixes.lla), notes, config_text)

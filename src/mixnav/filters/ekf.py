@@ -58,6 +58,9 @@ class InitialState:
         [m/s], NED [m].
     sigma_clock : ndarray (2,)
         Clock bias [m] and drift [m/s] sigma (17-state layout only).
+    sensor0 : ndarray (12,) or None
+        Initial sensor-error estimates ``[bg, ba, sg, sa]`` (e.g. a gyro bias
+        measured at rest); zero when None.
     """
 
     time: float
@@ -66,6 +69,7 @@ class InitialState:
     sigma_vel: np.ndarray
     sigma_pos: np.ndarray
     sigma_clock: np.ndarray = field(default_factory=lambda: np.array([10.0, 1.0]))
+    sensor0: np.ndarray | None = None
 
 
 @dataclass
@@ -86,6 +90,9 @@ class FilterResult:
         Sensor-error estimates ``[bg, ba, sg, sa]``.
     pv_cov : ndarray (K, 6, 6)
         Covariance of the velocity and position errors (for NEES).
+    w_b : ndarray (K, 3)
+        Compensated body angular rate of the last increment [rad/s] (for
+        lever-arm velocities).
     nis : ndarray (M,)
         NIS of each applied update, and ``nis_dim`` its dimension.
     recoveries : dict
@@ -104,6 +111,7 @@ class FilterResult:
     nis: np.ndarray
     nis_dim: np.ndarray
     pv_cov: np.ndarray
+    w_b: np.ndarray
     recoveries: dict
     timing: dict
     layout: StateLayout
@@ -111,6 +119,14 @@ class FilterResult:
 
 
 _WARM = set()
+
+
+def _event_index(times: np.ndarray, query: np.ndarray) -> np.ndarray:
+    """Index in the merged event times of each query time (within 1e-6 s)."""
+    k = np.clip(np.searchsorted(times, query - 1e-6), 0, len(times) - 1)
+    if query.size and np.abs(times[k] - query).max() > 1e-6:
+        raise AssertionError("an event time was lost while merging")  # a bug, not bad input
+    return k
 
 
 def _warm_up(layout: StateLayout) -> None:
@@ -217,7 +233,7 @@ class ErrorStateEkf:
 
         nav = np.array(init.nav, dtype=float)
         prev = np.zeros(6)
-        sensor = np.zeros(12)
+        sensor = np.zeros(12) if init.sensor0 is None else np.array(init.sensor0, dtype=float)
         clock = np.zeros(2)
         P = self.initial_covariance(init)
         work = np.empty((4, lay.n, lay.n))
@@ -229,12 +245,17 @@ class ErrorStateEkf:
         rec_used = np.zeros(n_out, dtype=bool)
         rec_sensor = np.empty((n_out, 12))
         rec_pv = np.empty((n_out, 6, 6))
+        rec_w = np.empty((n_out, 3))
         nis_list, nis_dim = [], []
-        is_out = np.isin(times, out_t)
-        ev_by_time = {}
-        for e in meas_events:
-            ev_by_time.setdefault(round(e[0], 6), []).append(e)
-        x0 = np.zeros(lay.n)
+        # Map outputs and measurements to event indices with the same
+        # tolerance that merged the event times (never by float equality).
+        is_out = np.zeros(len(times), dtype=bool)
+        is_out[_event_index(times, out_t)] = True
+        ev_by_index: dict[int, list] = {}
+        if meas_events:
+            idx = _event_index(times, np.array([e[0] for e in meas_events]))
+            for k, e in zip(idx, meas_events):
+                ev_by_index.setdefault(int(k), []).append(e)
         update_time = 0.0
         n_updates = 0
         io = 0
@@ -248,7 +269,7 @@ class ErrorStateEkf:
                 clock[0] += clock[1] * T
             start = end
             used = False
-            for (_, mi, i) in ev_by_time.get(round(t, 6), ()):
+            for (_, mi, i) in ev_by_index.get(ti, ()):
                 tu = _time.perf_counter()
                 w_b = prev[0:3] / imu_s.dt[end - 1]
                 zhr = measurements[mi].measure(i, nav, w_b, clock)
@@ -280,12 +301,13 @@ class ErrorStateEkf:
                 rec_used[io] = used
                 rec_sensor[io] = sensor
                 rec_pv[io] = P[3:9, 3:9]
+                rec_w[io] = prev[0:3] / imu_s.dt[end - 1] if end > 0 else 0.0
                 io += 1
         wall = _time.perf_counter() - wall0
         n_ep = max(n_updates, 1)
         return FilterResult(
             time=out_t[:io], nav=rec_nav[:io], sigma=rec_sig[:io], gnss_used=rec_used[:io],
-            sensor=rec_sensor[:io], pv_cov=rec_pv[:io], nis=np.array(nis_list), nis_dim=np.array(nis_dim, dtype=int),
+            sensor=rec_sensor[:io], pv_cov=rec_pv[:io], w_b=rec_w[:io], nis=np.array(nis_list), nis_dim=np.array(nis_dim, dtype=int),
             recoveries=recov, layout=lay, P=P,
             timing={"epoch_time_mean_us": wall / n_ep * 1e6,
                     "update_time_mean_us": update_time / n_ep * 1e6,

@@ -1,0 +1,226 @@
+"""``mixnav process``: run the methods of a dataset config on real recorded data.
+
+Steps: read the IMU, GNSS and reference files (validated readers of
+:mod:`mixnav.io`), apply the installation (IMU axes to body axes, IMU time
+offset, lever arm), withhold GNSS in the configured windows, align the INS,
+run every method, and score it against the reference where the reference is
+valid (its chosen quality flags), reporting the withheld windows separately.
+
+Times inside a run are seconds since the first IMU sample; the absolute time
+of that origin (as the files give it) is ``time_origin_s`` in metrics.json.
+"""
+
+from __future__ import annotations
+
+import os
+import time as _time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+import mixnav
+
+from ..alignment import align_from_gnss_velocity, coarse_align
+from ..attitude import euler_to_dcm
+from ..config.dataset_schema import Dataset
+from ..config.loader import imu_model
+from ..data import GnssFixes, ImuData, Trajectory
+from ..errors import ConfigError, DataError
+from ..filters.ekf import ErrorStateEkf, FilterResult, InitialState
+from ..ins.error_model import get_layout
+from ..ins.mechanization import nav_vector
+from ..io import drive0708, generic_csv, kfgins, psins, rtklib
+from ..measurements.loose import LooseGnss
+from ..sim.gnss import in_windows
+from .run import _lla_frame, solution_table, write_outputs
+
+
+@dataclass
+class ProcessOutput:
+    dataset: Dataset
+    source: str
+    data_dir: Path
+    time_origin: float
+    imu: ImuData
+    fixes: GnssFixes           # what the filters were given (withheld windows removed)
+    all_fixes: GnssFixes       # every fix read
+    reference: Trajectory | None
+    lever: np.ndarray
+    results: dict[str, FilterResult]
+    init: InitialState
+    read_time_s: float
+    filter_time_s: float
+
+
+def find_data_dir(ds: Dataset, data: str | None, source: str) -> Path:
+    """The data folder: ``--data``, else the config's ``data_dir`` relative to
+    the working directory, to the folder of the config file, or to the
+    repository (for the shipped configs); ``$MIXNAV_DATA/<name>`` last."""
+    if data is not None:
+        p = Path(data)
+        if not p.is_dir():
+            raise DataError(f"data folder given with --data does not exist: {p}")
+        return p
+    d = Path(ds.dataset.data_dir)
+    tried = []
+    candidates = [d] if d.is_absolute() else [Path.cwd() / d, Path(source).parent / d,
+                                               Path(mixnav.__file__).resolve().parents[2] / d]
+    if "MIXNAV_DATA" in os.environ:
+        candidates.append(Path(os.environ["MIXNAV_DATA"]) / d.name)
+    for c in candidates:
+        tried.append(str(c))
+        if c.is_dir():
+            return c
+    raise DataError(f"data folder '{ds.dataset.data_dir}' not found (tried {', '.join(tried)}); "
+                    "give it with --data DIR", file=source)
+
+
+def read_imu(ds: Dataset, folder: Path) -> ImuData:
+    c = ds.imu
+    f = folder / c.file
+    if c.format == "drive-0708":
+        return drive0708.read_drive_imu(f, folder / c.tag if c.tag else None, time_offset=0.0,
+                                        max_gap=c.max_gap, gap_action=c.gap_action)
+    if c.format == "kf-gins":
+        return kfgins.read_kfgins_imu(f, max_gap=c.max_gap, gap_action=c.gap_action)
+    if c.format == "psins":
+        return psins.read_psins_imu(f)[0]
+    return generic_csv.read_imu_csv(f, max_gap=c.max_gap, gap_action=c.gap_action)
+
+
+def read_gnss(ds: Dataset, folder: Path) -> GnssFixes:
+    c = ds.gnss
+    f = folder / c.file
+    if c.format == "rtklib-pos":
+        fixes = rtklib.read_pos(f).fixes(qualities=c.qualities, min_sigma=c.min_sigma)
+    elif c.format == "kf-gins":
+        fixes = kfgins.read_kfgins_gnss(f)
+    else:
+        fixes = generic_csv.read_gnss_csv(f)
+    if c.min_sigma > 0:
+        fixes = replace(fixes, pos_sigma=np.maximum(fixes.pos_sigma, c.min_sigma))
+    if not c.use_velocity and fixes.vel_n is not None:
+        fixes = replace(fixes, vel_n=None, vel_sigma=None)
+    return fixes
+
+
+def read_reference(ds: Dataset, folder: Path) -> Trajectory | None:
+    c = ds.reference
+    if c is None:
+        return None
+    f = folder / c.file
+    if c.format == "rtklib-pos":
+        return rtklib.read_pos(f).reference(qualities=c.qualities)
+    if c.format == "kf-gins-nav":
+        return kfgins.read_kfgins_nav(f)
+    return generic_csv.read_reference_csv(f)
+
+
+def _shift(obj, t0):
+    return replace(obj, time=obj.time - t0)
+
+
+def install(imu: ImuData, ds: Dataset) -> ImuData:
+    """IMU axes to body axes, and the IMU time offset."""
+    inst = ds.installation
+    c_bi = euler_to_dcm(np.asarray(inst.imu_misalignment)) @ euler_to_dcm(np.asarray(inst.imu_rotation))
+    return ImuData(time=imu.time + inst.imu_time_offset, dt=imu.dt, dtheta=imu.dtheta @ c_bi.T,
+                   dvel=imu.dvel @ c_bi.T, source=imu.source)
+
+
+def initial_state(ds: Dataset, imu: ImuData, fixes: GnssFixes, lever: np.ndarray) -> InitialState:
+    al = ds.alignment
+    sig = dict(sigma_att=np.asarray(al.attitude_sigma), sigma_vel=np.asarray(al.velocity_sigma),
+               sigma_pos=np.asarray(al.position_sigma))
+    t_static = imu.start_time + al.static_duration
+    still = imu.time <= t_static
+    sensor0 = None
+    if al.gyro_bias_from_static or al.method == "static":
+        if still.sum() < 10:
+            raise ConfigError("static window holds fewer than 10 IMU samples", key="alignment.static_duration")
+        static = ImuData(imu.time[still], imu.dt[still], imu.dtheta[still], imu.dvel[still], imu.source)
+    if al.method == "static":
+        lat = fixes.lla[0, 0]
+        a = coarse_align(static, lat, fixes.lla[0, 2])
+        k = int(np.searchsorted(fixes.time, t_static))
+        if k >= len(fixes):
+            raise DataError("no GNSS fix after the static alignment window", file=fixes.source)
+        d_n = euler_to_dcm(a.rpy) @ lever
+        from ..geodesy import earth
+        la, lo, h = fixes.lla[k]
+        rm, rn = earth.radii(la)
+        lla = np.array([la - d_n[0] / (rm + h), lo - d_n[1] / ((rn + h) * np.cos(la)), h + d_n[2]])
+        return InitialState(time=float(t_static), nav=nav_vector(a.q_nb, np.zeros(3), lla), **sig)
+    if al.gyro_bias_from_static:
+        # mean rate at rest; the unknown horizontal Earth rate (<= 15 deg/h)
+        # stays in it, far below a MEMS gyro's bias
+        sensor0 = np.zeros(12)
+        sensor0[0:3] = static.dtheta.sum(0) / static.dt.sum()
+    m = align_from_gnss_velocity(fixes, lever, al.min_speed, after=imu.start_time)
+    return InitialState(time=m.time, nav=nav_vector(m.q_nb, m.v_n, m.lla), sensor0=sensor0, **sig)
+
+
+def process(ds: Dataset, source: str, data: str | None = None) -> ProcessOutput:
+    """Read, align and filter a dataset with every configured method."""
+    folder = find_data_dir(ds, data, source)
+    t_read = _time.perf_counter()
+    imu = install(read_imu(ds, folder), ds)
+    all_fixes = read_gnss(ds, folder)
+    reference = read_reference(ds, folder)
+    read_time = _time.perf_counter() - t_read
+    t0 = imu.start_time
+    imu = _shift(imu, t0)
+    all_fixes = _shift(all_fixes, t0)
+    if reference is not None:
+        reference = _shift(reference, t0)
+    withheld = tuple(tuple(w) for w in ds.gnss.withhold)
+    keep = ~in_windows(all_fixes.time, withheld)
+    fixes = GnssFixes(time=all_fixes.time[keep], lla=all_fixes.lla[keep], pos_sigma=all_fixes.pos_sigma[keep],
+                      vel_n=None if all_fixes.vel_n is None else all_fixes.vel_n[keep],
+                      vel_sigma=None if all_fixes.vel_sigma is None else all_fixes.vel_sigma[keep],
+                      source=all_fixes.source)
+    inst = ds.installation
+    lever = np.asarray(inst.antenna_position, float) - np.asarray(inst.imu_position, float)
+    init = initial_state(ds, imu, fixes, lever)
+    out_times = None
+    if reference is not None:
+        out_times = reference.time[(reference.time > init.time) & (reference.time <= imu.time[-1])]
+        if out_times.size == 0:
+            raise DataError("the reference does not overlap the processed time span", file=source)
+    results = {}
+    t_filt = _time.perf_counter()
+    for i, m in enumerate(ds.methods):
+        if m.type != "loose-ekf":
+            raise ConfigError(f"method type '{m.type}' cannot process real data yet", file=source,
+                              key=f"methods[{i}].type")
+        layout = get_layout(m.states)
+        model = imu_model(m.imu_grade or ds.imu.grade, m.imu_errors if m.imu_errors is not None else ds.imu.errors,
+                          source, f"methods[{i}].imu_errors", f"methods[{i}].imu_grade")
+        ekf = ErrorStateEkf(layout, model, covariance_interval=m.covariance_interval)
+        results[m.name] = ekf.run(imu, init, [LooseGnss(fixes, lever, layout)], output_times=out_times)
+    filter_time = _time.perf_counter() - t_filt
+    return ProcessOutput(ds, source, folder, t0, imu, fixes, all_fixes, reference, lever, results, init,
+                         read_time, filter_time)
+
+
+def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = None) -> dict:
+    """Solutions, metrics (against the reference), figures and report of a processed dataset."""
+    withheld = tuple(tuple(w) for w in po.dataset.gnss.withhold)
+    tables = {name: solution_table(res, po.reference, withheld, lever=po.lever)
+              for name, res in po.results.items()}
+    for t in tables.values():
+        t.insert(1, "gps_time_s", t["time_s"] + po.time_origin)
+    duration = float(po.imu.time[-1] - po.init.time)
+    header = {"dataset": po.dataset.dataset.name, "source": po.source, "data_dir": str(po.data_dir),
+              "time_origin_s": po.time_origin, "start_s": po.init.time, "duration_s": duration,
+              "read_time_s": po.read_time_s, "filter_time_s": po.filter_time_s,
+              "real_time_factor": duration / (po.read_time_s + po.filter_time_s),
+              "gnss_withheld_s": [list(w) for w in withheld]}
+    notes = [f"Times are seconds since the first IMU sample (GPS time {po.time_origin:.3f} s since 1970).",
+             f"Aligned at t = {po.init.time:.2f} s ({po.dataset.alignment.method}).",
+             "Errors are estimate minus reference, at the reference's valid epochs, for the antenna point; "
+             "windows are the GNSS epochs withheld from the filter."]
+    ref = None if po.reference is None else _lla_frame(po.reference.time, po.reference.lla)
+    return write_outputs(out_dir, f"mixnav process: {po.dataset.dataset.name}", header, po.results, tables,
+                         withheld, ref, _lla_frame(po.fixes.time, po.fixes.lla), notes, config_text)

@@ -1,0 +1,104 @@
+"""Reader of the drive-0708 car recording (IMU CSV + RTKLIB time-tag file).
+
+``imu_*.csv``: one sample a line, ``ax, ay, az`` [g], ``gx, gy, gz``
+[deg/s], then a millisecond tick counter since IMU power-up. The first and
+last lines may be partial and are always skipped.
+
+``imu_*.csv.tag`` (RTKLIB time tag, little-endian): a 60-byte text header,
+``uint32`` tick, ``uint32`` whole seconds (GPS time counted from the Unix
+epoch) and ``float64`` fractional seconds of the start, then ``(uint32
+tick_ms, uint32 file_pos)`` pairs; the last pair's tick (ms after the start)
+gives the end time. The IMU ticks are spread linearly between start and end,
+then the logger's latency offset (-0.125 s for this recording) is added.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..data import ImuData
+from ..errors import DataError
+from ..units import DEG
+from .imu_checks import G0, check_plausible, rates_to_increments
+from .tables import check_times, read_numeric
+
+_HEADER = 60
+_FIXED = 16  # tick, seconds, fraction
+
+
+@dataclass(frozen=True)
+class TimeTag:
+    start: float      # GPS seconds since 1970-01-01 (no leap seconds)
+    end: float
+    n_tags: int
+
+
+def read_time_tag(path) -> TimeTag:
+    """Read an RTKLIB ``.tag`` file: start and end time of the stream."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataError("time-tag file does not exist", file=str(path))
+    b = path.read_bytes()
+    if len(b) < _HEADER + _FIXED + 8:
+        raise DataError(f"time-tag file is truncated: {len(b)} bytes, a header and one tag need "
+                        f"{_HEADER + _FIXED + 8}", file=str(path))
+    if not b[:7] == b"TIMETAG":
+        raise DataError("not an RTKLIB time-tag file (header does not start with 'TIMETAG')", file=str(path))
+    _, sec = struct.unpack_from("<II", b, _HEADER)
+    (frac,) = struct.unpack_from("<d", b, _HEADER + 8)
+    body = len(b) - _HEADER - _FIXED
+    if body % 8:
+        raise DataError(f"time-tag file is truncated: {body % 8} stray bytes after the last whole tag "
+                        f"(byte {len(b) - body % 8})", file=str(path))
+    pairs = np.frombuffer(b, dtype="<u4", offset=_HEADER + _FIXED).reshape(-1, 2)
+    if not (0.0 <= frac < 1.0) or np.any(np.diff(pairs[:, 0].astype(np.int64)) < 0):
+        raise DataError("time-tag file is corrupt (fraction outside [0, 1) or ticks decreasing)", file=str(path))
+    start = float(sec) + float(frac)
+    return TimeTag(start=start, end=start + pairs[-1, 0] / 1000.0, n_tags=len(pairs))
+
+
+def read_drive_imu(csv_path, tag_path=None, time_offset: float = -0.125, max_gap: float | None = 0.05,
+                   gap_action: str = "warn") -> ImuData:
+    """IMU increments of the drive-0708 recording, in the IMU's own axes (SI).
+
+    Parameters
+    ----------
+    csv_path, tag_path : path-like
+        The CSV and its ``.tag`` (default: the CSV path plus ``.tag``).
+    time_offset : float
+        Added to every IMU time [s] (logger latency).
+    max_gap, gap_action :
+        See :func:`mixnav.io.tables.check_times`.
+    """
+    csv_path = Path(csv_path)
+    tag = read_time_tag(tag_path or Path(str(csv_path) + ".tag"))
+    # The first and last lines may be partial: drop them, but use their
+    # ticks (when readable) as the span that the tag's start and end cover.
+    tab = read_numeric(csv_path, 7, delimiter=",", drop_edges=True, what="IMU")
+    text = csv_path.read_text(encoding="utf-8", errors="replace").splitlines()
+    first_tick = _tick(text[0], tab.values[0, 6])
+    last_tick = _tick(text[-1], tab.values[-1, 6])
+    ticks = tab.values[:, 6]
+    check_times(ticks, tab.lines, str(csv_path), what="IMU tick")
+    span = last_tick - first_tick
+    if span <= 0:
+        raise DataError("IMU ticks do not increase from the first to the last line", file=str(csv_path))
+    t = tag.start + (ticks - first_tick) / span * (tag.end - tag.start) + time_offset
+    check_times(t, tab.lines, str(csv_path), max_gap=max_gap, gap_action=gap_action, what="IMU")
+    f = tab.values[:, 0:3] * G0
+    w = tab.values[:, 3:6] * DEG
+    imu = rates_to_increments(t, w, f, source=str(csv_path))
+    check_plausible(imu, "deg/s", "g")
+    return imu
+
+
+def _tick(line: str, fallback: float) -> float:
+    """The tick at the end of a possibly partial line, or ``fallback``."""
+    try:
+        return float(line.strip().split(",")[-1])
+    except ValueError:
+        return fallback

@@ -1,0 +1,151 @@
+"""Reader of RTKLIB ``.pos`` solution files (as GNSS input or as reference).
+
+Supported: time as ``yyyy/mm/dd hh:mm:ss.sss`` or ``week tow`` (GPST), and
+position as latitude/longitude in degrees with ellipsoidal height, or ECEF x,
+y, z; the quality flag, satellite count, the standard deviations, and the
+velocity columns of RTKLIB demo5 when present. Times are returned as GPS
+seconds counted from the Unix epoch (no leap seconds), the scale RTKLIB time
+tags use. Latitude/longitude in d'" form is refused with a clear message.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+from ..data import GnssFixes, Trajectory
+from ..errors import DataError
+from ..geodesy.frames import ecef_to_lla
+from .tables import check_times, read_numeric
+
+GPS_EPOCH_UNIX = 315964800.0  # 1980-01-06 00:00:00 in Unix seconds
+_EPOCH = datetime(1970, 1, 1, tzinfo=timezone.utc)
+
+#: Quality flags of RTKLIB.
+QUALITY = {1: "fix", 2: "float", 3: "sbas", 4: "dgps", 5: "single", 6: "ppp"}
+
+
+@dataclass(frozen=True)
+class PosSolution:
+    """The columns of a ``.pos`` file in SI units.
+
+    Attributes
+    ----------
+    time : ndarray (n,)
+        GPS seconds since 1970-01-01.
+    lla : ndarray (n, 3)
+        rad, rad, m.
+    quality, n_sat : ndarray of int (n,)
+    sd_ned : ndarray (n, 3)
+        1-sigma north, east, down [m].
+    vel_ned, sd_vel : ndarray (n, 3) or None
+        Velocity north, east, down [m/s] and its 1-sigma.
+    """
+
+    time: np.ndarray
+    lla: np.ndarray
+    quality: np.ndarray
+    n_sat: np.ndarray
+    sd_ned: np.ndarray
+    vel_ned: np.ndarray | None
+    sd_vel: np.ndarray | None
+    source: str
+
+    def select(self, qualities=(1,)) -> np.ndarray:
+        """Mask of the epochs whose quality flag is in ``qualities``."""
+        return np.isin(self.quality, list(qualities))
+
+    def fixes(self, qualities=(1, 2, 5), min_sigma: float = 0.0) -> GnssFixes:
+        """GNSS fixes of the chosen qualities; sigmas floored at ``min_sigma`` [m]."""
+        m = self.select(qualities)
+        if not m.any():
+            raise DataError(f"no epoch with quality in {list(qualities)}", file=self.source)
+        sd = np.maximum(self.sd_ned[m], max(min_sigma, 1e-4))
+        if self.vel_ned is None:
+            return GnssFixes(time=self.time[m], lla=self.lla[m], pos_sigma=sd, source=self.source)
+        sv = np.maximum(self.sd_vel[m], 1e-4)
+        return GnssFixes(time=self.time[m], lla=self.lla[m], pos_sigma=sd, vel_n=self.vel_ned[m],
+                         vel_sigma=sv, source=self.source)
+
+    def reference(self, qualities=(1,)) -> Trajectory:
+        """Reference trajectory (position, and velocity when present) of the chosen qualities."""
+        m = self.select(qualities)
+        if not m.any():
+            raise DataError(f"no epoch with quality in {list(qualities)} for the reference", file=self.source)
+        return Trajectory(time=self.time[m], lla=self.lla[m],
+                          v_n=None if self.vel_ned is None else self.vel_ned[m], q_nb=None)
+
+
+def _header(path: Path) -> tuple[list[str], int]:
+    names, n = None, 0
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        for line in fh:
+            if not line.startswith("%"):
+                break
+            n += 1
+            if "GPST" in line or "UTC" in line:
+                names = line[1:].split()
+    if names is None:
+        raise DataError("no RTKLIB column header ('%  GPST ...' line) found", file=str(path), line=n or 1)
+    return names, n
+
+
+def read_pos(path, max_gap: float | None = None, gap_action: str = "warn") -> PosSolution:
+    """Read an RTKLIB ``.pos`` file.
+
+    Raises
+    ------
+    DataError
+        Missing header, unsupported layout, malformed line, time going
+        backwards or repeating, each naming the file and line.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError("RTKLIB solution file does not exist", file=str(path))
+    names, n_head = _header(path)
+    if names[0] == "UTC":
+        raise DataError("UTC time stamps are not supported; output GPST from RTKLIB", file=str(path), line=n_head)
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        first = next((ln for ln in fh if ln.strip() and not ln.startswith("%")), None)
+    if first is None:
+        raise DataError("RTKLIB solution file is empty (no data lines)", file=str(path))
+    calendar = "/" in first.split()[0]
+    low = [c.lower() for c in names]
+    if any(c.startswith("latitude(d'") for c in low):
+        raise DataError("latitude/longitude in d'\" form are not supported; output degrees", file=str(path),
+                        line=n_head)
+    ecef = any(c.startswith("x-ecef") for c in low)
+    has_vel = any(c.startswith("vn(") for c in low)
+    n_fields = 14 + (9 if has_vel else 0)  # time (2 tokens) + 3 pos + Q + ns + 6 sd + age + ratio [+ 9]
+
+    def conv(toks):
+        if len(toks) != n_fields + 1:
+            raise ValueError(f"expected {n_fields + 1} fields, found {len(toks)}")
+        if calendar:
+            dt = datetime.strptime(toks[0] + " " + toks[1], "%Y/%m/%d %H:%M:%S.%f").replace(tzinfo=timezone.utc)
+            t = (dt - _EPOCH).total_seconds()
+        else:
+            t = GPS_EPOCH_UNIX + float(toks[0]) * 604800.0 + float(toks[1])
+        return [t] + [float(x) for x in toks[2:]]
+
+    tab = read_numeric(path, n_fields, comment="%", converters=conv, what="RTKLIB solution")
+    v = tab.values
+    check_times(v[:, 0], tab.lines, str(path), max_gap=max_gap, gap_action=gap_action, what="solution")
+    if ecef:
+        lla = ecef_to_lla(v[:, 1:4])
+        sd = np.abs(v[:, 6:9])  # sdx, sdy, sdz: used as a bound per axis
+    else:
+        lla = np.column_stack([np.radians(v[:, 1]), np.radians(v[:, 2]), v[:, 3]])
+        sd = np.abs(v[:, 6:9])  # sdn, sde, sdu (down has the sigma of up)
+    if np.any(np.abs(lla[:, 0]) > np.pi / 2):
+        k = int(np.argmax(np.abs(lla[:, 0]) > np.pi / 2))
+        raise DataError("latitude outside [-90, 90] deg", file=str(path), line=int(tab.lines[k]))
+    vel = sdv = None
+    if has_vel:
+        vel = np.column_stack([v[:, 14], v[:, 15], -v[:, 16]])
+        sdv = np.abs(v[:, 17:20])
+    return PosSolution(time=v[:, 0], lla=lla, quality=v[:, 4].astype(int), n_sat=v[:, 5].astype(int),
+                       sd_ned=sd, vel_ned=vel, sd_vel=sdv, source=str(path))

@@ -1,0 +1,169 @@
+"""Validated reading of numeric text tables, with errors that name file and line.
+
+Every reader in :mod:`mixnav.io` goes through :func:`read_numeric` so that a
+malformed file fails the same way everywhere: missing or extra columns, text
+in a number column, NaN, all reported with the 1-based line number of the
+file. pandas' C parser does the fast path; only when it fails (or finds NaN)
+is the file scanned line by line to locate the problem.
+"""
+
+from __future__ import annotations
+
+import io
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..errors import DataError
+
+
+@dataclass(frozen=True)
+class Table:
+    """Rows of a numeric table and the file line each came from."""
+
+    values: np.ndarray   # (n, ncols) float64
+    lines: np.ndarray    # (n,) 1-based line numbers in the file
+    path: str
+
+
+def _is_float(tok: str) -> bool:
+    try:
+        float(tok)
+    except ValueError:
+        return False
+    return True
+
+
+def read_numeric(path, ncols: int | tuple[int, ...], *, delimiter: str | None = None,
+                 comment: str | None = None, skip_lines: int = 0, drop_edges: bool = False,
+                 converters=None, what: str = "data") -> Table:
+    """Read a table of numbers.
+
+    Parameters
+    ----------
+    path : path-like
+    ncols : int or tuple of int
+        Allowed numbers of columns (e.g. ``(7, 13)`` for optional velocity).
+    delimiter : str or None
+        ``None`` splits on whitespace.
+    comment : str or None
+        Lines starting with it are skipped (as are blank lines).
+    skip_lines : int
+        Header lines to skip before the data.
+    drop_edges : bool
+        Drop the first and the last data line (loggers that may cut them).
+    converters : callable, optional
+        ``converters(tokens) -> list[float]`` for lines whose first tokens are
+        not plain numbers (e.g. calendar dates); the line is parsed in Python.
+    what : str
+        What the file holds, for messages.
+
+    Raises
+    ------
+    DataError
+        Empty file, wrong column count, non-numeric or non-finite value, each
+        naming the file and the line.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{what} file does not exist", file=str(path))
+    text = path.read_text(encoding="utf-8", errors="replace")
+    allowed = (ncols,) if isinstance(ncols, int) else tuple(ncols)
+    raw = text.splitlines()
+    keep_lines, keep_rows = [], []
+    for i, line in enumerate(raw[skip_lines:], start=skip_lines + 1):
+        s = line.strip()
+        if not s or (comment and s.startswith(comment)):
+            continue
+        keep_lines.append(i)
+        keep_rows.append(s)
+    if drop_edges:
+        keep_lines, keep_rows = keep_lines[1:-1], keep_rows[1:-1]
+    if not keep_rows:
+        raise DataError(f"{what} file is empty (no data lines)", file=str(path))
+    lines = np.asarray(keep_lines)
+    if converters is None:
+        try:
+            sep = r"\s+" if delimiter is None else delimiter
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                df = pd.read_csv(io.StringIO("\n".join(keep_rows)), sep=sep, header=None,
+                                 dtype=np.float64, engine="c", skipinitialspace=True)
+            values = df.to_numpy()
+            if values.shape[1] in allowed and np.isfinite(values).all():
+                return Table(values, lines, str(path))
+        except (ValueError, pd.errors.ParserError):
+            pass
+    # Slow path: parse (or locate the problem) line by line.
+    rows = []
+    for ln, s in zip(lines, keep_rows):
+        toks = s.split(delimiter) if delimiter else s.split()
+        toks = [t.strip() for t in toks]
+        if converters is not None:
+            try:
+                vals = converters(toks)
+            except (ValueError, IndexError) as exc:
+                raise DataError(f"cannot read this {what} line ({exc}): {s[:80]!r}", file=str(path),
+                                line=int(ln)) from None
+        else:
+            if len(toks) not in allowed:
+                raise DataError(f"expected {' or '.join(map(str, allowed))} columns, found {len(toks)}",
+                                file=str(path), line=int(ln))
+            bad = [t for t in toks if not _is_float(t)]
+            if bad:
+                raise DataError(f"not a number: {bad[0]!r}", file=str(path), line=int(ln))
+            vals = [float(t) for t in toks]
+        if len(vals) not in allowed:
+            raise DataError(f"expected {' or '.join(map(str, allowed))} columns, found {len(vals)}",
+                            file=str(path), line=int(ln))
+        if not all(np.isfinite(vals)):
+            raise DataError("non-finite value (NaN or inf)", file=str(path), line=int(ln))
+        rows.append(vals)
+    widths = {len(r) for r in rows}
+    if len(widths) > 1:
+        first = next(i for i, r in enumerate(rows) if len(r) != len(rows[0]))
+        raise DataError(f"column count changes from {len(rows[0])} to {len(rows[first])}",
+                        file=str(path), line=int(lines[first]))
+    return Table(np.array(rows, dtype=float), lines, str(path))
+
+
+@dataclass
+class TimeCheck:
+    """What :func:`check_times` found (gaps are counted when only warned)."""
+
+    gaps: int = 0
+    largest_gap: float = 0.0
+
+
+def check_times(t: np.ndarray, lines: np.ndarray, path: str, max_gap: float | None = None,
+                gap_action: str = "warn", what: str = "data") -> TimeCheck:
+    """Times must increase strictly; gaps beyond ``max_gap`` warn (counted) or fail.
+
+    Raises
+    ------
+    DataError
+        Time going backwards or repeating (naming the line), or a gap when
+        ``gap_action == "fail"``.
+    """
+    d = np.diff(t)
+    bad = np.nonzero(d <= 0)[0]
+    if bad.size:
+        k = int(bad[0]) + 1
+        kind = "repeats" if d[bad[0]] == 0 else "goes backwards"
+        raise DataError(f"{what} time {kind} ({t[k - 1]!r} then {t[k]!r})", file=path, line=int(lines[k]))
+    out = TimeCheck()
+    if max_gap is not None and d.size:
+        gaps = np.nonzero(d > max_gap)[0]
+        out.gaps = int(gaps.size)
+        out.largest_gap = float(d.max())
+        if gaps.size:
+            k = int(gaps[0]) + 1
+            msg = (f"{gaps.size} gap(s) longer than {max_gap:g} s in the {what}; the first, "
+                   f"{d[gaps[0]]:.3f} s, ends here")
+            if gap_action == "fail":
+                raise DataError(msg, file=path, line=int(lines[k]))
+            warnings.warn(f"{path}, line {int(lines[k])}: {msg}", stacklevel=3)
+    return out
