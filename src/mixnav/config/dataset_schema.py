@@ -55,9 +55,14 @@ class GnssFile(Strict):
 
 
 class ReferenceFile(Strict):
+    """The reference trajectory, and which point of the vehicle it gives:
+    the GNSS antenna (an RTK solution) or the IMU (an INS/GNSS reference
+    such as KF-GINS' truth.nav)."""
+
     format: Literal["rtklib-pos", "kf-gins-nav", "csv"]
     file: str
     qualities: list[int] = Field(default_factory=lambda: [1])
+    point: Literal["antenna", "imu"] = "antenna"
 
 
 class Installation(Strict):

@@ -207,7 +207,9 @@ def process(ds: Dataset, source: str, data: str | None = None) -> ProcessOutput:
 def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = None) -> dict:
     """Solutions, metrics (against the reference), figures and report of a processed dataset."""
     withheld = tuple(tuple(w) for w in po.dataset.gnss.withhold)
-    tables = {name: solution_table(res, po.reference, withheld, lever=po.lever)
+    ref = po.dataset.reference
+    lever = po.lever if ref is not None and ref.point == "antenna" else None
+    tables = {name: solution_table(res, po.reference, withheld, lever=lever)
               for name, res in po.results.items()}
     for t in tables.values():
         t.insert(1, "gps_time_s", t["time_s"] + po.time_origin)
@@ -219,8 +221,8 @@ def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = No
               "gnss_withheld_s": [list(w) for w in withheld]}
     notes = [f"Times are seconds since the first IMU sample (GPS time {po.time_origin:.3f} s since 1970).",
              f"Aligned at t = {po.init.time:.2f} s ({po.dataset.alignment.method}).",
-             "Errors are estimate minus reference, at the reference's valid epochs, for the antenna point; "
-             "windows are the GNSS epochs withheld from the filter."]
+             "Errors are estimate minus reference, at the reference's valid epochs, for the point the "
+             "reference gives (antenna or IMU); windows are the GNSS epochs withheld from the filter."]
     ref = None if po.reference is None else _lla_frame(po.reference.time, po.reference.lla)
     return write_outputs(out_dir, f"mixnav process: {po.dataset.dataset.name}", header, po.results, tables,
                          withheld, ref, _lla_frame(po.fixes.time, po.fixes.lla), notes, config_text)

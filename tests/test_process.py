@@ -1,0 +1,133 @@
+"""`mixnav process` end to end: a simulated drive written in KF-GINS formats,
+and the real drive-0708 recording when ../shared/data is present."""
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from mixnav.cli import app
+from mixnav.config import load_dataset, load_scenario
+from mixnav.errors import ConfigError, DataError
+from mixnav.experiment.process import process
+from mixnav.sim.scenario import simulate
+
+from .conftest import DATA_DIR
+
+runner = CliRunner()
+
+
+def _write_kfgins(folder, run, sc):
+    imu = run.imu
+    rows = np.column_stack([np.concatenate([[imu.start_time], imu.time]),
+                            np.vstack([np.zeros(3), imu.dtheta]), np.vstack([np.zeros(3), imu.dvel])])
+    np.savetxt(folder / "imu.txt", rows, fmt="%.9f")
+    f = run.fixes
+    g = np.column_stack([f.time, np.degrees(f.lla[:, :2]), f.lla[:, 2], f.pos_sigma, f.vel_n, f.vel_sigma])
+    np.savetxt(folder / "gnss.txt", g, fmt="%.10f")
+    tr = run.truth
+    k = slice(0, None, 10)
+    nav = np.column_stack([np.zeros(len(tr.time[k])), tr.time[k], np.degrees(tr.lla[k, :2]), tr.lla[k, 2],
+                           tr.v_n[k], np.degrees(tr.rpy[k])])
+    np.savetxt(folder / "truth.nav", nav, fmt="%.10f")
+    lever = ", ".join(f'"{x} m"' for x in sc.gnss.lever_arm)
+    (folder / "sim.toml").write_text(f'''
+[dataset]
+name = "sim-kfgins"
+data_dir = "{folder}"
+[imu]
+format = "kf-gins"
+file = "imu.txt"
+grade = "mems"
+[gnss]
+format = "kf-gins"
+file = "gnss.txt"
+withhold = [["150 s", "180 s"], ["300 s", "360 s"]]
+[reference]
+format = "kf-gins-nav"
+file = "truth.nav"
+point = "imu"
+[installation]
+antenna_position = [{lever}]
+[alignment]
+method = "gnss-velocity"
+min_speed = "5 m/s"
+attitude_sigma = ["2 deg", "2 deg", "3 deg"]
+velocity_sigma = ["0.1 m/s", "0.1 m/s", "0.1 m/s"]
+position_sigma = ["1.5 m", "1.5 m", "3 m"]
+[[methods]]
+name = "ekf"
+type = "loose-ekf"
+''')
+    return folder / "sim.toml"
+
+
+@pytest.fixture(scope="module")
+def simulated(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("kfgins")
+    sc, src, _ = load_scenario("loose-demo")
+    run = simulate(sc, 4, src)
+    return run, _write_kfgins(folder, run, sc)
+
+
+def test_simulated_drive_through_files_is_scored_against_its_truth(simulated, tmp_path):
+    run, cfg = simulated
+    res = runner.invoke(app, ["process", str(cfg), "--out", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    m = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    e = m["methods"]["ekf"]
+    # The files carry the simulation exactly (9-10 digits), so the filter
+    # sees what `mixnav run` sees: metre-level fixes give a sub-2-m RMSE
+    # outside the outage and a drift inside it like loose-demo's (2.6-32 m
+    # over 20 seeds); the reference has attitude, so attitude is scored.
+    assert e["horizontal_rmse_outside_outages_m"] < 2.0
+    assert all(1.0 < o["horizontal_max_m"] < 60.0 for o in e["outages"])
+    assert e["yaw_rmse_deg"] < 2.0 and "velocity_rmse_mps" in e
+    assert m["start_s"] > 60.0  # in-motion alignment waits for 5 m/s; the drive starts at rest
+    # position NEES against the truth: 3 for a consistent filter (one run: wide band)
+    assert 1.0 < e["nees_pos_mean"] < 6.0
+
+
+def test_withheld_fixes_are_not_given_to_the_filter(simulated):
+    run, cfg = simulated
+    ds, src, _ = load_dataset(str(cfg))
+    po = process(ds, src)
+    assert not np.any((po.fixes.time >= 150) & (po.fixes.time < 180))
+    assert len(po.all_fixes) - len(po.fixes) == 30
+    assert po.results["ekf"].timing["measurement_epochs"] < len(po.fixes)  # fixes before alignment unused
+
+
+def test_missing_data_folder_names_what_was_tried(simulated, tmp_path):
+    run, cfg = simulated
+    text = cfg.read_text().replace(f'data_dir = "{cfg.parent}"', 'data_dir = "no/such/folder"')
+    p = tmp_path / "bad.toml"
+    p.write_text(text)
+    ds, src, _ = load_dataset(str(p))
+    with pytest.raises(DataError, match="no/such/folder.*--data"):
+        process(ds, src)
+
+
+def test_dataset_config_errors_name_the_key(tmp_path, simulated):
+    run, cfg = simulated
+    p = tmp_path / "bad.toml"
+    p.write_text(cfg.read_text().replace('withhold = [["150 s", "180 s"], ["300 s", "360 s"]]', 'withhold = [["300 s", "200 s"]]'))
+    with pytest.raises(ConfigError, match="gnss.withhold.*before it starts"):
+        load_dataset(str(p))
+
+
+def test_drive_0708_with_three_outages():
+    if not (DATA_DIR / "drive-0708" / "imu_1934.csv").exists():
+        pytest.skip(f"real data not found under {DATA_DIR}")
+    ds, src, _ = load_dataset("drive-0708")
+    po = process(ds, src, str(DATA_DIR / "drive-0708"))
+    from mixnav.experiment.run import method_metrics, solution_table
+    t = solution_table(po.results["ekf"], po.reference, ds.gnss.withhold, lever=po.lever)
+    m = method_metrics(po.results["ekf"], t, ds.gnss.withhold)
+    assert len(m["outages"]) == 3
+    # Outside the windows the filter follows RTK fixes it is given: dm level.
+    assert m["horizontal_rmse_outside_outages_m"] < 0.5
+    # Inside: a MEMS unit drifts tens of metres in 30 s (recorded 57, 29, 16 m,
+    # benchmarks/results/drive-0708.md); this bounds a regression, not a goal.
+    assert all(o["horizontal_max_m"] < 100.0 for o in m["outages"])
+    assert sum(m["recoveries"].values()) == 0
