@@ -43,6 +43,9 @@ class ImuData:
         Velocity increments of specific force in the body frame [m/s].
     source : str or None
         Where the data came from (file name), for error messages.
+    gaps : int
+        Number of time gaps longer than the reader's limit that were
+        accepted with a warning (reported in metrics.json).
     """
 
     time: np.ndarray
@@ -50,6 +53,7 @@ class ImuData:
     dtheta: np.ndarray
     dvel: np.ndarray
     source: str | None = None
+    gaps: int = 0
 
     def __post_init__(self):
         n = len(self.time)

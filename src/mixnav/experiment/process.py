@@ -126,7 +126,7 @@ def install(imu: ImuData, ds: Dataset) -> ImuData:
     inst = ds.installation
     c_bi = euler_to_dcm(np.asarray(inst.imu_misalignment)) @ euler_to_dcm(np.asarray(inst.imu_rotation))
     return ImuData(time=imu.time + inst.imu_time_offset, dt=imu.dt, dtheta=imu.dtheta @ c_bi.T,
-                   dvel=imu.dvel @ c_bi.T, source=imu.source)
+                   dvel=imu.dvel @ c_bi.T, source=imu.source, gaps=imu.gaps)
 
 
 def initial_state(ds: Dataset, imu: ImuData, fixes: GnssFixes, lever: np.ndarray) -> InitialState:
@@ -218,7 +218,8 @@ def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = No
               "time_origin_s": po.time_origin, "start_s": po.init.time, "duration_s": duration,
               "read_time_s": po.read_time_s, "filter_time_s": po.filter_time_s,
               "real_time_factor": duration / (po.read_time_s + po.filter_time_s),
-              "gnss_withheld_s": [list(w) for w in withheld]}
+              "gnss_withheld_s": [list(w) for w in withheld],
+              "imu_gaps_accepted": int(po.imu.gaps)}
     notes = [f"Times are seconds since the first IMU sample (GPS time {po.time_origin:.3f} s since 1970).",
              f"Aligned at t = {po.init.time:.2f} s ({po.dataset.alignment.method}).",
              "Errors are estimate minus reference, at the reference's valid epochs, for the point the "

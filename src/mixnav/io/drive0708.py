@@ -15,7 +15,7 @@ then the logger's latency offset (-0.125 s for this recording) is added.
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -88,10 +88,10 @@ def read_drive_imu(csv_path, tag_path=None, time_offset: float = -0.125, max_gap
     if span <= 0:
         raise DataError("IMU ticks do not increase from the first to the last line", file=str(csv_path))
     t = tag.start + (ticks - first_tick) / span * (tag.end - tag.start) + time_offset
-    check_times(t, tab.lines, str(csv_path), max_gap=max_gap, gap_action=gap_action, what="IMU")
+    gaps = check_times(t, tab.lines, str(csv_path), max_gap=max_gap, gap_action=gap_action, what="IMU").gaps
     f = tab.values[:, 0:3] * G0
     w = tab.values[:, 3:6] * DEG
-    imu = rates_to_increments(t, w, f, source=str(csv_path))
+    imu = replace(rates_to_increments(t, w, f, source=str(csv_path)), gaps=gaps)
     check_plausible(imu, "deg/s", "g")
     return imu
 

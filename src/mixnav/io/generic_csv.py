@@ -23,6 +23,7 @@ Reference (velocity and attitude optional, each group of three together)::
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -95,7 +96,7 @@ def read_imu_csv(path, max_gap: float | None = None, gap_action: str = "warn") -
     path = Path(path)
     names, fac = _header(path, [_IMU_RATE, _IMU_INC], "IMU")
     tab, c = _values(path, names, fac, "IMU")
-    check_times(c["time"], tab.lines, str(path), max_gap=max_gap, gap_action=gap_action, what="IMU")
+    gaps = check_times(c["time"], tab.lines, str(path), max_gap=max_gap, gap_action=gap_action, what="IMU").gaps
     if "wx" in c:
         imu = rates_to_increments(c["time"], np.column_stack([c["wx"], c["wy"], c["wz"]]),
                                   np.column_stack([c["fx"], c["fy"], c["fz"]]), source=str(path))
@@ -106,7 +107,7 @@ def read_imu_csv(path, max_gap: float | None = None, gap_action: str = "warn") -
                       dvel=np.column_stack([c["dvx"], c["dvy"], c["dvz"]])[1:], source=str(path))
         units = (names_unit(path, "dthx"), names_unit(path, "dvx"))
     check_plausible(imu, *units)
-    return imu
+    return replace(imu, gaps=gaps)
 
 
 def names_unit(path: Path, name: str) -> str:
