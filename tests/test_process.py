@@ -2,6 +2,7 @@
 and the real drive-0708 recording when ../shared/data is present."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -131,3 +132,25 @@ def test_drive_0708_with_three_outages():
     # benchmarks/results/drive-0708.md); this bounds a regression, not a goal.
     assert all(o["horizontal_max_m"] < 100.0 for o in m["outages"])
     assert sum(m["recoveries"].values()) == 0
+
+
+def test_static_alignment_of_a_navigation_grade_unit(tmp_path):
+    # A navigation-grade IMU senses Earth rate: gyrocompassing over the first
+    # 50 s at rest gives the heading to ~ bias / (Omega cos lat) = 0.02 deg;
+    # the filter then starts at rest with that attitude.
+    from mixnav.config.loader import _validate
+    from mixnav.config.schema import Scenario
+    demo = (Path(__file__).resolve().parents[1] / "src/mixnav/config/scenarios/loose-demo.toml").read_text()
+    sc = _validate(Scenario, demo.replace('grade = "mems"', 'grade = "navigation"'), "nav.toml")
+    run = simulate(sc, 1, "nav.toml")
+    cfg = _write_kfgins(tmp_path, run, sc)
+    text = cfg.read_text().replace('grade = "mems"', 'grade = "navigation"').replace(
+        'method = "gnss-velocity"', 'method = "static"\nstatic_duration = "50 s"')
+    cfg.write_text(text)
+    ds, src, _ = load_dataset(str(cfg))
+    po = process(ds, src)
+    assert po.init.time == pytest.approx(50.0, abs=0.02)
+    from mixnav.attitude import quat_to_euler, wrap_angle
+    yaw0 = quat_to_euler(po.init.nav[0:4])[2]
+    k = int(np.searchsorted(run.truth.time, po.init.time))
+    assert abs(np.degrees(wrap_angle(yaw0 - run.truth.rpy[k, 2]))) < 0.2
