@@ -4,7 +4,7 @@ Output folder of ``mixnav run`` (every file written atomically; see
 docs/outputs.md for the columns and keys):
 
     solution_<method>.csv / .parquet   the solution table of each method
-    truth.parquet                      the true trajectory at the output epochs
+    reference.parquet                  the truth (run) or the reference (process)
     metrics.json                       per-method metrics, timing, recoveries
     <figure>.png                       error and trajectory figures
     report.html                        one self-contained report
