@@ -8,10 +8,10 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field, field_validator
+from pydantic import Field
 
 from .. import units as u
-from .schema import (AngleVec, AngSigma, LengthVec, MethodConfig, PosSigma, Strict, Time, VelSigma,
+from .schema import (AngleVec, AngSigma, LengthVec, MethodConfig, PosSigma, Strict, VelSigma, Windows,
                      _quantity)
 
 Offset = _quantity(u.TIME)
@@ -43,15 +43,7 @@ class GnssFile(Strict):
     qualities: list[int] = Field(default_factory=lambda: [1, 2, 5])
     min_sigma: _quantity(u.LENGTH, nonnegative=True) = 0.0  # type: ignore[valid-type]
     use_velocity: bool = True
-    withhold: list[tuple[Time, Time]] = Field(default_factory=list)
-
-    @field_validator("withhold")
-    @classmethod
-    def _ordered(cls, v):
-        for i, (a, b) in enumerate(v):
-            if not b > a:
-                raise ValueError(f"window {i} ends ({b:g} s) before it starts ({a:g} s)")
-        return v
+    withhold: Windows = Field(default_factory=list)
 
 
 class ReferenceFile(Strict):

@@ -81,13 +81,17 @@ def load_scenario(name_or_path: str) -> tuple[Scenario, str, str]:
     """
     text, source = resolve(name_or_path)
     sc = _validate(Scenario, text, source)
-    # IMU errors are checked here too so that a bad value fails at load time.
-    imu_model(sc.imu.grade, sc.imu.errors, source, "imu.errors", "imu.grade")
-    for i, m in enumerate(sc.methods):
+    _check_imu_models(sc, source)
+    return sc, source, text
+
+
+def _check_imu_models(cfg, source: str) -> None:
+    """Build every IMU model of a config once, so a bad value fails at load time."""
+    imu_model(cfg.imu.grade, cfg.imu.errors, source, "imu.errors", "imu.grade")
+    for i, m in enumerate(cfg.methods):
         if m.imu_grade is not None or m.imu_errors is not None:
             imu_model(m.imu_grade, m.imu_errors or {}, source, f"methods[{i}].imu_errors",
                       f"methods[{i}].imu_grade")
-    return sc, source, text
 
 
 def _validate(model, text: str, source: str):
@@ -117,11 +121,7 @@ def load_dataset(name_or_path: str):
     from .dataset_schema import Dataset
     text, source = resolve(name_or_path, "datasets", "dataset")
     ds = _validate(Dataset, text, source)
-    imu_model(ds.imu.grade, ds.imu.errors, source, "imu.errors", "imu.grade")
-    for i, m in enumerate(ds.methods):
-        if m.imu_grade is not None or m.imu_errors is not None:
-            imu_model(m.imu_grade, m.imu_errors or {}, source, f"methods[{i}].imu_errors",
-                      f"methods[{i}].imu_grade")
+    _check_imu_models(ds, source)
     return ds, source, text
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import Annotated, Literal, Union
 
 import numpy as np
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator, model_validator
+from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
 from .. import units as u
 
@@ -52,6 +52,17 @@ VelSigma = _vector(u.VELOCITY, positive=True)
 AngSigma = _vector(u.ANGLE, positive=True)
 LengthVec = _vector(u.LENGTH)
 AngleVec = _vector(u.ANGLE)
+
+
+def _ordered_windows(v):
+    for i, (a, b) in enumerate(v):
+        if not b > a:
+            raise ValueError(f"window {i} ends ({b:g} s) before it starts ({a:g} s)")
+    return v
+
+
+#: Time windows ``[[start, end], ...]`` with each end after its start.
+Windows = Annotated[list[tuple[Time, Time]], AfterValidator(_ordered_windows)]
 
 
 class Strict(BaseModel):
@@ -144,15 +155,7 @@ class GnssConfig(Strict):
     position_sigma: PosSigma
     velocity_sigma: VelSigma | None = None
     lever_arm: LengthVec = (0.0, 0.0, 0.0)
-    outages: list[tuple[Time, Time]] = Field(default_factory=list)
-
-    @field_validator("outages")
-    @classmethod
-    def _outages_ordered(cls, v):
-        for i, (a, b) in enumerate(v):
-            if not b > a:
-                raise ValueError(f"outage {i} ends ({b:g} s) before it starts ({a:g} s)")
-        return v
+    outages: Windows = Field(default_factory=list)
 
 
 class InitConfig(Strict):
