@@ -79,10 +79,12 @@ def read_drive_imu(csv_path, tag_path=None, time_offset: float = -0.125, max_gap
     # The first and last lines may be partial: drop them, but use their
     # ticks (when readable) as the span that the tag's start and end cover.
     tab = read_numeric(csv_path, 7, delimiter=",", drop_edges=True, what="IMU")
-    text = csv_path.read_text(encoding="utf-8", errors="replace").splitlines()
-    first_tick = _tick(text[0], tab.values[0, 6])
-    last_tick = _tick(text[-1], tab.values[-1, 6])
+    text = [ln for ln in csv_path.read_text(encoding="utf-8", errors="replace").splitlines() if ln.strip()]
     ticks = tab.values[:, 6]
+    step = float(np.median(np.diff(ticks))) if len(ticks) > 1 else 10.0
+    # a cut edge line has lost its tick: it was one sample before/after its neighbour
+    first_tick = _tick(text[0], ticks[0] - step)
+    last_tick = _tick(text[-1], ticks[-1] + step)
     check_times(ticks, tab.lines, str(csv_path), what="IMU tick")
     span = last_tick - first_tick
     if span <= 0:
@@ -97,8 +99,10 @@ def read_drive_imu(csv_path, tag_path=None, time_offset: float = -0.125, max_gap
 
 
 def _tick(line: str, fallback: float) -> float:
-    """The tick at the end of a possibly partial line, or ``fallback``."""
+    """The tick of an edge line when the line is whole (7 numbers), else ``fallback``."""
+    parts = line.strip().split(",")
     try:
-        return float(line.strip().split(",")[-1])
+        vals = [float(x) for x in parts]
     except ValueError:
         return fallback
+    return vals[6] if len(vals) == 7 else fallback

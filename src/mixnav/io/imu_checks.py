@@ -8,8 +8,10 @@ from ..data import ImuData
 from ..errors import DataError
 
 G0 = 9.80665
-#: Largest plausible angular rate of a vehicle IMU [rad/s] (MEMS ranges end near 35 rad/s).
-MAX_RATE = 20.0
+#: Largest plausible 99th-percentile angular rate of a vehicle [rad/s]: 290 deg/s.
+#: Cars stay below 1 rad/s and aircraft below 3; deg/s data declared as rad/s
+#: (a 10 deg/s turn read as 10 rad/s) lands above it.
+MAX_RATE = 5.0
 
 
 def rates_to_increments(t, w, f, source=None, lines=None) -> ImuData:
@@ -32,7 +34,7 @@ def check_plausible(imu: ImuData, gyro_unit: str, accel_unit: str) -> None:
 
     The median specific force over a record must be near gravity (a vehicle
     spends most of its time near 1 g), and the 99th percentile of the rate
-    below 20 rad/s (deg/s data declared as rad/s gives tens of "rad/s").
+    below 5 rad/s (deg/s data declared as rad/s gives tens of "rad/s").
     """
     f = np.linalg.norm(imu.dvel / imu.dt[:, None], axis=1)
     w = np.linalg.norm(imu.dtheta / imu.dt[:, None], axis=1)

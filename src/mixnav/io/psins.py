@@ -26,6 +26,7 @@ import numpy as np
 from ..data import ImuData
 from ..errors import DataError
 from ..units import ARCSEC
+from .tables import read_numeric
 
 #: Sensor (right, forward, up) to body (forward, right, down).
 C_BODY_SENSOR = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
@@ -68,7 +69,9 @@ def read_psins_imu(path) -> tuple[ImuData, PsinsHeader]:
     header : PsinsHeader
     """
     path = Path(path)
-    with open(path, encoding="utf-8", errors="strict") as fh:
+    if not path.is_file():
+        raise DataError("PSINS IMU file does not exist", file=str(path))
+    with open(path, encoding="utf-8", errors="replace") as fh:
         lines = fh.readlines()
     i = 0
     while i < len(lines) and (lines[i].lstrip().startswith("%") or not lines[i].strip()):
@@ -79,21 +82,7 @@ def read_psins_imu(path) -> tuple[ImuData, PsinsHeader]:
     h2 = _numbers(lines[i + 1], 6, path, i + 2)
     h3 = _numbers(lines[i + 2], 6, path, i + 3)
     first = i + 3
-    try:
-        data = np.loadtxt(lines[first:], dtype=float, ndmin=2)
-    except ValueError as exc:
-        # find the offending line for the message
-        for j, line in enumerate(lines[first:]):
-            parts = line.split()
-            if len(parts) != 6 or not all(_is_number(p) for p in parts):
-                raise DataError(f"expected 6 numbers, got {line.strip()!r}", file=str(path),
-                                line=first + j + 1) from None
-        raise DataError(str(exc), file=str(path)) from None
-    if data.shape[1] != 6:
-        raise DataError(f"expected 6 columns of increments, got {data.shape[1]}", file=str(path), line=first + 1)
-    bad = ~np.isfinite(data).all(1)
-    if bad.any():
-        raise DataError("non-finite increment", file=str(path), line=first + 1 + int(np.argmax(bad)))
+    data = read_numeric(path, 6, comment="%", skip_lines=first, what="PSINS IMU").values
     dt = h2[4] * 1e-3
     if not dt > 0:
         raise DataError("sampling interval must be positive", file=str(path), line=i + 2)
@@ -110,11 +99,3 @@ def read_psins_imu(path) -> tuple[ImuData, PsinsHeader]:
         lla=np.array([np.deg2rad(h2[0]), np.deg2rad(h2[1]), h2[2]]),
         t0=h2[3], dt=dt, g=g, gyro_scale=gyro_scale, accel_scale=accel_scale)
     return ImuData(time=time, dt=np.full(n, dt), dtheta=dth, dvel=dv, source=str(path)), header
-
-
-def _is_number(s: str) -> bool:
-    try:
-        float(s)
-    except ValueError:
-        return False
-    return True

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..data import GnssFixes, Trajectory
 from ..errors import DataError
-from ..geodesy.frames import ecef_to_lla
+from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla
 from .tables import check_times, read_numeric
 
 GPS_EPOCH_UNIX = 315964800.0  # 1980-01-06 00:00:00 in Unix seconds
@@ -86,11 +86,30 @@ def _header(path: Path) -> tuple[list[str], int]:
             if not line.startswith("%"):
                 break
             n += 1
-            if "GPST" in line or "UTC" in line:
-                names = line[1:].split()
+            cols = line[1:].split()
+            # the column header starts with the time system and names the position columns
+            if cols and cols[0] in ("GPST", "UTC") and any(c.startswith(("latitude", "x-ecef")) for c in cols):
+                names = cols
     if names is None:
         raise DataError("no RTKLIB column header ('%  GPST ...' line) found", file=str(path), line=n or 1)
     return names, n
+
+
+def _ecef_sigmas_to_ned(sd6: np.ndarray, lla: np.ndarray) -> np.ndarray:
+    """NED 1-sigma from RTKLIB's ECEF ``sdx sdy sdz sdxy sdyz sdzx``.
+
+    RTKLIB writes the off-diagonal terms as signed square roots of the
+    covariances; the full ECEF covariance is rotated into NED.
+    """
+    sx, sy, sz, sxy, syz, szx = sd6.T
+    cov = np.empty((len(sd6), 3, 3))
+    cov[:, 0, 0], cov[:, 1, 1], cov[:, 2, 2] = sx ** 2, sy ** 2, sz ** 2
+    cov[:, 0, 1] = cov[:, 1, 0] = np.sign(sxy) * sxy ** 2
+    cov[:, 1, 2] = cov[:, 2, 1] = np.sign(syz) * syz ** 2
+    cov[:, 2, 0] = cov[:, 0, 2] = np.sign(szx) * szx ** 2
+    c = dcm_ecef_to_ned(lla[:, 0], lla[:, 1])
+    ned = c @ cov @ np.swapaxes(c, 1, 2)
+    return np.sqrt(np.abs(np.diagonal(ned, axis1=1, axis2=2)))
 
 
 def read_pos(path, max_gap: float | None = None, gap_action: str = "warn") -> PosSolution:
@@ -136,7 +155,7 @@ def read_pos(path, max_gap: float | None = None, gap_action: str = "warn") -> Po
     check_times(v[:, 0], tab.lines, str(path), max_gap=max_gap, gap_action=gap_action, what="solution")
     if ecef:
         lla = ecef_to_lla(v[:, 1:4])
-        sd = np.abs(v[:, 6:9])  # sdx, sdy, sdz: used as a bound per axis
+        sd = _ecef_sigmas_to_ned(v[:, 6:12], lla)
     else:
         lla = np.column_stack([np.radians(v[:, 1]), np.radians(v[:, 2]), v[:, 3]])
         sd = np.abs(v[:, 6:9])  # sdn, sde, sdu (down has the sigma of up)
