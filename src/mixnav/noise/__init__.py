@@ -1,10 +1,18 @@
-"""Non-Gaussian noise: the Gaussian-mixture type and its reduction.
+"""Non-Gaussian noise: mixtures, noise processes, diagnostics (and learners in ``learn``).
 
-``mixture``  GaussianMixture (stacked weights/means/covariances with their
-             Cholesky factors), logpdf/pdf, sampling, moments, marginals,
-             pruning and Runnalls' moment-preserving merge.
+``mixture``      GaussianMixture (stacked weights/means/covariances with their
+                 Cholesky factors), densities in log space, sampling, moments,
+                 marginals, pruning and Runnalls' moment-preserving merge
+``processes``    seeded noise processes to inject into any observable: Gaussian,
+                 mixture, gross errors, AR(1) (scalar, vector or matrix), bias
+                 segments, variance profiles, outages, sums; ``from_config``
+``diagnostics``  Q-Q, autocorrelation, normality tests, kurtosis, AR(1) and
+                 mixture fits of a residual series; ``mixnav diagnose``
 """
 
 from .mixture import GaussianMixture
+from .processes import (AR1, BiasSegments, Gaussian, GrossErrors, Mixture, NoiseProcess, Outages, Sum,
+                        VarianceProfile, from_config)
 
-__all__ = ["GaussianMixture"]
+__all__ = ["GaussianMixture", "AR1", "BiasSegments", "Gaussian", "GrossErrors", "Mixture", "NoiseProcess",
+           "Outages", "Sum", "VarianceProfile", "from_config"]

@@ -1,0 +1,465 @@
+"""Variational Bayes Gaussian mixture (paper P1 eqs. 10-29; Bishop PRML section 10.2).
+
+Model (P1 eqs. 13-17)::
+
+    pi            ~ Dir(alpha0, ..., alpha0)
+    Lambda_k      ~ Wishart(W0, nu0)
+    mu_k | Lambda ~ N(m0, (beta0 Lambda_k)^-1)
+    z_n | pi      ~ Cat(pi),   x_n | z_n = k ~ N(mu_k, Lambda_k^-1)
+
+Mean-field posterior q(Z) q(pi) prod_k q(mu_k | Lambda_k) q(Lambda_k) (P1 eq. 18)
+with q(pi) = Dir(alpha), q(mu_k | Lambda_k) = N(m_k, (beta_k Lambda_k)^-1),
+q(Lambda_k) = Wishart(W_k, nu_k).  The iteration alternates the
+responsibilities (E-step, P1 eq. 19 with the expectations of eqs. 26-28) and
+the posterior parameters (M-step, eqs. 22-25), and stops when the lower bound
+(eq. 29) changes by less than ``tol`` per unit sample weight.
+
+Lower bound.  It is evaluated right after each E-step: with q(Z) optimal for
+the current q(theta), the three terms of eq. (29) that involve Z collapse to
+``sum_n w_n log sum_k rho_nk`` (rho the unnormalised responsibilities of eq. 19),
+so the bound is that sum plus the (closed form) difference
+``E[ln p(pi, mu, Lambda)] - E[ln q(pi, mu, Lambda)]``.  This is the exact
+eq. (29) (with all constants), costs nothing beyond the E-step, and cannot
+decrease from one iteration to the next (coordinate ascent).
+
+Sample weights ``w_n`` act as replication counts in every sum over samples.
+
+Pruning.  As soon as (after an M-step) a component's expected weight
+``alpha_k / sum(alpha)`` is below ``prune_threshold`` it is removed from
+q(theta) and the iteration continues from the remaining posterior (the
+largest component is never removed); so the number of components is learned.
+Pruning as soon as a weight drops (rather than only after convergence) avoids
+hundreds of iterations spent on a dying component.
+``lower_bounds_`` restarts its monotone run after each pruning (the model
+changes; ``pruned_at_`` lists the indices into ``lower_bounds_`` where a new
+run starts).
+
+Defaults (paper P1 settings): alpha0 = 1, beta0 = 1, nu0 = 1 raised to d when
+1 <= d - 1 (the Wishart needs nu0 > d - 1), m0 = the (weighted) data mean,
+W0 = 2 I in the units of the data's precision, i.e. ``W0 = 2 inv(Cov(X))``
+(the paper's W0 = 2I for data whitened by its covariance; a scalar ``W0=c``
+means ``c inv(Cov(X))``; an array (d, d) is used as is).
+
+One-dimensional data use a fused numba kernel (:func:`_vb_loop_1d`): one pass
+over the samples per iteration does the E-step, the lower bound and the
+sufficient statistics of the M-step.  It implements exactly the same
+arithmetic as the numpy path (tested to agree to 1e-10).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numba
+import numpy as np
+from scipy.special import digamma, gammaln, logsumexp
+
+from mixnav.noise.learn import ConvergenceWarning
+from mixnav.noise.learn.em import (check_random_state, check_resp, kmeanspp_resp, validate_data,
+                                   validate_weights, weighted_moments)
+from mixnav.noise.mixture import GaussianMixture
+
+_LOG2PI = math.log(2.0 * math.pi)
+_EPS10 = 10 * np.finfo(float).eps
+
+
+# --------------------------------------------------------------------------
+# numpy core (any dimension)
+# --------------------------------------------------------------------------
+def _m_step(X, wr, prior):
+    """Posterior parameters from weighted responsibilities (P1 eqs. 22-25).
+
+    Returns (alpha (K,), beta (K,), m (K, d), nu (K,), Winv (K, d, d)).
+    """
+    alpha0, beta0, m0, nu0, W0inv = prior
+    nk, xbar, S = weighted_moments(X, wr)
+    alpha = alpha0 + nk                                                   # P1 eq. (23)
+    beta = beta0 + nk                                                     # P1 eq. (24)
+    m = (beta0 * m0[None, :] + nk[:, None] * xbar) / beta[:, None]        # P1 eq. (24)
+    nu = nu0 + nk                                                         # P1 eq. (25)
+    dm = xbar - m0[None, :]
+    Winv = (W0inv[None] + nk[:, None, None] * S                           # P1 eq. (25)
+            + (beta0 * nk / (beta0 + nk))[:, None, None] * dm[:, :, None] * dm[:, None, :])
+    Winv = 0.5 * (Winv + np.swapaxes(Winv, 1, 2))
+    return alpha, beta, m, nu, Winv
+
+
+def _expectations(params, d):
+    """E[ln pi_k] (P1 eq. 28), E[ln|Lambda_k|] (eq. 27), Cholesky of W_k^-1, log|W_k^-1|."""
+    alpha, beta, m, nu, Winv = params
+    chol = np.linalg.cholesky(Winv)
+    logdet_winv = 2.0 * np.sum(np.log(np.diagonal(chol, axis1=1, axis2=2)), axis=1)
+    e_ln_pi = digamma(alpha) - digamma(alpha.sum())                                    # P1 eq. (28)
+    e_ln_lam = (np.sum(digamma(0.5 * (nu[:, None] - np.arange(d)[None, :])), axis=1)  # P1 eq. (27)
+                + d * math.log(2.0) - logdet_winv)
+    return e_ln_pi, e_ln_lam, chol, logdet_winv
+
+
+def _log_wishart_norm(nu, logdet_winv, d):
+    """ln B(W, nu) of the Wishart normaliser (PRML B.79), with ln|W| = -ln|W^-1|."""
+    j = np.arange(d)
+    return (0.5 * nu * logdet_winv - 0.5 * nu * d * math.log(2.0) - 0.25 * d * (d - 1) * math.log(math.pi)
+            - np.sum(gammaln(0.5 * (np.asarray(nu)[..., None] - j)), axis=-1))
+
+
+def _theta_terms(params, prior, e_ln_pi, e_ln_lam, chol, logdet_winv):
+    """E[ln p(pi, mu, Lambda)] - E[ln q(pi, mu, Lambda)]: the non-Z part of P1 eq. (29)."""
+    alpha, beta, m, nu, Winv = params
+    alpha0, beta0, m0, nu0, W0inv = prior
+    K, d = m.shape
+    # Dirichlet part: ln C(alpha0) - ln C(alpha) + sum_k (alpha0 - alpha_k) E[ln pi_k]
+    t_pi = (gammaln(K * alpha0) - K * gammaln(alpha0) - gammaln(alpha.sum()) + np.sum(gammaln(alpha))
+            + np.sum((alpha0 - alpha) * e_ln_pi))
+    # Gaussian-Wishart part, per component
+    z0 = np.linalg.solve(chol, (m - m0[None, :])[:, :, None])[..., 0]
+    q0 = np.sum(z0 * z0, axis=1)                                          # (m_k-m0)^T W_k (m_k-m0)
+    tr = np.trace(np.linalg.solve(Winv, np.broadcast_to(W0inv, Winv.shape)), axis1=1, axis2=2)
+    logdet_w0inv = np.linalg.slogdet(W0inv)[1]
+    lnB0 = _log_wishart_norm(nu0, logdet_w0inv, d)
+    lnB = _log_wishart_norm(nu, logdet_winv, d)
+    t_k = (0.5 * d * np.log(beta0 / beta) + 0.5 * d - 0.5 * d * beta0 / beta - 0.5 * beta0 * nu * q0
+           + lnB0 - lnB + 0.5 * (nu0 - nu) * e_ln_lam - 0.5 * nu * tr + 0.5 * nu * d)
+    return float(t_pi + np.sum(t_k))
+
+
+def _vb_loop_numpy(X, w, params, prior, tol_abs, max_iter, bounds, prune_thr=0.0):
+    """Iterate E-step / bound / M-step from posterior ``params``.
+
+    Returns (params, n_iter, status): status 0 = max_iter reached, 1 = converged,
+    2 = a component's expected weight fell below ``prune_thr``.  Appends the bound
+    of every iteration to ``bounds``.
+    """
+    n, d = X.shape
+    prev = -np.inf
+    for it in range(1, max_iter + 1):
+        alpha, beta, m, nu, Winv = params
+        e_ln_pi, e_ln_lam, chol, logdet_winv = _expectations(params, d)
+        Linv = np.linalg.inv(chol)
+        LinvT = np.swapaxes(Linv, 1, 2)
+        y = np.matmul(X[None], LinvT) - np.matmul(m[:, None, :], LinvT)             # (K, n, d)
+        maha = np.einsum("kni,kni->nk", y, y)                                       # (x-m_k)^T W_k (x-m_k)
+        log_rho = (e_ln_pi + 0.5 * e_ln_lam - 0.5 * d * _LOG2PI)[None, :] \
+            - 0.5 * (d / beta[None, :] + nu[None, :] * maha)                        # P1 eqs. (19), (26)
+        log_norm = logsumexp(log_rho, axis=1)
+        bound = float(w @ log_norm) + _theta_terms(params, prior, e_ln_pi, e_ln_lam, chol, logdet_winv)
+        bounds.append(bound)                                                        # P1 eq. (29)
+        resp = np.exp(log_rho - log_norm[:, None])                                  # gamma_nk, P1 eq. (21)
+        params = _m_step(X, w[:, None] * resp, prior)
+        a = params[0]
+        if prune_thr > 0 and len(a) > 1 and np.any(a < prune_thr * a.sum()):
+            return params, it, 2
+        if abs(bound - prev) < tol_abs:
+            return params, it, 1
+        prev = bound
+    return params, max_iter, 0
+
+
+# --------------------------------------------------------------------------
+# numba fast path, d = 1
+# --------------------------------------------------------------------------
+@numba.njit(cache=True)
+def _digamma(x):
+    r = 0.0
+    while x < 6.0:
+        r -= 1.0 / x
+        x += 1.0
+    f = 1.0 / (x * x)
+    return r + math.log(x) - 0.5 / x - f * (1.0 / 12 - f * (1.0 / 120 - f * (1.0 / 252 - f * (1.0 / 240 - f / 132))))
+
+
+@numba.njit(cache=True)
+def _vb_loop_1d(x, w, alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0, w0inv, tol_abs, max_iter, bounds,
+                prune_thr):
+    """Fused 1-D VB iteration; updates alpha, beta, m, nu, winv (K,) in place.
+
+    Same arithmetic as :func:`_vb_loop_numpy` with d = 1.  Returns (n_iter, status) with
+    status 0 (max_iter reached), 1 (converged) or 2 (a component fell below ``prune_thr``);
+    ``bounds[:n_iter]`` holds the lower bound of each iteration.
+    """
+    n = x.shape[0]
+    K = alpha.shape[0]
+    e_ln_pi = np.empty(K)
+    const = np.empty(K)
+    prec = np.empty(K)
+    lr = np.empty(K)
+    s0 = np.empty(K)
+    s1 = np.empty(K)
+    s2 = np.empty(K)
+    ln2 = math.log(2.0)
+    lnB0 = 0.5 * nu0 * math.log(w0inv) - 0.5 * nu0 * ln2 - math.lgamma(0.5 * nu0)
+    prev = -np.inf
+    for it in range(1, max_iter + 1):
+        asum = 0.0
+        for k in range(K):
+            asum += alpha[k]
+        dg_sum = _digamma(asum)
+        theta = math.lgamma(K * alpha0) - K * math.lgamma(alpha0) - math.lgamma(asum)
+        for k in range(K):
+            e_ln_pi[k] = _digamma(alpha[k]) - dg_sum                                 # P1 eq. (28)
+            lw = math.log(winv[k])
+            e_ln_lam = _digamma(0.5 * nu[k]) + ln2 - lw                             # P1 eq. (27)
+            const[k] = e_ln_pi[k] + 0.5 * e_ln_lam - 0.5 * _LOG2PI - 0.5 / beta[k]
+            prec[k] = 0.5 * nu[k] / winv[k]
+            # non-Z part of the bound (see _theta_terms)
+            q0 = (m[k] - m0) ** 2 / winv[k]
+            lnB = 0.5 * nu[k] * lw - 0.5 * nu[k] * ln2 - math.lgamma(0.5 * nu[k])
+            theta += math.lgamma(alpha[k]) + (alpha0 - alpha[k]) * e_ln_pi[k]
+            theta += (0.5 * math.log(beta0 / beta[k]) + 0.5 - 0.5 * beta0 / beta[k]
+                      - 0.5 * beta0 * nu[k] * q0 + lnB0 - lnB + 0.5 * (nu0 - nu[k]) * e_ln_lam
+                      - 0.5 * nu[k] * w0inv / winv[k] + 0.5 * nu[k])
+            s0[k] = 0.0
+            s1[k] = 0.0
+            s2[k] = 0.0
+        total = 0.0
+        for i in range(n):
+            xi = x[i]
+            mx = -np.inf
+            for k in range(K):
+                dx = xi - m[k]
+                lr[k] = const[k] - prec[k] * dx * dx                                 # P1 eqs. (19), (26)
+                if lr[k] > mx:
+                    mx = lr[k]
+            se = 0.0
+            for k in range(K):
+                lr[k] = math.exp(lr[k] - mx)
+                se += lr[k]
+            total += w[i] * (mx + math.log(se))
+            scale = w[i] / se
+            for k in range(K):
+                r = lr[k] * scale                                                     # w_n gamma_nk
+                dx = xi - m[k]                                                        # shifted by m_k
+                s0[k] += r
+                s1[k] += r * dx
+                s2[k] += r * dx * dx
+        bound = total + theta                                                         # P1 eq. (29)
+        bounds[it - 1] = bound
+        for k in range(K):                                                            # P1 eqs. (22)-(25)
+            nk = s0[k] + 1e1 * 2.220446049250313e-16
+            xbar = m[k] + s1[k] / nk
+            nS = s2[k] - s1[k] * s1[k] / nk
+            if nS < 0.0:
+                nS = 0.0
+            alpha[k] = alpha0 + nk
+            beta[k] = beta0 + nk
+            m[k] = (beta0 * m0 + nk * xbar) / beta[k]
+            nu[k] = nu0 + nk
+            winv[k] = w0inv + nS + beta0 * nk / (beta0 + nk) * (xbar - m0) ** 2
+        if prune_thr > 0.0 and K > 1:
+            asum = 0.0
+            for k in range(K):
+                asum += alpha[k]
+            for k in range(K):
+                if alpha[k] < prune_thr * asum:
+                    return it, 2
+        if abs(bound - prev) < tol_abs:
+            return it, 1
+        prev = bound
+    return max_iter, 0
+
+
+# --------------------------------------------------------------------------
+# estimator
+# --------------------------------------------------------------------------
+class VariationalGaussianMixture:
+    """Variational Bayes Gaussian mixture with pruning and warm start (paper P1).
+
+    Parameters
+    ----------
+    n_components : int, default 4
+        Upper bound on the number of components (K).
+    alpha0 : float, default 1.0
+        Dirichlet concentration of the weights (P1 eq. 15).
+    beta0 : float, default 1.0
+        Scale of the prior precision of the means (P1 eq. 17).
+    nu0 : float or None
+        Wishart degrees of freedom, > d - 1.  ``None``: the paper's 1, raised to d
+        when d >= 2.
+    W0 : None, float or array_like (d, d)
+        Wishart scale.  ``None``: ``2 inv(Cov(X))`` (the paper's 2I in units of the
+        data precision); float c: ``c inv(Cov(X))``; array: used as is.
+    m0 : None or array_like (d,)
+        Prior mean of the means; ``None``: the weighted data mean.
+    tol : float, default 1e-6
+        Convergence when the lower bound divided by the total sample weight
+        changes by less than ``tol``.
+    max_iter : int, default 500
+        Total iterations over all pruning rounds.
+    prune_threshold : float, default 0.01
+        Components with expected weight below this are removed (0 disables).
+    init_resp : None or array_like (n, K)
+        Initial responsibilities; ``None``: hard k-means++ seeding from ``random_state``.
+    random_state : None, int or numpy Generator
+
+    Attributes
+    ----------
+    weights_ : ndarray (K',)
+        Expected weights ``alpha_k / sum(alpha)`` (K' <= K after pruning).
+    means_ : ndarray (K', d)
+        Posterior means ``m_k``.
+    covariances_ : ndarray (K', d, d)
+        ``W_k^-1 / nu_k`` = inverse of the expected precision (as scikit-learn).
+    weight_concentration_, mean_precision_, degrees_of_freedom_ : ndarray (K',)
+        Posterior ``alpha_k``, ``beta_k``, ``nu_k``.
+    precisions_ : ndarray (K', d, d)
+        Expected precisions ``nu_k W_k``.
+    converged_ : bool
+    n_iter_ : int
+    lower_bound_ : float
+        Final lower bound (eq. 29), total over samples (not per sample).
+    lower_bounds_ : list of float
+        Lower bound at every iteration.
+    pruned_at_ : list of int
+        Indices into ``lower_bounds_`` where an iteration run after pruning starts.
+    prior_ : dict
+        The resolved prior (alpha0, beta0, m0, nu0, W0).
+    """
+
+    def __init__(self, n_components=4, alpha0=1.0, beta0=1.0, nu0=None, W0=None, m0=None, tol=1e-6,
+                 max_iter=500, prune_threshold=0.01, init_resp=None, random_state=None):
+        self.n_components = n_components
+        self.alpha0 = alpha0
+        self.beta0 = beta0
+        self.nu0 = nu0
+        self.W0 = W0
+        self.m0 = m0
+        self.tol = tol
+        self.max_iter = max_iter
+        self.prune_threshold = prune_threshold
+        self.init_resp = init_resp
+        self.random_state = random_state
+
+    # ---- priors -------------------------------------------------------------
+    def _resolve_prior(self, X, w):
+        d = X.shape[1]
+        if not (self.alpha0 > 0 and self.beta0 > 0):
+            raise ValueError("alpha0 and beta0 must be positive")
+        if self.nu0 is None:
+            nu0 = 1.0 if d == 1 else float(d)          # paper's 1, raised so that nu0 > d - 1
+        else:
+            nu0 = float(self.nu0)
+            if not nu0 > d - 1:
+                raise ValueError(f"nu0={nu0} must exceed d - 1 = {d - 1}")
+        wsum = w.sum()
+        mean = (w @ X) / wsum
+        if self.m0 is None:
+            m0 = mean
+        else:
+            m0 = np.asarray(self.m0, dtype=float).reshape(-1)
+            if m0.shape != (d,):
+                raise ValueError(f"m0 must have shape ({d},)")
+        if self.W0 is None or np.ndim(self.W0) == 0:
+            c = 2.0 if self.W0 is None else float(self.W0)
+            diff = X - mean
+            cov = (diff * w[:, None]).T @ diff / wsum
+            W0inv = cov / c                              # W0 = c inv(Cov(X))
+        else:
+            W0 = np.asarray(self.W0, dtype=float)
+            if W0.shape != (d, d):
+                raise ValueError(f"W0 must have shape ({d}, {d})")
+            W0inv = np.linalg.inv(W0)
+        W0inv = 0.5 * (W0inv + W0inv.T)
+        try:
+            np.linalg.cholesky(W0inv)
+        except np.linalg.LinAlgError:
+            raise ValueError("W0 must be symmetric positive definite (is a data column constant?)") from None
+        return float(self.alpha0), float(self.beta0), m0, nu0, W0inv
+
+    # ---- fitting ----------------------------------------------------------
+    def fit(self, X, sample_weight=None, warm_start_from=None):
+        """Fit to samples ``X`` (n, d) or (n,).
+
+        Parameters
+        ----------
+        X : array_like (n, d) or (n,)
+        sample_weight : None or array_like (n,)
+            Non-negative weights, acting as replication counts.
+        warm_start_from : None or fitted VariationalGaussianMixture
+            Start from its posterior parameters (alpha, beta, m, nu, W) instead of
+            initial responsibilities -- for re-learning on a sliding window.  Its
+            number of components (after its pruning) is used.
+
+        Returns
+        -------
+        self
+        """
+        K = int(self.n_components)
+        X = validate_data(X, K if warm_start_from is None else 1)
+        n, d = X.shape
+        w = validate_weights(sample_weight, n)
+        prior = self._resolve_prior(X, w)
+        if warm_start_from is not None:
+            src = warm_start_from
+            if not hasattr(src, "_Winv"):
+                raise ValueError("warm_start_from must be a fitted VariationalGaussianMixture")
+            if src.means_.shape[1] != d:
+                raise ValueError(f"warm_start_from has dimension {src.means_.shape[1]}, the data {d}")
+            params = (src.weight_concentration_.copy(), src.mean_precision_.copy(), src.means_.copy(),
+                      src.degrees_of_freedom_.copy(), src._Winv.copy())
+        else:
+            if self.init_resp is None:
+                resp = kmeanspp_resp(X, K, check_random_state(self.random_state), w)
+            else:
+                resp = check_resp(self.init_resp, n, K)
+            params = _m_step(X, w[:, None] * resp, prior)
+        tol_abs = float(self.tol) * w.sum()
+        bounds: list[float] = []
+        pruned_at: list[int] = []
+        iters_left = int(self.max_iter)
+        thr = float(self.prune_threshold)
+        while True:
+            if d == 1:
+                params, it, status = self._loop_1d(X, w, params, prior, tol_abs, iters_left, bounds, thr)
+            else:
+                params, it, status = _vb_loop_numpy(X, w, params, prior, tol_abs, iters_left, bounds, thr)
+            iters_left -= it
+            converged = status == 1
+            if status != 2:
+                break
+            # P1: drop components whose expected weight is below the threshold, keep iterating
+            alpha = params[0]
+            keep = alpha >= thr * alpha.sum()
+            keep[np.argmax(alpha)] = True
+            params = tuple(p[keep] for p in params)
+            pruned_at.append(len(bounds))
+            if iters_left <= 0:
+                break
+        alpha, beta, m, nu, Winv = params
+        self.weight_concentration_, self.mean_precision_, self.degrees_of_freedom_ = alpha, beta, nu
+        self.means_ = m
+        self._Winv = Winv
+        self.covariances_ = Winv / nu[:, None, None]
+        self.precisions_ = np.linalg.inv(self.covariances_)
+        self.weights_ = alpha / alpha.sum()
+        self.converged_ = bool(converged)
+        self.n_iter_ = int(self.max_iter) - iters_left
+        self.lower_bounds_ = bounds
+        self.lower_bound_ = bounds[-1] if bounds else -np.inf
+        self.pruned_at_ = pruned_at
+        self.prior_ = dict(alpha0=prior[0], beta0=prior[1], m0=prior[2], nu0=prior[3],
+                           W0=np.linalg.inv(prior[4]))
+        if not converged:
+            warnings.warn(f"variational inference did not converge in {self.max_iter} iterations "
+                          f"(tol={self.tol})", ConvergenceWarning, stacklevel=2)
+        return self
+
+    @staticmethod
+    def _loop_1d(X, w, params, prior, tol_abs, max_iter, bounds, prune_thr):
+        alpha, beta, m, nu, Winv = (np.array(p, dtype=float) for p in params)
+        m1, winv1 = np.ascontiguousarray(m[:, 0]), np.ascontiguousarray(Winv[:, 0, 0])
+        buf = np.empty(max(max_iter, 1))
+        it, conv = _vb_loop_1d(np.ascontiguousarray(X[:, 0]), w, alpha, beta, m1, nu, winv1,
+                               prior[0], prior[1], float(prior[2][0]), prior[3], float(prior[4][0, 0]),
+                               tol_abs, max_iter, buf, prune_thr)
+        bounds.extend(buf[:it].tolist())
+        return (alpha, beta, m1[:, None], nu, winv1[:, None, None]), it, conv
+
+    # ---- results ---------------------------------------------------------
+    @property
+    def mixture_(self) -> GaussianMixture:
+        """The fitted mixture (expected weights, posterior means, ``W_k^-1 / nu_k``)."""
+        return GaussianMixture(self.weights_, self.means_, 0.5 * (self.covariances_ + np.swapaxes(self.covariances_, 1, 2)))
+
+    def score_samples(self, X) -> np.ndarray:
+        """Log density of each sample under :attr:`mixture_`, (n,)."""
+        return self.mixture_.logpdf(X)

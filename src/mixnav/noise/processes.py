@@ -1,0 +1,1002 @@
+"""Composable, seeded noise processes to inject into any observable series.
+
+Every process is a small frozen dataclass with
+
+``sample(times, n_channels, rng) -> ndarray (n, n_channels)``
+    Additive noise at the epochs ``times`` (n,) [s] for ``n_channels``
+    independent (or, for a matrix AR(1), coupled) channels, e.g. the
+    satellites of a pseudorange series or the three axes of a position fix.
+    Values are SI in the observable's unit (m for pseudorange, m/s for
+    Doppler, ...). Randomness comes only from the ``numpy.random.Generator``
+    passed in; the same generator state gives the same numbers.
+``sample_with_mask(times, n_channels, rng) -> (values, mask)``
+    The same values plus a boolean (n, n_channels) mask of the gross errors
+    injected (all False for processes without gross errors; :class:`Sum`
+    combines the masks of its parts with OR).
+``variance``
+    The stationary marginal variance per sample [unit^2] (float, or (c,)
+    ndarray when it differs per channel), ``None`` when the process is not
+    stationary (bias segments, variance profiles, gross errors every N).
+``describe()``
+    One line of text for logs and reports.
+
+Processes:
+
+- :class:`Gaussian` white noise, :class:`Mixture` white Gaussian-mixture
+  noise (1-D mixture per channel),
+- :class:`GrossErrors` of a given size every N epochs or with probability p,
+- :class:`AR1` coloured noise ``x_k = Psi x_{k-1} + w_k`` with scalar,
+  per-channel or (c, c) matrix ``Psi`` and Gaussian or mixture innovation,
+- :class:`BiasSegments` (multipath-like bias over time windows),
+- :class:`VarianceProfile` scaling another process's standard deviation over
+  time (jumps and slow drifts up and back),
+- :class:`Sum` of any of the above,
+- :class:`Outages`, not additive: a boolean availability mask.
+
+:func:`from_config` builds any of them from a TOML-like table, with units
+parsed by :func:`mixnav.units.parse_quantity` and errors as
+:class:`mixnav.errors.ConfigError` naming the key path.
+
+Errors in direct construction are :class:`~mixnav.errors.ConfigError` too
+(``key`` is the argument name); :func:`from_config` re-raises them with the
+full key path and file.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import numbers
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+from scipy import linalg as sla
+from scipy.signal import lfilter
+
+from ..errors import ConfigError
+from ..units import DIMENSIONLESS, TIME, Dimension, UnitError, parse_quantity
+from .mixture import GaussianMixture
+
+__all__ = [
+    "NoiseProcess", "Gaussian", "Mixture", "GrossErrors", "AR1", "BiasSegments",
+    "VarianceProfile", "Sum", "Outages", "from_config",
+]
+
+
+# --------------------------------------------------------------------------
+# helpers
+# --------------------------------------------------------------------------
+def _readonly(a) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+def _real_array(value, key: str, *, ndim_max: int = 1, nonnegative: bool = False,
+                positive: bool = False) -> np.ndarray:
+    """A finite float array of at most ``ndim_max`` dimensions, checked."""
+    if isinstance(value, bool):
+        raise ConfigError(f"expected a number, got {value!r}", key=key)
+    try:
+        a = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigError(f"expected a number or a list of numbers, got {value!r}", key=key) from None
+    if a.ndim > ndim_max:
+        raise ConfigError(f"expected at most {ndim_max} dimension(s), got shape {a.shape}", key=key)
+    if a.size == 0:
+        raise ConfigError("must not be empty", key=key)
+    if not np.all(np.isfinite(a)):
+        raise ConfigError(f"must be finite, got {value!r}", key=key)
+    if nonnegative and np.any(a < 0):
+        raise ConfigError(f"must not be negative, got {value!r}", key=key)
+    if positive and np.any(a <= 0):
+        raise ConfigError(f"must be positive, got {value!r}", key=key)
+    a.setflags(write=False)
+    return a
+
+
+def _check_call(times, n_channels, rng) -> np.ndarray:
+    """Validate the arguments of ``sample``; return ``times`` as a float (n,) array."""
+    t = np.asarray(times, dtype=float)
+    if t.ndim != 1:
+        raise ValueError(f"times must be a 1-D array (n,) [s], got shape {t.shape}")
+    if not np.all(np.isfinite(t)):
+        raise ValueError("times must be finite")
+    if isinstance(n_channels, bool) or not isinstance(n_channels, numbers.Integral) or n_channels < 1:
+        raise ValueError(f"n_channels must be a positive integer, got {n_channels!r}")
+    if not isinstance(rng, np.random.Generator):
+        raise TypeError("pass an explicit numpy Generator (np.random.default_rng(seed)), "
+                        f"got {type(rng).__name__}")
+    return t
+
+
+def _per_channel(a: np.ndarray, n_channels: int, what: str) -> np.ndarray:
+    """Broadcast a scalar or (c,) parameter to (n_channels,)."""
+    if a.ndim == 0:
+        return np.full(n_channels, float(a))
+    if a.shape != (n_channels,):
+        raise ValueError(f"{what} has {a.shape[0]} values, one per channel, but n_channels={n_channels}")
+    return a
+
+
+def _fmt(a) -> str:
+    a = np.asarray(a)
+    if a.ndim == 0:
+        return f"{float(a):.6g}"
+    return np.array2string(a, precision=4, separator=", ")
+
+
+class NoiseProcess:
+    """Base class of additive noise processes (see the module docstring)."""
+
+    def sample(self, times, n_channels: int, rng: np.random.Generator) -> np.ndarray:
+        """Noise at ``times``.
+
+        Parameters
+        ----------
+        times : array_like (n,)
+            Epochs [s].
+        n_channels : int
+            Number of channels c.
+        rng : numpy.random.Generator
+            The only source of randomness.
+
+        Returns
+        -------
+        ndarray (n, c)
+            Additive noise in the observable's SI unit.
+        """
+        return self.sample_with_mask(times, n_channels, rng)[0]
+
+    def sample_with_mask(self, times, n_channels: int, rng: np.random.Generator):
+        """Noise and the (n, c) boolean mask of injected gross errors."""
+        t = _check_call(times, n_channels, rng)
+        x = self._sample(t, n_channels, rng)
+        return x, np.zeros(x.shape, dtype=bool)
+
+    def _sample(self, t, n_channels, rng):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    @property
+    def variance(self):
+        """Stationary marginal variance [unit^2], or None when not stationary."""
+        return None
+
+    def describe(self) -> str:
+        return repr(self)
+
+
+# --------------------------------------------------------------------------
+# white noise
+# --------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class Gaussian(NoiseProcess):
+    """White Gaussian noise ``N(0, sigma^2)``, independent over epochs and channels.
+
+    Parameters
+    ----------
+    sigma : float or array_like (c,)
+        Standard deviation [unit], >= 0; one per channel if a vector.
+    """
+
+    sigma: Any
+
+    def __post_init__(self):
+        object.__setattr__(self, "sigma", _real_array(self.sigma, "sigma", nonnegative=True))
+
+    def _sample(self, t, c, rng):
+        s = _per_channel(self.sigma, c, "sigma")
+        return rng.standard_normal((t.size, c)) * s
+
+    @property
+    def variance(self):
+        v = self.sigma ** 2
+        return float(v) if v.ndim == 0 else v
+
+    def describe(self) -> str:
+        return f"white Gaussian, sigma={_fmt(self.sigma)}"
+
+
+@dataclass(frozen=True, eq=False)
+class Mixture(NoiseProcess):
+    """White 1-D Gaussian-mixture noise, drawn independently per epoch and channel.
+
+    Each sample picks component k with probability ``weights[k]`` and is then
+    ``N(means[k], sigmas[k]^2)``.
+
+    Parameters
+    ----------
+    weights : array_like (K,) or GaussianMixture
+        Non-negative, summing to 1 (within 1e-6). A
+        :class:`~mixnav.noise.mixture.GaussianMixture` of dimension 1 may be
+        passed instead, with ``sigmas`` and ``means`` left out.
+    sigmas : array_like (K,)
+        Component standard deviations [unit], >= 0.
+    means : float or array_like (K,), default 0
+        Component means [unit]. Non-zero means make the noise biased.
+    """
+
+    weights: Any
+    sigmas: Any = None
+    means: Any = 0.0
+
+    def __post_init__(self):
+        w = self.weights
+        if isinstance(w, GaussianMixture):
+            if w.dim != 1:
+                raise ConfigError(f"a GaussianMixture of dimension {w.dim} was given; "
+                                  "Mixture noise needs dimension 1 (one scalar per channel)", key="weights")
+            if self.sigmas is not None:
+                raise ConfigError("give either a GaussianMixture or sigmas, not both", key="sigmas")
+            gm = w
+            w, sig, mu = gm.weights, np.sqrt(gm.covariances[:, 0, 0]), gm.means[:, 0]
+        else:
+            if self.sigmas is None:
+                raise ConfigError("sigmas are required (one per component)", key="sigmas")
+            sig, mu = self.sigmas, self.means
+        w = _real_array(w, "weights", nonnegative=True)
+        sig = _real_array(sig, "sigmas", nonnegative=True)
+        mu = _real_array(mu, "means")
+        if w.ndim != 1:
+            w = _readonly(np.atleast_1d(w))
+        if sig.shape != w.shape:
+            raise ConfigError(f"{sig.size} sigmas for {w.size} weights; give one per component",
+                              key="sigmas")
+        if mu.ndim == 0:
+            mu = _readonly(np.full(w.shape, float(mu)))
+        elif mu.shape != w.shape:
+            raise ConfigError(f"{mu.size} means for {w.size} weights; give one per component", key="means")
+        if abs(w.sum() - 1.0) > 1e-6:
+            raise ConfigError(f"weights sum to {w.sum():.9g}, not 1", key="weights")
+        w = _readonly(w / w.sum())
+        object.__setattr__(self, "weights", w)
+        object.__setattr__(self, "sigmas", sig)
+        object.__setattr__(self, "means", mu)
+
+    def _sample(self, t, c, rng):
+        labels = rng.choice(self.weights.size, size=(t.size, c), p=self.weights)
+        z = rng.standard_normal((t.size, c))
+        return self.means[labels] + self.sigmas[labels] * z
+
+    @property
+    def mean(self) -> float:
+        """Mixture mean [unit]."""
+        return float(self.weights @ self.means)
+
+    @property
+    def variance(self) -> float:
+        """``sum_k w_k (sigma_k^2 + (mu_k - mu)^2)`` [unit^2]."""
+        d = self.means - self.mean
+        return float(self.weights @ (self.sigmas ** 2 + d ** 2))
+
+    @property
+    def excess_kurtosis(self) -> float:
+        """``m4 / m2^2 - 3`` with ``m4 = sum_k w_k (3 s^4 + 6 s^2 d^2 + d^4)``, d = mu_k - mu."""
+        d = self.means - self.mean
+        s2 = self.sigmas ** 2
+        m4 = float(self.weights @ (3 * s2 ** 2 + 6 * s2 * d ** 2 + d ** 4))
+        return m4 / self.variance ** 2 - 3.0
+
+    def describe(self) -> str:
+        s = f"Gaussian mixture, weights={_fmt(self.weights)}, sigmas={_fmt(self.sigmas)}"
+        if np.any(self.means != 0):
+            s += f", means={_fmt(self.means)}"
+        return s
+
+
+# --------------------------------------------------------------------------
+# gross errors
+# --------------------------------------------------------------------------
+_SIGNS = {"random": 0, "+": 1, "positive": 1, 1: 1, "-": -1, "negative": -1, -1: -1}
+
+
+@dataclass(frozen=True, eq=False)
+class GrossErrors(NoiseProcess):
+    """Gross errors (outliers) of fixed magnitude at chosen or random epochs.
+
+    Exactly one of ``every`` and ``probability`` is given:
+
+    - ``every=N``: at epoch indices ``start, start+N, start+2N, ...`` every
+      selected channel gets a gross error;
+    - ``probability=p``: from epoch index ``start`` on, each (epoch, channel)
+      of the selected channels independently gets one with probability p.
+
+    Elsewhere the process is exactly zero. Use :meth:`sample_with_mask` to
+    learn where they occurred.
+
+    Parameters
+    ----------
+    size : float
+        Magnitude s [unit], >= 0.
+    every : int, optional
+        Period N >= 1 in epochs.
+    probability : float, optional
+        Rate p in [0, 1].
+    start : int, default 0
+        First epoch index (not a time) that may carry a gross error.
+    sign : {"random", "+", "-"} or {1, -1}, default "random"
+        "random": +s or -s with probability 1/2 each, drawn independently for
+        every gross error; "+"/1 always +s; "-"/-1 always -s.
+    channels : sequence of int, optional
+        Channel indices affected; default all.
+    """
+
+    size: float
+    every: int | None = None
+    probability: float | None = None
+    start: int = 0
+    sign: Any = "random"
+    channels: Any = None
+
+    def __post_init__(self):
+        size = float(_real_array(self.size, "size", ndim_max=0, nonnegative=True))
+        object.__setattr__(self, "size", size)
+        if (self.every is None) == (self.probability is None):
+            raise ConfigError("give exactly one of 'every' (epochs) and 'probability'", key="every")
+        if self.every is not None:
+            _int(self.every, "every", minimum=1)
+        if self.probability is not None:
+            p = float(_real_array(self.probability, "probability", ndim_max=0, nonnegative=True))
+            if p > 1:
+                raise ConfigError(f"must be in [0, 1], got {p:g}", key="probability")
+            object.__setattr__(self, "probability", p)
+        _int(self.start, "start", minimum=0)
+        if isinstance(self.sign, bool) or not isinstance(self.sign, (str, int)) or self.sign not in _SIGNS:
+            raise ConfigError(f"sign must be 'random', '+' or '-', got {self.sign!r}", key="sign")
+        if self.channels is not None:
+            ch = [_int(v, f"channels[{i}]", minimum=0) for i, v in enumerate(np.atleast_1d(self.channels))]
+            object.__setattr__(self, "channels", tuple(ch))
+
+    def _channel_mask(self, c: int) -> np.ndarray:
+        sel = np.ones(c, dtype=bool)
+        if self.channels is not None:
+            if max(self.channels) >= c:
+                raise ValueError(f"gross-error channel {max(self.channels)} does not exist "
+                                 f"(n_channels={c})")
+            sel[:] = False
+            sel[list(self.channels)] = True
+        return sel
+
+    def sample_with_mask(self, times, n_channels, rng):
+        t = _check_call(times, n_channels, rng)
+        n, c = t.size, n_channels
+        k = np.arange(n)
+        eligible = (k >= self.start)[:, None] & self._channel_mask(c)[None, :]
+        if self.every is not None:
+            mask = eligible & ((k - self.start) % self.every == 0)[:, None]
+        else:
+            mask = eligible & (rng.random((n, c)) < self.probability)
+        s = _SIGNS[self.sign]
+        if s == 0:
+            signs = np.where(rng.random((n, c)) < 0.5, -1.0, 1.0)
+        else:
+            signs = float(s)
+        return np.where(mask, signs * self.size, 0.0), mask
+
+    @property
+    def variance(self):
+        # stationary only in the random-rate case (E x^2 = p s^2)
+        if self.probability is None:
+            return None
+        return self.probability * self.size ** 2
+
+    def describe(self) -> str:
+        when = f"every {self.every} epochs" if self.every is not None else f"with probability {self.probability:g}"
+        sign = {0: "random sign", 1: "positive", -1: "negative"}[_SIGNS[self.sign]]
+        return f"gross errors of {self.size:g} ({sign}) {when} from epoch {self.start}"
+
+
+def _int(v, key: str, minimum: int | None = None) -> int:
+    if isinstance(v, bool) or not isinstance(v, (numbers.Integral, float, np.floating)) \
+            or (isinstance(v, (float, np.floating)) and not float(v).is_integer()):
+        raise ConfigError(f"expected an integer, got {v!r}", key=key)
+    v = int(v)
+    if minimum is not None and v < minimum:
+        raise ConfigError(f"must be at least {minimum}, got {v}", key=key)
+    return v
+
+
+def _is_white(p) -> bool:
+    """True for stationary white processes (usable as an AR(1) innovation)."""
+    if isinstance(p, Sum):
+        return all(_is_white(q) for q in p.processes)
+    return isinstance(p, (Gaussian, Mixture)) or (isinstance(p, GrossErrors) and p.probability is not None)
+
+
+# --------------------------------------------------------------------------
+# AR(1)
+# --------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class AR1(NoiseProcess):
+    """First-order autoregressive (coloured) noise ``x_k = Psi x_{k-1} + w_k``.
+
+    The recursion runs per epoch (index k), whatever the spacing of
+    ``times``; for a correlation time tau at interval dt use
+    ``Psi = exp(-dt / tau)``.
+
+    Parameters
+    ----------
+    coefficient : float, array_like (c,) or array_like (c, c)
+        Psi: one coefficient for all channels, one per channel, or a matrix
+        coupling the channels. Its spectral radius must be < 1 (stationary);
+        otherwise the process grows without bound and a ConfigError says so.
+    sigma : float or array_like (c,), optional
+        Standard deviation of the *innovation* (driving noise) w_k [unit],
+        white Gaussian, independent across channels. Not the stationary sd:
+        for a scalar Psi the stationary variance is
+        ``sigma^2 / (1 - Psi^2)``; for a matrix it is the solution P of the
+        discrete Lyapunov equation ``P = Psi P Psi^T + diag(sigma^2)``.
+    innovation : NoiseProcess, optional
+        A white process (e.g. :class:`Mixture`) to drive the recursion instead
+        of the Gaussian one; give either ``sigma`` or ``innovation``. Its
+        ``variance`` must be defined (it sets the stationary start).
+
+    Notes
+    -----
+    Stationary start: x_0 is drawn from ``N(0, P)``, so the series is
+    (second-order) stationary from the first epoch. With a non-Gaussian
+    innovation the marginal distribution of the first ~1/(1-|Psi|) epochs is
+    Gaussian rather than the exact stationary shape; the covariance is right
+    throughout. The filtering uses ``scipy.signal.lfilter`` per channel
+    (after a complex Schur decomposition when Psi is a full matrix).
+    """
+
+    coefficient: Any
+    sigma: Any = None
+    innovation: NoiseProcess | None = None
+
+    def __post_init__(self):
+        psi = _real_array(self.coefficient, "coefficient", ndim_max=2)
+        if psi.ndim == 2 and psi.shape[0] != psi.shape[1]:
+            raise ConfigError(f"a coefficient matrix must be square (c, c), got shape {psi.shape}",
+                              key="coefficient")
+        rho = float(np.max(np.abs(np.linalg.eigvals(psi)))) if psi.ndim == 2 else float(np.max(np.abs(psi)))
+        if not rho < 1.0:
+            raise ConfigError(
+                f"AR(1) coefficient has spectral radius {rho:.6g} >= 1: the process is not stationary "
+                "and grows without bound (coefficients of 1.0-1.5 as printed in some papers diverge); "
+                "use a coefficient with |Psi| < 1, e.g. exp(-dt/tau) for correlation time tau",
+                key="coefficient")
+        object.__setattr__(self, "coefficient", psi)
+        if (self.sigma is None) == (self.innovation is None):
+            raise ConfigError("give exactly one of 'sigma' (Gaussian innovation sd) and 'innovation'",
+                              key="sigma")
+        if self.sigma is not None:
+            object.__setattr__(self, "sigma", _real_array(self.sigma, "sigma", nonnegative=True))
+        else:
+            if not _is_white(self.innovation):
+                raise ConfigError("innovation must be a stationary white process (Gaussian, Mixture, "
+                                  f"or a Sum of them), got {self.innovation!r}", key="innovation")
+        nc = self._fixed_channels()
+        if nc is not None and self.sigma is not None and self.sigma.ndim == 1 and self.sigma.size != nc:
+            raise ConfigError(f"{self.sigma.size} innovation sigmas for a {nc}-channel coefficient",
+                              key="sigma")
+
+    def _fixed_channels(self) -> int | None:
+        return None if self.coefficient.ndim == 0 else self.coefficient.shape[0]
+
+    def _innovation_variance(self, c: int) -> np.ndarray:
+        v = self.sigma ** 2 if self.sigma is not None else np.asarray(self.innovation.variance, dtype=float)
+        return _per_channel(v, c, "innovation variance")
+
+    def _psi_matrix(self, c: int) -> np.ndarray:
+        psi = self.coefficient
+        if psi.ndim == 2:
+            if psi.shape[0] != c:
+                raise ValueError(f"the AR(1) coefficient matrix is {psi.shape}, but n_channels={c}")
+            return psi
+        return np.diag(_per_channel(psi, c, "AR(1) coefficient"))
+
+    def stationary_covariance(self, n_channels: int | None = None) -> np.ndarray:
+        """Stationary covariance P (c, c) [unit^2]: ``P = Psi P Psi^T + Q``.
+
+        Parameters
+        ----------
+        n_channels : int, optional
+            Needed when the coefficient and sigma are scalars.
+        """
+        c = n_channels or self._fixed_channels() or (self.sigma.size if self.sigma is not None
+                                                     and self.sigma.ndim == 1 else None)
+        if c is None:
+            raise ValueError("n_channels is needed for a scalar coefficient and sigma")
+        psi = self._psi_matrix(c)
+        q = self._innovation_variance(c)
+        if self.coefficient.ndim < 2:
+            return np.diag(q / (1.0 - np.diag(psi) ** 2))
+        p = sla.solve_discrete_lyapunov(psi, np.diag(q))
+        return 0.5 * (p + p.T)
+
+    @property
+    def variance(self):
+        """Stationary variance per channel [unit^2] (float when one value fits all)."""
+        if self.coefficient.ndim == 2:
+            return np.diag(self.stationary_covariance())
+        q = self.sigma ** 2 if self.sigma is not None else np.asarray(self.innovation.variance, dtype=float)
+        v = q / (1.0 - self.coefficient ** 2)
+        return float(v) if np.ndim(v) == 0 else np.asarray(v)
+
+    def _sample(self, t, c, rng):
+        n = t.size
+        if self.coefficient.ndim < 2:
+            a = _per_channel(self.coefficient, c, "AR(1) coefficient")
+            # stationary start x_0 ~ N(0, q / (1 - psi^2)) per channel
+            x0 = np.sqrt(self._innovation_variance(c) / (1.0 - a ** 2)) * rng.standard_normal(c)
+        else:
+            psi = self._psi_matrix(c)
+            # stationary start x_0 ~ N(0, P) via a symmetric square root (P may be singular)
+            ev, vec = np.linalg.eigh(self.stationary_covariance(c))
+            x0 = vec @ (np.sqrt(np.clip(ev, 0.0, None)) * rng.standard_normal(c))
+        if self.sigma is not None:
+            w = rng.standard_normal((n, c)) * _per_channel(self.sigma, c, "sigma")
+        else:
+            w = np.asarray(self.innovation.sample(t, c, rng), dtype=float)
+        x = np.empty((n, c))
+        if n == 0:
+            return x
+        x[0] = x0
+        if n == 1:
+            return x
+        if self.coefficient.ndim == 0:     # one filter for all channels
+            a0 = float(self.coefficient)
+            x[1:], _ = lfilter([1.0], [1.0, -a0], w[1:], axis=0, zi=(a0 * x0)[None, :])
+            return x
+        if self.coefficient.ndim == 1:
+            for j in range(c):   # loop over channels, lfilter over samples
+                x[1:, j], _ = lfilter([1.0], [1.0, -a[j]], w[1:, j], zi=[a[j] * x0[j]])
+            return x
+        # matrix Psi = Z T Z^H (complex Schur, T upper triangular): z = Z^H x obeys
+        # z_k = T z_{k-1} + Z^H w_k; solve from the last mode up, each one a scalar
+        # lfilter whose input includes the lagged modes below it.
+        tt, zz = sla.schur(psi.astype(complex), output="complex")
+        u = w[1:] @ zz.conj()            # (n-1, c): rows are (Z^H w_k)^T
+        z = np.empty((n, c), dtype=complex)
+        z[0] = zz.conj().T @ x0
+        for i in range(c - 1, -1, -1):
+            drive = u[:, i] + z[:-1, i + 1:] @ tt[i, i + 1:]
+            z[1:, i], _ = lfilter([1.0], [1.0, -tt[i, i]], drive, zi=[tt[i, i] * z[0, i]])
+        return (z @ zz.T).real
+
+    def describe(self) -> str:
+        drive = f"innovation sigma={_fmt(self.sigma)}" if self.sigma is not None \
+            else f"innovation: {self.innovation.describe()}"
+        return f"AR(1), coefficient={_fmt(self.coefficient)}, {drive}"
+
+
+# --------------------------------------------------------------------------
+# time-dependent processes
+# --------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class BiasSegments(NoiseProcess):
+    """Constant biases over time windows (e.g. multipath), deterministic.
+
+    Parameters
+    ----------
+    segments : sequence of (start, end, bias)
+        Window ``start <= t < end`` [s] and bias [unit]: a float for all
+        channels or a (c,) vector (0 for the channels not affected).
+        Overlapping segments add.
+    """
+
+    segments: Any = ()
+
+    def __post_init__(self):
+        out = []
+        for i, seg in enumerate(self.segments):
+            key = f"segments[{i}]"
+            if not isinstance(seg, (tuple, list)) or len(seg) != 3:
+                raise ConfigError(f"expected (start, end, bias), got {seg!r}", key=key)
+            t0 = float(_real_array(seg[0], key + ".start", ndim_max=0))
+            t1 = float(_real_array(seg[1], key + ".end", ndim_max=0))
+            if not t1 > t0:
+                raise ConfigError(f"end ({t1:g} s) must be after start ({t0:g} s)", key=key)
+            out.append((t0, t1, _real_array(seg[2], key + ".bias")))
+        object.__setattr__(self, "segments", tuple(out))
+
+    def _sample(self, t, c, rng):
+        x = np.zeros((t.size, c))
+        for t0, t1, b in self.segments:       # loop over segments, not samples
+            inside = (t >= t0) & (t < t1)
+            x[inside] += _per_channel(b, c, "bias")
+        return x
+
+    def describe(self) -> str:
+        return "bias segments " + ", ".join(f"[{a:g}, {b:g}) s: {_fmt(v)}" for a, b, v in self.segments)
+
+
+@dataclass(frozen=True, eq=False)
+class VarianceProfile(NoiseProcess):
+    """Another process with its standard deviation scaled over time.
+
+    ``x(t) = scale(t) * base(t)`` with ``scale(t) = step(t) * prod drift_i(t)``:
+
+    - ``step(t)`` is the factor of the latest step with ``t_step <= t``
+      (1 before the first); a jump persists until the next step (give a step
+      with factor 1 to come back);
+    - a drift ``(t0, t1, f)`` rises linearly from 1 at t0 to f at the
+      midpoint and returns linearly to 1 at t1 (slow drift up and back).
+
+    Parameters
+    ----------
+    base : NoiseProcess
+        The zero-mean process whose sd is scaled (for a biased base the bias
+        is scaled too).
+    steps : sequence of (t, factor)
+        Times [s] and sd factors (>= 0; 0 silences the process).
+    drifts : sequence of (t0, t1, factor)
+        Windows [s] and peak sd factors (>= 0).
+    """
+
+    base: NoiseProcess
+    steps: Any = ()
+    drifts: Any = ()
+
+    def __post_init__(self):
+        if not isinstance(self.base, NoiseProcess):
+            raise ConfigError(f"base must be a noise process, got {self.base!r}", key="base")
+        st = []
+        for i, s in enumerate(self.steps):
+            if not isinstance(s, (tuple, list)) or len(s) != 2:
+                raise ConfigError(f"expected (t, factor), got {s!r}", key=f"steps[{i}]")
+            st.append((float(_real_array(s[0], f"steps[{i}].at", ndim_max=0)),
+                       float(_real_array(s[1], f"steps[{i}].factor", ndim_max=0, nonnegative=True))))
+        st.sort(key=lambda p: p[0])
+        dr = []
+        for i, d in enumerate(self.drifts):
+            if not isinstance(d, (tuple, list)) or len(d) != 3:
+                raise ConfigError(f"expected (start, end, factor), got {d!r}", key=f"drifts[{i}]")
+            t0 = float(_real_array(d[0], f"drifts[{i}].start", ndim_max=0))
+            t1 = float(_real_array(d[1], f"drifts[{i}].end", ndim_max=0))
+            if not t1 > t0:
+                raise ConfigError(f"end ({t1:g} s) must be after start ({t0:g} s)", key=f"drifts[{i}]")
+            dr.append((t0, t1, float(_real_array(d[2], f"drifts[{i}].factor", ndim_max=0, nonnegative=True))))
+        object.__setattr__(self, "steps", tuple(st))
+        object.__setattr__(self, "drifts", tuple(dr))
+
+    def scale(self, times) -> np.ndarray:
+        """The sd factor at ``times`` (n,) [s], shape (n,)."""
+        t = np.asarray(times, dtype=float)
+        s = np.ones(t.shape)
+        if self.steps:
+            at = np.array([p[0] for p in self.steps])
+            f = np.concatenate([[1.0], [p[1] for p in self.steps]])
+            s = f[np.searchsorted(at, t, side="right")]
+        for t0, t1, peak in self.drifts:
+            mid, half = 0.5 * (t0 + t1), 0.5 * (t1 - t0)
+            tri = np.clip(1.0 - np.abs(t - mid) / half, 0.0, 1.0)   # 0 at the ends, 1 mid-window
+            s = s * (1.0 + (peak - 1.0) * tri)
+        return s
+
+    def sample_with_mask(self, times, n_channels, rng):
+        t = _check_call(times, n_channels, rng)
+        x, mask = self.base.sample_with_mask(t, n_channels, rng)
+        return x * self.scale(t)[:, None], mask
+
+    def describe(self) -> str:
+        parts = [f"sd of ({self.base.describe()}) scaled"]
+        parts += [f"x{f:g} from {t:g} s" for t, f in self.steps]
+        parts += [f"drift to x{f:g} and back over [{a:g}, {b:g}] s" for a, b, f in self.drifts]
+        return ", ".join(parts)
+
+
+@dataclass(frozen=True, eq=False, init=False)
+class Sum(NoiseProcess):
+    """The sum of independent processes, sampled in order from the same generator.
+
+    Parameters
+    ----------
+    *processes : NoiseProcess
+    """
+
+    processes: tuple = field(default=())
+
+    def __init__(self, *processes: NoiseProcess):
+        if len(processes) == 1 and isinstance(processes[0], (list, tuple)):
+            processes = tuple(processes[0])
+        for i, p in enumerate(processes):
+            if not isinstance(p, NoiseProcess):
+                raise ConfigError(f"not an additive noise process: {p!r}", key=f"parts[{i}]")
+        object.__setattr__(self, "processes", tuple(processes))
+
+    def sample_with_mask(self, times, n_channels, rng):
+        t = _check_call(times, n_channels, rng)
+        x = np.zeros((t.size, n_channels))
+        mask = np.zeros((t.size, n_channels), dtype=bool)
+        for p in self.processes:
+            xi, mi = p.sample_with_mask(t, n_channels, rng)
+            x += xi
+            mask |= mi
+        return x, mask
+
+    @property
+    def variance(self):
+        vs = [p.variance for p in self.processes]
+        if any(v is None for v in vs):
+            return None
+        total = sum(np.asarray(v, dtype=float) for v in vs) if vs else 0.0
+        return float(total) if np.ndim(total) == 0 else total
+
+    def describe(self) -> str:
+        return " + ".join(f"({p.describe()})" for p in self.processes) or "zero"
+
+
+# --------------------------------------------------------------------------
+# outages (availability, not additive)
+# --------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class Outages:
+    """Where an observable is unavailable: windows and/or a random fraction of epochs.
+
+    Parameters
+    ----------
+    windows : sequence of (start, end)
+        Outage windows ``start <= t < end`` [s].
+    fraction : float, optional
+        In [0, 1]: exactly ``round(fraction * n)`` epochs, chosen at random
+        without replacement, are also out.
+    channels : sequence of int, optional
+        Channels affected (e.g. a subset of satellites); default all.
+    """
+
+    windows: Any = ()
+    fraction: float | None = None
+    channels: Any = None
+
+    def __post_init__(self):
+        win = []
+        for i, w in enumerate(self.windows):
+            if not isinstance(w, (tuple, list)) or len(w) != 2:
+                raise ConfigError(f"expected (start, end), got {w!r}", key=f"windows[{i}]")
+            t0 = float(_real_array(w[0], f"windows[{i}].start", ndim_max=0))
+            t1 = float(_real_array(w[1], f"windows[{i}].end", ndim_max=0))
+            if not t1 > t0:
+                raise ConfigError(f"end ({t1:g} s) must be after start ({t0:g} s)", key=f"windows[{i}]")
+            win.append((t0, t1))
+        object.__setattr__(self, "windows", tuple(win))
+        if self.fraction is not None:
+            f = float(_real_array(self.fraction, "fraction", ndim_max=0, nonnegative=True))
+            if f > 1:
+                raise ConfigError(f"must be in [0, 1], got {f:g}", key="fraction")
+            object.__setattr__(self, "fraction", f)
+        if self.channels is not None:
+            ch = [_int(v, f"channels[{i}]", minimum=0) for i, v in enumerate(np.atleast_1d(self.channels))]
+            object.__setattr__(self, "channels", tuple(ch))
+
+    def available(self, times, n_channels: int, rng: np.random.Generator) -> np.ndarray:
+        """Availability mask, shape (n, c): True where the observable exists.
+
+        ``rng`` is used only when ``fraction`` is set.
+        """
+        t = _check_call(times, n_channels, rng)
+        out = np.zeros(t.size, dtype=bool)
+        for t0, t1 in self.windows:
+            out |= (t >= t0) & (t < t1)
+        if self.fraction is not None and t.size:
+            k = int(round(self.fraction * t.size))
+            out[rng.choice(t.size, size=k, replace=False)] = True
+        sel = np.ones(n_channels, dtype=bool)
+        if self.channels is not None:
+            if max(self.channels) >= n_channels:
+                raise ValueError(f"outage channel {max(self.channels)} does not exist (n_channels={n_channels})")
+            sel[:] = False
+            sel[list(self.channels)] = True
+        return ~(out[:, None] & sel[None, :])
+
+    def describe(self) -> str:
+        parts = [f"[{a:g}, {b:g}) s" for a, b in self.windows]
+        if self.fraction is not None:
+            parts.append(f"random {100 * self.fraction:g} % of epochs")
+        return "outages: " + (", ".join(parts) or "none")
+
+
+# --------------------------------------------------------------------------
+# config
+# --------------------------------------------------------------------------
+_KEYS = {
+    "gaussian": {"sigma"},
+    "mixture": {"weights", "sigmas", "means"},
+    "gross": {"size", "every", "probability", "start", "sign", "channels"},
+    "ar1": {"coefficient", "sigma", "innovation"},
+    "bias_segments": {"segments"},
+    "variance_profile": {"base", "steps", "drifts"},
+    "sum": {"parts"},
+    "outages": {"windows", "fraction", "channels"},
+}
+_ALIASES = {"normal": "gaussian", "gross_errors": "gross", "ar(1)": "ar1", "bias": "bias_segments",
+            "multipath": "bias_segments", "profile": "variance_profile"}
+
+
+def from_config(table: dict, dimension: Dimension, key_prefix: str = "noise",
+                source: str | None = None):
+    """Build a noise process from a TOML-like table.
+
+    Parameters
+    ----------
+    table : dict
+        ``type`` plus the keys of that type (values with units are text,
+        e.g. ``"0.3 m"``; times such as segment bounds are text too,
+        ``"10 s"``)::
+
+            {type="gaussian", sigma="0.3 m"}            # or a list per channel
+            {type="mixture", weights=[0.1, 0.9], sigmas=["0.3 m", "0.173 m"], means=["0 m", "0 m"]}
+            {type="gross", size="2.5 m", every=20, start=0, sign="random", channels=[0, 3]}
+            {type="gross", size="2.5 m", probability=0.05}
+            {type="ar1", coefficient=0.9, sigma="0.3 m"}          # sigma: innovation sd
+            {type="ar1", coefficient=[[0.5, 0.1], [0.0, 0.7]], innovation={type="mixture", ...}}
+            {type="bias_segments", segments=[["100 s", "160 s", "4 m"], {start="300 s", end="320 s", bias="-2 m"}]}
+            {type="variance_profile", base={...}, steps=[["100 s", 3]], drifts=[["200 s", "400 s", 2]]}
+            {type="sum", parts=[{...}, {...}]}
+            {type="outages", windows=[["100 s", "130 s"]], fraction=0.1, channels=[2]}
+
+        Aliases: normal, gross_errors, ar(1), bias, multipath, profile.
+    dimension : mixnav.units.Dimension
+        Dimension of the observable, e.g. ``LENGTH`` for pseudorange,
+        ``VELOCITY`` for Doppler; sigmas, means, sizes and biases must have it.
+    key_prefix : str
+        Dotted path of ``table`` in the config file, used in error messages.
+    source : str, optional
+        The config file, used in error messages.
+
+    Returns
+    -------
+    NoiseProcess or Outages
+
+    Raises
+    ------
+    ConfigError
+        Unknown type or key, missing key, missing or wrong unit, negative
+        sigma, weights not summing to 1, non-stationary AR coefficient, ...;
+        ``key`` is the full path, e.g. ``noise.parts[1].sigmas[0]``.
+    """
+    return _Builder(dimension, source).build(table, key_prefix)
+
+
+class _Builder:
+    def __init__(self, dim: Dimension, source):
+        self.dim, self.source = dim, source
+
+    def err(self, msg, key):
+        return ConfigError(msg, file=self.source, key=key)
+
+    def quantity(self, v, key, dim=None, nonnegative=False, positive=False):
+        dim = self.dim if dim is None else dim
+        try:
+            x = parse_quantity(v, dim)
+        except UnitError as exc:
+            raise self.err(str(exc), key) from None
+        if nonnegative and x < 0:
+            raise self.err(f"must not be negative, got {v!r}", key)
+        if positive and not x > 0:
+            raise self.err(f"must be positive, got {v!r}", key)
+        return x
+
+    def quantities(self, v, key, dim=None, nonnegative=False, scalar_ok=True):
+        if isinstance(v, (list, tuple)):
+            if not v:
+                raise self.err("must not be an empty list", key)
+            return [self.quantity(x, f"{key}[{i}]", dim, nonnegative) for i, x in enumerate(v)]
+        if not scalar_ok:
+            raise self.err(f"expected a list, got {v!r}", key)
+        return self.quantity(v, key, dim, nonnegative)
+
+    def number_list(self, v, key):
+        if isinstance(v, (list, tuple)):
+            return [self.number_list(x, f"{key}[{i}]") for i, x in enumerate(v)]
+        return self.quantity(v, key, DIMENSIONLESS)
+
+    def table_list(self, v, key):
+        if not isinstance(v, (list, tuple)):
+            raise self.err(f"expected a list, got {v!r}", key)
+        return v
+
+    def record(self, item, key, names, dims):
+        """(a, b, ...) from a list of len(names) or a table with those keys."""
+        if isinstance(item, dict):
+            self.check_keys(item, set(names), key)
+            missing = [n for n in names if n not in item]
+            if missing:
+                raise self.err(f"missing key '{missing[0]}'", key)
+            vals = [item[n] for n in names]
+        elif isinstance(item, (list, tuple)) and len(item) == len(names):
+            vals = list(item)
+        else:
+            raise self.err(f"expected [{', '.join(names)}] or a table with those keys, got {item!r}", key)
+        out = []
+        for n, v, d in zip(names, vals, dims):
+            k = f"{key}.{n}"
+            # only a bias may be a per-channel list
+            out.append(self.quantities(v, k, d) if n == "bias" else self.quantity(v, k, d))
+        return tuple(out)
+
+    def check_keys(self, table, allowed, key):
+        for k in table:
+            if k not in allowed:
+                close = difflib.get_close_matches(str(k), sorted(allowed), n=1)
+                hint = f"; did you mean '{close[0]}'?" if close else f"; allowed: {', '.join(sorted(allowed))}"
+                raise self.err(f"unknown key '{k}'{hint}", f"{key}.{k}" if key else str(k))
+
+    def build(self, table, key):
+        if not isinstance(table, dict):
+            raise self.err(f"expected a table such as {{type=\"gaussian\", sigma=\"1 m\"}}, got {table!r}", key)
+        if "type" not in table:
+            raise self.err(f"missing key 'type' (one of {', '.join(_KEYS)})", key)
+        typ = str(table["type"]).lower()
+        typ = _ALIASES.get(typ, typ)
+        if typ not in _KEYS:
+            close = difflib.get_close_matches(typ, list(_KEYS) + list(_ALIASES), n=1)
+            hint = f"; did you mean '{close[0]}'?" if close else ""
+            raise self.err(f"unknown noise type '{table['type']}' (one of {', '.join(_KEYS)}){hint}",
+                           f"{key}.type")
+        body = {k: v for k, v in table.items() if k != "type"}
+        self.check_keys(body, _KEYS[typ], key)
+        return getattr(self, "_" + typ)(body, key)
+
+    def make(self, cls, key, *args, **kw):
+        """Call a constructor; its errors name the argument, so prefix the key path."""
+        try:
+            return cls(*args, **kw)
+        except ConfigError as exc:
+            raise self.err(exc.message, f"{key}.{exc.key}" if exc.key else key) from None
+
+    def need(self, body, name, key):
+        if name not in body:
+            raise self.err(f"missing key '{name}'", f"{key}.{name}")
+        return body[name]
+
+    def _gaussian(self, b, key):
+        return self.make(Gaussian, key, self.quantities(self.need(b, "sigma", key), f"{key}.sigma", nonnegative=True))
+
+    def _mixture(self, b, key):
+        w = self.need(b, "weights", key)
+        if not isinstance(w, (list, tuple)) or not w:
+            raise self.err(f"expected a list of weights, got {w!r}", f"{key}.weights")
+        w = [self.quantity(x, f"{key}.weights[{i}]", DIMENSIONLESS, nonnegative=True) for i, x in enumerate(w)]
+        s = self.quantities(self.need(b, "sigmas", key), f"{key}.sigmas", nonnegative=True, scalar_ok=False)
+        m = self.quantities(b["means"], f"{key}.means") if "means" in b else 0.0
+        return self.make(Mixture, key, w, s, m)
+
+    def _gross(self, b, key):
+        kw = dict(size=self.quantity(self.need(b, "size", key), f"{key}.size", nonnegative=True))
+        for name in ("every", "probability", "start", "sign", "channels"):
+            if name in b:
+                kw[name] = b[name]
+        return self.make(GrossErrors, key, **kw)
+
+    def _ar1(self, b, key):
+        coef = self.number_list(self.need(b, "coefficient", key), f"{key}.coefficient")
+        sigma = self.quantities(b["sigma"], f"{key}.sigma", nonnegative=True) if "sigma" in b else None
+        inn = self.build(b["innovation"], f"{key}.innovation") if "innovation" in b else None
+        if inn is not None and not _is_white(inn):
+            raise self.err("innovation must be white: type gaussian, mixture, gross with probability, "
+                           "or a sum of them",
+                           f"{key}.innovation.type")
+        return self.make(AR1, key, coef, sigma=sigma, innovation=inn)
+
+    def _bias_segments(self, b, key):
+        segs = self.table_list(self.need(b, "segments", key), f"{key}.segments")
+        return self.make(BiasSegments, key, [self.record(s, f"{key}.segments[{i}]", ("start", "end", "bias"),
+                                         (TIME, TIME, self.dim)) for i, s in enumerate(segs)])
+
+    def _variance_profile(self, b, key):
+        base = self.build(self.need(b, "base", key), f"{key}.base")
+        if not isinstance(base, NoiseProcess):
+            raise self.err("base must be an additive noise process (not outages)", f"{key}.base.type")
+        steps = [self.record(s, f"{key}.steps[{i}]", ("at", "factor"), (TIME, DIMENSIONLESS))
+                 for i, s in enumerate(self.table_list(b.get("steps", []), f"{key}.steps"))]
+        drifts = [self.record(s, f"{key}.drifts[{i}]", ("start", "end", "factor"), (TIME, TIME, DIMENSIONLESS))
+                  for i, s in enumerate(self.table_list(b.get("drifts", []), f"{key}.drifts"))]
+        return self.make(VarianceProfile, key, base, steps, drifts)
+
+    def _sum(self, b, key):
+        parts = self.table_list(self.need(b, "parts", key), f"{key}.parts")
+        built = [self.build(p, f"{key}.parts[{i}]") for i, p in enumerate(parts)]
+        for i, p in enumerate(built):
+            if not isinstance(p, NoiseProcess):
+                raise self.err("outages are not additive noise; configure them separately",
+                               f"{key}.parts[{i}].type")
+        return self.make(Sum, key, *built)
+
+    def _outages(self, b, key):
+        wins = [self.record(w, f"{key}.windows[{i}]", ("start", "end"), (TIME, TIME))
+                for i, w in enumerate(self.table_list(b.get("windows", []), f"{key}.windows"))]
+        return self.make(Outages, key, wins, fraction=b.get("fraction"), channels=b.get("channels"))
