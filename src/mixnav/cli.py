@@ -109,5 +109,23 @@ def process(dataset: str = typer.Argument(..., help="Shipped dataset config name
     out.print(f"report: {Path(out_dir) / 'report.html'}")
 
 
+@app.command()
+def diagnose(file: Path = typer.Argument(..., help="CSV or Parquet file holding a residual series."),
+             column: str = typer.Option(..., "--column", help="Name of the column to diagnose."),
+             out_dir: Path = typer.Option(..., "--out", help="Folder for diagnostics.json and the figures."),
+             max_lag: int = typer.Option(50, "--max-lag", min=1, help="Largest lag of the autocorrelation."),
+             components: int = typer.Option(None, "--components", min=1,
+                                            help="Fit a Gaussian mixture with this many components.")):
+    """Is a residual series non-Gaussian and coloured? Q-Q, ACF, normality test, kurtosis, AR(1), mixture."""
+    from .noise.diagnostics import diagnose_file
+
+    try:
+        result = diagnose_file(file, column, out_dir, max_lag=max_lag, n_components=components)
+    except MixnavError as exc:
+        _fail(exc)
+    out.print(result["verdict"]["summary"])
+    out.print(f"numbers: {Path(out_dir) / 'diagnostics.json'}")
+
+
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(app())

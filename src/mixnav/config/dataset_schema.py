@@ -44,6 +44,10 @@ class GnssFile(Strict):
     min_sigma: _quantity(u.LENGTH, nonnegative=True) = 0.0  # type: ignore[valid-type]
     use_velocity: bool = True
     withhold: Windows = Field(default_factory=list)
+    # optional corruption of the recorded fixes (NED metres per axis), e.g. to
+    # test a method under mixture noise or outliers on real data
+    corrupt_position: dict | None = None
+    corrupt_seed: int = 0
 
 
 class ReferenceFile(Strict):

@@ -82,7 +82,20 @@ def load_scenario(name_or_path: str) -> tuple[Scenario, str, str]:
     text, source = resolve(name_or_path)
     sc = _validate(Scenario, text, source)
     _check_imu_models(sc, source)
+    gnss_noise(sc, source)  # a bad noise table fails at load time
     return sc, source, text
+
+
+def gnss_noise(sc, source):
+    """The scenario's GNSS position and velocity noise processes (or None)."""
+    from .. import units as u
+    from ..noise.processes import from_config
+    g = sc.gnss
+    pos = None if g.position_noise is None else from_config(g.position_noise, u.LENGTH, "gnss.position_noise",
+                                                            source)
+    vel = None if g.velocity_noise is None else from_config(g.velocity_noise, u.VELOCITY, "gnss.velocity_noise",
+                                                            source)
+    return pos, vel
 
 
 def _check_imu_models(cfg, source: str) -> None:
@@ -122,7 +135,16 @@ def load_dataset(name_or_path: str):
     text, source = resolve(name_or_path, "datasets", "dataset")
     ds = _validate(Dataset, text, source)
     _check_imu_models(ds, source)
+    corruption(ds, source)
     return ds, source, text
+
+
+def corruption(ds, source):
+    """The noise process added to a dataset's recorded fixes (or None)."""
+    from .. import units as u
+    from ..noise.processes import from_config
+    c = ds.gnss.corrupt_position
+    return None if c is None else from_config(c, u.LENGTH, "gnss.corrupt_position", source)
 
 
 def imu_model(grade, errors, source, prefix, grade_key) -> ImuErrorModel:

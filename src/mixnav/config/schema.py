@@ -151,11 +151,18 @@ class ImuConfig(Strict):
 
 
 class GnssConfig(Strict):
+    """Simulated fixes. ``position_sigma``/``velocity_sigma`` are what the
+    filters are told (their R); the noise actually added is Gaussian with
+    those sigmas unless ``position_noise``/``velocity_noise`` give a noise
+    process (see mixnav.noise.processes.from_config), in NED per axis."""
+
     rate: Frequency
     position_sigma: PosSigma
     velocity_sigma: VelSigma | None = None
     lever_arm: LengthVec = (0.0, 0.0, 0.0)
     outages: Windows = Field(default_factory=list)
+    position_noise: dict | None = None
+    velocity_noise: dict | None = None
 
 
 class InitConfig(Strict):

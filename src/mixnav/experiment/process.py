@@ -24,7 +24,7 @@ import mixnav
 from ..alignment import align_from_gnss_velocity, coarse_align
 from ..attitude import euler_to_dcm
 from ..config.dataset_schema import Dataset
-from ..config.loader import imu_model
+from ..config.loader import corruption, imu_model
 from ..data import GnssFixes, ImuData, Trajectory
 from ..errors import ConfigError, DataError
 from ..filters.ekf import ErrorStateEkf, FilterResult, InitialState
@@ -117,6 +117,16 @@ def read_reference(ds: Dataset, folder: Path) -> Trajectory | None:
     return generic_csv.read_reference_csv(f)
 
 
+def _corrupt(fixes: GnssFixes, process, rng) -> GnssFixes:
+    """Add a noise process (NED metres) to recorded fixes."""
+    from ..geodesy import earth
+    d = process.sample(fixes.time, 3, rng)
+    lat, h = fixes.lla[:, 0], fixes.lla[:, 2]
+    rm, rn = earth.radii(lat)
+    lla = fixes.lla + np.stack([d[:, 0] / (rm + h), d[:, 1] / ((rn + h) * np.cos(lat)), -d[:, 2]], -1)
+    return replace(fixes, lla=lla)
+
+
 def _shift(obj, t0):
     return replace(obj, time=obj.time - t0)
 
@@ -174,6 +184,9 @@ def process(ds: Dataset, source: str, data: str | None = None) -> ProcessOutput:
     all_fixes = _shift(all_fixes, t0)
     if reference is not None:
         reference = _shift(reference, t0)
+    corrupt = corruption(ds, source)
+    if corrupt is not None:
+        all_fixes = _corrupt(all_fixes, corrupt, np.random.default_rng(ds.gnss.corrupt_seed))
     withheld = tuple(tuple(w) for w in ds.gnss.withhold)
     keep = ~in_windows(all_fixes.time, withheld)
     fixes = GnssFixes(time=all_fixes.time[keep], lla=all_fixes.lla[keep], pos_sigma=all_fixes.pos_sigma[keep],

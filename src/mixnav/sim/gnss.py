@@ -46,7 +46,7 @@ def in_windows(t: np.ndarray, windows) -> np.ndarray:
 
 
 def simulate_fixes(truth: Trajectory, model: GnssFixModel, rng: np.random.Generator,
-                   noise=None) -> GnssFixes:
+                   noise=None, position_noise=None, velocity_noise=None) -> GnssFixes:
     """Fixes of the antenna at every ``1/rate`` on the truth's time grid.
 
     Parameters
@@ -59,6 +59,10 @@ def simulate_fixes(truth: Trajectory, model: GnssFixModel, rng: np.random.Genera
     noise : callable, optional
         ``noise(rng, shape) -> ndarray`` of unit-variance samples replacing
         the standard normal.
+    position_noise, velocity_noise : mixnav.noise.processes.NoiseProcess, optional
+        Noise processes (NED, per axis) replacing the Gaussian noise of that
+        quantity; the fixes still carry the model's sigmas (what a filter is
+        told).
 
     Returns
     -------
@@ -81,7 +85,10 @@ def simulate_fixes(truth: Trajectory, model: GnssFixModel, rng: np.random.Genera
         w_b = truth.extra.get("w_ib_b")
         w = w_b[k] if w_b is not None else np.zeros(3)
         vel[j] = truth.v_n[k] + quat_to_dcm(truth.q_nb[k]) @ np.cross(w, lever)
-    dp = noise(rng, (len(idx), 3)) * model.pos_sigma
+    if position_noise is not None:
+        dp = position_noise.sample(t, 3, rng)
+    else:
+        dp = noise(rng, (len(idx), 3)) * model.pos_sigma
     rm, rn = earth.radii(lla[:, 0])
     lla = lla + np.stack([dp[:, 0] / (rm + lla[:, 2]),
                           dp[:, 1] / ((rn + lla[:, 2]) * np.cos(lla[:, 0])),
@@ -89,6 +96,9 @@ def simulate_fixes(truth: Trajectory, model: GnssFixModel, rng: np.random.Genera
     pos_sigma = np.tile(model.pos_sigma, (len(idx), 1))
     if model.vel_sigma is None:
         return GnssFixes(time=t, lla=lla, pos_sigma=pos_sigma)
-    vel = vel + noise(rng, (len(idx), 3)) * model.vel_sigma
+    if velocity_noise is not None:
+        vel = vel + velocity_noise.sample(t, 3, rng)
+    else:
+        vel = vel + noise(rng, (len(idx), 3)) * model.vel_sigma
     return GnssFixes(time=t, lla=lla, pos_sigma=pos_sigma, vel_n=vel,
                      vel_sigma=np.tile(model.vel_sigma, (len(idx), 1)))

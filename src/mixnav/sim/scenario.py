@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..attitude import quat_multiply, rotvec_to_quat
-from ..config.loader import imu_model
+from ..config.loader import gnss_noise, imu_model
 from ..config.schema import (AccelerateSegment, ClimbSegment, Scenario, StaticSegment,
                              TurnSegment, UniformSegment)
 from ..data import GnssFixes, ImuData, Trajectory
@@ -72,7 +72,9 @@ def simulate(sc: Scenario, seed: int, source: str | None = None, ideal=None) -> 
         rate=g.rate, pos_sigma=np.asarray(g.position_sigma),
         vel_sigma=None if g.velocity_sigma is None else np.asarray(g.velocity_sigma),
         lever_arm=np.asarray(g.lever_arm), outages=tuple(tuple(o) for o in g.outages))
-    fixes = simulate_fixes(truth, fix_model, streams.get("gnss"))
+    pos_noise, vel_noise = gnss_noise(sc, source)
+    fixes = simulate_fixes(truth, fix_model, streams.get("gnss"), position_noise=pos_noise,
+                           velocity_noise=vel_noise)
     init = initial_estimate(truth, sc, streams.get("init"))
     return SimulatedRun(seed, truth, imu_ideal, imu, draw, model, fixes, init, fix_model.outages)
 
