@@ -77,3 +77,18 @@ def test_bad_scenario_exits_2_with_located_message(tmp_path):
     assert res.exit_code == 2
     assert "bad.toml" in res.output and "scenario.sede" in res.output
     assert not (tmp_path / "o").exists()
+
+
+def test_diagnose_command(tmp_path):
+    import numpy as np
+    rng = np.random.default_rng(0)
+    x = np.zeros(3000)
+    for k in range(1, 3000):  # AR(1) with psi = 0.8: coloured
+        x[k] = 0.8 * x[k - 1] + rng.standard_normal()
+    pd.DataFrame({"res": x}).to_csv(tmp_path / "r.csv", index=False)
+    res = runner.invoke(app, ["diagnose", str(tmp_path / "r.csv"), "--column", "res", "--out", str(tmp_path / "d")])
+    assert res.exit_code == 0, res.output
+    d = json.loads((tmp_path / "d" / "diagnostics.json").read_text())
+    assert d["ar1"]["coefficient"] == pytest.approx(0.8, abs=0.03) and d["verdict"]["coloured"]
+    bad = runner.invoke(app, ["diagnose", str(tmp_path / "r.csv"), "--column", "nope", "--out", str(tmp_path / "e")])
+    assert bad.exit_code == 2 and "nope" in bad.output

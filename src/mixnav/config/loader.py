@@ -83,7 +83,16 @@ def load_scenario(name_or_path: str) -> tuple[Scenario, str, str]:
     sc = _validate(Scenario, text, source)
     _check_imu_models(sc, source)
     gnss_noise(sc, source)  # a bad noise table fails at load time
+    imu_white_noise(sc, source)
     return sc, source, text
+
+
+def imu_white_noise(sc, source):
+    """The scenario's IMU white-noise process (dimensionless), or None."""
+    from .. import units as u
+    from ..noise.processes import from_config
+    w = sc.imu.white_noise
+    return None if w is None else from_config(w, u.DIMENSIONLESS, "imu.white_noise", source)
 
 
 def gnss_noise(sc, source):

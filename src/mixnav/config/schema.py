@@ -145,9 +145,15 @@ class TrajectoryConfig(Strict):
 
 
 class ImuConfig(Strict):
+    """``white_noise``: an optional dimensionless noise process (e.g. the
+    mixture 0.1 N(0, 3) + 0.9 N(0, 1) of P1-sim2) whose samples replace the
+    standard normal that multiplies the ARW and VRW densities, so the filter's
+    Gaussian Q is mismatched on purpose."""
+
     rate: Frequency
     grade: str | None = None
     errors: dict[str, str] = Field(default_factory=dict)
+    white_noise: dict | None = None
 
 
 class GnssConfig(Strict):

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..attitude import quat_multiply, rotvec_to_quat
-from ..config.loader import gnss_noise, imu_model
+from ..config.loader import gnss_noise, imu_model, imu_white_noise
 from ..config.schema import (AccelerateSegment, ClimbSegment, Scenario, StaticSegment,
                              TurnSegment, UniformSegment)
 from ..data import GnssFixes, ImuData, Trajectory
@@ -66,7 +66,10 @@ def simulate(sc: Scenario, seed: int, source: str | None = None, ideal=None) -> 
     streams = Streams(seed)
     truth, imu_ideal = ideal if ideal is not None else truth_and_ideal_imu(sc, source)
     model = imu_model(sc.imu.grade, sc.imu.errors, source, "imu.errors", "imu.grade")
-    imu, draw = corrupt(imu_ideal, model, streams.get("imu"))
+    white = imu_white_noise(sc, source)
+    # the process is sampled per channel over the IMU epochs (n, 3) each call
+    noise = None if white is None else (lambda g, shape: white.sample(imu_ideal.time, shape[1], g))
+    imu, draw = corrupt(imu_ideal, model, streams.get("imu"), white_noise=noise)
     g = sc.gnss
     fix_model = GnssFixModel(
         rate=g.rate, pos_sigma=np.asarray(g.position_sigma),

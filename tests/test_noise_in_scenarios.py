@@ -1,0 +1,81 @@
+"""Noise processes reach the simulated data from scenario and dataset files."""
+
+import numpy as np
+import pytest
+from scipy.stats import kurtosis
+
+from mixnav.config import load_dataset, load_scenario
+from mixnav.errors import ConfigError
+from mixnav.geodesy.frames import ned_displacement
+from mixnav.measurements.loose import antenna_lla
+from mixnav.sim.scenario import simulate, truth_and_ideal_imu
+
+from .test_config import DEMO
+
+
+def _scenario(tmp_path, old, new):
+    text = DEMO.read_text()
+    assert old in text
+    p = tmp_path / "noisy.toml"
+    p.write_text(text.replace(old, new, 1))
+    return load_scenario(str(p))
+
+
+def _fix_errors(run, lever):
+    k = np.searchsorted(run.truth.time, run.fixes.time)
+    ant = np.array([antenna_lla(np.concatenate([run.truth.q_nb[i], run.truth.v_n[i], run.truth.lla[i]]), lever)
+                    for i in k])
+    return ned_displacement(run.fixes.lla, ant)
+
+
+def test_mixture_and_gross_errors_on_the_fixes(tmp_path):
+    sc, src, _ = _scenario(tmp_path, 'outages = [["300 s", "360 s"]]', '''outages = []
+position_noise = { type = "sum", parts = [
+  { type = "mixture", weights = [0.1, 0.9], sigmas = ["0.3 m", "0.17320508 m"] },
+  { type = "gross", size = "2.5 m", every = 20, sign = "+" } ] }''')
+    run = simulate(sc, 0, src)
+    e = _fix_errors(run, np.asarray(sc.gnss.lever_arm))
+    gross = np.zeros(len(e), dtype=bool)
+    gross[::20] = True
+    # gross errors exactly every 20th fix, of +2.5 m (the mixture adds < 1.5 m)
+    assert np.all(e[gross, 0] > 1.0) and np.all(np.abs(e[~gross, 0]) < 1.5)
+    # mixture variance 0.1*0.09 + 0.9*0.03 = 0.036 m^2 (570 samples x 3 axes: 6 % sd)
+    assert np.var(e[~gross]) == pytest.approx(0.036, rel=0.15)
+    # heavy tails: excess kurtosis of this mixture is 3*(0.1*0.09^2+0.9*0.03^2)/0.036^2 - 3 = 1.5
+    assert kurtosis(e[~gross].ravel()) > 0.5
+
+
+def test_imu_white_noise_mixture_raises_the_variance(tmp_path):
+    sc, src, _ = _scenario(tmp_path, 'grade = "mems"', '''grade = "mems"
+errors = { gyro_bias = "0 deg/h", gyro_bias_instability = "0 deg/h", gyro_scale = "0 ppm" }
+white_noise = { type = "mixture", weights = [0.1, 0.9], sigmas = [1.7320508, 1.0] }''')
+    ideal = truth_and_ideal_imu(sc, src)
+    run = simulate(sc, 1, src, ideal=ideal)
+    noise = (run.imu.dtheta - ideal[1].dtheta) / np.sqrt(ideal[1].dt)[:, None] / run.imu_model.arw
+    # unit-free mixture variance 0.1*3 + 0.9*1 = 1.2 (180 000 samples: 0.5 % sd)
+    assert np.var(noise) == pytest.approx(1.2, rel=0.03)
+
+
+def test_bad_noise_table_names_its_key(tmp_path):
+    with pytest.raises(ConfigError, match="gnss.position_noise"):
+        _scenario(tmp_path, 'outages = [["300 s", "360 s"]]',
+                  'position_noise = { type = "mixture", weights = [0.5, 0.6], sigmas = ["1 m", "2 m"] }')
+
+
+def test_recorded_fixes_can_be_corrupted(tmp_path):
+    from .test_process import _write_kfgins
+    from mixnav.experiment.process import process
+    sc, src, _ = load_scenario("loose-demo")
+    run = simulate(sc, 2, src)
+    cfg = _write_kfgins(tmp_path, run, sc)
+    text = cfg.read_text().replace('withhold = [["150 s", "180 s"], ["300 s", "360 s"]]',
+                                   'corrupt_position = { type = "gross", size = "20 m", every = 50, sign = "+" }')
+    cfg.write_text(text)
+    ds, s, _ = load_dataset(str(cfg))
+    po = process(ds, s)
+    d = ned_displacement(po.all_fixes.lla, run.fixes.lla)
+    hit = np.zeros(len(d), dtype=bool)
+    hit[::50] = True
+    # the KF-GINS file holds degrees to 1e-10 (1e-5 m): compare to 1e-4 m
+    np.testing.assert_allclose(d[hit], 20.0, atol=1e-4)
+    np.testing.assert_allclose(d[~hit], 0.0, atol=1e-4)
