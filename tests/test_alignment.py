@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from mixnav.alignment import coarse_align
-from mixnav.attitude import euler_to_dcm, wrap_angle
+from mixnav.attitude import wrap_angle
 from mixnav.data import ImuData
 from mixnav.errors import DataError
 from mixnav.geodesy import earth

@@ -16,8 +16,8 @@ import numpy as np
 from ..attitude import euler_to_quat, quat_to_dcm
 from ..data import GnssFixes
 from ..errors import DataError
-from ..geodesy import earth
 from ..geodesy.frames import ned_displacement
+from ..geodesy.frames import displace
 
 
 @dataclass(frozen=True)
@@ -68,7 +68,5 @@ def align_from_gnss_velocity(fixes: GnssFixes, lever_b: np.ndarray, min_speed: f
     pitch = np.arctan2(-v[i, 2], speed[i])
     q = euler_to_quat(np.array([0.0, pitch, yaw]))
     d_n = quat_to_dcm(q) @ np.asarray(lever_b, dtype=float)
-    lat, lon, h = fixes.lla[i]
-    rm, rn = earth.radii(lat)
-    lla = np.array([lat - d_n[0] / (rm + h), lon - d_n[1] / ((rn + h) * np.cos(lat)), h + d_n[2]])
+    lla = displace(fixes.lla[i], -d_n)
     return MotionAlignment(time=float(fixes.time[i]), q_nb=q, v_n=v[i].copy(), lla=lla, index=i)

@@ -34,6 +34,7 @@ from ..io import drive0708, generic_csv, kfgins, psins, rtklib
 from ..measurements.loose import LooseGnss
 from ..sim.gnss import in_windows
 from .run import _lla_frame, solution_table, write_outputs
+from ..geodesy.frames import displace
 
 
 @dataclass
@@ -119,12 +120,7 @@ def read_reference(ds: Dataset, folder: Path) -> Trajectory | None:
 
 def _corrupt(fixes: GnssFixes, process, rng) -> GnssFixes:
     """Add a noise process (NED metres) to recorded fixes."""
-    from ..geodesy import earth
-    d = process.sample(fixes.time, 3, rng)
-    lat, h = fixes.lla[:, 0], fixes.lla[:, 2]
-    rm, rn = earth.radii(lat)
-    lla = fixes.lla + np.stack([d[:, 0] / (rm + h), d[:, 1] / ((rn + h) * np.cos(lat)), -d[:, 2]], -1)
-    return replace(fixes, lla=lla)
+    return replace(fixes, lla=displace(fixes.lla, process.sample(fixes.time, 3, rng)))
 
 
 def _shift(obj, t0):
@@ -156,11 +152,7 @@ def initial_state(ds: Dataset, imu: ImuData, fixes: GnssFixes, lever: np.ndarray
         k = int(np.searchsorted(fixes.time, t_static))
         if k >= len(fixes):
             raise DataError("no GNSS fix after the static alignment window", file=fixes.source)
-        d_n = euler_to_dcm(a.rpy) @ lever
-        from ..geodesy import earth
-        la, lo, h = fixes.lla[k]
-        rm, rn = earth.radii(la)
-        lla = np.array([la - d_n[0] / (rm + h), lo - d_n[1] / ((rn + h) * np.cos(la)), h + d_n[2]])
+        lla = displace(fixes.lla[k], -(euler_to_dcm(a.rpy) @ lever))
         return InitialState(time=float(t_static), nav=nav_vector(a.q_nb, np.zeros(3), lla), **sig)
     if al.gyro_bias_from_static:
         # mean rate at rest; the unknown horizontal Earth rate (<= 15 deg/h)

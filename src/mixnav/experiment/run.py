@@ -12,7 +12,6 @@ docs/outputs.md for the columns and keys):
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 

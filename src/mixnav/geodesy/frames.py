@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .earth import A_WGS84, E2_WGS84, radii
+from .earth import E2_WGS84, radii
 
 
 def lla_to_ecef(lla):
@@ -116,3 +116,21 @@ def ned_displacement(lla, lla_ref):
         ],
         axis=-1,
     )
+
+
+def displace(lla, d_ned):
+    """Move ``lla`` by a small NED displacement [m]: the inverse of
+    :func:`ned_displacement` (radii at the starting point).
+
+    Parameters
+    ----------
+    lla : array_like (..., 3)
+    d_ned : array_like (..., 3)
+        North, east, down [m].
+    """
+    lla = np.asarray(lla, dtype=float)
+    d = np.asarray(d_ned, dtype=float)
+    lat, h = lla[..., 0], lla[..., 2]
+    rm, rn = radii(lat)
+    return np.stack([lat + d[..., 0] / (rm + h), lla[..., 1] + d[..., 1] / ((rn + h) * np.cos(lat)),
+                     h - d[..., 2]], axis=-1)

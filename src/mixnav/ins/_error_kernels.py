@@ -33,7 +33,6 @@ from numba import njit
 from ._kernels import (
     OMEGA_EARTH,
     mechanize_step,
-    normal_gravity,
     normal_gravity_dh,
     quat_to_dcm_into,
     radii,

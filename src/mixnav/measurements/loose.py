@@ -6,18 +6,14 @@ import numpy as np
 
 from ..attitude import quat_to_dcm
 from ..data import GnssFixes
-from ..geodesy import earth
 from ..ins.error_model import StateLayout
 from ._loose_kernel import loose_zhr
+from ..geodesy.frames import displace
 
 
 def antenna_lla(nav: np.ndarray, lever_b: np.ndarray) -> np.ndarray:
     """Geodetic position of a point at ``lever_b`` (body frame, [m]) from the IMU."""
-    c_nb = quat_to_dcm(nav[0:4])
-    d_n = c_nb @ lever_b
-    lat, lon, h = nav[7], nav[8], nav[9]
-    rm, rn = earth.radii(lat)
-    return np.array([lat + d_n[0] / (rm + h), lon + d_n[1] / ((rn + h) * np.cos(lat)), h - d_n[2]])
+    return displace(nav[7:10], quat_to_dcm(nav[0:4]) @ lever_b)
 
 
 class LooseGnss:

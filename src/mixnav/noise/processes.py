@@ -45,10 +45,9 @@ full key path and file.
 from __future__ import annotations
 
 import difflib
-import math
 import numbers
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 from scipy import linalg as sla

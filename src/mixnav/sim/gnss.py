@@ -9,7 +9,7 @@ import numpy as np
 from ..data import GnssFixes, Trajectory
 from ..measurements.loose import antenna_lla
 from ..attitude import quat_to_dcm
-from ..geodesy import earth
+from ..geodesy.frames import displace
 
 
 @dataclass(frozen=True)
@@ -89,10 +89,7 @@ def simulate_fixes(truth: Trajectory, model: GnssFixModel, rng: np.random.Genera
         dp = position_noise.sample(t, 3, rng)
     else:
         dp = noise(rng, (len(idx), 3)) * model.pos_sigma
-    rm, rn = earth.radii(lla[:, 0])
-    lla = lla + np.stack([dp[:, 0] / (rm + lla[:, 2]),
-                          dp[:, 1] / ((rn + lla[:, 2]) * np.cos(lla[:, 0])),
-                          -dp[:, 2]], -1)
+    lla = displace(lla, dp)
     pos_sigma = np.tile(model.pos_sigma, (len(idx), 1))
     if model.vel_sigma is None:
         return GnssFixes(time=t, lla=lla, pos_sigma=pos_sigma)

@@ -12,12 +12,12 @@ from ..config.schema import (AccelerateSegment, ClimbSegment, Scenario, StaticSe
                              TurnSegment, UniformSegment)
 from ..data import GnssFixes, ImuData, Trajectory
 from ..filters.ekf import InitialState
-from ..geodesy import earth
 from ..ins.imu_model import ImuErrorDraw, ImuErrorModel, corrupt
 from .gnss import GnssFixModel, simulate_fixes
 from .rng import Streams
 from .trajectory import InitialState as TrajectoryStart
 from .trajectory import MotionSegment, generate
+from ..geodesy.frames import displace
 
 
 @dataclass(frozen=True)
@@ -91,9 +91,7 @@ def initial_estimate(truth: Trajectory, sc: Scenario, rng: np.random.Generator) 
     dr = rng.standard_normal(3) * s_pos
     # Estimate = truth - error (dx = x_true - x_est).
     q = quat_multiply(rotvec_to_quat(-phi), truth.q_nb[0])
-    lat, lon, h = truth.lla[0]
-    rm, rn = earth.radii(lat)
-    lla = np.array([lat - dr[0] / (rm + h), lon - dr[1] / ((rn + h) * np.cos(lat)), h + dr[2]])
+    lla = displace(truth.lla[0], -dr)
     nav = np.concatenate([q, truth.v_n[0] - dv, lla])
     return InitialState(time=float(truth.time[0]), nav=nav, sigma_att=s_att, sigma_vel=s_vel,
                         sigma_pos=s_pos)
