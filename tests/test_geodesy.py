@@ -57,3 +57,10 @@ def test_ned_round_trip_and_small_displacement():
     # the curvilinear displacement agrees with the exact one for small offsets
     d = np.array([3.0, -2.0, 1.0])
     np.testing.assert_allclose(ned_displacement(ned_to_lla(d, ref), ref), d, atol=1e-5)
+
+
+def test_displace_inverts_ned_displacement(rng):
+    from mixnav.geodesy.frames import displace
+    lla = np.column_stack([rng.uniform(-1.4, 1.4, 100), rng.uniform(-3, 3, 100), rng.uniform(-100, 5000, 100)])
+    d = rng.normal(scale=50.0, size=(100, 3))
+    np.testing.assert_allclose(ned_displacement(displace(lla, d), lla), d, atol=1e-9)
