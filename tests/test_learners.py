@@ -271,3 +271,71 @@ def test_gibbs_posterior_mean_converges(seed):
     np.testing.assert_allclose(long.weights_, [0.4, 0.6], atol=0.07)
     np.testing.assert_allclose(long.means_[:, 0], [-3.0, 3.0], atol=0.2)
     np.testing.assert_allclose(long.covariances_[:, 0, 0], [1.0, 0.5], rtol=0.3)
+
+
+# --------------------------------------------------------------------------- VB, fused numba kernel for d >= 2
+def _fit_both_paths(monkeypatch, X, w, resp, **kw):
+    """Fit with the numba kernel (d <= _NUMBA_MAX_DIM) and with the numpy reference path."""
+    assert 2 <= X.shape[1] <= vbmod._NUMBA_MAX_DIM
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        fast = VariationalGaussianMixture(resp.shape[1], init_resp=resp, **kw).fit(X, sample_weight=w)
+        with monkeypatch.context() as mp:
+            mp.setattr(vbmod, "_NUMBA_MAX_DIM", 0)            # force the numpy path
+            ref = VariationalGaussianMixture(resp.shape[1], init_resp=resp, **kw).fit(X, sample_weight=w)
+    return fast, ref
+
+
+@pytest.mark.parametrize("d", [2, 3])
+@pytest.mark.parametrize("prune", [0.0, 0.05])
+def test_vb_numba_nd_path_equals_numpy_path(monkeypatch, d, prune):
+    rng = np.random.default_rng(20 + d)
+    X = _blobs(d, 450, rng)
+    w = rng.uniform(0.5, 2.0, size=len(X))
+    resp = rng.uniform(size=(len(X), 4))
+    resp[:, 3] *= 0.1                              # a small component (pruned when prune > 0)
+    resp /= resp.sum(axis=1, keepdims=True)
+    fast, ref = _fit_both_paths(monkeypatch, X, w, resp, prune_threshold=prune, tol=0, max_iter=30)
+    assert fast.n_iter_ == ref.n_iter_ == 30 and fast.pruned_at_ == ref.pruned_at_
+    if prune:
+        assert len(fast.pruned_at_) > 0            # the pruning branch of the kernel is exercised
+    np.testing.assert_allclose(fast.weights_, ref.weights_, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(fast.means_, ref.means_, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(fast.covariances_, ref.covariances_, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(fast.degrees_of_freedom_, ref.degrees_of_freedom_, rtol=1e-10)
+    np.testing.assert_allclose(fast.lower_bounds_, ref.lower_bounds_, rtol=1e-10)
+
+
+@pytest.mark.parametrize("d", [2, 3, 5])
+def test_vb_numba_nd_lower_bound_never_decreases(d):
+    # same criterion as test_vb_lower_bound_never_decreases, for the fused kernel (d <= _NUMBA_MAX_DIM)
+    assert d <= vbmod._NUMBA_MAX_DIM
+    for seed in range(15):
+        rng = np.random.default_rng(100 + seed)
+        X = _blobs(min(d, 3), 300, rng)
+        if d > 3:
+            X = np.hstack([X, rng.standard_normal((len(X), d - 3)) * 0.5])
+        w = rng.uniform(0.2, 3.0, size=len(X))
+        vb = VariationalGaussianMixture(5, random_state=seed, max_iter=200, tol=1e-10)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            vb.fit(X, sample_weight=w)
+        b = np.array(vb.lower_bounds_)
+        cuts = [0, *vb.pruned_at_, len(b)]
+        for lo, hi in zip(cuts[:-1], cuts[1:]):
+            seg = b[lo:hi]
+            assert np.all(np.diff(seg) >= -1e-9 * np.abs(seg[1:])), (seed, lo)
+
+
+def test_vb_numba_nd_warm_start_matches_numpy(monkeypatch):
+    rng = np.random.default_rng(31)
+    X = _blobs(3, 600, rng)
+    first = VariationalGaussianMixture(3, random_state=0, max_iter=2000).fit(X)
+    X2 = X + 0.05 * rng.standard_normal(X.shape)
+    fast = VariationalGaussianMixture(3, max_iter=2000).fit(X2, warm_start_from=first)
+    monkeypatch.setattr(vbmod, "_NUMBA_MAX_DIM", 0)
+    ref = VariationalGaussianMixture(3, max_iter=2000).fit(X2, warm_start_from=first)
+    assert fast.n_iter_ == ref.n_iter_ and fast.converged_
+    np.testing.assert_allclose(fast.means_, ref.means_, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(fast.covariances_, ref.covariances_, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(fast.lower_bounds_, ref.lower_bounds_, rtol=1e-10)

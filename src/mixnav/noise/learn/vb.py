@@ -42,8 +42,12 @@ means ``c inv(Cov(X))``; an array (d, d) is used as is).
 
 One-dimensional data use a fused numba kernel (:func:`_vb_loop_1d`): one pass
 over the samples per iteration does the E-step, the lower bound and the
-sufficient statistics of the M-step.  It implements exactly the same
-arithmetic as the numpy path (tested to agree to 1e-10).
+sufficient statistics of the M-step.  Data with 2 <= d <= ``_NUMBA_MAX_DIM``
+use the same scheme for general d (:func:`_vb_loop_nd`: per component the
+Cholesky factor of W_k^-1 and its triangular inverse, per sample the whitened
+distances, a stable log-sum-exp and the weighted first and second moments).
+Both implement the same arithmetic as the numpy path :func:`_vb_loop_numpy`
+(the reference, used for larger d; tested to agree to 1e-10).
 """
 
 from __future__ import annotations
@@ -259,6 +263,211 @@ def _vb_loop_1d(x, w, alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0, w0inv, t
 
 
 # --------------------------------------------------------------------------
+# numba fast path, 2 <= d <= _NUMBA_MAX_DIM
+# --------------------------------------------------------------------------
+_NUMBA_MAX_DIM = 16     # fused kernel for 2 <= d <= this (measured faster than numpy up to d = 16)
+
+
+@numba.njit(cache=True)
+def _chol_lower(A, L):
+    """Lower Cholesky factor ``L L^T = A`` of a small SPD matrix, written into ``L``.
+
+    Returns False (``L`` partly written) if ``A`` is not numerically positive definite.
+    """
+    d = A.shape[0]
+    for j in range(d):
+        s = A[j, j]
+        for p in range(j):
+            s -= L[j, p] * L[j, p]
+        if not s > 0.0:
+            return False
+        ljj = math.sqrt(s)
+        L[j, j] = ljj
+        for i in range(j + 1, d):
+            s = A[i, j]
+            for p in range(j):
+                s -= L[i, p] * L[j, p]
+            L[i, j] = s / ljj
+        for i in range(j):
+            L[i, j] = 0.0
+    return True
+
+
+@numba.njit(cache=True)
+def _tril_inv(L, Li):
+    """Inverse ``Li`` of a lower-triangular ``L`` (also lower triangular)."""
+    d = L.shape[0]
+    for j in range(d):
+        Li[j, j] = 1.0 / L[j, j]
+        for i in range(j + 1, d):
+            s = 0.0
+            for p in range(j, i):
+                s -= L[i, p] * Li[p, j]
+            Li[i, j] = s / L[i, i]
+        for i in range(j):
+            Li[i, j] = 0.0
+
+
+@numba.njit(cache=True)
+def _vb_loop_nd(X, w, alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0, w0inv, tol_abs, max_iter, bounds,
+                prune_thr):
+    """Fused VB iteration for d >= 2; updates alpha, beta, nu (K,), m (K, d), winv (K, d, d) in place.
+
+    Same arithmetic as :func:`_vb_loop_numpy`, one pass over the samples per iteration:
+    per component the Cholesky factor ``L_k`` of ``W_k^-1`` (so ``W_k = L_k^-T L_k^-1``),
+    its triangular inverse, E[ln pi_k], E[ln|Lambda_k|] and the non-Z part of the bound;
+    per sample the whitened distances ``|L_k^-1 (x - m_k)|^2``, a stable log-sum-exp and
+    the weighted statistics (N_k, sum r (x - m_k), sum r (x - m_k)(x - m_k)^T, shifted by
+    the current m_k for accuracy); then the M-step (P1 eqs. 22-25) from the statistics.
+
+    Returns (n_iter, status): status 0 (max_iter reached), 1 (converged), 2 (a component
+    fell below ``prune_thr``) or 3 (a ``W_k^-1`` is not numerically positive definite;
+    ``bounds[:n_iter - 1]`` are valid).  ``bounds[:n_iter]`` holds the lower bound of
+    each iteration.
+    """
+    n, d = X.shape
+    K = alpha.shape[0]
+    e_ln_pi = np.empty(K)
+    const = np.empty(K)
+    hnu = np.empty(K)
+    lr = np.empty(K)
+    L = np.empty((d, d))
+    Li = np.empty((K, d, d))
+    b = np.empty((K, d))                    # L_k^-1 m_k
+    dz = np.empty(d)
+    xi = np.empty(d)
+    dx = np.empty(d)
+    s0 = np.empty(K)
+    s1 = np.empty((K, d))
+    s2 = np.empty((K, d, d))                # lower triangle used
+    ln2 = math.log(2.0)
+    lnpi = math.log(math.pi)
+    # prior constants: ln B(W0, nu0) and the Cholesky factor of W0^-1
+    L0 = np.empty((d, d))
+    if not _chol_lower(w0inv, L0):
+        return 1, 3
+    logdet_w0inv = 0.0
+    for j in range(d):
+        logdet_w0inv += 2.0 * math.log(L0[j, j])
+    lnB0 = 0.5 * nu0 * logdet_w0inv - 0.5 * nu0 * d * ln2 - 0.25 * d * (d - 1) * lnpi
+    for j in range(d):
+        lnB0 -= math.lgamma(0.5 * (nu0 - j))
+    prev = -np.inf
+    for it in range(1, max_iter + 1):
+        asum = 0.0
+        for k in range(K):
+            asum += alpha[k]
+        dg_sum = _digamma(asum)
+        theta = math.lgamma(K * alpha0) - K * math.lgamma(alpha0) - math.lgamma(asum)
+        for k in range(K):
+            if not _chol_lower(winv[k], L):
+                return it, 3
+            _tril_inv(L, Li[k])
+            logdet_winv = 0.0
+            for j in range(d):
+                logdet_winv += 2.0 * math.log(L[j, j])
+            e_ln_pi[k] = _digamma(alpha[k]) - dg_sum                                 # P1 eq. (28)
+            e_ln_lam = d * ln2 - logdet_winv                                          # P1 eq. (27)
+            lnB = 0.5 * nu[k] * logdet_winv - 0.5 * nu[k] * d * ln2 - 0.25 * d * (d - 1) * lnpi
+            for j in range(d):
+                e_ln_lam += _digamma(0.5 * (nu[k] - j))
+                lnB -= math.lgamma(0.5 * (nu[k] - j))
+            const[k] = e_ln_pi[k] + 0.5 * e_ln_lam - 0.5 * d * _LOG2PI - 0.5 * d / beta[k]
+            hnu[k] = 0.5 * nu[k]
+            # b_k = L_k^-1 m_k;  q0 = |L_k^-1 (m_k - m0)|^2;  tr(W_k W0^-1) = |L_k^-1 L0|_F^2
+            q0 = 0.0
+            tr = 0.0
+            for i in range(d):
+                sb = 0.0
+                sq = 0.0
+                for j in range(i + 1):
+                    sb += Li[k, i, j] * m[k, j]
+                    sq += Li[k, i, j] * (m[k, j] - m0[j])
+                b[k, i] = sb
+                q0 += sq * sq
+                for c in range(i + 1):
+                    st = 0.0
+                    for j in range(c, i + 1):
+                        st += Li[k, i, j] * L0[j, c]
+                    tr += st * st
+            # non-Z part of the bound (see _theta_terms)
+            theta += math.lgamma(alpha[k]) + (alpha0 - alpha[k]) * e_ln_pi[k]
+            theta += (0.5 * d * math.log(beta0 / beta[k]) + 0.5 * d - 0.5 * d * beta0 / beta[k]
+                      - 0.5 * beta0 * nu[k] * q0 + lnB0 - lnB + 0.5 * (nu0 - nu[k]) * e_ln_lam
+                      - 0.5 * nu[k] * tr + 0.5 * nu[k] * d)
+            s0[k] = 0.0
+            for i in range(d):
+                s1[k, i] = 0.0
+                for j in range(i + 1):
+                    s2[k, i, j] = 0.0
+        total = 0.0
+        for nn in range(n):
+            for i in range(d):
+                xi[i] = X[nn, i]
+            mx = -np.inf
+            for k in range(K):
+                maha = 0.0
+                for i in range(d):
+                    z = -b[k, i]
+                    for j in range(i + 1):
+                        z += Li[k, i, j] * xi[j]
+                    maha += z * z                                                     # (x-m_k)^T W_k (x-m_k)
+                lr[k] = const[k] - hnu[k] * maha                                      # P1 eqs. (19), (26)
+                if lr[k] > mx:
+                    mx = lr[k]
+            se = 0.0
+            for k in range(K):
+                v = lr[k] - mx
+                # exp(v) is exactly 0.0 in IEEE double for v < -745.14: skip the (slow) underflow
+                e = math.exp(v) if v > -746.0 else 0.0
+                lr[k] = e
+                se += e
+            total += w[nn] * (mx + math.log(se))
+            scale = w[nn] / se
+            for k in range(K):
+                r = lr[k] * scale                                                     # w_n gamma_nk
+                if r == 0.0:
+                    continue                                                          # adds exactly 0
+                s0[k] += r
+                for i in range(d):
+                    dx[i] = xi[i] - m[k, i]                                           # shifted by m_k
+                for i in range(d):
+                    t = r * dx[i]
+                    s1[k, i] += t
+                    for j in range(i + 1):
+                        s2[k, i, j] += t * dx[j]
+        bound = total + theta                                                         # P1 eq. (29)
+        bounds[it - 1] = bound
+        for k in range(K):                                                            # P1 eqs. (22)-(25)
+            nk = s0[k] + 1e1 * 2.220446049250313e-16
+            for i in range(d):
+                dz[i] = s1[k, i] / nk                                                 # xbar - m_k
+                dx[i] = m[k, i] + dz[i] - m0[i]                                       # xbar - m0
+            c = beta0 * nk / (beta0 + nk)
+            for i in range(d):
+                for j in range(i + 1):
+                    v = w0inv[i, j] + s2[k, i, j] - s1[k, i] * dz[j] + c * dx[i] * dx[j]
+                    winv[k, i, j] = v
+                    winv[k, j, i] = v
+            alpha[k] = alpha0 + nk
+            beta[k] = beta0 + nk
+            nu[k] = nu0 + nk
+            for i in range(d):
+                m[k, i] = (beta0 * m0[i] + nk * (m[k, i] + dz[i])) / beta[k]
+        if prune_thr > 0.0 and K > 1:
+            asum = 0.0
+            for k in range(K):
+                asum += alpha[k]
+            for k in range(K):
+                if alpha[k] < prune_thr * asum:
+                    return it, 2
+        if abs(bound - prev) < tol_abs:
+            return it, 1
+        prev = bound
+    return max_iter, 0
+
+
+# --------------------------------------------------------------------------
 # estimator
 # --------------------------------------------------------------------------
 class VariationalGaussianMixture:
@@ -410,6 +619,8 @@ class VariationalGaussianMixture:
         while True:
             if d == 1:
                 params, it, status = self._loop_1d(X, w, params, prior, tol_abs, iters_left, bounds, thr)
+            elif d <= _NUMBA_MAX_DIM:
+                params, it, status = self._loop_nd(X, w, params, prior, tol_abs, iters_left, bounds, thr)
             else:
                 params, it, status = _vb_loop_numpy(X, w, params, prior, tol_abs, iters_left, bounds, thr)
             iters_left -= it
@@ -453,6 +664,19 @@ class VariationalGaussianMixture:
                                tol_abs, max_iter, buf, prune_thr)
         bounds.extend(buf[:it].tolist())
         return (alpha, beta, m1[:, None], nu, winv1[:, None, None]), it, conv
+
+    @staticmethod
+    def _loop_nd(X, w, params, prior, tol_abs, max_iter, bounds, prune_thr):
+        alpha, beta, m, nu, Winv = (np.array(p, dtype=float) for p in params)   # fresh C-contiguous copies
+        buf = np.empty(max(max_iter, 1))
+        it, status = _vb_loop_nd(np.ascontiguousarray(X, dtype=float), np.ascontiguousarray(w, dtype=float),
+                                 alpha, beta, m, nu, Winv, prior[0], prior[1],
+                                 np.ascontiguousarray(prior[2], dtype=float), prior[3],
+                                 np.ascontiguousarray(prior[4], dtype=float), tol_abs, max_iter, buf, prune_thr)
+        if status == 3:
+            raise np.linalg.LinAlgError("Matrix is not positive definite")
+        bounds.extend(buf[:it].tolist())
+        return (alpha, beta, m, nu, Winv), it, status
 
     # ---- results ---------------------------------------------------------
     @property
