@@ -27,11 +27,10 @@ from ..config.dataset_schema import Dataset
 from ..config.loader import corruption, imu_model
 from ..data import GnssFixes, ImuData, Trajectory
 from ..errors import ConfigError, DataError
-from ..filters.ekf import ErrorStateEkf, FilterResult, InitialState
-from ..ins.error_model import get_layout
+from ..filters import registry
+from ..filters.ekf import FilterResult, InitialState
 from ..ins.mechanization import nav_vector
 from ..io import drive0708, generic_csv, kfgins, psins, rtklib
-from ..measurements.loose import LooseGnss
 from ..sim.gnss import in_windows
 from .run import _lla_frame, solution_table, write_outputs
 from ..geodesy.frames import displace
@@ -195,15 +194,10 @@ def process(ds: Dataset, source: str, data: str | None = None) -> ProcessOutput:
             raise DataError("the reference does not overlap the processed time span", file=source)
     results = {}
     t_filt = _time.perf_counter()
+    model = imu_model(ds.imu.grade, ds.imu.errors, source, "imu.errors", "imu.grade")
     for i, m in enumerate(ds.methods):
-        if m.type != "loose-ekf":
-            raise ConfigError(f"method type '{m.type}' cannot process real data yet", file=source,
-                              key=f"methods[{i}].type")
-        layout = get_layout(m.states)
-        model = imu_model(m.imu_grade or ds.imu.grade, m.imu_errors if m.imu_errors is not None else ds.imu.errors,
-                          source, f"methods[{i}].imu_errors", f"methods[{i}].imu_grade")
-        ekf = ErrorStateEkf(layout, model, covariance_interval=m.covariance_interval)
-        results[m.name] = ekf.run(imu, init, [LooseGnss(fixes, lever, layout)], output_times=out_times)
+        filt, meas = registry.build(m, model, fixes, lever, source, i)
+        results[m.name] = filt.run(imu, init, meas, output_times=out_times)
     filter_time = _time.perf_counter() - t_filt
     return ProcessOutput(ds, source, folder, t0, imu, fixes, all_fixes, reference, lever, results, init,
                          read_time, filter_time)

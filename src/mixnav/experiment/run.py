@@ -49,8 +49,8 @@ def run_scenario(sc: Scenario, source: str | None = None, seed: int | None = Non
     sim = simulate(sc, seed, source, ideal=ideal)
     lever = np.asarray(sc.gnss.lever_arm, dtype=float)
     results = {}
-    for m in sc.methods:
-        filt, meas = registry.build(m, sim, lever, source)
+    for i, m in enumerate(sc.methods):
+        filt, meas = registry.build(m, sim.imu_model, sim.fixes, lever, source, i)
         results[m.name] = filt.run(sim.imu, sim.init, meas)
     return RunOutput(sc, source or sc.scenario.name, sim, results)
 

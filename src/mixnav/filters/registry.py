@@ -1,10 +1,11 @@
-"""Method names usable in scenario files, and how each is built."""
+"""Method names usable in scenario and dataset files, and how each is built."""
 
 from __future__ import annotations
 
 from ..config.loader import imu_model
 from ..config.schema import MethodConfig
 from ..ins.error_model import get_layout
+from ..ins.imu_model import ImuErrorModel
 from ..measurements.loose import LooseGnss
 from .ekf import ErrorStateEkf
 
@@ -14,18 +15,19 @@ METHODS = {
 }
 
 
-def build(method: MethodConfig, run, lever_arm, source=None):
-    """The filter and its measurement models for one method of a scenario.
+def build(method: MethodConfig, default_imu: ImuErrorModel, fixes, lever_arm, source=None, index: int = 0):
+    """The filter and its measurement models for one method of a config.
 
-    The filter models the IMU with the method's own grade/errors when given,
-    otherwise with the scenario's true IMU model.
+    The filter models the IMU with the method's own ``imu_grade``/``imu_errors``
+    when given, otherwise with ``default_imu`` (the simulated IMU of a
+    scenario, or the dataset's IMU model).
     """
     if method.type == "loose-ekf":
         layout = get_layout(method.states)
-        model = run.imu_model
+        model = default_imu
         if method.imu_grade is not None or method.imu_errors is not None:
             model = imu_model(method.imu_grade, method.imu_errors or {}, source,
-                              f"methods.{method.name}.imu_errors", f"methods.{method.name}.imu_grade")
+                              f"methods[{index}].imu_errors", f"methods[{index}].imu_grade")
         ekf = ErrorStateEkf(layout, model, covariance_interval=method.covariance_interval)
-        return ekf, [LooseGnss(run.fixes, lever_arm, layout)]
+        return ekf, [LooseGnss(fixes, lever_arm, layout)]
     raise KeyError(method.type)  # unreachable: the schema admits only known types

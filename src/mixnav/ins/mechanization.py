@@ -18,7 +18,7 @@ def nav_vector(q_nb, v_n, lla) -> np.ndarray:
     return nav
 
 
-def free_inertial(imu: ImuData, nav0: np.ndarray, start_time: float | None = None) -> Trajectory:
+def free_inertial(imu: ImuData, nav0: np.ndarray) -> Trajectory:
     """Mechanize all increments from an initial state, with no aiding.
 
     Parameters
