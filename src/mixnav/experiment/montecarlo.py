@@ -1,0 +1,411 @@
+"""Monte Carlo experiments: many seeded runs of one scenario, in parallel, resumable.
+
+Output folder of :func:`run_experiment` (every file written atomically)::
+
+    manifest.json          scenario, source, sha256 of the scenario text, mixnav
+                           version, runs, seeds, methods
+    runs/run_<seed>.parquet  one record per finished run: one row per method with
+                           scenario, seed, method and the flat scalar metrics
+    results.parquet/.csv   all records concatenated (written last)
+
+A run's record file is its only trace, so an interrupted experiment resumes by
+running the seeds that have none (``resume=True``). Records hold numbers only
+(no solution tables) to stay small for thousands of runs.
+
+Metrics are those of :func:`mixnav.experiment.run.method_metrics`, flattened:
+per outage window ``outage<i>_<key>`` (``outage0_horizontal_max_m``...),
+``recoveries_total`` plus ``recoveries_<kind>``. The timing metrics
+(:data:`TIMING_METRICS`) are wall-clock measurements and differ between two
+executions of the same seed; every other column is reproducible exactly.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import sys
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .. import __version__
+from ..errors import ConfigError
+from ..io.atomic import atomic_write_dataframe, atomic_write_json
+
+__all__ = ["run_experiment", "aggregate", "paired_comparison", "flatten_metrics",
+           "TIMING_METRICS", "ID_COLUMNS"]
+
+#: Columns identifying a record row; every other column is a metric.
+ID_COLUMNS = ("scenario", "seed", "method")
+#: Metrics measured with the wall clock: not reproducible from the seed.
+TIMING_METRICS = ("epoch_time_mean_us", "update_time_mean_us", "wall_time_s")
+
+RUNS_DIR = "runs"
+MANIFEST = "manifest.json"
+
+# Per process: the loaded scenario and its deterministic truth + ideal IMU,
+# keyed by (source, sha256 of the text) so an edited file is never mixed in.
+_SCENARIOS: dict[str, tuple] = {}
+_IDEAL_CACHE: dict[tuple[str, str], tuple] = {}
+
+
+def _sha256(text: str) -> str:
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def _record_path(out_dir: Path, seed: int) -> Path:
+    return out_dir / RUNS_DIR / f"run_{seed}.parquet"
+
+
+# ---------------------------------------------------------------- one run
+
+def _is_scalar(v) -> bool:
+    return isinstance(v, (bool, int, float, str, np.integer, np.floating, np.bool_))
+
+
+def _scalar(v):
+    return v.item() if isinstance(v, np.generic) else v
+
+
+def flatten_metrics(m: dict) -> dict:
+    """The scalar view of one method's metrics (see the module docstring)."""
+    out = {}
+    for k, v in m.items():
+        if k == "outages":
+            for i, w in enumerate(v):
+                for kk, vv in w.items():
+                    if _is_scalar(vv):
+                        out[f"outage{i}_{kk}"] = _scalar(vv)
+        elif k == "recoveries":
+            out["recoveries_total"] = int(sum(int(x) for x in v.values()))
+            for kk, vv in v.items():
+                out[f"recoveries_{kk}"] = int(vv)
+        elif _is_scalar(v):
+            out[k] = _scalar(v)
+        elif isinstance(v, dict):
+            for kk, vv in v.items():
+                if _is_scalar(vv):
+                    out[f"{k}_{kk}"] = _scalar(vv)
+        # other non-scalars (lists, arrays) are left out
+    return out
+
+
+def _load(scenario: str, expect_sha: str | None = None):
+    """(Scenario, source, sha) of ``scenario``, loaded once per process.
+
+    Without ``expect_sha`` the file is always read again (the caller wants
+    its current text); with it, the cached copy serves while it matches.
+    """
+    from ..config.loader import load_scenario
+    hit = _SCENARIOS.get(scenario)
+    if hit is None or expect_sha is None or hit[2] != expect_sha:
+        sc, source, text = load_scenario(scenario)
+        hit = _SCENARIOS[scenario] = (sc, source, _sha256(text))
+    if expect_sha is not None and hit[2] != expect_sha:
+        raise ConfigError("the scenario file changed while the experiment was running "
+                          f"(sha256 {hit[2][:12]}..., expected {expect_sha[:12]}...)", file=hit[1])
+    return hit
+
+
+def _ideal(sc, source: str, sha: str):
+    from ..sim.scenario import truth_and_ideal_imu
+    key = (source, sha)
+    if key not in _IDEAL_CACHE:
+        _IDEAL_CACHE[key] = truth_and_ideal_imu(sc, source)
+    return _IDEAL_CACHE[key]
+
+
+def _compute_run(scenario: str, sha: str, seed: int) -> pd.DataFrame:
+    """The record of one seeded run: one row per method."""
+    from .run import method_metrics, run_scenario, solution_table
+    sc, source, sha = _load(scenario, sha)
+    out = run_scenario(sc, source, seed, ideal=_ideal(sc, source, sha))
+    rows = []
+    for name, res in out.results.items():
+        table = solution_table(res, out.sim.truth, out.sim.outages)
+        rows.append({"scenario": sc.scenario.name, "seed": int(seed), "method": name,
+                     **flatten_metrics(method_metrics(res, table, out.sim.outages))})
+    return pd.DataFrame(rows)
+
+
+def _run_and_write(scenario: str, sha: str, seed: int, out_dir: str) -> int:
+    """Worker task: compute one run and write its record file; returns the seed."""
+    try:
+        rec = _compute_run(scenario, sha, seed)
+    except BaseException as exc:
+        exc.add_note(f"while running seed {seed} of scenario {scenario}")
+        raise
+    atomic_write_dataframe(_record_path(Path(out_dir), seed), rec)
+    return seed
+
+
+def _worker_init(scenario: str, sha: str) -> None:
+    _load(scenario, sha)
+
+
+# ---------------------------------------------------------------- progress
+
+class _Progress:
+    """rich progress bar on a terminal, else a plain line every few runs (stderr)."""
+
+    def __init__(self, total: int, enabled: bool):
+        self.total, self.done, self.t0 = total, 0, time.perf_counter()
+        self.enabled = enabled and total > 0
+        self.step = max(1, min(10, total // 20))
+        self.bar = None
+        if self.enabled and sys.stderr.isatty():
+            from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
+                                       TimeElapsedColumn, TimeRemainingColumn)
+            from rich.console import Console
+            self.bar = Progress(TextColumn("runs"), BarColumn(), MofNCompleteColumn(),
+                                TimeElapsedColumn(), TimeRemainingColumn(),
+                                console=Console(stderr=True))
+            self.bar.start()
+            self.task = self.bar.add_task("runs", total=total)
+
+    def advance(self) -> None:
+        self.done += 1
+        if not self.enabled:
+            return
+        if self.bar is not None:
+            self.bar.advance(self.task)
+        elif self.done % self.step == 0 or self.done == self.total:
+            dt = time.perf_counter() - self.t0
+            rate = self.done / dt if dt > 0 else float("inf")
+            eta = (self.total - self.done) / rate if rate > 0 else float("nan")
+            print(f"runs done {self.done}/{self.total}, {rate:.1f} runs/s, eta {eta:.0f} s",
+                  file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.stop()
+
+
+# ---------------------------------------------------------------- experiment
+
+def _read_records(out_dir: Path) -> pd.DataFrame:
+    files = sorted((out_dir / RUNS_DIR).glob("run_*.parquet"))
+    if not files:
+        return pd.DataFrame(columns=list(ID_COLUMNS))
+    df = pd.concat([pd.read_parquet(f) for f in files], ignore_index=True)
+    return df.sort_values(["seed", "method"], kind="stable").reset_index(drop=True)
+
+
+def run_experiment(scenario: str, runs: int, out_dir: Path, workers: int | None = None,
+                   resume: bool = False, seeds_from: int = 0, progress: bool = True) -> pd.DataFrame:
+    """Run every method of ``scenario`` over seeds ``seeds_from .. seeds_from + runs - 1``.
+
+    Parameters
+    ----------
+    scenario : str
+        Shipped scenario name or path of a ``.toml`` file.
+    runs : int
+        Number of seeded runs (>= 1).
+    out_dir : Path
+        Output folder (layout in the module docstring).
+    workers : int or None
+        Worker processes (default ``os.cpu_count()``); 1 runs in this process
+        without a pool.
+    resume : bool
+        Continue an experiment in ``out_dir``: run only the seeds without a
+        record file. Refused when the scenario text differs from the
+        manifest's. Without ``resume`` a folder that already holds an
+        experiment is refused too (records of other seeds would be mixed in).
+    seeds_from : int
+        First seed (>= 0).
+    progress : bool
+        Report progress on stderr.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Every record in ``out_dir/runs`` (also those of earlier resumed
+        calls), sorted by seed and method; also written to
+        ``results.parquet`` and ``results.csv``.
+
+    Raises
+    ------
+    ConfigError
+        Bad ``runs``/``workers``/``seeds_from``, an unknown or invalid
+        scenario (from the loader), or an ``out_dir`` that does not match.
+    """
+    if isinstance(runs, bool) or not isinstance(runs, (int, np.integer)) or runs < 1:
+        raise ConfigError(f"--runs must be a positive integer, got {runs!r}")
+    if workers is None:
+        workers = os.cpu_count() or 1
+    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
+        raise ConfigError(f"--workers must be a positive integer, got {workers!r}")
+    if isinstance(seeds_from, bool) or not isinstance(seeds_from, (int, np.integer)) or seeds_from < 0:
+        raise ConfigError(f"--seeds-from must be a non-negative integer, got {seeds_from!r}")
+    sc, source, sha = _load(scenario)  # unknown scenario: the loader's ConfigError
+    out_dir = Path(out_dir)
+    seeds = [int(seeds_from) + i for i in range(int(runs))]
+    methods = [m.name for m in sc.methods]
+
+    manifest_path = out_dir / MANIFEST
+    old_seeds: list[int] = []
+    if manifest_path.exists():
+        if not resume:
+            raise ConfigError("folder already holds an experiment; pass resume (--resume) to "
+                              "continue it or choose another folder", file=str(out_dir))
+        import json
+        try:
+            old = json.loads(manifest_path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise ConfigError(f"cannot read {MANIFEST}: {exc}", file=str(out_dir)) from None
+        if old.get("scenario_sha256") != sha:
+            raise ConfigError(
+                f"cannot resume: the experiment in this folder was run with scenario "
+                f"'{old.get('scenario')}' ({old.get('source')}, sha256 "
+                f"{str(old.get('scenario_sha256'))[:12]}...), not with {source} (sha256 "
+                f"{sha[:12]}...)", file=str(out_dir))
+        old_seeds = [int(s) for s in old.get("seeds", [])]
+    elif not resume and any((out_dir / RUNS_DIR).glob("run_*.parquet")):
+        raise ConfigError("folder holds run records but no manifest; remove them or choose "
+                          "another folder", file=str(out_dir))
+
+    all_seeds = sorted(set(old_seeds) | set(seeds))
+    atomic_write_json(manifest_path, {
+        "scenario": sc.scenario.name, "source": source, "scenario_sha256": sha,
+        "mixnav_version": __version__, "runs": len(all_seeds), "seeds": all_seeds,
+        "methods": methods})
+    runs_dir = out_dir / RUNS_DIR
+    runs_dir.mkdir(parents=True, exist_ok=True)
+    for stray in runs_dir.glob(".run_*.tmp"):  # left by a killed worker
+        stray.unlink(missing_ok=True)
+    todo = [s for s in seeds if not _record_path(out_dir, s).exists()]
+
+    bar = _Progress(len(todo), progress)
+    try:
+        if workers == 1 or len(todo) <= 1:
+            for s in todo:
+                _run_and_write(scenario, sha, s, str(out_dir))
+                bar.advance()
+        elif todo:
+            _run_pool(scenario, sha, todo, out_dir, min(workers, len(todo)), bar)
+    finally:
+        bar.close()
+
+    df = _read_records(out_dir)
+    atomic_write_dataframe(out_dir / "results.parquet", df)
+    atomic_write_dataframe(out_dir / "results.csv", df)
+    return df
+
+
+def _run_pool(scenario: str, sha: str, todo: list[int], out_dir: Path, workers: int,
+              bar: _Progress) -> None:
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=_worker_init,
+                               initargs=(scenario, sha))
+    try:
+        pending = {pool.submit(_run_and_write, scenario, sha, s, str(out_dir)) for s in todo}
+        while pending:
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for f in done:
+                f.result()  # re-raises a worker's error (noted with its seed)
+                bar.advance()
+    except BaseException:
+        # finished records stay on disk: the experiment can be resumed
+        pool.shutdown(wait=True, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
+
+
+# ---------------------------------------------------------------- statistics
+
+def _metric_columns(results: pd.DataFrame) -> list[str]:
+    return [c for c in results.columns if c not in ID_COLUMNS
+            and pd.api.types.is_numeric_dtype(results[c])]
+
+
+def _ci95(x: np.ndarray) -> tuple[float, float, float]:
+    """Mean, std (ddof 1) and half width of the 95 % t confidence interval of the mean."""
+    from scipy import stats
+    n = len(x)
+    mean = float(np.mean(x)) if n else math.nan
+    if n < 2:
+        return mean, math.nan, math.nan
+    std = float(np.std(x, ddof=1))
+    return mean, std, float(stats.t.ppf(0.975, n - 1) * std / math.sqrt(n))
+
+
+def aggregate(results: pd.DataFrame) -> pd.DataFrame:
+    """Per method and metric: n, mean, std, 95 % CI of the mean, median.
+
+    Parameters
+    ----------
+    results : pandas.DataFrame
+        Records as returned by :func:`run_experiment` (column ``method`` plus
+        numeric metric columns; ``seed`` and ``scenario`` are ignored).
+
+    Returns
+    -------
+    pandas.DataFrame
+        Long format, one row per (method, metric): ``method, metric, n,
+        mean, std, ci95_low, ci95_high, ci95_half, median``. NaNs are left
+        out of ``n``; the CI uses the t distribution with ``n - 1`` degrees
+        of freedom (NaN when ``n < 2``).
+    """
+    if "method" not in results.columns:
+        raise ConfigError("results table has no 'method' column")
+    rows = []
+    metrics = _metric_columns(results)
+    for method, g in results.groupby("method", sort=True):
+        for metric in metrics:
+            x = g[metric].to_numpy(dtype=float)
+            x = x[np.isfinite(x)]
+            mean, std, half = _ci95(x)
+            rows.append({"method": method, "metric": metric, "n": int(len(x)), "mean": mean,
+                         "std": std, "ci95_low": mean - half, "ci95_high": mean + half,
+                         "ci95_half": half, "median": float(np.median(x)) if len(x) else math.nan})
+    return pd.DataFrame(rows, columns=["method", "metric", "n", "mean", "std", "ci95_low",
+                                       "ci95_high", "ci95_half", "median"])
+
+
+def paired_comparison(results: pd.DataFrame, metric: str, a: str, b: str) -> dict:
+    """Compare methods ``a`` and ``b`` on ``metric`` over the seeds both have.
+
+    Returns
+    -------
+    dict
+        ``metric, a, b, n`` (common seeds with finite values of both),
+        ``mean_a, mean_b, mean_diff`` (a - b), ``ci95_low, ci95_high`` of
+        the mean difference (t distribution), ``t_statistic`` and
+        ``p_value`` of the two-sided paired t-test (scipy.stats.ttest_rel).
+
+    Raises
+    ------
+    ConfigError
+        Unknown metric or method, a (seed, method) pair present twice, or
+        fewer than 2 common seeds.
+    """
+    from scipy import stats
+    for col in ("seed", "method"):
+        if col not in results.columns:
+            raise ConfigError(f"results table has no '{col}' column")
+    if metric not in results.columns:
+        raise ConfigError(f"unknown metric '{metric}'; known: {', '.join(_metric_columns(results))}")
+    known = sorted(results["method"].unique())
+    for m in (a, b):
+        if m not in known:
+            raise ConfigError(f"unknown method '{m}'; known: {', '.join(map(str, known))}")
+    sub = results[results["method"].isin([a, b])]
+    if sub.duplicated(["seed", "method"]).any():
+        raise ConfigError("results hold a (seed, method) pair more than once "
+                          "(several scenarios mixed?)")
+    wide = sub.pivot(index="seed", columns="method", values=metric).astype(float)
+    wide = wide[np.isfinite(wide[a]) & np.isfinite(wide[b])]
+    n = len(wide)
+    if n < 2:
+        raise ConfigError(f"paired comparison of '{a}' and '{b}' on '{metric}' needs at least 2 "
+                          f"common seeds, found {n}")
+    xa, xb = wide[a].to_numpy(), wide[b].to_numpy()
+    mean_d, _, half = _ci95(xa - xb)
+    t = stats.ttest_rel(xa, xb)
+    return {"metric": metric, "a": a, "b": b, "n": n, "mean_a": float(xa.mean()),
+            "mean_b": float(xb.mean()), "mean_diff": mean_d, "ci95_low": mean_d - half,
+            "ci95_high": mean_d + half, "t_statistic": float(t.statistic),
+            "p_value": float(t.pvalue)}
