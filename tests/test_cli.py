@@ -92,3 +92,15 @@ def test_diagnose_command(tmp_path):
     assert d["ar1"]["coefficient"] == pytest.approx(0.8, abs=0.03) and d["verdict"]["coloured"]
     bad = runner.invoke(app, ["diagnose", str(tmp_path / "r.csv"), "--column", "nope", "--out", str(tmp_path / "e")])
     assert bad.exit_code == 2 and "nope" in bad.output
+
+
+def test_experiment_command_writes_results_and_summary(tmp_path):
+    res = runner.invoke(app, ["experiment", "loose-demo", "--runs", "2", "--out", str(tmp_path / "x"),
+                              "--workers", "1", "--no-progress"])
+    assert res.exit_code == 0, res.output
+    summary = pd.read_csv(tmp_path / "x" / "summary.csv")
+    row = summary[(summary.method == "ekf") & (summary.metric == "horizontal_rmse_m")].iloc[0]
+    results = pd.read_parquet(tmp_path / "x" / "results.parquet")
+    assert row["n"] == 2 and row["mean"] == pytest.approx(results["horizontal_rmse_m"].mean())
+    bad = runner.invoke(app, ["experiment", "loose-demo", "--runs", "0", "--out", str(tmp_path / "y")])
+    assert bad.exit_code == 2 and "--runs" in bad.output

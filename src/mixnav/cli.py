@@ -110,6 +110,33 @@ def process(dataset: str = typer.Argument(..., help="Shipped dataset config name
 
 
 @app.command()
+def experiment(scenario: str = typer.Argument(..., help="Shipped scenario name or path of a .toml file."),
+               runs: int = typer.Option(..., "--runs", help="Number of seeded Monte Carlo runs."),
+               out_dir: Path = typer.Option(..., "--out", help="Folder for the records, results and summary."),
+               workers: int = typer.Option(None, "--workers", help="Local worker processes (default: all cores)."),
+               resume: bool = typer.Option(False, "--resume", help="Run only the seeds with no record yet."),
+               seeds_from: int = typer.Option(0, "--seeds-from", help="First seed."),
+               progress: bool = typer.Option(True, "--progress/--no-progress")):
+    """Run every method of a scenario over N seeded runs on all local cores; keep partial results."""
+    from .experiment.montecarlo import aggregate, run_experiment
+    from .io.atomic import atomic_write_dataframe
+
+    try:
+        df = run_experiment(scenario, runs, out_dir, workers=workers, resume=resume, seeds_from=seeds_from,
+                            progress=progress)
+    except MixnavError as exc:
+        _fail(exc)
+    summary = aggregate(df)
+    atomic_write_dataframe(Path(out_dir) / "summary.csv", summary)
+    t = Table("method", "metric", "mean", "95 % CI", "n", title=f"{scenario}: {df['seed'].nunique()} runs")
+    for _, r in summary[summary["metric"].isin(["horizontal_rmse_m", "yaw_rmse_deg", "velocity_rmse_mps",
+                                                "epoch_time_mean_us"])].iterrows():
+        t.add_row(r["method"], r["metric"], f"{r['mean']:.4g}", f"+-{r['ci95_half']:.2g}", str(int(r["n"])))
+    out.print(t)
+    out.print(f"results: {Path(out_dir) / 'results.parquet'}, summary: {Path(out_dir) / 'summary.csv'}")
+
+
+@app.command()
 def diagnose(file: Path = typer.Argument(..., help="CSV or Parquet file holding a residual series."),
              column: str = typer.Option(..., "--column", help="Name of the column to diagnose."),
              out_dir: Path = typer.Option(..., "--out", help="Folder for diagnostics.json and the figures."),
