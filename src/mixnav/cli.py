@@ -116,8 +116,11 @@ def experiment(scenario: str = typer.Argument(..., help="Shipped scenario name o
                workers: int = typer.Option(None, "--workers", help="Local worker processes (default: all cores)."),
                resume: bool = typer.Option(False, "--resume", help="Run only the seeds with no record yet."),
                seeds_from: int = typer.Option(0, "--seeds-from", help="First seed."),
+               scheduler: str = typer.Option(None, "--scheduler",
+                                             help="Dask scheduler address (tcp://host:8786): run there "
+                                                  "instead of on local cores; needs mixnav[dask]."),
                progress: bool = typer.Option(True, "--progress/--no-progress")):
-    """Run every method of a scenario over N seeded runs on all local cores; keep partial results."""
+    """Run every method of a scenario over N seeded runs on all local cores (or a Dask cluster); keep partial results."""
     from .config.loader import resolve
     from .experiment.mc_report import write_experiment_report
     from .experiment.montecarlo import aggregate, run_experiment
@@ -125,7 +128,7 @@ def experiment(scenario: str = typer.Argument(..., help="Shipped scenario name o
 
     try:
         df = run_experiment(scenario, runs, out_dir, workers=workers, resume=resume, seeds_from=seeds_from,
-                            progress=progress)
+                            progress=progress, scheduler=scheduler)
     except MixnavError as exc:
         _fail(exc)
     summary = aggregate(df)

@@ -8,6 +8,12 @@ Output folder of :func:`run_experiment` (every file written atomically)::
                            scenario, seed, method and the flat scalar metrics
     results.parquet/.csv   all records concatenated (written last)
 
+Runs execute in this process (``workers=1``), in a local process pool, or on a
+Dask cluster (``scheduler="tcp://host:8786"``, needs ``pip install
+"mixnav[dask]"``) whose workers share the file system with the caller: each
+worker writes its records straight into ``out_dir``. The engine never changes
+the numbers: a seed gives the same record wherever it runs.
+
 A run's record file is its only trace, so an interrupted experiment resumes by
 running the seeds that have none (``resume=True``). Records hold numbers only
 (no solution tables) to stay small for thousands of runs.
@@ -196,7 +202,8 @@ def _read_records(out_dir: Path) -> pd.DataFrame:
 
 
 def run_experiment(scenario: str, runs: int, out_dir: Path, workers: int | None = None,
-                   resume: bool = False, seeds_from: int = 0, progress: bool = True) -> pd.DataFrame:
+                   resume: bool = False, seeds_from: int = 0, progress: bool = True,
+                   scheduler: str | None = None) -> pd.DataFrame:
     """Run every method of ``scenario`` over seeds ``seeds_from .. seeds_from + runs - 1``.
 
     Parameters
@@ -219,6 +226,13 @@ def run_experiment(scenario: str, runs: int, out_dir: Path, workers: int | None 
         First seed (>= 0).
     progress : bool
         Report progress on stderr.
+    scheduler : str or None
+        Address of a Dask scheduler (``"tcp://127.0.0.1:8786"``): the runs
+        are submitted to its workers instead of a local pool (``workers`` is
+        then not used). The workers must import the same mixnav and see
+        ``out_dir`` (and a scenario given as a path) at the same path: they
+        write the record files themselves. The connection is made only when
+        some seed still needs a run, before anything is written.
 
     Returns
     -------
@@ -230,8 +244,10 @@ def run_experiment(scenario: str, runs: int, out_dir: Path, workers: int | None 
     Raises
     ------
     ConfigError
-        Bad ``runs``/``workers``/``seeds_from``, an unknown or invalid
-        scenario (from the loader), or an ``out_dir`` that does not match.
+        Bad ``runs``/``workers``/``seeds_from``/``scheduler``, an unknown or
+        invalid scenario (from the loader), an ``out_dir`` that does not
+        match, ``distributed`` not installed, or a scheduler that cannot be
+        reached within :data:`DASK_CONNECT_TIMEOUT_S` (or has no worker).
     """
     if isinstance(runs, bool) or not isinstance(runs, (int, np.integer)) or runs < 1:
         raise ConfigError(f"--runs must be a positive integer, got {runs!r}")
@@ -241,6 +257,9 @@ def run_experiment(scenario: str, runs: int, out_dir: Path, workers: int | None 
         raise ConfigError(f"--workers must be a positive integer, got {workers!r}")
     if isinstance(seeds_from, bool) or not isinstance(seeds_from, (int, np.integer)) or seeds_from < 0:
         raise ConfigError(f"--seeds-from must be a non-negative integer, got {seeds_from!r}")
+    if scheduler is not None and (not isinstance(scheduler, str) or not scheduler.strip()):
+        raise ConfigError(f"--scheduler must be a Dask scheduler address such as "
+                          f"'tcp://127.0.0.1:8786', got {scheduler!r}")
     sc, source, sha = _load(scenario)  # unknown scenario: the loader's ConfigError
     out_dir = Path(out_dir)
     seeds = [int(seeds_from) + i for i in range(int(runs))]
@@ -268,8 +287,23 @@ def run_experiment(scenario: str, runs: int, out_dir: Path, workers: int | None 
         raise ConfigError("folder holds run records but no manifest; remove them or choose "
                           "another folder", file=str(out_dir))
 
+    # Connect before writing anything: an unreachable scheduler leaves no trace.
+    client = None
+    if scheduler is not None and any(not _record_path(out_dir, s).exists() for s in seeds):
+        client = _dask_client(scheduler.strip())
+    try:
+        return _run_seeds(scenario, sc, source, sha, seeds, methods, old_seeds, out_dir,
+                          workers, progress, client)
+    finally:
+        if client is not None:
+            client.close()
+
+
+def _run_seeds(scenario, sc, source, sha, seeds, methods, old_seeds, out_dir, workers,
+               progress, client) -> pd.DataFrame:
+    """Write the manifest, run the seeds without a record, collect the records."""
     all_seeds = sorted(set(old_seeds) | set(seeds))
-    atomic_write_json(manifest_path, {
+    atomic_write_json(out_dir / MANIFEST, {
         "scenario": sc.scenario.name, "source": source, "scenario_sha256": sha,
         "mixnav_version": __version__, "runs": len(all_seeds), "seeds": all_seeds,
         "methods": methods})
@@ -281,7 +315,9 @@ def run_experiment(scenario: str, runs: int, out_dir: Path, workers: int | None 
 
     bar = _Progress(len(todo), progress)
     try:
-        if workers == 1 or len(todo) <= 1:
+        if client is not None and todo:
+            _run_dask(client, scenario, sha, todo, out_dir, bar)
+        elif workers == 1 or len(todo) <= 1:
             for s in todo:
                 _run_and_write(scenario, sha, s, str(out_dir))
                 bar.advance()
@@ -312,6 +348,65 @@ def _run_pool(scenario: str, sha: str, todo: list[int], out_dir: Path, workers: 
         pool.shutdown(wait=True, cancel_futures=True)
         raise
     pool.shutdown(wait=True)
+
+
+#: Seconds to wait for a Dask scheduler to answer.
+DASK_CONNECT_TIMEOUT_S = 5.0
+#: Seconds to wait for a reachable scheduler to have at least one worker.
+DASK_WORKER_WAIT_S = 60.0
+
+
+def _dask_client(address: str):
+    """A ``distributed.Client`` connected to ``address``, or a ConfigError."""
+    try:
+        import distributed
+    except ImportError:
+        raise ConfigError("running on a Dask scheduler needs the 'distributed' package: "
+                          'pip install "mixnav[dask]"') from None
+    try:
+        client = distributed.Client(address, timeout=DASK_CONNECT_TIMEOUT_S,
+                                    set_as_default=False)
+    except (OSError, TimeoutError, ValueError) as exc:  # refused, timed out, bad address
+        raise ConfigError(f"cannot connect to the Dask scheduler at {address} within "
+                          f"{DASK_CONNECT_TIMEOUT_S:g} s ({type(exc).__name__}: {exc}); is it "
+                          "running and is the address right?") from None
+    try:
+        client.wait_for_workers(1, timeout=DASK_WORKER_WAIT_S)
+    except (OSError, TimeoutError) as exc:
+        client.close()
+        raise ConfigError(f"the Dask scheduler at {address} has no worker after "
+                          f"{DASK_WORKER_WAIT_S:g} s ({exc})") from None
+    except BaseException:
+        client.close()
+        raise
+    return client
+
+
+def _task_scenario(scenario: str) -> str:
+    """``scenario`` as a worker in another folder can load it (absolute path of a file)."""
+    p = Path(scenario)
+    return str(p.resolve()) if p.suffix == ".toml" or p.exists() else scenario
+
+
+def _run_dask(client, scenario: str, sha: str, todo: list[int], out_dir: Path,
+              bar: _Progress) -> None:
+    import uuid
+    from distributed import as_completed
+    task_scenario, target = _task_scenario(scenario), str(Path(out_dir).resolve())
+    tag = uuid.uuid4().hex[:8]
+    futures = [client.submit(_run_and_write, task_scenario, sha, s, target, pure=False,
+                             key=f"mixnav-run-{tag}-seed{s}") for s in todo]
+    try:
+        for f in as_completed(futures, loop=client.loop):
+            f.result()  # re-raises a worker's error (noted with its seed)
+            bar.advance()
+    except BaseException:
+        # finished records stay on disk: the experiment can be resumed
+        client.cancel(futures)
+        raise
+    finally:
+        for f in futures:
+            f.release()
 
 
 # ---------------------------------------------------------------- statistics
