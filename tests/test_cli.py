@@ -103,7 +103,7 @@ def test_experiment_command_writes_results_and_summary(tmp_path):
     results = pd.read_parquet(tmp_path / "x" / "results.parquet")
     assert row["n"] == 2 and row["mean"] == pytest.approx(results["horizontal_rmse_m"].mean())
     html = (tmp_path / "x" / "report.html").read_text()
-    assert "mixnav experiment" in html and f"{row['mean']:.3g}" in html
+    assert "mixnav experiment" in html and f"{row['mean']:.4g} ± {row['ci95_half']:.2g}" in html
     assert (tmp_path / "x" / "boxplots.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     bad = runner.invoke(app, ["experiment", "loose-demo", "--runs", "0", "--out", str(tmp_path / "y")])
     assert bad.exit_code == 2 and "--runs" in bad.output

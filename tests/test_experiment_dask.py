@@ -52,7 +52,7 @@ def cluster():
 def test_dask_cluster_gives_the_local_numbers(cluster, local3, tmp_path):
     df = run_experiment(SCENARIO, 3, tmp_path, scheduler=cluster.scheduler_address,
                         progress=False)
-    assert sorted(p.name for p in (tmp_path / "runs").glob("*.parquet")) == \
+    assert sorted(p.name for p in (tmp_path / "runs").glob("run_*.parquet")) == \
         [f"run_{s}.parquet" for s in (0, 1, 2)]
     assert not list((tmp_path / "runs").glob(".*"))
     pd.testing.assert_frame_equal(_reproducible(df), _reproducible(local3))
@@ -134,13 +134,17 @@ def test_killed_experiment_resumes_to_the_uninterrupted_table(tmp_path):
         rec = pd.read_parquet(p)
         assert len(rec) >= 1 and set(rec["seed"]) == {int(p.stem.split("_")[1])}
     # only atomic-writer temp files may be left besides them
-    others = [p.name for p in (out / "runs").iterdir() if p not in records]
-    assert all(n.startswith(".run_") and n.endswith(".tmp") for n in others), others
+    others = [p.name for p in (out / "runs").iterdir()
+              if p not in records and not p.name.startswith("series_")]
+    assert all(n.startswith((".run_", ".series_")) and n.endswith(".tmp") for n in others), others
     assert not (out / "results.parquet").exists()
 
     df = run_experiment(SCENARIO, runs, out, workers=1, resume=True, progress=False)
     assert not list((out / "runs").glob(".*"))  # the resume removed the stray temp files
-    assert sorted(p.name for p in (out / "runs").iterdir()) == \
+    assert sorted(p.name for p in (out / "runs").glob("run_*")) == \
         sorted(f"run_{s}.parquet" for s in range(runs))
+    # a seed's series is written before its record: every record has its series
+    assert {p.name[len("series_"):] for p in (out / "runs").glob("series_*")} >= \
+        {p.name[len("run_"):] for p in (out / "runs").glob("run_*")}
     fresh = run_experiment(SCENARIO, runs, fresh_dir, workers=1, progress=False)
     pd.testing.assert_frame_equal(_reproducible(df), _reproducible(fresh))

@@ -31,8 +31,10 @@ def serial(tmp_path_factory):
 
 def test_record_layout_and_manifest(serial):
     out, df = serial
-    assert sorted(p.name for p in (out / "runs").glob("*.parquet")) == \
+    assert sorted(p.name for p in (out / "runs").glob("run_*.parquet")) == \
         [f"run_{s}.parquet" for s in (3, 4, 5, 6)]
+    assert sorted(p.name for p in (out / "runs").glob("series_*.parquet")) == \
+        [f"series_{s}.parquet" for s in (3, 4, 5, 6)]
     assert not list((out / "runs").glob(".*"))  # no temp files left
     man = json.loads((out / "manifest.json").read_text())
     assert man["scenario"] == SCENARIO

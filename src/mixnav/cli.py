@@ -121,23 +121,22 @@ def experiment(scenario: str = typer.Argument(..., help="Shipped scenario name o
                                                   "instead of on local cores; needs mixnav[dask]."),
                progress: bool = typer.Option(True, "--progress/--no-progress")):
     """Run every method of a scenario over N seeded runs on all local cores (or a Dask cluster); keep partial results."""
-    from .config.loader import resolve
-    from .experiment.mc_report import write_experiment_report
-    from .experiment.montecarlo import aggregate, run_experiment
-    from .io.atomic import atomic_write_dataframe
+    from .experiment.montecarlo import run_experiment, write_experiment_outputs
 
     try:
         df = run_experiment(scenario, runs, out_dir, workers=workers, resume=resume, seeds_from=seeds_from,
                             progress=progress, scheduler=scheduler)
     except MixnavError as exc:
         _fail(exc)
-    summary = aggregate(df)
-    atomic_write_dataframe(Path(out_dir) / "summary.csv", summary)
-    write_experiment_report(out_dir, scenario, df, summary, config_text=resolve(scenario)[0])
-    t = Table("method", "metric", "mean", "95 % CI", "n", title=f"{scenario}: {df['seed'].nunique()} runs")
+    paths = write_experiment_outputs(scenario, df, out_dir)
+    summary = paths["summary"]
+    sweep = "sweep_value" in summary.columns
+    t = Table(*(["sweep"] if sweep else []), "method", "metric", "mean", "95 % CI", "n",
+              title=f"{scenario}: {df['seed'].nunique()} runs")
     for _, r in summary[summary["metric"].isin(["horizontal_rmse_m", "yaw_rmse_deg", "velocity_rmse_mps",
                                                 "epoch_time_mean_us"])].iterrows():
-        t.add_row(r["method"], r["metric"], f"{r['mean']:.4g}", f"+-{r['ci95_half']:.2g}", str(int(r["n"])))
+        t.add_row(*([f"{r['sweep_value']:g}"] if sweep else []), r["method"], r["metric"],
+                  f"{r['mean']:.4g}", f"+-{r['ci95_half']:.2g}", str(int(r["n"])))
     out.print(t)
     out.print(f"results: {Path(out_dir) / 'results.parquet'}, report: {Path(out_dir) / 'report.html'}")
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import tomllib
 from importlib import resources
 from pathlib import Path
@@ -81,10 +82,84 @@ def load_scenario(name_or_path: str) -> tuple[Scenario, str, str]:
     """
     text, source = resolve(name_or_path)
     sc = _validate(Scenario, text, source)
-    _check_imu_models(sc, source)
-    gnss_noise(sc, source)  # a bad noise table fails at load time
-    imu_white_noise(sc, source)
+    _check_scenario(sc, source)
+    if sc.sweep is not None:
+        sweep_variants(sc, text, source)  # a bad sweep value fails at load time
     return sc, source, text
+
+
+def _check_scenario(sc, source: str) -> None:
+    """What the schema alone cannot check: IMU models and noise tables build."""
+    _check_imu_models(sc, source)
+    gnss_noise(sc, source)
+    imu_white_noise(sc, source)
+
+
+_KEY_PART = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)((?:\[\d+\])*)$")
+
+
+def _set_dotted(data: dict, key: str, value, source: str, where: str) -> None:
+    """Replace ``data[a][b][i]...`` named by the dotted ``key`` (``a.b[i].c``) with ``value``.
+
+    Every table and list on the way must exist (a typo is an error); the last
+    name may be new, so a sweep can add an optional key (its schema checks it).
+    """
+    parts = key.split(".")
+    node = data
+    for n, part in enumerate(parts):
+        m = _KEY_PART.match(part)
+        if m is None:
+            raise ConfigError(f"'{key}' is not a dotted key such as 'gnss.position_noise.weights' "
+                              "or 'methods[0].states'", file=source, key=where)
+        name, idx = m.group(1), [int(i) for i in re.findall(r"\d+", m.group(2))]
+        last = n == len(parts) - 1
+        if not isinstance(node, dict):
+            raise ConfigError(f"'{'.'.join(parts[:n])}' is not a table", file=source, key=where)
+        if (not last or idx) and name not in node:
+            raise ConfigError(f"the scenario has no key '{'.'.join(parts[:n + 1])}'", file=source,
+                              key=where)
+        if not idx and last:
+            node[name] = value
+            return
+        if not idx:
+            node = node[name]
+            continue
+        node = node[name]
+        for j, i in enumerate(idx):
+            if not isinstance(node, list) or i >= len(node):
+                raise ConfigError(f"'{key}': index {i} is out of range", file=source, key=where)
+            if last and j == len(idx) - 1:
+                node[i] = value
+                return
+            node = node[i]
+
+
+def sweep_variants(sc: Scenario, text: str, source: str) -> list[tuple[float, Scenario]]:
+    """The scenario once per sweep value: ``[(value, scenario), ...]``.
+
+    Without a sweep: ``[(nan, sc)]``. Each variant is the file's TOML with the
+    ``sweep.set`` keys replaced and the ``sweep`` table removed, validated in
+    full; an error names the sweep entry (``sweep.set."KEY"[i]``) and the
+    problem the schema found.
+    """
+    import copy
+    if sc.sweep is None:
+        return [(float("nan"), sc)]
+    base = tomllib.loads(text)
+    base.pop("sweep")
+    out = []
+    for i, value in enumerate(sc.sweep.values):
+        data = copy.deepcopy(base)
+        for key, vals in sc.sweep.set.items():
+            _set_dotted(data, key, copy.deepcopy(vals[i]), source, f'sweep.set."{key}"[{i}]')
+        where = f"sweep value {value:g} ({sc.sweep.name})"
+        try:
+            variant = _validate_data(Scenario, data, source)
+            _check_scenario(variant, source)
+        except ConfigError as exc:
+            raise ConfigError(f"{where}: {exc.message}", file=source, key=exc.key) from None
+        out.append((float(value), variant))
+    return out
 
 
 def imu_white_noise(sc, source):
@@ -122,6 +197,10 @@ def _validate(model, text: str, source: str):
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"not valid TOML: {exc}", file=source) from None
+    return _validate_data(model, data, source)
+
+
+def _validate_data(model, data: dict, source: str):
     try:
         return model.model_validate(data)
     except ValidationError as exc:

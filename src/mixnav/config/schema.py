@@ -188,6 +188,32 @@ class MethodConfig(Strict):
     imu_errors: dict[str, str] | None = None
 
 
+class SweepConfig(Strict):
+    """A parameter swept by ``mixnav experiment``: every run is repeated per value.
+
+    ``name`` labels the swept quantity, ``values`` are its values (numbers,
+    the x axis of the sweep figures), and ``set`` maps dotted scenario keys
+    (``"gnss.position_noise.weights"``, ``"methods[0].states"``) to one TOML
+    value per entry of ``values``. Each variant is the scenario with those
+    keys replaced, validated like a scenario file (see
+    :func:`mixnav.config.loader.sweep_variants`).
+    """
+
+    name: str = Field(min_length=1)
+    values: list[float] = Field(min_length=1)
+    set: dict[str, list] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _lengths(self):
+        if len(set(self.values)) != len(self.values):
+            raise ValueError(f"sweep values must be distinct, got {self.values}")
+        for k, v in self.set.items():
+            if len(v) != len(self.values):
+                raise ValueError(f"sweep.set.\"{k}\" has {len(v)} entries, sweep.values has "
+                                 f"{len(self.values)}: give one per value")
+        return self
+
+
 class Scenario(Strict):
     scenario: ScenarioInfo
     trajectory: TrajectoryConfig
@@ -195,6 +221,7 @@ class Scenario(Strict):
     gnss: GnssConfig
     init: InitConfig
     methods: list[MethodConfig] = Field(min_length=1)
+    sweep: SweepConfig | None = None
 
     @model_validator(mode="after")
     def _unique_methods(self):

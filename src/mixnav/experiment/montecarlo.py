@@ -6,7 +6,16 @@ Output folder of :func:`run_experiment` (every file written atomically)::
                            version, runs, seeds, methods
     runs/run_<seed>.parquet  one record per finished run: one row per method with
                            scenario, seed, method and the flat scalar metrics
+                           (``run_<seed>_v<i>.parquet`` and a ``sweep_value``
+                           column when the scenario declares a sweep)
+    runs/series_<seed>.parquet  the run's per-epoch errors, filter sigmas, NEES
+                           and NIS (one row per method and output epoch),
+                           written before the record
     results.parquet/.csv   all records concatenated (written last)
+
+A scenario with a ``[sweep]`` table runs every seed once per sweep value
+(:func:`mixnav.config.loader.sweep_variants`); the sweep value is a column
+of the records and of the aggregates.
 
 Runs execute in this process (``workers=1``), in a local process pool, or on a
 Dask cluster (``scheduler="tcp://host:8786"``, needs ``pip install
@@ -42,11 +51,12 @@ from .. import __version__
 from ..errors import ConfigError
 from ..io.atomic import atomic_write_dataframe, atomic_write_json
 
-__all__ = ["run_experiment", "aggregate", "paired_comparison", "flatten_metrics",
+__all__ = ["run_experiment", "aggregate", "paired_comparison", "flatten_metrics", "series_files",
+           "write_experiment_outputs",
            "TIMING_METRICS", "ID_COLUMNS"]
 
 #: Columns identifying a record row; every other column is a metric.
-ID_COLUMNS = ("scenario", "seed", "method")
+ID_COLUMNS = ("scenario", "seed", "method", "sweep_value")
 #: Metrics measured with the wall clock: not reproducible from the seed.
 TIMING_METRICS = ("epoch_time_mean_us", "update_time_mean_us", "wall_time_s")
 
@@ -63,8 +73,16 @@ def _sha256(text: str) -> str:
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
-def _record_path(out_dir: Path, seed: int) -> Path:
-    return out_dir / RUNS_DIR / f"run_{seed}.parquet"
+def _stem(seed: int, variant: int | None) -> str:
+    return f"{seed}" if variant is None else f"{seed}_v{variant}"
+
+
+def _record_path(out_dir: Path, seed: int, variant: int | None = None) -> Path:
+    return out_dir / RUNS_DIR / f"run_{_stem(seed, variant)}.parquet"
+
+
+def _series_path(out_dir: Path, seed: int, variant: int | None = None) -> Path:
+    return out_dir / RUNS_DIR / f"series_{_stem(seed, variant)}.parquet"
 
 
 # ---------------------------------------------------------------- one run
@@ -101,16 +119,20 @@ def flatten_metrics(m: dict) -> dict:
 
 
 def _load(scenario: str, expect_sha: str | None = None):
-    """(Scenario, source, sha) of ``scenario``, loaded once per process.
+    """(variants, source, sha, sweep) of ``scenario``, loaded once per process.
 
-    Without ``expect_sha`` the file is always read again (the caller wants
-    its current text); with it, the cached copy serves while it matches.
+    ``variants`` is ``[(sweep_value, Scenario), ...]`` (one entry, the
+    scenario itself with a NaN value, when it has no sweep); ``sweep`` is
+    its :class:`~mixnav.config.schema.SweepConfig` or None. Without ``expect_sha`` the file is
+    always read again (the caller wants its current text); with it, the
+    cached copy serves while it matches.
     """
-    from ..config.loader import load_scenario
+    from ..config.loader import load_scenario, sweep_variants
     hit = _SCENARIOS.get(scenario)
     if hit is None or expect_sha is None or hit[2] != expect_sha:
         sc, source, text = load_scenario(scenario)
-        hit = _SCENARIOS[scenario] = (sc, source, _sha256(text))
+        hit = _SCENARIOS[scenario] = (sweep_variants(sc, text, source), source, _sha256(text),
+                                      sc.sweep)
     if expect_sha is not None and hit[2] != expect_sha:
         raise ConfigError("the scenario file changed while the experiment was running "
                           f"(sha256 {hit[2][:12]}..., expected {expect_sha[:12]}...)", file=hit[1])
@@ -119,33 +141,64 @@ def _load(scenario: str, expect_sha: str | None = None):
 
 def _ideal(sc, source: str, sha: str):
     from ..sim.scenario import truth_and_ideal_imu
-    key = (source, sha)
+    # keyed by what the truth depends on, so sweep variants share it when they can
+    key = (source, sha, sc.trajectory.model_dump_json(), sc.imu.rate)
     if key not in _IDEAL_CACHE:
         _IDEAL_CACHE[key] = truth_and_ideal_imu(sc, source)
     return _IDEAL_CACHE[key]
 
 
-def _compute_run(scenario: str, sha: str, seed: int) -> pd.DataFrame:
-    """The record of one seeded run: one row per method."""
+#: Solution-table columns kept in the per-run series (when present).
+SERIES_PREFIXES = ("err_", "sig_", "nees_")
+
+
+def _series(name: str, res, table: pd.DataFrame) -> pd.DataFrame:
+    """Per-epoch errors, sigmas, NEES and NIS of one method (see the module docstring)."""
+    cols = ["time_s"] + [c for c in table.columns if c.startswith(SERIES_PREFIXES)]
+    out = table[cols + ["gnss_used", "in_outage"]].copy()
+    out.insert(0, "method", name)
+    # NIS of the update at each output epoch where one was applied (every
+    # measurement epoch is an output epoch; checked, else NIS is left out)
+    nis = np.full(len(out), np.nan)
+    dof = np.full(len(out), np.nan)
+    used = out["gnss_used"].to_numpy(bool)
+    if len(res.nis) == int(used.sum()):
+        nis[used], dof[used] = res.nis, res.nis_dim
+    out["nis"], out["nis_dim"] = nis, dof
+    return out
+
+
+def _compute_run(scenario: str, sha: str, seed: int, variant: int | None = None):
+    """The record (one row per method) and the series of one seeded run."""
     from .run import method_metrics, run_scenario, solution_table
-    sc, source, sha = _load(scenario, sha)
+    variants, source, sha, _ = _load(scenario, sha)
+    value, sc = variants[0 if variant is None else variant]
     out = run_scenario(sc, source, seed, ideal=_ideal(sc, source, sha))
-    rows = []
+    rows, series = [], []
     for name, res in out.results.items():
         table = solution_table(res, out.sim.truth, out.sim.outages)
-        rows.append({"scenario": sc.scenario.name, "seed": int(seed), "method": name,
-                     **flatten_metrics(method_metrics(res, table, out.sim.outages))})
-    return pd.DataFrame(rows)
+        row = {"scenario": sc.scenario.name, "seed": int(seed), "method": name}
+        if variant is not None:
+            row["sweep_value"] = value
+        rows.append({**row, **flatten_metrics(method_metrics(res, table, out.sim.outages))})
+        series.append(_series(name, res, table))
+    return pd.DataFrame(rows), pd.concat(series, ignore_index=True)
 
 
-def _run_and_write(scenario: str, sha: str, seed: int, out_dir: str) -> int:
-    """Worker task: compute one run and write its record file; returns the seed."""
+def _run_and_write(scenario: str, sha: str, seed: int, out_dir: str,
+                   variant: int | None = None) -> int:
+    """Worker task: compute one run, write its series, then its record; returns the seed.
+
+    The record is written last: its presence marks a finished run.
+    """
     try:
-        rec = _compute_run(scenario, sha, seed)
+        rec, series = _compute_run(scenario, sha, seed, variant)
     except BaseException as exc:
-        exc.add_note(f"while running seed {seed} of scenario {scenario}")
+        where = "" if variant is None else f" (sweep variant {variant})"
+        exc.add_note(f"while running seed {seed}{where} of scenario {scenario}")
         raise
-    atomic_write_dataframe(_record_path(Path(out_dir), seed), rec)
+    atomic_write_dataframe(_series_path(Path(out_dir), seed, variant), series)
+    atomic_write_dataframe(_record_path(Path(out_dir), seed, variant), rec)
     return seed
 
 
@@ -198,7 +251,8 @@ def _read_records(out_dir: Path) -> pd.DataFrame:
     if not files:
         return pd.DataFrame(columns=list(ID_COLUMNS))
     df = pd.concat([pd.read_parquet(f) for f in files], ignore_index=True)
-    return df.sort_values(["seed", "method"], kind="stable").reset_index(drop=True)
+    keys = ["sweep_value", "seed", "method"] if "sweep_value" in df.columns else ["seed", "method"]
+    return df.sort_values(keys, kind="stable").reset_index(drop=True)
 
 
 def run_experiment(scenario: str, runs: int, out_dir: Path, workers: int | None = None,
@@ -260,10 +314,14 @@ def run_experiment(scenario: str, runs: int, out_dir: Path, workers: int | None 
     if scheduler is not None and (not isinstance(scheduler, str) or not scheduler.strip()):
         raise ConfigError(f"--scheduler must be a Dask scheduler address such as "
                           f"'tcp://127.0.0.1:8786', got {scheduler!r}")
-    sc, source, sha = _load(scenario)  # unknown scenario: the loader's ConfigError
+    variants, source, sha, sweep = _load(scenario)  # unknown scenario: the loader's ConfigError
+    sc = variants[0][1]
     out_dir = Path(out_dir)
     seeds = [int(seeds_from) + i for i in range(int(runs))]
     methods = [m.name for m in sc.methods]
+    # (seed, variant) of every run asked for; variant None when there is no sweep
+    tasks = [(s, v) for s in seeds
+             for v in ([None] if sweep is None else range(len(variants)))]
 
     manifest_path = out_dir / MANIFEST
     old_seeds: list[int] = []
@@ -289,37 +347,39 @@ def run_experiment(scenario: str, runs: int, out_dir: Path, workers: int | None 
 
     # Connect before writing anything: an unreachable scheduler leaves no trace.
     client = None
-    if scheduler is not None and any(not _record_path(out_dir, s).exists() for s in seeds):
+    if scheduler is not None and any(not _record_path(out_dir, *t).exists() for t in tasks):
         client = _dask_client(scheduler.strip())
     try:
-        return _run_seeds(scenario, sc, source, sha, seeds, methods, old_seeds, out_dir,
+        return _run_tasks(scenario, sc, sweep, source, sha, tasks, methods, old_seeds, out_dir,
                           workers, progress, client)
     finally:
         if client is not None:
             client.close()
 
 
-def _run_seeds(scenario, sc, source, sha, seeds, methods, old_seeds, out_dir, workers,
+def _run_tasks(scenario, sc, sweep, source, sha, tasks, methods, old_seeds, out_dir, workers,
                progress, client) -> pd.DataFrame:
-    """Write the manifest, run the seeds without a record, collect the records."""
-    all_seeds = sorted(set(old_seeds) | set(seeds))
-    atomic_write_json(out_dir / MANIFEST, {
-        "scenario": sc.scenario.name, "source": source, "scenario_sha256": sha,
-        "mixnav_version": __version__, "runs": len(all_seeds), "seeds": all_seeds,
-        "methods": methods})
+    """Write the manifest, run the tasks without a record, collect the records."""
+    all_seeds = sorted(set(old_seeds) | {s for s, _ in tasks})
+    manifest = {"scenario": sc.scenario.name, "source": source, "scenario_sha256": sha,
+                "mixnav_version": __version__, "runs": len(all_seeds), "seeds": all_seeds,
+                "methods": methods}
+    if sweep is not None:
+        manifest["sweep"] = {"name": sweep.name, "values": list(sweep.values)}
+    atomic_write_json(out_dir / MANIFEST, manifest)
     runs_dir = out_dir / RUNS_DIR
     runs_dir.mkdir(parents=True, exist_ok=True)
-    for stray in runs_dir.glob(".run_*.tmp"):  # left by a killed worker
+    for stray in runs_dir.glob(".*.tmp"):  # left by a killed worker
         stray.unlink(missing_ok=True)
-    todo = [s for s in seeds if not _record_path(out_dir, s).exists()]
+    todo = [t for t in tasks if not _record_path(out_dir, *t).exists()]
 
     bar = _Progress(len(todo), progress)
     try:
         if client is not None and todo:
             _run_dask(client, scenario, sha, todo, out_dir, bar)
         elif workers == 1 or len(todo) <= 1:
-            for s in todo:
-                _run_and_write(scenario, sha, s, str(out_dir))
+            for s, v in todo:
+                _run_and_write(scenario, sha, s, str(out_dir), v)
                 bar.advance()
         elif todo:
             _run_pool(scenario, sha, todo, out_dir, min(workers, len(todo)), bar)
@@ -332,12 +392,13 @@ def _run_seeds(scenario, sc, source, sha, seeds, methods, old_seeds, out_dir, wo
     return df
 
 
-def _run_pool(scenario: str, sha: str, todo: list[int], out_dir: Path, workers: int,
+def _run_pool(scenario: str, sha: str, todo: list[tuple], out_dir: Path, workers: int,
               bar: _Progress) -> None:
     pool = ProcessPoolExecutor(max_workers=workers, initializer=_worker_init,
                                initargs=(scenario, sha))
     try:
-        pending = {pool.submit(_run_and_write, scenario, sha, s, str(out_dir)) for s in todo}
+        pending = {pool.submit(_run_and_write, scenario, sha, s, str(out_dir), v)
+                   for s, v in todo}
         while pending:
             done, pending = wait(pending, return_when=FIRST_COMPLETED)
             for f in done:
@@ -388,14 +449,14 @@ def _task_scenario(scenario: str) -> str:
     return str(p.resolve()) if p.suffix == ".toml" or p.exists() else scenario
 
 
-def _run_dask(client, scenario: str, sha: str, todo: list[int], out_dir: Path,
+def _run_dask(client, scenario: str, sha: str, todo: list[tuple], out_dir: Path,
               bar: _Progress) -> None:
     import uuid
     from distributed import as_completed
     task_scenario, target = _task_scenario(scenario), str(Path(out_dir).resolve())
     tag = uuid.uuid4().hex[:8]
-    futures = [client.submit(_run_and_write, task_scenario, sha, s, target, pure=False,
-                             key=f"mixnav-run-{tag}-seed{s}") for s in todo]
+    futures = [client.submit(_run_and_write, task_scenario, sha, s, target, v, pure=False,
+                             key=f"mixnav-run-{tag}-{_stem(s, v)}") for s, v in todo]
     try:
         for f in as_completed(futures, loop=client.loop):
             f.result()  # re-raises a worker's error (noted with its seed)
@@ -407,6 +468,61 @@ def _run_dask(client, scenario: str, sha: str, todo: list[int], out_dir: Path,
     finally:
         for f in futures:
             f.release()
+
+
+def series_files(out_dir: Path) -> tuple[list[Path], list[float] | None]:
+    """The series files of the finished runs in ``out_dir`` and, for a sweep,
+    the sweep value of each (from the manifest); ``(files, None)`` otherwise.
+
+    A run counts as finished when its record exists (the series is written
+    before it), so an interrupted run's lone series is left out.
+    """
+    import json
+    import re
+    out_dir = Path(out_dir)
+    man = json.loads((out_dir / MANIFEST).read_text(encoding="utf-8"))
+    values = man.get("sweep", {}).get("values")
+    files, vals = [], []
+    for rec in sorted((out_dir / RUNS_DIR).glob("run_*.parquet")):
+        stem = rec.name[len("run_"):-len(".parquet")]
+        f = out_dir / RUNS_DIR / f"series_{stem}.parquet"
+        if not f.exists():
+            continue  # a record from before series were written
+        files.append(f)
+        m = re.search(r"_v(\d+)$", stem)
+        if values is not None and m is not None:
+            vals.append(float(values[int(m.group(1))]))
+    return files, (vals if values is not None else None)
+
+
+def write_experiment_outputs(scenario: str, results: pd.DataFrame, out_dir: Path) -> dict:
+    """Summaries and report of an experiment folder after :func:`run_experiment`.
+
+    Writes ``summary.csv`` (:func:`aggregate`), ``series_summary.parquet``
+    (per-epoch RMS errors, sigmas, NEES, NIS over runs), ``consistency.csv``
+    and ``report.html`` with its PNG figures. Returns the tables written
+    (``summary``, ``series``, ``consistency``).
+    """
+    from ..config.loader import resolve
+    from .mc_report import write_experiment_report
+    from .mc_series import consistency_table, summarise_series
+    out_dir = Path(out_dir)
+    variants, _, _, sweep = _load(scenario)
+    sc = variants[0][1]
+    summary = aggregate(results)
+    atomic_write_dataframe(out_dir / "summary.csv", summary)
+    files, values = series_files(out_dir)
+    series = summarise_series(files, values)
+    consistency = consistency_table(series)
+    if not series.empty:
+        atomic_write_dataframe(out_dir / "series_summary.parquet", series)
+    if not consistency.empty:
+        atomic_write_dataframe(out_dir / "consistency.csv", consistency)
+    write_experiment_report(out_dir, scenario, results, summary, config_text=resolve(scenario)[0],
+                            series=series, consistency=consistency,
+                            outages=[tuple(o) for o in sc.gnss.outages],
+                            sweep_name=None if sweep is None else sweep.name)
+    return {"summary": summary, "series": series, "consistency": consistency}
 
 
 # ---------------------------------------------------------------- statistics
@@ -440,28 +556,36 @@ def aggregate(results: pd.DataFrame) -> pd.DataFrame:
     -------
     pandas.DataFrame
         Long format, one row per (method, metric): ``method, metric, n,
-        mean, std, ci95_low, ci95_high, ci95_half, median``. NaNs are left
-        out of ``n``; the CI uses the t distribution with ``n - 1`` degrees
-        of freedom (NaN when ``n < 2``).
+        mean, std, ci95_low, ci95_high, ci95_half, median``; with a leading
+        ``sweep_value`` column (one block per value) when the results have
+        one. NaNs are left out of ``n``; the CI uses the t distribution with
+        ``n - 1`` degrees of freedom (NaN when ``n < 2``).
     """
     if "method" not in results.columns:
         raise ConfigError("results table has no 'method' column")
     rows = []
     metrics = _metric_columns(results)
-    for method, g in results.groupby("method", sort=True):
+    sweep = "sweep_value" in results.columns
+    keys = ["sweep_value", "method"] if sweep else ["method"]
+    for key, g in results.groupby(keys, sort=True):
+        ident = dict(zip(keys, key))
         for metric in metrics:
             x = g[metric].to_numpy(dtype=float)
             x = x[np.isfinite(x)]
             mean, std, half = _ci95(x)
-            rows.append({"method": method, "metric": metric, "n": int(len(x)), "mean": mean,
+            rows.append({**ident, "metric": metric, "n": int(len(x)), "mean": mean,
                          "std": std, "ci95_low": mean - half, "ci95_high": mean + half,
                          "ci95_half": half, "median": float(np.median(x)) if len(x) else math.nan})
-    return pd.DataFrame(rows, columns=["method", "metric", "n", "mean", "std", "ci95_low",
-                                       "ci95_high", "ci95_half", "median"])
+    return pd.DataFrame(rows, columns=keys + ["metric", "n", "mean", "std", "ci95_low",
+                                              "ci95_high", "ci95_half", "median"])
 
 
-def paired_comparison(results: pd.DataFrame, metric: str, a: str, b: str) -> dict:
+def paired_comparison(results: pd.DataFrame, metric: str, a: str, b: str,
+                      sweep_value: float | None = None) -> dict:
     """Compare methods ``a`` and ``b`` on ``metric`` over the seeds both have.
+
+    With a sweep (a ``sweep_value`` column) give the ``sweep_value`` to
+    compare at; without it the pairs are taken over every (value, seed).
 
     Returns
     -------
@@ -488,10 +612,19 @@ def paired_comparison(results: pd.DataFrame, metric: str, a: str, b: str) -> dic
         if m not in known:
             raise ConfigError(f"unknown method '{m}'; known: {', '.join(map(str, known))}")
     sub = results[results["method"].isin([a, b])]
-    if sub.duplicated(["seed", "method"]).any():
+    index = ["seed"]
+    if "sweep_value" in sub.columns:
+        if sweep_value is not None:
+            sub = sub[np.isclose(sub["sweep_value"].to_numpy(float), float(sweep_value))]
+            if sub.empty:
+                raise ConfigError(f"no results at sweep value {sweep_value:g}")
+        else:
+            index = ["sweep_value", "seed"]
+    if sub.duplicated(index + ["method"]).any():
         raise ConfigError("results hold a (seed, method) pair more than once "
                           "(several scenarios mixed?)")
-    wide = sub.pivot(index="seed", columns="method", values=metric).astype(float)
+    wide = sub.pivot_table(index=index, columns="method", values=metric,
+                           aggfunc="first", dropna=False).astype(float)
     wide = wide[np.isfinite(wide[a]) & np.isfinite(wide[b])]
     n = len(wide)
     if n < 2:

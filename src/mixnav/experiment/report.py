@@ -75,7 +75,8 @@ def _outage_table(methods: dict) -> str:
 
 
 def write_report(out_dir: Path, title: str, metrics: dict, figures: dict[str, Figure],
-                 notes: Sequence[str] = (), config_text: str | None = None) -> Path:
+                 notes: Sequence[str] = (), config_text: str | None = None,
+                 sections: Sequence[tuple[str, str]] = ()) -> Path:
     """Save the figures as PNG and write ``report.html`` with them embedded.
 
     Parameters
@@ -95,6 +96,9 @@ def write_report(out_dir: Path, title: str, metrics: dict, figures: dict[str, Fi
         Shown as a bullet list.
     config_text : str, optional
         The scenario file, shown verbatim at the end.
+    sections : sequence of (title, html)
+        Further sections placed after the metrics tables; the HTML must be
+        built with every piece of text already escaped.
 
     Returns
     -------
@@ -110,8 +114,9 @@ def write_report(out_dir: Path, title: str, metrics: dict, figures: dict[str, Fi
     if "scenario" in metrics:
         parts.append(f"<p>Scenario: <b>{_esc(metrics['scenario'])}</b></p>")
 
-    parts.append("<h2>Accuracy and cost</h2>")
-    parts.append(_metrics_table(methods))
+    if methods:
+        parts.append("<h2>Accuracy and cost</h2>")
+        parts.append(_metrics_table(methods))
     if any(m.get("outages") for m in methods.values()):
         parts.append("<h2>GNSS outages</h2>")
         parts.append(_outage_table(methods))
@@ -120,6 +125,8 @@ def write_report(out_dir: Path, title: str, metrics: dict, figures: dict[str, Fi
         parts.append("<h2>Numerical recoveries</h2><ul>" + "".join(
             f"<li>{_esc(n)}: " + ", ".join(f"{_esc(k)} {_esc(v)}" for k, v in r.items()) + "</li>"
             for n, r in rec.items()) + "</ul>")
+    for title_, body in sections:
+        parts.append(f"<h2>{_esc(title_)}</h2>{body}")
     if notes:
         parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{_esc(n)}</li>" for n in notes) + "</ul>")
 
