@@ -146,3 +146,14 @@ def test_rmse_outside_the_outages():
     m = compute_metrics(df, outages=[(2.0, 4.0)])
     assert m["horizontal_rmse_outside_outages_m"] == pytest.approx(1.0)
     assert m["outages"][0]["horizontal_max_m"] == pytest.approx(10.0)
+
+
+def test_percentiles_of_a_uniform_ramp():
+    # |error| = 0, 1, ..., 100 (signs alternate): numpy's linear 95th percentile is 95 exactly
+    n = 101
+    e = np.arange(n, dtype=float) * np.where(np.arange(n) % 2, -1.0, 1.0)
+    m = compute_metrics(table(n=n, err_d_m=e, err_pitch_deg=e, err_vn_mps=e))
+    assert m["vertical_p95_m"] == pytest.approx(95.0)
+    assert m["pitch_p95_deg"] == pytest.approx(95.0)
+    assert m["velocity_p95_mps"] == pytest.approx(95.0)
+    assert m["roll_p95_deg"] == 0.0

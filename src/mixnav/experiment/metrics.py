@@ -21,13 +21,18 @@ METRIC_KEYS_DOC: dict[str, str] = {
     "pitch_max_deg": "largest absolute pitch error [deg]",
     "yaw_rmse_deg": "RMS of the yaw error, wrapped to [-180, 180) [deg]",
     "yaw_max_deg": "largest absolute yaw error [deg]",
+    "roll_p95_deg": "95th percentile of the absolute roll error [deg]",
+    "pitch_p95_deg": "95th percentile of the absolute pitch error [deg]",
+    "yaw_p95_deg": "95th percentile of the absolute yaw error [deg]",
     "horizontal_rmse_m": "RMS of the horizontal position error hypot(north, east) [m]",
     "horizontal_max_m": "largest horizontal position error [m]",
     "horizontal_p95_m": "95th percentile of the horizontal position error [m]",
     "vertical_rmse_m": "RMS of the vertical position error [m]",
     "vertical_max_m": "largest absolute vertical position error [m]",
+    "vertical_p95_m": "95th percentile of the absolute vertical error [m]",
     "velocity_rmse_mps": "RMS of the 3-D velocity error norm [m/s]",
     "velocity_max_mps": "largest 3-D velocity error norm [m/s]",
+    "velocity_p95_mps": "95th percentile of the 3-D velocity error norm [m/s]",
     "n_epochs": "number of epochs scored",
     "outages": "per GNSS outage window: start_s, end_s, horizontal_max_m, vertical_max_m, "
                "horizontal_final_m (at the window's last epoch)",
@@ -115,15 +120,18 @@ def compute_metrics(solution: pd.DataFrame,
             e = c[f"err_{a}_deg"]
             m[f"{a}_rmse_deg"] = _rms(e)
             m[f"{a}_max_deg"] = float(np.max(np.abs(e)))
+            m[f"{a}_p95_deg"] = float(np.percentile(np.abs(e), 95))
     m["horizontal_rmse_m"] = _rms(hor)
     m["horizontal_max_m"] = float(hor.max())
     m["horizontal_p95_m"] = float(np.percentile(hor, 95))
     m["vertical_rmse_m"] = _rms(ver)
     m["vertical_max_m"] = float(ver.max())
+    m["vertical_p95_m"] = float(np.percentile(ver, 95))
     if _VEL in groups:
         vel = np.sqrt(c["err_vn_mps"] ** 2 + c["err_ve_mps"] ** 2 + c["err_vd_mps"] ** 2)
         m["velocity_rmse_mps"] = _rms(vel)
         m["velocity_max_mps"] = float(vel.max())
+        m["velocity_p95_mps"] = float(np.percentile(vel, 95))
     m["n_epochs"] = int(len(hor))
 
     t = c["time_s"]

@@ -221,17 +221,20 @@ class _Progress:
                                        TimeElapsedColumn, TimeRemainingColumn)
             from rich.console import Console
             self.bar = Progress(TextColumn("runs"), BarColumn(), MofNCompleteColumn(),
+                                TextColumn("{task.fields[rate]}"),
                                 TimeElapsedColumn(), TimeRemainingColumn(),
                                 console=Console(stderr=True))
             self.bar.start()
-            self.task = self.bar.add_task("runs", total=total)
+            self.task = self.bar.add_task("runs", total=total, rate="")
 
     def advance(self) -> None:
         self.done += 1
         if not self.enabled:
             return
         if self.bar is not None:
-            self.bar.advance(self.task)
+            dt = time.perf_counter() - self.t0
+            self.bar.update(self.task, advance=1,
+                            rate=f"{self.done / dt:.2f} runs/s" if dt > 0 else "")
         elif self.done % self.step == 0 or self.done == self.total:
             dt = time.perf_counter() - self.t0
             rate = self.done / dt if dt > 0 else float("inf")
