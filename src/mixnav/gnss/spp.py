@@ -1,0 +1,436 @@
+"""Single-point positioning (SPP) from GPS L1 C/A pseudoranges by iterated weighted least squares.
+
+Model of one pseudorange (all in metres)::
+
+    rho_i = | R3(OMEGA_E tau_i) r_sat_i - r_rx | + b - c dt_sv_i + T_i + I_i + e_i
+
+- ``r_sat_i``: satellite position at its transmit time in the ECEF frame of
+  that time; ``R3(OMEGA_E tau_i)`` turns it into the ECEF frame of the
+  reception time (Earth rotation during the travel time ``tau_i``, recomputed
+  from the geometric range at every iteration).
+- ``b``: receiver clock bias [m]; ``dt_sv_i``: satellite clock [s] with the
+  relativistic term and T_GD (IS-GPS-200 20.3.3.3.3.1-2, see
+  :mod:`mixnav.gnss.ephemeris`).
+- ``T_i``: troposphere, Saastamoinen's zenith delays for a standard atmosphere
+  at the receiver height (pressure 1013.25 hPa, 15 C at sea level, lapse
+  6.5 K/km, relative humidity 0.5), mapped with ``1 / sin(el)``; applied when
+  ``troposphere=True``. The ``1/sin`` mapping is the simple one: it is within
+  a few centimetres of the Niell mapping above 15 deg, a few decimetres at
+  5 deg.
+- ``I_i``: ionosphere, the broadcast Klobuchar model (IS-GPS-200
+  20.3.3.5.2.5, Figure 20-4) when its alpha/beta coefficients are given (the
+  RINEX navigation header's ION ALPHA / ION BETA), else not applied.
+- ``e_i``: noise with the elevation-dependent variance
+  ``sigma_i^2 = sigma_a^2 + sigma_b^2 / sin^2(el_i)`` (the usual
+  RTKLIB-style model), times a per-satellite factor if the caller gives one.
+  The weights are ``1 / sigma_i^2``.
+
+The unknowns ``x = (r_rx [m] ECEF, b [m])`` are found by Gauss-Newton
+iterations of WLS, from the Earth's centre (or a given start) until the
+position step is below ``tol``. The covariance is the inverse of the WLS
+normal matrix ``(H^T W H)^-1`` (solved through its Cholesky factor); it is
+the covariance of the estimate if the ``sigma_i`` are right. DOPs are from
+the unweighted ``(H^T H)^-1`` in the local east-north-up frame. Elevation
+mask, troposphere and ionosphere are applied once the iterate is within
+500 km of the Earth's surface (the first steps from the Earth's centre have
+no meaningful elevation).
+
+A single epoch with fewer than 4 usable satellites raises ``ValueError`` in
+:func:`wls_position`; :func:`solve_epochs` counts such epochs as skipped
+(status ``"too few satellites"``) instead.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla
+from .geometry import C_LIGHT, SatelliteStates, earth_rotation_correction, elevation_azimuth
+
+#: Epoch status codes of :func:`solve_epochs`.
+STATUS_OK = "ok"
+STATUS_FEW = "too few satellites"
+STATUS_NOT_CONVERGED = "not converged"
+
+
+@dataclass(frozen=True)
+class SppOptions:
+    """Settings of the SPP solver (SI units, angles in rad).
+
+    Attributes
+    ----------
+    elevation_mask : float
+        Satellites below it are not used [rad].
+    sigma_a, sigma_b : float
+        Constant and ``1/sin(el)`` parts of the pseudorange sigma [m].
+    troposphere, ionosphere : bool
+        Apply the Saastamoinen and (if coefficients are given) Klobuchar
+        models.
+    max_iter : int
+        Gauss-Newton iterations at most.
+    tol : float
+        Convergence when the position step is below it [m].
+    """
+
+    elevation_mask: float = np.deg2rad(10.0)
+    sigma_a: float = 3.0
+    sigma_b: float = 3.0
+    troposphere: bool = True
+    ionosphere: bool = True
+    max_iter: int = 15
+    tol: float = 1e-4
+
+
+@dataclass(frozen=True)
+class SppSolution:
+    """One epoch's WLS solution.
+
+    Attributes
+    ----------
+    pos_ecef : ndarray (3,)
+        Receiver position [m].
+    clock_bias : float
+        Receiver clock bias [m] (divide by c for seconds).
+    cov : ndarray (4, 4)
+        ``(H^T W H)^-1`` of (x, y, z, b) [m^2].
+    residuals : ndarray (k,)
+        Post-fit residuals, measured minus modelled [m], of the used satellites.
+    prn : ndarray of int (k,)
+        Satellites used.
+    elevation : ndarray (k,)
+        [rad].
+    dop : dict
+        ``gdop, pdop, hdop, vdop, tdop``.
+    iterations : int
+    converged : bool
+    n_rejected_mask : int
+        Satellites left out by the elevation mask.
+    """
+
+    pos_ecef: np.ndarray
+    clock_bias: float
+    cov: np.ndarray
+    residuals: np.ndarray
+    prn: np.ndarray
+    elevation: np.ndarray
+    dop: dict
+    iterations: int
+    converged: bool
+    n_rejected_mask: int = 0
+
+    @property
+    def n_sat(self) -> int:
+        return len(self.prn)
+
+
+# ---------------------------------------------------------------- atmosphere
+def saastamoinen(lat, h, elevation, humidity: float = 0.5):
+    """Tropospheric delay [m] for a standard atmosphere (Saastamoinen 1972).
+
+    Parameters
+    ----------
+    lat : float
+        Receiver geodetic latitude [rad].
+    h : float
+        Receiver ellipsoidal height [m] (used as height above sea level;
+        clipped to [0, 10 km] for the standard atmosphere).
+    elevation : ndarray (n,)
+        [rad], > 0.
+    humidity : float
+        Relative humidity in [0, 1].
+    """
+    hgt = float(np.clip(h, 0.0, 1.0e4))
+    p_hpa = 1013.25 * (1.0 - 2.2557e-5 * hgt) ** 5.2568          # standard atmosphere
+    t_k = 288.15 - 6.5e-3 * hgt
+    t_c = t_k - 273.15
+    e_hpa = 6.108 * humidity * np.exp(17.15 * t_c / (t_c + 234.7))  # water vapour pressure (Magnus)
+    zhd = 0.0022768 * p_hpa / (1.0 - 0.00266 * np.cos(2.0 * lat) - 0.00028 * hgt / 1e3)
+    zwd = 0.002277 * (1255.0 / t_k + 0.05) * e_hpa
+    return (zhd + zwd) / np.sin(np.asarray(elevation, float))
+
+
+def klobuchar(lat, lon, elevation, azimuth, tow, alpha, beta):
+    """Broadcast ionospheric L1 delay [m] (IS-GPS-200 20.3.3.5.2.5, Figure 20-4).
+
+    Parameters
+    ----------
+    lat, lon : float
+        Receiver geodetic latitude, longitude [rad].
+    elevation, azimuth : ndarray (n,)
+        [rad].
+    tow : float
+        GPS seconds of week of the reception [s].
+    alpha, beta : ndarray (4,)
+        Broadcast coefficients (s, s/semicircle^k).
+    """
+    el = np.asarray(elevation, float) / np.pi                      # semicircles
+    az = np.asarray(azimuth, float)
+    phi_u, lam_u = lat / np.pi, lon / np.pi
+    psi = 0.0137 / (el + 0.11) - 0.022                              # Earth's central angle
+    phi_i = np.clip(phi_u + psi * np.cos(az), -0.416, 0.416)       # sub-ionospheric latitude
+    lam_i = lam_u + psi * np.sin(az) / np.cos(phi_i * np.pi)       # and longitude
+    phi_m = phi_i + 0.064 * np.cos((lam_i - 1.617) * np.pi)        # geomagnetic latitude
+    t = np.mod(4.32e4 * lam_i + tow, 86400.0)                       # local time
+    f = 1.0 + 16.0 * (0.53 - el) ** 3                               # obliquity factor
+    powers = phi_m[:, None] ** np.arange(4)
+    amp = np.maximum(powers @ np.asarray(alpha, float), 0.0)
+    per = np.maximum(powers @ np.asarray(beta, float), 72000.0)
+    x = 2.0 * np.pi * (t - 50400.0) / per
+    day = f * (5.0e-9 + amp * (1.0 - x**2 / 2.0 + x**4 / 24.0))
+    return C_LIGHT * np.where(np.abs(x) < 1.57, day, f * 5.0e-9)
+
+
+# ---------------------------------------------------------------- solver
+def _dops(H: np.ndarray, pos_ecef: np.ndarray) -> dict:
+    lla = ecef_to_lla(pos_ecef)
+    c_ne = dcm_ecef_to_ned(lla[0], lla[1])
+    c_ue = np.array([c_ne[1], c_ne[0], -c_ne[2]])                  # ECEF -> ENU
+    G = np.column_stack([H[:, :3] @ c_ue.T, H[:, 3]])
+    q = np.linalg.solve(G.T @ G, np.eye(4))
+    d = np.diag(q)
+    return {"gdop": float(np.sqrt(d.sum())), "pdop": float(np.sqrt(d[:3].sum())),
+            "hdop": float(np.sqrt(d[:2].sum())), "vdop": float(np.sqrt(d[2])), "tdop": float(np.sqrt(d[3]))}
+
+
+def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOptions(), x0=None,
+                 sigma_scale=None, iono_alpha=None, iono_beta=None, tow: float = 0.0) -> SppSolution:
+    """WLS position and clock of one epoch.
+
+    Parameters
+    ----------
+    pseudorange : ndarray (n,)
+        Measured pseudoranges [m], one per satellite of ``sats``.
+    sats : SatelliteStates
+        The satellites at their transmit times (ECEF of the transmit time),
+        with their clocks [s].
+    options : SppOptions
+    x0 : ndarray (4,) or None
+        Start (ECEF position [m], clock [m]); None: the Earth's centre.
+    sigma_scale : ndarray (n,) or None
+        Per-satellite factor on the elevation-dependent sigma.
+    iono_alpha, iono_beta : ndarray (4,) or None
+        Klobuchar coefficients; the model is applied when both are given and
+        ``options.ionosphere``.
+    tow : float
+        Reception time of week [s] (Klobuchar's local time).
+
+    Raises
+    ------
+    ValueError
+        Fewer than 4 satellites (given, or left after the elevation mask),
+        or inputs of inconsistent length.
+    """
+    rho = np.asarray(pseudorange, float)
+    n = len(sats)
+    if rho.shape != (n,):
+        raise ValueError(f"pseudorange has shape {rho.shape}, expected ({n},) (one per satellite)")
+    if not np.all(np.isfinite(rho)):
+        raise ValueError("pseudoranges must be finite")
+    if n < 4:
+        raise ValueError(f"{n} satellites: at least 4 are needed for position and clock")
+    scale = np.ones(n) if sigma_scale is None else np.asarray(sigma_scale, float)
+    x = np.zeros(4) if x0 is None else np.asarray(x0, float).copy()
+    use_iono = options.ionosphere and iono_alpha is not None and iono_beta is not None
+    rho_corr = rho + C_LIGHT * sats.clock_bias                      # satellite clock removed
+    converged = False
+    it = 0
+    for it in range(1, options.max_iter + 1):
+        r_geo = np.linalg.norm(sats.pos_ecef - x[:3], axis=1)
+        sat_rx = earth_rotation_correction(sats.pos_ecef, r_geo / C_LIGHT)
+        rng = np.linalg.norm(sat_rx - x[:3], axis=1)
+        u = (sat_rx - x[:3]) / rng[:, None]
+        near_surface = abs(np.linalg.norm(x[:3]) - 6.371e6) < 5e5
+        model = rng + x[3]
+        sel = np.ones(n, bool)
+        el = np.full(n, np.pi / 2)
+        if near_surface:
+            el, az = elevation_azimuth(x[:3], sat_rx)
+            sel = el >= options.elevation_mask
+            lla = ecef_to_lla(x[:3])
+            if options.troposphere:
+                model = model + np.where(sel, saastamoinen(lla[0], lla[2], np.maximum(el, 1e-3)), 0.0)
+            if use_iono:
+                model = model + klobuchar(lla[0], lla[1], el, az, tow, iono_alpha, iono_beta)
+        if sel.sum() < 4:
+            raise ValueError(f"{int(sel.sum())} satellites above the elevation mask "
+                             f"({np.rad2deg(options.elevation_mask):.1f} deg): at least 4 are needed")
+        sigma = scale * np.sqrt(options.sigma_a**2 + options.sigma_b**2 / np.sin(np.maximum(el, 1e-3)) ** 2)
+        H = np.column_stack([-u, np.ones(n)])[sel]
+        w = 1.0 / sigma[sel] ** 2
+        dz = (rho_corr - model)[sel]
+        N = H.T @ (w[:, None] * H)
+        L = np.linalg.cholesky(N)
+        dx = np.linalg.solve(L.T, np.linalg.solve(L, H.T @ (w * dz)))
+        x = x + dx
+        if np.linalg.norm(dx[:3]) < options.tol and near_surface:
+            converged = True
+            break
+    # post-fit quantities at the final estimate (the last step is below tol)
+    r_geo = np.linalg.norm(sats.pos_ecef - x[:3], axis=1)
+    sat_rx = earth_rotation_correction(sats.pos_ecef, r_geo / C_LIGHT)
+    rng = np.linalg.norm(sat_rx - x[:3], axis=1)
+    u = (sat_rx - x[:3]) / rng[:, None]
+    el, az = elevation_azimuth(x[:3], sat_rx)
+    model = rng + x[3]
+    lla = ecef_to_lla(x[:3])
+    if options.troposphere:
+        model = model + np.where(sel, saastamoinen(lla[0], lla[2], np.maximum(el, 1e-3)), 0.0)
+    if use_iono:
+        model = model + klobuchar(lla[0], lla[1], el, az, tow, iono_alpha, iono_beta)
+    sigma = scale * np.sqrt(options.sigma_a**2 + options.sigma_b**2 / np.sin(np.maximum(el, 1e-3)) ** 2)
+    H = np.column_stack([-u, np.ones(n)])[sel]
+    N = H.T @ (H / sigma[sel, None] ** 2)
+    L = np.linalg.cholesky(N)
+    L_inv = np.linalg.solve(L, np.eye(4))
+    cov = L_inv.T @ L_inv
+    return SppSolution(pos_ecef=x[:3].copy(), clock_bias=float(x[3]), cov=cov, residuals=(rho_corr - model)[sel],
+                       prn=np.asarray(sats.prn)[sel], elevation=el[sel], dop=_dops(H, x[:3]), iterations=it,
+                       converged=converged, n_rejected_mask=int(n - sel.sum()))
+
+
+def satellites_at_transmit(ephemeris, prn, pseudorange, week, tow_rx, apply_tgd: bool = True):
+    """Satellite states at each signal's transmit time.
+
+    The transmit time in GPS time is ``t_rx - rho / c - dt_sv`` (the
+    pseudorange measures the receiver clock minus the satellite clock);
+    ``dt_sv`` is taken from a first evaluation at ``t_rx - rho / c`` (its
+    change over that microseconds-to-milliseconds shift is far below 1 ns).
+
+    Returns
+    -------
+    states : SatelliteStates
+        The satellites with usable ephemeris.
+    keep : ndarray of bool (n,)
+        Which of the inputs they are.
+    skips : EphemerisSkips
+    """
+    prn = np.asarray(prn, int)
+    rho = np.asarray(pseudorange, float)
+    t_tx = tow_rx - rho / C_LIGHT
+    first, skips = ephemeris.states_and_skips(week, t_tx, prn, apply_tgd=apply_tgd)
+    keep = ~np.isin(prn, skips.prn)
+    t_tx = t_tx[keep] - first.clock_bias
+    states = ephemeris.states(week, t_tx, prn[keep], apply_tgd=apply_tgd)
+    return states, keep, skips
+
+
+@dataclass
+class SppTrack:
+    """Epoch-by-epoch SPP (epochs without a solution hold NaN).
+
+    Attributes
+    ----------
+    week : ndarray (k,)
+    tow : ndarray (k,)
+        Reception time, GPS week and seconds of week [s].
+    pos_ecef : ndarray (k, 3)
+        [m].
+    clock_bias : ndarray (k,)
+        [m].
+    cov : ndarray (k, 4, 4)
+        [m^2].
+    n_sat : ndarray of int (k,)
+        Satellites used.
+    pdop, hdop, vdop : ndarray (k,)
+    rms_residual : ndarray (k,)
+        [m].
+    status : ndarray of str (k,)
+        ``ok``, ``too few satellites`` or ``not converged``.
+    skipped_satellites : dict
+        Satellite observations left out over all epochs, per reason
+        (ephemeris reasons and ``below elevation mask``).
+    """
+
+    week: np.ndarray
+    tow: np.ndarray
+    pos_ecef: np.ndarray
+    clock_bias: np.ndarray
+    cov: np.ndarray
+    n_sat: np.ndarray
+    pdop: np.ndarray
+    hdop: np.ndarray
+    vdop: np.ndarray
+    rms_residual: np.ndarray
+    status: np.ndarray
+    skipped_satellites: dict = field(default_factory=dict)
+
+    @property
+    def ok(self) -> np.ndarray:
+        return self.status == STATUS_OK
+
+    def status_counts(self) -> dict[str, int]:
+        vals, counts = np.unique(self.status, return_counts=True)
+        return {str(v): int(c) for v, c in zip(vals, counts)}
+
+
+def solve_epochs(ephemeris, week, tow_rx, epoch, prn, pseudorange, options: SppOptions = SppOptions(),
+                 sigma_scale=None) -> SppTrack:
+    """SPP at every epoch; epochs without a solution are counted, not raised.
+
+    Parameters
+    ----------
+    ephemeris : BroadcastEphemeris
+    week, tow_rx : ndarray (k,)
+        Reception time of each epoch (GPS week, seconds of week [s]).
+    epoch : ndarray of int (m,)
+        Epoch index (0..k-1) of each observation.
+    prn, pseudorange : ndarray (m,)
+        Satellite and pseudorange [m] of each observation.
+    options : SppOptions
+    sigma_scale : ndarray (m,) or None
+        Per-observation factor on the sigma model.
+
+    Returns
+    -------
+    SppTrack
+        Each epoch starts from the previous solution (the Earth's centre for
+        the first and after a failed one).
+    """
+    week = np.asarray(week)
+    tow_rx = np.asarray(tow_rx, float)
+    epoch = np.asarray(epoch, int)
+    prn = np.asarray(prn, int)
+    rho = np.asarray(pseudorange, float)
+    scale = np.ones(len(rho)) if sigma_scale is None else np.asarray(sigma_scale, float)
+    k = len(tow_rx)
+    nan3 = np.full((k, 3), np.nan)
+    out = SppTrack(week=week.copy(), tow=tow_rx.copy(), pos_ecef=nan3, clock_bias=np.full(k, np.nan),
+                   cov=np.full((k, 4, 4), np.nan), n_sat=np.zeros(k, int), pdop=np.full(k, np.nan),
+                   hdop=np.full(k, np.nan), vdop=np.full(k, np.nan), rms_residual=np.full(k, np.nan),
+                   status=np.full(k, STATUS_OK, dtype=object))
+    skipped: dict[str, int] = {}
+    order = np.argsort(epoch, kind="stable")
+    bounds = np.searchsorted(epoch[order], np.arange(k + 1))
+    x0 = None
+    for j in range(k):
+        rows = order[bounds[j]:bounds[j + 1]]
+        sats, keep, skips = satellites_at_transmit(ephemeris, prn[rows], rho[rows], week[j], tow_rx[j])
+        for r, c in skips.counts().items():
+            skipped[r] = skipped.get(r, 0) + c
+        if len(sats) < 4:
+            out.status[j] = STATUS_FEW
+            continue
+        try:
+            sol = wls_position(rho[rows][keep], sats, options, x0=x0, sigma_scale=scale[rows][keep],
+                               iono_alpha=ephemeris.iono_alpha, iono_beta=ephemeris.iono_beta, tow=tow_rx[j])
+        except ValueError:
+            out.status[j] = STATUS_FEW
+            x0 = None
+            continue
+        skipped["below elevation mask"] = skipped.get("below elevation mask", 0) + sol.n_rejected_mask
+        if not sol.converged:
+            out.status[j] = STATUS_NOT_CONVERGED
+            x0 = None
+            continue
+        out.pos_ecef[j] = sol.pos_ecef
+        out.clock_bias[j] = sol.clock_bias
+        out.cov[j] = sol.cov
+        out.n_sat[j] = sol.n_sat
+        out.pdop[j], out.hdop[j], out.vdop[j] = sol.dop["pdop"], sol.dop["hdop"], sol.dop["vdop"]
+        out.rms_residual[j] = float(np.sqrt(np.mean(sol.residuals**2)))
+        x0 = np.append(sol.pos_ecef, sol.clock_bias)
+    out.status = out.status.astype(str)
+    out.skipped_satellites = skipped
+    return out
