@@ -20,9 +20,14 @@ MinSpeed = _quantity(u.VELOCITY, positive=True)
 
 
 class DatasetInfo(Strict):
+    """``kind``: ``ins-gnss`` (IMU + GNSS fixes, filtered by ``methods``) or
+    ``gnss-raw`` (raw GNSS measurements, epoch-by-epoch single-point
+    positioning, sections ``raw_gnss`` and ``reference_point``)."""
+
     name: str
     description: str = ""
     data_dir: str = "."
+    kind: Literal["ins-gnss", "gnss-raw"] = "ins-gnss"
 
 
 class ImuFile(Strict):
@@ -100,11 +105,49 @@ class Alignment(Strict):
     position_sigma: PosSigma
 
 
+class RawGnss(Strict):
+    """Raw GNSS measurements and the broadcast ephemeris for single-point positioning.
+
+    ``file``: the measurement log; ``navigation``: the RINEX navigation file
+    (both relative to the data folder). ``elevation_mask``, ``sigma_a``,
+    ``sigma_b`` (pseudorange sigma ``sqrt(a^2 + b^2 / sin^2(el))``),
+    ``troposphere`` (Saastamoinen) and ``ionosphere`` (Klobuchar, when the
+    navigation header has its coefficients) set the solver
+    (:class:`mixnav.gnss.spp.SppOptions`); ``max_sv_time_uncertainty``
+    rejects measurements the receiver reports as worse than it.
+    """
+
+    format: Literal["android-gnsslogger"]
+    file: str
+    navigation: str
+    elevation_mask: _quantity(u.ANGLE, nonnegative=True) = 10.0 * u.DEG  # type: ignore[valid-type]
+    sigma_a: _quantity(u.LENGTH, nonnegative=True) = 3.0  # type: ignore[valid-type]
+    sigma_b: _quantity(u.LENGTH, nonnegative=True) = 3.0  # type: ignore[valid-type]
+    troposphere: bool = True
+    ionosphere: bool = True
+    max_sv_time_uncertainty: _quantity(u.TIME, positive=True) = 500e-9  # type: ignore[valid-type]
+
+
+class ReferencePoint(Strict):
+    """A surveyed static point (WGS-84 geodetic, ellipsoidal height)."""
+
+    latitude: _quantity(u.ANGLE)  # type: ignore[valid-type]
+    longitude: _quantity(u.ANGLE)  # type: ignore[valid-type]
+    height: _quantity(u.LENGTH)  # type: ignore[valid-type]
+
+
+#: sections each kind needs, and those it must not have
+KIND_SECTIONS = {"ins-gnss": (("imu", "gnss", "alignment", "methods"), ("raw_gnss", "reference_point")),
+                 "gnss-raw": (("raw_gnss",), ("imu", "gnss", "alignment", "methods", "reference"))}
+
+
 class Dataset(Strict):
     dataset: DatasetInfo
-    imu: ImuFile
-    gnss: GnssFile
+    imu: ImuFile | None = None
+    gnss: GnssFile | None = None
     reference: ReferenceFile | None = None
     installation: Installation = Installation()
-    alignment: Alignment
-    methods: list[MethodConfig] = Field(min_length=1)
+    alignment: Alignment | None = None
+    methods: list[MethodConfig] | None = Field(default=None, min_length=1)
+    raw_gnss: RawGnss | None = None
+    reference_point: ReferencePoint | None = None

@@ -222,9 +222,26 @@ def load_dataset(name_or_path: str):
     from .dataset_schema import Dataset
     text, source = resolve(name_or_path, "datasets", "dataset")
     ds = _validate(Dataset, text, source)
+    _check_kind(ds, source)
+    if ds.dataset.kind == "gnss-raw":
+        return ds, source, text
     _check_imu_models(ds, source)
     corruption(ds, source)
     return ds, source, text
+
+
+def _check_kind(ds, source):
+    """Each dataset kind has its sections (dataset_schema.KIND_SECTIONS)."""
+    from .dataset_schema import KIND_SECTIONS
+    kind = ds.dataset.kind
+    needed, foreign = KIND_SECTIONS[kind]
+    for key in needed:
+        if getattr(ds, key) is None:
+            raise ConfigError(f"required key is missing (dataset.kind = '{kind}')", file=source, key=key)
+    for key in foreign:
+        if getattr(ds, key) is not None:
+            raise ConfigError(f"not used by dataset.kind = '{kind}' (remove it, or change the kind)",
+                              file=source, key=key)
 
 
 def corruption(ds, source):

@@ -162,9 +162,16 @@ def initial_state(ds: Dataset, imu: ImuData, fixes: GnssFixes, lever: np.ndarray
     return InitialState(time=m.time, nav=nav_vector(m.q_nb, m.v_n, m.lla), sensor0=sensor0, **sig)
 
 
-def process(ds: Dataset, source: str, data: str | None = None) -> ProcessOutput:
-    """Read, align and filter a dataset with every configured method."""
+def process(ds: Dataset, source: str, data: str | None = None):
+    """Read, align and filter a dataset with every configured method.
+
+    A ``gnss-raw`` dataset is solved epoch by epoch instead
+    (:func:`mixnav.experiment.spp_process.process_raw`, returning an ``SppOutput``).
+    """
     folder = find_data_dir(ds, data, source)
+    if ds.dataset.kind == "gnss-raw":
+        from .spp_process import process_raw
+        return process_raw(ds, source, folder)
     t_read = _time.perf_counter()
     imu = install(read_imu(ds, folder), ds)
     all_fixes = read_gnss(ds, folder)
@@ -205,6 +212,9 @@ def process(ds: Dataset, source: str, data: str | None = None) -> ProcessOutput:
 
 def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = None) -> dict:
     """Solutions, metrics (against the reference), figures and report of a processed dataset."""
+    if po.dataset.dataset.kind == "gnss-raw":
+        from .spp_process import write_raw
+        return write_raw(out_dir, po, config_text)
     withheld = tuple(tuple(w) for w in po.dataset.gnss.withhold)
     ref = po.dataset.reference
     lever = po.lever if ref is not None and ref.point == "antenna" else None

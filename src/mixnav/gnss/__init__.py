@@ -4,4 +4,7 @@ geometry.py      constants of the GPS signal and Earth model used by GNSS code,
                  line-of-sight geometry (elevation, azimuth, Earth rotation
                  during signal travel), the :class:`SatelliteStates` type every
                  satellite source returns
+ephemeris.py     GPS broadcast ephemeris from RINEX navigation files (georinex),
+                 orbit, velocity and clock per IS-GPS-200
+spp.py           single-point positioning by iterated weighted least squares
 """

@@ -1,0 +1,133 @@
+"""`mixnav process` of a raw-GNSS dataset (android-static): config validation, and
+the epoch-by-epoch SPP end to end when ../shared/data is present."""
+
+import json
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from mixnav.cli import app
+from mixnav.config import load_dataset
+from mixnav.errors import ConfigError
+
+from .conftest import DATA_DIR, data_file
+
+runner = CliRunner()
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+LOG = "pseudoranges_log_2016_06_30_21_26_07.txt"
+SHIPPED = (Path(__file__).resolve().parents[1] / "src/mixnav/config/datasets/android-static.toml").read_text()
+
+
+def _cfg(tmp_path, text, name="raw.toml"):
+    p = tmp_path / name
+    p.write_text(text)
+    return str(p)
+
+
+def test_shipped_config_validates():
+    ds, src, _ = load_dataset("android-static")
+    assert ds.dataset.kind == "gnss-raw" and ds.raw_gnss.format == "android-gnsslogger"
+    assert ds.raw_gnss.elevation_mask == pytest.approx(np.deg2rad(10))
+    assert ds.raw_gnss.max_sv_time_uncertainty == pytest.approx(5e-7)
+    assert ds.reference_point.height == -28.0
+    assert ds.imu is None and ds.methods is None
+
+
+@pytest.mark.parametrize("edit, key, message", [
+    (('sigma_b = "3 m"', 'sigma_b = "3 m"\nsigma_c = "1 m"'), "raw_gnss.sigma_c", "unknown key"),
+    (('elevation_mask = "10 deg"', 'elevation_mask = 10'), "raw_gnss.elevation_mask", "bare number"),
+    (('format = "android-gnsslogger"', 'format = "rinex-obs"'), "raw_gnss.format", "android-gnsslogger"),
+    (('height = "-28 m"', 'height = "-28 deg"'), "reference_point.height", "length is expected"),
+    (('[raw_gnss]', '[imu]\nformat = "csv"\nfile = "x"\n[raw_gnss]'), "imu", "not used by dataset.kind"),
+])
+def test_config_errors_name_file_and_key(tmp_path, edit, key, message):
+    text = SHIPPED.replace(*edit)
+    assert text != SHIPPED
+    with pytest.raises(ConfigError, match=message) as ei:
+        load_dataset(_cfg(tmp_path, text))
+    assert ei.value.key == key and "raw.toml" in str(ei.value)
+
+
+def test_kind_needs_its_sections(tmp_path):
+    text = re.sub(r"\[raw_gnss\].*?\n\n", "", SHIPPED, flags=re.S)
+    with pytest.raises(ConfigError, match="required key is missing") as ei:
+        load_dataset(_cfg(tmp_path, text))
+    assert ei.value.key == "raw_gnss"
+    # an INS dataset (the default kind) still needs its IMU
+    with pytest.raises(ConfigError, match="required key is missing") as ei:
+        load_dataset(_cfg(tmp_path, '[dataset]\nname = "x"\n', "ins.toml"))
+    assert ei.value.key == "imu"
+
+
+def _process(tmp_path, data_dir):
+    out = tmp_path / "out"
+    res = runner.invoke(app, ["process", "android-static", "--data", str(data_dir), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    return out, json.loads((out / "metrics.json").read_text())
+
+
+def test_android_static_end_to_end(tmp_path):
+    folder = data_file("android-static", LOG).parent
+    out, m = _process(tmp_path, folder)
+    s = m["methods"]["spp"]
+    for key in ("horizontal_rmse_m", "horizontal_max_m", "horizontal_p95_m", "vertical_rmse_m",
+                "vertical_max_m", "vertical_p95_m"):
+        assert np.isfinite(s[key]), key
+    assert m["epochs_total"] == 223 and m["epochs_used"] + m["epochs_skipped"] == 223
+    assert m["epochs_used"] >= 200
+    # a phone's SPP: tens of metres (recorded: 10 m horizontal, 32 m vertical RMSE);
+    # a wrong time, clock or Earth-rotation handling gives hundreds of metres or more
+    assert 1.0 < s["horizontal_rmse_m"] < 30.0 and s["horizontal_p95_m"] < 50.0
+    assert s["vertical_rmse_m"] < 80.0
+    assert s["horizontal_max_m"] >= s["horizontal_p95_m"] and s["vertical_max_m"] >= s["vertical_p95_m"]
+    assert 4 <= s["n_sat_mean"] <= 12
+    csv = pd.read_csv(out / "solution_spp.csv")
+    pq = pd.read_parquet(out / "solution_spp.parquet")
+    assert len(csv) == len(pq) == 223 and "err_n_m" in csv and "sig_n_m" in pq
+    h = np.hypot(csv["err_n_m"], csv["err_e_m"])[csv["status"] == "ok"]
+    assert np.sqrt(np.mean(h**2)) == pytest.approx(s["horizontal_rmse_m"], rel=1e-9)
+    assert (out / "report.html").exists() and (out / "horizontal_error.png").exists()
+    # every metrics key is documented
+    doc = (DOCS / "outputs.md").read_text()
+    for key in list(m) + list(s):
+        assert f"`{key}`" in doc, key
+
+
+def test_epochs_with_too_few_satellites_are_counted(tmp_path):
+    src = data_file("android-static", LOG)
+    folder = tmp_path / "data"
+    folder.mkdir()
+    shutil.copy(src.parent / "hour1820.16n", folder)
+    # keep only 3 satellites in the epochs of the first 10 TimeNanos values
+    lines = src.read_text().splitlines(keepends=True)
+    times = []
+    kept = []
+    for line in lines:
+        if line.startswith("Raw,"):
+            f = line.split(",")
+            if f[2] not in times:
+                times.append(f[2])
+            if times.index(f[2]) < 10 and int(f[11]) not in (2, 6, 12):
+                continue
+        kept.append(line)
+    (folder / LOG).write_text("".join(kept))
+    out, m = _process(tmp_path, folder)
+    assert m["epochs_skipped"] == 10 and m["epoch_status"] == {"ok": 213, "too few satellites": 10}
+    assert m["methods"]["spp"]["n_epochs"] == 213
+    t = pd.read_csv(out / "solution_spp.csv")
+    assert t["lat_deg"][:10].isna().all() and t["lat_deg"][10:].notna().all()
+
+
+def test_missing_navigation_file_is_a_data_error(tmp_path):
+    src = data_file("android-static", LOG)
+    folder = tmp_path / "data"
+    folder.mkdir()
+    shutil.copy(src, folder)
+    res = runner.invoke(app, ["process", "android-static", "--data", str(folder), "--out", str(tmp_path / "o")])
+    assert res.exit_code != 0 and "hour1820.16n" in res.output and "not found" in res.output
+    assert not (tmp_path / "o" / "metrics.json").exists()
