@@ -93,6 +93,21 @@ def _check_scenario(sc, source: str) -> None:
     _check_imu_models(sc, source)
     gnss_noise(sc, source)
     imu_white_noise(sc, source)
+    observable_noise(sc, source)
+
+
+def observable_noise(sc, source):
+    """Noise processes of the raw observables ``(pseudorange, range rate, carrier)``;
+    each None when not given (or when the scenario has no satellites)."""
+    from .. import units as u
+    from ..noise.processes import from_config
+    s = sc.gnss.satellites
+    if s is None:
+        return None, None, None
+    dims = (("pseudorange_noise", u.LENGTH), ("range_rate_noise", u.VELOCITY),
+            ("carrier_noise", u.LENGTH))
+    return tuple(None if getattr(s, k) is None else
+                 from_config(getattr(s, k), d, f"gnss.satellites.{k}", source) for k, d in dims)
 
 
 _KEY_PART = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)((?:\[\d+\])*)$")

@@ -156,6 +156,59 @@ class ImuConfig(Strict):
     white_noise: dict | None = None
 
 
+class SatelliteOutageConfig(Strict):
+    """Satellites lost in ``window``: the listed ``prns``, or all but the
+    ``keep`` highest (``keep = 0``: all of them)."""
+
+    window: tuple[Time, Time]
+    prns: list[int] = Field(default_factory=list)
+    keep: int | None = Field(default=None, ge=0)
+
+    @model_validator(mode="after")
+    def _one_rule(self):
+        if not self.window[1] > self.window[0]:
+            raise ValueError(f"window ends ({self.window[1]:g} s) before it starts ({self.window[0]:g} s)")
+        if (self.keep is None) == (not self.prns):
+            raise ValueError("give either 'prns' (the satellites lost) or 'keep' (how many of the "
+                             "highest stay)")
+        return self
+
+
+ClockNoise = _quantity(u.Dimension(0.0, 1.0, -0.5), nonnegative=True)       # m/sqrt(s)
+ClockDriftNoise = _quantity(u.VELOCITY_RANDOM_WALK, nonnegative=True)       # m/s/sqrt(s)
+
+
+class SatellitesConfig(Strict):
+    """Simulated satellites and raw observables (``[gnss.satellites]``), for the
+    tight filters. Sigmas are what the filters are told and, unless a noise
+    process is given for that observable, the Gaussian noise added."""
+
+    constellation: Literal["gps24", "gps30"] = "gps30"
+    mask: Angle = float(np.radians(10.0))
+    pseudorange_sigma: _quantity(u.LENGTH, positive=True)
+    range_rate_sigma: _quantity(u.VELOCITY, positive=True)
+    carrier_sigma: _quantity(u.LENGTH, positive=True) = 0.003
+    clock_bias_noise: ClockNoise = float(np.sqrt(0.1))
+    clock_drift_noise: ClockDriftNoise = 0.1
+    outages: list[SatelliteOutageConfig] = Field(default_factory=list)
+    pseudorange_noise: dict | None = None
+    range_rate_noise: dict | None = None
+    carrier_noise: dict | None = None
+
+    @property
+    def n_satellites(self) -> int:
+        return {"gps24": 24, "gps30": 30}[self.constellation]
+
+    @model_validator(mode="after")
+    def _known_prns(self):
+        for i, o in enumerate(self.outages):
+            bad = [p for p in o.prns if not 1 <= p <= self.n_satellites]
+            if bad:
+                raise ValueError(f"outages[{i}]: PRN {bad} not in the {self.constellation} "
+                                 f"constellation (1-{self.n_satellites})")
+        return self
+
+
 class GnssConfig(Strict):
     """Simulated fixes. ``position_sigma``/``velocity_sigma`` are what the
     filters are told (their R); the noise actually added is Gaussian with
@@ -169,23 +222,29 @@ class GnssConfig(Strict):
     outages: Windows = Field(default_factory=list)
     position_noise: dict | None = None
     velocity_noise: dict | None = None
+    satellites: SatellitesConfig | None = None
 
 
 class InitConfig(Strict):
-    """1-sigma initial errors: the filter starts at truth plus a draw of these."""
+    """1-sigma initial errors: the filter starts at truth plus a draw of these.
+    ``clock_sigma`` (bias, drift) is the spread of the true receiver clock,
+    whose estimate starts at zero."""
 
     attitude_sigma: AngSigma
     velocity_sigma: VelSigma
     position_sigma: PosSigma
+    clock_sigma: tuple[_quantity(u.LENGTH, positive=True), _quantity(u.VELOCITY, positive=True)] = \
+        (10.0, 1.0)
 
 
 class MethodConfig(Strict):
     name: str
-    type: Literal["loose-ekf"]
+    type: Literal["loose-ekf", "tight-ekf"]
     states: Literal[15, 17, 21] = 15
     covariance_interval: Duration = 1.0
     imu_grade: str | None = None
     imu_errors: dict[str, str] | None = None
+    use_range_rate: bool = True
 
 
 class SweepConfig(Strict):
@@ -228,6 +287,14 @@ class Scenario(Strict):
         names = [m.name for m in self.methods]
         if len(set(names)) != len(names):
             raise ValueError(f"method names must be unique, got {names}")
+        for i, m in enumerate(self.methods):
+            if m.type == "tight-ekf":
+                if self.gnss.satellites is None:
+                    raise ValueError(f"methods[{i}] ({m.name}) is tightly coupled: the scenario "
+                                     "needs a [gnss.satellites] table")
+                if m.states == 15:
+                    raise ValueError(f"methods[{i}] ({m.name}) is tightly coupled: it needs the "
+                                     "receiver clock states (states = 17 or 21)")
         return self
 
     @property

@@ -49,8 +49,14 @@ def run_scenario(sc: Scenario, source: str | None = None, seed: int | None = Non
     sim = simulate(sc, seed, source, ideal=ideal)
     lever = np.asarray(sc.gnss.lever_arm, dtype=float)
     results = {}
+    clock = None
+    if sc.gnss.satellites is not None:
+        from ..ins.error_model import ClockModel
+        s = sc.gnss.satellites
+        clock = ClockModel(q_bias=s.clock_bias_noise ** 2, q_drift=s.clock_drift_noise ** 2)
     for i, m in enumerate(sc.methods):
-        filt, meas = registry.build(m, sim.imu_model, sim.fixes, lever, source, i)
+        filt, meas = registry.build(m, sim.imu_model, sim.fixes, lever, source, i,
+                                    observations=sim.observations, clock=clock)
         results[m.name] = filt.run(sim.imu, sim.init, meas)
     return RunOutput(sc, source or sc.scenario.name, sim, results)
 

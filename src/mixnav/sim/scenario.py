@@ -33,6 +33,7 @@ class SimulatedRun:
     fixes: GnssFixes
     init: InitialState
     outages: tuple
+    observations: object = None  # GnssObservations when the scenario has [gnss.satellites]
 
 
 def motion_segments(sc: Scenario) -> list[MotionSegment]:
@@ -79,7 +80,56 @@ def simulate(sc: Scenario, seed: int, source: str | None = None, ideal=None) -> 
     fixes = simulate_fixes(truth, fix_model, streams.get("gnss"), position_noise=pos_noise,
                            velocity_noise=vel_noise)
     init = initial_estimate(truth, sc, streams.get("init"))
-    return SimulatedRun(seed, truth, imu_ideal, imu, draw, model, fixes, init, fix_model.outages)
+    obs, outages = None, fix_model.outages
+    if g.satellites is not None:
+        obs = simulate_satellites(sc, truth, streams, source)
+        fixes = _without_fixes_below_four(fixes, obs)
+        # satellite outages leaving fewer than 4 are windows with no fix: scored like outages
+        lost = {tuple(o.window) for o in g.satellites.outages if o.keep is not None and o.keep < 4}
+        outages = tuple(sorted(set(outages) | lost))
+    return SimulatedRun(seed, truth, imu_ideal, imu, draw, model, fixes, init, outages, obs)
+
+
+def _without_fixes_below_four(fixes: GnssFixes, obs):
+    """The fixes at epochs where at least 4 satellites are tracked (a receiver
+    cannot fix its position and clock with fewer)."""
+    n_vis = np.zeros(len(fixes), dtype=int)
+    k = np.searchsorted(obs.time, fixes.time - 1e-6)
+    ok = (k < len(obs.time)) & (np.abs(obs.time[np.minimum(k, len(obs.time) - 1)] - fixes.time) < 1e-6)
+    n_vis[ok] = obs.n_visible[k[ok]]
+    keep = n_vis >= 4
+    sel = lambda a: None if a is None else a[keep]  # noqa: E731
+    out = GnssFixes(time=fixes.time[keep], lla=fixes.lla[keep], pos_sigma=fixes.pos_sigma[keep],
+                    vel_n=sel(fixes.vel_n), vel_sigma=sel(fixes.vel_sigma))
+    return out
+
+
+def constellation(name: str):
+    """The nominal constellation a scenario names."""
+    from ..gnss.constellation import NominalConstellation
+    return NominalConstellation.gps({"gps24": 4, "gps30": 5}[name])
+
+
+def simulate_satellites(sc: Scenario, truth: Trajectory, streams: Streams, source=None):
+    """Raw observables of a scenario with ``[gnss.satellites]``.
+
+    Streams: ``clock`` draws the true initial receiver clock (spread
+    ``init.clock_sigma``; the filters start from zero), ``satellites`` the
+    clock walk, the observable noise and the ambiguities.
+    """
+    from ..config.loader import observable_noise
+    from ..gnss.observables import SatelliteOutage, simulate_observables
+    g, s = sc.gnss, sc.gnss.satellites
+    clock0 = streams.get("clock").standard_normal(2) * np.asarray(sc.init.clock_sigma)
+    pr_noise, rr_noise, cp_noise = observable_noise(sc, source)
+    outs = [SatelliteOutage(o.window[0], o.window[1], tuple(o.prns), o.keep) for o in s.outages]
+    return simulate_observables(
+        truth, constellation(s.constellation), g.rate, np.asarray(g.lever_arm), s.mask,
+        s.pseudorange_sigma, s.range_rate_sigma, s.carrier_sigma,
+        (s.clock_bias_noise ** 2, s.clock_drift_noise ** 2), tuple(clock0),
+        streams.get("satellites"), outages=tuple(tuple(o) for o in g.outages),
+        satellite_outages=outs, pseudorange_noise=pr_noise, range_rate_noise=rr_noise,
+        carrier_noise=cp_noise)
 
 
 def initial_estimate(truth: Trajectory, sc: Scenario, rng: np.random.Generator) -> InitialState:
@@ -94,4 +144,4 @@ def initial_estimate(truth: Trajectory, sc: Scenario, rng: np.random.Generator) 
     lla = displace(truth.lla[0], -dr)
     nav = np.concatenate([q, truth.v_n[0] - dv, lla])
     return InitialState(time=float(truth.time[0]), nav=nav, sigma_att=s_att, sigma_vel=s_vel,
-                        sigma_pos=s_pos)
+                        sigma_pos=s_pos, sigma_clock=np.asarray(ic.clock_sigma, dtype=float))

@@ -1,0 +1,113 @@
+"""Tightly coupled pseudorange and pseudorange-rate (Doppler) in the error-state EKF.
+
+Innovations, true minus predicted, for each valid satellite ``j`` of the
+epoch (antenna ``r_a = r + C_en^T C_nb l``, unit line of sight ``u`` from the
+antenna to the satellite, receiver clock bias ``b`` [m] and drift ``d`` [m/s])::
+
+    z_rho_j = rho_j - (|r_s - r_a| + b)
+    z_rr_j  = rr_j  - (u . (v_s - v_a) + d)
+
+Jacobians (``dx = x_true - x_est``, ``C_true = exp(phi x) C_est``, position
+error in NED metres, ``u_n`` the line of sight in NED, ``l_n = C_nb l``,
+``w`` the compensated body rate)::
+
+    H_rho = [ u_n^T [l_n x],                0,       -u_n^T, 0,               0, 1, 0 ]
+    H_rr  = [ u_n^T [(C_nb (w x l)) x],    -u_n^T,   0,     -u_n^T C_nb [l x], 0, 0, 1 ]
+
+The dependence of the range rate on position through ``u`` (relative size
+|v_s - v_a| / range, about 1e-4 per metre) is left out of H, as is
+customary, and so is the factor ``1 - d(tau)/dt`` on the satellite velocity
+(a few mm/s against Doppler noise of centimetres per second).
+Needs a layout with the clock block (17 states or more).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..attitude import quat_to_dcm
+from ..errors import ConfigError
+from ..geodesy.frames import dcm_ecef_to_ned, lla_to_ecef
+from ..gnss.observables import GnssObservations
+from ..ins.error_model import StateLayout
+
+
+def _skew(a: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+class TightGnss:
+    """Pseudoranges (and range rates) of every valid satellite of an epoch.
+
+    Parameters
+    ----------
+    obs : GnssObservations
+    lever_arm : ndarray (3,)
+        Antenna in the body frame relative to the IMU [m].
+    layout : StateLayout
+        Must have the clock block.
+    use_range_rate : bool
+        Also use the Doppler range rates.
+    min_satellites : int
+        Epochs with fewer valid satellites give no update (the filter keeps
+        predicting); 1 uses whatever there is, which is the point of tight
+        coupling.
+    """
+
+    def __init__(self, obs: GnssObservations, lever_arm, layout: StateLayout,
+                 use_range_rate: bool = True, min_satellites: int = 1):
+        if layout.clk < 0:
+            raise ConfigError(f"tight coupling needs the receiver clock states: use states = 17, "
+                              f"not {layout.n}", key="states")
+        self.obs = obs
+        self.lever = np.asarray(lever_arm, dtype=float).reshape(3)
+        self.layout = layout
+        self.use_range_rate = bool(use_range_rate)
+        self.min_satellites = int(min_satellites)
+
+    @property
+    def times(self) -> np.ndarray:
+        return self.obs.time
+
+    def predict(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock) -> tuple:
+        """Predicted (pseudorange (n,), range rate (n,), u_n (n, 3), l_n, C_nb) of epoch ``i``."""
+        o = self.obs
+        sel = o.valid[i]
+        C_nb = quat_to_dcm(nav[0:4])
+        C_ne = dcm_ecef_to_ned(nav[7], nav[8])
+        l_n = C_nb @ self.lever
+        r_a = lla_to_ecef(nav[7:10]) + C_ne.T @ l_n
+        v_a_n = nav[4:7] + C_nb @ np.cross(w_b, self.lever)
+        d = o.sat_pos[i, sel] - r_a
+        rng = np.linalg.norm(d, axis=1)
+        u_e = d / rng[:, None]
+        u_n = u_e @ C_ne.T
+        rr = np.einsum("ij,ij->i", u_e, o.sat_vel[i, sel]) - u_n @ v_a_n
+        return rng + clock[0], rr + clock[1], u_n, l_n, C_nb
+
+    def measure(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock):
+        """``(z, H, R_diagonal)`` of epoch ``i``, or None with too few satellites."""
+        o, lay = self.obs, self.layout
+        sel = o.valid[i]
+        n = int(sel.sum())
+        if n < self.min_satellites:
+            return None
+        pr, rr, u_n, l_n, C_nb = self.predict(i, nav, w_b, clock)
+        use_rr = self.use_range_rate
+        m = 2 * n if use_rr else n
+        H = np.zeros((m, lay.n))
+        z = np.empty(m)
+        r = np.empty(m)
+        z[:n] = o.pseudorange[i, sel] - pr
+        H[:n, lay.att] = u_n @ _skew(l_n)
+        H[:n, lay.pos] = -u_n
+        H[:n, lay.clk] = 1.0
+        r[:n] = o.sigma_pr ** 2
+        if use_rr:
+            z[n:] = o.range_rate[i, sel] - rr
+            H[n:, lay.att] = u_n @ _skew(C_nb @ np.cross(w_b, self.lever))
+            H[n:, lay.vel] = -u_n
+            H[n:, lay.bg] = -u_n @ (C_nb @ _skew(self.lever))
+            H[n:, lay.clk + 1] = 1.0
+            r[n:] = o.sigma_rr ** 2
+        return z, H, r
