@@ -19,3 +19,10 @@ def data_file(*parts) -> Path:
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+def reproducible(df):
+    """An experiment's results without the wall-clock columns, in a canonical order."""
+    from mixnav.experiment.montecarlo import TIMING_METRICS
+    df = df.drop(columns=[c for c in TIMING_METRICS if c in df.columns])
+    return df.sort_values(["seed", "method"]).reset_index(drop=True)

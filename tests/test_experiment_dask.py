@@ -11,17 +11,13 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from .conftest import reproducible as _reproducible
+
 from mixnav.errors import ConfigError
-from mixnav.experiment.montecarlo import TIMING_METRICS, run_experiment
+from mixnav.experiment.montecarlo import run_experiment
 
 SCENARIO = "loose-demo"
 SRC = Path(__file__).resolve().parents[1] / "src"
-
-
-def _reproducible(df: pd.DataFrame) -> pd.DataFrame:
-    """The table without wall-clock columns, in a canonical order."""
-    df = df.drop(columns=[c for c in TIMING_METRICS if c in df.columns])
-    return df.sort_values(["seed", "method"]).reset_index(drop=True)
 
 
 @pytest.fixture(scope="module")

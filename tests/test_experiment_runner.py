@@ -6,20 +6,16 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
+
+from .conftest import reproducible as _reproducible
 from scipy import stats
 
 from mixnav.errors import ConfigError
 from mixnav.experiment import montecarlo as mc
-from mixnav.experiment.montecarlo import (TIMING_METRICS, aggregate, flatten_metrics,
+from mixnav.experiment.montecarlo import (aggregate, flatten_metrics,
                                           paired_comparison, run_experiment)
 
 SCENARIO = "loose-demo"
-
-
-def _reproducible(df: pd.DataFrame) -> pd.DataFrame:
-    """The table without wall-clock columns, in a canonical order."""
-    df = df.drop(columns=[c for c in TIMING_METRICS if c in df.columns])
-    return df.sort_values(["seed", "method"]).reset_index(drop=True)
 
 
 @pytest.fixture(scope="module")

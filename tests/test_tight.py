@@ -1,7 +1,6 @@
 """Raw observables, the receiver clock and the tightly coupled EKF."""
 
 import numpy as np
-import pandas as pd
 import pytest
 
 from mixnav.attitude import quat_multiply, rotvec_to_quat
