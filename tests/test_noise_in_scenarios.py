@@ -79,3 +79,42 @@ def test_recorded_fixes_can_be_corrupted(tmp_path):
     # the KF-GINS file holds degrees to 1e-10 (1e-5 m): compare to 1e-4 m
     np.testing.assert_allclose(d[hit], 20.0, atol=1e-4)
     np.testing.assert_allclose(d[~hit], 0.0, atol=1e-4)
+
+
+def test_noise_processes_reach_the_raw_observables(tmp_path):
+    # P1-sim1's noise on the pseudoranges (mixture + 2.5 m every 20 epochs) and an AR(1)
+    # on the Doppler: the residuals against the noiseless observables show them
+    from mixnav.config.loader import resolve
+    text, _ = resolve("tight-demo")
+    old = 'range_rate_sigma = "0.1 m/s"'
+    new = old + '''
+pseudorange_noise = { type = "sum", parts = [
+  { type = "mixture", weights = [0.1, 0.9], sigmas = ["0.3 m", "0.17320508 m"] },
+  { type = "gross", size = "2.5 m", every = 20, sign = "+" } ] }
+range_rate_noise = { type = "ar1", coefficient = 0.9, sigma = "0.05 m/s" }'''
+    p = tmp_path / "noisy.toml"
+    p.write_text(text.replace(old, new).replace("keep = 3 }", "keep = 0 }"))
+    sc, src, _ = load_scenario(str(p))
+    noisy = simulate(sc, 0, src).observations
+    # the same run without noise: same seed and streams, Gaussian sigmas made negligible
+    q = tmp_path / "quiet.toml"
+    q.write_text(p.read_text().replace(new, 'range_rate_sigma = "1e-9 m/s"').replace(
+        'pseudorange_sigma = "3 m"', 'pseudorange_sigma = "1e-9 m"'))
+    qsc, qsrc, _ = load_scenario(str(q))
+    quiet = simulate(qsc, 0, qsrc).observations
+    assert np.array_equal(noisy.valid, quiet.valid) and np.array_equal(noisy.prn, quiet.prn)
+    e_pr = (noisy.pseudorange - quiet.pseudorange)
+    # the clock walk is drawn from the same stream before the noise: identical in both
+    np.testing.assert_array_equal(noisy.clock, quiet.clock)
+    rows = np.arange(len(noisy.time))
+    gross = (rows % 20) == 0
+    v = noisy.valid
+    assert (e_pr[gross][v[gross]] > 1.0).all() and (np.abs(e_pr[~gross][v[~gross]]) < 1.5).all()
+    # mixture variance 0.1 * 0.09 + 0.9 * 0.03 = 0.036 m^2 (+-10 %: ~4000 samples)
+    assert np.var(e_pr[~gross][v[~gross]]) == pytest.approx(0.036, rel=0.1)
+    # AR(1) along time in one satellite slot: lag-1 autocorrelation 0.9
+    e_rr = noisy.range_rate - quiet.range_rate
+    col = e_rr[:, 0]
+    col = col[np.isfinite(col)]
+    r1 = np.corrcoef(col[:-1], col[1:])[0, 1]
+    assert r1 == pytest.approx(0.9, abs=0.05)
