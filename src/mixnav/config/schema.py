@@ -239,12 +239,15 @@ class InitConfig(Strict):
 
 class MethodConfig(Strict):
     name: str
-    type: Literal["loose-ekf", "tight-ekf"]
+    type: Literal["loose-ekf", "tight-ekf", "tdcp-ekf"]
     states: Literal[15, 17, 21] = 15
     covariance_interval: Duration = 1.0
     imu_grade: str | None = None
     imu_errors: dict[str, str] | None = None
     use_range_rate: bool = True
+    #: tdcp-ekf: "clone" (stochastic cloning of the previous antenna position and
+    #: clock) or "known" (the shortcut that takes the previous estimate as exact)
+    tdcp_previous: Literal["clone", "known"] = "clone"
 
 
 class SweepConfig(Strict):
@@ -288,7 +291,7 @@ class Scenario(Strict):
         if len(set(names)) != len(names):
             raise ValueError(f"method names must be unique, got {names}")
         for i, m in enumerate(self.methods):
-            if m.type == "tight-ekf":
+            if m.type in ("tight-ekf", "tdcp-ekf"):
                 if self.gnss.satellites is None:
                     raise ValueError(f"methods[{i}] ({m.name}) is tightly coupled: the scenario "
                                      "needs a [gnss.satellites] table")

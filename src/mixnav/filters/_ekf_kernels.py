@@ -18,11 +18,18 @@ ABSURD = 2
 NON_FINITE = 3
 NEEDS_REPAIR = 4
 
-__all__ = ["ekf_correct", "OK", "S_NOT_POSITIVE_DEFINITE", "ABSURD", "NON_FINITE", "NEEDS_REPAIR"]
+__all__ = ["ekf_correct", "ekf_correct_dx", "OK", "S_NOT_POSITIVE_DEFINITE", "ABSURD", "NON_FINITE", "NEEDS_REPAIR"]
 
 
 @njit(cache=True)
 def ekf_correct(P, z, H, r, n_sigma, nav, sensor, clock, layout):
+    """:func:`ekf_correct_dx` without the correction vector (see there)."""
+    P_post, dx, nis, status = ekf_correct_dx(P, z, H, r, n_sigma, nav, sensor, clock, layout)
+    return P_post, nis, status
+
+
+@njit(cache=True)
+def ekf_correct_dx(P, z, H, r, n_sigma, nav, sensor, clock, layout):
     """Gate, update and feed back one measurement; closed loop (prior dx = 0).
 
     Parameters
@@ -43,6 +50,10 @@ def ekf_correct(P, z, H, r, n_sigma, nav, sensor, clock, layout):
     -------
     P_post : ndarray (n, n)
         Posterior (the prior when the epoch is rejected).
+    dx : ndarray (n,)
+        The correction (zeros when rejected). States beyond the layout's
+        ``n`` (e.g. a stochastic clone) are not fed back here: the caller
+        applies ``dx[layout n:]`` to whatever they describe.
     nis : float
     status : int
         ``OK``, ``S_NOT_POSITIVE_DEFINITE``, ``ABSURD``, ``NON_FINITE`` (the
@@ -58,19 +69,20 @@ def ekf_correct(P, z, H, r, n_sigma, nav, sensor, clock, layout):
     rd = np.empty(m)
     for i in range(m):
         rd[i] = R[i, i]
+    zero = np.zeros(n)
     if innovation_is_absurd(z, H, P, rd, n_sigma):
-        return P, np.inf, ABSURD
-    dx, P_post, nis, status = kalman_update(np.zeros(n), P, z, H, R)
+        return P, zero, np.inf, ABSURD
+    dx, P_post, nis, status = kalman_update(zero, P, z, H, R)
     if status != OK:
-        return P, nis, status
+        return P, zero, nis, status
     for i in range(n):
         if not np.isfinite(dx[i]):
-            return P, nis, NON_FINITE
+            return P, zero, nis, NON_FINITE
         for j in range(n):
             if not np.isfinite(P_post[i, j]):
-                return P, nis, NON_FINITE
+                return P, zero, nis, NON_FINITE
     apply_feedback(nav, sensor, clock, dx, layout)
     for i in range(n):
         if P_post[i, i] <= 0.0:
-            return P_post, nis, NEEDS_REPAIR
-    return P_post, nis, OK
+            return P_post, dx, nis, NEEDS_REPAIR
+    return P_post, dx, nis, OK

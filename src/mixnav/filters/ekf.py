@@ -24,6 +24,24 @@ Numerical recoveries (each counted in ``FilterResult.recoveries``):
 
 A non-finite value in P or the state raises :class:`NumericalError` naming
 the epoch: results never silently carry NaN.
+
+Stochastic cloning (TDCP and any other measurement of two epochs). A
+measurement model with ``clone_size = c > 0`` asks the engine to carry, beside
+the ``n`` error states, a copy ``x_c = J x`` of some of them taken at that
+model's previous epoch (``J = model.clone_rows(nav)``, (c, n)). The engine then
+keeps the blocks of the augmented covariance::
+
+    [[P,      P_xc],      P_xc <- Phi P_xc over each propagation step
+     [P_xc^T, P_cc]]      (the clone is a constant: its own block does not move)
+
+updates every measurement at those epochs in the augmented space (a model's
+``H`` has ``n`` or ``n + c`` columns), hands the clone part of each correction
+to ``model.correct_clone(dx_c)`` (the model owns the estimate the clone
+describes), and after the updates of each of the model's epochs replaces the
+clone: ``P_xc = P J^T``, ``P_cc = J P J^T``, ``model.remember(i, nav, clock)``.
+At most one cloning model per filter. A model without a clone may still have
+``remember`` (called the same way), e.g. to use its previous estimate as if it
+were exact.
 """
 
 from __future__ import annotations
@@ -38,7 +56,8 @@ from ..errors import ConfigError, NumericalError
 from ..ins._error_kernels import propagate_block
 from ..ins.error_model import ClockModel, StateLayout, process_noise
 from ..ins.imu_model import ImuErrorModel
-from ._ekf_kernels import ABSURD, NON_FINITE, NEEDS_REPAIR, S_NOT_POSITIVE_DEFINITE, ekf_correct
+from ._ekf_kernels import (ABSURD, NON_FINITE, NEEDS_REPAIR, OK, S_NOT_POSITIVE_DEFINITE, ekf_correct,
+                           ekf_correct_dx)
 from .timing import split_at_times
 
 
@@ -144,6 +163,8 @@ def _warm_up(layout: StateLayout) -> None:
     H[:, 6:9] = np.eye(3)
     ekf_correct(np.eye(n), np.zeros(3), H, np.ones(3), 1e4, nav, np.zeros(12), np.zeros(2),
                 layout.as_array())
+    ekf_correct_dx(np.eye(n), np.zeros(3), H, np.ones(3), 1e4, nav, np.zeros(12), np.zeros(2),
+                   layout.as_array())
     _WARM.add(n)
 
 
@@ -205,6 +226,11 @@ class ErrorStateEkf:
         """
         lay = self.layout
         _warm_up(lay)
+        cloners = [m for m in measurements if getattr(m, "clone_size", 0) > 0]
+        if len(cloners) > 1:
+            raise ConfigError("at most one measurement model per filter may use a stochastic clone")
+        cloner = cloners[0] if cloners else None
+        nc = cloner.clone_size if cloner is not None else 0
         for model in measurements:  # compile their kernels outside the timed loop too
             if len(model.times):
                 model.measure(0, np.array(init.nav, dtype=float), np.zeros(3), np.zeros(2))
@@ -239,6 +265,10 @@ class ErrorStateEkf:
         sensor = np.zeros(12) if init.sensor0 is None else np.array(init.sensor0, dtype=float)
         clock = np.zeros(2)
         P = self.initial_covariance(init)
+        n = lay.n
+        P_xc = np.zeros((n, nc))  # cross-covariance of the error state and the clone
+        P_cc = np.zeros((nc, nc))
+        have_clone = False
         work = np.empty((4, lay.n, lay.n))
         layout_arr = lay.as_array()
         recov = {"rejected_not_pd": 0, "rejected_absurd": 0, "covariance_repair": 0}
@@ -268,6 +298,8 @@ class ErrorStateEkf:
             end = int(ends[ti]) + 1
             T = propagate_block(nav, prev, sensor, imu_s.dtheta[start:end], imu_s.dvel[start:end],
                                 imu_s.dt[start:end], P, self.qc, layout_arr, self.tau, work)
+            if have_clone and T > 0.0:
+                P_xc = work[1] @ P_xc  # work[1] holds this step's Phi
             if lay.clk >= 0:
                 clock[0] += clock[1] * T
             start = end
@@ -275,11 +307,32 @@ class ErrorStateEkf:
             for (_, mi, i) in ev_by_index.get(ti, ()):
                 tu = _time.perf_counter()
                 w_b = prev[0:3] / imu_s.dt[end - 1]
-                zhr = measurements[mi].measure(i, nav, w_b, clock)
-                if zhr is not None:
+                model = measurements[mi]
+                zhr = model.measure(i, nav, w_b, clock)
+                if zhr is not None and have_clone:
                     z, H, r = zhr
+                    Pa = np.empty((n + nc, n + nc))
+                    Pa[:n, :n] = P
+                    Pa[:n, n:] = P_xc
+                    Pa[n:, :n] = P_xc.T
+                    Pa[n:, n:] = P_cc
+                    if H.shape[1] == n:
+                        H = np.hstack([H, np.zeros((len(z), nc))])
+                    Pa_new, dx, nis, status = ekf_correct_dx(Pa, z, H, r, self.absurd_sigma, nav,
+                                                             sensor, clock, layout_arr)
+                    P_new = np.ascontiguousarray(Pa_new[:n, :n])
+                    if status in (OK, NEEDS_REPAIR):  # applied: split the blocks back
+                        cloner.correct_clone(dx[n:])
+                        P_xc = Pa_new[:n, n:].copy()
+                        P_cc = Pa_new[n:, n:].copy()
+                elif zhr is not None:
+                    z, H, r = zhr
+                    if H.shape[1] != n:
+                        raise NumericalError("a measurement model returned H for a clone the "
+                                             "filter does not carry")  # a bug, not bad input
                     P_new, nis, status = ekf_correct(P, z, H, r, self.absurd_sigma, nav, sensor,
                                                      clock, layout_arr)
+                if zhr is not None:
                     if status == ABSURD:
                         recov["rejected_absurd"] += 1
                     elif status == S_NOT_POSITIVE_DEFINITE:
@@ -294,6 +347,13 @@ class ErrorStateEkf:
                         nis_list.append(nis)
                         nis_dim.append(len(z))
                         used = True
+                if hasattr(model, "remember"):
+                    if model is cloner:  # replace the clone by the current state
+                        J = model.clone_rows(nav)
+                        P_xc = P @ J.T
+                        P_cc = J @ P_xc
+                        have_clone = True
+                    model.remember(i, nav, clock)
                 update_time += _time.perf_counter() - tu
                 n_updates += 1
             if not np.isfinite(nav).all():

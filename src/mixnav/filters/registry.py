@@ -8,6 +8,7 @@ from ..errors import ConfigError
 from ..ins.error_model import ClockModel, get_layout
 from ..ins.imu_model import ImuErrorModel
 from ..measurements.loose import LooseGnss
+from ..measurements.tdcp import TdcpGnss
 from ..measurements.tight import TightGnss
 from .ekf import ErrorStateEkf
 
@@ -15,6 +16,8 @@ from .ekf import ErrorStateEkf
 METHODS = {
     "loose-ekf": "M1 closed-loop error-state EKF, GNSS position/velocity (loose coupling)",
     "tight-ekf": "M1 closed-loop error-state EKF, pseudorange + Doppler (tight coupling, 17 states)",
+    "tdcp-ekf": "M1 closed-loop error-state EKF, pseudorange + TDCP (P1 eqs. 1-4; stochastic cloning "
+                "of the previous antenna position and clock)",
 }
 
 
@@ -36,11 +39,13 @@ def build(method: MethodConfig, default_imu: ImuErrorModel, fixes, lever_arm, so
     if method.type == "loose-ekf":
         ekf = ErrorStateEkf(layout, model, covariance_interval=method.covariance_interval)
         return ekf, [LooseGnss(fixes, lever_arm, layout)]
-    if method.type == "tight-ekf":
+    if method.type in ("tight-ekf", "tdcp-ekf"):
         if observations is None:
             raise ConfigError(f"method '{method.name}' is tightly coupled but there are no raw "
                               "GNSS observations", file=source, key=f"methods[{index}].type")
         ekf = ErrorStateEkf(layout, model, covariance_interval=method.covariance_interval,
                             clock=clock or ClockModel())
+        if method.type == "tdcp-ekf":
+            return ekf, [TdcpGnss(observations, lever_arm, layout, clone=method.tdcp_previous == "clone")]
         return ekf, [TightGnss(observations, lever_arm, layout, use_range_rate=method.use_range_rate)]
     raise KeyError(method.type)  # unreachable: the schema admits only known types

@@ -30,6 +30,7 @@ from ..errors import ConfigError
 from ..geodesy.frames import dcm_ecef_to_ned, lla_to_ecef
 from ..gnss.observables import GnssObservations
 from ..ins.error_model import StateLayout
+from ._tight_kernel import tight_zhr
 
 
 def _skew(a: np.ndarray) -> np.ndarray:
@@ -64,6 +65,7 @@ class TightGnss:
         self.layout = layout
         self.use_range_rate = bool(use_range_rate)
         self.min_satellites = int(min_satellites)
+        self._n_valid = obs.valid.sum(axis=1)
 
     @property
     def times(self) -> np.ndarray:
@@ -86,7 +88,20 @@ class TightGnss:
         return rng + clock[0], rr + clock[1], u_n, l_n, C_nb
 
     def measure(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock):
-        """``(z, H, R_diagonal)`` of epoch ``i``, or None with too few satellites."""
+        """``(z, H, R_diagonal)`` of epoch ``i``, or None with too few satellites.
+
+        One compiled call (:func:`mixnav.measurements._tight_kernel.tight_zhr`);
+        :meth:`measure_numpy` is the same model in numpy (the tests' oracle).
+        """
+        o, lay = self.obs, self.layout
+        if self._n_valid[i] < self.min_satellites or self._n_valid[i] == 0:
+            return None
+        return tight_zhr(nav, self.lever, w_b, np.asarray(clock, dtype=float), o.sat_pos[i],
+                         o.sat_vel[i], o.pseudorange[i], o.range_rate[i], o.valid[i],
+                         o.sigma_pr, o.sigma_rr, self.use_range_rate, lay.n, lay.bg.start, lay.clk)
+
+    def measure_numpy(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock):
+        """:meth:`measure` in plain numpy."""
         o, lay = self.obs, self.layout
         sel = o.valid[i]
         n = int(sel.sum())

@@ -1,0 +1,123 @@
+"""Compiled tight-coupling measurement model (see :class:`TightGnss` for the maths).
+
+One call per GNSS epoch: antenna position and velocity, line of sight, the
+innovations, ``H`` and the noise variances of every valid satellite slot,
+without per-satellite Python or temporary numpy arrays.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ..ins._kernels import E2, quat_to_dcm_into, radii
+
+
+@njit(cache=True)
+def tight_zhr(nav, lever, w_b, clock, sat_pos, sat_vel, pr, rr, valid, sig_pr, sig_rr, use_rr,
+              n, i_bg, i_clk):
+    """Innovation, Jacobian and noise variances of one epoch.
+
+    Parameters
+    ----------
+    nav : ndarray (10,)
+    lever, w_b : ndarray (3,)
+        Antenna lever arm (body) [m]; compensated body rate [rad/s].
+    clock : ndarray (2,)
+        Clock bias [m] and drift [m/s] estimates.
+    sat_pos, sat_vel : ndarray (K, 3)
+        ECEF, receive-time frame [m], [m/s].
+    pr, rr : ndarray (K,)
+        Pseudorange [m] and range rate [m/s].
+    valid : ndarray of bool (K,)
+    sig_pr, sig_rr : float
+    use_rr : bool
+    n, i_bg, i_clk : int
+        Number of states and first index of the gyro-bias and clock blocks.
+
+    Returns
+    -------
+    z (m,), H (m, n), r (m,), with ``m = ns`` or ``2 ns`` for ``ns`` valid slots
+    (pseudoranges first).
+    """
+    K = valid.shape[0]
+    ns = 0
+    for k in range(K):
+        if valid[k]:
+            ns += 1
+    m = 2 * ns if use_rr else ns
+    z = np.empty(m)
+    H = np.zeros((m, n))
+    r = np.empty(m)
+    c = np.empty((3, 3))
+    quat_to_dcm_into(nav[0:4], c)
+    lat, lon, h = nav[7], nav[8], nav[9]
+    sl, cl, so, co = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
+    # C_ne rows: N, E, D in ECEF
+    cne = np.empty((3, 3))
+    cne[0, 0], cne[0, 1], cne[0, 2] = -sl * co, -sl * so, cl
+    cne[1, 0], cne[1, 1], cne[1, 2] = -so, co, 0.0
+    cne[2, 0], cne[2, 1], cne[2, 2] = -cl * co, -cl * so, -sl
+    _, rn = radii(lat)
+    ln = np.empty(3)   # C_nb l
+    wl = np.empty(3)   # C_nb (w x l)
+    wxl0 = w_b[1] * lever[2] - w_b[2] * lever[1]
+    wxl1 = w_b[2] * lever[0] - w_b[0] * lever[2]
+    wxl2 = w_b[0] * lever[1] - w_b[1] * lever[0]
+    for i in range(3):
+        ln[i] = c[i, 0] * lever[0] + c[i, 1] * lever[1] + c[i, 2] * lever[2]
+        wl[i] = c[i, 0] * wxl0 + c[i, 1] * wxl1 + c[i, 2] * wxl2
+    ra = np.empty(3)
+    ra[0] = (rn + h) * cl * co
+    ra[1] = (rn + h) * cl * so
+    ra[2] = (rn * (1.0 - E2) + h) * sl
+    va_n = np.empty(3)
+    for i in range(3):
+        ra[i] += cne[0, i] * ln[0] + cne[1, i] * ln[1] + cne[2, i] * ln[2]
+        va_n[i] = nav[4 + i] + wl[i]
+    # C_nb [l x] for the gyro-bias columns of the range rate
+    clx = np.empty((3, 3))
+    for i in range(3):
+        clx[i, 0] = c[i, 1] * lever[2] - c[i, 2] * lever[1]
+        clx[i, 1] = -c[i, 0] * lever[2] + c[i, 2] * lever[0]
+        clx[i, 2] = c[i, 0] * lever[1] - c[i, 1] * lever[0]
+    j = 0
+    d = np.empty(3)
+    un = np.empty(3)
+    for k in range(K):
+        if not valid[k]:
+            continue
+        rho2 = 0.0
+        for i in range(3):
+            d[i] = sat_pos[k, i] - ra[i]
+            rho2 += d[i] * d[i]
+        rho = math.sqrt(rho2)
+        us = 0.0
+        for i in range(3):
+            d[i] /= rho
+            us += d[i] * sat_vel[k, i]
+        for i in range(3):
+            un[i] = cne[i, 0] * d[0] + cne[i, 1] * d[1] + cne[i, 2] * d[2]
+        z[j] = pr[k] - (rho + clock[0])
+        # u_n^T [l_n x]
+        H[j, 0] = un[1] * ln[2] - un[2] * ln[1]
+        H[j, 1] = un[2] * ln[0] - un[0] * ln[2]
+        H[j, 2] = un[0] * ln[1] - un[1] * ln[0]
+        H[j, 6], H[j, 7], H[j, 8] = -un[0], -un[1], -un[2]
+        H[j, i_clk] = 1.0
+        r[j] = sig_pr * sig_pr
+        if use_rr:
+            q = ns + j
+            z[q] = rr[k] - (us - (un[0] * va_n[0] + un[1] * va_n[1] + un[2] * va_n[2]) + clock[1])
+            H[q, 0] = un[1] * wl[2] - un[2] * wl[1]
+            H[q, 1] = un[2] * wl[0] - un[0] * wl[2]
+            H[q, 2] = un[0] * wl[1] - un[1] * wl[0]
+            H[q, 3], H[q, 4], H[q, 5] = -un[0], -un[1], -un[2]
+            for b in range(3):
+                H[q, i_bg + b] = -(un[0] * clx[0, b] + un[1] * clx[1, b] + un[2] * clx[2, b])
+            H[q, i_clk + 1] = 1.0
+            r[q] = sig_rr * sig_rr
+        j += 1
+    return z, H, r

@@ -1,0 +1,162 @@
+"""Pseudorange + time-differenced carrier phase (TDCP) by stochastic cloning (P1 eqs. 2-4).
+
+TDCP of satellite ``j`` between the previous GNSS epoch ``k-1`` and epoch ``k``
+(carrier in metres, the constant ambiguity cancels)::
+
+    dphi_j = phi_j(k) - phi_j(k-1) = |r_s(k) - r_a(k)| - |r_s(k-1) - r_a(k-1)| + b(k) - b(k-1) + e
+                                                                    # P1 eq. (3)
+
+It depends on the antenna position and clock bias at *two* epochs. This model
+carries the earlier ones as a stochastic clone (see :mod:`mixnav.filters.ekf`):
+after the update of each epoch the engine appends to the error state a copy
+
+    x_c = [dr_a (3, NED at the clone's place), db]  = J x,
+    J = [[-[l_n x], 0, I, 0, 0, 0, 0], [0, ..., 0, 1, 0]]
+
+with its covariance and cross-covariances, which propagate with the INS
+(the clone itself is constant). At the next epoch the innovation and Jacobian
+of a TDCP row are::
+
+    z = dphi_j - (|r_s(k) - r_a| + b - |r_s(k-1) - r_a^c| - b^c)
+    H = [u_n^T [l_n x], 0, -u_n^T, 0, 0, 1, 0 | u_c^T, -1]
+
+(``u`` the unit line of sight from the antenna to the satellite, in NED at
+each epoch; ``r_a^c``, ``b^c`` the cloned estimates, corrected by the clone
+part of every update). Pseudorange rows are those of
+:class:`mixnav.measurements.tight.TightGnss` (P1 eq. (2)), with zeros on the
+clone. The TDCP noise is taken as white with variance ``2 sigma_cp^2``:
+successive TDCPs share a carrier epoch and are in truth correlated (-1/2), an
+approximation that makes the filter slightly conservative about velocity.
+
+``clone=False`` gives the common shortcut instead: the previous antenna
+position and clock are taken as known (the estimates remembered at the
+previous epoch, no clone, ``H`` on the current states only). It ignores the
+previous epoch's uncertainty, so the filter becomes overconfident: tests and
+benchmarks/results/tight.md show what this costs in NEES.
+
+TDCP rows are formed only for satellites tracked at both epochs when the
+epochs are at most ``1.5 / rate`` apart (a longer gap means loss of lock).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..attitude import quat_to_dcm
+from ..geodesy.frames import dcm_ecef_to_ned, lla_to_ecef
+from ..gnss.observables import GnssObservations
+from ..ins.error_model import StateLayout
+from .tight import TightGnss, _skew
+
+
+class TdcpGnss(TightGnss):
+    """Pseudoranges and TDCP of every satellite tracked at an epoch.
+
+    Parameters
+    ----------
+    obs : GnssObservations
+    lever_arm : ndarray (3,)
+        Antenna in the body frame [m].
+    layout : StateLayout
+        With the clock block.
+    clone : bool
+        Stochastic cloning (default) or the known-previous-position shortcut.
+    use_pseudorange : bool
+        Also use the pseudoranges (TDCP alone does not observe absolute position).
+    min_satellites : int
+        Fewer valid satellites than this at an epoch: no update.
+    """
+
+    def __init__(self, obs: GnssObservations, lever_arm, layout: StateLayout, clone: bool = True,
+                 use_pseudorange: bool = True, min_satellites: int = 1):
+        super().__init__(obs, lever_arm, layout, use_range_rate=False, min_satellites=min_satellites)
+        self.clone = bool(clone)
+        self.clone_size = 4 if self.clone else 0
+        self.use_pseudorange = bool(use_pseudorange)
+        dt = np.diff(obs.time)
+        self.max_gap = 1.5 * (float(np.median(dt)) if len(dt) else np.inf)
+        self._prev = None        # index of the epoch the clone (or remembered state) belongs to
+        self._r_prev = None      # antenna ECEF [m] estimate at that epoch
+        self._b_prev = 0.0       # clock bias estimate [m] at that epoch
+        self._C_ne_prev = None   # ECEF -> NED at that epoch
+
+    # --- the clone -----------------------------------------------------------------------
+    def _antenna(self, nav):
+        C_nb = quat_to_dcm(nav[0:4])
+        C_ne = dcm_ecef_to_ned(nav[7], nav[8])
+        l_n = C_nb @ self.lever
+        return lla_to_ecef(nav[7:10]) + C_ne.T @ l_n, C_ne, l_n
+
+    def clone_rows(self, nav: np.ndarray) -> np.ndarray:
+        """``J`` (4, n): antenna position error (NED) and clock-bias error from the error state."""
+        lay = self.layout
+        _, _, l_n = self._antenna(nav)
+        J = np.zeros((4, lay.n))
+        J[0:3, lay.att] = -_skew(l_n)
+        J[0:3, lay.pos] = np.eye(3)
+        J[3, lay.clk] = 1.0
+        return J
+
+    def remember(self, i: int, nav: np.ndarray, clock) -> None:
+        """Keep the estimates of epoch ``i`` (after its update) for the next TDCP."""
+        self._r_prev, self._C_ne_prev, _ = self._antenna(nav)
+        self._b_prev = float(clock[0])
+        self._prev = int(i)
+
+    def correct_clone(self, dx_c: np.ndarray) -> None:
+        """Apply the clone part of a correction to the remembered estimates."""
+        self._r_prev = self._r_prev + self._C_ne_prev.T @ dx_c[0:3]
+        self._b_prev += float(dx_c[3])
+
+    # --- the measurement -------------------------------------------------------------------
+    def _tdcp_pairs(self, i: int):
+        """Slots (current, previous) of the satellites tracked at epochs ``prev`` and ``i``."""
+        o, p = self.obs, self._prev
+        if p is None or p >= i or o.time[i] - o.time[p] > self.max_gap:
+            return None
+        a = np.nonzero(o.valid[i])[0]
+        b = np.nonzero(o.valid[p])[0]
+        _, ia, ib = np.intersect1d(o.prn[i, a], o.prn[p, b], assume_unique=True, return_indices=True)
+        if not len(ia):
+            return None
+        return a[ia], b[ib]
+
+    def measure(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock):
+        """``(z, H, R_diagonal)`` of epoch ``i``; ``H`` has ``n + 4`` columns when
+        TDCP rows are present and the model clones, else ``n``."""
+        o, lay = self.obs, self.layout
+        sel = o.valid[i]
+        n_sat = int(sel.sum())
+        if n_sat < self.min_satellites:
+            return None
+        pairs = self._tdcp_pairs(i)
+        n_pr = n_sat if self.use_pseudorange else 0
+        n_td = 0 if pairs is None else len(pairs[0])
+        if n_pr + n_td == 0:
+            return None
+        ncol = lay.n + (self.clone_size if n_td else 0)
+        z = np.empty(n_pr + n_td)
+        H = np.zeros((n_pr + n_td, ncol))
+        r = np.empty(n_pr + n_td)
+        r_a, C_ne, l_n = self._antenna(nav)
+        if n_pr:  # the pseudorange rows of TightGnss (compiled)
+            z[:n_pr], H[:n_pr, :lay.n], r[:n_pr] = super().measure(i, nav, w_b, clock)
+        if n_td:
+            cur, prev = pairs
+            d = o.sat_pos[i, cur] - r_a
+            rho = np.linalg.norm(d, axis=1)
+            u_n = (d / rho[:, None]) @ C_ne.T
+            d_c = o.sat_pos[self._prev, prev] - self._r_prev
+            rho_c = np.linalg.norm(d_c, axis=1)
+            u_c = (d_c / rho_c[:, None]) @ self._C_ne_prev.T
+            rows = slice(n_pr, n_pr + n_td)
+            z[rows] = (o.carrier[i, cur] - o.carrier[self._prev, prev]) - \
+                (rho + clock[0] - rho_c - self._b_prev)
+            H[rows, lay.att] = u_n @ _skew(l_n)
+            H[rows, lay.pos] = -u_n
+            H[rows, lay.clk] = 1.0
+            if self.clone:
+                H[rows, lay.n:lay.n + 3] = u_c
+                H[rows, lay.n + 3] = -1.0
+            r[rows] = 2.0 * o.sigma_cp ** 2
+        return z, H, r

@@ -1,0 +1,131 @@
+"""Pseudorange + TDCP by stochastic cloning: Jacobian, engine bookkeeping, consistency."""
+
+import numpy as np
+import pytest
+
+from mixnav.attitude import quat_multiply, rotvec_to_quat
+from mixnav.config.loader import load_scenario, resolve
+from mixnav.errors import ConfigError
+from mixnav.experiment.run import run_scenario, solution_table
+from mixnav.geodesy.frames import displace
+from mixnav.gnss.constellation import NominalConstellation
+from mixnav.gnss.observables import simulate_observables
+from mixnav.ins.error_model import get_layout
+from mixnav.measurements.tdcp import TdcpGnss
+from mixnav.sim.scenario import truth_and_ideal_imu
+
+LEVER = np.array([0.5, 0.2, -1.0])
+
+
+@pytest.fixture(scope="module")
+def scenario():
+    sc, src, _ = load_scenario("tdcp-demo")
+    return sc, src, truth_and_ideal_imu(sc, src)
+
+
+def _perturbed(nav, w, dx):
+    """The true state that the error ``dx = x_true - x_est`` describes."""
+    q = quat_multiply(rotvec_to_quat(dx[0:3]), nav[0:4])
+    return np.concatenate([q, nav[4:7] + dx[3:6], displace(nav[7:10], dx[6:9])]), w - dx[9:12]
+
+
+def test_tdcp_jacobian_matches_finite_differences(scenario):
+    _, _, (truth, _) = scenario
+    o = simulate_observables(truth, NominalConstellation.gps(5), 1.0, LEVER, np.radians(10), 1.0, 0.1,
+                             0.003, (0.1, 0.01), (5.0, 0.3), np.random.default_rng(1))
+    lay = get_layout(17)
+    meas = TdcpGnss(o, LEVER, lay)
+    k = 150
+    kt = lambda i: int(np.searchsorted(truth.time, o.time[i] - 1e-9))  # noqa: E731
+    nav_prev = np.concatenate([truth.q_nb[kt(k - 1)], truth.v_n[kt(k - 1)], truth.lla[kt(k - 1)]])
+    meas.remember(k - 1, nav_prev, np.array([4.0, 0.3]))
+    nav = np.concatenate([truth.q_nb[kt(k)], truth.v_n[kt(k)], truth.lla[kt(k)]])
+    w, clock = np.array([0.01, -0.02, 0.3]), np.array([4.3, 0.3])
+    z0, H, r = meas.measure(k, nav, w, clock)
+    n_pr = int(o.valid[k].sum())
+    assert H.shape == (len(z0), 21) and len(z0) > n_pr  # pseudoranges, then TDCP rows
+    np.testing.assert_allclose(r[n_pr:], 2 * 0.003 ** 2)
+    # z = measured - h(x): a true-state change dx moves z by -H dx
+    steps = {**{i: 1e-4 for i in range(3)}, **{i: 1e-3 for i in range(3, 9)}, 15: 1e-3}
+    for i, eps in steps.items():
+        dx = np.zeros(17)
+        dx[i] = eps
+        nav_t, w_t = _perturbed(nav, w, dx)
+        z, _, _ = meas.measure(k, nav_t, w_t, clock + dx[15:17])
+        np.testing.assert_allclose(-(z - z0) / eps, H[:, i], rtol=2e-3, atol=2e-3)
+    for j in range(4):  # the clone: the remembered antenna position (NED) and clock bias
+        saved = (meas._r_prev.copy(), meas._b_prev)
+        dxc = np.zeros(4)
+        dxc[j] = 1e-3
+        meas.correct_clone(dxc)
+        z, _, _ = meas.measure(k, nav, w, clock)
+        meas._r_prev, meas._b_prev = saved
+        np.testing.assert_allclose(-(z - z0) / 1e-3, H[:, 17 + j], atol=2e-3)
+    assert np.all(H[:n_pr, 17:] == 0)
+
+
+def test_clone_rows_give_the_antenna_position_error():
+    lay = get_layout(17)
+    meas = TdcpGnss.__new__(TdcpGnss)  # only the lever arm and layout are needed
+    meas.lever, meas.layout = LEVER, lay
+    nav = np.array([np.cos(0.3), 0, 0, np.sin(0.3), 0, 0, 0, 0.6, 2.0, 50.0])
+    J = meas.clone_rows(nav)
+    # antenna NED displacement for an attitude + position error, by direct evaluation
+    dx = np.zeros(17)
+    dx[[0, 1, 2, 6, 7, 8, 15]] = [1e-4, -2e-4, 3e-4, 0.3, -0.2, 0.1, 2.0]
+    r0, C_ne, _ = meas._antenna(nav)
+    nav_t, _ = _perturbed(nav, np.zeros(3), dx)
+    r1, _, _ = meas._antenna(nav_t)
+    np.testing.assert_allclose(J[:3] @ dx, C_ne @ (r1 - r0), atol=1e-5)
+    assert J[3] @ dx == 2.0
+
+
+@pytest.fixture(scope="module")
+def tdcp_runs(scenario):
+    sc, src, ideal = scenario
+    tables = {m.name: [] for m in sc.methods}
+    for seed in range(8):
+        out = run_scenario(sc, src, seed=seed, ideal=ideal)
+        for name, res in out.results.items():
+            assert sum(res.recoveries.values()) == 0
+            tables[name].append(solution_table(res, out.sim.truth, out.sim.outages))
+    return tables
+
+
+def test_cloning_is_consistent_and_the_shortcut_is_not(tdcp_runs):
+    # Run-averaged NEES over 8 runs and the drive. With cloning the filter's own
+    # covariance must bound the errors: its mean NEES per dof is expected below 1,
+    # because successive TDCPs share a carrier epoch (correlation -1/2) that the
+    # filter treats as white, which overstates the noise of a sum of TDCPs
+    # (benchmarks/results/tight.md); a wrong Jacobian or clone bookkeeping pushes it
+    # far above 1. Taking the previous position as known collapses the position
+    # covariance to millimetres: its NEES is orders of magnitude above the dof.
+    nees = {k: np.mean([t["nees_pos"].mean() for t in v]) / 3 for k, v in tdcp_runs.items()}
+    nees_v = {k: np.mean([t["nees_vel"].mean() for t in v]) / 3 for k, v in tdcp_runs.items()}
+    assert 0.3 < nees["tdcp"] < 1.2 and 0.3 < nees_v["tdcp"] < 1.2, (nees, nees_v)
+    assert 0.6 < nees["pr-only"] < 1.3, nees
+    assert nees["tdcp-known"] > 100 * nees["tdcp"], nees
+
+
+def test_tdcp_improves_velocity_and_attitude_over_pseudorange_only(tdcp_runs):
+    rms = lambda ts, cols: np.sqrt(np.mean([np.mean(sum(t[c] ** 2 for c in cols)) for t in ts]))  # noqa: E731
+    vel = ("err_vn_mps", "err_ve_mps", "err_vd_mps")
+    yaw = ("err_yaw_deg",)
+    assert rms(tdcp_runs["tdcp"], vel) < 0.3 * rms(tdcp_runs["pr-only"], vel)
+    assert rms(tdcp_runs["tdcp"], yaw) < 0.8 * rms(tdcp_runs["pr-only"], yaw)
+
+
+def test_tdcp_method_config_errors(tmp_path):
+    text, _ = resolve("tdcp-demo")
+    p = tmp_path / "a.toml"
+    p.write_text(text.replace('tdcp_previous = "known"', 'tdcp_previous = "exact"'))
+    with pytest.raises(ConfigError) as exc:
+        load_scenario(str(p))
+    assert exc.value.key == "methods[2].tdcp_previous" and str(p) in str(exc.value)
+    p.write_text(text.replace('carrier_sigma = "3 mm"', 'carrier_sigma = "3"'))
+    with pytest.raises(ConfigError) as exc:
+        load_scenario(str(p))
+    assert exc.value.key == "gnss.satellites.carrier_sigma"
+    p.write_text(text.replace('carrier_sigma = "3 mm"', 'carrier_sigmas = "3 mm"'))
+    with pytest.raises(ConfigError, match="unknown key") as exc:
+        load_scenario(str(p))
