@@ -110,6 +110,18 @@ def test_jacobian_matches_finite_differences(truth):
         np.testing.assert_allclose(H[:, i], fd, rtol=2e-3, atol=2e-3 * max(1.0, np.abs(fd).max()))
 
 
+@pytest.mark.parametrize("use_rr", [True, False])
+def test_compiled_model_equals_the_numpy_one(truth, use_rr):
+    o = simulate_observables(truth, SATS, 1.0, np.array([0.5, 0.2, -1.0]), np.radians(10), 3.0, 0.1,
+                             0.003, (0.1, 0.01), (7.0, 0.5), np.random.default_rng(4))
+    meas = TightGnss(o, [0.5, 0.2, -1.0], get_layout(17), use_range_rate=use_rr)
+    kt = int(np.searchsorted(truth.time, o.time[300] - 1e-9))
+    nav = np.concatenate([truth.q_nb[kt], truth.v_n[kt], truth.lla[kt] + [1e-6, -1e-6, 3.0]])
+    w, clock = np.array([0.01, -0.02, 0.3]), np.array([3.0, 0.2])
+    for a, b in zip(meas.measure(300, nav, w, clock), meas.measure_numpy(300, nav, w, clock)):
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-7)
+
+
 def test_tight_method_needs_satellites_and_clock_states(tmp_path):
     text, _ = resolve("tight-demo")
     p = tmp_path / "a.toml"
