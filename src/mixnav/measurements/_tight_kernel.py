@@ -121,3 +121,27 @@ def tight_zhr(nav, lever, w_b, clock, sat_pos, sat_vel, pr, rr, valid, sig_pr, s
             r[q] = sig_rr * sig_rr
         j += 1
     return z, H, r
+
+
+@njit(cache=True)
+def antenna_frame(nav, lever):
+    """Antenna ECEF position [m], ``C_ne`` (ECEF -> NED at the IMU) and ``l_n = C_nb l``."""
+    c = np.empty((3, 3))
+    quat_to_dcm_into(nav[0:4], c)
+    lat, lon, h = nav[7], nav[8], nav[9]
+    sl, cl, so, co = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
+    cne = np.empty((3, 3))
+    cne[0, 0], cne[0, 1], cne[0, 2] = -sl * co, -sl * so, cl
+    cne[1, 0], cne[1, 1], cne[1, 2] = -so, co, 0.0
+    cne[2, 0], cne[2, 1], cne[2, 2] = -cl * co, -cl * so, -sl
+    _, rn = radii(lat)
+    ln = np.empty(3)
+    for i in range(3):
+        ln[i] = c[i, 0] * lever[0] + c[i, 1] * lever[1] + c[i, 2] * lever[2]
+    ra = np.empty(3)
+    ra[0] = (rn + h) * cl * co
+    ra[1] = (rn + h) * cl * so
+    ra[2] = (rn * (1.0 - E2) + h) * sl
+    for i in range(3):
+        ra[i] += cne[0, i] * ln[0] + cne[1, i] * ln[1] + cne[2, i] * ln[2]
+    return ra, cne, ln

@@ -42,10 +42,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..attitude import quat_to_dcm
-from ..geodesy.frames import dcm_ecef_to_ned, lla_to_ecef
 from ..gnss.observables import GnssObservations
 from ..ins.error_model import StateLayout
+from ._tight_kernel import antenna_frame
 from .tight import TightGnss, _skew
 
 
@@ -79,13 +78,13 @@ class TdcpGnss(TightGnss):
         self._r_prev = None      # antenna ECEF [m] estimate at that epoch
         self._b_prev = 0.0       # clock bias estimate [m] at that epoch
         self._C_ne_prev = None   # ECEF -> NED at that epoch
+        # slots of the satellites tracked at both epoch i-1 and epoch i, once, up front
+        self._pairs = [None] + [self._common_slots(i - 1, i) for i in range(1, len(obs.time))]
 
     # --- the clone -----------------------------------------------------------------------
     def _antenna(self, nav):
-        C_nb = quat_to_dcm(nav[0:4])
-        C_ne = dcm_ecef_to_ned(nav[7], nav[8])
-        l_n = C_nb @ self.lever
-        return lla_to_ecef(nav[7:10]) + C_ne.T @ l_n, C_ne, l_n
+        """Antenna ECEF [m], C_ne and ``C_nb l`` (compiled)."""
+        return antenna_frame(nav, self.lever)
 
     def clone_rows(self, nav: np.ndarray) -> np.ndarray:
         """``J`` (4, n): antenna position error (NED) and clock-bias error from the error state."""
@@ -114,6 +113,12 @@ class TdcpGnss(TightGnss):
         o, p = self.obs, self._prev
         if p is None or p >= i or o.time[i] - o.time[p] > self.max_gap:
             return None
+        if p == i - 1:
+            return self._pairs[i]
+        return self._common_slots(p, i)
+
+    def _common_slots(self, p: int, i: int):
+        o = self.obs
         a = np.nonzero(o.valid[i])[0]
         b = np.nonzero(o.valid[p])[0]
         _, ia, ib = np.intersect1d(o.prn[i, a], o.prn[p, b], assume_unique=True, return_indices=True)
