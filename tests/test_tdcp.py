@@ -133,3 +133,36 @@ def test_tdcp_method_config_errors(tmp_path):
     p.write_text(text.replace('carrier_sigma = "3 mm"', 'carrier_sigmas = "3 mm"'))
     with pytest.raises(ConfigError, match="unknown key") as exc:
         load_scenario(str(p))
+    assert exc.value.key == "gnss.satellites.carrier_sigmas"
+    p.write_text(text.replace('mask = "10 deg"', 'mask = "10 deg"\noutages = [{ window = ["1 s", "9 s"], '
+                                                  'keep = 2, fraction = 1.5 }]'))
+    with pytest.raises(ConfigError) as exc:
+        load_scenario(str(p))
+    assert exc.value.key == "gnss.satellites.outages[0].fraction"
+
+
+@pytest.mark.parametrize("rule", ["keep = 0", "keep = 1", "keep = 2, fraction = 0.5", "prns = [1, 2, 3, 4, 5, 6, 7, 8]"])
+def test_too_few_satellites_never_crash(tmp_path, scenario, rule):
+    # Satellites lost for 40 s (all, all but one, half of the epochs with 2, or a PRN list):
+    # every filter keeps running, uses what there is (an epoch without satellites is
+    # skipped), counts no recovery, and is back near its normal error 60 s later.
+    text, _ = resolve("tdcp-demo")
+    text = text.replace('carrier_sigma = "3 mm"                               # TDCP noise sigma = sqrt(2) * 3 mm',
+                        f'carrier_sigma = "3 mm"\noutages = [{{ window = ["200 s", "240 s"], {rule} }}]')
+    p = tmp_path / "few.toml"
+    p.write_text(text)
+    sc, src, _ = load_scenario(str(p))
+    out = run_scenario(sc, src, seed=3, ideal=scenario[2])
+    o = out.sim.observations
+    inside = (o.time >= 200) & (o.time < 240)
+    if rule.startswith("keep"):
+        assert o.n_visible[inside].min() == int(rule.split()[2].rstrip(","))
+    if "fraction" in rule:
+        assert np.mean(o.n_visible[inside] == 2) == pytest.approx(0.5, abs=0.03)
+    for name, res in out.results.items():
+        assert sum(res.recoveries.values()) == 0, name
+        t = solution_table(res, out.sim.truth, out.sim.outages)
+        if rule == "keep = 0":
+            assert not t["gnss_used"][(t.time_s > 200.5) & (t.time_s < 240)].any()
+        late = t[t.time_s > 300]
+        assert np.hypot(late.err_n_m, late.err_e_m).max() < 10.0, name

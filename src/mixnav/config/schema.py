@@ -158,11 +158,13 @@ class ImuConfig(Strict):
 
 class SatelliteOutageConfig(Strict):
     """Satellites lost in ``window``: the listed ``prns``, or all but the
-    ``keep`` highest (``keep = 0``: all of them)."""
+    ``keep`` highest (``keep = 0``: all of them). With ``fraction`` the loss
+    applies only at that share of the window's epochs, drawn at random."""
 
     window: tuple[Time, Time]
     prns: list[int] = Field(default_factory=list)
     keep: int | None = Field(default=None, ge=0)
+    fraction: float | None = Field(default=None, gt=0.0, le=1.0)
 
     @model_validator(mode="after")
     def _one_rule(self):

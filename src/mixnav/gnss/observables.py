@@ -38,12 +38,15 @@ __all__ = ["GnssObservations", "SatelliteOutage", "simulate_observables"]
 @dataclass(frozen=True)
 class SatelliteOutage:
     """Satellites lost in ``[start, end)`` [s]: the listed ``prns``, or all but
-    the ``keep`` highest (``keep = 0``: every satellite)."""
+    the ``keep`` highest (``keep = 0``: every satellite); with ``fraction``
+    only at ``round(fraction * n)`` of the window's ``n`` epochs, drawn at
+    random (after the clock walk, so runs without a fraction keep their draws)."""
 
     start: float
     end: float
     prns: tuple = ()
     keep: int | None = None
+    fraction: float | None = None
 
 
 @dataclass(frozen=True)
@@ -148,6 +151,15 @@ def simulate_observables(truth: Trajectory, satellites, rate: float, lever_arm, 
     idx, t = idx[keep], t[keep]
     m = len(t)
     clock = simulate_clock(t, clock_q[0], clock_q[1], clock0[0], clock0[1], rng)
+    active = []  # per outage: bool (m,) of the epochs where it applies
+    for o in satellite_outages:
+        inside = (t >= o.start) & (t < o.end)
+        if o.fraction is not None:
+            idx_in = np.nonzero(inside)[0]
+            pick = rng.choice(idx_in, size=int(round(o.fraction * len(idx_in))), replace=False)
+            inside = np.zeros(m, bool)
+            inside[pick] = True
+        active.append(inside)
 
     n_sat = len(satellites.states(time_offset).prn)
     per_epoch = []
@@ -163,8 +175,8 @@ def simulate_observables(truth: Trajectory, satellites, rate: float, lever_arm, 
         vs = earth_rotation_correction(s.vel_ecef, tau)
         el, _ = elevation_azimuth(r, p)
         vis = el >= mask_angle
-        for o in satellite_outages:
-            if o.start <= t[j] < o.end:
+        for o, on in zip(satellite_outages, active):
+            if on[j]:
                 if o.keep is not None:
                     order = np.argsort(-np.where(vis, el, -np.inf))
                     lost = np.ones(len(el), bool)

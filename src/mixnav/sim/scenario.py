@@ -85,7 +85,8 @@ def simulate(sc: Scenario, seed: int, source: str | None = None, ideal=None) -> 
         obs = simulate_satellites(sc, truth, streams, source)
         fixes = _without_fixes_below_four(fixes, obs)
         # satellite outages leaving fewer than 4 are windows with no fix: scored like outages
-        lost = {tuple(o.window) for o in g.satellites.outages if o.keep is not None and o.keep < 4}
+        lost = {tuple(o.window) for o in g.satellites.outages
+                if o.keep is not None and o.keep < 4 and o.fraction is None}
         outages = tuple(sorted(set(outages) | lost))
     return SimulatedRun(seed, truth, imu_ideal, imu, draw, model, fixes, init, outages, obs)
 
@@ -122,7 +123,7 @@ def simulate_satellites(sc: Scenario, truth: Trajectory, streams: Streams, sourc
     g, s = sc.gnss, sc.gnss.satellites
     clock0 = streams.get("clock").standard_normal(2) * np.asarray(sc.init.clock_sigma)
     pr_noise, rr_noise, cp_noise = observable_noise(sc, source)
-    outs = [SatelliteOutage(o.window[0], o.window[1], tuple(o.prns), o.keep) for o in s.outages]
+    outs = [SatelliteOutage(o.window[0], o.window[1], tuple(o.prns), o.keep, o.fraction) for o in s.outages]
     return simulate_observables(
         truth, constellation(s.constellation), g.rate, np.asarray(g.lever_arm), s.mask,
         s.pseudorange_sigma, s.range_rate_sigma, s.carrier_sigma,
