@@ -51,6 +51,7 @@ def consistency_rows(tables, df) -> list[dict]:
     for _, r in c.iterrows():
         q = r["quantity"]
         lo_col, hi_col = ({"NEES pos": ("nees_pos_lo", "nees_pos_hi"), "NEES vel": ("nees_vel_lo", "nees_vel_hi"),
+                           "NEES pv": ("nees_pv_lo", "nees_pv_hi"),
                            "NIS per dof": ("nis_lo", "nis_hi")}.get(q, (None, None)))
         g = s[s["method"] == r["method"]]
         band = (float(g[lo_col].median()), float(g[hi_col].median())) if lo_col in g else (np.nan, np.nan)
@@ -124,6 +125,11 @@ def main():
     cols = ["velocity_rmse_mps", "roll_rmse_deg", "pitch_rmse_deg", "yaw_rmse_deg", "horizontal_rmse_m",
             "vertical_rmse_m"]
     res["tdcp"] = {m: {c: float(g[c].mean()) for c in cols} for m, g in df2.groupby("method")}
+    # yaw is unobservable in the first 60 s at rest: its whole-run RMSE is mostly the
+    # initial error; the RMS over runs and epochs after 150 s shows what TDCP changes
+    s2 = tables2["series"]
+    for m, g in s2[s2["time_s"] > 150].groupby("method"):
+        res["tdcp"][m]["yaw_rmse_after_150s_deg"] = float(np.sqrt(np.mean(g["rms_err_yaw_deg"] ** 2)))
     res["tdcp_consistency"] = consistency_rows(tables2, df2)
     res["white_tdcp"] = white_tdcp_check(min(args.runs, 8))
     res["wall_s"] = time.perf_counter() - t0
@@ -156,12 +162,16 @@ def write_md(res):
           f"| tight | {_f(p['tight_median_m'])} | {_f(p['tight_mean_m'])} | {_f(p['tight_max_m'])} |", "",
           f"Tight below loose in {100 * p['tight_better_fraction']:.0f} % of the runs.", "",
           "## 3. tdcp-demo: pseudorange only vs + TDCP (mean over runs of each run's RMSE)", "",
-          "| method | velocity [m/s] | roll [deg] | pitch [deg] | yaw [deg] | horizontal [m] | vertical [m] |",
-          "| --- | --- | --- | --- | --- | --- | --- |"]
+          "| method | velocity [m/s] | roll [deg] | pitch [deg] | yaw [deg] | yaw after 150 s [deg] | "
+          "horizontal [m] | vertical [m] |",
+          "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for m, v in res["tdcp"].items():
         L.append(f"| {m} | {_f(v['velocity_rmse_mps'])} | {_f(v['roll_rmse_deg'])} | {_f(v['pitch_rmse_deg'])} | "
-                 f"{_f(v['yaw_rmse_deg'])} | {_f(v['horizontal_rmse_m'])} | {_f(v['vertical_rmse_m'])} |")
-    L += ["", "Consistency of the three:", "", "| method | quantity | expected | mean | band | in band |",
+                 f"{_f(v['yaw_rmse_deg'])} | {_f(v['yaw_rmse_after_150s_deg'])} | {_f(v['horizontal_rmse_m'])} | {_f(v['vertical_rmse_m'])} |")
+    L += ["", "Yaw is unobservable during the first 60 s at rest, so its whole-run RMSE is "
+          "mostly the initial 2 deg error, the same for all; after 150 s (the first acceleration "
+          "and turn done) the TDCP velocity makes yaw observable far sooner.", "",
+          "Consistency of the three:", "", "| method | quantity | expected | mean | band | in band |",
           "| --- | --- | --- | --- | --- | --- |"]
     for r in res["tdcp_consistency"]:
         L.append(f"| {r['method']} | {r['quantity']} | {_f(r['expected'])} | {_f(r['mean'])} | "

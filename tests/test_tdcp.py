@@ -112,11 +112,18 @@ def test_cloning_is_consistent_and_the_shortcut_is_not(tdcp_runs):
 
 
 def test_tdcp_improves_velocity_and_attitude_over_pseudorange_only(tdcp_runs):
-    rms = lambda ts, cols: np.sqrt(np.mean([np.mean(sum(t[c] ** 2 for c in cols)) for t in ts]))  # noqa: E731
+    # RMS over 8 runs. Velocity: TDCP measures the displacement to millimetres
+    # (0.17 -> 0.01 m/s over 20 runs); roll and pitch follow (about 2x). Yaw is
+    # unobservable in the first 60 s at rest (whole-run RMSE is mostly the initial
+    # 2 deg error, equal for both), so it is compared after 150 s (4.5x over 8 runs).
+    def rms(ts, cols, t0=0.0):
+        return np.sqrt(np.mean([np.mean(sum(t[t.time_s > t0][c] ** 2 for c in cols)) for t in ts]))
     vel = ("err_vn_mps", "err_ve_mps", "err_vd_mps")
-    yaw = ("err_yaw_deg",)
-    assert rms(tdcp_runs["tdcp"], vel) < 0.3 * rms(tdcp_runs["pr-only"], vel)
-    assert rms(tdcp_runs["tdcp"], yaw) < 0.8 * rms(tdcp_runs["pr-only"], yaw)
+    tilt = ("err_roll_deg", "err_pitch_deg")
+    a, b = tdcp_runs["tdcp"], tdcp_runs["pr-only"]
+    assert rms(a, vel) < 0.2 * rms(b, vel)
+    assert rms(a, tilt) < 0.7 * rms(b, tilt)
+    assert rms(a, ("err_yaw_deg",), 150.0) < 0.5 * rms(b, ("err_yaw_deg",), 150.0)
 
 
 def test_tdcp_method_config_errors(tmp_path):

@@ -73,6 +73,24 @@ def test_range_rate_is_the_derivative_of_the_pseudorange(truth):
             assert o.range_rate[k, b] == pytest.approx(fd, abs=2e-3)
 
 
+def test_coloured_noise_follows_its_satellite_across_slots(truth):
+    # An AR(1) on the range rate is sampled per satellite: when a lost satellite shifts
+    # the others to new slots, each satellite's noise stays one AR(1) series (lag-1
+    # correlation 0.9), which a per-slot draw would break at every shift.
+    from mixnav.noise.processes import AR1
+    first = _noiseless(truth)
+    lost = int(first.prn[0, 0])  # the first slot's satellite: losing it shifts all others
+    o = _noiseless(truth, satellite_outages=[SatelliteOutage(100.0, 400.0, prns=(lost,))],
+                   range_rate_noise=AR1(coefficient=0.9, sigma=0.05))
+    e = o.range_rate - _noiseless(truth, satellite_outages=[SatelliteOutage(100.0, 400.0, prns=(lost,))]).range_rate
+    p = int(o.prn[0, 1])
+    slots = [np.nonzero(o.prn[k] == p)[0] for k in range(len(o))]
+    assert len({int(sl[0]) for sl in slots if len(sl)}) > 1  # the satellite did change slot
+    series = np.array([e[k, sl[0]] for k, sl in enumerate(slots) if len(sl)])
+    r1 = np.corrcoef(series[:-1], series[1:])[0, 1]
+    assert r1 == pytest.approx(0.9, abs=0.05)
+
+
 def test_satellite_outage_keeps_the_highest(truth):
     o = _noiseless(truth, satellite_outages=[SatelliteOutage(300.0, 360.0, keep=3)])
     inside = (o.time >= 300) & (o.time < 360)

@@ -132,7 +132,8 @@ def simulate_observables(truth: Trajectory, satellites, rate: float, lever_arm, 
     sigma_pr, sigma_rr, sigma_cp : float
         Gaussian noise 1-sigma of pseudorange [m], range rate [m/s], carrier
         [m]; also what the filters are told. A noise process given for an
-        observable replaces its Gaussian noise (sampled per satellite slot).
+        observable replaces its Gaussian noise (sampled per satellite of the
+        source, one channel each, then placed in the slots).
     clock_q : (q_bias [m^2/s], q_drift [m^2/s^3])
     clock0 : (bias [m], drift [m/s]) at the first epoch.
     rng : numpy.random.Generator
@@ -208,12 +209,21 @@ def simulate_observables(truth: Trajectory, satellites, rate: float, lever_arm, 
         us = np.einsum("ij,ij->i", u, vs)
         rr[j, :n] = (us - u @ v) / (1.0 + us / C_LIGHT)
 
+    # Noise is drawn per satellite (one channel per satellite of the source, over all
+    # epochs) and then gathered into the slots, so a coloured process (AR(1), bias
+    # segments) follows its satellite even when the slot it occupies changes as
+    # satellites rise and set; process ``channels`` are satellite indices of the source.
+    all_sat = np.asarray(satellites.states(time_offset).prn)
+    order = np.argsort(all_sat)
+    col = order[np.searchsorted(all_sat[order], np.where(valid, prn, all_sat[order[0]]))]
+    rows = np.arange(m)[:, None]
+
     def noise(process, sigma):
         if process is not None:
-            e = process.sample(t, K, rng)
+            e = process.sample(t, n_sat, rng)
         else:
-            e = rng.standard_normal((m, K)) * sigma
-        return np.where(valid, e, np.nan)
+            e = rng.standard_normal((m, n_sat)) * sigma
+        return np.where(valid, e[rows, col], np.nan)
 
     pr = geo + clock[:, :1] + noise(pseudorange_noise, sigma_pr)
     rrate = rr + clock[:, 1:] + noise(range_rate_noise, sigma_rr)
