@@ -4,6 +4,9 @@ geometry.py      constants of the GPS signal and Earth model used by GNSS code,
                  line-of-sight geometry (elevation, azimuth, Earth rotation
                  during signal travel), the :class:`SatelliteStates` type every
                  satellite source returns
+constellation.py nominal GPS constellation (6 planes, circular Kepler orbits) for simulation
+clock.py         two-state receiver clock (the filters' ClockModel), sampled exactly
+observables.py   simulated pseudorange, range rate, carrier per satellite and epoch
 ephemeris.py     GPS broadcast ephemeris from RINEX navigation files (georinex),
                  orbit, velocity and clock per IS-GPS-200
 spp.py           single-point positioning by iterated weighted least squares
