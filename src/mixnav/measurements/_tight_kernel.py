@@ -51,31 +51,14 @@ def tight_zhr(nav, lever, w_b, clock, sat_pos, sat_vel, pr, rr, valid, sig_pr, s
     z = np.empty(m)
     H = np.zeros((m, n))
     r = np.empty(m)
-    c = np.empty((3, 3))
-    quat_to_dcm_into(nav[0:4], c)
-    lat, lon, h = nav[7], nav[8], nav[9]
-    sl, cl, so, co = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
-    # C_ne rows: N, E, D in ECEF
-    cne = np.empty((3, 3))
-    cne[0, 0], cne[0, 1], cne[0, 2] = -sl * co, -sl * so, cl
-    cne[1, 0], cne[1, 1], cne[1, 2] = -so, co, 0.0
-    cne[2, 0], cne[2, 1], cne[2, 2] = -cl * co, -cl * so, -sl
-    _, rn = radii(lat)
-    ln = np.empty(3)   # C_nb l
+    ra, cne, ln, c = _frame(nav, lever)
     wl = np.empty(3)   # C_nb (w x l)
     wxl0 = w_b[1] * lever[2] - w_b[2] * lever[1]
     wxl1 = w_b[2] * lever[0] - w_b[0] * lever[2]
     wxl2 = w_b[0] * lever[1] - w_b[1] * lever[0]
-    for i in range(3):
-        ln[i] = c[i, 0] * lever[0] + c[i, 1] * lever[1] + c[i, 2] * lever[2]
-        wl[i] = c[i, 0] * wxl0 + c[i, 1] * wxl1 + c[i, 2] * wxl2
-    ra = np.empty(3)
-    ra[0] = (rn + h) * cl * co
-    ra[1] = (rn + h) * cl * so
-    ra[2] = (rn * (1.0 - E2) + h) * sl
     va_n = np.empty(3)
     for i in range(3):
-        ra[i] += cne[0, i] * ln[0] + cne[1, i] * ln[1] + cne[2, i] * ln[2]
+        wl[i] = c[i, 0] * wxl0 + c[i, 1] * wxl1 + c[i, 2] * wxl2
         va_n[i] = nav[4 + i] + wl[i]
     # C_nb [l x] for the gyro-bias columns of the range rate
     clx = np.empty((3, 3))
@@ -124,8 +107,8 @@ def tight_zhr(nav, lever, w_b, clock, sat_pos, sat_vel, pr, rr, valid, sig_pr, s
 
 
 @njit(cache=True)
-def antenna_frame(nav, lever):
-    """Antenna ECEF position [m], ``C_ne`` (ECEF -> NED at the IMU) and ``l_n = C_nb l``."""
+def _frame(nav, lever):
+    """Antenna ECEF position, ``C_ne`` (rows N, E, D in ECEF), ``l_n = C_nb l`` and ``C_nb``."""
     c = np.empty((3, 3))
     quat_to_dcm_into(nav[0:4], c)
     lat, lon, h = nav[7], nav[8], nav[9]
@@ -144,4 +127,11 @@ def antenna_frame(nav, lever):
     ra[2] = (rn * (1.0 - E2) + h) * sl
     for i in range(3):
         ra[i] += cne[0, i] * ln[0] + cne[1, i] * ln[1] + cne[2, i] * ln[2]
+    return ra, cne, ln, c
+
+
+@njit(cache=True)
+def antenna_frame(nav, lever):
+    """Antenna ECEF position [m], ``C_ne`` (ECEF -> NED at the IMU) and ``l_n = C_nb l``."""
+    ra, cne, ln, _ = _frame(nav, lever)
     return ra, cne, ln

@@ -42,10 +42,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..attitude import skew
 from ..gnss.observables import GnssObservations
 from ..ins.error_model import StateLayout
 from ._tight_kernel import antenna_frame
-from .tight import TightGnss, _skew
+from .tight import TightGnss
 
 
 class TdcpGnss(TightGnss):
@@ -91,7 +92,7 @@ class TdcpGnss(TightGnss):
         lay = self.layout
         _, _, l_n = self._antenna(nav)
         J = np.zeros((4, lay.n))
-        J[0:3, lay.att] = -_skew(l_n)
+        J[0:3, lay.att] = -skew(l_n)
         J[0:3, lay.pos] = np.eye(3)
         J[3, lay.clk] = 1.0
         return J
@@ -157,7 +158,7 @@ class TdcpGnss(TightGnss):
             rows = slice(n_pr, n_pr + n_td)
             z[rows] = (o.carrier[i, cur] - o.carrier[self._prev, prev]) - \
                 (rho + clock[0] - rho_c - self._b_prev)
-            H[rows, lay.att] = u_n @ _skew(l_n)
+            H[rows, lay.att] = u_n @ skew(l_n)
             H[rows, lay.pos] = -u_n
             H[rows, lay.clk] = 1.0
             if self.clone:

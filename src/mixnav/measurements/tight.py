@@ -25,16 +25,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..attitude import quat_to_dcm
+from ..attitude import quat_to_dcm, skew
 from ..errors import ConfigError
 from ..geodesy.frames import dcm_ecef_to_ned, lla_to_ecef
 from ..gnss.observables import GnssObservations
 from ..ins.error_model import StateLayout
 from ._tight_kernel import tight_zhr
 
-
-def _skew(a: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
 
 
 class TightGnss:
@@ -114,15 +111,15 @@ class TightGnss:
         z = np.empty(m)
         r = np.empty(m)
         z[:n] = o.pseudorange[i, sel] - pr
-        H[:n, lay.att] = u_n @ _skew(l_n)
+        H[:n, lay.att] = u_n @ skew(l_n)
         H[:n, lay.pos] = -u_n
         H[:n, lay.clk] = 1.0
         r[:n] = o.sigma_pr ** 2
         if use_rr:
             z[n:] = o.range_rate[i, sel] - rr
-            H[n:, lay.att] = u_n @ _skew(C_nb @ np.cross(w_b, self.lever))
+            H[n:, lay.att] = u_n @ skew(C_nb @ np.cross(w_b, self.lever))
             H[n:, lay.vel] = -u_n
-            H[n:, lay.bg] = -u_n @ (C_nb @ _skew(self.lever))
+            H[n:, lay.bg] = -u_n @ (C_nb @ skew(self.lever))
             H[n:, lay.clk + 1] = 1.0
             r[n:] = o.sigma_rr ** 2
         return z, H, r
