@@ -208,6 +208,12 @@ class ErrorStateEkf:
             s[lay.clk:lay.clk + 2] = init.sigma_clock
         return np.diag(s ** 2)
 
+    def _belief(self, P0: np.ndarray, n_clone: int) -> "GaussianBelief":
+        """The covariance (or bank of covariances) the run loop carries.
+
+        Subclasses return their own kind (robust updates, a Gaussian sum)."""
+        return GaussianBelief(P0, n_clone, self.layout, self.absurd_sigma)
+
     def run(self, imu: ImuData, init: InitialState, measurements=(),
             output_times: np.ndarray | None = None) -> FilterResult:
         """Run the filter over the IMU data.
@@ -264,14 +270,10 @@ class ErrorStateEkf:
         prev = np.zeros(6)
         sensor = np.zeros(12) if init.sensor0 is None else np.array(init.sensor0, dtype=float)
         clock = np.zeros(2)
-        P = self.initial_covariance(init)
-        n = lay.n
-        P_xc = np.zeros((n, nc))  # cross-covariance of the error state and the clone
-        P_cc = np.zeros((nc, nc))
-        have_clone = False
+        belief = self._belief(self.initial_covariance(init), nc)
         work = np.empty((4, lay.n, lay.n))
         layout_arr = lay.as_array()
-        recov = {"rejected_not_pd": 0, "rejected_absurd": 0, "covariance_repair": 0}
+        recov = belief.counts
         n_out = len(out_t)
         rec_nav = np.empty((n_out, 10))
         rec_sig = np.empty((n_out, lay.n))
@@ -297,42 +299,23 @@ class ErrorStateEkf:
         for ti, t in enumerate(times):
             end = int(ends[ti]) + 1
             T = propagate_block(nav, prev, sensor, imu_s.dtheta[start:end], imu_s.dvel[start:end],
-                                imu_s.dt[start:end], P, self.qc, layout_arr, self.tau, work)
-            if have_clone and T > 0.0:
-                P_xc = work[1] @ P_xc  # work[1] holds this step's Phi
+                                imu_s.dt[start:end], belief.P, self.qc, layout_arr, self.tau, work)
+            events = ev_by_index.get(ti, ())
+            if T > 0.0:
+                belief.propagated(work, T, measured=bool(events))
             if lay.clk >= 0:
                 clock[0] += clock[1] * T
             start = end
             used = False
-            for (_, mi, i) in ev_by_index.get(ti, ()):
+            for (_, mi, i) in events:
                 tu = _time.perf_counter()
                 w_b = prev[0:3] / imu_s.dt[end - 1]
                 model = measurements[mi]
                 zhr = model.measure(i, nav, w_b, clock)
-                if zhr is not None and have_clone:
-                    z, H, r = zhr
-                    Pa = np.empty((n + nc, n + nc))
-                    Pa[:n, :n] = P
-                    Pa[:n, n:] = P_xc
-                    Pa[n:, :n] = P_xc.T
-                    Pa[n:, n:] = P_cc
-                    if H.shape[1] == n:
-                        H = np.hstack([H, np.zeros((len(z), nc))])
-                    Pa_new, dx, nis, status = ekf_correct_dx(Pa, z, H, r, self.absurd_sigma, nav,
-                                                             sensor, clock, layout_arr)
-                    P_new = np.ascontiguousarray(Pa_new[:n, :n])
-                    if status in (OK, NEEDS_REPAIR):  # applied: split the blocks back
-                        cloner.correct_clone(dx[n:])
-                        P_xc = Pa_new[:n, n:].copy()
-                        P_cc = Pa_new[n:, n:].copy()
-                elif zhr is not None:
-                    z, H, r = zhr
-                    if H.shape[1] != n:
-                        raise NumericalError("a measurement model returned H for a clone the "
-                                             "filter does not carry")  # a bug, not bad input
-                    P_new, nis, status = ekf_correct(P, z, H, r, self.absurd_sigma, nav, sensor,
-                                                     clock, layout_arr)
                 if zhr is not None:
+                    z, H, r = zhr
+                    kinds = model.row_kinds(i, len(z)) if hasattr(model, "row_kinds") else None
+                    status, nis = belief.update(z, H, r, kinds, nav, sensor, clock, layout_arr, cloner)
                     if status == ABSURD:
                         recov["rejected_absurd"] += 1
                     elif status == S_NOT_POSITIVE_DEFINITE:
@@ -341,24 +324,21 @@ class ErrorStateEkf:
                         raise NumericalError(f"the update at t = {t:.3f} s gave a non-finite "
                                              "covariance or correction")
                     else:
-                        P = P_new
                         if status == NEEDS_REPAIR:
-                            self._repair_covariance(P, recov)
+                            belief.repair()
                         nis_list.append(nis)
                         nis_dim.append(len(z))
                         used = True
                 if hasattr(model, "remember"):
                     if model is cloner:  # replace the clone by the current state
-                        J = model.clone_rows(nav)
-                        P_xc = P @ J.T
-                        P_cc = J @ P_xc
-                        have_clone = True
+                        belief.replace_clone(model.clone_rows(nav))
                     model.remember(i, nav, clock)
                 update_time += _time.perf_counter() - tu
                 n_updates += 1
             if not np.isfinite(nav).all():
                 raise NumericalError(f"INS state became non-finite at t = {t:.3f} s")
             if is_out[ti]:
+                P = belief.covariance()
                 rec_nav[io] = nav
                 rec_sig[io] = np.sqrt(np.diag(P))
                 rec_used[io] = used
@@ -368,19 +348,96 @@ class ErrorStateEkf:
                 io += 1
         wall = _time.perf_counter() - wall0
         n_ep = max(n_updates, 1)
+        timing = {"epoch_time_mean_us": wall / n_ep * 1e6,
+                  "update_time_mean_us": update_time / n_ep * 1e6,
+                  "wall_time_s": wall, "measurement_epochs": n_updates}
+        timing.update(self.extra_timing())
         return FilterResult(
             time=out_t[:io], nav=rec_nav[:io], sigma=rec_sig[:io], gnss_used=rec_used[:io],
-            sensor=rec_sensor[:io], pv_cov=rec_pv[:io], w_b=rec_w[:io], nis=np.array(nis_list), nis_dim=np.array(nis_dim, dtype=int),
-            recoveries=recov, layout=lay, P=P,
-            timing={"epoch_time_mean_us": wall / n_ep * 1e6,
-                    "update_time_mean_us": update_time / n_ep * 1e6,
-                    "wall_time_s": wall, "measurement_epochs": n_updates},
+            sensor=rec_sensor[:io], pv_cov=rec_pv[:io], w_b=rec_w[:io], nis=np.array(nis_list),
+            nis_dim=np.array(nis_dim, dtype=int), recoveries=recov, layout=lay, P=belief.covariance(),
+            timing=timing,
         )
 
-    @staticmethod
-    def _repair_covariance(P, recov) -> None:
-        """Rebuild P from its eigen-decomposition with floored eigenvalues (counted)."""
-        w, v = np.linalg.eigh(P)
-        w = np.maximum(w, 1e-12 * w.max())
-        P[:, :] = (v * w) @ v.T
-        recov["covariance_repair"] += 1
+    def extra_timing(self) -> dict:
+        """Timing entries beyond the loop's own (e.g. the learning time of a mixture)."""
+        return {}
+
+
+def repair_covariance(P: np.ndarray) -> None:
+    """Rebuild P (in place) from its eigen-decomposition with eigenvalues floored
+    at 1e-12 of the largest."""
+    w, v = np.linalg.eigh(P)
+    w = np.maximum(w, 1e-12 * w.max())
+    P[:, :] = (v * w) @ v.T
+
+
+class GaussianBelief:
+    """The one Gaussian of the EKF: ``P``, and the stochastic-clone blocks.
+
+    The run loop hands it each propagation step (``propagated``), each
+    measurement (``update``, which also feeds the correction back into the
+    INS, sensor and clock estimates) and each clone replacement. Subclasses
+    change only :meth:`correct` (e.g. the robust adaptive EKF).
+
+    ``counts`` holds the recoveries of the module docstring (and whatever a
+    subclass adds); the run loop reports it as ``FilterResult.recoveries``.
+    """
+
+    def __init__(self, P0: np.ndarray, n_clone: int, layout: StateLayout, absurd_sigma: float):
+        n = layout.n
+        self.P = np.array(P0, dtype=float)
+        self.nc = n_clone
+        self.P_xc = np.zeros((n, n_clone))  # cross-covariance of the error state and the clone
+        self.P_cc = np.zeros((n_clone, n_clone))
+        self.have_clone = False
+        self.absurd_sigma = absurd_sigma
+        self.counts = {"rejected_not_pd": 0, "rejected_absurd": 0, "covariance_repair": 0}
+
+    def propagated(self, work: np.ndarray, T: float, measured: bool) -> None:
+        """``P`` was propagated in place by the kernel; move the clone's cross block."""
+        if self.have_clone:
+            self.P_xc = work[1] @ self.P_xc  # work[1] holds this step's Phi
+
+    def correct(self, P, z, H, r, nav, sensor, clock, layout_arr):
+        """One gated Kalman correction with feedback: ``(P_post, dx, nis, status)``."""
+        return ekf_correct_dx(P, z, H, r, self.absurd_sigma, nav, sensor, clock, layout_arr)
+
+    def update(self, z, H, r, kinds, nav, sensor, clock, layout_arr, cloner):
+        """Apply one measurement; returns ``(status, nis)``."""
+        n, nc = self.P.shape[0], self.nc
+        if self.have_clone:
+            Pa = np.empty((n + nc, n + nc))
+            Pa[:n, :n] = self.P
+            Pa[:n, n:] = self.P_xc
+            Pa[n:, :n] = self.P_xc.T
+            Pa[n:, n:] = self.P_cc
+            if H.shape[1] == n:
+                H = np.hstack([H, np.zeros((len(z), nc))])
+            Pa_new, dx, nis, status = self.correct(Pa, z, H, r, nav, sensor, clock, layout_arr)
+            if status in (OK, NEEDS_REPAIR):  # applied: split the blocks back
+                self.P = np.ascontiguousarray(Pa_new[:n, :n])
+                cloner.correct_clone(dx[n:])
+                self.P_xc = Pa_new[:n, n:].copy()
+                self.P_cc = Pa_new[n:, n:].copy()
+            return status, nis
+        if H.shape[1] != n:
+            raise NumericalError("a measurement model returned H for a clone the "
+                                 "filter does not carry")  # a bug, not bad input
+        P_new, dx, nis, status = self.correct(self.P, z, H, r, nav, sensor, clock, layout_arr)
+        if status in (OK, NEEDS_REPAIR):
+            self.P = P_new
+        return status, nis
+
+    def replace_clone(self, J: np.ndarray) -> None:
+        """The clone becomes ``J x`` of the current (updated) state."""
+        self.P_xc = self.P @ J.T
+        self.P_cc = J @ self.P_xc
+        self.have_clone = True
+
+    def repair(self) -> None:
+        repair_covariance(self.P)
+        self.counts["covariance_repair"] += 1
+
+    def covariance(self) -> np.ndarray:
+        return self.P

@@ -189,6 +189,14 @@ def discretize(F, qc, T, phi, qd, tmp):
                 for j in range(n):
                     phi[i, j] += f * tmp[k, j] * T / 3.0
         phi[i, i] += 1.0
+    discrete_noise(F, qc, T, qd)
+
+
+@njit(cache=True)
+def discrete_noise(F, qc, T, qd):
+    """``Qd`` of :func:`discretize` alone (linear in ``qc``: mixture filters use
+    it for the part of the noise whose scale differs between components)."""
+    n = F.shape[0]
     for i in range(n):
         for j in range(i, n):
             s = 0.0

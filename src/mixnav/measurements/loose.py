@@ -8,6 +8,7 @@ from ..attitude import quat_to_dcm
 from ..data import GnssFixes
 from ..ins.error_model import StateLayout
 from ._loose_kernel import loose_zhr
+from .kinds import POSITION, VELOCITY
 from ..geodesy.frames import displace
 
 
@@ -67,3 +68,7 @@ class LooseGnss:
         per axis), shape ``(m,)``.
         """
         return loose_zhr(nav, self.lever, self._rows[i], w_b, self.use_velocity, self._n, self._i_bg)
+
+    def row_kinds(self, i: int, m: int) -> np.ndarray:
+        """Three position rows, then (with velocity) three velocity rows."""
+        return np.array([POSITION] * 3 + [VELOCITY] * (m - 3))

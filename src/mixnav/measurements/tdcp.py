@@ -46,6 +46,7 @@ from ..attitude import skew
 from ..gnss.observables import GnssObservations
 from ..ins.error_model import StateLayout
 from ._tight_kernel import antenna_frame
+from .kinds import PSEUDORANGE, TDCP
 from .tight import TightGnss
 
 
@@ -126,6 +127,11 @@ class TdcpGnss(TightGnss):
         if not len(ia):
             return None
         return a[ia], b[ib]
+
+    def row_kinds(self, i: int, m: int) -> np.ndarray:
+        """The pseudorange rows of the epoch's satellites, then the TDCP rows."""
+        n_pr = int(self.obs.valid[i].sum()) if self.use_pseudorange else 0
+        return np.array([PSEUDORANGE] * n_pr + [TDCP] * (m - n_pr))
 
     def measure(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock):
         """``(z, H, R_diagonal)`` of epoch ``i``; ``H`` has ``n + 4`` columns when

@@ -30,6 +30,7 @@ from ..errors import ConfigError
 from ..geodesy.frames import dcm_ecef_to_ned, lla_to_ecef
 from ..gnss.observables import GnssObservations
 from ..ins.error_model import StateLayout
+from .kinds import PSEUDORANGE, RANGE_RATE
 from ._tight_kernel import tight_zhr
 
 
@@ -96,6 +97,11 @@ class TightGnss:
         return tight_zhr(nav, self.lever, w_b, np.asarray(clock, dtype=float), o.sat_pos[i],
                          o.sat_vel[i], o.pseudorange[i], o.range_rate[i], o.valid[i],
                          o.sigma_pr, o.sigma_rr, self.use_range_rate, lay.n, lay.bg.start, lay.clk)
+
+    def row_kinds(self, i: int, m: int) -> np.ndarray:
+        """Pseudorange rows, then (with ``use_range_rate``) as many range-rate rows."""
+        n_pr = m // 2 if self.use_range_rate else m
+        return np.array([PSEUDORANGE] * n_pr + [RANGE_RATE] * (m - n_pr))
 
     def measure_numpy(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock):
         """:meth:`measure` in plain numpy."""

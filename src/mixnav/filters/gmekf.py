@@ -1,0 +1,312 @@
+"""The Gaussian-mixture EKF (Gaussian sum filter), method M3 (P1 eqs. 5-9, P2 eqs. 21-29).
+
+State prior, process noise and measurement noise are each Gaussian mixtures.
+The filter carries a bank of error-state components about one shared nominal
+INS solution (one mechanization, as in the EKF; the components differ in
+their error-state mean and covariance), and each epoch:
+
+1. propagates every component with the common ``Phi`` and ``Qd``; the white
+   IMU noise (ARW, VRW) part of ``Qd`` is accumulated on its own, and at a
+   measurement epoch each component splits into ``J`` children, one per
+   process-noise component ``j`` (``P + c_j Q_white``, weight ``w_j``);
+2. updates every child by every measurement row with the row's noise mixture
+   (``L`` components), the ``L`` grandchildren merged straight back into
+   their parent in closed form (:mod:`mixnav.filters._bank_kernels`), the
+   weights multiplied by the innovation likelihoods in log space (P1 eqs.
+   8-9);
+3. reduces the bank to ``max_components`` by moment-preserving merges
+   (Salmond's criterion), feeds the merged error estimate back into the INS,
+   sensor and clock estimates and re-centres every component on it.
+
+The bank is therefore ``I x J`` components before reduction (``I`` those
+kept from the previous epoch, or the prior mixture at the start) and each
+measurement row sees ``x L`` of them; with one-component mixtures it is the
+EKF (tested to 1e-10 per update).
+
+Noise mixtures are *standardised*: a measurement mixture
+``sum pi_l N(mu_l, v_l)`` means noise ``sigma (mu_l + sqrt(v_l) N(0, 1))``
+with ``sigma`` the measurement model's own sigma of that row, so one
+mixture serves satellites of different sigmas; the process mixture scales
+the IMU white-noise densities (``v_j ARW^2``, ``v_j VRW^2``; its means
+must be zero, a non-zero mean being a bias the bias states carry); the prior
+mixture scales the initial covariance.
+
+When an event has no measurement (a GNSS outage), the accumulated white
+noise is folded into every component with the mixture's mean scale
+``sum w_j v_j``: without a measurement the children could never be told
+apart, so merging them at once is exact.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..ins._error_kernels import apply_feedback, discrete_noise
+from ..ins.error_model import ClockModel, StateLayout
+from ..ins.imu_model import ImuErrorModel
+from ..measurements.kinds import KINDS
+from ..noise.mixture import GaussianMixture
+from ._bank_kernels import (accumulate_noise, bank_moments, bank_propagate, bank_reduce, bank_split,
+                            bank_update, predicted_nis)
+from ._ekf_kernels import ABSURD, NEEDS_REPAIR, NON_FINITE, OK, S_NOT_POSITIVE_DEFINITE
+from .ekf import ErrorStateEkf, repair_covariance
+from .kalman import innovation_is_absurd
+
+
+@dataclass(frozen=True)
+class StandardMixture:
+    """A 1-D mixture of a standardised noise: weights, means, variance scales."""
+
+    weights: tuple
+    means: tuple
+    scales: tuple
+
+    def __post_init__(self):
+        w, mu, v = (np.atleast_1d(np.asarray(a, dtype=float)) for a in (self.weights, self.means, self.scales))
+        if not (w.shape == mu.shape == v.shape) or w.ndim != 1 or len(w) == 0:
+            raise ConfigError(f"weights, means and scales need one entry per component, got "
+                              f"{len(w)}, {len(mu)}, {len(v)}", key="weights")
+        if not (np.all(np.isfinite(w)) and np.all(np.isfinite(mu)) and np.all(np.isfinite(v))):
+            raise ConfigError("weights, means and scales must be finite", key="weights")
+        if np.any(w < 0) or abs(w.sum() - 1.0) > 1e-6:
+            raise ConfigError(f"weights must be non-negative and sum to 1, got {w.tolist()}", key="weights")
+        if np.any(v <= 0):
+            raise ConfigError(f"variance scales must be positive, got {v.tolist()}", key="scales")
+        object.__setattr__(self, "weights", tuple(w / w.sum()))
+        object.__setattr__(self, "means", tuple(mu))
+        object.__setattr__(self, "scales", tuple(v))
+
+    @classmethod
+    def gaussian(cls) -> "StandardMixture":
+        return cls((1.0,), (0.0,), (1.0,))
+
+    @classmethod
+    def from_mixture(cls, gm: GaussianMixture, sigma: float = 1.0) -> "StandardMixture":
+        """From a fitted 1-D :class:`GaussianMixture` of residuals in units of ``sigma``."""
+        if gm.dim != 1:
+            raise ConfigError(f"a noise mixture must be one-dimensional, got d = {gm.dim}")
+        return cls(tuple(gm.weights), tuple(gm.means[:, 0] / sigma), tuple(gm.covariances[:, 0, 0] / sigma ** 2))
+
+    @property
+    def n_components(self) -> int:
+        return len(self.weights)
+
+    @property
+    def mean_scale(self) -> float:
+        return float(np.dot(self.weights, self.scales))
+
+    def variance(self) -> float:
+        w, mu, v = map(np.asarray, (self.weights, self.means, self.scales))
+        m = w @ mu
+        return float(w @ (v + mu ** 2) - m ** 2)
+
+
+@dataclass(frozen=True)
+class BankMixtures:
+    """The three mixtures of a Gaussian-mixture EKF.
+
+    ``measurement`` maps an observable kind (``"pseudorange"``, ``"tdcp"``,
+    ``"range_rate"``, ``"position"``, ``"velocity"``; see
+    :mod:`mixnav.measurements.kinds`) to its standardised noise mixture;
+    kinds not listed are Gaussian with the model's sigma.
+    """
+
+    measurement: dict = field(default_factory=dict)
+    process: StandardMixture = field(default_factory=StandardMixture.gaussian)
+    prior: StandardMixture = field(default_factory=StandardMixture.gaussian)
+
+    def __post_init__(self):
+        for k in self.measurement:
+            if k not in KINDS:
+                raise ConfigError(f"unknown observable '{k}' (known: {', '.join(KINDS)})",
+                                  key=f"mixture.measurement.{k}")
+        if any(m != 0.0 for m in self.process.means):
+            raise ConfigError("process-noise mixture means must be zero", key="mixture.process.means")
+        if any(m != 0.0 for m in self.prior.means):
+            raise ConfigError("prior mixture means must be zero", key="mixture.prior.means")
+
+    def tables(self):
+        """``(log_w, mu, var)``, each (n_kinds, L_max), rows in kind-code order."""
+        L = max([m.n_components for m in self.measurement.values()] + [1])
+        nk = len(KINDS)
+        lw = np.full((nk, L), -np.inf)
+        mu = np.zeros((nk, L))
+        var = np.ones((nk, L))
+        for name, code in KINDS.items():
+            m = self.measurement.get(name, StandardMixture.gaussian())
+            k = m.n_components
+            with np.errstate(divide="ignore"):
+                lw[code, :k] = np.log(m.weights)
+            mu[code, :k] = m.means
+            var[code, :k] = m.scales
+        return lw, mu, var
+
+
+class BankBelief:
+    """The bank of components the run loop of :class:`ErrorStateEkf` carries
+    for :class:`GaussianMixtureEkf` (same interface as ``GaussianBelief``)."""
+
+    def __init__(self, P0, n_clone, layout: StateLayout, absurd_sigma: float, mixtures: BankMixtures,
+                 qc_white: np.ndarray, max_components: int):
+        n = layout.n
+        na = n + n_clone
+        self.n, self.na, self.nc = n, na, n_clone
+        self.P = np.zeros((n, n))  # scratch for the propagation kernel (gives Phi and Qd)
+        pr = mixtures.prior
+        I = pr.n_components
+        self.lw = np.log(np.asarray(pr.weights))
+        self.X = np.zeros((I, na))
+        self.Pb = np.zeros((I, na, na))
+        for i, s in enumerate(pr.scales):
+            self.Pb[i, :n, :n] = s * P0
+        self.absurd_sigma = absurd_sigma
+        self.max_components = int(max_components)
+        self.tables = mixtures.tables()
+        proc = mixtures.process
+        self.split = proc.n_components > 1
+        self.proc_logw = np.log(np.asarray(proc.weights))
+        self.proc_scale = np.asarray(proc.scales)
+        self.one_scale = proc.scales[0] if not self.split else 1.0
+        self.mean_scale = proc.mean_scale
+        self.qc_white = qc_white
+        self.white = np.any(qc_white > 0) and (self.split or self.one_scale != 1.0)
+        self.Qw = np.zeros((n, n))
+        self.Qw_pending = False
+        self._qdw = np.empty((n, n))
+        self.counts = {"rejected_not_pd": 0, "rejected_absurd": 0, "covariance_repair": 0}
+        self.largest_bank = I
+        self.have_clone = False
+
+    # --- run-loop interface ----------------------------------------------------------
+    def propagated(self, work, T, measured):
+        F, phi, qd = work[0], work[1], work[2]
+        self.P[:, :] = 0.0
+        if not self.white:
+            bank_propagate(self.X, self.Pb, phi, qd, self.n)
+            return
+        discrete_noise(F, self.qc_white, T, self._qdw)
+        if not self.split:  # one process component with its own scale
+            bank_propagate(self.X, self.Pb, phi, qd + (self.one_scale - 1.0) * self._qdw, self.n)
+            return
+        bank_propagate(self.X, self.Pb, phi, qd - self._qdw, self.n)
+        accumulate_noise(self.Qw, phi, self._qdw)
+        self.Qw_pending = True
+        if not measured:  # nothing can tell the children apart: merge them now (exact)
+            self._fold()
+
+    def _fold(self):
+        n = self.n
+        self.Pb[:, :n, :n] += self.mean_scale * self.Qw
+        self.Qw[:, :] = 0.0
+        self.Qw_pending = False
+
+    def update(self, z, H, r, kinds, nav, sensor, clock, layout_arr, cloner):
+        n, na = self.n, self.na
+        z = np.ascontiguousarray(z, dtype=float)
+        r = np.asarray(r, dtype=float)
+        if r.ndim != 1:
+            if np.any(r - np.diag(np.diag(r))):
+                raise ConfigError("the Gaussian-mixture EKF needs independent measurement rows "
+                                  "(a diagonal R)")
+            r = np.diag(r).copy()
+        if H.shape[1] != na:
+            Ha = np.zeros((len(z), na))
+            Ha[:, :H.shape[1]] = H
+            H = Ha
+        if self.Qw_pending:
+            self.lw, self.X, self.Pb = bank_split(self.lw, self.X, self.Pb, self.Qw, self.proc_logw,
+                                                  self.proc_scale)
+            self.Qw[:, :] = 0.0
+            self.Qw_pending = False
+            self.largest_bank = max(self.largest_bank, len(self.lw))
+        w, xm, Pm = bank_moments(self.lw, self.X, self.Pb)
+        y = z - H @ xm
+        if innovation_is_absurd(y, H, Pm, r, self.absurd_sigma):
+            return ABSURD, np.inf
+        nis, _ = predicted_nis(xm, Pm, z, H, r)
+        if not np.isfinite(nis):
+            return S_NOT_POSITIVE_DEFINITE, nis
+        lw, X, Pb = self.lw.copy(), self.X.copy(), self.Pb.copy()
+        kinds = np.zeros(len(z), dtype=np.int64) if kinds is None else np.asarray(kinds, dtype=np.int64)
+        if not bank_update(lw, X, Pb, z, np.ascontiguousarray(H), r, kinds, *self.tables):
+            return S_NOT_POSITIVE_DEFINITE, nis
+        lw, X, Pb = bank_reduce(lw, X, Pb, self.max_components, n)
+        w = np.exp(lw)
+        dx = w @ X
+        if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(Pb)) and np.all(np.isfinite(lw))):
+            return NON_FINITE, nis
+        apply_feedback(nav, sensor, clock, dx[:n], layout_arr)
+        if self.have_clone:
+            cloner.correct_clone(dx[n:])
+        X -= dx
+        self.lw, self.X, self.Pb = lw, X, Pb
+        d = np.diagonal(Pb, axis1=1, axis2=2)[:, :n]
+        return (NEEDS_REPAIR if np.any(d <= 0.0) else OK), nis
+
+    def replace_clone(self, J):
+        n = self.n
+        Pxx = self.Pb[:, :n, :n]
+        self.X[:, n:] = self.X[:, :n] @ J.T
+        Pxc = Pxx @ J.T
+        self.Pb[:, :n, n:] = Pxc
+        self.Pb[:, n:, :n] = np.swapaxes(Pxc, 1, 2)
+        self.Pb[:, n:, n:] = J @ Pxc
+        self.have_clone = True
+
+    def repair(self):
+        n = self.n
+        for c in np.nonzero(np.any(np.diagonal(self.Pb, axis1=1, axis2=2)[:, :n] <= 0.0, axis=1))[0]:
+            Pc = np.ascontiguousarray(self.Pb[c])
+            repair_covariance(Pc)
+            self.Pb[c] = Pc
+        self.counts["covariance_repair"] += 1
+
+    def covariance(self):
+        _, _, Pm = bank_moments(self.lw, self.X, self.Pb)
+        return np.ascontiguousarray(Pm[:self.n, :self.n])
+
+
+class GaussianMixtureEkf(ErrorStateEkf):
+    """Gaussian-mixture (Gaussian sum) closed-loop error-state EKF, method M3.
+
+    Parameters
+    ----------
+    layout, imu_model, covariance_interval, absurd_sigma, clock
+        As :class:`~mixnav.filters.ekf.ErrorStateEkf`.
+    mixtures : BankMixtures
+        Prior, process-noise and measurement-noise mixtures.
+    max_components : int
+        The bank is reduced to at most this many components after each
+        update (default 16).
+    learning_time_s : float
+        Time spent learning the mixtures (reported beside the filter's own
+        timing; M4/M5 learn them offline).
+    """
+
+    def __init__(self, layout: StateLayout, imu_model: ImuErrorModel, mixtures: BankMixtures,
+                 max_components: int = 16, covariance_interval: float = 1.0, absurd_sigma: float = 1e4,
+                 clock: ClockModel | None = None, learning_time_s: float = 0.0):
+        super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
+        if int(max_components) < 1:
+            raise ConfigError("must be at least 1", key="mixture.max_components")
+        self.mixtures = mixtures
+        self.max_components = int(max_components)
+        self.learning_time_s = float(learning_time_s)
+        self.qc_white = np.zeros(layout.n)
+        self.qc_white[layout.att] = self.qc[layout.att]
+        self.qc_white[layout.vel] = self.qc[layout.vel]
+        self._last = None
+
+    def _belief(self, P0, n_clone):
+        self._last = BankBelief(P0, n_clone, self.layout, self.absurd_sigma, self.mixtures, self.qc_white,
+                                self.max_components)
+        return self._last
+
+    def extra_timing(self) -> dict:
+        out = {"learning_time_s": self.learning_time_s}
+        if self._last is not None:
+            out["bank_components_max"] = float(self._last.largest_bank)
+        return out
