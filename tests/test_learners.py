@@ -68,13 +68,32 @@ def test_em_convergence_warning():
 
 
 # --------------------------------------------------------------------------- VB
+def _assert_runs_monotone(vb, seed):
+    """The bound never decreases within a run; each accepted merge ends above the run before it.
+
+    A run starts at 0, after each pruning (``pruned_at_``) and after each accepted merge
+    (``merged_at_``).  Coordinate ascent cannot decrease eq. (29) within a run; we allow a
+    relative slack of 1e-9 because the bound is a sum of O(n) terms of size O(1) computed in
+    floating point (and through Cholesky factors), so two consecutive values that are equal
+    in exact arithmetic can differ by ~1e-13 relative; 1e-9 leaves a wide margin while any
+    real decrease (a wrong update) is orders of magnitude larger.
+    """
+    b = np.array(vb.lower_bounds_)
+    cuts = [0, *sorted(vb.pruned_at_ + vb.merged_at_), len(b)]
+    for lo, hi in zip(cuts[:-1], cuts[1:]):
+        seg = b[lo:hi]
+        assert np.all(np.diff(seg) >= -1e-9 * np.abs(seg[1:])), (seed, lo)
+    # a merge is kept only if the converged bound after it (end of its runs, before the next
+    # merge) exceeds the converged bound before it
+    ends = [*vb.merged_at_[1:], len(b)]
+    for start, end in zip(vb.merged_at_, ends):
+        assert b[end - 1] > b[start - 1], (seed, start)
+    assert sum(m["accepted"] for m in vb.merges_) == len(vb.merged_at_)
+
+
 @pytest.mark.parametrize("d", [1, 3])
 def test_vb_lower_bound_never_decreases(d):
-    # Coordinate ascent cannot decrease eq. (29); we allow a relative slack of 1e-9
-    # because the bound is a sum of O(n) terms of size O(1) computed in floating
-    # point (and through Cholesky factors), so two consecutive values that are equal
-    # in exact arithmetic can differ by ~1e-13 relative; 1e-9 leaves a wide margin
-    # while any real decrease (a wrong update) is orders of magnitude larger.
+    # criterion and tolerance: see _assert_runs_monotone
     for seed in range(30):
         rng = np.random.default_rng(seed)
         X = _blobs(d, 240, rng)
@@ -82,11 +101,7 @@ def test_vb_lower_bound_never_decreases(d):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
             vb.fit(X)
-        b = np.array(vb.lower_bounds_)
-        cuts = [0, *vb.pruned_at_, len(b)]           # the bound is monotone within each pruning run
-        for lo, hi in zip(cuts[:-1], cuts[1:]):
-            seg = b[lo:hi]
-            assert np.all(np.diff(seg) >= -1e-9 * np.abs(seg[1:])), (seed, lo)
+        _assert_runs_monotone(vb, seed)
 
 
 def test_vb_numba_path_equals_numpy_path():
@@ -98,8 +113,7 @@ def test_vb_numba_path_equals_numpy_path():
         est.fit(X, sample_weight=w)
     X2 = X
     prior = est._resolve_prior(X2, w)
-    from mixnav.noise.learn.em import check_random_state, kmeanspp_resp
-    resp = kmeanspp_resp(X2, 4, check_random_state(0), w)
+    resp = est._initial_resp(X2, w)            # the estimator's own initialisation (k-means, seeded)
     bounds = []
     p, it, _ = vbmod._vb_loop_numpy(X2, w, vbmod._m_step(X2, w[:, None] * resp, prior), prior, 0.0, 40, bounds)
     np.testing.assert_allclose(bounds, est.lower_bounds_, rtol=1e-10)
@@ -320,11 +334,7 @@ def test_vb_numba_nd_lower_bound_never_decreases(d):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
             vb.fit(X, sample_weight=w)
-        b = np.array(vb.lower_bounds_)
-        cuts = [0, *vb.pruned_at_, len(b)]
-        for lo, hi in zip(cuts[:-1], cuts[1:]):
-            seg = b[lo:hi]
-            assert np.all(np.diff(seg) >= -1e-9 * np.abs(seg[1:])), (seed, lo)
+        _assert_runs_monotone(vb, seed)
 
 
 def test_vb_numba_nd_warm_start_matches_numpy(monkeypatch):
