@@ -70,9 +70,15 @@ class Strict(BaseModel):
 
 
 class ScenarioInfo(Strict):
+    """``report_table``: metric keys (docs/outputs.md, e.g. ``pitch_rmse_deg``,
+    ``outage0_horizontal_max_m``) of the headline table that ``mixnav
+    experiment`` puts first in its report (a paper's table), also the metrics
+    drawn against a swept value."""
+
     name: str
     description: str = ""
     seed: Annotated[int, Field(ge=0)] = 0
+    report_table: list[str] = Field(default_factory=list)
 
 
 class StaticSegment(Strict):
@@ -239,9 +245,78 @@ class InitConfig(Strict):
         (10.0, 1.0)
 
 
+class RobustConfig(Strict):
+    """Robust adaptive EKF (``estimator = "robust-adaptive"``): IGG-III
+    thresholds ``k0 < k1`` on standardised innovations and the adaptive-factor
+    threshold ``c`` (see mixnav.filters.robust)."""
+
+    k0: float = Field(default=1.5, gt=0)
+    k1: float = Field(default=3.0, gt=0)
+    c: float = Field(default=1.5, gt=0)
+
+    @model_validator(mode="after")
+    def _order(self):
+        if not self.k0 < self.k1:
+            raise ValueError(f"need k0 < k1, got k0 = {self.k0}, k1 = {self.k1}")
+        return self
+
+
+class MixtureSpec(Strict):
+    """A 1-D mixture of a standardised noise: ``weights`` summing to 1,
+    ``means`` (in units of the model's sigma; default zeros) and variance
+    ``scales`` (multiples of the model's variance)."""
+
+    weights: list[Annotated[float, Field(ge=0)]] = Field(min_length=1)
+    means: list[float] | None = None
+    scales: list[Annotated[float, Field(gt=0)]]
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        k = len(self.weights)
+        if len(self.scales) != k or (self.means is not None and len(self.means) != k):
+            raise ValueError("weights, means and scales need one entry per component")
+        if abs(sum(self.weights) - 1.0) > 1e-6:
+            raise ValueError(f"weights must sum to 1, got {sum(self.weights):.6g}")
+        return self
+
+
+class LearnConfig(Strict):
+    """Mixtures learned offline from a training stretch (M4: ``method = "vb"``,
+    M5: ``"gibbs"``; ``"em"`` too). In a scenario the training residuals are
+    the scenario's own noise processes drawn over a separate stretch
+    (``training_samples`` residuals per mixture, stream ``training``) and
+    standardised by the sigma the filter is told."""
+
+    method: Literal["vb", "gibbs", "em"]
+    observables: list[Literal["pseudorange", "range_rate", "tdcp", "position", "velocity"]] = \
+        Field(default_factory=lambda: ["pseudorange", "tdcp"])
+    process: bool = True
+    training_samples: int = Field(default=2000, ge=10)
+    n_components: int = Field(default=4, ge=1)
+    gibbs_samples: int = Field(default=1000, ge=10)
+    prune: float = Field(default=0.01, ge=0, lt=1)
+
+
+class MixtureConfig(Strict):
+    """Gaussian-mixture EKF (``estimator = "gaussian-mixture"``): prior,
+    process-noise and per-observable measurement-noise mixtures, given or
+    learned, and the bank size after reduction."""
+
+    max_components: int = Field(default=16, ge=1)
+    prior: MixtureSpec | None = None
+    process: MixtureSpec | None = None
+    measurement: dict[Literal["pseudorange", "range_rate", "tdcp", "position", "velocity"], MixtureSpec] = \
+        Field(default_factory=dict)
+    learn: LearnConfig | None = None
+
+
 class MethodConfig(Strict):
     name: str
     type: Literal["loose-ekf", "tight-ekf", "tdcp-ekf"]
+    #: "ekf" (M1), "robust-adaptive" (M2), "gaussian-mixture" (M3; M4/M5 with mixture.learn)
+    estimator: Literal["ekf", "robust-adaptive", "gaussian-mixture"] = "ekf"
+    robust: RobustConfig | None = None
+    mixture: MixtureConfig | None = None
     states: Literal[15, 17, 21] = 15
     covariance_interval: Duration = 1.0
     imu_grade: str | None = None
@@ -250,6 +325,14 @@ class MethodConfig(Strict):
     #: tdcp-ekf: "clone" (stochastic cloning of the previous antenna position and
     #: clock) or "known" (the shortcut that takes the previous estimate as exact)
     tdcp_previous: Literal["clone", "known"] = "clone"
+
+    @model_validator(mode="after")
+    def _estimator_tables(self):
+        if self.robust is not None and self.estimator != "robust-adaptive":
+            raise ValueError("a [robust] table needs estimator = \"robust-adaptive\"")
+        if self.mixture is not None and self.estimator != "gaussian-mixture":
+            raise ValueError("a [mixture] table needs estimator = \"gaussian-mixture\"")
+        return self
 
 
 class SweepConfig(Strict):

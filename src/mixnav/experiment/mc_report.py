@@ -190,21 +190,35 @@ def _table(df: pd.DataFrame) -> str:
     return f"<table><tr>{head}</tr>" + "".join(rows) + "</table>"
 
 
-def _mean_ci_table(summary: pd.DataFrame) -> pd.DataFrame:
-    """Wide table: one row per (sweep value,) method, 'mean +- CI' per metric of BOX_METRICS."""
+def _mean_ci_table(summary: pd.DataFrame, columns: dict[str, str] = BOX_METRICS) -> pd.DataFrame:
+    """Wide table: one row per (sweep value,) method, 'mean +- CI' per metric of ``columns``."""
     keys = ["sweep_value", "method"] if "sweep_value" in summary.columns else ["method"]
-    s = summary[summary["metric"].isin(list(BOX_METRICS))].copy()
+    s = summary[summary["metric"].isin(list(columns))].copy()
     s["cell"] = [f"{m:.4g} ± {h:.2g}" if np.isfinite(h) else f"{m:.4g}"
                  for m, h in zip(s["mean"], s["ci95_half"])]
     wide = s.pivot_table(index=keys, columns="metric", values="cell", aggfunc="first")
-    wide = wide[[c for c in BOX_METRICS if c in wide.columns]].rename(columns=BOX_METRICS)
+    wide = wide[[c for c in columns if c in wide.columns]].rename(columns=columns)
     return wide.reset_index()
+
+
+#: Labels of further metrics a headline table may name.
+LABELS = {**BOX_METRICS,
+          "roll_max_deg": "roll max [deg]", "pitch_max_deg": "pitch max [deg]", "yaw_max_deg": "yaw max [deg]",
+          "vertical_max_m": "vertical max [m]", "learning_time_s": "learning time [s]",
+          "total_time_s": "total time: filter + learning [s]",
+          **{f"outage{i}_{k}_max_m": f"outage {i + 1}: max {k} error [m]" for i in range(9)
+             for k in ("horizontal", "vertical")}}
+
+
+def headline_columns(keys: Sequence[str]) -> dict[str, str]:
+    """Labels of a scenario's ``report_table`` metric keys (the key itself when unknown)."""
+    return {k: LABELS.get(k, k) for k in keys}
 
 
 def write_experiment_report(out_dir: Path, scenario: str, results: pd.DataFrame, summary: pd.DataFrame,
                             config_text: str | None = None, series: pd.DataFrame | None = None,
                             consistency: pd.DataFrame | None = None, outages=(),
-                            sweep_name: str | None = None) -> Path:
+                            sweep_name: str | None = None, headline: Sequence[str] = ()) -> Path:
     """``report.html`` of an experiment folder.
 
     Parameters
@@ -218,6 +232,9 @@ def write_experiment_report(out_dir: Path, scenario: str, results: pd.DataFrame,
         GNSS outage windows, shaded in the time plots.
     sweep_name : str, optional
         Name of the swept quantity (sweep experiments).
+    headline : sequence of str
+        Metric keys of the scenario's headline table (``scenario.report_table``),
+        shown first and, for a sweep, drawn against the swept value.
     """
     sweep = "sweep_value" in results.columns
     runs = int(results["seed"].nunique())
@@ -230,12 +247,17 @@ def write_experiment_report(out_dir: Path, scenario: str, results: pd.DataFrame,
              "N x mean NEES follows chi2(N x dof), whose 2.5 % and 97.5 % quantiles give the band. "
              "Epochs within a run are correlated, so the in-band fraction can fall below 95 % by more "
              "than chance would allow for independent epochs."]
-    sections = [("Means over runs (95 % CI)", _table(_mean_ci_table(summary)))]
+    sections = []
+    if headline:
+        sections.append(("Headline table: means over runs (95 % CI)",
+                         _table(_mean_ci_table(summary, headline_columns(headline)))))
+    sections.append(("Means over runs (95 % CI)", _table(_mean_ci_table(summary))))
     if consistency is not None and not consistency.empty:
         sections.append(("Monte Carlo consistency", _table(consistency)))
     figs: dict[str, Figure] = {}
     if sweep:
-        figs["sweep"] = sweep_figure(summary, BOX_METRICS, sweep_name or "sweep value")
+        figs["sweep"] = sweep_figure(summary, headline_columns(headline) if headline else BOX_METRICS,
+                                     sweep_name or "sweep value")
     else:
         figs["boxplots"] = boxplot_figure(results, BOX_METRICS)
     if series is not None and not series.empty and not sweep:

@@ -44,8 +44,13 @@ METRIC_KEYS_DOC: dict[str, str] = {
     "epoch_time_mean_us": "filter wall time per GNSS epoch, mechanization included [us]",
     "update_time_mean_us": "measurement model + correction + feedback per GNSS epoch [us]",
     "wall_time_s": "wall time of the filter run [s]",
+    "learning_time_s": "Gaussian-mixture methods: time spent learning the noise mixtures offline [s]",
+    "bank_components_max": "Gaussian-mixture methods: largest bank before a reduction (kept x process "
+                           "components)",
+    "total_time_s": "wall_time_s + learning_time_s [s]",
     "measurement_epochs": "number of GNSS epochs processed",
-    "recoveries": "counts of numerical recoveries (see mixnav.filters.ekf)",
+    "recoveries": "counts of numerical recoveries (see mixnav.filters.ekf); the robust adaptive EKF "
+                  "adds its row and epoch counts (see mixnav.filters.robust)",
     "nis_mean_per_dof": "mean NIS divided by the measurement dimension (1 if consistent)",
 }
 

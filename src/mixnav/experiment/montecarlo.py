@@ -58,7 +58,7 @@ __all__ = ["run_experiment", "aggregate", "paired_comparison", "flatten_metrics"
 #: Columns identifying a record row; every other column is a metric.
 ID_COLUMNS = ("scenario", "seed", "method", "sweep_value")
 #: Metrics measured with the wall clock: not reproducible from the seed.
-TIMING_METRICS = ("epoch_time_mean_us", "update_time_mean_us", "wall_time_s")
+TIMING_METRICS = ("epoch_time_mean_us", "update_time_mean_us", "wall_time_s", "learning_time_s", "total_time_s")
 
 RUNS_DIR = "runs"
 MANIFEST = "manifest.json"
@@ -524,7 +524,8 @@ def write_experiment_outputs(scenario: str, results: pd.DataFrame, out_dir: Path
     write_experiment_report(out_dir, scenario, results, summary, config_text=resolve(scenario)[0],
                             series=series, consistency=consistency,
                             outages=[tuple(o) for o in sc.gnss.outages],
-                            sweep_name=None if sweep is None else sweep.name)
+                            sweep_name=None if sweep is None else sweep.name,
+                            headline=sc.scenario.report_table)
     return {"summary": summary, "series": series, "consistency": consistency}
 
 

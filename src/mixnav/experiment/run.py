@@ -54,11 +54,24 @@ def run_scenario(sc: Scenario, source: str | None = None, seed: int | None = Non
         from ..ins.error_model import ClockModel
         s = sc.gnss.satellites
         clock = ClockModel(q_bias=s.clock_bias_noise ** 2, q_drift=s.clock_drift_noise ** 2)
+    training = _training(sc, seed, source)
     for i, m in enumerate(sc.methods):
         filt, meas = registry.build(m, sim.imu_model, sim.fixes, lever, source, i,
-                                    observations=sim.observations, clock=clock)
+                                    observations=sim.observations, clock=clock, training=training,
+                                    seed=seed)
         results[m.name] = filt.run(sim.imu, sim.init, meas)
     return RunOutput(sc, source or sc.scenario.name, sim, results)
+
+
+def _training(sc: Scenario, seed: int, source):
+    """Training residuals for the methods that learn their mixtures (one draw shared by all)."""
+    learners = [m.mixture.learn for m in sc.methods if m.mixture is not None and m.mixture.learn is not None]
+    if not learners:
+        return None
+    from ..sim.training import training_residuals
+    kinds = sorted({k for lc in learners for k in lc.observables})
+    n = max(lc.training_samples for lc in learners)
+    return training_residuals(sc, seed, kinds, n, any(lc.process for lc in learners), source)
 
 
 def truth_at(truth: Trajectory, times: np.ndarray) -> Trajectory:
@@ -145,6 +158,7 @@ def method_metrics(res: FilterResult, table: pd.DataFrame, outages) -> dict:
     # without a reference there is nothing to score: timing and health only
     m = compute_metrics(table, outages=list(outages)) if "err_n_m" in table else {}
     m.update({k: float(v) for k, v in res.timing.items()})
+    m["total_time_s"] = m["wall_time_s"] + m.get("learning_time_s", 0.0)
     m["recoveries"] = dict(res.recoveries)
     if len(res.nis):
         m["nis_mean_per_dof"] = float(np.mean(res.nis / res.nis_dim))

@@ -34,7 +34,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .kalman import cholesky_lower
+from .kalman import cholesky_lower, innovation_is_absurd
 
 _LOG2PI = math.log(2.0 * math.pi)
 
@@ -177,7 +177,8 @@ def predicted_nis(xm, Pm, z, H, r):
     return nis, y
 
 
-@njit(cache=True)
+# reassociation lets the row loops vectorise; no 'nnan'/'ninf', so the infinity checks stay
+@njit(cache=True, fastmath={"reassoc", "contract"})
 def bank_update(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var):
     """Sequential scalar update of every component by every row (module docstring).
 
@@ -203,23 +204,35 @@ def bank_update(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var):
     L = mix_logw.shape[1]
     Ph = np.empty(na)
     ll = np.empty(L)
+    ex = np.empty(L)
+    # each row's non-zero columns, found once for all components
+    nz = np.empty((m, na), dtype=np.int64)
+    n_nz = np.zeros(m, dtype=np.int64)
     for k in range(m):
-        kd = kinds[k]
-        rk = r[k]
-        sig = math.sqrt(rk)
-        for c in range(N):
+        for j in range(na):
+            if H[k, j] != 0.0:
+                nz[k, n_nz[k]] = j
+                n_nz[k] += 1
+    # components are independent here: one at a time, all rows (it stays in cache)
+    for c in range(N):
+        Pc = P[c]
+        Xc = X[c]
+        for k in range(m):
+            kd = kinds[k]
+            rk = r[k]
+            sig = math.sqrt(rk)
             for i in range(na):
                 Ph[i] = 0.0
             hx = 0.0
-            for j in range(na):
+            for q in range(n_nz[k]):
+                j = nz[k, q]
                 h = H[k, j]
-                if h != 0.0:
-                    hx += h * X[c, j]
-                    for i in range(na):
-                        Ph[i] += P[c, j, i] * h  # P symmetric: row j is column j
+                hx += h * Xc[j]
+                for i in range(na):
+                    Ph[i] += Pc[j, i] * h  # P symmetric: row j is column j
             hPh = 0.0
-            for j in range(na):
-                hPh += H[k, j] * Ph[j]
+            for q in range(n_nz[k]):
+                hPh += H[k, nz[k, q]] * Ph[nz[k, q]]
             y = z[k] - hx
             lmax = -np.inf
             for l in range(L):
@@ -235,15 +248,16 @@ def bank_update(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var):
                     lmax = ll[l]
             tot = 0.0
             for l in range(L):
-                tot += math.exp(ll[l] - lmax)
+                ex[l] = math.exp(ll[l] - lmax)
+                tot += ex[l]
             lam = lmax + math.log(tot)
             a = 0.0
             e2 = 0.0
             inv = 0.0
             for l in range(L):
-                if ll[l] == -np.inf:
+                if ex[l] == 0.0:
                     continue
-                rho = math.exp(ll[l] - lam)
+                rho = ex[l] / tot
                 s = hPh + mix_var[kd, l] * rk
                 g = (y - mix_mu[kd, l] * sig) / s
                 a += rho * g
@@ -253,13 +267,12 @@ def bank_update(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var):
             if not (np.isfinite(a) and np.isfinite(b) and np.isfinite(lam)):
                 return False
             for i in range(na):
-                X[c, i] += Ph[i] * a
+                Xc[i] += Ph[i] * a
+            # full rows (contiguous, vectorised); symmetric by construction
             for i in range(na):
                 bi = b * Ph[i]
-                for j in range(i, na):
-                    v = P[c, i, j] - bi * Ph[j]
-                    P[c, i, j] = v
-                    P[c, j, i] = v
+                for j in range(na):
+                    Pc[i, j] -= bi * Ph[j]
             lw[c] += lam
     return True
 
@@ -363,3 +376,53 @@ def bank_reduce(lw, X, P, max_components, n):
         X2[o] = Xw[c]
         P2[o] = Pw[c]
     return lw2, X2, P2
+
+
+#: Status codes of :func:`bank_epoch` (the values of mixnav.filters._ekf_kernels).
+_OK, _NOT_PD, _ABSURD, _NON_FINITE, _NEEDS_REPAIR = 0, 1, 2, 3, 4
+
+
+@njit(cache=True)
+def bank_epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n):
+    """One measurement of the bank in one call: gate the merged prediction,
+    NIS, per-row mixture update, reduction, merged correction.
+
+    Returns ``(status, nis, lw, X, P, dx)``: on ``_OK``/``_NEEDS_REPAIR`` the
+    new bank re-centred on its merged mean and that mean ``dx`` (na,), which
+    the caller feeds back; otherwise the bank unchanged and ``dx`` zero.
+    """
+    na = X.shape[1]
+    zero = np.zeros(na)
+    w, xm, Pm = bank_moments(lw, X, P)
+    m = z.shape[0]
+    y = z.copy()
+    for i in range(m):
+        for k in range(na):
+            y[i] -= H[i, k] * xm[k]
+    if innovation_is_absurd(y, H, Pm, r, n_sigma):
+        return _ABSURD, np.inf, lw, X, P, zero
+    nis, _ = predicted_nis(xm, Pm, z, H, r)
+    if not np.isfinite(nis):
+        return _NOT_PD, nis, lw, X, P, zero
+    lw2, X2, P2 = lw.copy(), X.copy(), P.copy()
+    if not bank_update(lw2, X2, P2, z, H, r, kinds, mix_logw, mix_mu, mix_var):
+        return _NOT_PD, nis, lw, X, P, zero
+    lw2, X2, P2 = bank_reduce(lw2, X2, P2, max_components, n)
+    K = lw2.shape[0]
+    dx = np.zeros(na)
+    for c in range(K):
+        wc = math.exp(lw2[c])
+        for i in range(na):
+            dx[i] += wc * X2[c, i]
+    for i in range(na):
+        if not np.isfinite(dx[i]):
+            return _NON_FINITE, nis, lw, X, P, zero
+    status = _OK
+    for c in range(K):
+        if not np.isfinite(lw2[c]):
+            return _NON_FINITE, nis, lw, X, P, zero
+        for i in range(na):
+            X2[c, i] -= dx[i]
+            if i < n and not (P2[c, i, i] > 0.0):
+                status = _NEEDS_REPAIR
+    return status, nis, lw2, X2, P2, dx

