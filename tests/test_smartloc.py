@@ -1,0 +1,326 @@
+"""smartLoc reader and pseudorange residuals against ground truth (mixnav.io.smartloc).
+
+1. Synthetic: satellites and a moving receiver chosen here, pseudoranges
+   built independently of the code (satellite placed in the reception-time
+   frame, then turned back by OMEGA_E tau into the transmit-time frame the
+   data set uses), written in the smartLoc format, read back: residuals are
+   zero to 1e-6 m and the clock comes back; NLOS outliers do not move the
+   median clock.
+2. Malformed files raise DataError naming the file and the line.
+3. The real Berlin Potsdamer Platz files (skipped without ../shared/data).
+"""
+
+import numpy as np
+import pytest
+
+from mixnav.errors import DataError
+from mixnav.geodesy.frames import dcm_ecef_to_ned, lla_to_ecef
+from mixnav.gnss.geometry import C_LIGHT, earth_rotation_correction
+from mixnav.io.smartloc import (SmartlocTruth, clock_per_epoch, geometric_range, pseudorange_residuals,
+                                read_ground_truth, read_pseudoranges, read_smartloc)
+
+from .conftest import data_file
+
+LAT, LON, H = np.deg2rad(52.5096), np.deg2rad(13.3760), 40.0   # Potsdamer Platz
+
+
+def _sat_positions(rx, az_el_range):
+    """Satellites in the *reception-time* frame at given azimuth, elevation [deg] and range [m]."""
+    C_ne = dcm_ecef_to_ned(LAT, LON)
+    out = []
+    for az, el, rho in az_el_range:
+        a, e = np.deg2rad(az), np.deg2rad(el)
+        u_n = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), -np.sin(e)])
+        out.append(rx + rho * (C_ne.T @ u_n))
+    return np.array(out)
+
+
+# (system, id, azimuth, elevation, range)
+SATS = [(1, 2, 30, 60, 20.4e6), (1, 5, 120, 35, 21.9e6), (1, 12, 200, 80, 20.2e6), (1, 17, 290, 15, 24.1e6),
+        (1, 25, 330, 45, 21.0e6), (4, 301, 60, 25, 21.5e6), (4, 310, 170, 70, 19.4e6),
+        (4, 319, 250, 40, 20.3e6)]
+
+
+def make_synthetic(n_epochs=12, nlos=None, dt=0.2):
+    """Rows (time, pseudorange, variance, sat xyz, id, sys, el, cn0), GT rows, true ranges and clocks."""
+    rx0 = lla_to_ecef(np.array([LAT, LON, H]))
+    v = np.array([8.0, -3.0, 2.0])                   # [m/s] straight line: interpolation is exact
+    times = np.arange(n_epochs) * dt
+    rows, truth_range, clocks = [], [], {}
+    for k, t in enumerate(times):
+        rx = rx0 + v * t
+        clk = {1: -1.4e5 - 50.0 * t, 4: -1.4e5 - 50.0 * t + 7.5}       # receiver clock + ISB [m]
+        clocks[k] = clk
+        sats = _sat_positions(rx, [(az + 0.5 * k, el, rho + 700.0 * k) for _, _, az, el, rho in SATS])
+        for (sys_, sid, az, el, _), p in zip(SATS, sats):
+            rho = float(np.linalg.norm(p - rx))        # geometric range in the reception-time frame
+            tau = rho / C_LIGHT
+            p_tx = earth_rotation_correction(p, -tau)  # the same point in the transmit-time frame
+            extra = nlos(k, sid) if nlos else 0.0
+            rows.append((t, rho + clk[sys_] + extra, 25.0, *p_tx, sid, sys_, el, 45.0))
+            truth_range.append(rho)
+    # ground truth every second epoch, plus the last one
+    gt_t = np.r_[times[::2], times[-1]] if (n_epochs - 1) % 2 else times[::2]
+    gt = [(t, *(rx0 + v * t)) for t in gt_t]
+    return rows, gt, np.array(truth_range), clocks
+
+
+def write_files(tmp_path, rows, gt, extra_input_lines=(), extra_gt_lines=()):
+    inp = tmp_path / "X_Input.txt"
+    out = []
+    for i, r in enumerate(rows):
+        if i % 8 == 0:
+            out.append(f"odom3 {float(r[0])!r} 5.0 0 0 0 0 0.01 0.0025 0.0009 0.0009 4e-06 4e-06 4e-06   ")
+        t, p, var, x, y, z, sid, sys_, el, cn0 = (float(v) for v in r)
+        sid, sys_ = int(sid), int(sys_)
+        out.append(f"pseudorange3 {t!r} {p!r} {var!r} {x!r} {y!r} {z!r} {sid} {sys_} {el!r} {cn0!r}       ")
+    inp.write_text("\n".join(list(out) + list(extra_input_lines)) + "\n")
+    gtf = tmp_path / "X_GT.txt"
+    gtf.write_text("\n".join([f"point3 {float(t)!r} {float(x)!r} {float(y)!r} {float(z)!r} 0 0 0 0 0 0 0 0 0"
+                              for t, x, y, z in gt]
+                             + list(extra_gt_lines)) + "\n")
+    return inp, gtf
+
+
+# ---------------------------------------------------------------------------
+# 1. synthetic
+# ---------------------------------------------------------------------------
+def test_synthetic_round_trip_residuals_are_zero(tmp_path):
+    rows, gt, rho, clocks = make_synthetic()
+    inp, gtf = write_files(tmp_path, rows, gt)
+    pr, truth = read_smartloc(tmp_path, "X")
+    assert len(pr) == len(rows) and len(truth) == len(gt)
+    np.testing.assert_array_equal(pr.pseudorange, [r[1] for r in rows])
+    np.testing.assert_array_equal(pr.sat_ecef, np.array([r[3:6] for r in rows]))
+    np.testing.assert_allclose(np.rad2deg(pr.elevation), [r[8] for r in rows])
+    assert pr.line[0] == 2 and truth.line[0] == 1      # line 1 of the input is an odom3 row
+    assert pr.labels[:3] == ["G02", "G05", "G12"] and pr.labels[5] == "R301"
+
+    res = pseudorange_residuals(pr, truth)
+    np.testing.assert_allclose(res.range, rho, rtol=0, atol=1e-6)
+    assert np.all(res.valid)
+    assert np.max(np.abs(res.residual)) < 1e-6
+    for k, clk in clocks.items():
+        np.testing.assert_allclose(res.clock_bias[k], [clk[1], clk[4]], rtol=0, atol=1e-6)
+    assert res.channel_names == ["G02", "G05", "G12", "G17", "G25", "R301", "R310", "R319"]
+    ch = res.channels()
+    assert ch.shape == (12, 8) and np.all(np.isfinite(ch))
+    # Huber clock on noise-free data is exact too
+    assert np.max(np.abs(pseudorange_residuals(pr, truth, clock="huber").residual)) < 1e-6
+
+
+def test_without_earth_rotation_residuals_are_metres():
+    rows, gt, _, _ = make_synthetic(4)
+    pr = _as_pr(rows)
+    truth = SmartlocTruth(np.array([g[0] for g in gt]), np.array([g[1:] for g in gt]), np.arange(len(gt)))
+    res = pseudorange_residuals(pr, truth, earth_rotation=False)
+    # Sagnac: OMEGA_E / c (x_s y_r - y_s x_r), up to ~30 m; not removed by a common clock
+    assert 1.0 < np.max(np.abs(res.residual)) < 40.0
+
+
+def _as_pr(rows):
+    from mixnav.io.smartloc import SmartlocPseudoranges
+    a = np.array(rows, dtype=float)
+    return SmartlocPseudoranges(a[:, 0], a[:, 1], a[:, 2], a[:, 3:6], a[:, 6].astype(int), a[:, 7].astype(int),
+                                np.deg2rad(a[:, 8]), a[:, 9], np.arange(len(a)) + 1)
+
+
+def test_nlos_outliers_do_not_move_the_median_clock():
+    # one GPS satellite per epoch 60..150 m long (NLOS), rotating through the satellites
+    bad = {1: 2, 2: 5, 3: 12, 4: 17, 5: 25}
+    rows, gt, _, clocks = make_synthetic(10, nlos=lambda k, sid: 60.0 + 10 * k if bad.get(1 + k % 5) == sid
+                                         else 0.0)
+    pr = _as_pr(rows)
+    truth = SmartlocTruth(np.array([g[0] for g in gt]), np.array([g[1:] for g in gt]), np.arange(len(gt)))
+    res = pseudorange_residuals(pr, truth)
+    is_bad = np.array([bad.get(1 + int(round(r[0] / 0.2)) % 5) == r[6] for r in rows])
+    assert is_bad.sum() == 10
+    np.testing.assert_allclose(res.residual[~is_bad], 0.0, atol=1e-6)
+    np.testing.assert_allclose(res.residual[is_bad], 60.0 + 10 * np.arange(10), atol=1e-6)
+    # a mean clock would have moved by outlier / 5 and biased every other residual
+    mean_clk = np.array([np.mean(res.raw[(res.epoch == k) & (pr.system == 1)]) for k in range(10)])
+    assert np.all(mean_clk - np.array([clocks[k][1] for k in range(10)]) > 10.0)
+
+
+def test_small_groups_are_left_out_and_counted():
+    rows, gt, _, _ = make_synthetic(3)
+    rows = [r for r in rows if not (r[7] == 4 and r[6] == 319)]        # 2 GLONASS left per epoch
+    pr = _as_pr(rows)
+    truth = SmartlocTruth(np.array([g[0] for g in gt]), np.array([g[1:] for g in gt]), np.arange(len(gt)))
+    res = pseudorange_residuals(pr, truth)
+    assert res.counts["small_group"] == 6 and res.counts["valid"] == 15
+    assert np.all(np.isnan(res.residual[pr.system == 4])) and np.all(np.isnan(res.clock_bias[:, 1]))
+    assert np.all(np.isnan(res.channels()[:, 5:]))
+    res2 = pseudorange_residuals(pr, truth, min_satellites=2)
+    assert res2.counts["small_group"] == 0
+    # two satellites: +-half their difference, a symmetric pair
+    g = res2.channels()[:, 5:]
+    np.testing.assert_allclose(g[:, 0], -g[:, 1], atol=1e-9)
+
+
+def test_rows_outside_truth_are_excluded_and_counted():
+    rows, gt, _, _ = make_synthetic(6)
+    pr = _as_pr(rows)
+    truth = SmartlocTruth(np.array([g[0] for g in gt[:-1]]), np.array([g[1:] for g in gt[:-1]]),
+                          np.arange(len(gt) - 1))
+    res = pseudorange_residuals(pr, truth)
+    assert res.counts["outside_truth"] == 8            # the last epoch (t = 1.0 s > 0.8 s)
+    assert res.n_epochs == 5 and np.all(res.epoch[-8:] == -1)
+    with pytest.raises(ValueError, match="outside the ground truth"):
+        truth.position_at([1.0])
+    far = SmartlocTruth(truth.time + 100.0, truth.pos_ecef, truth.line)
+    with pytest.raises(ValueError, match="no pseudorange time"):
+        pseudorange_residuals(pr, far)
+
+
+def test_geometric_range_fixed_point_and_clock_arguments():
+    rx = lla_to_ecef(np.array([LAT, LON, H]))[None]
+    p = _sat_positions(rx[0], [(45, 30, 2.2e7)])
+    rho = np.linalg.norm(p - rx, axis=1)
+    p_tx = earth_rotation_correction(p, -rho / C_LIGHT)
+    np.testing.assert_allclose(geometric_range(rx, p_tx), rho, rtol=0, atol=1e-7)
+    assert abs(geometric_range(rx, p_tx, iterations=0) - rho)[0] > 1.0
+    with pytest.raises(ValueError, match="median"):
+        clock_per_epoch(np.zeros(3), np.zeros(3, int), np.ones(3, int), method="mean")
+    with pytest.raises(ValueError, match="min_satellites"):
+        clock_per_epoch(np.zeros(3), np.zeros(3, int), np.ones(3, int), min_satellites=0)
+
+
+def test_huber_clock_is_a_robust_mean():
+    rng = np.random.default_rng(4)
+    raw = np.r_[rng.normal(0.0, 3.0, 9), 150.0]
+    b_med, _, _ = clock_per_epoch(raw, np.zeros(10, int), np.ones(10, int))
+    b_hub, _, _ = clock_per_epoch(raw, np.zeros(10, int), np.ones(10, int), method="huber")
+    assert b_med[0, 0] == pytest.approx(np.median(raw))
+    assert abs(b_hub[0, 0] - np.mean(raw[:9])) < 2.0 < abs(np.mean(raw) - np.mean(raw[:9]))
+
+
+# ---------------------------------------------------------------------------
+# 2. malformed files
+# ---------------------------------------------------------------------------
+GOOD = ("pseudorange3 0 19949087.65 25 14567933.9 2809850.9 21875628.0 12 1 85.1 49\n"
+        "pseudorange3 0 19713469.01 64 18145814.9 11532054.1 13684003.6 320 4 58.1 40\n"
+        "pseudorange3 0.2 19949088.65 25 14567933.9 2809850.9 21875628.0 12 1 85.1 49\n")
+
+
+@pytest.mark.parametrize("bad, match", [
+    ("pseudorange3 0.4 1.9e7 25 1.4e7 2.8e6 2.1e7 12 1 85.1\n", "11 fields, found 10"),
+    ("pseudorange3 0.4 1.9e7 25 1.4e7 2.8e6 2.1e7 12 1 85.1 abc\n", "column 11: 'abc' is not a number"),
+    ("pseudorange3 0.4 1.9e7 nan 1.4e7 2.8e6 2.1e7 12 1 85.1 40\n", "column 4: 'nan' is not finite"),
+    ("pseudorange3 0.1 1.9e7 25 1.4e7 2.8e6 2.1e7 12 1 85.1 40\n", "time goes backwards"),
+    ("pseudorange3 0.2 1.9e7 25 1.4e7 2.8e6 2.1e7 12 1 85.1 40\n", "G12 appears twice at time 0.2"),
+    ("pseudorange3 0.4 1.9e7 25 1.4e7 2.8e6 2.1e7 12 3 85.1 40\n", "unknown satellite system code"),
+    ("pseudorange3 0.4 1.9e7 25 1.4e7 2.8e6 2.1e7 12.5 1 85.1 40\n", "satellite id"),
+    ("pseudorange3 0.4 1.9e7 0 1.4e7 2.8e6 2.1e7 12 1 85.1 40\n", "variance"),
+    ("pseudorange3 0.4 1.9e7 25 1.4e3 2.8e3 2.1e3 12 1 85.1 40\n", "satellite position"),
+    ("pseudorange3 0.4 1.9e7 25 1.4e7 2.8e6 2.1e7 12 1 95 40\n", "elevation"),
+    ("pseudorange4 0.4 1.9e7 25 1.4e7 2.8e6 2.1e7 12 1 85 40\n", "unknown row type 'pseudorange4'"),
+])
+def test_malformed_input_rows_name_file_and_line(tmp_path, bad, match):
+    p = tmp_path / "in.txt"
+    p.write_text(GOOD + "odom3 0 5.85 0 0 0 0 -0.006 0.0025 0.0009 0.0009 4e-06 4e-06 4e-06\n" + bad)
+    with pytest.raises(DataError, match=match) as ei:
+        read_pseudoranges(p)
+    assert ei.value.line == 5 and ei.value.file == str(p)
+
+
+def test_input_without_rows_or_file(tmp_path):
+    p = tmp_path / "in.txt"
+    p.write_text("odom3 0 5.85 0 0 0 0 -0.006 0.0025 0.0009 0.0009 4e-06 4e-06 4e-06\n\n")
+    with pytest.raises(DataError, match="no 'pseudorange3' rows"):
+        read_pseudoranges(p)
+    with pytest.raises(DataError, match="not found"):
+        read_pseudoranges(tmp_path / "nope.txt")
+
+
+@pytest.mark.parametrize("bad, match", [
+    ("point3 0.2 3785105.7 899901.8 5037236.1 0 0 0 0 0 0 0 0 0\n", "time repeats"),
+    ("point3 0.1 3785105.7 899901.8 5037236.1 0 0 0 0 0 0 0 0 0\n", "time goes backwards"),
+    ("point3 0.4 3785105.7 899901.8 0 0 0 0 0 0 0 0 0 0\n", "ground-truth position"),
+    ("point3 0.4 3785105.7 899901.8 5037236.1 0 0 0\n", "14 fields, found 8"),
+])
+def test_malformed_truth_rows(tmp_path, bad, match):
+    p = tmp_path / "gt.txt"
+    p.write_text("point3 0 3785108.1 899901.4 5037234.4 0 0 0 0 0 0 0 0 0\n"
+                 "point3 0.2 3785106.6 899901.7 5037235.4 0 0 0 0 0 0 0 0 0\n" + bad)
+    with pytest.raises(DataError, match=match) as ei:
+        read_ground_truth(p)
+    assert ei.value.line == 3
+
+
+# ---------------------------------------------------------------------------
+# 3. real data: Berlin Potsdamer Platz
+# ---------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def berlin():
+    folder = data_file("smartloc-berlin", "Berlin_Potsdamer_Platz_Input.txt").parent
+    data_file("smartloc-berlin", "Berlin_Potsdamer_Platz_GT.txt")
+    return read_smartloc(folder)
+
+
+def test_real_reader_shapes_and_epochs(berlin):
+    pr, gt = berlin
+    assert len(pr) == 20038 and len(gt) == 1372
+    assert set(np.unique(pr.system)) == {1, 4}
+    ep = pr.epoch_times
+    assert ep.size == 1372 and np.all(np.diff(ep) > 0)
+    assert np.all(np.diff(pr.time) >= 0)
+    # 5 Hz with some 0.3 s steps, 283 s; ~14.6 satellites per epoch
+    assert 0.19 < np.min(np.diff(ep)) and np.max(np.diff(ep)) < 0.31
+    assert 282 < ep[-1] - ep[0] < 284
+    assert 14.0 < len(pr) / ep.size < 15.0
+    assert np.all((pr.elevation > 0) & (pr.elevation < np.pi / 2))
+    # the pseudorange times are truth times (interpolation exact there)
+    assert np.all(np.isin(ep, gt.time))
+
+
+def test_real_truth_is_a_continuous_car_track(berlin):
+    _, gt = berlin
+    dt = np.diff(gt.time)
+    assert np.all(dt > 0) and dt.max() < 0.5
+    v = np.linalg.norm(np.diff(gt.pos_ecef, axis=0), axis=1) / dt
+    assert v.max() < 15.0                    # a car in town: < 54 km/h (measured max 9.9 m/s)
+    assert np.median(v) > 2.0                # and it drives (median 5.8 m/s)
+    tm = 0.5 * (gt.time[1:] + gt.time[:-1])
+    a = np.linalg.norm(np.diff(np.diff(gt.pos_ecef, axis=0) / dt[:, None], axis=0), axis=1) / np.diff(tm)
+    assert np.median(a) < 2.0                # no jumps: typical acceleration of a car (measured 0.6 m/s^2)
+    # near Potsdamer Platz, on the ground
+    r = np.linalg.norm(gt.pos_ecef, axis=1)
+    assert np.all(np.abs(r - 6.365e6) < 2e4)
+
+
+def test_real_residuals_after_clock_removal(berlin):
+    pr, gt = berlin
+    res = pseudorange_residuals(pr, gt)
+    assert res.counts == {"rows": 20038, "outside_truth": 0, "small_group": 0, "valid": 20038}
+    ch = res.channels()
+    assert ch.shape == (1372, 19)
+    assert np.sum(np.isfinite(ch)) == 20038
+    # per epoch and system the median residual is zero for the median clock ...
+    for sys_ in (1, 4):
+        m = pr.system == sys_
+        med = np.array([np.median(res.residual[m & (res.epoch == k)]) for k in range(res.n_epochs)])
+        assert np.max(np.abs(med)) < 1e-6
+    # ... and near zero for the Huber clock (a robust mean, not the median)
+    hub = pseudorange_residuals(pr, gt, clock="huber")
+    med = np.array([np.median(hub.residual[hub.epoch == k]) for k in range(hub.n_epochs)])
+    assert np.median(np.abs(med)) < 5.0
+    # the receiver clock drifts smoothly (~ -50 m/s); GLONASS-GPS offset is a few metres on median
+    clk = res.clock_bias[:, 0]
+    rate = np.polyfit(res.epoch_times, clk, 1)[0]
+    assert -60.0 < rate < -40.0
+    assert abs(np.median(res.clock_bias[:, 1] - res.clock_bias[:, 0])) < 5.0
+
+
+def test_real_residuals_need_the_earth_rotation(berlin):
+    pr, gt = berlin
+    spread = {}
+    for er in (True, False):
+        v = pseudorange_residuals(pr, gt, earth_rotation=er).residual
+        spread[er] = 1.4826 * np.median(np.abs(v - np.median(v)))
+    # measured 15.4 m with the rotation, 22.4 m without
+    assert spread[True] < 17.0 < 20.0 < spread[False]
+    # the high line-of-sight satellite G12 (85 deg) is tight with it (robust spread measured 6.5 m)
+    res = pseudorange_residuals(pr, gt)
+    g12 = res.channels()[:, res.channel_names.index("G12")]
+    assert 1.4826 * np.nanmedian(np.abs(g12 - np.nanmedian(g12))) < 8.0
