@@ -205,3 +205,55 @@ def test_bad_method_tables_name_their_key(tmp_path, old, new, key):
     with pytest.raises(ConfigError) as e:
         load_scenario(_write(tmp_path, text.replace(old, new)))
     assert key in str(e.value)
+
+
+def _true_mixture_scenario(tmp_path) -> str:
+    """P1-sim1 without the gross errors, the EKF against M3 told the true mixture."""
+    text, _ = resolve("P1-sim1")
+    text = text.replace('''pseudorange_noise = { type = "sum", parts = [
+  { type = "mixture", weights = [0.1, 0.9], sigmas = ["0.3 m", "0.17320508 m"] },
+  { type = "gross", size = "2.5 m", every = 20 } ] }''',
+                        'pseudorange_noise = { type = "mixture", weights = [0.1, 0.9], sigmas = ["0.3 m", "0.17320508 m"] }')
+    assert 'type = "gross"' not in text
+    head, rest = text.split("[[methods]]", 1)
+    blocks = ["[[methods]]" + b for b in rest.split("[[methods]]")]
+    keep = [b for b in blocks if 'name = "ekf"' in b or 'name = "gm-true"' in b]
+    p = tmp_path / "true-mixture.toml"
+    p.write_text(head + "".join(keep))
+    return str(p)
+
+
+def _paired(tmp_path, runs):
+    from mixnav.experiment.run import run_scenario, solution_table
+    sc, src, _ = load_scenario(_true_mixture_scenario(tmp_path))
+    d = {"ekf": [], "gm-true": []}
+    for seed in range(runs):
+        out = run_scenario(sc, src, seed=seed)
+        for name, res in out.results.items():
+            t = solution_table(res, out.sim.truth, out.sim.outages)
+            d[name].append([np.sqrt(np.mean(t.err_n_m ** 2 + t.err_e_m ** 2)),
+                            np.sqrt(np.mean(t.err_pitch_deg ** 2 + t.err_roll_deg ** 2))])
+    return np.array(d["ekf"]), np.array(d["gm-true"])
+
+
+def _assert_not_worse(ekf, gm):
+    """Paired: the mean of (M3 - EKF) over runs is below zero or within its
+    one-sided 95 % bound of zero (t distribution)."""
+    from scipy.stats import t as student
+    for j in range(ekf.shape[1]):
+        diff = gm[:, j] - ekf[:, j]
+        half = student.ppf(0.95, len(diff) - 1) * diff.std(ddof=1) / np.sqrt(len(diff))
+        assert diff.mean() - half <= 0.0, (j, diff.mean(), half)
+
+
+def test_true_mixture_gmekf_is_not_worse_than_the_ekf_12_runs(tmp_path):
+    ekf, gm = _paired(tmp_path, 12)
+    _assert_not_worse(ekf, gm)
+    # and in horizontal position it is better in most runs (it knows the noise is smaller than R)
+    assert np.mean(gm[:, 0] < ekf[:, 0]) >= 0.75
+
+
+@pytest.mark.slow
+def test_true_mixture_gmekf_is_not_worse_than_the_ekf_50_runs(tmp_path):
+    ekf, gm = _paired(tmp_path, 50)
+    _assert_not_worse(ekf, gm)
