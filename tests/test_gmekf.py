@@ -192,9 +192,9 @@ def _write(tmp_path, text):
 
 
 @pytest.mark.parametrize("old,new,key", [
-    ('estimator = "robust-adaptive"\nrobust = { k0 = 1.5, k1 = 3.0, c = 1.5 }',
-     'robust = { k0 = 1.5, k1 = 3.0, c = 1.5 }', "methods[1]"),
-    ('robust = { k0 = 1.5, k1 = 3.0, c = 1.5 }', 'robust = { k0 = 3.5, k1 = 3.0, c = 1.5 }', "methods[1].robust"),
+    ('estimator = "robust-adaptive"\nrobust = { k0 = 2.5, k1 = 5.0, c = 1.5 }',
+     'robust = { k0 = 2.5, k1 = 5.0, c = 1.5 }', "methods[1]"),
+    ('robust = { k0 = 2.5, k1 = 5.0, c = 1.5 }', 'robust = { k0 = 5.5, k1 = 5.0, c = 1.5 }', "methods[1].robust"),
     ('measurement.pseudorange = { weights = [0.1, 0.9]', 'measurement.pseudorange = { weights = [0.2, 0.9]',
      "methods[5].mixture.measurement.pseudorange"),
     ('learn = { method = "vb" }', 'learn = { method = "mcmc" }', "methods[4].mixture.learn.method"),

@@ -250,8 +250,8 @@ class RobustConfig(Strict):
     thresholds ``k0 < k1`` on standardised innovations and the adaptive-factor
     threshold ``c`` (see mixnav.filters.robust)."""
 
-    k0: float = Field(default=1.5, gt=0)
-    k1: float = Field(default=3.0, gt=0)
+    k0: float = Field(default=2.5, gt=0)
+    k1: float = Field(default=5.0, gt=0)
     c: float = Field(default=1.5, gt=0)
 
     @model_validator(mode="after")
