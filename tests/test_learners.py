@@ -287,10 +287,10 @@ def test_gibbs_posterior_mean_converges(seed):
     np.testing.assert_allclose(long.covariances_[:, 0, 0], [1.0, 0.5], rtol=0.3)
 
 
-# --------------------------------------------------------------------------- VB, fused numba kernel for d >= 2
+# --------------------------------------------------------------------------- VB, fused numba kernel (d <= 16)
 def _fit_both_paths(monkeypatch, X, w, resp, **kw):
     """Fit with the numba kernel (d <= _NUMBA_MAX_DIM) and with the numpy reference path."""
-    assert 2 <= X.shape[1] <= vbmod._NUMBA_MAX_DIM
+    assert 1 <= X.shape[1] <= vbmod._NUMBA_MAX_DIM
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         fast = VariationalGaussianMixture(resp.shape[1], init_resp=resp, **kw).fit(X, sample_weight=w)
@@ -349,3 +349,83 @@ def test_vb_numba_nd_warm_start_matches_numpy(monkeypatch):
     np.testing.assert_allclose(fast.means_, ref.means_, rtol=1e-10, atol=1e-10)
     np.testing.assert_allclose(fast.covariances_, ref.covariances_, rtol=1e-10, atol=1e-10)
     np.testing.assert_allclose(fast.lower_bounds_, ref.lower_bounds_, rtol=1e-10)
+
+
+def test_exp_nonpos_matches_numpy():
+    # oracle: numpy's exp.  The polynomial exp is within 2.5e-16 relative (Taylor truncation
+    # < 1e-17, Cody-Waite reduction and Horner rounding ~1 ulp) for -708 <= v <= 0, and
+    # exactly 0 below -708 (where numpy's result is < 3.3e-308, subnormal or 0).
+    rng = np.random.default_rng(0)
+    v = np.concatenate([-rng.exponential(5.0, 100000), -rng.uniform(0, 760, 100000),
+                        [0.0, -0.0, -1e-300, -5e-324, -0.5 * np.log(2), -np.log(2), -707.9, -708.0,
+                         -708.0000001, -745.2, -1e300, -np.inf]])
+    out = np.empty_like(v)
+    ibuf = np.empty(len(v), dtype=np.int64)
+    vbmod._exp_nonpos(v, out, ibuf, len(v))
+    ok = v >= -708.0
+    ref = np.exp(v[ok])
+    assert np.max(np.abs(out[ok] / ref - 1.0)) <= 2.5e-16
+    assert np.all(out[~ok] == 0.0)
+    assert out[200000] == 1.0 and out[200001] == 1.0                 # exp(0) and exp(-0) exactly
+
+
+@pytest.mark.parametrize("d", [1, 4, 5])
+def test_vb_numba_path_equals_numpy_path_several_chunks(monkeypatch, d):
+    # several chunks of _CHUNK samples with a partial last block, d = 1 (written-out
+    # kernels) and d = 4, 5 (the general ones); agreement as in the test above
+    rng = np.random.default_rng(50 + d)
+    n = 2 * vbmod._CHUNK + vbmod._BLOCK + 77
+    X = _blobs(min(d, 3), n - n % 3, rng)
+    if d > 3:
+        X = np.hstack([X, rng.standard_normal((len(X), d - 3)) * 0.5])
+    X = np.vstack([X, rng.standard_normal((n - len(X), d))])
+    w = rng.uniform(0.5, 2.0, size=n)
+    resp = rng.uniform(size=(n, 4))
+    resp /= resp.sum(axis=1, keepdims=True)
+    fast, ref = _fit_both_paths(monkeypatch, X, w, resp, prune_threshold=0, tol=0, max_iter=25)
+    np.testing.assert_allclose(fast.lower_bounds_, ref.lower_bounds_, rtol=1e-10)
+    np.testing.assert_allclose(fast.means_, ref.means_, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(fast.covariances_, ref.covariances_, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(fast.weights_, ref.weights_, rtol=1e-10, atol=1e-10)
+
+
+@pytest.mark.parametrize("d", [1, 3, 5])
+def test_vb_parallel_equals_serial_bitwise(monkeypatch, d):
+    # invariant: the chunks' partial sums are added in chunk order, so the parallel E-step
+    # gives the very same floating-point results as the serial one, with any thread count
+    import threading
+
+    import numba
+    rng = np.random.default_rng(60 + d)
+    n = 3 * vbmod._CHUNK + 100
+    X = rng.standard_normal((n, d)) + np.where(rng.uniform(size=(n, 1)) < 0.3, 4.0, 0.0)
+    monkeypatch.setattr(vbmod, "_PARALLEL_MIN_N", 0)
+    kw = dict(random_state=1, tol=0, max_iter=40)
+
+    def fit(parallel):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            return VariationalGaussianMixture(4, parallel=parallel, **kw).fit(X)
+
+    serial = fit(False)
+    runs = [fit(True)]
+    if numba.config.NUMBA_NUM_THREADS > 1:
+        assert vbmod._use_parallel(True, n)
+        old = numba.get_num_threads()
+        numba.set_num_threads(1)
+        try:
+            runs.append(fit(True))
+        finally:
+            numba.set_num_threads(old)
+    box = []
+    t = threading.Thread(target=lambda: box.append(fit(True)))   # off the main thread: serial E-step
+    t.start()
+    t.join()
+    runs += box
+    assert len(runs) >= 2
+    for r in runs:
+        assert r.n_iter_ == serial.n_iter_
+        np.testing.assert_array_equal(r.lower_bounds_, serial.lower_bounds_)
+        np.testing.assert_array_equal(r.means_, serial.means_)
+        np.testing.assert_array_equal(r.covariances_, serial.covariances_)
+        np.testing.assert_array_equal(r.weights_, serial.weights_)
