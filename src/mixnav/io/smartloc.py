@@ -28,7 +28,7 @@ Residuals against the ground truth
 :func:`pseudorange_residuals` computes per pseudorange::
 
     raw_i  = rho_i - | R3(OMEGA_E tau_i) s_i - r(t_i) |,   tau_i = |R3(OMEGA_E tau_i) s_i - r(t_i)| / c
-    res_i  = raw_i - b(epoch_i, system_i)
+    res_i  = raw_i - b_i,    b_i = location of {raw_j : j in the epoch and system of i, j != i}
 
 - ``r(t)``: the ground-truth position, linearly interpolated in ECEF to the
   pseudorange time (in smartLoc the two share the time stamps, so the
@@ -40,23 +40,32 @@ Residuals against the ground truth
   (:func:`mixnav.gnss.geometry.earth_rotation_correction`), tau solved by a
   fixed-point iteration (3 steps; converged to < 1e-9 m). The readme does not
   say it; the residuals do: on Berlin Potsdamer Platz the robust spread
-  (1.4826 MAD) of the clock-removed residuals is 15.4 m with the rotation,
-  22.4 m without and 32.5 m with the opposite sign
-  (``benchmarks/results/smartloc_residuals.md``).
-- ``b(epoch, system)``: the receiver clock (and, by taking it per system, the
-  GLONASS-GPS inter-system bias), estimated per epoch and system as the
-  **median** of that group's ``raw`` (``clock="median"``, the default) or a
-  Huber M-estimate of location (``clock="huber"``: k = 1.345 times the
-  group's scaled MAD, iteratively reweighted). A plain mean would absorb the
-  non-line-of-sight (NLOS) errors, which are large and positive: one 100 m
-  NLOS range in an epoch of 8 would move the mean by 12.5 m and every other
-  residual by -12.5 m. The median is not moved by one outlier, but where
-  several satellites of an epoch are NLOS it still shifts by a few metres,
-  so line-of-sight satellites get slightly negative residuals (e.g. the
-  85 deg GPS satellite 12 has a median residual of about -10 m).
-  Groups with fewer than ``min_satellites`` (default 3) satellites are left
-  out (NaN, counted): with one satellite the residual is zero by
-  construction, with two it is +-half their difference.
+  (1.4826 MAD) of the residuals is 23.5 m with the rotation, 30.8 m without
+  (15.4 / 22.4 m with the plain median clock below); the wrong sign is worse
+  still (``benchmarks/results/smartloc_residuals.md``).
+- ``b_i``: the receiver clock (and, by taking it per system, the GLONASS-GPS
+  inter-system bias), estimated per epoch and system as the **median**
+  (``clock="median"``, the default) or a Huber M-estimate of location
+  (``clock="huber"``: k = 1.345 times the scaled MAD, iteratively
+  reweighted). A plain mean would absorb the non-line-of-sight (NLOS)
+  errors, which are large and positive: one 100 m NLOS range in an epoch of
+  8 would move the mean by 12.5 m and every other residual by -12.5 m. The
+  median is not moved by one outlier; where several satellites of an epoch
+  are NLOS it still shifts by a few metres, so line-of-sight satellites get
+  negative residuals (the 85 deg GPS satellite 12 has a median residual of
+  -12 m).
+- **Leave one out** (``leave_one_out=True``, the default): the clock removed
+  from satellite i is estimated from the *other* satellites of its group.
+  With the group's own median (``leave_one_out=False``; ``clock_bias``
+  always holds that one) the median satellite of every odd-sized group has
+  a residual of exactly zero (7.8 % of the Berlin residuals) and all
+  residuals are pulled towards zero, a spike that a mixture fit takes for a
+  narrow component (weight 0.13, sigma 1.2 m on Berlin). Leave-one-out
+  residuals are the satellite's error minus an estimate independent of it:
+  no spike, no shrinkage, a little wider.
+- Groups with fewer than ``min_satellites`` (default 3, counting satellite
+  i) are left out (NaN, counted): with one satellite there is no clock,
+  with two the residuals are +-their difference.
 
 Residuals per satellite form channels: :meth:`SmartlocResiduals.channels`
 gives an (n_epochs, n_satellites) array with NaN where a satellite is not
@@ -360,7 +369,7 @@ def _huber_location(v: np.ndarray, k: float = _HUBER_K, tol: float = 1e-6, max_i
 
 
 def clock_per_epoch(raw, epoch, system, n_epochs: int | None = None, method: str = "median",
-                    min_satellites: int = 3):
+                    min_satellites: int = 3, leave_one_out: bool = False):
     """Receiver clock (+ inter-system bias) per epoch and system from range residuals.
 
     Parameters
@@ -376,16 +385,23 @@ def clock_per_epoch(raw, epoch, system, n_epochs: int | None = None, method: str
     method : {"median", "huber"}
         Location estimate of each (epoch, system) group (see the module docstring).
     min_satellites : int, default 3
-        Smaller groups get no clock (NaN).
+        Smaller groups (counting every satellite of the group) get no clock (NaN).
+    leave_one_out : bool, default False
+        The clock removed from a row is the estimate from the *other*
+        satellites of its group (see the module docstring).
 
     Returns
     -------
     bias : ndarray (n_epochs, s)
-        [m], NaN where a group is absent or too small.
+        Estimate from all satellites of each group [m], NaN where a group is
+        absent or too small.
     systems : ndarray of int (s,)
         The system code of each column, increasing.
     count : ndarray of int (n_epochs, s)
         Satellites in each group.
+    per_row : ndarray (n,)
+        The clock to remove from each row [m]: ``bias`` of its group, or the
+        leave-one-out estimate; NaN in groups that are too small.
     """
     if method not in ("median", "huber"):
         raise ValueError(f"clock method must be 'median' or 'huber', got {method!r}")
@@ -398,6 +414,8 @@ def clock_per_epoch(raw, epoch, system, n_epochs: int | None = None, method: str
     systems = np.unique(system)
     col = np.searchsorted(systems, system)
     bias = np.full((n_epochs, systems.size), np.nan)
+    per_row = np.full(raw.shape, np.nan)
+    locate = np.median if method == "median" else _huber_location
     count = np.zeros((n_epochs, systems.size), dtype=int)
     np.add.at(count, (epoch, col), 1)
     order = np.lexsort((col, epoch))
@@ -407,10 +425,16 @@ def clock_per_epoch(raw, epoch, system, n_epochs: int | None = None, method: str
     for a, b in zip(starts, ends):
         if b - a < min_satellites:
             continue
-        v = raw[order[a:b]]
+        rows = order[a:b]
+        v = raw[rows]
         e, c = divmod(int(key[a]), systems.size)
-        bias[e, c] = float(np.median(v)) if method == "median" else _huber_location(v)
-    return bias, systems, count
+        bias[e, c] = float(locate(v))
+        if leave_one_out:
+            for i, r in enumerate(rows):
+                per_row[r] = float(locate(np.delete(v, i)))
+        else:
+            per_row[rows] = bias[e, c]
+    return bias, systems, count, per_row
 
 
 @dataclass(frozen=True)
@@ -432,21 +456,22 @@ class SmartlocResiduals:
     raw : ndarray (n,)
         Pseudorange minus range [m] (receiver clock still in it).
     clock : ndarray (n,)
-        Clock (+ inter-system bias) removed from each row [m]; NaN where the
-        group had too few satellites.
+        Clock (+ inter-system bias) removed from each row [m] (the group's
+        estimate, or the leave-one-out one); NaN where the group had too few
+        satellites.
     residual : ndarray (n,)
         ``raw - clock`` [m]; NaN where not valid.
     valid : ndarray of bool (n,)
         Row inside the truth's span and in a group with a clock.
     clock_bias : ndarray (n_epochs, s)
-        Per epoch and system [m] (columns: ``systems``).
+        Per epoch and system, from all satellites of the group [m] (columns: ``systems``).
     systems : ndarray of int (s,)
     elevation, cn0, variance : ndarray (n,)
         Copied from the pseudoranges ([rad], [dB-Hz], [m^2]).
     counts : dict
         ``rows``, ``outside_truth``, ``small_group`` (rows left out), ``valid``.
     settings : dict
-        ``earth_rotation``, ``clock``, ``min_satellites``.
+        ``earth_rotation``, ``clock``, ``min_satellites``, ``leave_one_out``.
     """
 
     epoch_times: np.ndarray
@@ -494,7 +519,8 @@ class SmartlocResiduals:
 
 
 def pseudorange_residuals(pr: SmartlocPseudoranges, truth: SmartlocTruth, *, earth_rotation: bool = True,
-                          clock: str = "median", min_satellites: int = 3) -> SmartlocResiduals:
+                          clock: str = "median", min_satellites: int = 3,
+                          leave_one_out: bool = True) -> SmartlocResiduals:
     """Pseudorange residuals against the ground truth, receiver clock removed per epoch and system.
 
     See the module docstring for the model, the Earth-rotation evidence and
@@ -511,6 +537,9 @@ def pseudorange_residuals(pr: SmartlocPseudoranges, truth: SmartlocTruth, *, ear
         Estimate of the common bias of each (epoch, system) group.
     min_satellites : int, default 3
         Groups with fewer satellites get no residual (NaN, counted).
+    leave_one_out : bool, default True
+        Remove from each satellite the clock estimated from the *other*
+        satellites of its group, so that no residual is zero by construction.
 
     Returns
     -------
@@ -533,10 +562,11 @@ def pseudorange_residuals(pr: SmartlocPseudoranges, truth: SmartlocTruth, *, ear
     rng[inside] = geometric_range(rx, pr.sat_ecef[inside], earth_rotation=earth_rotation)
     raw = pr.pseudorange - rng
     idx = np.flatnonzero(inside)
-    bias, systems, _ = clock_per_epoch(raw[idx], epoch[idx], pr.system[idx], n_epochs=epoch_times.size,
-                                       method=clock, min_satellites=min_satellites)
+    bias, systems, _, clk_in = clock_per_epoch(raw[idx], epoch[idx], pr.system[idx], n_epochs=epoch_times.size,
+                                               method=clock, min_satellites=min_satellites,
+                                               leave_one_out=leave_one_out)
     clk = np.full(len(pr), np.nan)
-    clk[idx] = bias[epoch[idx], np.searchsorted(systems, pr.system[idx])]
+    clk[idx] = clk_in
     valid = inside & np.isfinite(clk)
     residual = np.where(valid, raw - clk, np.nan)
     # channels: one per (system, satellite), sorted
@@ -551,4 +581,5 @@ def pseudorange_residuals(pr: SmartlocPseudoranges, truth: SmartlocTruth, *, ear
         channel_id=ch_id.astype(int), epoch=epoch, channel=channel.astype(int), range=rng, raw=raw, clock=clk,
         residual=residual, valid=valid, clock_bias=bias, systems=systems, elevation=pr.elevation, cn0=pr.cn0,
         variance=pr.variance, counts=counts,
-        settings={"earth_rotation": bool(earth_rotation), "clock": clock, "min_satellites": int(min_satellites)})
+        settings={"earth_rotation": bool(earth_rotation), "clock": clock, "min_satellites": int(min_satellites),
+                  "leave_one_out": bool(leave_one_out)})
