@@ -40,7 +40,7 @@ from scipy import stats
 
 from mixnav.gnss.geometry import C_LIGHT, earth_rotation_correction
 from mixnav.io.atomic import atomic_savefig, atomic_write_json, atomic_write_text
-from mixnav.io.smartloc import SYSTEMS, pseudorange_residuals, read_smartloc
+from mixnav.io.smartloc import pseudorange_residuals, read_smartloc
 from mixnav.noise.ar import autocorrelation, fit_ar1, whiten_ar1
 from mixnav.noise.diagnostics import diagnose
 from mixnav.noise.learn import ConvergenceWarning, EMGaussianMixture, VariationalGaussianMixture
