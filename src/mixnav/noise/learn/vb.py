@@ -1085,7 +1085,10 @@ class VariationalGaussianMixture:
                 r = np.delete(resp, j, axis=1)
                 r[:, i] += resp[:, j]                                  # merged responsibilities
                 trial = _m_step(X, w[:, None] * r, prior)
-                p2, b2, pr2, it2, conv2 = self._run(X, w, trial, prior, tol_abs, thr)
+                try:
+                    p2, b2, pr2, it2, conv2 = self._run(X, w, trial, prior, tol_abs, thr)
+                except np.linalg.LinAlgError:                          # a W_k^-1 lost definiteness
+                    p2, b2, pr2, it2, conv2 = trial, [], [], 0, False
                 gain = b2[-1] - current if b2 else -np.inf                 # rule: see the module docstring
                 ok = bool(conv2 and gain > 0.0)
                 merges.append(dict(pair=(i, j), overlap=overlap, n_before=len(params[0]), n_after=len(p2[0]),
