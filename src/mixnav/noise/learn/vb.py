@@ -781,32 +781,72 @@ def _greedy_kmeanspp(X, k, rng, w):
             centres[j:] = centres[0]
             break
         cand = rng.choice(n, size=n_trials, p=q / s)
-        cd2 = np.minimum(d2[None, :], np.sum((X[None, :, :] - X[cand][:, None, :]) ** 2, axis=2))
+        cd2 = np.zeros((n_trials, n))
+        for c in range(X.shape[1]):
+            cd2 += (X[None, :, c] - X[cand, c][:, None]) ** 2
+        np.minimum(cd2, d2[None, :], out=cd2)
         best = int(np.argmin(cd2 @ w))
         centres[j] = X[cand[best]]
         d2 = cd2[best]
     return centres
 
 
+@numba.njit(cache=True)
+def _lloyd(X, w, centres, labels, max_iter):
+    """Weighted Lloyd iterations from ``centres`` (K, d), in place; ``labels`` (n,) out.
+
+    Assign each sample to its nearest centre (the first on a tie), move each centre to
+    the weighted mean of its samples (an empty cluster keeps its centre); stop when no
+    label changes or after ``max_iter`` updates.  Returns the number of updates.
+    """
+    n, d = X.shape
+    K = centres.shape[0]
+    nk = np.empty(K)
+    sx = np.empty((K, d))
+    it = 0
+    while True:
+        changed = 0
+        for i in range(n):
+            best = 0
+            bd = np.inf
+            for k in range(K):
+                dist = 0.0
+                for j in range(d):
+                    t = X[i, j] - centres[k, j]
+                    dist += t * t
+                if dist < bd:
+                    bd = dist
+                    best = k
+            if best != labels[i]:
+                changed += 1
+                labels[i] = best
+        if (changed == 0 and it > 0) or it >= max_iter:
+            return it
+        it += 1
+        nk[:] = 0.0
+        sx[:] = 0.0
+        for i in range(n):
+            k = labels[i]
+            nk[k] += w[i]
+            for j in range(d):
+                sx[k, j] += w[i] * X[i, j]
+        for k in range(K):
+            if nk[k] > 0:
+                for j in range(d):
+                    centres[k, j] = sx[k, j] / nk[k]
+
+
 def kmeans_resp(X, k, rng, w, max_iter=_LLOYD_MAX_ITER):
     """Hard responsibilities (n, K) of weighted k-means: k-means++ seeding, then Lloyd iterations.
 
-    Lloyd's iterations stop when no label changes (or after ``max_iter``); a cluster that
-    becomes empty keeps its previous centre.  Deterministic given ``rng``.
+    Lloyd's iterations (:func:`_lloyd`) stop when no label changes (or after ``max_iter``);
+    a cluster that becomes empty keeps its previous centre.  Deterministic given ``rng``.
     """
     n = X.shape[0]
     centres = _greedy_kmeanspp(X, k, rng, w)
-    labels = np.argmin(np.sum((X[:, None, :] - centres[None]) ** 2, axis=2), axis=1)
-    for _ in range(max_iter):
-        nk = np.bincount(labels, weights=w, minlength=k)
-        for j in range(X.shape[1]):
-            sj = np.bincount(labels, weights=w * X[:, j], minlength=k)
-            centres[:, j] = np.where(nk > 0, sj / np.where(nk > 0, nk, 1.0), centres[:, j])
-        dist = np.sum((X[:, None, :] - centres[None]) ** 2, axis=2)
-        new = np.argmin(dist, axis=1)
-        if np.array_equal(new, labels):
-            break
-        labels = new
+    labels = np.full(n, -1, dtype=np.int64)
+    _lloyd(np.ascontiguousarray(X, dtype=float), np.ascontiguousarray(w, dtype=float), centres, labels,
+           int(max_iter))
     resp = np.zeros((n, k))
     resp[np.arange(n), labels] = 1.0
     return resp
