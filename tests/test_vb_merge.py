@@ -110,8 +110,8 @@ def _recovered(vb, truth, mean_tol):
 @pytest.mark.parametrize("truth", [THREE_1D, THREE_2D], ids=["1d", "2d"])
 def test_component_count_recovered_in_every_seed(truth):
     # With the paper's settings (alpha0 = 1, K = 4, prune 1 %) and no merge move about 1 in 10
-    # seeds ended with a split duplicate (4 components; measured 12 / 100 in 1-D, 5 / 100 in
-    # 2-D with the k-means initialisation, more with k-means++ seeding alone).  With the merge
+    # seeds ended with a split duplicate (4 components; measured 8 / 100 in 1-D and in 2-D
+    # with the k-means initialisation, more with k-means++ seeding alone).  With the merge
     # move: 100 / 100 in both (seeds 1000-1099); asserted on 20 seeds here.  On these 20
     # seeds merge=False fails seeds 4, 11 (1-D) and 0, 2 (2-D), and init="kmeans++" (seeding
     # without Lloyd iterations) fails 2-D seed 9 (two clusters in one component).
@@ -237,7 +237,8 @@ def test_kmeans_init_is_deterministic_and_weighted():
     a = vbmod.kmeans_resp(X, 3, np.random.default_rng(1), w)
     b = vbmod.kmeans_resp(X, 3, np.random.default_rng(1), w)
     np.testing.assert_array_equal(a, b)
-    # Lloyd fixed point: every sample is assigned to its nearest weighted centre
+    # for well-separated clusters Lloyd's iterations end at a fixed point: every sample is
+    # assigned to the nearest weighted mean of its cluster
     centres = (a * w[:, None]).T @ X / (a * w[:, None]).sum(axis=0)[:, None]
     nearest = np.argmin(((X[:, None, :] - centres[None]) ** 2).sum(axis=2), axis=1)
     np.testing.assert_array_equal(np.argmax(a, axis=1), nearest)

@@ -760,6 +760,7 @@ def _use_parallel(requested, n):
 # initialisation and merge moves
 # --------------------------------------------------------------------------
 _LLOYD_MAX_ITER = 100           # Lloyd iterations after k-means++ seeding (stops earlier when labels settle)
+_LLOYD_TOL = 1e-4               # ... or when the centres move less than this x the mean data variance (sklearn's)
 _MERGE_MIN_OVERLAP = 1e-3       # merge candidates: responsibility overlap J_ij at least this
 
 
@@ -792,35 +793,52 @@ def _greedy_kmeanspp(X, k, rng, w):
 
 
 @numba.njit(cache=True)
-def _lloyd(X, w, centres, labels, max_iter):
+def _lloyd(X, w, centres, labels, max_iter, shift_tol):
     """Weighted Lloyd iterations from ``centres`` (K, d), in place; ``labels`` (n,) out.
 
     Assign each sample to its nearest centre (the first on a tie), move each centre to
     the weighted mean of its samples (an empty cluster keeps its centre); stop when no
-    label changes or after ``max_iter`` updates.  Returns the number of updates.
+    label changes, when the centres moved by less than ``shift_tol`` in total squared
+    distance, or after ``max_iter`` updates; the labels are those of the final centres.
+    Returns the number of updates.
     """
     n, d = X.shape
     K = centres.shape[0]
     nk = np.empty(K)
     sx = np.empty((K, d))
+    XT = np.ascontiguousarray(X.T)
+    bd = np.empty(_BLOCK)
+    dist = np.empty(_BLOCK)
+    best = np.empty(_BLOCK, dtype=np.int64)
     it = 0
+    shift = np.inf
     while True:
         changed = 0
-        for i in range(n):
-            best = 0
-            bd = np.inf
+        for lo in range(0, n, _BLOCK):                 # blocks of samples, sample loops innermost (SIMD)
+            nb = min(_BLOCK, n - lo)
             for k in range(K):
-                dist = 0.0
+                for s in range(nb):
+                    dist[s] = 0.0
                 for j in range(d):
-                    t = X[i, j] - centres[k, j]
-                    dist += t * t
-                if dist < bd:
-                    bd = dist
-                    best = k
-            if best != labels[i]:
-                changed += 1
-                labels[i] = best
-        if (changed == 0 and it > 0) or it >= max_iter:
+                    c = centres[k, j]
+                    xj = XT[j]
+                    for s in range(nb):
+                        t = xj[lo + s] - c
+                        dist[s] += t * t
+                if k == 0:
+                    for s in range(nb):
+                        bd[s] = dist[s]
+                        best[s] = 0
+                else:
+                    for s in range(nb):
+                        closer = dist[s] < bd[s]
+                        bd[s] = dist[s] if closer else bd[s]
+                        best[s] = k if closer else best[s]
+            for s in range(nb):
+                if best[s] != labels[lo + s]:
+                    changed += 1
+                    labels[lo + s] = best[s]
+        if (changed == 0 and it > 0) or it >= max_iter or shift <= shift_tol:
             return it
         it += 1
         nk[:] = 0.0
@@ -830,23 +848,30 @@ def _lloyd(X, w, centres, labels, max_iter):
             nk[k] += w[i]
             for j in range(d):
                 sx[k, j] += w[i] * X[i, j]
+        shift = 0.0
         for k in range(K):
             if nk[k] > 0:
                 for j in range(d):
-                    centres[k, j] = sx[k, j] / nk[k]
+                    c = sx[k, j] / nk[k]
+                    shift += (c - centres[k, j]) ** 2
+                    centres[k, j] = c
 
 
 def kmeans_resp(X, k, rng, w, max_iter=_LLOYD_MAX_ITER):
     """Hard responsibilities (n, K) of weighted k-means: k-means++ seeding, then Lloyd iterations.
 
-    Lloyd's iterations (:func:`_lloyd`) stop when no label changes (or after ``max_iter``);
+    Lloyd's iterations (:func:`_lloyd`) stop when no label changes, when the centres move
+    by less than ``_LLOYD_TOL`` times the mean variance of the data columns (squared
+    distance summed over the centres; scikit-learn's KMeans rule) or after ``max_iter``;
     a cluster that becomes empty keeps its previous centre.  Deterministic given ``rng``.
     """
     n = X.shape[0]
     centres = _greedy_kmeanspp(X, k, rng, w)
     labels = np.full(n, -1, dtype=np.int64)
+    mean = (w @ X) / w.sum()
+    var = (w @ (X - mean) ** 2) / w.sum()
     _lloyd(np.ascontiguousarray(X, dtype=float), np.ascontiguousarray(w, dtype=float), centres, labels,
-           int(max_iter))
+           int(max_iter), _LLOYD_TOL * float(np.mean(var)))
     resp = np.zeros((n, k))
     resp[np.arange(n), labels] = 1.0
     return resp
