@@ -32,7 +32,7 @@ Pruning as soon as a weight drops (rather than only after convergence) avoids
 hundreds of iterations spent on a dying component.
 ``lower_bounds_`` restarts its monotone run after each pruning (the model
 changes; ``pruned_at_`` lists the indices into ``lower_bounds_`` where a new
-run starts).
+run starts) and after each accepted merge (``merged_at_``).
 
 Initialisation.  Hard responsibilities of weighted k-means (greedy k-means++
 seeding, then Lloyd iterations; scikit-learn's default for its
@@ -603,19 +603,143 @@ def _e_pass_parallel(XT, w, Li, b, const, hnu, m, acc_t, acc0, acc1, acc2):
 
 
 @numba.njit(cache=True)
+def _prior_consts(w0inv, nu0, L0):
+    """Cholesky factor ``L0`` of W0^-1 (written) and ln B(W0, nu0); (False, 0) if not SPD."""
+    d = w0inv.shape[0]
+    if not _chol_lower(w0inv, L0):
+        return False, 0.0
+    logdet_w0inv = 0.0
+    for j in range(d):
+        logdet_w0inv += 2.0 * math.log(L0[j, j])
+    lnB0 = 0.5 * nu0 * logdet_w0inv - 0.5 * nu0 * d * math.log(2.0) - 0.25 * d * (d - 1) * math.log(math.pi)
+    for j in range(d):
+        lnB0 -= math.lgamma(0.5 * (nu0 - j))
+    return True, lnB0
+
+
+@numba.njit(cache=True)
+def _iter_prepare(alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0, L0, lnB0, L, Li, b, const, hnu):
+    """Per component: ``Li`` = inverse Cholesky factor of W_k^-1, ``b = Li m_k``, the constant
+    and ``nu_k / 2`` of ln rho (P1 eqs. 19, 26-28); returns (ok, the non-Z part of the bound).
+    """
+    K, d = m.shape
+    ln2 = math.log(2.0)
+    lnpi = math.log(math.pi)
+    asum = 0.0
+    for k in range(K):
+        asum += alpha[k]
+    dg_sum = _digamma(asum)
+    theta = math.lgamma(K * alpha0) - K * math.lgamma(alpha0) - math.lgamma(asum)
+    for k in range(K):
+        if not _chol_lower(winv[k], L):
+            return False, 0.0
+        _tril_inv(L, Li[k])
+        logdet_winv = 0.0
+        for j in range(d):
+            logdet_winv += 2.0 * math.log(L[j, j])
+        e_ln_pi = _digamma(alpha[k]) - dg_sum                                        # P1 eq. (28)
+        e_ln_lam = d * ln2 - logdet_winv                                              # P1 eq. (27)
+        lnB = 0.5 * nu[k] * logdet_winv - 0.5 * nu[k] * d * ln2 - 0.25 * d * (d - 1) * lnpi
+        for j in range(d):
+            e_ln_lam += _digamma(0.5 * (nu[k] - j))
+            lnB -= math.lgamma(0.5 * (nu[k] - j))
+        const[k] = e_ln_pi + 0.5 * e_ln_lam - 0.5 * d * _LOG2PI - 0.5 * d / beta[k]
+        hnu[k] = 0.5 * nu[k]
+        # b_k = L_k^-1 m_k;  q0 = |L_k^-1 (m_k - m0)|^2;  tr(W_k W0^-1) = |L_k^-1 L0|_F^2
+        q0 = 0.0
+        tr = 0.0
+        for i in range(d):
+            sb = 0.0
+            sq = 0.0
+            for j in range(i + 1):
+                sb += Li[k, i, j] * m[k, j]
+                sq += Li[k, i, j] * (m[k, j] - m0[j])
+            b[k, i] = sb
+            q0 += sq * sq
+            for c in range(i + 1):
+                st = 0.0
+                for j in range(c, i + 1):
+                    st += Li[k, i, j] * L0[j, c]
+                tr += st * st
+        # non-Z part of the bound (see _theta_terms)
+        theta += math.lgamma(alpha[k]) + (alpha0 - alpha[k]) * e_ln_pi
+        theta += (0.5 * d * math.log(beta0 / beta[k]) + 0.5 * d - 0.5 * d * beta0 / beta[k]
+                  - 0.5 * beta0 * nu[k] * q0 + lnB0 - lnB + 0.5 * (nu0 - nu[k]) * e_ln_lam
+                  - 0.5 * nu[k] * tr + 0.5 * nu[k] * d)
+    return True, theta
+
+
+@numba.njit(cache=True)
+def _iter_finish(acc_t, acc0, acc1, acc2, alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0, w0inv):
+    """Add the chunks' partial sums in chunk order, then the M-step (P1 eqs. 22-25) in place.
+
+    Returns ``sum_n w_n ln sum_k rho_nk``.
+    """
+    K, d = m.shape
+    s0 = np.zeros(K)
+    s1 = np.zeros((K, d))
+    s2 = np.zeros((K, d, d))                # lower triangle used
+    dz = np.empty(d)
+    dx = np.empty(d)
+    total = 0.0
+    for ch in range(acc_t.shape[0]):
+        total += acc_t[ch]
+        for k in range(K):
+            s0[k] += acc0[ch, k]
+            for i in range(d):
+                s1[k, i] += acc1[ch, k, i]
+                for j in range(i + 1):
+                    s2[k, i, j] += acc2[ch, k, i, j]
+    for k in range(K):                                                                # P1 eqs. (22)-(25)
+        nk = s0[k] + 1e1 * 2.220446049250313e-16
+        for i in range(d):
+            dz[i] = s1[k, i] / nk                                                     # xbar - m_k
+            dx[i] = m[k, i] + dz[i] - m0[i]                                           # xbar - m0
+        c = beta0 * nk / (beta0 + nk)
+        for i in range(d):
+            for j in range(i + 1):
+                v = w0inv[i, j] + s2[k, i, j] - s1[k, i] * dz[j] + c * dx[i] * dx[j]
+                winv[k, i, j] = v
+                winv[k, j, i] = v
+        alpha[k] = alpha0 + nk
+        beta[k] = beta0 + nk
+        nu[k] = nu0 + nk
+        for i in range(d):
+            m[k, i] = (beta0 * m0[i] + nk * (m[k, i] + dz[i])) / beta[k]
+    return total
+
+
+@numba.njit(cache=True)
+def _iter_status(alpha, prune_thr, bound, prev, tol_abs):
+    """2 if a component's expected weight is below ``prune_thr``, 1 if converged, else 0."""
+    K = alpha.shape[0]
+    if prune_thr > 0.0 and K > 1:
+        asum = 0.0
+        for k in range(K):
+            asum += alpha[k]
+        for k in range(K):
+            if alpha[k] < prune_thr * asum:
+                return 2
+    if abs(bound - prev) < tol_abs:
+        return 1
+    return 0
+
+
+@numba.njit(cache=True)
 def _vb_loop_nd(XT, w, alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0, w0inv, tol_abs, max_iter, bounds,
-                prune_thr, parallel):
+                prune_thr):
     """Fused VB iteration; updates alpha, beta, nu (K,), m (K, d), winv (K, d, d) in place.
 
     Same arithmetic as :func:`_vb_loop_numpy`, one pass over the samples per iteration:
-    per component the Cholesky factor ``L_k`` of ``W_k^-1`` (so ``W_k = L_k^-T L_k^-1``),
-    its triangular inverse, E[ln pi_k], E[ln|Lambda_k|] and the non-Z part of the bound;
-    then (:func:`_e_chunk`, per chunk of ``_CHUNK`` samples, on all threads if ``parallel``)
-    the whitened distances ``|L_k^-1 (x - m_k)|^2``, a stable log-sum-exp and the weighted
+    per component (:func:`_iter_prepare`) the Cholesky factor ``L_k`` of ``W_k^-1`` (so
+    ``W_k = L_k^-T L_k^-1``), its triangular inverse, E[ln pi_k], E[ln|Lambda_k|] and the
+    non-Z part of the bound; then (:func:`_e_chunk`, per chunk of ``_CHUNK`` samples) the
+    whitened distances ``|L_k^-1 (x - m_k)|^2``, a stable log-sum-exp and the weighted
     statistics (N_k, sum r (x - m_k), sum r (x - m_k)(x - m_k)^T, shifted by the current
-    m_k for accuracy); the chunks' partial sums are added in chunk order (the same result
-    serial or parallel, with any number of threads); then the M-step (P1 eqs. 22-25).
-    ``XT`` is the data transposed, (d, n), C-contiguous.
+    m_k for accuracy); then (:func:`_iter_finish`) the chunks' partial sums added in chunk
+    order and the M-step (P1 eqs. 22-25).  ``XT`` is the data transposed, (d, n),
+    C-contiguous.  :func:`_vb_loop_nd_parallel` is the same with the chunks on numba's
+    threads (a separate kernel, compiled only when used): the same result bitwise.
 
     Returns (n_iter, status): status 0 (max_iter reached), 1 (converged), 2 (a component
     fell below ``prune_thr``) or 3 (a ``W_k^-1`` is not numerically positive definite;
@@ -624,122 +748,56 @@ def _vb_loop_nd(XT, w, alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0, w0inv, 
     """
     d, n = XT.shape
     K = alpha.shape[0]
-    e_ln_pi = np.empty(K)
-    const = np.empty(K)
-    hnu = np.empty(K)
-    L = np.empty((d, d))
-    Li = np.empty((K, d, d))
-    b = np.empty((K, d))                    # L_k^-1 m_k
-    dz = np.empty(d)
-    dx = np.empty(d)
-    s0 = np.empty(K)
-    s1 = np.empty((K, d))
-    s2 = np.empty((K, d, d))                # lower triangle used
+    const, hnu, L, Li, b = np.empty(K), np.empty(K), np.empty((d, d)), np.empty((K, d, d)), np.empty((K, d))
     n_chunks = (n + _CHUNK - 1) // _CHUNK
-    acc_t = np.empty(n_chunks)              # per-chunk partial sums, added in chunk order
-    acc0 = np.empty((n_chunks, K))
-    acc1 = np.empty((n_chunks, K, d))
-    acc2 = np.empty((n_chunks, K, d, d))
-    ln2 = math.log(2.0)
-    lnpi = math.log(math.pi)
-    # prior constants: ln B(W0, nu0) and the Cholesky factor of W0^-1
+    acc_t, acc0 = np.empty(n_chunks), np.empty((n_chunks, K))      # per-chunk partial sums
+    acc1, acc2 = np.empty((n_chunks, K, d)), np.empty((n_chunks, K, d, d))
     L0 = np.empty((d, d))
-    if not _chol_lower(w0inv, L0):
+    ok, lnB0 = _prior_consts(w0inv, nu0, L0)
+    if not ok:
         return 1, 3
-    logdet_w0inv = 0.0
-    for j in range(d):
-        logdet_w0inv += 2.0 * math.log(L0[j, j])
-    lnB0 = 0.5 * nu0 * logdet_w0inv - 0.5 * nu0 * d * ln2 - 0.25 * d * (d - 1) * lnpi
-    for j in range(d):
-        lnB0 -= math.lgamma(0.5 * (nu0 - j))
     prev = -np.inf
     for it in range(1, max_iter + 1):
-        asum = 0.0
-        for k in range(K):
-            asum += alpha[k]
-        dg_sum = _digamma(asum)
-        theta = math.lgamma(K * alpha0) - K * math.lgamma(alpha0) - math.lgamma(asum)
-        for k in range(K):
-            if not _chol_lower(winv[k], L):
-                return it, 3
-            _tril_inv(L, Li[k])
-            logdet_winv = 0.0
-            for j in range(d):
-                logdet_winv += 2.0 * math.log(L[j, j])
-            e_ln_pi[k] = _digamma(alpha[k]) - dg_sum                                 # P1 eq. (28)
-            e_ln_lam = d * ln2 - logdet_winv                                          # P1 eq. (27)
-            lnB = 0.5 * nu[k] * logdet_winv - 0.5 * nu[k] * d * ln2 - 0.25 * d * (d - 1) * lnpi
-            for j in range(d):
-                e_ln_lam += _digamma(0.5 * (nu[k] - j))
-                lnB -= math.lgamma(0.5 * (nu[k] - j))
-            const[k] = e_ln_pi[k] + 0.5 * e_ln_lam - 0.5 * d * _LOG2PI - 0.5 * d / beta[k]
-            hnu[k] = 0.5 * nu[k]
-            # b_k = L_k^-1 m_k;  q0 = |L_k^-1 (m_k - m0)|^2;  tr(W_k W0^-1) = |L_k^-1 L0|_F^2
-            q0 = 0.0
-            tr = 0.0
-            for i in range(d):
-                sb = 0.0
-                sq = 0.0
-                for j in range(i + 1):
-                    sb += Li[k, i, j] * m[k, j]
-                    sq += Li[k, i, j] * (m[k, j] - m0[j])
-                b[k, i] = sb
-                q0 += sq * sq
-                for c in range(i + 1):
-                    st = 0.0
-                    for j in range(c, i + 1):
-                        st += Li[k, i, j] * L0[j, c]
-                    tr += st * st
-            # non-Z part of the bound (see _theta_terms)
-            theta += math.lgamma(alpha[k]) + (alpha0 - alpha[k]) * e_ln_pi[k]
-            theta += (0.5 * d * math.log(beta0 / beta[k]) + 0.5 * d - 0.5 * d * beta0 / beta[k]
-                      - 0.5 * beta0 * nu[k] * q0 + lnB0 - lnB + 0.5 * (nu0 - nu[k]) * e_ln_lam
-                      - 0.5 * nu[k] * tr + 0.5 * nu[k] * d)
-            s0[k] = 0.0
-            for i in range(d):
-                s1[k, i] = 0.0
-                for j in range(i + 1):
-                    s2[k, i, j] = 0.0
-        if parallel:
-            _e_pass_parallel(XT, w, Li, b, const, hnu, m, acc_t, acc0, acc1, acc2)
-        else:
-            _e_pass_serial(XT, w, Li, b, const, hnu, m, acc_t, acc0, acc1, acc2)
-        total = 0.0
-        for ch in range(n_chunks):
-            total += acc_t[ch]
-            for k in range(K):
-                s0[k] += acc0[ch, k]
-                for i in range(d):
-                    s1[k, i] += acc1[ch, k, i]
-                    for j in range(i + 1):
-                        s2[k, i, j] += acc2[ch, k, i, j]
-        bound = total + theta                                                         # P1 eq. (29)
+        ok, theta = _iter_prepare(alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0, L0, lnB0, L, Li, b, const, hnu)
+        if not ok:
+            return it, 3
+        _e_pass_serial(XT, w, Li, b, const, hnu, m, acc_t, acc0, acc1, acc2)
+        bound = _iter_finish(acc_t, acc0, acc1, acc2, alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0,
+                             w0inv) + theta                                          # P1 eq. (29)
         bounds[it - 1] = bound
-        for k in range(K):                                                            # P1 eqs. (22)-(25)
-            nk = s0[k] + 1e1 * 2.220446049250313e-16
-            for i in range(d):
-                dz[i] = s1[k, i] / nk                                                 # xbar - m_k
-                dx[i] = m[k, i] + dz[i] - m0[i]                                       # xbar - m0
-            c = beta0 * nk / (beta0 + nk)
-            for i in range(d):
-                for j in range(i + 1):
-                    v = w0inv[i, j] + s2[k, i, j] - s1[k, i] * dz[j] + c * dx[i] * dx[j]
-                    winv[k, i, j] = v
-                    winv[k, j, i] = v
-            alpha[k] = alpha0 + nk
-            beta[k] = beta0 + nk
-            nu[k] = nu0 + nk
-            for i in range(d):
-                m[k, i] = (beta0 * m0[i] + nk * (m[k, i] + dz[i])) / beta[k]
-        if prune_thr > 0.0 and K > 1:
-            asum = 0.0
-            for k in range(K):
-                asum += alpha[k]
-            for k in range(K):
-                if alpha[k] < prune_thr * asum:
-                    return it, 2
-        if abs(bound - prev) < tol_abs:
-            return it, 1
+        status = _iter_status(alpha, prune_thr, bound, prev, tol_abs)
+        if status != 0:
+            return it, status
+        prev = bound
+    return max_iter, 0
+
+
+@numba.njit(cache=True)
+def _vb_loop_nd_parallel(XT, w, alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0, w0inv, tol_abs, max_iter,
+                         bounds, prune_thr):
+    """:func:`_vb_loop_nd` with the E-step's chunks on numba's threads (:func:`_e_pass_parallel`)."""
+    d, n = XT.shape
+    K = alpha.shape[0]
+    const, hnu, L, Li, b = np.empty(K), np.empty(K), np.empty((d, d)), np.empty((K, d, d)), np.empty((K, d))
+    n_chunks = (n + _CHUNK - 1) // _CHUNK
+    acc_t, acc0 = np.empty(n_chunks), np.empty((n_chunks, K))
+    acc1, acc2 = np.empty((n_chunks, K, d)), np.empty((n_chunks, K, d, d))
+    L0 = np.empty((d, d))
+    ok, lnB0 = _prior_consts(w0inv, nu0, L0)
+    if not ok:
+        return 1, 3
+    prev = -np.inf
+    for it in range(1, max_iter + 1):
+        ok, theta = _iter_prepare(alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0, L0, lnB0, L, Li, b, const, hnu)
+        if not ok:
+            return it, 3
+        _e_pass_parallel(XT, w, Li, b, const, hnu, m, acc_t, acc0, acc1, acc2)
+        bound = _iter_finish(acc_t, acc0, acc1, acc2, alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0,
+                             w0inv) + theta
+        bounds[it - 1] = bound
+        status = _iter_status(alpha, prune_thr, bound, prev, tol_abs)
+        if status != 0:
+            return it, status
         prev = bound
     return max_iter, 0
 
@@ -1173,11 +1231,10 @@ class VariationalGaussianMixture:
     def _loop_nd(X, w, params, prior, tol_abs, max_iter, bounds, prune_thr, parallel):
         alpha, beta, m, nu, Winv = (np.array(p, dtype=float) for p in params)   # fresh C-contiguous copies
         buf = np.empty(max(max_iter, 1))
-        it, status = _vb_loop_nd(np.ascontiguousarray(X.T, dtype=float), np.ascontiguousarray(w, dtype=float),
-                                 alpha, beta, m, nu, Winv, prior[0], prior[1],
-                                 np.ascontiguousarray(prior[2], dtype=float), prior[3],
-                                 np.ascontiguousarray(prior[4], dtype=float), tol_abs, max_iter, buf, prune_thr,
-                                 parallel)
+        kernel = _vb_loop_nd_parallel if parallel else _vb_loop_nd
+        it, status = kernel(np.ascontiguousarray(X.T, dtype=float), np.ascontiguousarray(w, dtype=float),
+                            alpha, beta, m, nu, Winv, prior[0], prior[1], np.ascontiguousarray(prior[2], dtype=float),
+                            prior[3], np.ascontiguousarray(prior[4], dtype=float), tol_abs, max_iter, buf, prune_thr)
         if status == 3:
             raise np.linalg.LinAlgError("Matrix is not positive definite")
         bounds.extend(buf[:it].tolist())
