@@ -77,26 +77,6 @@ def bank_propagate(X, P, phi, qd, n):
 
 
 @njit(cache=True)
-def accumulate_noise(Q, phi, qd):
-    """``Q <- Phi Q Phi^T + Qd`` (the white-noise part accumulated since the last split)."""
-    n = Q.shape[0]
-    tmp = np.zeros((n, n))
-    for i in range(n):
-        for k in range(n):
-            f = phi[i, k]
-            if f != 0.0:
-                for j in range(n):
-                    tmp[i, j] += f * Q[k, j]
-    for i in range(n):
-        for j in range(i, n):
-            s = 0.0
-            for k in range(n):
-                s += tmp[i, k] * phi[j, k]
-            Q[i, j] = s + qd[i, j]
-            Q[j, i] = Q[i, j]
-
-
-@njit(cache=True)
 def bank_split(lw, X, P, Q, log_wj, cj):
     """Children ``(c, j)`` of every component for each process-noise component
     ``j``: ``P_cj = P_c + c_j Q`` on the error-state block, ``log w + log w_j``."""

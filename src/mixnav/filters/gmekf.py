@@ -44,12 +44,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError
-from ..ins._error_kernels import apply_feedback, discrete_noise
+from ..ins._error_kernels import apply_feedback, covariance_predict, discrete_noise
 from ..ins.error_model import ClockModel, StateLayout
 from ..ins.imu_model import ImuErrorModel
 from ..measurements.kinds import KINDS
 from ..noise.mixture import GaussianMixture
-from ._bank_kernels import (accumulate_noise, bank_epoch, bank_moments, bank_propagate, bank_reduce, bank_split,
+from ._bank_kernels import (bank_epoch, bank_moments, bank_propagate, bank_reduce, bank_split,
                             bank_update, predicted_nis)
 from ._ekf_kernels import NEEDS_REPAIR, OK
 from .ekf import ErrorStateEkf, repair_covariance
@@ -175,6 +175,7 @@ class BankBelief:
         self.Qw = np.zeros((n, n))
         self.Qw_pending = False
         self._qdw = np.empty((n, n))
+        self._tmp = np.empty((n, n))
         self.counts = {"rejected_not_pd": 0, "rejected_absurd": 0, "covariance_repair": 0}
         self.largest_bank = I
         self.have_clone = False
@@ -191,7 +192,7 @@ class BankBelief:
             bank_propagate(self.X, self.Pb, phi, qd + (self.one_scale - 1.0) * self._qdw, self.n)
             return
         bank_propagate(self.X, self.Pb, phi, qd - self._qdw, self.n)
-        accumulate_noise(self.Qw, phi, self._qdw)
+        covariance_predict(self.Qw, phi, self._qdw, self._tmp)  # the white part since the last split
         self.Qw_pending = True
         if not measured:  # nothing can tell the children apart: merge them now (exact)
             self._fold()
@@ -266,7 +267,6 @@ def _warm_bank() -> None:
     lw, X, P = np.zeros(2), np.zeros((2, na)), np.tile(np.eye(na), (2, 1, 1))
     phi, Q = np.eye(n), np.eye(n)
     bank_propagate(X, P, phi, Q, n)
-    accumulate_noise(Q.copy(), phi, Q)
     lw, X, P = bank_split(lw, X, P, Q, np.log([0.5, 0.5]), np.ones(2))
     w, xm, Pm = bank_moments(lw, X, P)
     H = np.ones((1, na))
