@@ -280,21 +280,71 @@ class MixtureSpec(Strict):
         return self
 
 
+class OnlineLearnConfig(Strict):
+    """Online re-learning of the measurement mixtures (M4 beyond paper P1,
+    ``mixture.learn.online``; see :mod:`mixnav.filters.online`): per observable
+    kind of ``learn.observables``, the last ``window`` rows' standardised
+    innovations (rows, not epochs: 600 pseudorange rows are about 70 s of 8-9
+    satellites at 1 Hz) are refitted by VB, warm-started from the mixture in
+    use, every ``every`` measurement epochs once the window is full. Rows more
+    than ``gate`` standard deviations from every component of the mixture in
+    use are left out of the fit (gross errors)."""
+
+    window: int = Field(default=600, ge=20)
+    every: int = Field(default=10, ge=1)
+    gate: float = Field(default=10.0, ge=3)
+
+
 class LearnConfig(Strict):
     """Mixtures learned offline from a training stretch (M4: ``method = "vb"``,
     M5: ``"gibbs"``; ``"em"`` too). In a scenario the training residuals are
     the scenario's own noise processes drawn over a separate stretch
     (``training_samples`` residuals per mixture, stream ``training``) and
-    standardised by the sigma the filter is told."""
+    standardised by the sigma the filter is told.
+
+    ``online`` (a table, :class:`OnlineLearnConfig`) also re-learns the
+    ``observables``' mixtures online from the filter's innovations (VB only).
+    ``offline = false`` skips the training stretch: the online learner then
+    starts from the mixtures given under ``mixture.measurement`` (Gaussian for
+    a kind not given), which also works on real data. ``process`` (learn the
+    process-noise mixture offline) defaults to ``offline``."""
 
     method: Literal["vb", "gibbs", "em"]
     observables: list[Literal["pseudorange", "range_rate", "tdcp", "position", "velocity"]] = \
         Field(default_factory=lambda: ["pseudorange", "tdcp"])
-    process: bool = True
+    process: bool | None = None
     training_samples: int = Field(default=2000, ge=10)
     n_components: int = Field(default=4, ge=1)
     gibbs_samples: int = Field(default=1000, ge=10)
     prune: float = Field(default=0.01, ge=0, lt=1)
+    offline: bool = True
+    online: OnlineLearnConfig | None = None
+
+    @model_validator(mode="after")
+    def _online(self):
+        if self.online is not None and self.method != "vb":
+            raise ValueError(f"online re-learning uses the VB learner (warm starts): it needs "
+                             f"method = \"vb\", got \"{self.method}\"")
+        if not self.offline:
+            if self.online is None:
+                raise ValueError("offline = false learns nothing: add an 'online' table "
+                                 "(or give the mixtures under mixture.measurement without 'learn')")
+            if self.process:
+                raise ValueError("process = true needs the training stretch (offline = true): the "
+                                 "process-noise mixture is not re-learned online")
+        if self.online is not None:
+            if not self.observables:
+                raise ValueError("online re-learning needs at least one kind in 'observables'")
+            if self.online.window < 10 * self.n_components:
+                raise ValueError(f"online.window = {self.online.window} rows is too short for "
+                                 f"n_components = {self.n_components}: give at least 10 rows per "
+                                 f"component ({10 * self.n_components})")
+        return self
+
+    @property
+    def learn_process(self) -> bool:
+        """Whether the process-noise mixture is learned (offline)."""
+        return self.offline if self.process is None else self.process
 
 
 class MixtureConfig(Strict):

@@ -65,13 +65,14 @@ def run_scenario(sc: Scenario, source: str | None = None, seed: int | None = Non
 
 def _training(sc: Scenario, seed: int, source):
     """Training residuals for the methods that learn their mixtures (one draw shared by all)."""
-    learners = [m.mixture.learn for m in sc.methods if m.mixture is not None and m.mixture.learn is not None]
+    learners = [m.mixture.learn for m in sc.methods
+                if m.mixture is not None and m.mixture.learn is not None and m.mixture.learn.offline]
     if not learners:
         return None
     from ..sim.training import training_residuals
     kinds = sorted({k for lc in learners for k in lc.observables})
     n = max(lc.training_samples for lc in learners)
-    return training_residuals(sc, seed, kinds, n, any(lc.process for lc in learners), source)
+    return training_residuals(sc, seed, kinds, n, any(lc.learn_process for lc in learners), source)
 
 
 def truth_at(truth: Trajectory, times: np.ndarray) -> Trajectory:

@@ -371,6 +371,27 @@ def bank_epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max
     new bank re-centred on its merged mean and that mean ``dx`` (na,), which
     the caller feeds back; otherwise the bank unchanged and ``dx`` zero.
     """
+    empty = np.empty(0)
+    return _epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n,
+                  False, empty, empty)
+
+
+@njit(cache=True)
+def bank_epoch_collect(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n,
+                       u, q):
+    """:func:`bank_epoch` that also writes, per row ``k``, the standardised
+    innovation of the merged prediction ``u[k] = (z_k - h_k x_m) / sigma_k``
+    and the state's share of its variance ``q[k] = h_k P_m h_k^T / sigma_k^2``
+    (``sigma_k^2 = r_k``; ``u``, ``q`` preallocated, length >= m) -- what the
+    online mixture learner (:mod:`mixnav.filters.online`) collects. Written
+    before the gate, so also for a rejected epoch. The returned values are
+    bitwise those of :func:`bank_epoch`."""
+    return _epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n,
+                  True, u, q)
+
+
+@njit(cache=True)
+def _epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n, collect, u, q):
     na = X.shape[1]
     zero = np.zeros(na)
     w, xm, Pm = bank_moments(lw, X, P)
@@ -379,6 +400,18 @@ def bank_epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max
     for i in range(m):
         for k in range(na):
             y[i] -= H[i, k] * xm[k]
+    if collect:
+        for i in range(m):
+            s = 0.0
+            for a in range(na):
+                ha = H[i, a]
+                if ha != 0.0:
+                    acc = 0.0
+                    for b in range(na):
+                        acc += Pm[a, b] * H[i, b]
+                    s += ha * acc
+            u[i] = y[i] / math.sqrt(r[i])
+            q[i] = s / r[i]
     if innovation_is_absurd(y, H, Pm, r, n_sigma):
         return _ABSURD, np.inf, lw, X, P, zero
     nis, _ = predicted_nis(xm, Pm, z, H, r)

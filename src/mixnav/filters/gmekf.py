@@ -39,7 +39,7 @@ apart, so merging them at once is exact.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -49,7 +49,7 @@ from ..ins.error_model import ClockModel, StateLayout
 from ..ins.imu_model import ImuErrorModel
 from ..measurements.kinds import KINDS
 from ..noise.mixture import GaussianMixture
-from ._bank_kernels import (bank_epoch, bank_moments, bank_propagate, bank_reduce, bank_split,
+from ._bank_kernels import (bank_epoch, bank_epoch_collect, bank_moments, bank_propagate, bank_reduce, bank_split,
                             bank_update, predicted_nis)
 from ._ekf_kernels import NEEDS_REPAIR, OK
 from .ekf import ErrorStateEkf, repair_covariance
@@ -149,7 +149,7 @@ class BankBelief:
     for :class:`GaussianMixtureEkf` (same interface as ``GaussianBelief``)."""
 
     def __init__(self, P0, n_clone, layout: StateLayout, absurd_sigma: float, mixtures: BankMixtures,
-                 qc_white: np.ndarray, max_components: int):
+                 qc_white: np.ndarray, max_components: int, online=None):
         n = layout.n
         na = n + n_clone
         self.n, self.na, self.nc = n, na, n_clone
@@ -163,7 +163,12 @@ class BankBelief:
             self.Pb[i, :n, :n] = s * P0
         self.absurd_sigma = absurd_sigma
         self.max_components = int(max_components)
+        self.mixtures = mixtures
         self.tables = mixtures.tables()
+        #: optional :class:`mixnav.filters.online.OnlineMixtureLearner` (M4 online re-learning)
+        self.online = online
+        self._u = np.empty(0)
+        self._q = np.empty(0)
         proc = mixtures.process
         self.split = proc.n_components > 1
         self.proc_logw = np.log(np.asarray(proc.weights))
@@ -223,14 +228,36 @@ class BankBelief:
             self.Qw_pending = False
             self.largest_bank = max(self.largest_bank, len(self.lw))
         kinds = np.zeros(len(z), dtype=np.int64) if kinds is None else np.asarray(kinds, dtype=np.int64)
-        status, nis, lw, X, Pb, dx = bank_epoch(self.lw, self.X, self.Pb, z, np.ascontiguousarray(H), r, kinds,
-                                                *self.tables, self.absurd_sigma, self.max_components, n)
+        status, nis, lw, X, Pb, dx = self.epoch(z, np.ascontiguousarray(H), r, kinds)
         if status in (OK, NEEDS_REPAIR):
             apply_feedback(nav, sensor, clock, dx[:n], layout_arr)
             if self.have_clone:
                 cloner.correct_clone(dx[n:])
             self.lw, self.X, self.Pb = lw, X, Pb
         return status, nis
+
+    def epoch(self, z, H, r, kinds):
+        """The bank's measurement epoch in one compiled call, ``(status, nis, lw, X, P, dx)``
+        of :func:`~mixnav.filters._bank_kernels.bank_epoch` (the bank itself unchanged).
+
+        With online learning the collecting variant also returns each row's
+        standardised innovation and prediction share, which go to the learner;
+        a refit replaces the mixture tables used from the next epoch on. A
+        subclass that writes its own ``update`` calls this to keep both.
+        """
+        args = (self.lw, self.X, self.Pb, z, H, r, kinds, *self.tables, self.absurd_sigma,
+                self.max_components, self.n)
+        if self.online is None:
+            return bank_epoch(*args)
+        m = len(z)
+        if len(self._u) < m:
+            self._u, self._q = np.empty(2 * m), np.empty(2 * m)
+        out = bank_epoch_collect(*args, self._u, self._q)
+        if self.online.observe(out[0] in (OK, NEEDS_REPAIR), kinds, self._u[:m], self._q[:m]):
+            self.mixtures = replace(self.mixtures, measurement={**self.mixtures.measurement,
+                                                                **self.online.current})
+            self.tables = self.mixtures.tables()
+        return out
 
     def replace_clone(self, J):
         n = self.n
@@ -276,6 +303,8 @@ def _warm_bank() -> None:
     bank_reduce(lw, X, P, 1, n)
     bank_epoch(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
                np.zeros((1, 1)), np.ones((1, 1)), 1e4, 1, n)
+    bank_epoch_collect(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
+                       np.zeros((1, 1)), np.ones((1, 1)), 1e4, 1, n, np.empty(1), np.empty(1))
     _BANK_WARM.append(True)
 
 
@@ -294,17 +323,22 @@ class GaussianMixtureEkf(ErrorStateEkf):
     learning_time_s : float
         Time spent learning the mixtures (reported beside the filter's own
         timing; M4/M5 learn them offline).
+    online : mixnav.filters.online.OnlineSettings, optional
+        Re-learn these kinds' measurement mixtures online from a sliding window
+        of innovations (M4 beyond the paper; :mod:`mixnav.filters.online`),
+        starting from ``mixtures``. Every run starts again from ``mixtures``.
     """
 
     def __init__(self, layout: StateLayout, imu_model: ImuErrorModel, mixtures: BankMixtures,
                  max_components: int = 16, covariance_interval: float = 1.0, absurd_sigma: float = 1e4,
-                 clock: ClockModel | None = None, learning_time_s: float = 0.0):
+                 clock: ClockModel | None = None, learning_time_s: float = 0.0, online=None):
         super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
         if int(max_components) < 1:
             raise ConfigError("must be at least 1", key="mixture.max_components")
         self.mixtures = mixtures
         self.max_components = int(max_components)
         self.learning_time_s = float(learning_time_s)
+        self.online = online
         self.qc_white = np.zeros(layout.n)
         self.qc_white[layout.att] = self.qc[layout.att]
         self.qc_white[layout.vel] = self.qc[layout.vel]
@@ -312,14 +346,26 @@ class GaussianMixtureEkf(ErrorStateEkf):
 
     def _belief(self, P0, n_clone):
         _warm_bank()
+        learner = None
+        if self.online is not None:
+            from .online import warm_online
+            warm_online()
+            learner = self.online.learner(self.mixtures)
         self._last = BankBelief(P0, n_clone, self.layout, self.absurd_sigma, self.mixtures, self.qc_white,
-                                self.max_components)
+                                self.max_components, online=learner)
         return self._last
+
+    @property
+    def online_learner(self):
+        """The online learner of the last run (its ``history`` and counters), or None."""
+        return None if self._last is None else self._last.online
 
     def extra_timing(self) -> dict:
         out = {"learning_time_s": self.learning_time_s}
         if self._last is not None:
             out["bank_components_max"] = float(self._last.largest_bank)
+            if self._last.online is not None:
+                out.update(self._last.online.timing())
         return out
 
 
@@ -367,10 +413,12 @@ def learn_mixtures(cfg, training: dict, seed: int = 0) -> tuple[BankMixtures, fl
     lc = cfg.learn
     t0 = time.perf_counter()
     meas = {k: _spec(v) for k, v in cfg.measurement.items()}
+    if not lc.offline:  # only online learning: start from the given mixtures
+        return mixtures_from_config(cfg), 0.0
     for kind in lc.observables:
         meas[kind] = learn_mixture(training[kind][:lc.training_samples], lc.method, lc.n_components, lc.gibbs_samples, lc.prune, seed)
     process = _spec(cfg.process) if cfg.process is not None else StandardMixture.gaussian()
-    if lc.process:
+    if lc.learn_process:
         p = learn_mixture(training["process"][:lc.training_samples], lc.method, lc.n_components, lc.gibbs_samples, lc.prune, seed)
         # process-noise means are zero by construction (module docstring): keep weights and scales,
         # the scales about zero (E[x^2] per component)

@@ -12,6 +12,7 @@ from ..measurements.tdcp import TdcpGnss
 from ..measurements.tight import TightGnss
 from .ekf import ErrorStateEkf
 from .gmekf import GaussianMixtureEkf, learn_mixtures, mixtures_from_config
+from .online import OnlineSettings
 from .robust import RobustAdaptiveEkf
 
 #: Method type -> one-line description (listed by ``mixnav scenarios``).
@@ -27,7 +28,7 @@ ESTIMATORS = {
     "ekf": "M1 extended Kalman filter (the default)",
     "robust-adaptive": "M2 robust adaptive EKF: IGG-III equivalent weights + Yang's adaptive factor",
     "gaussian-mixture": "M3 Gaussian-mixture EKF (bank of components); M4/M5 when [mixture.learn] "
-                        "uses vb/gibbs",
+                        "uses vb/gibbs; M4 re-learned online with mixture.learn.online",
 }
 
 
@@ -68,7 +69,12 @@ def build(method: MethodConfig, default_imu: ImuErrorModel, fixes, lever_arm, so
     if method.estimator == "gaussian-mixture":
         mc = method.mixture or MixtureConfig()
         learning_time = 0.0
-        if mc.learn is not None:
+        online = None
+        if mc.learn is not None and mc.learn.online is not None:
+            oc = mc.learn.online
+            online = OnlineSettings(tuple(mc.learn.observables), window=oc.window, every=oc.every, gate=oc.gate,
+                                    n_components=mc.learn.n_components, prune=mc.learn.prune)
+        if mc.learn is not None and mc.learn.offline:
             if training is None:
                 raise ConfigError(f"method '{method.name}' learns its mixtures from a training stretch, "
                                   "which only simulated scenarios provide", file=source,
@@ -77,5 +83,5 @@ def build(method: MethodConfig, default_imu: ImuErrorModel, fixes, lever_arm, so
         else:
             mixtures = mixtures_from_config(mc)
         return GaussianMixtureEkf(layout, model, mixtures, max_components=mc.max_components,
-                                  learning_time_s=learning_time, **common), meas
+                                  learning_time_s=learning_time, online=online, **common), meas
     return ErrorStateEkf(layout, model, **common), meas
