@@ -73,6 +73,34 @@ def test_moment_deconvolution_recovers_the_noise_mixture():
     assert raw[:, 1].mean() - truth[1] > 0.5   # the narrow scale without deconvolution: + mean q
 
 
+def test_compiled_steps_equal_their_numpy_formulas():
+    """Gate, start responsibilities (with the birth column) and the per-component
+    prediction shares against the formulas of the module docstring in numpy."""
+    from scipy.stats import norm
+    from mixnav.filters.online import BIRTH_SIGMA, component_shares, start_responsibilities
+    rng = np.random.default_rng(5)
+    u = np.concatenate([rng.standard_normal(300), [40.0, -60.0], rng.normal(0, 5, 20)])
+    q = rng.uniform(0.05, 0.5, len(u))
+    w, mu, v = np.array([0.3, 0.7]), np.array([0.2, -0.1]), np.array([2.0, 0.5])
+    keep, resp = start_responsibilities(u, q, w, mu, v, 10.0, True, 0.01)
+    S = v + q[:, None]
+    d = np.abs(u[:, None] - mu) / np.sqrt(S)
+    np.testing.assert_array_equal(keep, d.min(axis=1) <= 10.0)
+    far = d[keep].min(axis=1) > BIRTH_SIGMA
+    assert far.sum() >= 2 and resp.shape == (keep.sum(), 3)
+    dens = w * norm.pdf(u[keep][:, None], mu, np.sqrt(S[keep]))
+    np.testing.assert_allclose(resp[~far, :2], (dens / dens.sum(axis=1, keepdims=True))[~far], rtol=1e-12)
+    np.testing.assert_array_equal(resp[far], np.tile([0.0, 0.0, 1.0], (far.sum(), 1)))
+    _, r2 = start_responsibilities(u, q, w, mu, v, 10.0, False, 0.01)
+    assert r2.shape == (keep.sum(), 2)
+    x = u[keep]
+    nl, qbar = component_shares(x, q[keep], w, mu, v)
+    g = w * norm.pdf(x[:, None], mu, np.sqrt(v))
+    g /= g.sum(axis=1, keepdims=True)
+    np.testing.assert_allclose(nl, g.sum(axis=0), rtol=1e-12)
+    np.testing.assert_allclose(qbar, (g * q[keep][:, None]).sum(axis=0) / g.sum(axis=0), rtol=1e-12)
+
+
 def test_gate_keeps_an_absurd_row_out_of_the_fit():
     rng = np.random.default_rng(1)
     u = _sample(rng, TRUE, 600)

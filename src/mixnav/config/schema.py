@@ -286,12 +286,14 @@ class OnlineLearnConfig(Strict):
     kind of ``learn.observables``, the last ``window`` rows' standardised
     innovations (rows, not epochs: 600 pseudorange rows are about 70 s of 8-9
     satellites at 1 Hz) are refitted by VB, warm-started from the mixture in
-    use, every ``every`` measurement epochs once the window is full. Rows more
-    than ``gate`` standard deviations from every component of the mixture in
-    use are left out of the fit (gross errors)."""
+    use, every ``every`` measurement epochs once the window is full (default
+    20: a third of a 600-row window is new at each refit; the window, not
+    ``every``, sets how fast a change is tracked). Rows more than ``gate``
+    standard deviations from every component of the mixture in use are left
+    out of the fit (gross errors)."""
 
     window: int = Field(default=600, ge=20)
-    every: int = Field(default=10, ge=1)
+    every: int = Field(default=20, ge=1)
     gate: float = Field(default=10.0, ge=3)
 
 

@@ -206,6 +206,7 @@ LABELS = {**BOX_METRICS,
           "roll_max_deg": "roll max [deg]", "pitch_max_deg": "pitch max [deg]", "yaw_max_deg": "yaw max [deg]",
           "vertical_max_m": "vertical max [m]", "learning_time_s": "learning time [s]",
           "total_time_s": "total time: filter + learning [s]",
+          "online_refits": "online refits", "online_refit_time_s": "online refit time [s]",
           **{f"outage{i}_{k}_max_m": f"outage {i + 1}: max {k} error [m]" for i in range(9)
              for k in ("horizontal", "vertical")}}
 

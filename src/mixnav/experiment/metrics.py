@@ -47,6 +47,11 @@ METRIC_KEYS_DOC: dict[str, str] = {
     "learning_time_s": "Gaussian-mixture methods: time spent learning the noise mixtures offline [s]",
     "bank_components_max": "Gaussian-mixture methods: largest bank before a reduction (kept x process "
                            "components)",
+    "online_refits": "M4 online re-learning: number of VB refits of a window (one per observable kind each time)",
+    "online_refit_time_s": "M4 online re-learning: time spent in the refits [s] (part of wall_time_s)",
+    "online_floored": "M4 online re-learning: refitted components whose deconvolved scale was raised to its floor",
+    "online_failed": "M4 online re-learning: refits that failed (the mixture in use was kept)",
+    "online_rows_gated": "M4 online re-learning: window rows left out of a fit by the gate (counted per refit)",
     "total_time_s": "wall_time_s + learning_time_s [s]",
     "measurement_epochs": "number of GNSS epochs processed",
     "recoveries": "counts of numerical recoveries (see mixnav.filters.ekf); the robust adaptive EKF "

@@ -31,6 +31,10 @@ the IMU white-noise densities (``v_j ARW^2``, ``v_j VRW^2``; its means
 must be zero, a non-zero mean being a bias the bias states carry); the prior
 mixture scales the initial covariance.
 
+M4 can also re-learn the measurement mixtures online from a sliding window
+of the bank's standardised innovations (:mod:`mixnav.filters.online`; the
+hook is :meth:`BankBelief.epoch`).
+
 When an event has no measurement (a GNSS outage), the accumulated white
 noise is folded into every component with the mixture's mean scale
 ``sum w_j v_j``: without a measurement the children could never be told

@@ -94,6 +94,7 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from ..errors import ConfigError
 from ..measurements.kinds import KINDS
@@ -110,7 +111,7 @@ class OnlineSettings:
 
     kinds: tuple
     window: int = 600
-    every: int = 10
+    every: int = 20
     gate: float = 10.0
     n_components: int = 4
     prune: float = 0.01
@@ -146,6 +147,9 @@ def warm_online() -> None:
     outside the timed loop."""
     if _WARM:
         return
+    z = np.zeros(3)
+    component_shares(z, z, np.ones(1), np.zeros(1), np.ones(1))
+    start_responsibilities(z, z, np.ones(1), np.zeros(1), np.ones(1), 10.0, True, 0.01)
     from ..noise.learn import VariationalGaussianMixture
     x = np.random.default_rng(0).standard_normal((40, 1))
     resp = np.zeros((40, 2))
@@ -154,6 +158,110 @@ def warm_online() -> None:
         warnings.simplefilter("ignore")
         VariationalGaussianMixture(2, nu0=1.0, W0=np.array([[2.0]]), merge=False, init_resp=resp).fit(x)
     _WARM.append(True)
+
+
+@njit(cache=True)
+def start_responsibilities(u, q, w, mu, v, gate, allow_birth, prune):
+    """Steps 1-2 of the module docstring in one pass over the window.
+
+    Parameters
+    ----------
+    u, q : ndarray (n,)
+        Standardised innovations and prediction shares [-].
+    w, mu, v : ndarray (L,)
+        The mixture in use (weights > 0, means, scales).
+    gate : float
+        Rows with ``|u - mu_l| > gate sqrt(v_l + q)`` for every ``l`` are left out.
+    allow_birth : bool
+        Add a birth column when at least ``max(prune n, 2)`` kept rows are more
+        than :data:`BIRTH_SIGMA` standard deviations from every component.
+
+    Returns
+    -------
+    keep : ndarray of bool (n,)
+    resp : ndarray (n_kept, L) or (n_kept, L + 1)
+        Responsibilities ``∝ w_l N(u; mu_l, v_l + q)`` (the birth column: 1 for
+        the far rows, whose other columns are 0).
+    """
+    n = u.shape[0]
+    L = w.shape[0]
+    lr = np.empty((n, L))
+    keep = np.zeros(n, dtype=np.bool_)
+    far = np.zeros(n, dtype=np.bool_)
+    g2, b2 = gate * gate, BIRTH_SIGMA * BIRTH_SIGMA
+    n_keep = 0
+    n_far = 0
+    for t in range(n):
+        dmin = np.inf
+        for l in range(L):
+            s = v[l] + q[t]
+            e = u[t] - mu[l]
+            d2 = e * e / s
+            if d2 < dmin:
+                dmin = d2
+            lr[t, l] = math.log(w[l]) - 0.5 * (_LOG2PI + math.log(s) + d2)
+        if dmin <= g2:
+            keep[t] = True
+            n_keep += 1
+            if dmin > b2:
+                far[t] = True
+                n_far += 1
+    birth = allow_birth and n_far >= max(prune * n_keep, 2.0)
+    resp = np.zeros((n_keep, L + 1 if birth else L))
+    o = 0
+    for t in range(n):
+        if not keep[t]:
+            continue
+        if birth and far[t]:
+            resp[o, L] = 1.0
+        else:
+            m = -np.inf
+            for l in range(L):
+                if lr[t, l] > m:
+                    m = lr[t, l]
+            tot = 0.0
+            for l in range(L):
+                r = math.exp(lr[t, l] - m)
+                resp[o, l] = r
+                tot += r
+            for l in range(L):
+                resp[o, l] /= tot
+        o += 1
+    return keep, resp
+
+
+@njit(cache=True)
+def component_shares(x, q, w, mu, s):
+    """Step 3: per component of the fitted innovation-space mixture ``(w, mu, s)``
+    (K,), the responsibility mass ``n_l = sum_t g_tl`` and the mean prediction
+    share ``qbar_l = sum_t g_tl q_t / n_l`` of the rows ``x``, ``q`` (n,)."""
+    n = x.shape[0]
+    K = w.shape[0]
+    c = np.empty(K)
+    for l in range(K):
+        c[l] = math.log(w[l]) - 0.5 * (_LOG2PI + math.log(s[l]))
+    nl = np.zeros(K)
+    qs = np.zeros(K)
+    lg = np.empty(K)
+    for t in range(n):
+        m = -np.inf
+        for l in range(K):
+            e = x[t] - mu[l]
+            lg[l] = c[l] - 0.5 * e * e / s[l]
+            if lg[l] > m:
+                m = lg[l]
+        tot = 0.0
+        for l in range(K):
+            lg[l] = math.exp(lg[l] - m)
+            tot += lg[l]
+        for l in range(K):
+            g = lg[l] / tot
+            nl[l] += g
+            qs[l] += g * q[t]
+    qbar = np.empty(K)
+    for l in range(K):
+        qbar[l] = qs[l] / max(nl[l], 1e-300)
+    return nl, qbar
 
 
 class OnlineMixtureLearner:
@@ -288,24 +396,13 @@ class OnlineMixtureLearner:
         w, mu, v = (np.asarray(a, dtype=float) for a in (cur.weights, cur.means, cur.scales))
         live = w > 0
         w, mu, v = w[live], mu[live], v[live]
-        S = v[None, :] + q[:, None]                       # innovation-space variances, (n, L)
-        d2 = (u[:, None] - mu[None, :]) ** 2 / S
-        d2min = d2.min(axis=1)
-        keep = d2min <= self.gate ** 2                    # step 1
-        n_gated = int(len(u) - keep.sum())
-        self.rows_gated += n_gated
-        x, qk, S, d2, d2min = u[keep], q[keep], S[keep], d2[keep], d2min[keep]
+        allow_birth = len(w) < self.n_components
+        keep, resp = start_responsibilities(u, q, w, mu, v, self.gate, allow_birth, self.prune)   # steps 1-2
+        x, qk = u[keep], q[keep]
         n = len(x)
+        self.rows_gated += len(u) - n
         if n < 10 * max(len(w), 1):
             return None
-        lr = np.log(w)[None, :] - 0.5 * (_LOG2PI + np.log(S) + d2)   # step 2
-        lr -= lr.max(axis=1, keepdims=True)
-        resp = np.exp(lr)
-        resp /= resp.sum(axis=1, keepdims=True)
-        if len(w) < self.n_components:
-            poor = d2min > BIRTH_SIGMA ** 2
-            if poor.sum() >= max(self.prune * n, 2):
-                resp = np.hstack([resp * ~poor[:, None], poor[:, None].astype(float)])
         est = VariationalGaussianMixture(n_components=resp.shape[1], alpha0=1.0, beta0=1.0, nu0=1.0,
                                          W0=np.array([[2.0]]), tol=1e-6, max_iter=self.max_iter,
                                          prune_threshold=self.prune, merge=False, init_resp=resp)
@@ -318,13 +415,7 @@ class OnlineMixtureLearner:
         pw, pm, ps = est.weights_, est.means_[:, 0], est.covariances_[:, 0, 0]
         if not (np.all(np.isfinite(pw)) and np.all(np.isfinite(pm)) and np.all(ps > 0)):
             return None
-        # step 3: responsibilities under the fitted innovation-space mixture -> qbar_l
-        lg = np.log(pw)[None, :] - 0.5 * (_LOG2PI + np.log(ps)[None, :] + (x[:, None] - pm) ** 2 / ps)
-        lg -= lg.max(axis=1, keepdims=True)
-        g = np.exp(lg)
-        g /= g.sum(axis=1, keepdims=True)
-        nl = g.sum(axis=0)
-        qbar = (g * qk[:, None]).sum(axis=0) / np.maximum(nl, 1e-300)
+        nl, qbar = component_shares(x, qk, pw, pm, ps)     # step 3
         n_eff = nl * (min(n_epochs, n) / n if n_epochs else 1.0)   # rows of one epoch share its state error
         floor = ps * np.sqrt(2.0 / np.maximum(n_eff, 1.0))
         vs = ps - qbar
