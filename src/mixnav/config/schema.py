@@ -297,10 +297,29 @@ class LearnConfig(Strict):
     prune: float = Field(default=0.01, ge=0, lt=1)
 
 
+_Psi = Annotated[float, Field(gt=-1, lt=1)]
+
+
+class ColoredConfig(Strict):
+    """Coloured noise (M6, paper P2): AR(1) coefficients of the process noise
+    (``process``, per ``process_interval``, on the epoch's white IMU noise) and
+    of each observable's measurement noise (``measurement``, per epoch, per
+    channel), each ``|psi| < 1``. With a ``[mixture.colored]`` table the mixtures
+    are those of the white driving noises (P2 eqs. 6-7). ``"fit"`` fits the
+    coefficient to the training stretch (AR(1) per channel, median over channels;
+    scenarios only). See mixnav.filters.colored."""
+
+    process: _Psi | Literal["fit"] = 0.0
+    measurement: dict[Literal["pseudorange", "range_rate", "position", "velocity"], _Psi | Literal["fit"]] = \
+        Field(default_factory=dict)
+    process_interval: Duration = 1.0
+
+
 class MixtureConfig(Strict):
     """Gaussian-mixture EKF (``estimator = "gaussian-mixture"``): prior,
     process-noise and per-observable measurement-noise mixtures, given or
-    learned, and the bank size after reduction."""
+    learned, and the bank size after reduction; with ``colored``, the
+    coloured-noise variant M6."""
 
     max_components: int = Field(default=16, ge=1)
     prior: MixtureSpec | None = None
@@ -308,6 +327,7 @@ class MixtureConfig(Strict):
     measurement: dict[Literal["pseudorange", "range_rate", "tdcp", "position", "velocity"], MixtureSpec] = \
         Field(default_factory=dict)
     learn: LearnConfig | None = None
+    colored: ColoredConfig | None = None
 
 
 class MethodConfig(Strict):

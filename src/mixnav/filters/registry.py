@@ -27,7 +27,7 @@ ESTIMATORS = {
     "ekf": "M1 extended Kalman filter (the default)",
     "robust-adaptive": "M2 robust adaptive EKF: IGG-III equivalent weights + Yang's adaptive factor",
     "gaussian-mixture": "M3 Gaussian-mixture EKF (bank of components); M4/M5 when [mixture.learn] "
-                        "uses vb/gibbs",
+                        "uses vb/gibbs; M6 (coloured noise, paper P2) with [mixture.colored]",
 }
 
 
@@ -76,6 +76,36 @@ def build(method: MethodConfig, default_imu: ImuErrorModel, fixes, lever_arm, so
             mixtures, learning_time = learn_mixtures(mc, training, seed)
         else:
             mixtures = mixtures_from_config(mc)
+        if mc.colored is not None:
+            return _colored(method, mc, layout, model, mixtures, meas, training, learning_time, source, index,
+                            common)
         return GaussianMixtureEkf(layout, model, mixtures, max_components=mc.max_components,
                                   learning_time_s=learning_time, **common), meas
     return ErrorStateEkf(layout, model, **common), meas
+
+
+def _colored(method, mc, layout, model, mixtures, meas, training, learning_time, source, index, common):
+    """M6: the coloured-noise mixture EKF and its differenced measurement models."""
+    from ..measurements.differenced import DifferencedMeasurement
+    from .colored import ColoredMixtureEkf, fit_coefficient
+    cc = mc.colored
+    key = f"methods[{index}].mixture.colored"
+    if method.type == "tdcp-ekf":
+        raise ConfigError("the coloured-noise mixture EKF differences pseudoranges and range rates; TDCP "
+                          "already differences the carrier: use type = \"tight-ekf\"", file=source,
+                          key=f"methods[{index}].type")
+
+    def coefficient(v, kind, k):
+        if v != "fit":
+            return float(v)
+        if training is None or kind not in training.get("series", {}):
+            raise ConfigError("'fit' needs a training stretch (simulated scenarios only)", file=source,
+                              key=f"{key}.{k}")
+        return fit_coefficient(training["series"][kind])
+
+    psi_m = {k: coefficient(v, k, f"measurement.{k}") for k, v in cc.measurement.items()}
+    psi_p = coefficient(cc.process, "process", "process")
+    meas = [DifferencedMeasurement(m, layout, psi_m) for m in meas]
+    return ColoredMixtureEkf(layout, model, mixtures, psi_process=psi_p, psi_measurement=psi_m,
+                             process_interval=cc.process_interval, max_components=mc.max_components,
+                             learning_time_s=learning_time, **common), meas
