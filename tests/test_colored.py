@@ -180,3 +180,58 @@ def test_non_stationary_coefficients_are_refused(psi):
         DifferencedMeasurement(meas[0], ekf.layout, {"pseudorange": psi})
     with pytest.raises(ConfigError, match="psi"):
         ColoredMixtureEkf(ekf.layout, ekf.imu_model, BankMixtures(), psi_process=psi)
+
+
+_M6 = '''
+[[methods]]
+name = "m6"
+type = "tight-ekf"
+states = 17
+estimator = "gaussian-mixture"
+[methods.mixture]
+learn = { method = "vb", observables = ["pseudorange", "range_rate"], process = false }
+colored = { measurement = { pseudorange = "fit", range_rate = 0.3 }, channels = { "pseudorange:3" = 0.5 } }
+'''
+
+
+def _m6_scenario(tmp_path, extra=_M6, psi=0.9):
+    p = tmp_path / "m6.toml"
+    p.write_text(_coloured_tight_demo(psi) + extra)
+    return str(p)
+
+
+def test_scenario_fits_the_coefficient_and_learns_the_whitened_mixture(tmp_path):
+    """'fit' recovers the simulated AR(1) coefficient from the training series;
+    the mixture is learned from the whitened series, so it describes the white
+    driving noise (unit variance in units of the told sigma), not the coloured
+    noise (variance 1 / (1 - 0.81) = 5.3)."""
+    from mixnav.experiment.run import _training
+    sc, src, _ = load_scenario(_m6_scenario(tmp_path))
+    training = _training(sc, 0, src)
+    sim = simulate(sc, 0, src)
+    f, meas = registry.build(sc.methods[-1], sim.imu_model, None, np.zeros(3), src, len(sc.methods) - 1,
+                             observations=sim.observations, clock=ClockModel(), training=training, seed=0)
+    assert isinstance(f, ColoredMixtureEkf) and isinstance(meas[0], DifferencedMeasurement)
+    assert f.psi_measurement[0] == pytest.approx(0.9, abs=0.03)  # 167 epochs x 12 channels
+    assert f.psi_measurement[1] == 0.3
+    assert meas[0].psi_channels == {3: 0.5}
+    pr = f.mixtures.measurement["pseudorange"]
+    assert pr.variance() == pytest.approx(1.0, abs=0.15)
+    assert f.learning_time_s > 0
+
+
+@pytest.mark.parametrize("old, new, key", [
+    ('type = "tight-ekf"\nstates = 17\nestimator = "gaussian-mixture"', 'type = "tdcp-ekf"\nstates = 17\n'
+     'estimator = "gaussian-mixture"', "methods[2].type"),
+    ('range_rate = 0.3', 'range_rate = 1.0', "methods[2].mixture.colored.measurement.range_rate"),
+    ('"pseudorange:3"', '"pseudorange-3"', "methods[2].mixture.colored.channels.pseudorange-3"),
+    ('colored = {', 'colored = { process = "often", ', "methods[2].mixture.colored.process"),
+])
+def test_bad_colored_tables_name_their_key(tmp_path, old, new, key):
+    text = _M6.replace(old, new)
+    assert text != _M6
+    with pytest.raises(ConfigError) as e:
+        sc, src, _ = load_scenario(_m6_scenario(tmp_path, text))
+        from mixnav.experiment.run import run_scenario
+        run_scenario(sc, src, seed=0)
+    assert key in str(e.value)

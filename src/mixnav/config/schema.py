@@ -307,12 +307,15 @@ class ColoredConfig(Strict):
     channel), each ``|psi| < 1``. With a ``[mixture.colored]`` table the mixtures
     are those of the white driving noises (P2 eqs. 6-7). ``"fit"`` fits the
     coefficient to the training stretch (AR(1) per channel, median over channels;
-    scenarios only). See mixnav.filters.colored."""
+    scenarios only). ``channels`` overrides the coefficient of single channels,
+    ``"<observable>:<id>" = psi`` with ``id`` the PRN (tight) or axis 0-2 (loose).
+    See mixnav.filters.colored."""
 
     process: _Psi | Literal["fit"] = 0.0
     measurement: dict[Literal["pseudorange", "range_rate", "position", "velocity"], _Psi | Literal["fit"]] = \
         Field(default_factory=dict)
     process_interval: Duration = 1.0
+    channels: dict[str, _Psi] = Field(default_factory=dict)
 
 
 class MixtureConfig(Strict):

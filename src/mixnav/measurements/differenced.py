@@ -83,9 +83,12 @@ class DifferencedMeasurement:
     psi : dict
         Observable kind name -> AR(1) coefficient per epoch, ``|psi| < 1``;
         kinds not listed are white (``psi = 0``).
+    psi_channels : dict, optional
+        Per-channel coefficients that replace the kind's: ``(kind name, id)``
+        -> psi, ``id`` the satellite PRN (tight) or the axis 0-2 (loose).
     """
 
-    def __init__(self, inner, layout: StateLayout, psi: dict):
+    def __init__(self, inner, layout: StateLayout, psi: dict, psi_channels: dict | None = None):
         if getattr(inner, "clone_size", 0):
             raise ConfigError("measurement differencing cannot wrap a model that clones itself "
                               "(e.g. tdcp-ekf): use tight-ekf or loose-ekf", key="type")
@@ -103,6 +106,14 @@ class DifferencedMeasurement:
                 raise ConfigError(f"AR(1) coefficient must satisfy |psi| < 1 (stationary), got {v}",
                                   key=f"colored.measurement.{name}")
             self.psi_by_code[KINDS[name]] = float(v)
+        self.psi_channels = {}
+        for (name, cid), v in (psi_channels or {}).items():
+            key = f"colored.channels.{name}:{cid}"
+            if name not in KINDS:
+                raise ConfigError(f"unknown observable '{name}' (known: {', '.join(KINDS)})", key=key)
+            if not (np.isfinite(v) and abs(v) < 1.0):
+                raise ConfigError(f"AR(1) coefficient must satisfy |psi| < 1 (stationary), got {v}", key=key)
+            self.psi_channels[KINDS[name] * 1000 + int(cid)] = float(v)
         self.cols = clone_columns(inner, layout)
         self.clone_size = len(self.cols)
         t = np.asarray(inner.times, dtype=float)
@@ -155,6 +166,12 @@ class DifferencedMeasurement:
         z, H, r = zhr
         m, n = len(z), self.layout.n
         kinds = np.asarray(self.inner.row_kinds(i, m), dtype=np.int64)
+        ch = self.inner.row_channels(i, m)
+        psi_row = self.psi_by_code[kinds]
+        if self.psi_channels:
+            psi_row = psi_row.copy()
+            for q, c in enumerate(ch):
+                psi_row[q] = self.psi_channels.get(int(c), psi_row[q])
         Ha = np.zeros((m, n + self.clone_size))
         Ha[:, :n] = H
         za = np.array(z, dtype=float)
@@ -163,16 +180,15 @@ class DifferencedMeasurement:
         t = self.inner.times
         if prev is not None and prev[0] < i and t[i] - t[prev[0]] <= self.max_gap:
             _, ch_p, z_p, Hc_p = prev
-            ch = self.inner.row_channels(i, m)
             _, a, b = np.intersect1d(ch, ch_p, assume_unique=True, return_indices=True)
-            psi = self.psi_by_code[kinds[a]]
+            psi = psi_row[a]
             za[a] -= psi * z_p[b]                                       # P2 eq. (15)
             Ha[a, n:] = -psi[:, None] * Hc_p[b]                         # P2 eq. (16), clone form
             stationary[a] = False
         if stationary.all():  # no clone in use (the engine may not carry one yet)
             Ha = Ha[:, :n]
         ra = np.array(r, dtype=float)
-        ps = self.psi_by_code[kinds[stationary]]
+        ps = psi_row[stationary]
         ra[stationary] /= 1.0 - ps * ps                                 # stationary variance of e
         self._kinds = kinds + STATIONARY * stationary
         return za, Ha, ra
