@@ -51,7 +51,7 @@ from numba import njit
 from ..errors import ConfigError
 from ..ins._error_kernels import apply_feedback, covariance_predict, discrete_noise
 from ..measurements.differenced import STATIONARY
-from ._bank_kernels import bank_epoch
+from ._bank_kernels import bank_epoch, bank_propagate
 from ._ekf_kernels import NEEDS_REPAIR, OK
 from .gmekf import BankBelief, GaussianMixtureEkf
 
@@ -135,28 +135,31 @@ class ColoredBankBelief(BankBelief):
     process-noise state ``w`` and the differencing clone (module docstring)."""
 
     def __init__(self, P0, n_clone, layout, absurd_sigma, mixtures, qc_white, max_components,
-                 psi_process, process_interval, psi_measurement):
-        super().__init__(P0, n_clone + N_W, layout, absurd_sigma, mixtures, qc_white, max_components)
+                 psi_process, process_interval, psi_measurement, augment=True):
+        nw = N_W if augment else 0
+        super().__init__(P0, n_clone + nw, layout, absurd_sigma, mixtures, qc_white, max_components)
         n = self.n
+        self.nw = nw                       # 0: no process colour, M3's propagation and split
         self.nc = n_clone                  # the clone proper sits after w
-        self.iw = n                        # w at n:n+9, clone at n+9:
-        self.ic = n + N_W
+        self.ic = n + nw                   # w at n:n+9, clone at n+nw:
         self.psi_w = np.asarray(psi_process, dtype=float)
         self.process_interval = float(process_interval)
         self.T_acc = 0.0
         self.started = False
-        self.white = bool(np.any(qc_white > 0))  # the white part is always kept apart here
+        if nw:
+            self.white = bool(np.any(qc_white > 0))  # the white part is always kept apart here
         # kinds k (differenced, zeta) and k + STATIONARY (undifferenced, stationary noise)
         lw, mu, var = self.tables
         psi_m = np.asarray(psi_measurement, dtype=float)
         grow = np.sqrt((1.0 + psi_m) / (1.0 - psi_m))[:, None]
         self.tables = (np.vstack([lw, lw]), np.vstack([mu, mu * grow]), np.vstack([var, var]))
-        self.counts["process_steps"] = 0
+        self.process_steps = 0             # AR(1) steps of w taken (not a recovery)
 
     # --- run-loop interface -------------------------------------------------------------
     def propagated(self, work, T, measured):
+        if not self.nw:
+            return super().propagated(work, T, measured)
         F, phi, qd = work[0], work[1], work[2]
-        from ._bank_kernels import bank_propagate
         if not self.white:
             bank_propagate(self.X, self.Pb, phi, qd, self.n)
             return
@@ -181,10 +184,12 @@ class ColoredBankBelief(BankBelief):
         self.Qw[:, :] = 0.0
         self.Qw_pending = False
         self.T_acc = 0.0
-        self.counts["process_steps"] += 1
+        self.process_steps += 1
         self.largest_bank = max(self.largest_bank, len(self.lw))
 
     def update(self, z, H, r, kinds, nav, sensor, clock, layout_arr, cloner):
+        if not self.nw:
+            return super().update(z, H, r, kinds, nav, sensor, clock, layout_arr, cloner)
         n, na, ic = self.n, self.na, self.ic
         z = np.ascontiguousarray(z, dtype=float)
         r = np.asarray(r, dtype=float)
@@ -214,6 +219,8 @@ class ColoredBankBelief(BankBelief):
         return status, nis
 
     def replace_clone(self, J):
+        if not self.nw:
+            return super().replace_clone(J)
         n, ic = self.n, self.ic
         A = self.Pb[:, :ic, :n] @ J.T                 # Cov([x; w], x_c) = Cov([x; w], x) J^T
         self.X[:, ic:] = self.X[:, :n] @ J.T
@@ -242,11 +249,17 @@ class ColoredMixtureEkf(GaussianMixtureEkf):
         the same coefficients (:func:`mixnav.filters.registry.build` does).
     process_interval : float
         [s] The interval ``psi_process`` refers to (default 1 s).
+    augment : bool, optional
+        Carry the 9 process-noise states. Default: when a ``psi_process`` is
+        non-zero (with all zero they cannot change the estimate, so leaving
+        them out is exact and M6 then costs what M3 does); True forces them
+        (the tests use it to check the zero-coefficient invariant).
     """
 
     def __init__(self, layout, imu_model, mixtures, psi_process=0.0, psi_measurement=None,
                  process_interval: float = 1.0, max_components: int = 16, covariance_interval: float = 1.0,
-                 absurd_sigma: float = 1e4, clock=None, learning_time_s: float = 0.0):
+                 absurd_sigma: float = 1e4, clock=None, learning_time_s: float = 0.0,
+                 augment: bool | None = None):
         super().__init__(layout, imu_model, mixtures, max_components, covariance_interval, absurd_sigma,
                          clock, learning_time_s)
         psi_w = np.broadcast_to(np.asarray(psi_process, dtype=float), (N_W,)).copy()
@@ -261,6 +274,7 @@ class ColoredMixtureEkf(GaussianMixtureEkf):
         for name, v in (psi_measurement or {}).items():
             self.psi_measurement[KINDS[name]] = v
         self.process_interval = float(process_interval)
+        self.augment = bool(np.any(psi_w != 0.0)) if augment is None else bool(augment)
 
     def _belief(self, P0, n_clone):
         from .gmekf import _warm_bank
@@ -268,7 +282,7 @@ class ColoredMixtureEkf(GaussianMixtureEkf):
         _warm_colored()
         self._last = ColoredBankBelief(P0, n_clone, self.layout, self.absurd_sigma, self.mixtures,
                                        self.qc_white, self.max_components, self.psi_process,
-                                       self.process_interval, self.psi_measurement)
+                                       self.process_interval, self.psi_measurement, self.augment)
         return self._last
 
 

@@ -139,7 +139,8 @@ def _colored(method, mc, layout, model, meas, training, source, index, common, s
         learning_time = time.perf_counter() - t0
     else:
         mixtures = mixtures_from_config(mc)
-    meas = [DifferencedMeasurement(m, layout, psi_m, channels) for m in meas]
+    if any(v != 0.0 for v in psi_m.values()) or channels:  # all white: nothing to difference (exact)
+        meas = [DifferencedMeasurement(m, layout, psi_m, channels) for m in meas]
     return ColoredMixtureEkf(layout, model, mixtures, psi_process=psi_p, psi_measurement=psi_m,
                              process_interval=cc.process_interval, max_components=mc.max_components,
                              learning_time_s=learning_time, **common), meas
