@@ -31,7 +31,9 @@ def training_residuals(sc: Scenario, seed: int, observables, n_samples: int, pro
 
     Returns ``{kind: ndarray (n_samples,)}``; ``"process"`` holds the IMU
     white-noise multipliers (already standardised: the scenario's
-    ``imu.white_noise`` process, or N(0, 1) when it has none).
+    ``imu.white_noise`` process, or N(0, 1) when it has none), drawn like the
+    simulation draws them: one value per IMU sample, or with
+    ``imu.white_noise_hold`` one per hold interval (6 channels, epochs T apart).
     """
     rng = Streams(seed).get("training")
     out = {}
@@ -63,7 +65,9 @@ def training_residuals(sc: Scenario, seed: int, observables, n_samples: int, pro
         out[kind] = np.ravel(x)[:n_samples]
     if process:
         white = imu_white_noise(sc, source)
-        t = np.arange(math.ceil(n_samples / 6) + 1) / sc.imu.rate
+        hold = sc.imu.white_noise_hold
+        k = np.arange(math.ceil(n_samples / 6) + 1)
+        t = k / sc.imu.rate if hold is None else (k + 1) * hold
         out["process"] = np.ravel((white or Gaussian(1.0)).sample(t, 6, rng))[:n_samples]
     return out
 
