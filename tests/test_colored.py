@@ -243,8 +243,8 @@ def _held_ar1_noise(psi, dt, T=1.0):
     integrated over epoch k is ``x_k ARW sqrt(T)`` with ``x_k = psi x_{k-1} + N(0, 1)``."""
     from scipy.signal import lfilter
 
-    def noise(rng, shape):
-        n, c = shape
+    def noise(rng, times, c):
+        n = len(times)
         k = np.ceil(np.arange(1, n + 1) * dt / T - 1e-9).astype(int) - 1
         w = rng.standard_normal((k[-1] + 1, c))
         x = np.empty_like(w)
@@ -264,7 +264,7 @@ def test_process_augmentation_follows_coloured_imu_noise(monkeypatch):
     import mixnav.sim.scenario as simsc
     from mixnav.experiment.run import solution_table
     orig = simsc.corrupt
-    monkeypatch.setattr(simsc, "corrupt", lambda imu, model, rng, white_noise=None:
+    monkeypatch.setattr(simsc, "corrupt", lambda imu, model, rng, white_noise=None, hold=None:
                         orig(imu, model, rng, white_noise=_held_ar1_noise(0.9, 0.01)))
     for seed in range(2):
         sim, clock, models = _tight_demo(seed)
