@@ -118,3 +118,34 @@ range_rate_noise = { type = "ar1", coefficient = 0.9, sigma = "0.05 m/s" }'''
     col = col[np.isfinite(col)]
     r1 = np.corrcoef(col[:-1], col[1:])[0, 1]
     assert r1 == pytest.approx(0.9, abs=0.05)
+
+
+@pytest.mark.parametrize("hold,words", [
+    ('"0 s"', "positive"), ('"-1 s"', "positive"), ('"1"', "unit"),
+    ('"0.015 s"', "whole number of IMU intervals"), ('"601 s"', "longer than the run"),
+])
+def test_bad_white_noise_hold_names_its_key(tmp_path, hold, words):
+    with pytest.raises(ConfigError) as exc:
+        _scenario(tmp_path, 'grade = "mems"', f'grade = "mems"\nwhite_noise_hold = {hold}')
+    msg = str(exc.value)
+    assert "imu.white_noise_hold" in msg and "noisy.toml" in msg and words in msg, msg
+
+
+def test_training_process_samples_follow_the_hold(tmp_path, monkeypatch):
+    # with a hold the "process" training series is the process drawn at epochs one hold
+    # interval apart (the simulation's reading), 6 channels interleaved; an AR(1) keeps its
+    # coefficient per channel (6 x 1000 values: se 0.006 on the mean of the 6 fits, 0.03 is 5)
+    import mixnav.noise.processes as proc
+    from mixnav.noise.ar import fit_ar1
+    from mixnav.sim.training import training_residuals
+    ar = 'white_noise = { type = "ar1", coefficient = 0.8, innovation = { type = "mixture", ' \
+         'weights = [0.1, 0.9], sigmas = [0.25, 1.0] } }'
+    seen = []
+    orig = proc.AR1.sample
+    monkeypatch.setattr(proc.AR1, "sample",
+                        lambda self, t, c, g: seen.append(np.asarray(t)) or orig(self, t, c, g))
+    for hold, step in (('\nwhite_noise_hold = "1 s"', 1.0), ("", 0.01)):
+        sc, src, _ = _scenario(tmp_path, 'grade = "mems"', f'grade = "mems"\n{ar}{hold}')
+        x = training_residuals(sc, 5, [], 6000, True, src)["process"]
+        np.testing.assert_allclose(np.diff(seen[-1]), step)
+        assert fit_ar1(x.reshape(-1, 6)).psi.mean() == pytest.approx(0.8, abs=0.03)

@@ -369,3 +369,18 @@ def test_online_from_given_mixtures_needs_no_training_and_starts_from_them(tmp_p
     assert f.mixtures.measurement["pseudorange"].scales == (0.5, 3.0)
     lrn = f.online.learner(f.mixtures)
     assert lrn.current["pseudorange"].weights == (0.5, 0.5)
+
+
+def test_online_with_the_coloured_noise_filter_is_a_config_error(tmp_path):
+    """M6 (ColoredBankBelief) has its own update and does not collect innovations."""
+    text = _drive(methods=("vb-online",)).replace(
+        "mixture = { learn = {", "mixture = { colored = { measurement = { pseudorange = 0.5 } }, learn = {")
+    p = tmp_path / "c.toml"
+    p.write_text(text)
+    sc, src, _ = load_scenario(str(p))
+    sim = simulate(sc, 0, src)
+    with pytest.raises(ConfigError) as e:
+        registry.build(sc.methods[0], sim.imu_model, sim.fixes, np.zeros(3), src, 0,
+                       observations=sim.observations, clock=ClockModel(),
+                       training=runmod._training(sc, 0, src))
+    assert "methods[0].mixture.learn.online" in str(e.value)

@@ -95,3 +95,117 @@ def test_clock_block_of_phi_and_q_is_the_two_state_closed_form():
     np.testing.assert_allclose(qd[c:c + 2, c:c + 2],
                                [[qb * T + qdr * T ** 3 / 3, qdr * T ** 2 / 2], [qdr * T ** 2 / 2, qdr * T]],
                                rtol=1e-12)
+
+
+# --------------------------------------------------------------------------
+# white noise held per interval (imu.white_noise_hold, P2's epoch-level W_k)
+# --------------------------------------------------------------------------
+NOISE_ONLY = ImuErrorModel(arw=np.deg2rad(0.2) / 60, vrw=30e-6 * 9.80665)
+
+
+def _recording(process):
+    """A white_noise callable that samples ``process`` and keeps what it drew."""
+    drawn = []
+
+    def white(g, times, c):
+        x = process.sample(times, c, g)
+        drawn.append((np.asarray(times).copy(), x))
+        return x
+    return white, drawn
+
+
+def test_without_a_hold_the_noise_is_the_per_sample_one_as_before(static_imu):
+    # the per-sample path written out independently: four per-run draws, then one
+    # standard normal (n, 3) block for the gyros and one for the accelerometers
+    _, ideal = static_imu
+    model = ImuErrorModel(gyro_bias=1e-5, accel_bias=1e-3, gyro_scale=1e-3, accel_scale=2e-3,
+                          arw=NOISE_ONLY.arw, vrw=NOISE_ONLY.vrw)
+    imu, _ = corrupt(ideal, model, np.random.default_rng(7))
+    g = np.random.default_rng(7)
+    bg, ba, sg, sa = (g.standard_normal(3) * s for s in (1e-5, 1e-3, 1e-3, 2e-3))
+    n = len(ideal)
+    sdt = np.sqrt(ideal.dt)[:, None]
+    ng, na = g.standard_normal((n, 3)), g.standard_normal((n, 3))
+    np.testing.assert_array_equal(imu.dtheta, (1 + sg) * ideal.dtheta + bg * ideal.dt[:, None]
+                                  + ng * model.arw * sdt)
+    np.testing.assert_array_equal(imu.dvel, (1 + sa) * ideal.dvel + ba * ideal.dt[:, None]
+                                  + na * model.vrw * sdt)
+
+
+def _zero_increments(ideal):
+    """The static IMU's time grid with zero increments: measured = the injected noise."""
+    z = np.zeros_like(ideal.dtheta)
+    return type(ideal)(ideal.time, ideal.dt, z, z.copy())
+
+
+@pytest.mark.parametrize("hold", [1.0, 0.7])   # 0.7 s: 600 s leaves a last interval of 0.1 s
+def test_held_noise_is_constant_per_interval_and_integrates_to_the_draw(static_imu, hold):
+    from mixnav.ins.imu_model import hold_intervals
+    from mixnav.noise.processes import Mixture
+    zero = _zero_increments(static_imu[1])
+    white, drawn = _recording(Mixture([0.1, 0.9], [0.25, 1.0]))
+    imu, _ = corrupt(zero, NOISE_ONLY, np.random.default_rng(3), white_noise=white, hold=hold)
+    (t_g, x_g), (t_a, x_a) = drawn
+    k, ends, length = hold_intervals(zero, hold)
+    n_int = int(np.ceil(600.0 / hold - 1e-9))
+    assert len(t_g) == n_int and np.array_equal(t_g, t_a) and np.array_equal(t_g, ends)
+    # the process is sampled at the interval ends, on the grid t0 + (k+1) T
+    np.testing.assert_allclose(t_g[:-1], hold * np.arange(1, n_int), atol=1e-9)
+    assert t_g[-1] == pytest.approx(600.0)
+    assert length[:-1] == pytest.approx(hold) and length[-1] == pytest.approx(600.0 - hold * (n_int - 1))
+    first = np.searchsorted(k, np.arange(n_int))
+    for got, x, s in ((imu.dtheta, x_g, NOISE_ONLY.arw), (imu.dvel, x_a, NOISE_ONLY.vrw)):
+        rate = got / zero.dt[:, None]
+        # one rate value per interval: every sample equals its interval's first sample
+        np.testing.assert_allclose(rate, rate[first][k], rtol=1e-12, atol=0)
+        # the noise integrated over interval k is x_k s sqrt(L_k) (L_k = T but the last)
+        sums = np.stack([np.bincount(k, weights=got[:, j]) for j in range(3)], axis=1)
+        np.testing.assert_allclose(sums, x * s * np.sqrt(length)[:, None], rtol=1e-12, atol=0)
+
+
+def test_held_gaussian_noise_has_the_variance_of_the_filters_q_per_interval(static_imu):
+    # default N(0, 1) multiplier held 1 s: each 1 s sum of angle (velocity) noise has variance
+    # ARW^2 T (VRW^2 T). 5 seeds x 600 intervals x 3 axes = 9000 sums: the sd of a
+    # variance estimate is sqrt(2 / 9000) = 1.5 %, so 6 % is 4 sd.
+    from mixnav.ins.imu_model import hold_intervals
+    zero = _zero_increments(static_imu[1])
+    k, _, _ = hold_intervals(zero, 1.0)
+    sg, sa = [], []
+    for seed in range(5):
+        imu, _ = corrupt(zero, NOISE_ONLY, np.random.default_rng(seed), hold=1.0)
+        for out, d in ((sg, imu.dtheta), (sa, imu.dvel)):
+            out.append(np.stack([np.bincount(k, weights=d[:, j]) for j in range(3)], axis=1))
+    assert np.var(np.concatenate(sg)) == pytest.approx(NOISE_ONLY.arw ** 2 * 1.0, rel=0.06)
+    assert np.var(np.concatenate(sa)) == pytest.approx(NOISE_ONLY.vrw ** 2 * 1.0, rel=0.06)
+
+
+def test_held_ar1_gives_the_coloured_epoch_noise_of_p2(static_imu):
+    # AR(1) coefficient 0.7 with a mixture innovation, held 1 s: the epoch sums of every
+    # channel are that AR(1) (P2 eq. 6), so least squares recovers 0.7. Per channel
+    # (599 pairs) the standard error is sqrt((1 - 0.49) / 599) = 0.029; the mean over the
+    # 6 independent channels has 0.012, and 0.05 is 4 of it. Per-sample draws would give
+    # epoch sums that are nearly white (0.7^100 between samples an epoch apart).
+    from mixnav.ins.imu_model import hold_intervals
+    from mixnav.noise.ar import fit_ar1
+    from mixnav.noise.processes import AR1, Mixture
+    zero = _zero_increments(static_imu[1])
+    proc = AR1(0.7, innovation=Mixture([0.1, 0.9], [0.25, 1.0]))
+    k, _, _ = hold_intervals(zero, 1.0)
+    psi = {}
+    for hold in (1.0, None):
+        white = lambda g, times, c: proc.sample(times, c, g)  # noqa: E731
+        imu, _ = corrupt(zero, NOISE_ONLY, np.random.default_rng(11), white_noise=white, hold=hold)
+        sums = [np.stack([np.bincount(k, weights=d[:, j]) for j in range(3)], axis=1)
+                for d in (imu.dtheta, imu.dvel)]
+        psi[hold] = fit_ar1(np.concatenate(sums, axis=1)).psi
+    assert psi[1.0].mean() == pytest.approx(0.7, abs=0.05)
+    # per sample: the epoch sums are white up to O(0.7^100) and edge terms; se 0.017 per mean
+    assert abs(psi[None].mean()) < 0.07
+
+
+@pytest.mark.parametrize("hold", [0.0, -1.0, 0.015, 0.0101, 601.0, float("nan")])
+def test_bad_hold_is_refused(static_imu, hold):
+    from mixnav.errors import ConfigError
+    _, ideal = static_imu
+    with pytest.raises(ConfigError, match="white_noise_hold"):
+        corrupt(ideal, NOISE_ONLY, np.random.default_rng(0), hold=hold)

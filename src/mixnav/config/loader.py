@@ -93,7 +93,19 @@ def _check_scenario(sc, source: str) -> None:
     _check_imu_models(sc, source)
     gnss_noise(sc, source)
     imu_white_noise(sc, source)
+    _check_hold(sc, source)
     observable_noise(sc, source)
+
+
+def _check_hold(sc, source) -> None:
+    """``imu.white_noise_hold``: a whole number of IMU intervals, no longer than the run."""
+    from ..ins.imu_model import check_hold
+    if sc.imu.white_noise_hold is None:
+        return
+    try:
+        check_hold(sc.imu.white_noise_hold, 1.0 / sc.imu.rate, sc.duration)
+    except ConfigError as exc:
+        raise ConfigError(exc.message, file=source, key="imu.white_noise_hold") from None
 
 
 def observable_noise(sc, source):

@@ -154,12 +154,28 @@ class ImuConfig(Strict):
     """``white_noise``: an optional dimensionless noise process (e.g. the
     mixture 0.1 N(0, 3) + 0.9 N(0, 1) of P1-sim2) whose samples replace the
     standard normal that multiplies the ARW and VRW densities, so the filter's
-    Gaussian Q is mismatched on purpose."""
+    Gaussian Q is mismatched on purpose.
+
+    ``white_noise_hold``: optional duration T (a whole number of IMU
+    intervals, at most the run). Without it the multiplier is drawn per IMU
+    sample, so over a GNSS epoch of ~100 samples a mixture averages towards a
+    Gaussian and an AR(1) is coloured at the sample rate. With it the
+    multiplier is drawn once per interval ``(t0 + kT, t0 + (k+1)T]`` (t0 the
+    start of the run, the process sampled at the interval ends) per channel,
+    and held as a rate noise: each sample's angle (velocity) noise is
+    ``x_k ARW dt / sqrt(T)`` (``x_k VRW dt / sqrt(T)``), so the noise
+    integrated over interval k is ``x_k ARW sqrt(T)``, variance
+    ``ARW^2 T x_k^2``. The epoch-level process noise is then exactly the
+    process: a mixture stays a mixture, and ``{type = "ar1", coefficient = psi,
+    innovation = <mixture>}`` is paper P2's coloured ``W_k = H W_{k-1} + xi_k``
+    (eq. 6) with ``H = psi I``. Gyro and accelerometer channels are
+    independent draws (see mixnav.ins.imu_model.corrupt)."""
 
     rate: Frequency
     grade: str | None = None
     errors: dict[str, str] = Field(default_factory=dict)
     white_noise: dict | None = None
+    white_noise_hold: Duration | None = None
 
 
 class SatelliteOutageConfig(Strict):
@@ -349,10 +365,32 @@ class LearnConfig(Strict):
         return self.offline if self.process is None else self.process
 
 
+_Psi = Annotated[float, Field(gt=-1, lt=1)]
+
+
+class ColoredConfig(Strict):
+    """Coloured noise (M6, paper P2): AR(1) coefficients of the process noise
+    (``process``, per ``process_interval``, on the epoch's white IMU noise) and
+    of each observable's measurement noise (``measurement``, per epoch, per
+    channel), each ``|psi| < 1``. With a ``[mixture.colored]`` table the mixtures
+    are those of the white driving noises (P2 eqs. 6-7). ``"fit"`` fits the
+    coefficient to the training stretch (AR(1) per channel, median over channels;
+    scenarios only). ``channels`` overrides the coefficient of single channels,
+    ``"<observable>:<id>" = psi`` with ``id`` the PRN (tight) or axis 0-2 (loose).
+    See mixnav.filters.colored."""
+
+    process: _Psi | Literal["fit"] = 0.0
+    measurement: dict[Literal["pseudorange", "range_rate", "position", "velocity"], _Psi | Literal["fit"]] = \
+        Field(default_factory=dict)
+    process_interval: Duration = 1.0
+    channels: dict[str, _Psi] = Field(default_factory=dict)
+
+
 class MixtureConfig(Strict):
     """Gaussian-mixture EKF (``estimator = "gaussian-mixture"``): prior,
     process-noise and per-observable measurement-noise mixtures, given or
-    learned, and the bank size after reduction."""
+    learned, and the bank size after reduction; with ``colored``, the
+    coloured-noise variant M6."""
 
     max_components: int = Field(default=16, ge=1)
     prior: MixtureSpec | None = None
@@ -360,6 +398,7 @@ class MixtureConfig(Strict):
     measurement: dict[Literal["pseudorange", "range_rate", "tdcp", "position", "velocity"], MixtureSpec] = \
         Field(default_factory=dict)
     learn: LearnConfig | None = None
+    colored: ColoredConfig | None = None
 
 
 class MethodConfig(Strict):

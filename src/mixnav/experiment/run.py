@@ -64,15 +64,29 @@ def run_scenario(sc: Scenario, source: str | None = None, seed: int | None = Non
 
 
 def _training(sc: Scenario, seed: int, source):
-    """Training residuals for the methods that learn their mixtures (one draw shared by all)."""
+    """Training residuals for the methods that learn their mixtures (one draw shared by all),
+    and training series for the coloured-noise methods (M6) that fit or whiten with them."""
     learners = [m.mixture.learn for m in sc.methods
                 if m.mixture is not None and m.mixture.learn is not None and m.mixture.learn.offline]
-    if not learners:
+    colored = [m.mixture for m in sc.methods if m.mixture is not None and m.mixture.colored is not None]
+    if not learners and not colored:
         return None
-    from ..sim.training import training_residuals
-    kinds = sorted({k for lc in learners for k in lc.observables})
-    n = max(lc.training_samples for lc in learners)
-    return training_residuals(sc, seed, kinds, n, any(lc.learn_process for lc in learners), source)
+    from ..sim.training import training_residuals, training_series
+    out = {}
+    if learners:
+        kinds = sorted({k for lc in learners for k in lc.observables})
+        n = max(lc.training_samples for lc in learners)
+        out = training_residuals(sc, seed, kinds, n, any(lc.learn_process for lc in learners), source)
+    if colored:
+        from ..sim.training import TRAINING_CHANNELS
+        kinds = sorted({k for mc in colored for k in mc.colored.measurement} |
+                       {k for mc in colored if mc.learn is not None for k in mc.learn.observables})
+        process = any(mc.colored.process == "fit" or (mc.learn is not None and mc.learn.learn_process)
+                      for mc in colored)
+        n = max([mc.learn.training_samples for mc in colored if mc.learn is not None] + [2000])
+        out["series"] = training_series(sc, seed, [k for k in kinds if k in ("pseudorange", "range_rate")],
+                                        -(-n // TRAINING_CHANNELS) + 1, process, source)
+    return out
 
 
 def truth_at(truth: Trajectory, times: np.ndarray) -> Trajectory:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from ..config.loader import imu_model
 from ..config.schema import MethodConfig, MixtureConfig, RobustConfig
 from ..errors import ConfigError
@@ -28,7 +30,8 @@ ESTIMATORS = {
     "ekf": "M1 extended Kalman filter (the default)",
     "robust-adaptive": "M2 robust adaptive EKF: IGG-III equivalent weights + Yang's adaptive factor",
     "gaussian-mixture": "M3 Gaussian-mixture EKF (bank of components); M4/M5 when [mixture.learn] "
-                        "uses vb/gibbs; M4 re-learned online with mixture.learn.online",
+                        "uses vb/gibbs; M4 re-learned online with mixture.learn.online; M6 (coloured "
+                        "noise, paper P2) with [mixture.colored]",
 }
 
 
@@ -69,6 +72,8 @@ def build(method: MethodConfig, default_imu: ImuErrorModel, fixes, lever_arm, so
     if method.estimator == "gaussian-mixture":
         mc = method.mixture or MixtureConfig()
         learning_time = 0.0
+        if mc.colored is not None:
+            return _colored(method, mc, layout, model, meas, training, source, index, common, seed)
         online = None
         if mc.learn is not None and mc.learn.online is not None:
             oc = mc.learn.online
@@ -85,3 +90,68 @@ def build(method: MethodConfig, default_imu: ImuErrorModel, fixes, lever_arm, so
         return GaussianMixtureEkf(layout, model, mixtures, max_components=mc.max_components,
                                   learning_time_s=learning_time, online=online, **common), meas
     return ErrorStateEkf(layout, model, **common), meas
+
+
+def _colored(method, mc, layout, model, meas, training, source, index, common, seed):
+    """M6: the coloured-noise mixture EKF and its differenced measurement models.
+
+    Coefficients given as ``"fit"`` are fitted to the training series; learned
+    mixtures are learned from the training series *whitened* with the
+    coefficients (``e_k - psi e_{k-1}``, the driving noise of P2 eqs. 6-7).
+    """
+    import time
+    from ..measurements.differenced import DifferencedMeasurement
+    from ..noise.ar import whiten_ar1
+    from .colored import ColoredMixtureEkf, fit_coefficient
+    cc = mc.colored
+    key = f"methods[{index}].mixture.colored"
+    if mc.learn is not None and mc.learn.online is not None:
+        raise ConfigError("online re-learning of the mixtures is not available with the coloured-noise "
+                          "mixture EKF (M6)", file=source, key=f"methods[{index}].mixture.learn.online")
+    if method.type == "tdcp-ekf":
+        raise ConfigError("the coloured-noise mixture EKF differences pseudoranges and range rates; TDCP "
+                          "already differences the carrier: use type = \"tight-ekf\"", file=source,
+                          key=f"methods[{index}].type")
+    series = (training or {}).get("series", {})
+
+    def coefficient(v, kind, k):
+        if v != "fit":
+            return float(v)
+        if kind not in series:
+            raise ConfigError("'fit' needs a training stretch (simulated scenarios only)", file=source,
+                              key=f"{key}.{k}")
+        return fit_coefficient(series[kind])
+
+    t_fit = time.perf_counter()
+    psi_m = {k: coefficient(v, k, f"measurement.{k}") for k, v in cc.measurement.items()}
+    psi_p = coefficient(cc.process, "process", "process")
+    channels = {}
+    for k, v in cc.channels.items():
+        name, _, cid = k.partition(":")
+        if name not in ("pseudorange", "range_rate", "position", "velocity") or not cid.isdigit():
+            raise ConfigError(f"a channel is '<observable>:<id>' (e.g. 'pseudorange:12', the PRN), got '{k}'",
+                              file=source, key=f"{key}.channels.{k}")
+        channels[(name, int(cid))] = v
+    learning_time = time.perf_counter() - t_fit  # the AR(1) fits count as learning
+    if mc.learn is not None:
+        if not series:
+            raise ConfigError(f"method '{method.name}' learns its mixtures from a training stretch, "
+                              "which only simulated scenarios provide", file=source, key=f"methods[{index}].mixture.learn")
+        t0 = time.perf_counter()
+        white = {k: np.ravel(whiten_ar1(series[k], psi_m.get(k, 0.0))[1:]) for k in mc.learn.observables
+                 if k in series}
+        if mc.learn.learn_process and "process" in series:
+            white["process"] = np.ravel(whiten_ar1(series["process"], psi_p)[1:])
+        missing = [k for k in mc.learn.observables if k not in white]
+        if missing:
+            raise ConfigError(f"the coloured-noise filter learns pseudorange and range-rate mixtures, not {missing}",
+                              file=source, key=f"methods[{index}].mixture.learn.observables")
+        mixtures, _ = learn_mixtures(mc, white, seed)
+        learning_time += time.perf_counter() - t0
+    else:
+        mixtures = mixtures_from_config(mc)
+    if any(v != 0.0 for v in psi_m.values()) or channels:  # all white: nothing to difference (exact)
+        meas = [DifferencedMeasurement(m, layout, psi_m, channels) for m in meas]
+    return ColoredMixtureEkf(layout, model, mixtures, psi_process=psi_p, psi_measurement=psi_m,
+                             process_interval=cc.process_interval, max_components=mc.max_components,
+                             learning_time_s=learning_time, **common), meas

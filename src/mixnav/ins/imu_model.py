@@ -10,6 +10,19 @@ per run, the in-run biases ``bg_t, ba_t`` first-order Gauss-Markov processes
 (steady-state sigma = bias instability, correlation time tau) plus an optional
 random walk, and white noise whose increment variance is ``ARW^2 dt``.
 
+The white noise is per sample by default: ``ARW sqrt(dt) x_i`` with ``x_i``
+N(0, 1) or the samples of a configured unit-free process. With a *hold*
+``T`` (a whole number of IMU intervals) the multiplier process is drawn once
+per interval ``(t0 + kT, t0 + (k+1)T]`` and held as a rate noise::
+
+    dtheta noise of sample i in interval k = x_k ARW dt_i / sqrt(T)
+
+so the angle noise integrated over interval k is exactly ``x_k ARW sqrt(T)``
+(variance ``ARW^2 T x_k^2``, the filter's Q over T times ``x_k^2``). The
+epoch-level process noise then *is* the process ``x_k`` -- a mixture, or
+P2's coloured ``W_k = H W_{k-1} + xi_k`` (P2 eqs. 1, 6) -- instead of being
+averaged towards a Gaussian over the ~1/(dt) samples of an epoch.
+
 Grades are written as a datasheet writes them and parsed by
 :mod:`mixnav.units`, the one place units are converted.
 """
@@ -171,8 +184,72 @@ def _gauss_markov(rng, n, dt, sigma, tau):
     return y
 
 
+def check_hold(hold: float, dt: float, duration: float) -> int:
+    """Validate a white-noise hold interval; return it in IMU intervals.
+
+    Parameters
+    ----------
+    hold : float
+        Hold interval T [s].
+    dt : float
+        IMU interval [s].
+    duration : float
+        Length of the run [s].
+
+    Returns
+    -------
+    int
+        ``T / dt``, rounded.
+
+    Raises
+    ------
+    ConfigError
+        ``key="white_noise_hold"``: T not positive and finite, not a whole
+        number of IMU intervals (to 1e-6 of one), or longer than the run.
+    """
+    if not (np.isfinite(hold) and hold > 0.0):
+        raise ConfigError(f"must be positive, got {hold!r} s", key="white_noise_hold")
+    m = round(hold / dt)
+    if m < 1 or abs(hold / dt - m) > 1e-6:
+        raise ConfigError(f"{hold:g} s is not a whole number of IMU intervals ({dt:g} s)",
+                          key="white_noise_hold")
+    if hold > duration * (1.0 + 1e-9):
+        raise ConfigError(f"{hold:g} s is longer than the run ({duration:g} s)",
+                          key="white_noise_hold")
+    return int(m)
+
+
+def hold_intervals(imu: ImuData, hold: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Which hold interval each IMU sample falls in.
+
+    Parameters
+    ----------
+    imu : ImuData
+        N samples; the grid starts at the first sample's start ``t0 = time[0] - dt[0]``.
+    hold : float
+        Hold interval T [s] (see :func:`check_hold`).
+
+    Returns
+    -------
+    index : ndarray of int (N,)
+        Interval k of each sample, the one holding its midpoint: ``(t0 + kT, t0 + (k+1)T]``.
+    ends : ndarray (K,)
+        End time of each interval [s], ``t0 + (k+1)T`` (the last one clipped to
+        the last sample's time): the epochs the process is sampled at.
+    length : ndarray (K,)
+        Length of each interval covered by samples [s] (T except perhaps the last).
+    """
+    t0 = float(imu.time[0] - imu.dt[0])
+    index = np.floor((imu.time - 0.5 * imu.dt - t0) / hold).astype(np.int64)
+    k = int(index[-1]) + 1
+    ends = np.minimum(t0 + hold * np.arange(1, k + 1), imu.time[-1])
+    length = np.bincount(index, weights=imu.dt, minlength=k)
+    return index, ends, length
+
+
 def corrupt(imu: ImuData, model: ImuErrorModel, rng: np.random.Generator,
-            white_noise: "callable | None" = None) -> tuple[ImuData, ImuErrorDraw]:
+            white_noise: "callable | None" = None,
+            hold: float | None = None) -> tuple[ImuData, ImuErrorDraw]:
     """Apply the error model to ideal increments.
 
     Parameters
@@ -183,8 +260,14 @@ def corrupt(imu: ImuData, model: ImuErrorModel, rng: np.random.Generator,
     rng : numpy.random.Generator
         The run's ``imu`` stream.
     white_noise : callable, optional
-        ``white_noise(rng, shape) -> ndarray`` of unit-variance samples, to
-        replace the standard normal (non-Gaussian process noise scenarios).
+        ``white_noise(rng, times, n_channels) -> ndarray (len(times), n_channels)``
+        of unit-variance samples at the epochs ``times`` [s], to replace the
+        standard normal (non-Gaussian or coloured process noise scenarios).
+        Called once for the gyro channels, then once for the accelerometer's.
+    hold : float, optional
+        Hold interval T [s]: draw the multiplier once per interval and hold
+        it as a rate noise (module docstring; :func:`hold_intervals`). None:
+        one draw per IMU sample.
 
     Returns
     -------
@@ -199,14 +282,22 @@ def corrupt(imu: ImuData, model: ImuErrorModel, rng: np.random.Generator,
         gyro_scale=rng.standard_normal(3) * model.gyro_scale,
         accel_scale=rng.standard_normal(3) * model.accel_scale,
     )
-    noise = white_noise or (lambda g, shape: g.standard_normal(shape))
+    noise = white_noise or (lambda g, times, c: g.standard_normal((len(times), c)))
     bg = draw.gyro_bias + _gauss_markov(rng, n, dt, model.gyro_bias_instability, model.gyro_bias_tau)
     ba = draw.accel_bias + _gauss_markov(rng, n, dt, model.accel_bias_instability, model.accel_bias_tau)
     if model.gyro_bias_walk > 0:
         bg = bg + np.cumsum(rng.standard_normal((n, 3)) * model.gyro_bias_walk * np.sqrt(dt), axis=0)
     if model.accel_bias_walk > 0:
         ba = ba + np.cumsum(rng.standard_normal((n, 3)) * model.accel_bias_walk * np.sqrt(dt), axis=0)
-    sdt = np.sqrt(imu.dt)[:, None]
-    dtheta = (1.0 + draw.gyro_scale) * imu.dtheta + bg * imu.dt[:, None] + noise(rng, (n, 3)) * model.arw * sdt
-    dvel = (1.0 + draw.accel_scale) * imu.dvel + ba * imu.dt[:, None] + noise(rng, (n, 3)) * model.vrw * sdt
+    if hold is None:
+        times, scale, index = imu.time, np.sqrt(imu.dt)[:, None], slice(None)
+    else:
+        check_hold(hold, dt, float(imu.time[-1] - imu.time[0] + imu.dt[0]))
+        index, times, length = hold_intervals(imu, hold)
+        # zero-order-held rate noise: the increments of interval k sum to x_k sqrt(L_k)
+        scale = (imu.dt / np.sqrt(length[index]))[:, None]
+    dtheta = (1.0 + draw.gyro_scale) * imu.dtheta + bg * imu.dt[:, None] + \
+        noise(rng, times, 3)[index] * model.arw * scale
+    dvel = (1.0 + draw.accel_scale) * imu.dvel + ba * imu.dt[:, None] + \
+        noise(rng, times, 3)[index] * model.vrw * scale
     return ImuData(time=imu.time, dt=imu.dt, dtheta=dtheta, dvel=dvel, source=imu.source), draw

@@ -72,3 +72,7 @@ class LooseGnss:
     def row_kinds(self, i: int, m: int) -> np.ndarray:
         """Three position rows, then (with velocity) three velocity rows."""
         return np.array([POSITION] * 3 + [VELOCITY] * (m - 3))
+
+    def row_channels(self, i: int, m: int) -> np.ndarray:
+        """A channel id per row, the same at every epoch: ``kind * 1000 + axis``."""
+        return self.row_kinds(i, m) * 1000 + np.arange(m) % 3

@@ -103,6 +103,12 @@ class TightGnss:
         n_pr = m // 2 if self.use_range_rate else m
         return np.array([PSEUDORANGE] * n_pr + [RANGE_RATE] * (m - n_pr))
 
+    def row_channels(self, i: int, m: int) -> np.ndarray:
+        """A channel id per row, the same for the same satellite and observable at
+        every epoch: ``kind * 1000 + prn`` (rows in the order of :meth:`row_kinds`)."""
+        prn = self.obs.prn[i, self.obs.valid[i]]
+        return self.row_kinds(i, m) * 1000 + np.concatenate([prn] * (m // len(prn)))
+
     def measure_numpy(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock):
         """:meth:`measure` in plain numpy."""
         o, lay = self.obs, self.layout

@@ -68,9 +68,11 @@ def simulate(sc: Scenario, seed: int, source: str | None = None, ideal=None) -> 
     truth, imu_ideal = ideal if ideal is not None else truth_and_ideal_imu(sc, source)
     model = imu_model(sc.imu.grade, sc.imu.errors, source, "imu.errors", "imu.grade")
     white = imu_white_noise(sc, source)
-    # the process is sampled per channel over the IMU epochs (n, 3) each call
-    noise = None if white is None else (lambda g, shape: white.sample(imu_ideal.time, shape[1], g))
-    imu, draw = corrupt(imu_ideal, model, streams.get("imu"), white_noise=noise)
+    # the process is sampled per channel (3 gyro, then 3 accelerometer) at the IMU epochs,
+    # or with imu.white_noise_hold at the ends of the hold intervals
+    noise = None if white is None else (lambda g, times, c: white.sample(times, c, g))
+    imu, draw = corrupt(imu_ideal, model, streams.get("imu"), white_noise=noise,
+                        hold=sc.imu.white_noise_hold)
     g = sc.gnss
     fix_model = GnssFixModel(
         rate=g.rate, pos_sigma=np.asarray(g.position_sigma),

@@ -31,7 +31,9 @@ def training_residuals(sc: Scenario, seed: int, observables, n_samples: int, pro
 
     Returns ``{kind: ndarray (n_samples,)}``; ``"process"`` holds the IMU
     white-noise multipliers (already standardised: the scenario's
-    ``imu.white_noise`` process, or N(0, 1) when it has none).
+    ``imu.white_noise`` process, or N(0, 1) when it has none), drawn like the
+    simulation draws them: one value per IMU sample, or with
+    ``imu.white_noise_hold`` one per hold interval (6 channels, epochs T apart).
     """
     rng = Streams(seed).get("training")
     out = {}
@@ -63,6 +65,40 @@ def training_residuals(sc: Scenario, seed: int, observables, n_samples: int, pro
         out[kind] = np.ravel(x)[:n_samples]
     if process:
         white = imu_white_noise(sc, source)
-        t = np.arange(math.ceil(n_samples / 6) + 1) / sc.imu.rate
+        hold = sc.imu.white_noise_hold
+        k = np.arange(math.ceil(n_samples / 6) + 1)
+        t = k / sc.imu.rate if hold is None else (k + 1) * hold
         out["process"] = np.ravel((white or Gaussian(1.0)).sample(t, 6, rng))[:n_samples]
+    return out
+
+
+def training_series(sc: Scenario, seed: int, kinds, n_epochs: int, process: bool,
+                    source: str | None = None) -> dict[str, np.ndarray]:
+    """Standardised training *time series* per observable (and ``"process"``), for
+    the AR(1) fits and the whitened mixtures of the coloured-noise filter (M6).
+
+    Returns ``{kind: ndarray (n_epochs, channels)}``: ``TRAINING_CHANNELS``
+    satellites per epoch at the GNSS rate for ``"pseudorange"`` and
+    ``"range_rate"``, and for ``"process"`` the 6 IMU white-noise multipliers
+    sampled once per ``imu.white_noise_hold`` (or per IMU sample without one).
+    Stream ``training-series`` of the run's seed (independent of the
+    ``training`` stream of :func:`training_residuals`).
+    """
+    rng = Streams(seed).get("training-series")
+    sat = sc.gnss.satellites
+    pr, rr, _ = observable_noise(sc, source)
+    t = np.arange(n_epochs) / sc.gnss.rate
+    out = {}
+    for kind in kinds:
+        if sat is None or kind not in ("pseudorange", "range_rate"):
+            raise ConfigError(f"cannot fit a {kind} AR(1) coefficient: a training series exists for the "
+                              "pseudoranges and range rates of a scenario with [gnss.satellites]",
+                              file=source, key="methods.mixture.colored.measurement")
+        proc, sig = (pr, sat.pseudorange_sigma) if kind == "pseudorange" else (rr, sat.range_rate_sigma)
+        out[kind] = (proc or Gaussian(sig)).sample(t, TRAINING_CHANNELS, rng) / sig
+    if process:
+        white = imu_white_noise(sc, source)
+        hold = getattr(sc.imu, "white_noise_hold", None)
+        tp = np.arange(n_epochs) * (hold if hold else 1.0 / sc.imu.rate)
+        out["process"] = (white or Gaussian(1.0)).sample(tp, 6, rng)
     return out

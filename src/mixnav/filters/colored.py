@@ -1,0 +1,295 @@
+"""The coloured-noise Gaussian-mixture EKF, method M6 (paper P2).
+
+P2 whitens, inside every component of the Gaussian-mixture EKF (M3,
+:mod:`mixnav.filters.gmekf`), the coloured part of a non-Gaussian noise:
+
+Coloured process noise, by state augmentation (P2 eqs. 6, 8-12). The
+process noise of an epoch is ``W_k = Psi_w W_{k-1} + xi_k`` with ``xi_k`` the
+process-noise mixture. Here ``W`` is the white IMU noise (ARW, VRW)
+accumulated over the epoch, which lives on the attitude, velocity and
+position errors (the first 9 error states; M3's ``Q_white``), and ``Psi_w``
+is diagonal. Each component carries ``w`` (9,), the noise added at the last
+epoch, beside its error state. At each epoch (where M3 splits into
+process-noise children ``j`` or, without a measurement, folds the noise in)::
+
+    w <- Psi_w w + xi,   x <- x + (Psi_w w + xi),   xi ~ N(0, c_j Q_white)
+
+i.e. ``[x; w] <- A [x; w] + [xi; xi]`` with ``A = [[I, Psi_w], [0, Psi_w]]``.
+That is P2 eq. (9) with the noise of an epoch entering the state at that
+epoch (P2 lets it enter one epoch later, which only relabels ``W``). With
+``Psi_w = 0`` it is M3's split exactly. ``w`` starts from its stationary
+covariance ``Q / (1 - psi_i psi_j)``. Between epochs ``w`` is constant (the
+engine treats it like a clone). The recursion steps once per covariance
+event (with the standard 1 s grid and 1 Hz GNSS, once per epoch); a step of
+length ``T`` uses ``psi^(T / process_interval)``.
+
+Coloured measurement noise, by differencing (P2 eqs. 7, 13-20): the
+measurement model is wrapped in
+:class:`mixnav.measurements.differenced.DifferencedMeasurement`, which forms
+``z_k - Psi z_{k-1}`` per channel and asks the engine for a stochastic clone
+of the previous error state; the differenced rows carry the white mixture
+``zeta`` of P2 eq. (7), rows without a previous value the stationary noise.
+
+The update itself is M3's: every component, every row, the row's mixture
+merged back in closed form, weights in log space, reduction each epoch (P2
+eqs. 21-29). The augmented state of a component is ``[x (n), w (9),
+clone (c)]``; the bank kernels treat everything past ``n`` as constant
+during propagation. After an update the error state and the clone are fed
+back and re-centred as in M3; ``w`` keeps its estimate (it predicts the
+next epoch's noise).
+
+With every coefficient zero M6 equals M3 (tested to 1e-10).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ..errors import ConfigError
+from ..ins._error_kernels import apply_feedback, covariance_predict, discrete_noise
+from ..measurements.differenced import STATIONARY
+from ._bank_kernels import bank_epoch, bank_propagate
+from ._ekf_kernels import NEEDS_REPAIR, OK
+from .gmekf import BankBelief, GaussianMixtureEkf
+
+#: Error states the coloured process noise lives on (attitude, velocity, position).
+N_W = 9
+
+
+@njit(cache=True)
+def colored_split(lw, X, P, Q, log_wj, cj, psi, n):
+    """Children ``(c, j)`` of every component for each process-noise component ``j``
+    with the AR(1) process-noise state ``w`` at ``n:n+9`` (module docstring)::
+
+        X' = A X,   P' = A P A^T + c_j [[Q, Q], [Q, Q]],   A = [[I, Psi], [0, Psi]]
+
+    ``Q`` (9, 9) the white noise of the step, ``psi`` (9,) the coefficients.
+    """
+    N, na = X.shape
+    J = cj.shape[0]
+    lw2 = np.empty(N * J)
+    X2 = np.empty((N * J, na))
+    P2 = np.empty((N * J, na, na))
+    B = np.empty((na, na))
+    AP = np.empty((na, na))
+    xa = np.empty(na)
+    for c in range(N):
+        # A x and A P A^T, once per parent
+        for i in range(na):
+            xa[i] = X[c, i]
+        for i in range(N_W):
+            pw = psi[i] * X[c, n + i]
+            xa[i] += pw
+            xa[n + i] = pw
+        for j in range(na):
+            for i in range(na):
+                B[i, j] = P[c, i, j]
+        for i in range(N_W):          # rows: B = A P
+            for j in range(na):
+                pw = psi[i] * P[c, n + i, j]
+                B[i, j] += pw
+                B[n + i, j] = pw
+        for i in range(na):           # columns: A P A^T = B A^T
+            for j in range(na):
+                AP[i, j] = B[i, j]
+            for j in range(N_W):
+                pw = psi[j] * B[i, n + j]
+                AP[i, j] += pw
+                AP[i, n + j] = pw
+        for jj in range(J):
+            o = c * J + jj
+            lw2[o] = lw[c] + log_wj[jj]
+            for i in range(na):
+                X2[o, i] = xa[i]
+            for i in range(na):
+                for j in range(na):
+                    P2[o, i, j] = AP[i, j]
+            s = cj[jj]
+            for i in range(N_W):
+                for j in range(N_W):
+                    q = s * Q[i, j]
+                    P2[o, i, j] += q
+                    P2[o, i, n + j] += q
+                    P2[o, n + i, j] += q
+                    P2[o, n + i, n + j] += q
+    return lw2, X2, P2
+
+
+_COLORED_WARM = []
+
+
+def _warm_colored() -> None:
+    """Compile (or load from the numba cache) :func:`colored_split` outside the timed loop."""
+    if not _COLORED_WARM:
+        na = N_W + 1 + N_W
+        colored_split(np.zeros(1), np.zeros((1, na)), np.tile(np.eye(na), (1, 1, 1)), np.eye(N_W),
+                      np.zeros(1), np.ones(1), np.zeros(N_W), N_W + 1)
+        _COLORED_WARM.append(True)
+
+
+class ColoredBankBelief(BankBelief):
+    """The bank of :class:`ColoredMixtureEkf`: M3's bank with the AR(1)
+    process-noise state ``w`` and the differencing clone (module docstring)."""
+
+    def __init__(self, P0, n_clone, layout, absurd_sigma, mixtures, qc_white, max_components,
+                 psi_process, process_interval, psi_measurement, augment=True):
+        nw = N_W if augment else 0
+        super().__init__(P0, n_clone + nw, layout, absurd_sigma, mixtures, qc_white, max_components)
+        n = self.n
+        self.nw = nw                       # 0: no process colour, M3's propagation and split
+        self.nc = n_clone                  # the clone proper sits after w
+        self.ic = n + nw                   # w at n:n+9, clone at n+nw:
+        self.psi_w = np.asarray(psi_process, dtype=float)
+        self.process_interval = float(process_interval)
+        self.T_acc = 0.0
+        self.started = False
+        if nw:
+            self.white = bool(np.any(qc_white > 0))  # the white part is always kept apart here
+        # kinds k (differenced, zeta) and k + STATIONARY (undifferenced, stationary noise)
+        lw, mu, var = self.tables
+        psi_m = np.asarray(psi_measurement, dtype=float)
+        grow = np.sqrt((1.0 + psi_m) / (1.0 - psi_m))[:, None]
+        self.tables = (np.vstack([lw, lw]), np.vstack([mu, mu * grow]), np.vstack([var, var]))
+        self.process_steps = 0             # AR(1) steps of w taken (not a recovery)
+
+    # --- run-loop interface -------------------------------------------------------------
+    def propagated(self, work, T, measured):
+        if not self.nw:
+            return super().propagated(work, T, measured)
+        F, phi, qd = work[0], work[1], work[2]
+        if not self.white:
+            bank_propagate(self.X, self.Pb, phi, qd, self.n)
+            return
+        discrete_noise(F, self.qc_white, T, self._qdw)
+        bank_propagate(self.X, self.Pb, phi, qd - self._qdw, self.n)
+        covariance_predict(self.Qw, phi, self._qdw, self._tmp)  # the white part since the last step
+        self.Qw_pending = True
+        self.T_acc += T
+        if not measured:  # children could never be told apart: one child of mean scale (exact)
+            self._step(np.zeros(1), np.array([self.mean_scale if self.split else self.one_scale]))
+
+    def _step(self, log_wj, cj):
+        """One AR(1) step of ``w`` with the accumulated white noise, split into children."""
+        n = self.n
+        Q = np.ascontiguousarray(self.Qw[:N_W, :N_W])
+        psi = self.psi_w ** (self.T_acc / self.process_interval)
+        if not self.started:  # w from its stationary covariance Q / (1 - psi_i psi_j)
+            S = Q * self.mean_scale / (1.0 - np.outer(psi, psi))
+            self.Pb[:, n:n + N_W, n:n + N_W] = S
+            self.started = True
+        self.lw, self.X, self.Pb = colored_split(self.lw, self.X, self.Pb, Q, log_wj, cj, psi, n)
+        self.Qw[:, :] = 0.0
+        self.Qw_pending = False
+        self.T_acc = 0.0
+        self.process_steps += 1
+        self.largest_bank = max(self.largest_bank, len(self.lw))
+
+    def update(self, z, H, r, kinds, nav, sensor, clock, layout_arr, cloner):
+        if not self.nw:
+            return super().update(z, H, r, kinds, nav, sensor, clock, layout_arr, cloner)
+        n, na, ic = self.n, self.na, self.ic
+        z = np.ascontiguousarray(z, dtype=float)
+        r = np.asarray(r, dtype=float)
+        if r.ndim != 1:
+            if np.any(r - np.diag(np.diag(r))):
+                raise ConfigError("the Gaussian-mixture EKF needs independent measurement rows "
+                                  "(a diagonal R)")
+            r = np.diag(r).copy()
+        Ha = np.zeros((len(z), na))
+        Ha[:, :n] = H[:, :n]
+        if H.shape[1] > n:
+            Ha[:, ic:ic + H.shape[1] - n] = H[:, n:]
+        if self.Qw_pending:
+            if self.split:
+                self._step(self.proc_logw, self.proc_scale)
+            else:
+                self._step(np.zeros(1), np.array([self.one_scale]))
+        kinds = np.zeros(len(z), dtype=np.int64) if kinds is None else np.asarray(kinds, dtype=np.int64)
+        status, nis, lw, X, Pb, dx = bank_epoch(self.lw, self.X, self.Pb, z, Ha, r, kinds, *self.tables,
+                                                self.absurd_sigma, self.max_components, n)
+        if status in (OK, NEEDS_REPAIR):
+            apply_feedback(nav, sensor, clock, dx[:n], layout_arr)
+            if self.have_clone:
+                cloner.correct_clone(dx[ic:])
+            X[:, n:ic] += dx[n:ic]  # w is a state, not an error of the nominal: keep its estimate
+            self.lw, self.X, self.Pb = lw, X, Pb
+        return status, nis
+
+    def replace_clone(self, J):
+        if not self.nw:
+            return super().replace_clone(J)
+        n, ic = self.n, self.ic
+        A = self.Pb[:, :ic, :n] @ J.T                 # Cov([x; w], x_c) = Cov([x; w], x) J^T
+        self.X[:, ic:] = self.X[:, :n] @ J.T
+        self.Pb[:, :ic, ic:] = A
+        self.Pb[:, ic:, :ic] = np.swapaxes(A, 1, 2)
+        self.Pb[:, ic:, ic:] = J @ A[:, :n]
+        self.have_clone = True
+
+
+class ColoredMixtureEkf(GaussianMixtureEkf):
+    """Coloured-noise Gaussian-mixture EKF, method M6 (paper P2).
+
+    Parameters
+    ----------
+    layout, imu_model, mixtures, max_components, covariance_interval, absurd_sigma, clock, learning_time_s
+        As :class:`~mixnav.filters.gmekf.GaussianMixtureEkf`. The measurement
+        mixtures are those of the white driving noise ``zeta`` (P2 eq. 7), the
+        process mixture that of ``xi`` (P2 eq. 6).
+    psi_process : float or array_like (9,)
+        AR(1) coefficient of the epoch's process noise on the attitude,
+        velocity and position errors per ``process_interval`` (P2's ``H``).
+    psi_measurement : dict
+        Observable kind -> AR(1) coefficient of its noise per epoch (P2's
+        ``Psi``); the measurement models must be wrapped in
+        :class:`~mixnav.measurements.differenced.DifferencedMeasurement` with
+        the same coefficients (:func:`mixnav.filters.registry.build` does).
+    process_interval : float
+        [s] The interval ``psi_process`` refers to (default 1 s).
+    augment : bool, optional
+        Carry the 9 process-noise states. Default: when a ``psi_process`` is
+        non-zero (with all zero they cannot change the estimate, so leaving
+        them out is exact and M6 then costs what M3 does); True forces them
+        (the tests use it to check the zero-coefficient invariant).
+    """
+
+    def __init__(self, layout, imu_model, mixtures, psi_process=0.0, psi_measurement=None,
+                 process_interval: float = 1.0, max_components: int = 16, covariance_interval: float = 1.0,
+                 absurd_sigma: float = 1e4, clock=None, learning_time_s: float = 0.0,
+                 augment: bool | None = None):
+        super().__init__(layout, imu_model, mixtures, max_components, covariance_interval, absurd_sigma,
+                         clock, learning_time_s)
+        psi_w = np.broadcast_to(np.asarray(psi_process, dtype=float), (N_W,)).copy()
+        if not (np.all(np.isfinite(psi_w)) and np.all(np.abs(psi_w) < 1.0)):
+            raise ConfigError(f"AR(1) coefficient must satisfy |psi| < 1 (stationary), got {psi_process}",
+                              key="colored.process")
+        if not process_interval > 0:
+            raise ConfigError("must be positive", key="colored.process_interval")
+        from ..measurements.kinds import KINDS
+        self.psi_process = psi_w
+        self.psi_measurement = np.zeros(len(KINDS))
+        for name, v in (psi_measurement or {}).items():
+            self.psi_measurement[KINDS[name]] = v
+        self.process_interval = float(process_interval)
+        self.augment = bool(np.any(psi_w != 0.0)) if augment is None else bool(augment)
+
+    def _belief(self, P0, n_clone):
+        from .gmekf import _warm_bank
+        _warm_bank()
+        _warm_colored()
+        self._last = ColoredBankBelief(P0, n_clone, self.layout, self.absurd_sigma, self.mixtures,
+                                       self.qc_white, self.max_components, self.psi_process,
+                                       self.process_interval, self.psi_measurement, self.augment)
+        return self._last
+
+
+def fit_coefficient(series: np.ndarray) -> float:
+    """AR(1) coefficient of a training series (epochs, channels): the median of the
+    per-channel least-squares fits (:func:`mixnav.noise.ar.fit_ar1`), clipped to
+    ``|psi| <= 0.999`` so the filter's model stays stationary."""
+    from ..noise.ar import fit_ar1
+    fit = fit_ar1(np.asarray(series, dtype=float))
+    return float(np.clip(np.median(fit.psi), -0.999, 0.999))
