@@ -128,10 +128,11 @@ def test_window_bookkeeping_and_refit_schedule():
         u[8:] = 1e6                       # range-rate rows: never in the pseudorange window
         lrn.observe(e != 7, kinds, u, np.zeros(16))
         full = min(8 * (e - (e >= 7)), 100)
-        assert lrn._filled["pseudorange"] == full
+        assert lrn.filled("pseudorange") == full
         # first full at epoch 14 (13 accepted epochs x 8 rows >= 100): refits at 15, 20, 25, 30
         assert lrn.refits == sum(1 for k in (15, 20, 25, 30) if k <= e)
-    assert np.all(np.abs(lrn._u["pseudorange"]) < 10)
+    u_win, _ = lrn.window_rows("pseudorange")
+    assert len(u_win) == 100 and np.all(np.abs(u_win) < 10)
     assert len(lrn.history) == 4 and all(k == "pseudorange" for _, k, _ in lrn.history)
 
 
@@ -325,7 +326,7 @@ def test_online_disabled_or_never_refitting_is_bitwise_the_offline_filter(tmp_pa
     g = GaussianMixtureEkf(f.layout, f.imu_model, f.mixtures, clock=clock,
                            online=OnlineSettings(("pseudorange",), window=10 ** 6))
     r1 = g.run(sim.imu, sim.init, meas)
-    assert r1.timing["online_refits"] == 0 and g.online_learner._filled["pseudorange"] > 4000
+    assert r1.timing["online_refits"] == 0 and g.online_learner.filled("pseudorange") > 4000
     assert np.array_equal(r0.nav, r1.nav) and np.array_equal(r0.sigma, r1.sigma)
     assert np.array_equal(r0.nis, r1.nis)
 

@@ -148,6 +148,9 @@ def warm_online() -> None:
     if _WARM:
         return
     z = np.zeros(3)
+    zi = np.zeros(1, dtype=np.int64)
+    push_rows(zi, z, z, zi, np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((1, 2), dtype=np.int64), zi.copy(),
+              zi.copy(), zi.copy(), 1)
     component_shares(z, z, np.ones(1), np.zeros(1), np.ones(1))
     start_responsibilities(z, z, np.ones(1), np.zeros(1), np.ones(1), 10.0, True, 0.01)
     from ..noise.learn import VariationalGaussianMixture
@@ -264,6 +267,25 @@ def component_shares(x, q, w, mu, s):
     return nl, qbar
 
 
+@njit(cache=True)
+def push_rows(kinds, u, q, codes, U, Q, EP, pos, filled, new, epoch):
+    """Append the rows of the learned kinds (``codes``) to their ring buffers
+    ``U``, ``Q``, ``EP`` (n_learned, window), in place; one pass, no allocation."""
+    W = U.shape[1]
+    for t in range(kinds.shape[0]):
+        for j in range(codes.shape[0]):
+            if kinds[t] == codes[j]:
+                p = pos[j]
+                U[j, p] = u[t]
+                Q[j, p] = q[t]
+                EP[j, p] = epoch
+                pos[j] = (p + 1) % W
+                if filled[j] < W:
+                    filled[j] += 1
+                new[j] += 1
+                break
+
+
 class OnlineMixtureLearner:
     """Sliding windows of standardised innovations and the VB refits (module docstring).
 
@@ -303,13 +325,13 @@ class OnlineMixtureLearner:
         self._mean0 = {k: float(np.dot(start[k].weights, start[k].means)) for k in self.kinds}
         self.window, self.every, self.gate = int(window), int(every), float(gate)
         self.n_components, self.prune, self.max_iter = int(n_components), float(prune), int(max_iter)
-        W = self.window
-        self._u = {k: np.zeros(W) for k in self.kinds}
-        self._q = {k: np.zeros(W) for k in self.kinds}
-        self._ep = {k: np.zeros(W, dtype=np.int64) for k in self.kinds}
-        self._pos = dict.fromkeys(self.kinds, 0)
-        self._filled = dict.fromkeys(self.kinds, 0)
-        self._new = dict.fromkeys(self.kinds, 0)
+        W, nk = self.window, len(self.kinds)
+        self._U = np.zeros((nk, W))                       # ring buffers, one row per kind
+        self._Q = np.zeros((nk, W))
+        self._EP = np.zeros((nk, W), dtype=np.int64)      # measurement epoch of each row
+        self._pos = np.zeros(nk, dtype=np.int64)
+        self._filled = np.zeros(nk, dtype=np.int64)
+        self._new = np.zeros(nk, dtype=np.int64)
         self.epochs = 0
         self.refits = 0
         self.refit_time_s = 0.0
@@ -338,45 +360,35 @@ class OnlineMixtureLearner:
         """
         self.epochs += 1
         if accepted:
-            for k, code in zip(self.kinds, self.codes):
-                sel = kinds == code
-                if sel.any():
-                    self._push(k, u[sel], q[sel])
+            push_rows(kinds, u, q, self.codes, self._U, self._Q, self._EP, self._pos, self._filled, self._new,
+                      self.epochs)
         if self.epochs % self.every:
             return False
         changed = False
-        for k in self.kinds:
-            if self._filled[k] == self.window and self._new[k] > 0:
-                changed |= self._refit(k)
+        for j, k in enumerate(self.kinds):
+            if self._filled[j] == self.window and self._new[j] > 0:
+                changed |= self._refit(j, k)
         return changed
 
-    def _push(self, k, u, q):
-        W = self.window
-        m = len(u)
-        if m > W:
-            u, q, m = u[-W:], q[-W:], W
-        p = self._pos[k]
-        first = min(m, W - p)
-        self._u[k][p:p + first] = u[:first]
-        self._q[k][p:p + first] = q[:first]
-        self._ep[k][p:p + first] = self.epochs
-        if first < m:
-            self._u[k][:m - first] = u[first:]
-            self._q[k][:m - first] = q[first:]
-            self._ep[k][:m - first] = self.epochs
-        self._pos[k] = (p + m) % W
-        self._filled[k] = min(W, self._filled[k] + m)
-        self._new[k] += m
+    def filled(self, kind: str) -> int:
+        """Rows of ``kind`` in its window."""
+        return int(self._filled[self.kinds.index(kind)])
+
+    def window_rows(self, kind: str):
+        """``(u, q)`` of the rows of ``kind`` in its window (ring order), each (filled,)."""
+        j = self.kinds.index(kind)
+        f = self._filled[j]
+        return self._U[j, :f].copy(), self._Q[j, :f].copy()
 
     # --- refit -------------------------------------------------------------------------
-    def _refit(self, k) -> bool:
+    def _refit(self, j, k) -> bool:
         t0 = time.perf_counter()
         try:
-            n_epochs = len(np.unique(self._ep[k]))
-            new = self.fit_window(self._u[k], self._q[k], self.current[k], n_epochs, self._mean0[k])
+            n_epochs = len(np.unique(self._EP[j]))
+            new = self.fit_window(self._U[j], self._Q[j], self.current[k], n_epochs, self._mean0[k])
         finally:
             self.refit_time_s += time.perf_counter() - t0
-        self._new[k] = 0
+        self._new[j] = 0
         self.refits += 1
         if new is None:
             self.failed += 1
