@@ -279,3 +279,15 @@ def test_process_augmentation_follows_coloured_imu_noise(monkeypatch):
         assert nees1 > 4 * nees6, seed
         rms = [np.sqrt(np.mean(t.err_vn_mps ** 2 + t.err_ve_mps ** 2)) for t in (t1, t6)]
         assert rms[1] < 0.75 * rms[0], seed
+
+
+def test_ar_coefficient_over_fractional_and_whole_steps():
+    """A fitted coefficient may be slightly negative (white noise); a step of a
+    non-integer number of intervals must not turn it into NaN."""
+    from mixnav.filters.colored import ar_coefficient
+    psi = np.array([0.9, -0.02, 0.0, -0.5])
+    np.testing.assert_allclose(ar_coefficient(psi, 1.0 + 1e-9), psi)
+    np.testing.assert_allclose(ar_coefficient(psi, 2.0), psi ** 2)
+    half = ar_coefficient(psi, 0.5)
+    assert np.all(np.isfinite(half))
+    np.testing.assert_allclose(half, np.sign(psi) * np.sqrt(np.abs(psi)))

@@ -39,7 +39,7 @@ def _noise(sc, src):
 
 
 def _methods_but_m6_coefficients(sc):
-    return [m.model_dump(exclude={"mixture": {"colored"}}) if m.name == "m6" else m.model_dump()
+    return [m.model_dump(exclude={"mixture": {"colored"}}) if m.name in ("m6", "m6-sf") else m.model_dump()
             for m in sc.methods]
 
 
@@ -51,9 +51,10 @@ def test_the_cases_differ_only_in_the_colour(cases):
             assert getattr(sc, part) == getattr(s2, part), (key, part)
         assert _methods_but_m6_coefficients(sc) == _methods_but_m6_coefficients(s2), key
         # M6 is told the case's coefficients (0 in the white case)
-        c = {m.name: m for m in sc.methods}["m6"].mixture.colored
         psi = 0.0 if key == "P2-s1" else 0.9 if key == "P2-s2" else key
-        assert c.process == psi and c.measurement == {"pseudorange": psi, "range_rate": psi}, key
+        for name in ("m6", "m6-sf"):
+            c = {m.name: m for m in sc.methods}[name].mixture.colored
+            assert c.process == psi and c.measurement == {"pseudorange": psi, "range_rate": psi}, (key, name)
         assert sc.imu.errors == s2.imu.errors and sc.imu.white_noise_hold == 1.0
         g, g2 = sc.gnss.model_dump(), s2.gnss.model_dump()
         for k in ("pseudorange_noise", "range_rate_noise"):

@@ -408,7 +408,7 @@ class MethodConfig(Strict):
     estimator: Literal["ekf", "robust-adaptive", "gaussian-mixture"] = "ekf"
     robust: RobustConfig | None = None
     mixture: MixtureConfig | None = None
-    states: Literal[15, 17, 21] = 15
+    states: Literal[15, 17, 21, 23] = 15
     covariance_interval: Duration = 1.0
     imu_grade: str | None = None
     imu_errors: dict[str, str] | None = None
@@ -471,9 +471,9 @@ class Scenario(Strict):
                 if self.gnss.satellites is None:
                     raise ValueError(f"methods[{i}] ({m.name}) is tightly coupled: the scenario "
                                      "needs a [gnss.satellites] table")
-                if m.states == 15:
+                if m.states in (15, 21):
                     raise ValueError(f"methods[{i}] ({m.name}) is tightly coupled: it needs the "
-                                     "receiver clock states (states = 17 or 21)")
+                                     "receiver clock states (states = 17, or 23 with the scale factors)")
         return self
 
     @property

@@ -21,7 +21,7 @@ epoch (P2 lets it enter one epoch later, which only relabels ``W``). With
 covariance ``Q / (1 - psi_i psi_j)``. Between epochs ``w`` is constant (the
 engine treats it like a clone). The recursion steps once per covariance
 event (with the standard 1 s grid and 1 Hz GNSS, once per epoch); a step of
-length ``T`` uses ``psi^(T / process_interval)``.
+length ``T`` uses ``psi^(T / process_interval)`` (:func:`ar_coefficient`).
 
 Coloured measurement noise, by differencing (P2 eqs. 7, 13-20): the
 measurement model is wrapped in
@@ -118,6 +118,17 @@ def colored_split(lw, X, P, Q, log_wj, cj, psi, n):
     return lw2, X2, P2
 
 
+def ar_coefficient(psi: np.ndarray, steps: float) -> np.ndarray:
+    """The AR(1) coefficient over ``steps`` intervals: ``psi ** steps``, an integer power
+    when ``steps`` is within 1e-6 of an integer (a negative ``psi`` alternates), else
+    ``sign(psi) |psi| ** steps`` (a fractional step of a negative coefficient has no
+    exact AR(1) meaning; this keeps its sign and the decay of its magnitude)."""
+    k = round(steps)
+    if abs(steps - k) < 1e-6:
+        return psi ** k
+    return np.sign(psi) * np.abs(psi) ** steps
+
+
 _COLORED_WARM = []
 
 
@@ -175,7 +186,7 @@ class ColoredBankBelief(BankBelief):
         """One AR(1) step of ``w`` with the accumulated white noise, split into children."""
         n = self.n
         Q = np.ascontiguousarray(self.Qw[:N_W, :N_W])
-        psi = self.psi_w ** (self.T_acc / self.process_interval)
+        psi = ar_coefficient(self.psi_w, self.T_acc / self.process_interval)
         if not self.started:  # w from its stationary covariance Q / (1 - psi_i psi_j)
             S = Q * self.mean_scale / (1.0 - np.outer(psi, psi))
             self.Pb[:, n:n + N_W, n:n + N_W] = S

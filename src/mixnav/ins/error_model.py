@@ -62,11 +62,12 @@ LAYOUTS: dict[int, StateLayout] = {
     15: StateLayout("ins15", 15),
     17: StateLayout("ins15+clock", 17, clk=15),
     21: StateLayout("ins15+scale", 21, sg=15, sa=18),
+    23: StateLayout("ins15+scale+clock", 23, sg=15, sa=18, clk=21),
 }
 
 
 def get_layout(n_states: int) -> StateLayout:
-    """The layout with ``n_states`` states (15, 17 or 21)."""
+    """The layout with ``n_states`` states (15, 17, 21 or 23)."""
     try:
         return LAYOUTS[int(n_states)]
     except (KeyError, ValueError):
