@@ -257,3 +257,16 @@ def test_true_mixture_gmekf_is_not_worse_than_the_ekf_12_runs(tmp_path):
 def test_true_mixture_gmekf_is_not_worse_than_the_ekf_50_runs(tmp_path):
     ekf, gm = _paired(tmp_path, 50)
     _assert_not_worse(ekf, gm)
+
+
+def test_a_non_finite_bank_raises_instead_of_rejecting_epochs():
+    """A NaN in a component's covariance (a bug upstream) is reported as
+    non-finite, which the run loop raises, rather than as a not-PD epoch that
+    would be rejected and counted quietly every epoch from then on."""
+    from mixnav.filters._bank_kernels import _NON_FINITE
+    rng = np.random.default_rng(2)
+    lw, X, P = _bank(rng, 3, 5)
+    P[1, 2, 2] = np.nan
+    status = bank_epoch(lw, X, P, np.zeros(1), np.ones((1, 5)), np.ones(1), np.zeros(1, dtype=np.int64),
+                        *_tables(StandardMixture.gaussian()), 1e4, 16, 5)[0]
+    assert status == _NON_FINITE

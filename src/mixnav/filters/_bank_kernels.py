@@ -395,6 +395,9 @@ def _epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_com
     na = X.shape[1]
     zero = np.zeros(na)
     w, xm, Pm = bank_moments(lw, X, P)
+    for i in range(na):  # a NaN bank is a fault to raise, not an epoch to reject as "not PD"
+        if not (np.isfinite(xm[i]) and np.isfinite(Pm[i, i])):
+            return _NON_FINITE, np.inf, lw, X, P, zero
     m = z.shape[0]
     y = z.copy()
     for i in range(m):
