@@ -41,19 +41,19 @@ def _fmt(m: float, h: float) -> str:
     return f"{m:.4g} ± {h:.2g}"
 
 
-def case_table(df: pd.DataFrame, title: str) -> list[str]:
+def case_table(df: pd.DataFrame, title: str, order=None, pairs=None) -> list[str]:
     runs = df["seed"].nunique()
     out = [f"### {title}, {runs} runs", "",
            "| method | " + " | ".join(lbl for _, lbl, _ in METRICS) + " |",
            "|---|" + "---|" * len(METRICS)]
-    for m in ORDER:
+    for m in order or ORDER:
         d = df[df["method"] == m]
         if d.empty:
             continue
         out.append(f"| {LABEL[m]} | " + " | ".join(_fmt(*_ci(d[k] * s)) for k, _, s in METRICS) + " |")
     out += ["", "Paired, M6 minus M3 (same runs): mean difference ± 95 % CI, share of runs where M6 is better", "",
             "| pair | heading [deg] | horizontal [m] | velocity [m/s] |", "|---|---|---|---|"]
-    for a, b in PAIRS:
+    for a, b in pairs or PAIRS:
         da, db = (df[df["method"] == x].set_index("seed").sort_index() for x in (a, b))
         if da.empty or db.empty:
             continue
