@@ -12,7 +12,6 @@ from mixnav.config.loader import load_scenario, resolve
 from mixnav.errors import ConfigError
 from mixnav.filters import registry
 from mixnav.filters.colored import N_W, ColoredMixtureEkf, colored_split, fit_coefficient
-from mixnav.filters.ekf import ErrorStateEkf
 from mixnav.filters.gmekf import BankMixtures, GaussianMixtureEkf, StandardMixture
 from mixnav.ins.error_model import ClockModel
 from mixnav.measurements.differenced import STATIONARY, DifferencedMeasurement

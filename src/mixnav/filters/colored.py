@@ -43,17 +43,15 @@ With every coefficient zero M6 equals M3 (tested to 1e-10).
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 from numba import njit
 
 from ..errors import ConfigError
 from ..ins._error_kernels import apply_feedback, covariance_predict, discrete_noise
-from ..measurements.differenced import STATIONARY
 from ._bank_kernels import bank_epoch, bank_propagate
 from ._ekf_kernels import NEEDS_REPAIR, OK
-from .gmekf import BankBelief, GaussianMixtureEkf
+from .gmekf import BankBelief, GaussianMixtureEkf, independent_rows
 
 #: Error states the coloured process noise lives on (attitude, velocity, position).
 N_W = 9
@@ -202,13 +200,7 @@ class ColoredBankBelief(BankBelief):
         if not self.nw:
             return super().update(z, H, r, kinds, nav, sensor, clock, layout_arr, cloner)
         n, na, ic = self.n, self.na, self.ic
-        z = np.ascontiguousarray(z, dtype=float)
-        r = np.asarray(r, dtype=float)
-        if r.ndim != 1:
-            if np.any(r - np.diag(np.diag(r))):
-                raise ConfigError("the Gaussian-mixture EKF needs independent measurement rows "
-                                  "(a diagonal R)")
-            r = np.diag(r).copy()
+        z, r = independent_rows(z, r)
         Ha = np.zeros((len(z), na))
         Ha[:, :n] = H[:, :n]
         if H.shape[1] > n:

@@ -148,6 +148,18 @@ class BankMixtures:
         return lw, mu, var
 
 
+def independent_rows(z, r) -> tuple[np.ndarray, np.ndarray]:
+    """``z`` contiguous and ``R`` as its diagonal; a bank updates row by row, so a
+    full ``R`` with off-diagonal terms is refused."""
+    z = np.ascontiguousarray(z, dtype=float)
+    r = np.asarray(r, dtype=float)
+    if r.ndim != 1:
+        if np.any(r - np.diag(np.diag(r))):
+            raise ConfigError("the Gaussian-mixture EKF needs independent measurement rows (a diagonal R)")
+        r = np.diag(r).copy()
+    return z, r
+
+
 class BankBelief:
     """The bank of components the run loop of :class:`ErrorStateEkf` carries
     for :class:`GaussianMixtureEkf` (same interface as ``GaussianBelief``)."""
@@ -214,13 +226,7 @@ class BankBelief:
 
     def update(self, z, H, r, kinds, nav, sensor, clock, layout_arr, cloner):
         n, na = self.n, self.na
-        z = np.ascontiguousarray(z, dtype=float)
-        r = np.asarray(r, dtype=float)
-        if r.ndim != 1:
-            if np.any(r - np.diag(np.diag(r))):
-                raise ConfigError("the Gaussian-mixture EKF needs independent measurement rows "
-                                  "(a diagonal R)")
-            r = np.diag(r).copy()
+        z, r = independent_rows(z, r)
         if H.shape[1] != na:
             Ha = np.zeros((len(z), na))
             Ha[:, :H.shape[1]] = H
