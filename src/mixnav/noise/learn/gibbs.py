@@ -220,12 +220,12 @@ def _draw_params(cnt, s1, s2, alpha0, beta0, m0c, nu0, w0inv, pi, mu, ld, M, cov
 
 
 @numba.njit(cache=True)
-def _label_pass1(x, z, pi, mu, ld, M, cnt, s1, s2, lr, tmp, mx, ibuf):
+def _label_pass1(x, z, pi, mu, ld, M, cnt, s1, s2, lr, tmp, mx, ibuf, kb):
     """Step 3 for d = 1, fused with the statistics of the new labels (``x`` about the data mean).
 
     Samples in blocks of ``_BLOCK`` with the loops over the samples innermost (SIMD), ``exp``
     by the vectorisable :func:`~mixnav.noise.learn.vb._exp_nonpos`; ``lr`` (K, _BLOCK),
-    ``tmp, mx`` (_BLOCK,) and ``ibuf`` (_BLOCK,) int64 are work arrays.
+    ``tmp, mx`` (_BLOCK,) and ``ibuf, kb`` (_BLOCK,) int64 are work arrays.
     """
     n = x.shape[0]
     K = pi.shape[0]
@@ -255,11 +255,17 @@ def _label_pass1(x, z, pi, mu, ld, M, cnt, s1, s2, lr, tmp, mx, ibuf):
         for k in range(1, K):                             # cumulative: the categorical's CDF
             for s in range(nb):
                 lr[k, s] += lr[k - 1, s]
+        for s in range(nb):                               # the uniforms (numba's generator is scalar)
+            tmp[s] = np.random.random() * lr[K - 1, s]
+        # label = number of CDF values <= u: branch-free and vectorised (a search loop mispredicts)
         for s in range(nb):
-            u = np.random.random() * lr[K - 1, s]
-            k = 0
-            while k < K - 1 and lr[k, s] <= u:
-                k += 1
+            kb[s] = 0
+        for k in range(K - 1):
+            cdf = lr[k]
+            for s in range(nb):
+                kb[s] += cdf[s] <= tmp[s]
+        for s in range(nb):
+            k = kb[s]
             xi = x[lo + s]
             z[lo + s] = k
             cnt[k] += 1.0
@@ -296,8 +302,8 @@ def _label_pass(X, z, pi, mu, ld, M, cnt, s1, s2, lp, y):
             lp[k] = tot
         u = np.random.random() * tot
         k = 0
-        while k < K - 1 and lp[k] <= u:
-            k += 1
+        for j in range(K - 1):                                # number of CDF values <= u (branch-free)
+            k += lp[j] <= u
         z[i] = k
         cnt[k] += 1.0
         for a in range(d):
@@ -339,6 +345,7 @@ def _gibbs_loop(Xc, z, alpha0, beta0, m0c, nu0, w0inv, burn, seed, cw, cm, cc):
     tmp = np.empty(_BLOCK)
     mx = np.empty(_BLOCK)
     ibuf = np.empty(_BLOCK, dtype=np.int64)
+    kb = np.empty(_BLOCK, dtype=np.int64)
     x1 = Xc[:, 0].copy()
     _hard_stats(Xc, np.zeros(d), z, cnt, s1, s2)
     for t in range(burn + S):
@@ -364,7 +371,7 @@ def _gibbs_loop(Xc, z, alpha0, beta0, m0c, nu0, w0inv, burn, seed, cw, cm, cc):
                         cc[s, k, a, b] = cov[o, a, b]
         if t < burn + S - 1:      # the labels after the last kept draw are not needed
             if d == 1:
-                _label_pass1(x1, z, pi, mu, ld, M, cnt, s1, s2, lr, tmp, mx, ibuf)
+                _label_pass1(x1, z, pi, mu, ld, M, cnt, s1, s2, lr, tmp, mx, ibuf, kb)
             else:
                 _label_pass(Xc, z, pi, mu, ld, M, cnt, s1, s2, lp, y)
 
