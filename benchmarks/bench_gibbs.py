@@ -1,0 +1,125 @@
+"""Benchmark the Gibbs learner: compiled kernel vs the numpy reference sweep, with VB beside.
+
+Run:  PYTHONPATH=src python benchmarks/bench_gibbs.py [--out benchmarks/results/gibbs]   (-> .md and .json)
+
+The P1 training problem: 1-D standardised residuals, n = 2000 per mixture, K = 4,
+the priors of ``mixnav.filters.gmekf.learn_mixture`` (alpha0 = 1, beta0 = 1,
+nu0 = 1, W0 = 2).  Three training sets like the ones a P1-sim1 run learns from
+(every learned filter fits all three per run):
+
+* pseudorange: 0.1 N(0, 1) + 0.9 N(0, 1/9), plus a +-8.33 gross error (2.5 m / 0.3 m)
+  on every 20th sample (P1's "every 20 epochs");
+* tdcp: the difference of two such mixture draws (no gross errors);
+* process: 0.1 N(0, 3) + 0.9 N(0, 1) (P1-sim2's IMU white noise).
+
+Timed, all in one process, side by side: MCMC with 1000 and 5000 kept samples
+(burn-in the default, 500 / 2500 sweeps), numpy backend (best of 2) and numba
+backend (best of 3), and VB as ``learn_mixture`` runs it (best of 3 per seed,
+median over 3 seeds: its iteration count depends on the initial partition).
+The first compiled fit (cache load or compilation) is timed separately.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+import warnings
+
+import numba
+import numpy as np
+
+from mixnav.filters.gmekf import learn_mixture
+from mixnav.noise.learn import GibbsGaussianMixture
+from mixnav.noise.mixture import GaussianMixture
+
+N = 2000
+K = 4
+
+
+def training_sets(rng):
+    """The three 1-D training sets (n = 2000 each) described in the module docstring."""
+    meas = GaussianMixture([0.1, 0.9], [[0.0], [0.0]], [[[1.0]], [[1.0 / 9]]])
+    pr = meas.sample(N, rng)[:, 0]
+    pr[::20] += 2.5 / 0.3 * rng.choice([-1.0, 1.0], size=pr[::20].shape)
+    tdcp = meas.sample(N, rng)[:, 0] - meas.sample(N, rng)[:, 0]
+    proc = GaussianMixture([0.1, 0.9], [[0.0], [0.0]], [[[3.0]], [[1.0]]]).sample(N, rng)[:, 0]
+    return {"pseudorange": pr, "tdcp": tdcp, "process": proc}
+
+
+def gibbs(x, samples, backend, seed=0):
+    # learn_mixture's settings (mixnav.filters.gmekf), with the backend chosen
+    return GibbsGaussianMixture(n_components=K, n_samples=samples, alpha0=1.0, beta0=1.0, nu0=1.0,
+                                W0=np.array([[2.0]]), prune_threshold=0.01, random_state=seed,
+                                backend=backend).fit(x[:, None])
+
+
+def best_of(fn, repeats):
+    best = np.inf
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
+def main(out=None):
+    warnings.simplefilter("ignore")
+    data = training_sets(np.random.default_rng(0))
+    t = time.perf_counter()
+    gibbs(data["tdcp"][:100], 10, "numba")
+    t_first = time.perf_counter() - t
+    learn_mixture(data["tdcp"], "vb")                    # VB kernel: compile / cache load
+    load0 = os.getloadavg()
+    rows = []
+    for name, x in data.items():
+        r = {"data": name}
+        for S in (1000, 5000):
+            r[f"numpy_{S}"] = best_of(lambda: gibbs(x, S, "numpy"), 2)
+            r[f"numba_{S}"] = best_of(lambda: gibbs(x, S, "numba"), 3)
+        r["vb"] = float(np.median([best_of(lambda: learn_mixture(x, "vb", seed=s), 3) for s in range(3)]))
+        rows.append(r)
+        print(r, flush=True)
+    load1 = os.getloadavg()
+    tot = {k: sum(r[k] for r in rows) for k in rows[0] if k != "data"}
+    rows.append({"data": "total (one learned filter's training in a P1 run)", **tot})
+
+    def ms(v):
+        return f"{1e3 * v:.0f}" if v >= 0.1 else f"{1e3 * v:.1f}"
+
+    lines = ["# Gibbs learner: compiled kernel vs numpy reference, VB beside", "",
+             f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores "
+             f"(numba threads {numba.get_num_threads()}; every learner here is single-threaded), Python "
+             f"{platform.python_version()}, numpy {np.__version__}.  Produced by `benchmarks/bench_gibbs.py`, "
+             f"all in one process.  Load average (1 min) {load0[0]:.1f} at the start, {load1[0]:.1f} at the end "
+             f"(the machine is shared: absolute times are inflated alike, the ratios are the result).", "",
+             f"P1 training problem: 1-D, n = {N}, K = {K}, learn_mixture's priors; MCMC-S keeps S draws after "
+             f"the default burn-in of S/2 sweeps; numpy best of 2, numba best of 3; VB median over 3 seeds of "
+             f"the best of 3.  First compiled fit in the process (cache load): {t_first:.2f} s.", "",
+             "| training set | MCMC-1000 numpy [ms] | MCMC-1000 numba [ms] | speed-up | MCMC-5000 numpy [ms] "
+             "| MCMC-5000 numba [ms] | speed-up | VB [ms] | MCMC-5000 numba / VB |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['data']} | {ms(r['numpy_1000'])} | {ms(r['numba_1000'])} | "
+                     f"{r['numpy_1000'] / r['numba_1000']:.1f}x | {ms(r['numpy_5000'])} | {ms(r['numba_5000'])} | "
+                     f"{r['numpy_5000'] / r['numba_5000']:.1f}x | {ms(r['vb'])} | "
+                     f"{r['numba_5000'] / r['vb']:.1f}x |")
+    per_sweep = {k: tot[f"numba_{k}"] / (3 * 1.5 * k) for k in (1000, 5000)}
+    lines += ["", f"Per sweep (n = {N}, K = {K}), compiled: {1e6 * per_sweep[5000]:.0f} us "
+              f"(numpy: {1e6 * tot['numpy_5000'] / (3 * 7500):.0f} us).", ""]
+    text = "\n".join(lines)
+    print(text)
+    if out:
+        with open(out + ".md", "w") as f:
+            f.write(text)
+        with open(out + ".json", "w") as f:
+            json.dump({"rows": rows, "first_fit_s": t_first, "load": [load0[0], load1[0]],
+                       "n": N, "K": K}, f, indent=1)
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--out", default=None, help="path without extension: writes .md and .json")
+    main(ap.parse_args().out)
