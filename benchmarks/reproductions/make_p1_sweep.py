@@ -54,23 +54,58 @@ STARTUP_S = 30.0      # the start-up excluded from the series maxima [s]
 
 
 def series_maxima(folder: Path, values: list[float], t0: float = STARTUP_S) -> pd.DataFrame:
-    """Summary (sweep_value, method, metric, n, mean, ci95_half) of the maxima over ``t > t0``."""
+    """Per run (seed, sweep_value, method): the four maxima over ``t > t0`` from the series files."""
     rows = []
     for f in sorted((folder / "runs").glob("series_*_v*.parquet")):
-        v = values[int(f.stem.split("_v")[1])]
+        seed, v = f.stem.removeprefix("series_").split("_v")
         s = pd.read_parquet(f)
         s = s[s["time_s"] > t0]
         for m, g in s.groupby("method"):
-            rows.append({"sweep_value": v, "method": m, "roll_max_deg": g["err_roll_deg"].abs().max(),
+            rows.append({"seed": int(seed), "sweep_value": values[int(v)], "method": m,
+                         "roll_max_deg": g["err_roll_deg"].abs().max(),
                          "pitch_max_deg": g["err_pitch_deg"].abs().max(), "yaw_max_deg": g["err_yaw_deg"].abs().max(),
                          "horizontal_max_m": np.hypot(g["err_n_m"], g["err_e_m"]).max()})
-    r = pd.DataFrame(rows).melt(id_vars=["sweep_value", "method"], var_name="metric")
+    return pd.DataFrame(rows)
+
+
+def _ci(x: np.ndarray) -> tuple[float, float]:
+    """Mean and half width of the 95 % t confidence interval of the mean."""
+    x = x[np.isfinite(x)]
+    half = stats.t.ppf(0.975, len(x) - 1) * x.std(ddof=1) / np.sqrt(len(x)) if len(x) > 1 else np.nan
+    return float(x.mean()), float(half)
+
+
+def summarise(runs: pd.DataFrame, metrics: list[str]) -> pd.DataFrame:
+    """summary.csv-like table (sweep_value, method, metric, n, mean, ci95_half) of per-run records."""
     out = []
-    for (v, m, k), g in r.groupby(["sweep_value", "method", "metric"]):
-        x = g["value"].to_numpy()
-        half = stats.t.ppf(0.975, len(x) - 1) * x.std(ddof=1) / np.sqrt(len(x)) if len(x) > 1 else np.nan
-        out.append({"sweep_value": v, "method": m, "metric": k, "n": len(x), "mean": x.mean(), "ci95_half": half})
+    for (v, m), g in runs.groupby(["sweep_value", "method"]):
+        for k in metrics:
+            mean, half = _ci(g[k].to_numpy(dtype=float))
+            out.append({"sweep_value": v, "method": m, "metric": k, "n": len(g), "mean": mean, "ci95_half": half})
     return pd.DataFrame(out)
+
+
+def paired(runs: pd.DataFrame, metrics: list[tuple[str, str]], title: str, ref: str = "ekf") -> list[str]:
+    """Table of the paired differences (method - ``ref``) over the same seeds, mean ± 95 % CI.
+
+    Every method of a run sees the same simulated data, so the run-to-run spread, which makes
+    the per-method intervals overlap, cancels in the difference.  ``*``: the interval excludes 0.
+    """
+    others = [m for m in ORDER if m != ref]
+    out = [f"### {title}", "", "| epsilon | metric | " + " | ".join(f"{m} - {ref}" for m in others) + " |",
+           "|---|---|" + "---|" * len(others)]
+    for v, g in runs.groupby("sweep_value"):
+        w = {k: g.pivot_table(index="seed", columns="method", values=k) for k, _ in metrics}
+        for k, _ in metrics:
+            cells = []
+            for m in others:
+                if m not in w[k] or ref not in w[k]:
+                    cells.append("")
+                    continue
+                mean, half = _ci((w[k][m] - w[k][ref]).to_numpy(dtype=float))
+                cells.append(f"{mean:+.3g} ± {half:.2g}{' *' if abs(mean) > half else ''}")
+            out.append(f"| {v:g} | {k} | " + " | ".join(cells) + " |")
+    return out
 
 
 def _cell(g: pd.DataFrame, method: str, metric: str) -> str:
@@ -123,12 +158,17 @@ def main(folders: list[Path]) -> None:
         runs = int(s[s["metric"].isin([k for k, _ in metrics])]["n"].min())
         lines += table(s, metrics, f"{name}: {title}, {runs} runs per value") + [""]
         figure(s, metrics, f"{name}: {title}", runs, HERE / f"{name}.png")
+        res = pd.read_parquet(folder / "results.parquet")
+        lines += paired(res, metrics, f"{name}: paired differences to the EKF (same seeds), {runs} runs") + [""]
         if name == "P1-sweep":
             values = json.loads((folder / "manifest.json").read_text())["sweep"]["values"]
-            a = series_maxima(folder, values)
+            r = series_maxima(folder, values)
+            a = summarise(r, [k for k, _ in metrics])
             t = f"{name}: maxima over t > {STARTUP_S:g} s (start-up excluded)"
-            lines += table(a, metrics, f"{t}, {int(a['n'].min())} runs per value") + [""]
-            figure(a, metrics, t, int(a["n"].min()), HERE / f"{name}-after-30s.png")
+            n = int(a["n"].min())
+            lines += table(a, metrics, f"{t}, {n} runs per value") + [""]
+            lines += paired(r, metrics, f"{t}: paired differences to the EKF, {n} runs") + [""]
+            figure(a, metrics, t, n, HERE / f"{name}-after-30s.png")
     (HERE / "P1_sweep_tables.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
