@@ -85,13 +85,14 @@ def summarise(runs: pd.DataFrame, metrics: list[str]) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
-def paired(runs: pd.DataFrame, metrics: list[tuple[str, str]], title: str, ref: str = "ekf") -> list[str]:
+def paired(runs: pd.DataFrame, metrics: list[tuple[str, str]], title: str, ref: str = "ekf",
+           others: list[str] | None = None) -> list[str]:
     """Table of the paired differences (method - ``ref``) over the same seeds, mean ± 95 % CI.
 
     Every method of a run sees the same simulated data, so the run-to-run spread, which makes
     the per-method intervals overlap, cancels in the difference.  ``*``: the interval excludes 0.
     """
-    others = [m for m in ORDER if m != ref]
+    others = others or [m for m in ORDER if m != ref]
     out = [f"### {title}", "", "| epsilon | metric | " + " | ".join(f"{m} - {ref}" for m in others) + " |",
            "|---|---|" + "---|" * len(others)]
     for v, g in runs.groupby("sweep_value"):
@@ -160,6 +161,8 @@ def main(folders: list[Path]) -> None:
         figure(s, metrics, f"{name}: {title}", runs, HERE / f"{name}.png")
         res = pd.read_parquet(folder / "results.parquet")
         lines += paired(res, metrics, f"{name}: paired differences to the EKF (same seeds), {runs} runs") + [""]
+        lines += paired(res, metrics, f"{name}: MCMC against VB, paired, {runs} runs", "vb",
+                        ["mcmc-1000", "mcmc-5000"]) + [""]
         if name == "P1-sweep":
             values = json.loads((folder / "manifest.json").read_text())["sweep"]["values"]
             r = series_maxima(folder, values)
