@@ -287,6 +287,88 @@ def test_gibbs_posterior_mean_converges(seed):
     np.testing.assert_allclose(long.covariances_[:, 0, 0], [1.0, 0.5], rtol=0.3)
 
 
+def _normal_wishart_posterior(X, prior):
+    """Closed-form K = 1 posterior (P1 eqs. 24-25 with N_1 = n): (m_N, beta_N, nu_N, W_N)."""
+    n, d = X.shape
+    xb = X.mean(axis=0)
+    S = (X - xb).T @ (X - xb)
+    beta = prior["beta0"] + n
+    m = (prior["beta0"] * prior["m0"] + n * xb) / beta
+    Winv = np.linalg.inv(prior["W0"]) + S + prior["beta0"] * n / beta * np.outer(xb - prior["m0"], xb - prior["m0"])
+    return m, beta, prior["nu0"] + n, np.linalg.inv(Winv)
+
+
+def _z_of_variance(draws, var_true):
+    """(sample variance - true variance) / its standard error, per column of i.i.d. draws (S, p).
+
+    The standard error of the sample variance of S i.i.d. draws is sqrt((mu4 - var^2) / S),
+    mu4 the fourth central moment (estimated from the draws).
+    """
+    c = draws - draws.mean(axis=0)
+    v = (c ** 2).mean(axis=0)
+    mu4 = (c ** 4).mean(axis=0)
+    return (v - var_true) / np.sqrt((mu4 - v ** 2) / draws.shape[0])
+
+
+@pytest.mark.parametrize("backend", ["numba", pytest.param("numpy", marks=pytest.mark.slow)])
+@pytest.mark.parametrize("d", [1, 3])
+def test_gibbs_one_component_draws_normal_wishart_posterior(backend, d):
+    # With K = 1 every label is 1, so each sweep draws (mu, Lambda) independently from the
+    # Normal-Wishart posterior: Lambda ~ W(W_N, nu_N) with E = nu W, Var(L_ij) = nu (W_ij^2 + W_ii W_jj);
+    # mu is Student-t with mean m_N and covariance W_N^-1 / (beta_N (nu_N - d - 1)).  The draws
+    # are i.i.d., so the Monte Carlo standard error of a mean is sd / sqrt(S) exactly and that of
+    # a variance sqrt((mu4 - var^2) / S); 4.5 standard errors (two-sided p = 7e-6 per entry, 13
+    # entries at most) bound the seeded check.
+    rng = np.random.default_rng(40 + d)
+    X = rng.standard_normal((40, d)) @ (np.tril(rng.standard_normal((d, d))) + 2.0 * np.eye(d)).T + 1.0
+    S = 20000
+    g = GibbsGaussianMixture(1, n_samples=S, burn_in=0, random_state=d, backend=backend).fit(X)
+    m, beta, nu, W = _normal_wishart_posterior(X, g.prior_)
+    lam = np.linalg.inv(g.chain_covariances_[:, 0]).reshape(S, d * d)
+    lam_var = (nu * (W ** 2 + np.outer(np.diag(W), np.diag(W)))).ravel()
+    z_lam = (lam.mean(axis=0) - nu * W.ravel()) / np.sqrt(lam_var / S)
+    assert np.abs(z_lam).max() < 4.5
+    assert np.abs(_z_of_variance(lam, lam_var)).max() < 4.5
+    mu = g.chain_means_[:, 0]
+    mu_var = np.diag(np.linalg.inv(W)) / (beta * (nu - d - 1))
+    assert np.abs((mu.mean(axis=0) - m) / np.sqrt(mu_var / S)).max() < 4.5
+    assert np.abs(_z_of_variance(mu, mu_var)).max() < 4.5
+    np.testing.assert_allclose(g.chain_weights_, 1.0, rtol=0, atol=1e-12)
+
+
+def _batch_se(chain, n_batches=40):
+    """Monte Carlo standard error of a chain's mean (S, ...) by batch means (autocorrelation included)."""
+    b = chain[: chain.shape[0] // n_batches * n_batches].reshape(n_batches, -1, *chain.shape[1:]).mean(axis=1)
+    return b.std(axis=0, ddof=1) / np.sqrt(n_batches)
+
+
+@pytest.mark.parametrize("case", ["2 components, 1-D", "3 components, 2-D"])
+def test_gibbs_compiled_and_numpy_sample_the_same_posterior(case):
+    # The two backends use different random streams (and draw the labels differently), so the
+    # chains differ; their posterior means must agree within Monte Carlo error: |a - b| below
+    # 5 standard errors of the difference, each chain's from 40 batch means.
+    rng = np.random.default_rng(7)
+    if case.startswith("2"):
+        K, X = 2, TWO.sample(400, rng)
+    else:
+        truth = GaussianMixture([0.2, 0.5, 0.3], [[-4.0, 1.0], [0.0, -1.0], [4.0, 2.0]],
+                                [np.eye(2), [[1.0, 0.6], [0.6, 2.0]], [[0.5, -0.2], [-0.2, 0.4]]])
+        K, X = 3, truth.sample(600, rng)
+    fits = [GibbsGaussianMixture(K, n_samples=4000, burn_in=500, random_state=5, backend=b).fit(X)
+            for b in ("numba", "numpy")]
+    assert not np.array_equal(fits[0].chain_means_, fits[1].chain_means_)
+    for attr in ("weights", "means", "covariances"):
+        a, b = (getattr(f, f"chain_{attr}_") for f in fits)
+        se = np.sqrt(_batch_se(a) ** 2 + _batch_se(b) ** 2)
+        z = np.abs(a.mean(axis=0) - b.mean(axis=0)) / se
+        assert z.max() < 5.0, (attr, z.max())
+
+
+def test_gibbs_bad_backend():
+    with pytest.raises(ValueError, match="backend"):
+        GibbsGaussianMixture(2, backend="cuda").fit(TWO.sample(50, np.random.default_rng(0)))
+
+
 # --------------------------------------------------------------------------- VB, fused numba kernel (d <= 16)
 def _fit_both_paths(monkeypatch, X, w, resp, **kw):
     """Fit with the numba kernel (d <= _NUMBA_MAX_DIM) and with the numpy reference path."""
