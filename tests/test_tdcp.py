@@ -23,6 +23,32 @@ def scenario():
     return sc, src, truth_and_ideal_imu(sc, src)
 
 
+@pytest.mark.parametrize("clone", [True, False])
+def test_compiled_tdcp_rows_equal_the_numpy_model(scenario, clone):
+    """The compiled TDCP rows of measure() against the numpy oracle at every
+    epoch of a drive, with and without the clone columns."""
+    _, _, (truth, _) = scenario
+    o = simulate_observables(truth, NominalConstellation.gps(5), 1.0, LEVER, np.radians(10), 1.0, 0.1,
+                             0.003, (0.1, 0.01), (5.0, 0.3), np.random.default_rng(2))
+    lay = get_layout(17)
+    meas = TdcpGnss(o, LEVER, lay, clone=clone)
+    kt = lambda i: int(np.searchsorted(truth.time, o.time[i] - 1e-9))  # noqa: E731
+    checked = 0
+    for k in range(1, len(o.time), 7):
+        nav_prev = np.concatenate([truth.q_nb[kt(k - 1)], truth.v_n[kt(k - 1)], truth.lla[kt(k - 1)]])
+        meas.remember(k - 1, nav_prev, np.array([4.0, 0.3]))
+        nav = np.concatenate([truth.q_nb[kt(k)], truth.v_n[kt(k)], truth.lla[kt(k)]]) + 1e-7
+        clock = np.array([4.3, 0.3])
+        z, H, r = meas.measure(k, nav, np.zeros(3), clock)
+        n_pr = int(o.valid[k].sum())
+        zt, Ht, rt = meas.tdcp_rows_numpy(k, nav, clock)
+        np.testing.assert_allclose(z[n_pr:], zt, rtol=0, atol=1e-7)    # metres of 2e7 m ranges
+        np.testing.assert_allclose(H[n_pr:], Ht, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(r[n_pr:], rt)
+        checked += len(zt)
+    assert checked > 100
+
+
 def _perturbed(nav, w, dx):
     """The true state that the error ``dx = x_true - x_est`` describes."""
     q = quat_multiply(rotvec_to_quat(dx[0:3]), nav[0:4])

@@ -135,3 +135,40 @@ def antenna_frame(nav, lever):
     """Antenna ECEF position [m], ``C_ne`` (ECEF -> NED at the IMU) and ``l_n = C_nb l``."""
     ra, cne, ln, _ = _frame(nav, lever)
     return ra, cne, ln
+
+
+@njit(cache=True)
+def tdcp_rows(z, H, r, row0, ra, cne, ln, clock_bias, sat_now, sat_prev, carrier_now, carrier_prev,
+              r_prev, cne_prev, b_prev, sig_cp, clone, n, i_clk):
+    """Fill the TDCP rows ``row0:`` of ``(z, H, r)`` in place (mixnav.measurements.tdcp,
+    P1 eq. (3)): one row per satellite tracked at both epochs, ``sat_now``/``sat_prev``
+    (k, 3) ECEF at each epoch, ``r_prev``/``cne_prev``/``b_prev`` the cloned antenna
+    position, its ECEF->NED and clock bias. With ``clone`` the clone columns are
+    ``n:n+4`` (position NED, clock bias)."""
+    k = sat_now.shape[0]
+    lx = np.empty((3, 3))
+    lx[0, 0], lx[0, 1], lx[0, 2] = 0.0, -ln[2], ln[1]
+    lx[1, 0], lx[1, 1], lx[1, 2] = ln[2], 0.0, -ln[0]
+    lx[2, 0], lx[2, 1], lx[2, 2] = -ln[1], ln[0], 0.0
+    d = np.empty(3)
+    un = np.empty(3)
+    for j in range(k):
+        q = row0 + j
+        for a in range(3):
+            d[a] = sat_now[j, a] - ra[a]
+        rho = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        for a in range(3):
+            un[a] = (cne[a, 0] * d[0] + cne[a, 1] * d[1] + cne[a, 2] * d[2]) / rho
+        for a in range(3):
+            d[a] = sat_prev[j, a] - r_prev[a]
+        rho_c = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        z[q] = (carrier_now[j] - carrier_prev[j]) - (rho + clock_bias - rho_c - b_prev)
+        for b in range(3):
+            H[q, b] = un[0] * lx[0, b] + un[1] * lx[1, b] + un[2] * lx[2, b]
+            H[q, 6 + b] = -un[b]
+        H[q, i_clk] = 1.0
+        if clone:
+            for a in range(3):
+                H[q, n + a] = (cne_prev[a, 0] * d[0] + cne_prev[a, 1] * d[1] + cne_prev[a, 2] * d[2]) / rho_c
+            H[q, n + 3] = -1.0
+        r[q] = 2.0 * sig_cp * sig_cp

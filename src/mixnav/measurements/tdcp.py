@@ -45,7 +45,7 @@ import numpy as np
 from ..attitude import skew
 from ..gnss.observables import GnssObservations
 from ..ins.error_model import StateLayout
-from ._tight_kernel import antenna_frame
+from ._tight_kernel import antenna_frame, tdcp_rows
 from .kinds import PSEUDORANGE, TDCP
 from .tight import TightGnss
 
@@ -155,13 +155,30 @@ class TdcpGnss(TightGnss):
             z[:n_pr], H[:n_pr, :lay.n], r[:n_pr] = super().measure(i, nav, w_b, clock)
         if n_td:
             cur, prev = pairs
+            tdcp_rows(z, H, r, n_pr, r_a, C_ne, l_n, float(clock[0]), o.sat_pos[i, cur],
+                      o.sat_pos[self._prev, prev], o.carrier[i, cur], o.carrier[self._prev, prev],
+                      self._r_prev, self._C_ne_prev, self._b_prev, o.sigma_cp, self.clone, lay.n, lay.clk)
+        return z, H, r
+
+    def tdcp_rows_numpy(self, i: int, nav: np.ndarray, clock):
+        """The TDCP rows of :meth:`measure` (``z``, ``H``, ``r``) in plain numpy (the tests'
+        oracle for the compiled :func:`mixnav.measurements._tight_kernel.tdcp_rows`)."""
+        o, lay = self.obs, self.layout
+        pairs = self._tdcp_pairs(i)
+        r_a, C_ne, l_n = self._antenna(nav)
+        n_td = len(pairs[0])
+        z = np.empty(n_td)
+        H = np.zeros((n_td, lay.n + self.clone_size))
+        r = np.empty(n_td)
+        if n_td:
+            cur, prev = pairs
             d = o.sat_pos[i, cur] - r_a
             rho = np.linalg.norm(d, axis=1)
             u_n = (d / rho[:, None]) @ C_ne.T
             d_c = o.sat_pos[self._prev, prev] - self._r_prev
             rho_c = np.linalg.norm(d_c, axis=1)
             u_c = (d_c / rho_c[:, None]) @ self._C_ne_prev.T
-            rows = slice(n_pr, n_pr + n_td)
+            rows = slice(0, n_td)
             z[rows] = (o.carrier[i, cur] - o.carrier[self._prev, prev]) - \
                 (rho + clock[0] - rho_c - self._b_prev)
             H[rows, lay.att] = u_n @ skew(l_n)
