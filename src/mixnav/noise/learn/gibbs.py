@@ -58,7 +58,7 @@ import numba
 import numpy as np
 
 from mixnav.noise.learn.em import check_random_state, kmeanspp_resp, validate_data
-from mixnav.noise.learn.vb import _BLOCK, VariationalGaussianMixture, _exp_nonpos, _m_step
+from mixnav.noise.learn.vb import _BLOCK, VariationalGaussianMixture, _chol_lower, _exp_nonpos, _m_step
 from mixnav.noise.mixture import GaussianMixture
 
 _LOG2PI = np.log(2.0 * np.pi)
@@ -154,20 +154,8 @@ def _draw_params(cnt, s1, s2, alpha0, beta0, m0c, nu0, w0inv, pi, mu, ld, M, cov
             for b in range(a + 1):
                 sc = s2[k, a, b] - (s1[k, a] * s1[k, b] / nk if nk > 0.0 else 0.0)   # N_k S_k
                 A[a, b] = w0inv[a, b] + sc + f * v[a] * v[b]      # P1 eq. (25) (lower triangle)
-        # U U^T = W_k^-1 (the matrix is SPD: W0^-1 SPD plus PSD terms)
-        for j in range(d):
-            s = A[j, j]
-            for p in range(j):
-                s -= U[j, p] * U[j, p]
-            ujj = math.sqrt(s)
-            U[j, j] = ujj
-            for i in range(j + 1, d):
-                s = A[i, j]
-                for p in range(j):
-                    s -= U[i, p] * U[j, p]
-                U[i, j] = s / ujj
-            for i in range(j):
-                U[i, j] = 0.0
+        # U U^T = W_k^-1 (the matrix is SPD: W0^-1 SPD plus PSD terms; only its lower triangle is read)
+        _chol_lower(A, U)
         # Ui = U^-1 (lower triangular)
         for j in range(d):
             Ui[j, j] = 1.0 / U[j, j]
