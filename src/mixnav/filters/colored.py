@@ -48,10 +48,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import ConfigError
-from ..ins._error_kernels import apply_feedback, covariance_predict, discrete_noise
-from ._bank_kernels import bank_epoch, bank_propagate
-from ._ekf_kernels import NEEDS_REPAIR, OK
-from .gmekf import BankBelief, GaussianMixtureEkf, independent_rows
+from .gmekf import BankBelief, GaussianMixtureEkf
 
 #: Error states the coloured process noise lives on (attitude, velocity, position).
 N_W = 9
@@ -150,13 +147,14 @@ class ColoredBankBelief(BankBelief):
         n = self.n
         self.nw = nw                       # 0: no process colour, M3's propagation and split
         self.nc = n_clone                  # the clone proper sits after w
-        self.ic = n + nw                   # w at n:n+9, clone at n+nw:
+        self.ic = n + nw                   # w at n:n+9 (kept as estimates), clone at n+nw:
         self.psi_w = np.asarray(psi_process, dtype=float)
         self.process_interval = float(process_interval)
         self.T_acc = 0.0
         self.started = False
-        if nw:
-            self.white = bool(np.any(qc_white > 0))  # the white part is always kept apart here
+        if nw:  # the white part is always kept apart, for the AR(1) step of w
+            self.white = bool(np.any(qc_white > 0))
+            self.separate = True
         # kinds k (differenced, zeta) and k + STATIONARY (undifferenced, stationary noise)
         lw, mu, var = self.tables
         psi_m = np.asarray(psi_measurement, dtype=float)
@@ -164,21 +162,24 @@ class ColoredBankBelief(BankBelief):
         self.tables = (np.vstack([lw, lw]), np.vstack([mu, mu * grow]), np.vstack([var, var]))
         self.process_steps = 0             # AR(1) steps of w taken (not a recovery)
 
-    # --- run-loop interface -------------------------------------------------------------
+    # --- hooks of the bank's run-loop interface ----------------------------------------
     def propagated(self, work, T, measured):
-        if not self.nw:
-            return super().propagated(work, T, measured)
-        F, phi, qd = work[0], work[1], work[2]
-        if not self.white:
-            bank_propagate(self.X, self.Pb, phi, qd, self.n)
-            return
-        discrete_noise(F, self.qc_white, T, self._qdw)
-        bank_propagate(self.X, self.Pb, phi, qd - self._qdw, self.n)
-        covariance_predict(self.Qw, phi, self._qdw, self._tmp)  # the white part since the last step
-        self.Qw_pending = True
         self.T_acc += T
-        if not measured:  # children could never be told apart: one child of mean scale (exact)
-            self._step(np.zeros(1), np.array([self.mean_scale if self.split else self.one_scale]))
+        super().propagated(work, T, measured)
+
+    def _fold(self):
+        """No measurement: the children could never be told apart, one child of mean scale (exact)."""
+        if not self.nw:
+            return super()._fold()
+        self._step(np.zeros(1), np.array([self.mean_scale]))
+
+    def _split(self):
+        if not self.nw:
+            return super()._split()
+        if self.split:
+            self._step(self.proc_logw, self.proc_scale)
+        else:
+            self._step(np.zeros(1), np.array([self.one_scale]))
 
     def _step(self, log_wj, cj):
         """One AR(1) step of ``w`` with the accumulated white noise, split into children."""
@@ -195,42 +196,6 @@ class ColoredBankBelief(BankBelief):
         self.T_acc = 0.0
         self.process_steps += 1
         self.largest_bank = max(self.largest_bank, len(self.lw))
-
-    def update(self, z, H, r, kinds, nav, sensor, clock, layout_arr, cloner):
-        if not self.nw:
-            return super().update(z, H, r, kinds, nav, sensor, clock, layout_arr, cloner)
-        n, na, ic = self.n, self.na, self.ic
-        z, r = independent_rows(z, r)
-        Ha = np.zeros((len(z), na))
-        Ha[:, :n] = H[:, :n]
-        if H.shape[1] > n:
-            Ha[:, ic:ic + H.shape[1] - n] = H[:, n:]
-        if self.Qw_pending:
-            if self.split:
-                self._step(self.proc_logw, self.proc_scale)
-            else:
-                self._step(np.zeros(1), np.array([self.one_scale]))
-        kinds = np.zeros(len(z), dtype=np.int64) if kinds is None else np.asarray(kinds, dtype=np.int64)
-        status, nis, lw, X, Pb, dx = bank_epoch(self.lw, self.X, self.Pb, z, Ha, r, kinds, *self.tables,
-                                                self.absurd_sigma, self.max_components, n)
-        if status in (OK, NEEDS_REPAIR):
-            apply_feedback(nav, sensor, clock, dx[:n], layout_arr)
-            if self.have_clone:
-                cloner.correct_clone(dx[ic:])
-            X[:, n:ic] += dx[n:ic]  # w is a state, not an error of the nominal: keep its estimate
-            self.lw, self.X, self.Pb = lw, X, Pb
-        return status, nis
-
-    def replace_clone(self, J):
-        if not self.nw:
-            return super().replace_clone(J)
-        n, ic = self.n, self.ic
-        A = self.Pb[:, :ic, :n] @ J.T                 # Cov([x; w], x_c) = Cov([x; w], x) J^T
-        self.X[:, ic:] = self.X[:, :n] @ J.T
-        self.Pb[:, :ic, ic:] = A
-        self.Pb[:, ic:, :ic] = np.swapaxes(A, 1, 2)
-        self.Pb[:, ic:, ic:] = J @ A[:, :n]
-        self.have_clone = True
 
 
 class ColoredMixtureEkf(GaussianMixtureEkf):

@@ -169,6 +169,9 @@ class BankBelief:
         n = layout.n
         na = n + n_clone
         self.n, self.na, self.nc = n, na, n_clone
+        #: first index of the stochastic clone; states n:ic (none here; M6's process-noise states)
+        #: are kept as estimates after an update, not fed back into the nominal
+        self.ic = n
         self.P = np.zeros((n, n))  # scratch for the propagation kernel (gives Phi and Qd)
         pr = mixtures.prior
         I = pr.n_components
@@ -193,6 +196,8 @@ class BankBelief:
         self.mean_scale = proc.mean_scale
         self.qc_white = qc_white
         self.white = np.any(qc_white > 0) and (self.split or self.one_scale != 1.0)
+        #: keep the white part apart until the next split (else scale it into Qd at once)
+        self.separate = self.split
         self.Qw = np.zeros((n, n))
         self.Qw_pending = False
         self._qdw = np.empty((n, n))
@@ -209,7 +214,7 @@ class BankBelief:
             bank_propagate(self.X, self.Pb, phi, qd, self.n)
             return
         discrete_noise(F, self.qc_white, T, self._qdw)
-        if not self.split:  # one process component with its own scale
+        if not self.separate:  # one process component with its own scale
             bank_propagate(self.X, self.Pb, phi, qd + (self.one_scale - 1.0) * self._qdw, self.n)
             return
         bank_propagate(self.X, self.Pb, phi, qd - self._qdw, self.n)
@@ -224,25 +229,32 @@ class BankBelief:
         self.Qw[:, :] = 0.0
         self.Qw_pending = False
 
+    def _split(self):
+        """Children of every component for each process-noise component (the white
+        noise accumulated since the last split)."""
+        self.lw, self.X, self.Pb = bank_split(self.lw, self.X, self.Pb, self.Qw, self.proc_logw,
+                                              self.proc_scale)
+        self.Qw[:, :] = 0.0
+        self.Qw_pending = False
+        self.largest_bank = max(self.largest_bank, len(self.lw))
+
     def update(self, z, H, r, kinds, nav, sensor, clock, layout_arr, cloner):
-        n, na = self.n, self.na
+        n, na, ic = self.n, self.na, self.ic
         z, r = independent_rows(z, r)
-        if H.shape[1] != na:
+        if H.shape[1] != na:  # the model's columns: error states, then its clone (at ic)
             Ha = np.zeros((len(z), na))
-            Ha[:, :H.shape[1]] = H
+            Ha[:, :n] = H[:, :n]
+            Ha[:, ic:ic + H.shape[1] - n] = H[:, n:]
             H = Ha
         if self.Qw_pending:
-            self.lw, self.X, self.Pb = bank_split(self.lw, self.X, self.Pb, self.Qw, self.proc_logw,
-                                                  self.proc_scale)
-            self.Qw[:, :] = 0.0
-            self.Qw_pending = False
-            self.largest_bank = max(self.largest_bank, len(self.lw))
+            self._split()
         kinds = np.zeros(len(z), dtype=np.int64) if kinds is None else np.asarray(kinds, dtype=np.int64)
         status, nis, lw, X, Pb, dx = self.epoch(z, np.ascontiguousarray(H), r, kinds)
         if status in (OK, NEEDS_REPAIR):
             apply_feedback(nav, sensor, clock, dx[:n], layout_arr)
             if self.have_clone:
-                cloner.correct_clone(dx[n:])
+                cloner.correct_clone(dx[ic:])
+            X[:, n:ic] += dx[n:ic]  # kept states are estimates, not errors of the nominal: undo the re-centring
             self.lw, self.X, self.Pb = lw, X, Pb
         return status, nis
 
@@ -270,13 +282,12 @@ class BankBelief:
         return out
 
     def replace_clone(self, J):
-        n = self.n
-        Pxx = self.Pb[:, :n, :n]
-        self.X[:, n:] = self.X[:, :n] @ J.T
-        Pxc = Pxx @ J.T
-        self.Pb[:, :n, n:] = Pxc
-        self.Pb[:, n:, :n] = np.swapaxes(Pxc, 1, 2)
-        self.Pb[:, n:, n:] = J @ Pxc
+        n, ic = self.n, self.ic
+        A = self.Pb[:, :ic, :n] @ J.T                 # Cov(states before the clone, x) J^T
+        self.X[:, ic:] = self.X[:, :n] @ J.T
+        self.Pb[:, :ic, ic:] = A
+        self.Pb[:, ic:, :ic] = np.swapaxes(A, 1, 2)
+        self.Pb[:, ic:, ic:] = J @ A[:, :n]
         self.have_clone = True
 
     def repair(self):

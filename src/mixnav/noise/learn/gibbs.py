@@ -58,7 +58,8 @@ import numba
 import numpy as np
 
 from mixnav.noise.learn.em import check_random_state, kmeanspp_resp, validate_data
-from mixnav.noise.learn.vb import _BLOCK, VariationalGaussianMixture, _chol_lower, _exp_nonpos, _m_step
+from mixnav.noise.learn.vb import (_BLOCK, VariationalGaussianMixture, _chol_lower, _exp_nonpos, _m_step,
+                                   _tril_inv)
 from mixnav.noise.mixture import GaussianMixture
 
 _LOG2PI = np.log(2.0 * np.pi)
@@ -156,16 +157,7 @@ def _draw_params(cnt, s1, s2, alpha0, beta0, m0c, nu0, w0inv, pi, mu, ld, M, cov
                 A[a, b] = w0inv[a, b] + sc + f * v[a] * v[b]      # P1 eq. (25) (lower triangle)
         # U U^T = W_k^-1 (the matrix is SPD: W0^-1 SPD plus PSD terms; only its lower triangle is read)
         _chol_lower(A, U)
-        # Ui = U^-1 (lower triangular)
-        for j in range(d):
-            Ui[j, j] = 1.0 / U[j, j]
-            for i in range(j + 1, d):
-                s = 0.0
-                for p in range(j, i):
-                    s -= U[i, p] * Ui[p, j]
-                Ui[i, j] = s / U[i, i]
-            for i in range(j):
-                Ui[i, j] = 0.0
+        _tril_inv(U, Ui)                                  # Ui = U^-1 (lower triangular)
         # Bartlett factor A (lower): A_jj^2 ~ chi2(nu - j), A_ij ~ N(0, 1) below the diagonal;
         # Lambda = L A A^T L^T with L = U^-T (L L^T = W_k) is Wishart(W_k, nu_k)
         logdet = 0.0
