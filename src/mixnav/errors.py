@@ -32,6 +32,27 @@ class ConfigError(MixnavError, ValueError):
         super().__init__(f"{where}: {message}" if where else message)
 
 
+class ArgumentError(MixnavError, ValueError):
+    """A library function or class got an impossible argument.
+
+    Library code (filters, models, learners) names the *argument*; the config
+    layer, which knows which file and key the value came from, maps it to a
+    :class:`ConfigError` (``mixnav.config.errors.config_keys``).
+
+    Parameters
+    ----------
+    message : str
+        What is wrong and, where it helps, what would be right.
+    argument : str or None
+        The argument's name, dotted for a part of it (``mixtures.process.means``).
+    """
+
+    def __init__(self, message: str, argument: str | None = None):
+        self.argument = argument
+        self.message = message
+        super().__init__(f"argument '{argument}': {message}" if argument else message)
+
+
 class DataError(MixnavError, ValueError):
     """A data file is malformed: names the file and the line."""
 
