@@ -27,6 +27,51 @@ def _finite(name: str, a: np.ndarray, source: str | None) -> None:
 
 
 @dataclass(frozen=True)
+class InitialState:
+    """Initial navigation estimate and its 1-sigma uncertainty.
+
+    Attributes
+    ----------
+    time : float
+        [s]; must be the start of the IMU data or later.
+    nav : ndarray (10,)
+        ``[q_nb(4), v_n(3), lat, lon, h]``.
+    sigma_att : ndarray (3,)
+        Attitude error sigma as a rotation vector in NED [rad].
+    sigma_vel, sigma_pos : ndarray (3,)
+        [m/s], NED [m].
+    sigma_clock : ndarray (2,)
+        Clock bias [m] and drift [m/s] sigma (17-state layout only).
+    sensor0 : ndarray (12,) or None
+        Initial sensor-error estimates ``[bg, ba, sg, sa]`` (e.g. a gyro bias
+        measured at rest); zero when None.
+    """
+
+    time: float
+    nav: np.ndarray
+    sigma_att: np.ndarray
+    sigma_vel: np.ndarray
+    sigma_pos: np.ndarray
+    sigma_clock: np.ndarray = field(default_factory=lambda: np.array([10.0, 1.0]))
+    sensor0: np.ndarray | None = None
+
+    def __post_init__(self):
+        nav = np.asarray(self.nav, dtype=float)
+        _check(nav.shape == (10,), f"InitialState.nav must be [q_nb(4), v_n(3), lat, lon, h], shape (10,), "
+               f"got {nav.shape}", None)
+        _finite("InitialState.nav", nav, None)
+        _check(abs(np.linalg.norm(nav[0:4]) - 1.0) < 1e-6, "InitialState.nav[0:4] must be a unit quaternion "
+               f"(norm {np.linalg.norm(nav[0:4]):.6g})", None)
+        _check(abs(nav[7]) <= np.pi / 2 and abs(nav[8]) <= 2 * np.pi,
+               f"InitialState.nav latitude/longitude must be in radians, got {nav[7]:.6g}, {nav[8]:.6g}", None)
+        for name in ("sigma_att", "sigma_vel", "sigma_pos"):
+            a = np.asarray(getattr(self, name), dtype=float)
+            _check(a.shape == (3,) and np.all(np.isfinite(a)) and np.all(a >= 0),
+                   f"InitialState.{name} must be 3 finite non-negative sigmas, got {a.tolist()}", None)
+
+
+
+@dataclass(frozen=True)
 class ImuData:
     """IMU angle and velocity increments.
 

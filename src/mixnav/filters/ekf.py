@@ -51,7 +51,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..data import ImuData
+from ..data import ImuData, InitialState  # noqa: F401  (InitialState re-exported)
 from ..errors import ConfigError, NumericalError
 from ..ins._error_kernels import propagate_block
 from ..ins.error_model import ClockModel, StateLayout, process_noise
@@ -59,36 +59,6 @@ from ..ins.imu_model import ImuErrorModel
 from ._ekf_kernels import (ABSURD, NON_FINITE, NEEDS_REPAIR, OK, S_NOT_POSITIVE_DEFINITE, ekf_correct,
                            ekf_correct_dx)
 from .timing import split_at_times
-
-
-@dataclass(frozen=True)
-class InitialState:
-    """Initial navigation estimate and its 1-sigma uncertainty.
-
-    Attributes
-    ----------
-    time : float
-        [s]; must be the start of the IMU data or later.
-    nav : ndarray (10,)
-        ``[q_nb(4), v_n(3), lat, lon, h]``.
-    sigma_att : ndarray (3,)
-        Attitude error sigma as a rotation vector in NED [rad].
-    sigma_vel, sigma_pos : ndarray (3,)
-        [m/s], NED [m].
-    sigma_clock : ndarray (2,)
-        Clock bias [m] and drift [m/s] sigma (17-state layout only).
-    sensor0 : ndarray (12,) or None
-        Initial sensor-error estimates ``[bg, ba, sg, sa]`` (e.g. a gyro bias
-        measured at rest); zero when None.
-    """
-
-    time: float
-    nav: np.ndarray
-    sigma_att: np.ndarray
-    sigma_vel: np.ndarray
-    sigma_pos: np.ndarray
-    sigma_clock: np.ndarray = field(default_factory=lambda: np.array([10.0, 1.0]))
-    sensor0: np.ndarray | None = None
 
 
 @dataclass

@@ -11,7 +11,7 @@ from ..config.loader import gnss_noise, imu_model, imu_white_noise
 from ..config.schema import (AccelerateSegment, ClimbSegment, Scenario, StaticSegment,
                              TurnSegment, UniformSegment)
 from ..data import GnssFixes, ImuData, Trajectory
-from ..filters.ekf import InitialState
+from ..data import InitialState
 from ..ins.imu_model import ImuErrorDraw, ImuErrorModel, corrupt
 from .gnss import GnssFixModel, simulate_fixes
 from .rng import Streams
