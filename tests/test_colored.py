@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from mixnav.config.loader import load_scenario, resolve
-from mixnav.errors import ConfigError
+from mixnav.errors import ArgumentError, ConfigError
 from mixnav.filters import registry
 from mixnav.filters.colored import N_W, ColoredMixtureEkf, colored_split, fit_coefficient
 from mixnav.filters.gmekf import BankMixtures, GaussianMixtureEkf, StandardMixture
@@ -141,15 +141,13 @@ def test_differencing_rows_and_kinds():
     ekf, meas = models()
     dm = DifferencedMeasurement(meas[0], ekf.layout, {"pseudorange": 0.5})
     nav, w = sim.init.nav.copy(), np.zeros(3)
-    z0, H0, r0 = dm.measure(1, nav, w, np.zeros(2))
-    k0 = dm.row_kinds(1, len(z0))
+    z0, H0, r0, k0, _ = dm.rows(1, nav, w, np.zeros(2))
     assert np.all(k0 >= STATIONARY)                                 # nothing remembered yet
     np.testing.assert_allclose(r0[k0 == STATIONARY], 9.0 / 0.75)     # pseudorange: 3 m, psi 0.5
     np.testing.assert_allclose(r0[k0 == STATIONARY + 1], 0.01)       # range rate: white
-    dm.remember(1, nav, np.zeros(2))
+    mem = dm.remember(1, nav, w, np.zeros(2))
     zi, Hi, ri = meas[0].measure(2, nav, w, np.zeros(2))
-    z, H, r = dm.measure(2, nav, w, np.zeros(2))
-    k = dm.row_kinds(2, len(z))
+    z, H, r, k, _ = dm.rows(2, nav, w, np.zeros(2), mem)
     ch1 = meas[0].row_channels(1, len(z0))
     ch2 = meas[0].row_channels(2, len(z))
     common = np.isin(ch2, ch1)
@@ -175,9 +173,9 @@ def test_fit_coefficient_recovers_the_ar1():
 def test_non_stationary_coefficients_are_refused(psi):
     sim, clock, models = _tight_demo()
     ekf, meas = models()
-    with pytest.raises(ConfigError, match="psi"):
+    with pytest.raises(ArgumentError, match="psi"):
         DifferencedMeasurement(meas[0], ekf.layout, {"pseudorange": psi})
-    with pytest.raises(ConfigError, match="psi"):
+    with pytest.raises(ArgumentError, match="psi"):
         ColoredMixtureEkf(ekf.layout, ekf.imu_model, BankMixtures(), psi_process=psi)
 
 

@@ -10,7 +10,7 @@ import pytest
 
 from mixnav.config.loader import resolve
 from mixnav.filters._ekf_kernels import ABSURD, OK, ekf_correct_dx
-from mixnav.filters.robust import RobustBelief, adaptive_factor, igg3_factors
+from mixnav.filters.robust import RobustEstimator, adaptive_factor, igg3_factors
 from mixnav.ins.error_model import get_layout
 
 
@@ -42,7 +42,7 @@ def _problem(rng, m=6):
 
 
 def _belief(lay, P, k0=1.5, k1=3.0, c=1.5):
-    return RobustBelief(P, 0, lay, 1e4, k0, k1, c)
+    return RobustEstimator(k0, k1, c, absurd_sigma=1e4)
 
 
 def test_gross_row_rejected_and_mid_row_downweighted_exactly():
@@ -52,7 +52,7 @@ def test_gross_row_rejected_and_mid_row_downweighted_exactly():
     z[4] = 2.0 * np.sqrt(S[4])      # down-weighted by IGG-III
     b = _belief(lay, P)
     args = (np.zeros(12), np.zeros(2), lay.as_array())
-    P1, dx1, nis1, st1 = b.correct(P, z, H, r, nav.copy(), *args)
+    P1, dx1, nis1, st1 = b.correct(P, z, H, r)
     keep = np.array([True, True, False, True, True, True])
     g4 = (1.5 / 2.0) * ((3.0 - 2.0) / 1.5) ** 2
     r2 = r.copy()
@@ -75,11 +75,11 @@ def test_adaptive_factor_inflates_the_prediction():
     lay, P, H, r, z, S, nav = _problem(rng)
     z = 1.4 * np.sqrt(S)
     args = (np.zeros(12), np.zeros(2), lay.as_array())
-    P_a, dx_a, _, _ = _belief(lay, P, c=1.5).correct(P, z, H, r, nav.copy(), *args)
+    P_a, dx_a, _, _ = _belief(lay, P, c=1.5).correct(P, z, H, r)
     P_e, dx_e, _, _ = ekf_correct_dx(P, z, H, r, 1e4, nav.copy(), *args)
     np.testing.assert_allclose(dx_a, dx_e, rtol=1e-12)
     b = _belief(lay, P, c=1.0)
-    P_b, dx_b, _, _ = b.correct(P, z, H, r, nav.copy(), *args)
+    P_b, dx_b, _, _ = b.correct(P, z, H, r)
     P_i, dx_i, _, _ = ekf_correct_dx(P * 1.4, z, H, r, 1e4, nav.copy(), *args)
     np.testing.assert_allclose(dx_b, dx_i, rtol=1e-10)
     np.testing.assert_allclose(P_b, P_i, rtol=1e-10)
@@ -91,7 +91,7 @@ def test_all_rows_rejected_is_a_skipped_epoch():
     lay, P, H, r, z, S, nav = _problem(rng)
     z = 10.0 * np.sqrt(S)
     b = _belief(lay, P)
-    P1, dx1, _, st = b.correct(P, z, H, r, nav.copy(), np.zeros(12), np.zeros(2), lay.as_array())
+    P1, dx1, _, st = b.correct(P, z, H, r)
     assert st == ABSURD and not dx1.any() and b.counts["robust_epochs_all_rejected"] == 1
 
 

@@ -36,12 +36,12 @@ def test_compiled_tdcp_rows_equal_the_numpy_model(scenario, clone):
     checked = 0
     for k in range(1, len(o.time), 7):
         nav_prev = np.concatenate([truth.q_nb[kt(k - 1)], truth.v_n[kt(k - 1)], truth.lla[kt(k - 1)]])
-        meas.remember(k - 1, nav_prev, np.array([4.0, 0.3]))
+        mem = meas.remember(k - 1, nav_prev, np.zeros(3), np.array([4.0, 0.3]))
         nav = np.concatenate([truth.q_nb[kt(k)], truth.v_n[kt(k)], truth.lla[kt(k)]]) + 1e-7
         clock = np.array([4.3, 0.3])
-        z, H, r = meas.measure(k, nav, np.zeros(3), clock)
+        z, H, r = meas.measure(k, nav, np.zeros(3), clock, mem)
         n_pr = int(o.valid[k].sum())
-        zt, Ht, rt = meas.tdcp_rows_numpy(k, nav, clock)
+        zt, Ht, rt = meas.tdcp_rows_numpy(k, nav, clock, mem)
         np.testing.assert_allclose(z[n_pr:], zt, rtol=0, atol=1e-7)    # metres of 2e7 m ranges
         np.testing.assert_allclose(H[n_pr:], Ht, rtol=0, atol=1e-12)
         np.testing.assert_array_equal(r[n_pr:], rt)
@@ -64,10 +64,10 @@ def test_tdcp_jacobian_matches_finite_differences(scenario):
     k = 150
     kt = lambda i: int(np.searchsorted(truth.time, o.time[i] - 1e-9))  # noqa: E731
     nav_prev = np.concatenate([truth.q_nb[kt(k - 1)], truth.v_n[kt(k - 1)], truth.lla[kt(k - 1)]])
-    meas.remember(k - 1, nav_prev, np.array([4.0, 0.3]))
+    mem = meas.remember(k - 1, nav_prev, np.zeros(3), np.array([4.0, 0.3]))
     nav = np.concatenate([truth.q_nb[kt(k)], truth.v_n[kt(k)], truth.lla[kt(k)]])
     w, clock = np.array([0.01, -0.02, 0.3]), np.array([4.3, 0.3])
-    z0, H, r = meas.measure(k, nav, w, clock)
+    z0, H, r = meas.measure(k, nav, w, clock, mem)
     n_pr = int(o.valid[k].sum())
     assert H.shape == (len(z0), 21) and len(z0) > n_pr  # pseudoranges, then TDCP rows
     np.testing.assert_allclose(r[n_pr:], 2 * 0.003 ** 2)
@@ -77,15 +77,12 @@ def test_tdcp_jacobian_matches_finite_differences(scenario):
         dx = np.zeros(17)
         dx[i] = eps
         nav_t, w_t = _perturbed(nav, w, dx)
-        z, _, _ = meas.measure(k, nav_t, w_t, clock + dx[15:17])
+        z, _, _ = meas.measure(k, nav_t, w_t, clock + dx[15:17], mem)
         np.testing.assert_allclose(-(z - z0) / eps, H[:, i], rtol=2e-3, atol=2e-3)
     for j in range(4):  # the clone: the remembered antenna position (NED) and clock bias
-        saved = (meas._r_prev.copy(), meas._b_prev)
         dxc = np.zeros(4)
         dxc[j] = 1e-3
-        meas.correct_clone(dxc)
-        z, _, _ = meas.measure(k, nav, w, clock)
-        meas._r_prev, meas._b_prev = saved
+        z, _, _ = meas.measure(k, nav, w, clock, meas.correct_memory(mem, dxc))
         np.testing.assert_allclose(-(z - z0) / 1e-3, H[:, 17 + j], atol=2e-3)
     assert np.all(H[:n_pr, 17:] == 0)
 

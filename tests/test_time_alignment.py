@@ -35,7 +35,7 @@ def test_split_increments_reach_the_true_state_between_samples():
     # those instants must land on it; the nearest 100 Hz sample is v * 4 ms
     # (up to 9 cm) away.
     from mixnav.geodesy.frames import ned_displacement
-    from mixnav.filters.timing import split_at_times
+    from mixnav.engine.timing import split_at_times
     from mixnav.ins.mechanization import free_inertial, nav_vector
     from mixnav.sim.scenario import motion_segments
     from mixnav.sim.trajectory import InitialState, generate

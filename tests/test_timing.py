@@ -3,7 +3,7 @@
 import numpy as np
 
 from mixnav.data import ImuData
-from mixnav.filters.timing import split_at_times
+from mixnav.engine.timing import split_at_times
 
 
 def _imu(n=50, dt=0.01, rng=None):

@@ -14,11 +14,9 @@ from ..ins._error_kernels import apply_feedback
 from .kalman import OK, S_NOT_POSITIVE_DEFINITE, innovation_is_absurd, kalman_update
 
 #: Status codes of :func:`ekf_correct` beyond those of ``kalman_update``.
-ABSURD = 2
-NON_FINITE = 3
-NEEDS_REPAIR = 4
+from ..engine.status import ABSURD, NEEDS_REPAIR, NON_FINITE  # noqa: E402,F401
 
-__all__ = ["ekf_correct", "ekf_correct_dx", "OK", "S_NOT_POSITIVE_DEFINITE", "ABSURD", "NON_FINITE", "NEEDS_REPAIR"]
+__all__ = ["ekf_correct", "ekf_correct_dx", "kalman_correct", "OK", "S_NOT_POSITIVE_DEFINITE", "ABSURD", "NON_FINITE", "NEEDS_REPAIR"]
 
 
 @njit(cache=True)
@@ -30,7 +28,17 @@ def ekf_correct(P, z, H, r, n_sigma, nav, sensor, clock, layout):
 
 @njit(cache=True)
 def ekf_correct_dx(P, z, H, r, n_sigma, nav, sensor, clock, layout):
-    """Gate, update and feed back one measurement; closed loop (prior dx = 0).
+    """:func:`kalman_correct` followed by the feedback of ``dx`` into ``nav``, ``sensor``
+    and ``clock`` (in place) when the update is applied (``OK`` or ``NEEDS_REPAIR``)."""
+    P_post, dx, nis, status = kalman_correct(P, z, H, r, n_sigma)
+    if status == OK or status == NEEDS_REPAIR:
+        apply_feedback(nav, sensor, clock, dx, layout)
+    return P_post, dx, nis, status
+
+
+@njit(cache=True)
+def kalman_correct(P, z, H, r, n_sigma):
+    """Gate and update one measurement; closed loop (prior dx = 0); no feedback.
 
     Parameters
     ----------
@@ -42,18 +50,13 @@ def ekf_correct_dx(P, z, H, r, n_sigma, nav, sensor, clock, layout):
         Noise variances (diagonal) or full covariance.
     n_sigma : float
         Absurd-innovation threshold in predicted sigmas.
-    nav, sensor, clock : ndarray
-        Corrected in place when the update is applied.
-    layout : ndarray of int64
 
     Returns
     -------
     P_post : ndarray (n, n)
         Posterior (the prior when the epoch is rejected).
     dx : ndarray (n,)
-        The correction (zeros when rejected). States beyond the layout's
-        ``n`` (e.g. a stochastic clone) are not fed back here: the caller
-        applies ``dx[layout n:]`` to whatever they describe.
+        The correction (zeros when rejected), for the engine to feed back.
     nis : float
     status : int
         ``OK``, ``S_NOT_POSITIVE_DEFINITE``, ``ABSURD``, ``NON_FINITE`` (the
@@ -81,7 +84,6 @@ def ekf_correct_dx(P, z, H, r, n_sigma, nav, sensor, clock, layout):
         for j in range(n):
             if not np.isfinite(P_post[i, j]):
                 return P, zero, nis, NON_FINITE
-    apply_feedback(nav, sensor, clock, dx, layout)
     for i in range(n):
         if P_post[i, i] <= 0.0:
             return P_post, dx, nis, NEEDS_REPAIR

@@ -47,8 +47,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..errors import ConfigError
-from .gmekf import BankBelief, GaussianMixtureEkf
+from ..errors import ArgumentError
+from ..measurements.kinds import MAX_KINDS, kind_code
+from .gmekf import BankEstimator, GaussianMixtureEkf, _padded
 
 #: Error states the coloured process noise lives on (attitude, velocity, position).
 N_W = 9
@@ -127,45 +128,55 @@ def ar_coefficient(psi: np.ndarray, steps: float) -> np.ndarray:
 _COLORED_WARM = []
 
 
-def _warm_colored() -> None:
-    """Compile (or load from the numba cache) :func:`colored_split` outside the timed loop."""
-    if not _COLORED_WARM:
-        na = N_W + 1 + N_W
-        colored_split(np.zeros(1), np.zeros((1, na)), np.tile(np.eye(na), (1, 1, 1)), np.eye(N_W),
-                      np.zeros(1), np.ones(1), np.zeros(N_W), N_W + 1)
-        _COLORED_WARM.append(True)
-
-
-class ColoredBankBelief(BankBelief):
+class ColoredBankEstimator(BankEstimator):
     """The bank of :class:`ColoredMixtureEkf`: M3's bank with the AR(1)
-    process-noise state ``w`` and the differencing clone (module docstring)."""
+    process-noise state ``w`` and the differencing clone (module docstring).
 
-    def __init__(self, P0, n_clone, layout, absurd_sigma, mixtures, qc_white, max_components,
-                 psi_process, process_interval, psi_measurement, augment=True):
-        nw = N_W if augment else 0
-        super().__init__(P0, n_clone + nw, layout, absurd_sigma, mixtures, qc_white, max_components)
-        n = self.n
-        self.nw = nw                       # 0: no process colour, M3's propagation and split
-        self.nc = n_clone                  # the clone proper sits after w
-        self.ic = n + nw                   # w at n:n+9 (kept as estimates), clone at n+nw:
+    Parameters
+    ----------
+    mixtures, max_components, absurd_sigma
+        As :class:`~mixnav.filters.gmekf.BankEstimator`.
+    psi_process : ndarray (9,)
+        AR(1) coefficients of the process noise per ``process_interval``.
+    process_interval : float
+        [s]
+    psi_measurement : ndarray (MAX_KINDS,)
+        AR(1) coefficient of each kind code's measurement noise.
+    augment : bool
+        Carry the 9 process-noise states.
+    """
+
+    def __init__(self, mixtures, max_components, absurd_sigma, psi_process, process_interval, psi_measurement,
+                 augment=True):
+        super().__init__(mixtures, max_components, absurd_sigma)
+        self.nw = N_W if augment else 0     # 0: no process colour, M3's propagation and split
         self.psi_w = np.asarray(psi_process, dtype=float)
         self.process_interval = float(process_interval)
+        self.psi_m = np.asarray(psi_measurement, dtype=float)
+
+    def _kept_states(self) -> int:
+        return self.nw
+
+    def init(self, motion, P0, n_clone, rng):
+        super().init(motion, P0, n_clone, rng)   # w at n:n+9 (kept as estimates), the clone after it
         self.T_acc = 0.0
         self.started = False
-        if nw:  # the white part is always kept apart, for the AR(1) step of w
-            self.white = bool(np.any(qc_white > 0))
+        if self.nw:  # the white part is always kept apart, for the AR(1) step of w
+            self.white = bool(np.any(self.qc_white > 0))
             self.separate = True
-        # kinds k (differenced, zeta) and k + STATIONARY (undifferenced, stationary noise)
-        lw, mu, var = self.tables
-        psi_m = np.asarray(psi_measurement, dtype=float)
-        grow = np.sqrt((1.0 + psi_m) / (1.0 - psi_m))[:, None]
-        self.tables = (np.vstack([lw, lw]), np.vstack([mu, mu * grow]), np.vstack([var, var]))
         self.process_steps = 0             # AR(1) steps of w taken (not a recovery)
 
-    # --- hooks of the bank's run-loop interface ----------------------------------------
-    def propagated(self, work, T, measured):
-        self.T_acc += T
-        super().propagated(work, T, measured)
+    def _tables_for(self, mixtures):
+        """Kinds k (differenced, zeta) and their stationary twins k + MAX_KINDS
+        (undifferenced, stationary noise: means grown by sqrt((1 + psi) / (1 - psi)))."""
+        lw, mu, var = _padded(mixtures.tables())
+        grow = np.sqrt((1.0 + self.psi_m) / (1.0 - self.psi_m))[:, None]
+        return np.vstack([lw, lw]), np.vstack([mu, mu * grow]), np.vstack([var, var])
+
+    # --- hooks of the bank ----------------------------------------------------------------
+    def predict(self, step):
+        self.T_acc += step.T
+        super().predict(step)
 
     def _fold(self):
         """No measurement: the children could never be told apart, one child of mean scale (exact)."""
@@ -197,6 +208,18 @@ class ColoredBankBelief(BankBelief):
         self.process_steps += 1
         self.largest_bank = max(self.largest_bank, len(self.lw))
 
+    def warm_up(self) -> None:
+        super().warm_up()
+        if not _COLORED_WARM:
+            na = N_W + 1 + N_W
+            colored_split(np.zeros(1), np.zeros((1, na)), np.tile(np.eye(na), (1, 1, 1)), np.eye(N_W),
+                          np.zeros(1), np.ones(1), np.zeros(N_W), N_W + 1)
+            _COLORED_WARM.append(True)
+
+
+#: The old name of :class:`ColoredBankEstimator`.
+ColoredBankBelief = ColoredBankEstimator
+
 
 class ColoredMixtureEkf(GaussianMixtureEkf):
     """Coloured-noise Gaussian-mixture EKF, method M6 (paper P2).
@@ -214,7 +237,7 @@ class ColoredMixtureEkf(GaussianMixtureEkf):
         Observable kind -> AR(1) coefficient of its noise per epoch (P2's
         ``Psi``); the measurement models must be wrapped in
         :class:`~mixnav.measurements.differenced.DifferencedMeasurement` with
-        the same coefficients (:func:`mixnav.filters.registry.build` does).
+        the same coefficients (the experiment layer's method builder does).
     process_interval : float
         [s] The interval ``psi_process`` refers to (default 1 s).
     augment : bool, optional
@@ -227,30 +250,26 @@ class ColoredMixtureEkf(GaussianMixtureEkf):
     def __init__(self, layout, imu_model, mixtures, psi_process=0.0, psi_measurement=None,
                  process_interval: float = 1.0, max_components: int = 16, covariance_interval: float = 1.0,
                  absurd_sigma: float = 1e4, clock=None, learning_time_s: float = 0.0,
-                 augment: bool | None = None):
+                 augment: bool | None = None, learner_not_converged: int = 0):
         super().__init__(layout, imu_model, mixtures, max_components, covariance_interval, absurd_sigma,
-                         clock, learning_time_s)
+                         clock, learning_time_s, learner_not_converged=learner_not_converged)
         psi_w = np.broadcast_to(np.asarray(psi_process, dtype=float), (N_W,)).copy()
         if not (np.all(np.isfinite(psi_w)) and np.all(np.abs(psi_w) < 1.0)):
-            raise ConfigError(f"AR(1) coefficient must satisfy |psi| < 1 (stationary), got {psi_process}",
-                              key="colored.process")
+            raise ArgumentError(f"AR(1) coefficient must satisfy |psi| < 1 (stationary), got {psi_process}",
+                                argument="psi_process")
         if not process_interval > 0:
-            raise ConfigError("must be positive", key="colored.process_interval")
-        from ..measurements.kinds import KINDS
+            raise ArgumentError(f"must be positive, got {process_interval}", argument="process_interval")
         self.psi_process = psi_w
-        self.psi_measurement = np.zeros(len(KINDS))
+        self.psi_measurement = np.zeros(MAX_KINDS)
         for name, v in (psi_measurement or {}).items():
-            self.psi_measurement[KINDS[name]] = v
+            self.psi_measurement[kind_code(name, argument=f"psi_measurement.{name}")] = v
         self.process_interval = float(process_interval)
         self.augment = bool(np.any(psi_w != 0.0)) if augment is None else bool(augment)
 
-    def _belief(self, P0, n_clone):
-        from .gmekf import _warm_bank
-        _warm_bank()
-        _warm_colored()
-        self._last = ColoredBankBelief(P0, n_clone, self.layout, self.absurd_sigma, self.mixtures,
-                                       self.qc_white, self.max_components, self.psi_process,
-                                       self.process_interval, self.psi_measurement, self.augment)
+    def make_estimator(self):
+        self._last = ColoredBankEstimator(self.mixtures, self.max_components, self.absurd_sigma,
+                                          self.psi_process, self.process_interval, self.psi_measurement,
+                                          self.augment)
         return self._last
 
 

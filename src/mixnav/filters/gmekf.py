@@ -47,11 +47,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..errors import ConfigError
-from ..ins._error_kernels import apply_feedback, covariance_predict, discrete_noise
+from ..engine.protocols import Correction, Epoch, Transition
+from ..errors import ArgumentError, ConfigError
+from ..ins._error_kernels import covariance_predict, discrete_noise
 from ..ins.error_model import ClockModel, StateLayout
 from ..ins.imu_model import ImuErrorModel
-from ..measurements.kinds import KINDS
+from ..measurements.kinds import KINDS, MAX_KINDS
 from ..noise.mixture import GaussianMixture
 from ._bank_kernels import (bank_epoch, bank_epoch_collect, bank_moments, bank_propagate, bank_reduce, bank_split,
                             bank_update, predicted_nis)
@@ -160,18 +161,66 @@ def independent_rows(z, r) -> tuple[np.ndarray, np.ndarray]:
     return z, r
 
 
-class BankBelief:
-    """The bank of components the run loop of :class:`ErrorStateEkf` carries
-    for :class:`GaussianMixtureEkf` (same interface as ``GaussianBelief``)."""
+def _padded(tables):
+    """The mixture tables with one row per possible kind code (``MAX_KINDS``), so a
+    kind registered after the mixtures were built still indexes a row (Gaussian)."""
+    lw, mu, var = tables
+    k, L = lw.shape
+    out = (np.full((MAX_KINDS, L), -np.inf), np.zeros((MAX_KINDS, L)), np.ones((MAX_KINDS, L)))
+    out[0][:, 0] = 0.0  # unlisted kinds: N(0, 1) in standard units
+    out[0][:k], out[1][:k], out[2][:k] = lw, mu, var
+    return out
 
-    def __init__(self, P0, n_clone, layout: StateLayout, absurd_sigma: float, mixtures: BankMixtures,
-                 qc_white: np.ndarray, max_components: int, online=None):
-        n = layout.n
-        na = n + n_clone
+
+_BANK_WARM = []
+
+
+class BankEstimator:
+    """The bank of Gaussian components about the one nominal INS state (method M3;
+    the engine's estimator protocol, :mod:`mixnav.engine.protocols`).
+
+    Parameters
+    ----------
+    mixtures : BankMixtures
+        Prior, process-noise and measurement-noise mixtures.
+    max_components : int
+        The bank is reduced to at most this many components after each update.
+    absurd_sigma : float
+        Innovations beyond this many predicted sigmas reject the epoch (counted).
+    online : mixnav.filters.online.OnlineSettings, optional
+        Re-learn these kinds' measurement mixtures online (M4 beyond the paper).
+    """
+
+    def __init__(self, mixtures: BankMixtures, max_components: int = 16, absurd_sigma: float = 1e4,
+                 online=None):
+        if int(max_components) < 1:
+            raise ArgumentError(f"must be at least 1, got {max_components}", argument="max_components")
+        self.mixtures0 = mixtures
+        self.max_components = int(max_components)
+        self.absurd_sigma = float(absurd_sigma)
+        self.online_settings = online
+        self.online = None
+        self.counts = {"rejected_not_pd": 0, "rejected_absurd": 0, "covariance_repair": 0}
+        self.largest_bank = 0
+
+    def _kept_states(self) -> int:
+        """States between the error states and the clone, kept as estimates (M6's ``w``)."""
+        return 0
+
+    # --- the estimator protocol --------------------------------------------------------------
+    def init(self, motion, P0, n_clone, rng):
+        lay = motion.layout
+        n = lay.n
+        qc_white = np.zeros(n)  # the white IMU noise (ARW, VRW) the process mixture scales
+        qc_white[lay.att] = motion.qc[lay.att]
+        qc_white[lay.vel] = motion.qc[lay.vel]
+        mixtures = self.mixtures0
+        nk = self._kept_states()
+        na = n + nk + n_clone
         self.n, self.na, self.nc = n, na, n_clone
-        #: first index of the stochastic clone; states n:ic (none here; M6's process-noise states)
+        #: first index of the stochastic clone; states n:ic (M6's process-noise states)
         #: are kept as estimates after an update, not fed back into the nominal
-        self.ic = n
+        self.ic = n + nk
         self.P = np.zeros((n, n))  # scratch for the propagation kernel (gives Phi and Qd)
         pr = mixtures.prior
         I = pr.n_components
@@ -180,12 +229,10 @@ class BankBelief:
         self.Pb = np.zeros((I, na, na))
         for i, s in enumerate(pr.scales):
             self.Pb[i, :n, :n] = s * P0
-        self.absurd_sigma = absurd_sigma
-        self.max_components = int(max_components)
         self.mixtures = mixtures
-        self.tables = mixtures.tables()
+        self.tables = self._tables_for(mixtures)
         #: optional :class:`mixnav.filters.online.OnlineMixtureLearner` (M4 online re-learning)
-        self.online = online
+        self.online = None if self.online_settings is None else self.online_settings.learner(mixtures)
         self._u = np.empty(0)
         self._q = np.empty(0)
         proc = mixtures.process
@@ -205,10 +252,15 @@ class BankBelief:
         self.counts = {"rejected_not_pd": 0, "rejected_absurd": 0, "covariance_repair": 0}
         self.largest_bank = I
         self.have_clone = False
+        self.rng = rng
 
-    # --- run-loop interface ----------------------------------------------------------
-    def propagated(self, work, T, measured):
-        F, phi, qd = work[0], work[1], work[2]
+    @property
+    def kernel_covariance(self) -> np.ndarray:
+        """A zeroed scratch: the kernel's step leaves this step's ``Phi`` and ``Qd`` in the work array."""
+        return self.P
+
+    def predict(self, step: Transition) -> None:
+        F, phi, qd, T, measured = step.F, step.Phi, step.Qd, step.T, step.measured
         self.P[:, :] = 0.0
         if not self.white:
             bank_propagate(self.X, self.Pb, phi, qd, self.n)
@@ -238,9 +290,13 @@ class BankBelief:
         self.Qw_pending = False
         self.largest_bank = max(self.largest_bank, len(self.lw))
 
-    def update(self, z, H, r, kinds, nav, sensor, clock, layout_arr, cloner):
+    def update(self, epoch: Epoch) -> Correction | None:
+        rows = epoch.rows()
+        if rows is None:
+            return None
         n, na, ic = self.n, self.na, self.ic
-        z, r = independent_rows(z, r)
+        z, r = independent_rows(rows.z, rows.R)
+        H = rows.H
         if H.shape[1] != na:  # the model's columns: error states, then its clone (at ic)
             Ha = np.zeros((len(z), na))
             Ha[:, :n] = H[:, :n]
@@ -248,15 +304,14 @@ class BankBelief:
             H = Ha
         if self.Qw_pending:
             self._split()
-        kinds = np.zeros(len(z), dtype=np.int64) if kinds is None else np.asarray(kinds, dtype=np.int64)
+        kinds = np.asarray(rows.kinds, dtype=np.int64)
         status, nis, lw, X, Pb, dx = self.epoch(z, np.ascontiguousarray(H), r, kinds)
         if status in (OK, NEEDS_REPAIR):
-            apply_feedback(nav, sensor, clock, dx[:n], layout_arr)
-            if self.have_clone:
-                cloner.correct_clone(dx[ic:])
             X[:, n:ic] += dx[n:ic]  # kept states are estimates, not errors of the nominal: undo the re-centring
             self.lw, self.X, self.Pb = lw, X, Pb
-        return status, nis
+            if self.have_clone:
+                return Correction(np.concatenate([dx[:n], dx[ic:]]), nis, status, len(z))
+        return Correction(dx[:n], nis, status, len(z))
 
     def epoch(self, z, H, r, kinds):
         """The bank's measurement epoch in one compiled call, ``(status, nis, lw, X, P, dx)``
@@ -278,8 +333,11 @@ class BankBelief:
         if self.online.observe(out[0] in (OK, NEEDS_REPAIR), kinds, self._u[:m], self._q[:m]):
             self.mixtures = replace(self.mixtures, measurement={**self.mixtures.measurement,
                                                                 **self.online.current})
-            self.tables = self.mixtures.tables()
+            self.tables = self._tables_for(self.mixtures)
         return out
+
+    def _tables_for(self, mixtures):
+        return _padded(mixtures.tables())
 
     def replace_clone(self, J):
         n, ic = self.n, self.ic
@@ -302,31 +360,40 @@ class BankBelief:
         _, _, Pm = bank_moments(self.lw, self.X, self.Pb)
         return np.ascontiguousarray(Pm[:self.n, :self.n])
 
+    def diagnostics(self) -> dict:
+        out = {"bank_components_max": float(self.largest_bank)}
+        if self.online is not None:
+            out.update(self.online.timing())
+        return out
 
-_BANK_WARM = []
+    def warm_up(self) -> None:
+        """Compile (or load from the numba cache) the bank kernels once per process,
+        outside the timed loop."""
+        if self.online_settings is not None:
+            from .online import warm_online
+            warm_online()
+        if _BANK_WARM:
+            return
+        n, na = 3, 4
+        lw, X, P = np.zeros(2), np.zeros((2, na)), np.tile(np.eye(na), (2, 1, 1))
+        phi, Q = np.eye(n), np.eye(n)
+        bank_propagate(X, P, phi, Q, n)
+        lw, X, P = bank_split(lw, X, P, Q, np.log([0.5, 0.5]), np.ones(2))
+        w, xm, Pm = bank_moments(lw, X, P)
+        H = np.ones((1, na))
+        predicted_nis(xm, Pm, np.zeros(1), H, np.ones(1))
+        bank_update(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
+                    np.zeros((1, 1)), np.ones((1, 1)))
+        bank_reduce(lw, X, P, 1, n)
+        bank_epoch(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
+                   np.zeros((1, 1)), np.ones((1, 1)), 1e4, 1, n)
+        bank_epoch_collect(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
+                           np.zeros((1, 1)), np.ones((1, 1)), 1e4, 1, n, np.empty(1), np.empty(1))
+        _BANK_WARM.append(True)
 
 
-def _warm_bank() -> None:
-    """Compile (or load from the numba cache) the bank kernels once per process,
-    outside the timed loop."""
-    if _BANK_WARM:
-        return
-    n, na = 3, 4
-    lw, X, P = np.zeros(2), np.zeros((2, na)), np.tile(np.eye(na), (2, 1, 1))
-    phi, Q = np.eye(n), np.eye(n)
-    bank_propagate(X, P, phi, Q, n)
-    lw, X, P = bank_split(lw, X, P, Q, np.log([0.5, 0.5]), np.ones(2))
-    w, xm, Pm = bank_moments(lw, X, P)
-    H = np.ones((1, na))
-    predicted_nis(xm, Pm, np.zeros(1), H, np.ones(1))
-    bank_update(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
-                np.zeros((1, 1)), np.ones((1, 1)))
-    bank_reduce(lw, X, P, 1, n)
-    bank_epoch(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
-               np.zeros((1, 1)), np.ones((1, 1)), 1e4, 1, n)
-    bank_epoch_collect(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
-                       np.zeros((1, 1)), np.ones((1, 1)), 1e4, 1, n, np.empty(1), np.empty(1))
-    _BANK_WARM.append(True)
+#: The old name of :class:`BankEstimator`.
+BankBelief = BankEstimator
 
 
 class GaussianMixtureEkf(ErrorStateEkf):
@@ -348,46 +415,39 @@ class GaussianMixtureEkf(ErrorStateEkf):
         Re-learn these kinds' measurement mixtures online from a sliding window
         of innovations (M4 beyond the paper; :mod:`mixnav.filters.online`),
         starting from ``mixtures``. Every run starts again from ``mixtures``.
+    learner_not_converged : int
+        Offline mixture fits that did not converge (reported in ``recoveries``).
     """
 
     def __init__(self, layout: StateLayout, imu_model: ImuErrorModel, mixtures: BankMixtures,
                  max_components: int = 16, covariance_interval: float = 1.0, absurd_sigma: float = 1e4,
-                 clock: ClockModel | None = None, learning_time_s: float = 0.0, online=None):
+                 clock: ClockModel | None = None, learning_time_s: float = 0.0, online=None,
+                 learner_not_converged: int = 0):
         super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
         if int(max_components) < 1:
-            raise ConfigError("must be at least 1", key="mixture.max_components")
+            raise ArgumentError(f"must be at least 1, got {max_components}", argument="max_components")
         self.mixtures = mixtures
         self.max_components = int(max_components)
         self.learning_time_s = float(learning_time_s)
+        self.learner_not_converged = int(learner_not_converged)
         self.online = online
-        self.qc_white = np.zeros(layout.n)
-        self.qc_white[layout.att] = self.qc[layout.att]
-        self.qc_white[layout.vel] = self.qc[layout.vel]
         self._last = None
 
-    def _belief(self, P0, n_clone):
-        _warm_bank()
-        learner = None
-        if self.online is not None:
-            from .online import warm_online
-            warm_online()
-            learner = self.online.learner(self.mixtures)
-        self._last = BankBelief(P0, n_clone, self.layout, self.absurd_sigma, self.mixtures, self.qc_white,
-                                self.max_components, online=learner)
+    def make_estimator(self):
+        self._last = BankEstimator(self.mixtures, self.max_components, self.absurd_sigma, self.online)
         return self._last
+
+    def run(self, imu, init, measurements=(), output_times=None, rng=None, history: bool = False):
+        res = super().run(imu, init, measurements, output_times, rng, history)
+        res.timing["learning_time_s"] = self.learning_time_s
+        if self.learner_not_converged:
+            res.recoveries["learner_not_converged"] = self.learner_not_converged
+        return res
 
     @property
     def online_learner(self):
         """The online learner of the last run (its ``history`` and counters), or None."""
         return None if self._last is None else self._last.online
-
-    def extra_timing(self) -> dict:
-        out = {"learning_time_s": self.learning_time_s}
-        if self._last is not None:
-            out["bank_components_max"] = float(self._last.largest_bank)
-            if self._last.online is not None:
-                out.update(self._last.online.timing())
-        return out
 
 
 def learn_mixture(samples: np.ndarray, method: str, n_components: int = 4, gibbs_samples: int = 1000,

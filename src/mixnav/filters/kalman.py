@@ -14,8 +14,7 @@ import numpy as np
 from numba import njit
 
 #: Status codes returned by :func:`kalman_update`.
-OK = 0
-S_NOT_POSITIVE_DEFINITE = 1
+from ..engine.status import OK, S_NOT_POSITIVE_DEFINITE  # noqa: E402,F401
 
 
 @njit(cache=True)

@@ -39,11 +39,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import ConfigError
+from ..errors import ArgumentError
 from ..ins.error_model import ClockModel, StateLayout
 from ..ins.imu_model import ImuErrorModel
-from ._ekf_kernels import ABSURD, ekf_correct_dx
-from .ekf import ErrorStateEkf, GaussianBelief
+from ._ekf_kernels import ABSURD, kalman_correct
+from .ekf import ErrorStateEkf, KalmanEstimator
 from .kalman import innovation_is_absurd
 
 
@@ -62,16 +62,37 @@ def adaptive_factor(d: float, c: float) -> float:
     return 1.0 if d <= c else c / d
 
 
-class RobustBelief(GaussianBelief):
-    """The EKF's Gaussian with the robust, adaptive correction."""
+class RobustEstimator(KalmanEstimator):
+    """The EKF's Gaussian with the robust, adaptive correction (module docstring).
 
-    def __init__(self, P0, n_clone, layout, absurd_sigma, k0, k1, c):
-        super().__init__(P0, n_clone, layout, absurd_sigma)
-        self.k0, self.k1, self.c = k0, k1, c
+    Parameters
+    ----------
+    k0, k1 : float
+        IGG-III thresholds on standardised innovations, ``0 < k0 < k1``.
+    c : float
+        Threshold of the adaptive factor, positive.
+    absurd_sigma : float
+        As :class:`~mixnav.filters.ekf.KalmanEstimator`.
+    """
+
+    def __init__(self, k0: float = 2.5, k1: float = 5.0, c: float = 1.5, absurd_sigma: float = 1e4):
+        super().__init__(absurd_sigma)
+        if not 0.0 < k0 < k1:
+            raise ArgumentError(f"need 0 < k0 < k1, got k0 = {k0}, k1 = {k1}", argument="k0")
+        if not c > 0.0:
+            raise ArgumentError(f"must be positive, got {c}", argument="c")
+        self.k0, self.k1, self.c = float(k0), float(k1), float(c)
+        self._reset_counts()
+
+    def _reset_counts(self):
         self.counts.update(robust_rows_downweighted=0, robust_rows_rejected=0,
                            robust_epochs_all_rejected=0, adaptive_epochs=0)
 
-    def correct(self, P, z, H, r, nav, sensor, clock, layout_arr):
+    def init(self, motion, P0, n_clone, rng):
+        super().init(motion, P0, n_clone, rng)
+        self._reset_counts()
+
+    def correct(self, P, z, H, r):
         r = np.diag(r).copy() if np.ndim(r) == 2 else np.asarray(r, dtype=float)
         n = P.shape[0]
         if innovation_is_absurd(z, H, P, r, self.absurd_sigma):
@@ -90,8 +111,11 @@ class RobustBelief(GaussianBelief):
         if alpha < 1.0:
             self.counts["adaptive_epochs"] += 1
             P = P / alpha
-        return ekf_correct_dx(P, z[keep], np.ascontiguousarray(H[keep]), r[keep] / g[keep], self.absurd_sigma,
-                              nav, sensor, clock, layout_arr)
+        return kalman_correct(P, z[keep], np.ascontiguousarray(H[keep]), r[keep] / g[keep], self.absurd_sigma)
+
+
+#: The old name of :class:`RobustEstimator`.
+RobustBelief = RobustEstimator
 
 
 class RobustAdaptiveEkf(ErrorStateEkf):
@@ -111,11 +135,8 @@ class RobustAdaptiveEkf(ErrorStateEkf):
                  c: float = 1.5, covariance_interval: float = 1.0, absurd_sigma: float = 1e4,
                  clock: ClockModel | None = None):
         super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
-        if not 0.0 < k0 < k1:
-            raise ConfigError(f"need 0 < k0 < k1, got k0 = {k0}, k1 = {k1}", key="robust.k0")
-        if not c > 0.0:
-            raise ConfigError(f"must be positive, got {c}", key="robust.c")
+        RobustEstimator(k0, k1, c, absurd_sigma)  # validate now, not at the first run
         self.k0, self.k1, self.c = float(k0), float(k1), float(c)
 
-    def _belief(self, P0, n_clone):
-        return RobustBelief(P0, n_clone, self.layout, self.absurd_sigma, self.k0, self.k1, self.c)
+    def make_estimator(self):
+        return RobustEstimator(self.k0, self.k1, self.c, self.absurd_sigma)

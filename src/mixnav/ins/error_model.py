@@ -13,29 +13,91 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ConfigError
 from .imu_model import ImuErrorModel
 
 
 @dataclass(frozen=True)
-class StateLayout:
-    """Positions of the error-state blocks.
+class StateBlock:
+    """One named block of the error state.
 
     Attributes
     ----------
     name : str
+        ``attitude``, ``velocity``, ``position``, ``gyro_bias``, ``accel_bias``,
+        ``gyro_scale``, ``accel_scale``, ``clock`` (the blocks the INS kernels
+        know), or any other name for an *auxiliary* block (odometer scale,
+        mounting angles, a multipath bias...).
+    size : int
+    dynamics : str
+        ``"ins"`` for the built-in blocks (their rows of F come from the
+        error-state kernels, :mod:`mixnav.ins._error_kernels`); ``"random_walk"``
+        for an auxiliary block (F rows zero, noise density ``walk ** 2``).
+    feedback : str
+        Where a correction of the block goes: ``"nav"`` (attitude, velocity,
+        position of the nominal INS), ``"sensor"``, ``"clock"``, or ``"aux"``
+        (the engine keeps an estimate vector per auxiliary block and adds the
+        correction to it).
+    sigma0 : float
+        Initial 1-sigma of an auxiliary block [its unit].
+    walk : float
+        Random-walk density of an auxiliary block [its unit / sqrt(s)].
+    labels : tuple of str
+        One short label per state.
+    """
+
+    name: str
+    size: int
+    dynamics: str = "ins"
+    feedback: str = "aux"
+    sigma0: float = 0.0
+    walk: float = 0.0
+    labels: tuple = ()
+
+
+def _ins_block(name, size, feedback, labels):
+    return StateBlock(name, size, "ins", feedback, labels=tuple(labels))
+
+
+#: The blocks the INS kernels know, in the order their offsets are passed to them.
+INS_BLOCKS = {
+    "attitude": _ins_block("attitude", 3, "nav", ["phi_n", "phi_e", "phi_d"]),
+    "velocity": _ins_block("velocity", 3, "nav", ["dv_n", "dv_e", "dv_d"]),
+    "position": _ins_block("position", 3, "nav", ["dr_n", "dr_e", "dr_d"]),
+    "gyro_bias": _ins_block("gyro_bias", 3, "sensor", ["bg_x", "bg_y", "bg_z"]),
+    "accel_bias": _ins_block("accel_bias", 3, "sensor", ["ba_x", "ba_y", "ba_z"]),
+    "gyro_scale": _ins_block("gyro_scale", 3, "sensor", ["sg_x", "sg_y", "sg_z"]),
+    "accel_scale": _ins_block("accel_scale", 3, "sensor", ["sa_x", "sa_y", "sa_z"]),
+    "clock": _ins_block("clock", 2, "clock", ["clock_bias", "clock_drift"]),
+}
+_CORE = ("attitude", "velocity", "position", "gyro_bias", "accel_bias")
+
+
+class StateLayout:
+    """An error-state layout built from named blocks, compiled to an offset table.
+
+    The first five blocks are always attitude, velocity, position, gyro bias
+    and accelerometer bias (the 15-state core, at fixed offsets 0-14, which the
+    kernels and measurement models rely on); any further blocks follow in the
+    order given. Filters and measurement models address states by block
+    (``layout.pos``, ``layout.slice("clock")``), never by bare numbers.
+
+    Parameters
+    ----------
+    name : str
+    blocks : sequence of StateBlock or str
+        The blocks after the core; a string names a built-in block
+        (``"gyro_scale"``, ``"accel_scale"``, ``"clock"``).
+
+    Attributes
+    ----------
     n : int
         Number of states.
     sg, sa, clk : int
         First index of the gyro/accelerometer scale-factor blocks and of the
         clock block (bias [m], drift [m/s]); -1 when absent.
+    offsets : dict
+        Block name -> first index.
     """
-
-    name: str
-    n: int
-    sg: int = -1
-    sa: int = -1
-    clk: int = -1
 
     att = slice(0, 3)
     vel = slice(3, 6)
@@ -43,36 +105,98 @@ class StateLayout:
     bg = slice(9, 12)
     ba = slice(12, 15)
 
+    def __init__(self, name: str, blocks=()):
+        from ..errors import ArgumentError
+        full = [INS_BLOCKS[b] for b in _CORE]
+        for b in blocks:
+            if isinstance(b, str):
+                if b not in INS_BLOCKS:
+                    raise ArgumentError(f"unknown built-in block '{b}' (known: {', '.join(INS_BLOCKS)}); "
+                                        "give a StateBlock for an auxiliary one", argument="blocks")
+                b = INS_BLOCKS[b]
+            if b.dynamics == "ins" and b.name not in INS_BLOCKS:
+                raise ArgumentError(f"block '{b.name}' has INS dynamics but the kernels do not know it",
+                                    argument="blocks")
+            if b.dynamics not in ("ins", "random_walk") or b.feedback not in ("nav", "sensor", "clock", "aux"):
+                raise ArgumentError(f"block '{b.name}': dynamics must be 'ins' or 'random_walk' and "
+                                    "feedback one of nav, sensor, clock, aux", argument="blocks")
+            if b.dynamics == "random_walk" and b.feedback != "aux":
+                raise ArgumentError(f"auxiliary block '{b.name}' must have feedback 'aux'", argument="blocks")
+            if int(b.size) < 1:
+                raise ArgumentError(f"block '{b.name}' must have at least one state", argument="blocks")
+            full.append(b)
+        names = [b.name for b in full]
+        if len(set(names)) != len(names):
+            raise ArgumentError(f"block names must be unique, got {names}", argument="blocks")
+        self.name = name
+        self.blocks = tuple(full)
+        self.offsets = {}
+        k = 0
+        for b in full:
+            self.offsets[b.name] = k
+            k += int(b.size)
+        self.n = k
+        self.sg = self.offsets.get("gyro_scale", -1)
+        self.sa = self.offsets.get("accel_scale", -1)
+        self.clk = self.offsets.get("clock", -1)
+        if (self.sg >= 0) != (self.sa >= 0):
+            raise ArgumentError("gyro_scale and accel_scale go together (the kernels carry both)",
+                                argument="blocks")
+        #: auxiliary blocks: (name, slice) of the states the engine keeps estimates of
+        self.aux = tuple((b.name, self.slice(b.name)) for b in full if b.feedback == "aux")
+        self._array = np.array([self.n, 9, 12, self.sg, self.sa, self.clk], dtype=np.int64)
+
+    def slice(self, block: str) -> slice:
+        """The states of a block."""
+        o = self.offsets[block]
+        return slice(o, o + self.block(block).size)
+
+    def block(self, name: str) -> StateBlock:
+        for b in self.blocks:
+            if b.name == name:
+                return b
+        raise KeyError(name)
+
+    def has(self, name: str) -> bool:
+        return name in self.offsets
+
     def as_array(self) -> np.ndarray:
-        """``[n, i_bg, i_ba, i_sg, i_sa, i_clk]`` for the compiled kernels."""
-        return np.array([self.n, 9, 12, self.sg, self.sa, self.clk], dtype=np.int64)
+        """``[n, i_bg, i_ba, i_sg, i_sa, i_clk]`` for the compiled kernels (a copy)."""
+        return self._array.copy()
 
     def labels(self) -> list[str]:
         """One short label per state, in order (for tables and plots)."""
-        lab = ["phi_n", "phi_e", "phi_d", "dv_n", "dv_e", "dv_d", "dr_n", "dr_e", "dr_d",
-               "bg_x", "bg_y", "bg_z", "ba_x", "ba_y", "ba_z"]
-        extra = {self.sg: ["sg_x", "sg_y", "sg_z"], self.sa: ["sa_x", "sa_y", "sa_z"],
-                 self.clk: ["clock_bias", "clock_drift"]}
-        for start in sorted(k for k in extra if k >= 0):
-            lab += extra[start]
+        lab = []
+        for b in self.blocks:
+            lab += list(b.labels) if b.labels else [f"{b.name}_{i}" for i in range(b.size)]
         return lab
+
+    def __eq__(self, other):
+        return isinstance(other, StateLayout) and self.blocks == other.blocks
+
+    def __hash__(self):
+        return hash(self.blocks)
+
+    def __repr__(self):
+        return f"StateLayout({self.name!r}, n={self.n}, blocks={[b.name for b in self.blocks]})"
 
 
 LAYOUTS: dict[int, StateLayout] = {
-    15: StateLayout("ins15", 15),
-    17: StateLayout("ins15+clock", 17, clk=15),
-    21: StateLayout("ins15+scale", 21, sg=15, sa=18),
-    23: StateLayout("ins15+scale+clock", 23, sg=15, sa=18, clk=21),
+    15: StateLayout("ins15"),
+    17: StateLayout("ins15+clock", ["clock"]),
+    21: StateLayout("ins15+scale", ["gyro_scale", "accel_scale"]),
+    23: StateLayout("ins15+scale+clock", ["gyro_scale", "accel_scale", "clock"]),
 }
 
 
 def get_layout(n_states: int) -> StateLayout:
     """The layout with ``n_states`` states (15, 17, 21 or 23)."""
+    from ..errors import ArgumentError
     try:
         return LAYOUTS[int(n_states)]
-    except (KeyError, ValueError):
-        raise ConfigError(f"no error-state layout with {n_states!r} states; choose one of "
-                          f"{sorted(LAYOUTS)}", key="states") from None
+    except (KeyError, ValueError, TypeError):
+        raise ArgumentError(f"no error-state layout with {n_states!r} states; choose one of "
+                            f"{sorted(LAYOUTS)}", argument="states") from None
 
 
 @dataclass(frozen=True)
@@ -118,6 +242,10 @@ def process_noise(layout: StateLayout, imu: ImuErrorModel, clock: ClockModel | N
     if layout.sg >= 0:
         s0[layout.sg:layout.sg + 3] = imu.gyro_scale
         s0[layout.sa:layout.sa + 3] = imu.accel_scale
+    for name, sl in layout.aux:  # auxiliary blocks: random walks
+        b = layout.block(name)
+        qc[sl] = b.walk ** 2
+        s0[sl] = b.sigma0
     if layout.clk >= 0:
         clock = clock or ClockModel()
         qc[layout.clk] = clock.q_bias

@@ -39,14 +39,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import ConfigError, NumericalError
+from ..errors import ArgumentError, NumericalError
 from ..ins.error_model import StateLayout
-from .kinds import KINDS
+from .base import MeasurementModel, Rows
+from .kinds import KINDS, MAX_KINDS, kind_code
 from .loose import LooseGnss
 from .tight import TightGnss
 
-#: Offset added to the row kind of an undifferenced (stationary-noise) row.
-STATIONARY = len(KINDS)
+#: Offset added to the row kind of an undifferenced (stationary-noise) row: its
+#: stationary twin (:func:`mixnav.measurements.kinds.stationary`).
+STATIONARY = MAX_KINDS
 
 
 def clone_columns(model, layout: StateLayout) -> np.ndarray:
@@ -69,7 +71,7 @@ def clone_columns(model, layout: StateLayout) -> np.ndarray:
     return np.array(sorted(cols), dtype=np.int64)
 
 
-class DifferencedMeasurement:
+class DifferencedMeasurement(MeasurementModel):
     """Wrap a measurement model so that its rows are differenced against the
     previous epoch (P2 eqs. 13-20), with a stochastic clone of the previous state.
 
@@ -88,40 +90,37 @@ class DifferencedMeasurement:
         -> psi, ``id`` the satellite PRN (tight) or the axis 0-2 (loose).
     """
 
+    remembers = True
+
     def __init__(self, inner, layout: StateLayout, psi: dict, psi_channels: dict | None = None):
-        if getattr(inner, "clone_size", 0):
-            raise ConfigError("measurement differencing cannot wrap a model that clones itself "
-                              "(e.g. tdcp-ekf): use tight-ekf or loose-ekf", key="type")
+        if getattr(inner, "clone_size", 0) or getattr(inner, "remembers", False):
+            raise ArgumentError("measurement differencing cannot wrap a model that remembers its previous "
+                                "epoch (e.g. tdcp-ekf): use tight-ekf or loose-ekf", argument="inner")
         if not hasattr(inner, "row_channels"):
-            raise ConfigError(f"{type(inner).__name__} does not name the channel of its rows, "
-                              "which differencing needs", key="type")
+            raise ArgumentError(f"{type(inner).__name__} does not name the channel of its rows, "
+                                "which differencing needs", argument="inner")
         self.inner = inner
         self.layout = layout
-        self.psi_by_code = np.zeros(len(KINDS))
+        self.kinds = tuple(inner.kinds)
+        self.psi_by_code = np.zeros(MAX_KINDS)
         for name, v in psi.items():
-            if name not in KINDS:
-                raise ConfigError(f"unknown observable '{name}' (known: {', '.join(KINDS)})",
-                                  key=f"colored.measurement.{name}")
+            code = kind_code(name, argument=f"psi.{name}")
             if not (np.isfinite(v) and abs(v) < 1.0):
-                raise ConfigError(f"AR(1) coefficient must satisfy |psi| < 1 (stationary), got {v}",
-                                  key=f"colored.measurement.{name}")
-            self.psi_by_code[KINDS[name]] = float(v)
+                raise ArgumentError(f"AR(1) coefficient must satisfy |psi| < 1 (stationary), got {v}",
+                                    argument=f"psi.{name}")
+            self.psi_by_code[code] = float(v)
         self.psi_channels = {}
         for (name, cid), v in (psi_channels or {}).items():
-            key = f"colored.channels.{name}:{cid}"
-            if name not in KINDS:
-                raise ConfigError(f"unknown observable '{name}' (known: {', '.join(KINDS)})", key=key)
+            arg = f"psi_channels.{name}:{cid}"
+            code = kind_code(name, argument=arg)
             if not (np.isfinite(v) and abs(v) < 1.0):
-                raise ConfigError(f"AR(1) coefficient must satisfy |psi| < 1 (stationary), got {v}", key=key)
-            self.psi_channels[KINDS[name] * 1000 + int(cid)] = float(v)
+                raise ArgumentError(f"AR(1) coefficient must satisfy |psi| < 1 (stationary), got {v}", argument=arg)
+            self.psi_channels[code * 1000 + int(cid)] = float(v)
         self.cols = clone_columns(inner, layout)
         self.clone_size = len(self.cols)
         t = np.asarray(inner.times, dtype=float)
         dt = np.diff(t)
         self.max_gap = 1.5 * (float(np.median(dt)) if len(dt) else np.inf)
-        self._w_b = np.zeros(3)
-        self._prev = None       # (epoch, channels, z, H on clone columns) after the update
-        self._kinds = None
 
     @property
     def times(self) -> np.ndarray:
@@ -134,38 +133,37 @@ class DifferencedMeasurement:
         J[np.arange(self.clone_size), self.cols] = 1.0
         return J
 
-    def remember(self, i: int, nav: np.ndarray, clock) -> None:
-        """The innovations of epoch ``i`` recomputed with the updated state (the clone's nominal)."""
-        zhr = self.inner.measure(i, nav, self._w_b, clock)
-        if zhr is None:
-            self._prev = None
-            return
-        z, H, _ = zhr
-        H = np.asarray(H)
+    def remember(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock):
+        """The innovations of epoch ``i`` recomputed with the updated state (the clone's
+        nominal): ``(i, channels, z, H on the clone columns)``, or None."""
+        rows = self.inner.rows(i, nav, w_b, clock)
+        if rows is None:
+            return None
+        z, H = rows.z, np.asarray(rows.H)
         Hc = H[:, self.cols]
         if np.count_nonzero(H) != np.count_nonzero(Hc):  # a bug in clone_columns, not bad input
             raise NumericalError("the measurement Jacobian uses columns outside the clone")
-        self._prev = (int(i), self.inner.row_channels(i, len(z)), np.array(z, dtype=float), Hc)
+        return (int(i), self.inner.row_channels(i, len(z)), np.array(z, dtype=float), Hc)
 
-    def correct_clone(self, dx_c: np.ndarray) -> None:
+    def correct_memory(self, memory, dx_c: np.ndarray):
         """The clone's nominal moved by ``dx_c``: the remembered innovations follow it."""
-        if self._prev is not None:
-            i, ch, z, Hc = self._prev
-            self._prev = (i, ch, z - Hc @ dx_c, Hc)
+        if memory is None:
+            return None
+        i, ch, z, Hc = memory
+        return (i, ch, z - Hc @ dx_c, Hc)
 
     # --- the measurement ---------------------------------------------------------------------
-    def measure(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock):
+    def rows(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock, memory=None) -> Rows | None:
         """``(z*, H*, r)``: ``H*`` has ``n + c`` columns (the clone last), or ``n`` when
         no row is differenced; rows of channels measured at the previous epoch are
-        differenced, the others are not."""
-        self._w_b = np.array(w_b, dtype=float)
-        zhr = self.inner.measure(i, nav, w_b, clock)
-        if zhr is None:
-            self._kinds = None
+        differenced (kind ``k``, noise ``zeta``), the others are not (kind
+        ``k + STATIONARY``, the stationary noise of the AR(1) process)."""
+        inner = self.inner.rows(i, nav, w_b, clock)
+        if inner is None:
             return None
-        z, H, r = zhr
+        z, H, r = inner.z, inner.H, inner.R
         m, n = len(z), self.layout.n
-        kinds = np.asarray(self.inner.row_kinds(i, m), dtype=np.int64)
+        kinds = np.asarray(inner.kinds, dtype=np.int64)
         ch = self.inner.row_channels(i, m)
         psi_row = self.psi_by_code[kinds]
         if self.psi_channels:
@@ -176,7 +174,7 @@ class DifferencedMeasurement:
         Ha[:, :n] = H
         za = np.array(z, dtype=float)
         stationary = np.ones(m, dtype=bool)
-        prev = self._prev
+        prev = memory
         t = self.inner.times
         if prev is not None and prev[0] < i and t[i] - t[prev[0]] <= self.max_gap:
             _, ch_p, z_p, Hc_p = prev
@@ -190,10 +188,4 @@ class DifferencedMeasurement:
         ra = np.array(r, dtype=float)
         ps = psi_row[stationary]
         ra[stationary] /= 1.0 - ps * ps                                 # stationary variance of e
-        self._kinds = kinds + STATIONARY * stationary
-        return za, Ha, ra
-
-    def row_kinds(self, i: int, m: int) -> np.ndarray:
-        """Kind codes of the last :meth:`measure`: ``kind`` for differenced rows
-        (noise ``zeta``), ``kind + STATIONARY`` for undifferenced ones."""
-        return self._kinds
+        return Rows(za, Ha, ra, kinds + STATIONARY * stationary, ch)

@@ -8,6 +8,7 @@ from ..attitude import quat_to_dcm
 from ..data import GnssFixes
 from ..ins.error_model import StateLayout
 from ._loose_kernel import loose_zhr
+from .base import MeasurementModel, Rows
 from .kinds import POSITION, VELOCITY
 from ..geodesy.frames import displace
 
@@ -17,7 +18,7 @@ def antenna_lla(nav: np.ndarray, lever_b: np.ndarray) -> np.ndarray:
     return displace(nav[7:10], quat_to_dcm(nav[0:4]) @ lever_b)
 
 
-class LooseGnss:
+class LooseGnss(MeasurementModel):
     """GNSS position (and velocity, when the fixes have it) in the error-state EKF.
 
     Innovations (true minus estimated antenna quantities)::
@@ -56,23 +57,27 @@ class LooseGnss:
         self._rows = np.ascontiguousarray(np.hstack([fixes.lla, fixes.pos_sigma, vel, vsig]))
         self._n = layout.n
         self._i_bg = layout.bg.start
+        m = 6 if self.use_velocity else 3
+        self._kinds = np.array([POSITION] * 3 + [VELOCITY] * (m - 3), dtype=np.int64)
+        self._channels = self._kinds * 1000 + np.arange(m) % 3
+
+    kinds = ("position", "velocity")
 
     @property
     def times(self) -> np.ndarray:
         return self.fixes.time
 
-    def measure(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock=None):
-        """``(z, H, R)`` of fix ``i`` given the INS state ``nav`` and body rate ``w_b``.
-
-        ``R`` is returned as its diagonal (the fixes' errors are independent
-        per axis), shape ``(m,)``.
-        """
-        return loose_zhr(nav, self.lever, self._rows[i], w_b, self.use_velocity, self._n, self._i_bg)
+    def rows(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock=None, memory=None) -> Rows:
+        """The rows of fix ``i`` given the INS state ``nav`` and body rate ``w_b``:
+        three position rows (NED [m]), then with velocity three velocity rows
+        (NED [m/s]); ``R`` as its diagonal (independent axes)."""
+        z, H, r = loose_zhr(nav, self.lever, self._rows[i], w_b, self.use_velocity, self._n, self._i_bg)
+        return Rows(z, H, r, self._kinds, self._channels)
 
     def row_kinds(self, i: int, m: int) -> np.ndarray:
-        """Three position rows, then (with velocity) three velocity rows."""
-        return np.array([POSITION] * 3 + [VELOCITY] * (m - 3))
+        """Kind codes of the rows of fix ``i`` (``m`` rows)."""
+        return self._kinds[:m]
 
     def row_channels(self, i: int, m: int) -> np.ndarray:
         """A channel id per row, the same at every epoch: ``kind * 1000 + axis``."""
-        return self.row_kinds(i, m) * 1000 + np.arange(m) % 3
+        return self._channels[:m]

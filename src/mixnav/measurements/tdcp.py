@@ -40,6 +40,8 @@ epochs are at most ``1.5 / rate`` apart (a longer gap means loss of lock).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from ..attitude import skew
@@ -47,7 +49,20 @@ from ..gnss.observables import GnssObservations
 from ..ins.error_model import StateLayout
 from ._tight_kernel import antenna_frame, tdcp_rows
 from .kinds import PSEUDORANGE, TDCP
+from .base import Rows
 from .tight import TightGnss
+
+
+class TdcpMemory(NamedTuple):
+    """What a TDCP epoch remembers of the previous one (held by the engine).
+
+    ``i`` its epoch index, ``r_a`` the antenna ECEF estimate [m], ``C_ne`` ECEF -> NED
+    there, ``b`` the clock-bias estimate [m]."""
+
+    i: int
+    r_a: np.ndarray
+    C_ne: np.ndarray
+    b: float
 
 
 class TdcpGnss(TightGnss):
@@ -76,12 +91,11 @@ class TdcpGnss(TightGnss):
         self.use_pseudorange = bool(use_pseudorange)
         dt = np.diff(obs.time)
         self.max_gap = 1.5 * (float(np.median(dt)) if len(dt) else np.inf)
-        self._prev = None        # index of the epoch the clone (or remembered state) belongs to
-        self._r_prev = None      # antenna ECEF [m] estimate at that epoch
-        self._b_prev = 0.0       # clock bias estimate [m] at that epoch
-        self._C_ne_prev = None   # ECEF -> NED at that epoch
         # slots of the satellites tracked at both epoch i-1 and epoch i, once, up front
         self._pairs = [None] + [self._common_slots(i - 1, i) for i in range(1, len(obs.time))]
+
+    kinds = ("pseudorange", "tdcp")
+    remembers = True
 
     # --- the clone -----------------------------------------------------------------------
     def _antenna(self, nav):
@@ -98,21 +112,20 @@ class TdcpGnss(TightGnss):
         J[3, lay.clk] = 1.0
         return J
 
-    def remember(self, i: int, nav: np.ndarray, clock) -> None:
-        """Keep the estimates of epoch ``i`` (after its update) for the next TDCP."""
-        self._r_prev, self._C_ne_prev, _ = self._antenna(nav)
-        self._b_prev = float(clock[0])
-        self._prev = int(i)
+    def remember(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock) -> TdcpMemory:
+        """The estimates of epoch ``i`` (after its update) the next TDCP needs."""
+        r_a, C_ne, _ = self._antenna(nav)
+        return TdcpMemory(int(i), r_a, C_ne, float(clock[0]))
 
-    def correct_clone(self, dx_c: np.ndarray) -> None:
-        """Apply the clone part of a correction to the remembered estimates."""
-        self._r_prev = self._r_prev + self._C_ne_prev.T @ dx_c[0:3]
-        self._b_prev += float(dx_c[3])
+    def correct_memory(self, memory: TdcpMemory, dx_c: np.ndarray) -> TdcpMemory:
+        """The remembered estimates moved by the clone part of a correction."""
+        return memory._replace(r_a=memory.r_a + memory.C_ne.T @ dx_c[0:3], b=memory.b + float(dx_c[3]))
 
     # --- the measurement -------------------------------------------------------------------
-    def _tdcp_pairs(self, i: int):
-        """Slots (current, previous) of the satellites tracked at epochs ``prev`` and ``i``."""
-        o, p = self.obs, self._prev
+    def _tdcp_pairs(self, i: int, memory):
+        """Slots (current, previous) of the satellites tracked at the remembered epoch and ``i``."""
+        o = self.obs
+        p = None if memory is None else memory.i
         if p is None or p >= i or o.time[i] - o.time[p] > self.max_gap:
             return None
         if p == i - 1:
@@ -128,20 +141,19 @@ class TdcpGnss(TightGnss):
             return None
         return a[ia], b[ib]
 
-    def row_kinds(self, i: int, m: int) -> np.ndarray:
-        """The pseudorange rows of the epoch's satellites, then the TDCP rows."""
-        n_pr = int(self.obs.valid[i].sum()) if self.use_pseudorange else 0
-        return np.array([PSEUDORANGE] * n_pr + [TDCP] * (m - n_pr))
+    def _kinds_tdcp(self, n_pr: int, m: int) -> np.ndarray:
+        return np.array([PSEUDORANGE] * n_pr + [TDCP] * (m - n_pr), dtype=np.int64)
 
-    def measure(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock):
-        """``(z, H, R_diagonal)`` of epoch ``i``; ``H`` has ``n + 4`` columns when
-        TDCP rows are present and the model clones, else ``n``."""
+    def rows(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock, memory: TdcpMemory | None = None):
+        """The rows of epoch ``i``: pseudoranges [m], then TDCP [m]; ``H`` has ``n + 4``
+        columns when TDCP rows are present and the model clones, else ``n``.
+        ``memory`` is what :meth:`remember` returned at the previous epoch."""
         o, lay = self.obs, self.layout
         sel = o.valid[i]
         n_sat = int(sel.sum())
         if n_sat < self.min_satellites:
             return None
-        pairs = self._tdcp_pairs(i)
+        pairs = self._tdcp_pairs(i, memory)
         n_pr = n_sat if self.use_pseudorange else 0
         n_td = 0 if pairs is None else len(pairs[0])
         if n_pr + n_td == 0:
@@ -152,19 +164,21 @@ class TdcpGnss(TightGnss):
         r = np.empty(n_pr + n_td)
         r_a, C_ne, l_n = self._antenna(nav)
         if n_pr:  # the pseudorange rows of TightGnss (compiled)
-            z[:n_pr], H[:n_pr, :lay.n], r[:n_pr] = super().measure(i, nav, w_b, clock)
+            pr = super().rows(i, nav, w_b, clock)
+            z[:n_pr], H[:n_pr, :lay.n], r[:n_pr] = pr.z, pr.H, pr.R
         if n_td:
             cur, prev = pairs
+            p = memory.i
             tdcp_rows(z, H, r, n_pr, r_a, C_ne, l_n, float(clock[0]), o.sat_pos[i, cur],
-                      o.sat_pos[self._prev, prev], o.carrier[i, cur], o.carrier[self._prev, prev],
-                      self._r_prev, self._C_ne_prev, self._b_prev, o.sigma_cp, self.clone, lay.n, lay.clk)
-        return z, H, r
+                      o.sat_pos[p, prev], o.carrier[i, cur], o.carrier[p, prev],
+                      memory.r_a, memory.C_ne, memory.b, o.sigma_cp, self.clone, lay.n, lay.clk)
+        return Rows(z, H, r, self._kinds_tdcp(n_pr, n_pr + n_td))
 
-    def tdcp_rows_numpy(self, i: int, nav: np.ndarray, clock):
+    def tdcp_rows_numpy(self, i: int, nav: np.ndarray, clock, memory: TdcpMemory):
         """The TDCP rows of :meth:`measure` (``z``, ``H``, ``r``) in plain numpy (the tests'
         oracle for the compiled :func:`mixnav.measurements._tight_kernel.tdcp_rows`)."""
         o, lay = self.obs, self.layout
-        pairs = self._tdcp_pairs(i)
+        pairs = self._tdcp_pairs(i, memory)
         r_a, C_ne, l_n = self._antenna(nav)
         n_td = len(pairs[0])
         z = np.empty(n_td)
@@ -175,12 +189,12 @@ class TdcpGnss(TightGnss):
             d = o.sat_pos[i, cur] - r_a
             rho = np.linalg.norm(d, axis=1)
             u_n = (d / rho[:, None]) @ C_ne.T
-            d_c = o.sat_pos[self._prev, prev] - self._r_prev
+            d_c = o.sat_pos[memory.i, prev] - memory.r_a
             rho_c = np.linalg.norm(d_c, axis=1)
-            u_c = (d_c / rho_c[:, None]) @ self._C_ne_prev.T
+            u_c = (d_c / rho_c[:, None]) @ memory.C_ne.T
             rows = slice(0, n_td)
-            z[rows] = (o.carrier[i, cur] - o.carrier[self._prev, prev]) - \
-                (rho + clock[0] - rho_c - self._b_prev)
+            z[rows] = (o.carrier[i, cur] - o.carrier[memory.i, prev]) - \
+                (rho + clock[0] - rho_c - memory.b)
             H[rows, lay.att] = u_n @ skew(l_n)
             H[rows, lay.pos] = -u_n
             H[rows, lay.clk] = 1.0

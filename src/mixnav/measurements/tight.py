@@ -30,12 +30,13 @@ from ..errors import ConfigError
 from ..geodesy.frames import dcm_ecef_to_ned, lla_to_ecef
 from ..gnss.observables import GnssObservations
 from ..ins.error_model import StateLayout
+from .base import MeasurementModel, Rows
 from .kinds import PSEUDORANGE, RANGE_RATE
 from ._tight_kernel import tight_zhr
 
 
 
-class TightGnss:
+class TightGnss(MeasurementModel):
     """Pseudoranges (and range rates) of every valid satellite of an epoch.
 
     Parameters
@@ -64,6 +65,16 @@ class TightGnss:
         self.use_range_rate = bool(use_range_rate)
         self.min_satellites = int(min_satellites)
         self._n_valid = obs.valid.sum(axis=1)
+        self._kind_rows = {}  # rows per satellite count -> kind codes (built once per count)
+
+    kinds = ("pseudorange", "range_rate")
+
+    def _kinds_of(self, m: int) -> np.ndarray:
+        k = self._kind_rows.get(m)
+        if k is None:
+            n_pr = m // 2 if self.use_range_rate else m
+            k = self._kind_rows[m] = np.array([PSEUDORANGE] * n_pr + [RANGE_RATE] * (m - n_pr), dtype=np.int64)
+        return k
 
     @property
     def times(self) -> np.ndarray:
@@ -85,8 +96,9 @@ class TightGnss:
         rr = np.einsum("ij,ij->i", u_e, o.sat_vel[i, sel]) - u_n @ v_a_n
         return rng + clock[0], rr + clock[1], u_n, l_n, C_nb
 
-    def measure(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock):
-        """``(z, H, R_diagonal)`` of epoch ``i``, or None with too few satellites.
+    def rows(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock, memory=None) -> Rows | None:
+        """The rows of epoch ``i`` (pseudoranges [m], then range rates [m/s] of the
+        same satellites), or None with too few satellites.
 
         One compiled call (:func:`mixnav.measurements._tight_kernel.tight_zhr`);
         :meth:`measure_numpy` is the same model in numpy (the tests' oracle).
@@ -94,20 +106,21 @@ class TightGnss:
         o, lay = self.obs, self.layout
         if self._n_valid[i] < self.min_satellites or self._n_valid[i] == 0:
             return None
-        return tight_zhr(nav, self.lever, w_b, np.asarray(clock, dtype=float), o.sat_pos[i],
-                         o.sat_vel[i], o.pseudorange[i], o.range_rate[i], o.valid[i],
-                         o.sigma_pr, o.sigma_rr, self.use_range_rate, lay.n, lay.bg.start, lay.clk)
+        z, H, r = tight_zhr(nav, self.lever, w_b, np.asarray(clock, dtype=float), o.sat_pos[i],
+                            o.sat_vel[i], o.pseudorange[i], o.range_rate[i], o.valid[i],
+                            o.sigma_pr, o.sigma_rr, self.use_range_rate, lay.n, lay.bg.start, lay.clk)
+        m = len(z)
+        return Rows(z, H, r, self._kinds_of(m), self.row_channels(i, m))
 
     def row_kinds(self, i: int, m: int) -> np.ndarray:
         """Pseudorange rows, then (with ``use_range_rate``) as many range-rate rows."""
-        n_pr = m // 2 if self.use_range_rate else m
-        return np.array([PSEUDORANGE] * n_pr + [RANGE_RATE] * (m - n_pr))
+        return self._kinds_of(m)
 
     def row_channels(self, i: int, m: int) -> np.ndarray:
         """A channel id per row, the same for the same satellite and observable at
         every epoch: ``kind * 1000 + prn`` (rows in the order of :meth:`row_kinds`)."""
         prn = self.obs.prn[i, self.obs.valid[i]]
-        return self.row_kinds(i, m) * 1000 + np.concatenate([prn] * (m // len(prn)))
+        return self._kinds_of(m) * 1000 + np.concatenate([prn] * (m // len(prn)))
 
     def measure_numpy(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock):
         """:meth:`measure` in plain numpy."""

@@ -1,0 +1,126 @@
+"""The small protocols between the engine and what it drives.
+
+- :class:`MotionModel`: the nominal-state propagation (the strapdown INS,
+  :class:`mixnav.ins.motion.StrapdownMotion`; a dead-reckoning or
+  constant-velocity model later).
+- :class:`Estimator`: what carries the belief about the error state (one
+  Gaussian, a robust variant, a bank of Gaussians, an IMM of estimators). It
+  never touches the nominal state: it returns a :class:`Correction` and the
+  engine feeds it back, once.
+- The measurement model: :class:`mixnav.measurements.base.MeasurementModel`.
+
+An estimator sees a measurement epoch as an :class:`Epoch`, which gives lazy
+access to the linearised rows (``epoch.rows()``) and to the model itself
+(``epoch.model``, for ``h`` on a batch of states), so a composite estimator
+can route epochs to the children whose measurement set contains the model.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple, Protocol, runtime_checkable
+
+import numpy as np
+
+from .status import ABSURD, NEEDS_REPAIR, NON_FINITE, OK, S_NOT_POSITIVE_DEFINITE  # noqa: F401
+
+
+class Transition(NamedTuple):
+    """One propagation step of the error state, as the motion model gave it.
+
+    ``F``, ``Phi``, ``Qd`` (n, n) are views into the engine's scratch, valid
+    until the next step; ``T`` [s] the step length; ``measured`` whether a
+    measurement epoch follows at the end of the step.
+    """
+
+    F: np.ndarray
+    Phi: np.ndarray
+    Qd: np.ndarray
+    T: float
+    measured: bool
+
+
+class Correction(NamedTuple):
+    """What an estimator's update returns.
+
+    ``dx`` (n,) or (n + c,): the error estimate to feed back (error states,
+    then the clone's part), zeros when rejected; ``nis`` the normalised
+    innovation squared of the epoch (inf when rejected); ``status`` one of
+    ``OK``, ``NEEDS_REPAIR`` (applied, the covariance needs repair),
+    ``ABSURD``, ``S_NOT_POSITIVE_DEFINITE`` (rejected, counted),
+    ``NON_FINITE`` (the engine raises); ``m`` the number of rows.
+    """
+
+    dx: np.ndarray
+    nis: float
+    status: int
+    m: int
+
+
+class Epoch:
+    """One measurement epoch as an estimator sees it (lazy rows)."""
+
+    __slots__ = ("time", "index", "model", "nav", "w_b", "clock", "memory", "_rows", "_done")
+
+    def __init__(self, time, index, model, nav, w_b, clock, memory):
+        self.time = time
+        self.index = index
+        self.model = model
+        self.nav = nav
+        self.w_b = w_b
+        self.clock = clock
+        self.memory = memory
+        self._done = False
+        self._rows = None
+
+    def rows(self):
+        """The model's :class:`~mixnav.measurements.base.Rows` at the nominal state (computed
+        once), or None when it has no data."""
+        if not self._done:
+            self._rows = self.model.rows(self.index, self.nav, self.w_b, self.clock, self.memory)
+            self._done = True
+        return self._rows
+
+
+@runtime_checkable
+class MotionModel(Protocol):
+    layout: object
+
+    def initial_covariance(self, init) -> np.ndarray: ...
+
+    def propagate(self, nav, prev, sensor, dtheta, dvel, dt, P, work) -> float: ...
+
+    def inject(self, nav, sensor, clock, aux, dx) -> None: ...
+
+    def warm_up(self) -> None: ...
+
+
+@runtime_checkable
+class Estimator(Protocol):
+    """The error-state estimator protocol (see :mod:`mixnav.engine`).
+
+    ``init`` starts a run; ``kernel_covariance`` is the (n, n) array the motion
+    model's compiled step propagates in place (an estimator with one
+    covariance gives its own, others a zeroed scratch); ``predict`` sees each
+    step's transition; ``update`` one measurement epoch; ``replace_clone`` the
+    stochastic clone becoming ``J x``; ``covariance`` the (n, n) error
+    covariance for the record; ``counts`` the recoveries it counts.
+    """
+
+    counts: dict
+    kernel_covariance: np.ndarray
+
+    def init(self, motion, P0: np.ndarray, n_clone: int, rng: np.random.Generator) -> None: ...
+
+    def predict(self, step: Transition) -> None: ...
+
+    def update(self, epoch: Epoch) -> Correction | None: ...
+
+    def replace_clone(self, J: np.ndarray) -> None: ...
+
+    def covariance(self) -> np.ndarray: ...
+
+    def repair(self) -> None: ...
+
+    def diagnostics(self) -> dict: ...
+
+    def warm_up(self) -> None: ...
