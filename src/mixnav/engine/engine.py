@@ -60,6 +60,7 @@ from ..errors import ArgumentError, NumericalError
 from .protocols import Epoch, Transition
 from .result import FilterResult, History
 from .status import ABSURD, NEEDS_REPAIR, NON_FINITE, OK, S_NOT_POSITIVE_DEFINITE
+from ._record_kernel import record_epoch
 from .timing import split_at_times
 
 
@@ -69,6 +70,18 @@ def _event_index(times: np.ndarray, query: np.ndarray) -> np.ndarray:
     if query.size and np.abs(times[k] - query).max() > 1e-6:
         raise AssertionError("an event time was lost while merging")  # a bug, not bad input
     return k
+
+
+_WARM = []
+
+
+def _warm_record() -> None:
+    """Compile (or load from numba's cache) the record kernel once per process."""
+    if not _WARM:
+        z = np.zeros
+        record_epoch(0, np.eye(9), z(10), z(12), z(2), z(6), 0.01, z((1, 10)), z((1, 9)), z((1, 12)), z((1, 2)),
+                     z((1, 6, 6)), z((1, 3)))
+        _WARM.append(True)
 
 
 class Engine:
@@ -122,6 +135,7 @@ class Engine:
         motion, est, lay = self.motion, self.estimator, self.motion.layout
         motion.warm_up()
         est.warm_up()
+        _warm_record()
         for model in self.measurements:  # compile their kernels outside the timed loop too
             model.warm_up(init.nav)
         t0, t1 = init.time, float(imu.time[-1])
@@ -173,6 +187,11 @@ class Engine:
         for k in ("rejected_not_pd", "rejected_absurd", "covariance_repair"):
             self.counts.setdefault(k, 0)
         self._work = np.empty((4, lay.n, lay.n))
+        self._n_events = len(times)
+        self._ends_list = self._ends.tolist()
+        self._propagate = motion.propagate
+        self._inject = motion.inject
+        self._has_clock = lay.clk >= 0
         self._n = lay.n
         self._start_k = k0
         self._ti = 0
@@ -194,21 +213,21 @@ class Engine:
 
         Returns False when there is no event left (nothing was done)."""
         ti = self._ti
-        if ti >= len(self._times):
+        if ti >= self._n_events:
             return False
-        wall0 = _time.perf_counter()
+        perf = _time.perf_counter
+        wall0 = perf()
         t = self._times[ti]
-        imu, est, nav, sensor, clock = self._imu, self.estimator, self.nav, self.sensor, self.clock
-        end = int(self._ends[ti]) + 1
+        imu, est, nav, sensor, clock, prev = self._imu, self.estimator, self.nav, self.sensor, self.clock, self.prev
+        end = self._ends_list[ti] + 1
         s = self._start_k
         work = self._work
-        P_kernel = est.kernel_covariance
-        T = self.motion.propagate(nav, self.prev, sensor, imu.dtheta[s:end], imu.dvel[s:end], imu.dt[s:end],
-                                  P_kernel, work)
+        T = self._propagate(nav, prev, sensor, imu.dtheta[s:end], imu.dvel[s:end], imu.dt[s:end],
+                            est.kernel_covariance, work)
         events = self._events.get(ti, ())
         if T > 0.0:
             est.predict(Transition(work[0], work[1], work[2], T, bool(events)))
-        if self.motion.layout.clk >= 0:
+        if self._has_clock:
             clock[0] += clock[1] * T
         self._start_k = end
         hist = self._history
@@ -217,21 +236,14 @@ class Engine:
             dx_sum = np.zeros(self._n)
         used = False
         for (mi, i) in events:
-            tu = _time.perf_counter()
-            w_b = self.prev[0:3] / imu.dt[end - 1]
+            tu = perf()
+            w_b = prev[0:3] / imu.dt[end - 1]
             model = self.measurements[mi]
             corr = est.update(Epoch(t, i, model, nav, w_b, clock, self.memory[mi]))
             if corr is not None:
                 status = corr.status
-                if status == ABSURD:
-                    self.counts["rejected_absurd"] += 1
-                elif status == S_NOT_POSITIVE_DEFINITE:
-                    self.counts["rejected_not_pd"] += 1
-                elif status == NON_FINITE:
-                    raise NumericalError(f"the update at t = {t:.3f} s gave a non-finite "
-                                         "covariance or correction")
-                elif status == OK or status == NEEDS_REPAIR:
-                    self._feedback(corr.dx, mi)
+                if status == OK or status == NEEDS_REPAIR:
+                    self._feedback(corr.dx)
                     if status == NEEDS_REPAIR:
                         est.repair()
                     self._nis.append(corr.nis)
@@ -240,44 +252,50 @@ class Engine:
                     used = True
                     if hist is not None:
                         dx_sum += corr.dx[:self._n]
+                elif status == ABSURD:
+                    self.counts["rejected_absurd"] += 1
+                elif status == S_NOT_POSITIVE_DEFINITE:
+                    self.counts["rejected_not_pd"] += 1
+                elif status == NON_FINITE:
+                    raise NumericalError(f"the update at t = {t:.3f} s gave a non-finite "
+                                         "covariance or correction")
             if model.remembers:
                 if model is self.cloner:  # replace the clone by the current state
                     est.replace_clone(model.clone_rows(nav))
                 self.memory[mi] = model.remember(i, nav, w_b, clock)
-            self._update_time += _time.perf_counter() - tu
+            self._update_time += perf() - tu
             self._n_updates += 1
-        if not np.isfinite(nav).all():
-            raise NumericalError(f"INS state became non-finite at t = {t:.3f} s")
         if self._is_out[ti]:
-            self._record(end, used)
+            finite = self._record(end, used)
+        else:
+            finite = bool(np.isfinite(nav).all())
+        if not finite:
+            raise NumericalError(f"INS state became non-finite at t = {t:.3f} s")
         if hist is not None:
             Phi = work[1].copy() if T > 0.0 else np.eye(self._n)
             hist.append((t, Phi, P_pred, est.covariance().copy(), dx_sum, nav.copy(), used))
         self._ti = ti + 1
-        self._wall += _time.perf_counter() - wall0
+        self._wall += perf() - wall0
         return True
 
-    def _feedback(self, dx: np.ndarray, mi: int) -> None:
+    def _feedback(self, dx: np.ndarray) -> None:
         """The one place a correction reaches the nominal state (and the clone's memory)."""
-        n = self._n
-        self.motion.inject(self.nav, self.sensor, self.clock, self.aux, dx)
-        if len(dx) > n:
+        self._inject(self.nav, self.sensor, self.clock, self.aux, dx)
+        if len(dx) > self._n:
             ci = self._ci
-            self.memory[ci] = self.cloner.correct_memory(self.memory[ci], dx[n:])
+            self.memory[ci] = self.cloner.correct_memory(self.memory[ci], dx[self._n:])
 
-    def _record(self, end: int, used: bool) -> None:
+    def _record(self, end: int, used: bool) -> bool:
+        """Store the output epoch; returns whether the nominal state is finite."""
         r, io = self._rec, self._io
-        P = self.estimator.covariance()
-        r["nav"][io] = self.nav
-        r["sigma"][io] = np.sqrt(np.diag(P))
+        finite = record_epoch(io, self.estimator.covariance(), self.nav, self.sensor, self.clock, self.prev,
+                              self._imu.dt[end - 1] if end > 0 else 0.0, r["nav"], r["sigma"], r["sensor"],
+                              r["clock"], r["pv"], r["w_b"])
         r["used"][io] = used
-        r["sensor"][io] = self.sensor
-        r["clock"][io] = self.clock
-        r["pv"][io] = P[3:9, 3:9]
-        r["w_b"][io] = self.prev[0:3] / self._imu.dt[end - 1] if end > 0 else 0.0
         for name, v in self.aux.items():
             r["aux"][name][io] = v
         self._io = io + 1
+        return finite
 
     # --- the result -------------------------------------------------------------------------
     def result(self) -> FilterResult:

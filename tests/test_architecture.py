@@ -1,0 +1,133 @@
+"""The import structure ARCHITECTURE.md draws: floors, no upward import, no cycle.
+
+Every import counts, the ones inside functions too (a lazy import is still a
+dependency). A package's floor is in FLOORS; a module may import its own floor
+or any floor below, never one above.
+"""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parents[1] / "src" / "mixnav"
+
+#: floor of each top-level module or package of mixnav (ARCHITECTURE.md, "Floors")
+FLOORS = {
+    "errors": 0, "units": 0, "linalg": 0, "_version": 0,
+    "attitude": 1, "geodesy": 1, "data": 2,
+    "ins": 3, "gnss": 3, "noise": 3, "io": 3, "alignment": 4,
+    "measurements": 4,
+    "engine": 5,
+    "filters": 6,
+    "config": 7,
+    "sim": 8,  # simulate(scenario): a scenario file's run; its parts (trajectory, gnss, rng) take plain arguments
+    "experiment": 9,
+    "api": 10, "cli": 10, "__init__": 10, "__main__": 10,
+}
+#: the engine's status codes sit below the kernels that return them
+MODULE_FLOORS = {"mixnav.engine.status": 0}
+
+
+def _module_name(path: Path) -> str:
+    rel = path.relative_to(SRC.parent).with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def _imports(path: Path):
+    """Absolute names of the mixnav modules ``path`` imports (at any depth of the code)."""
+    mod = _module_name(path)
+    pkg = mod if path.name == "__init__.py" else mod.rpartition(".")[0]
+    tree = ast.parse(path.read_text(), str(path))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.startswith("mixnav"):
+                    yield a.name, node.lineno
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = pkg.split(".")
+                base = base[:len(base) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            if target.startswith("mixnav"):
+                for a in node.names:  # "from .x import y" may import the module x.y
+                    sub = f"{target}.{a.name}"
+                    yield (sub if _exists(sub) else target), node.lineno
+
+
+def _exists(name: str) -> bool:
+    p = SRC.parent.joinpath(*name.split("."))
+    return p.with_suffix(".py").exists() or (p / "__init__.py").exists()
+
+
+def _floor(module: str) -> int:
+    if module in MODULE_FLOORS:
+        return MODULE_FLOORS[module]
+    parts = module.split(".")
+    top = parts[1] if len(parts) > 1 else "__init__"
+    return FLOORS[top]
+
+
+def _graph():
+    edges = {}
+    for path in sorted(SRC.rglob("*.py")):
+        mod = _module_name(path)
+        edges[mod] = [(t, line) for t, line in _imports(path) if t != mod]
+    return edges
+
+
+def test_every_package_has_a_floor():
+    missing = sorted({m.split(".")[1] for m in _graph() if "." in m and m.split(".")[1] not in FLOORS})
+    assert not missing, f"add these to FLOORS (and to ARCHITECTURE.md): {missing}"
+
+
+def test_no_module_imports_a_higher_floor():
+    bad = []
+    for mod, targets in _graph().items():
+        if mod == "mixnav":
+            continue
+        for t, line in targets:
+            if t != "mixnav" and _floor(t) > _floor(mod):
+                bad.append(f"{mod}:{line} imports {t} (floor {_floor(mod)} -> {_floor(t)})")
+    assert not bad, "upward imports:\n" + "\n".join(bad)
+
+
+def test_no_import_cycles():
+    g = {m: {t for t, _ in ts if t != "mixnav"} for m, ts in _graph().items()}
+    # a package's __init__ that re-exports its modules is not a cycle with them
+    # when the modules import siblings directly; cycles are searched among modules.
+    state, stack, cycles = {}, [], []
+
+    def visit(u):
+        state[u] = 1
+        stack.append(u)
+        for v in sorted(g.get(u, ())):
+            if v.startswith(u + ".") or u.startswith(v + ".") and _is_package(v):
+                continue  # a package and its own submodules
+            if state.get(v) == 1:
+                cycles.append(stack[stack.index(v):] + [v])
+            elif v in g and not state.get(v):
+                visit(v)
+        stack.pop()
+        state[u] = 2
+
+    for m in sorted(g):
+        if not state.get(m):
+            visit(m)
+    assert not cycles, "import cycles:\n" + "\n".join(" -> ".join(c) for c in cycles)
+
+
+def _is_package(name: str) -> bool:
+    return (SRC.parent.joinpath(*name.split(".")) / "__init__.py").exists()
+
+
+@pytest.mark.parametrize("probe", ["mixnav.filters.ekf", "mixnav.engine.engine"])
+def test_the_graph_reader_sees_imports(probe):
+    """The test reads real edges (so an empty graph cannot pass it)."""
+    g = _graph()
+    assert probe in g and len(g[probe]) >= 3
