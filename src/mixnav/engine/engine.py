@@ -57,6 +57,7 @@ import numpy as np
 
 from ..data import ImuData, InitialState
 from ..errors import ArgumentError, NumericalError
+from ..measurements.kinds import kind_code
 from .protocols import Epoch, Transition
 from .result import FilterResult, History
 from .status import ABSURD, NEEDS_REPAIR, NON_FINITE, OK, S_NOT_POSITIVE_DEFINITE
@@ -114,6 +115,8 @@ class Engine:
                 raise ArgumentError(f"measurement {mi} ({type(m).__name__}) is not a measurement model: it "
                                     "needs times and rows() (mixnav.measurements.base.MeasurementModel)",
                                     argument=f"measurements[{mi}]")
+            for name in getattr(m, "kinds", ()):  # an unknown kind is an error, never a default
+                kind_code(name, argument=f"measurements[{mi}].kinds")
         cloners = [m for m in self.measurements if getattr(m, "clone_size", 0) > 0]
         if len(cloners) > 1:
             raise ArgumentError("at most one measurement model per filter may use a stochastic clone",
@@ -137,7 +140,7 @@ class Engine:
         est.warm_up()
         _warm_record()
         for model in self.measurements:  # compile their kernels outside the timed loop too
-            model.warm_up(init.nav)
+            model.warm_up(init.nav, {name: np.zeros(sl.stop - sl.start) for name, sl in lay.aux})
         t0, t1 = init.time, float(imu.time[-1])
         if t0 < imu.start_time - 1e-9:
             raise ArgumentError(f"initial time {t0} is before the first IMU sample {imu.start_time}",
@@ -239,7 +242,7 @@ class Engine:
             tu = perf()
             w_b = prev[0:3] / imu.dt[end - 1]
             model = self.measurements[mi]
-            corr = est.update(Epoch(t, i, model, nav, w_b, clock, self.memory[mi]))
+            corr = est.update(Epoch(t, i, model, nav, w_b, clock, self.memory[mi], self.aux))
             if corr is not None:
                 status = corr.status
                 if status == OK or status == NEEDS_REPAIR:

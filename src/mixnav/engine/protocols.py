@@ -59,9 +59,9 @@ class Correction(NamedTuple):
 class Epoch:
     """One measurement epoch as an estimator sees it (lazy rows)."""
 
-    __slots__ = ("time", "index", "model", "nav", "w_b", "clock", "memory", "_rows", "_done")
+    __slots__ = ("time", "index", "model", "nav", "w_b", "clock", "memory", "aux", "_rows", "_done")
 
-    def __init__(self, time, index, model, nav, w_b, clock, memory):
+    def __init__(self, time, index, model, nav, w_b, clock, memory, aux=None):
         self.time = time
         self.index = index
         self.model = model
@@ -69,6 +69,7 @@ class Epoch:
         self.w_b = w_b
         self.clock = clock
         self.memory = memory
+        self.aux = aux
         self._done = False
         self._rows = None
 
@@ -76,7 +77,10 @@ class Epoch:
         """The model's :class:`~mixnav.measurements.base.Rows` at the nominal state (computed
         once), or None when it has no data."""
         if not self._done:
-            self._rows = self.model.rows(self.index, self.nav, self.w_b, self.clock, self.memory)
+            if self.aux:
+                self._rows = self.model.rows(self.index, self.nav, self.w_b, self.clock, self.memory, aux=self.aux)
+            else:
+                self._rows = self.model.rows(self.index, self.nav, self.w_b, self.clock, self.memory)
             self._done = True
         return self._rows
 

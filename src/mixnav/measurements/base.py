@@ -76,7 +76,8 @@ class MeasurementModel:
         """Epoch times [s], (M,), increasing."""
         raise NotImplementedError
 
-    def rows(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock: np.ndarray, memory=None) -> Rows | None:
+    def rows(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock: np.ndarray, memory=None,
+             aux: dict | None = None) -> Rows | None:
         """The rows of epoch ``i``.
 
         Parameters
@@ -91,6 +92,9 @@ class MeasurementModel:
             Receiver clock bias [m] and drift [m/s] estimates (zeros without a clock).
         memory : object or None
             What :meth:`remember` returned at this model's previous epoch.
+        aux : dict, optional
+            Estimates of the layout's auxiliary blocks (name -> ndarray), passed
+            only when the layout has any (e.g. an odometer scale factor).
         """
         raise NotImplementedError
 
@@ -116,7 +120,10 @@ class MeasurementModel:
         the ensemble estimators (UKF, particle filters); not yet implemented."""
         raise NotImplementedError(f"{type(self).__name__} does not evaluate h on a batch of states yet")
 
-    def warm_up(self, nav: np.ndarray) -> None:
+    def warm_up(self, nav: np.ndarray, aux: dict | None = None) -> None:
         """Compile (or load from numba's cache) the model's kernels outside the timed loop."""
         if len(self.times):
-            self.rows(0, np.array(nav, dtype=float), np.zeros(3), np.zeros(2), None)
+            if aux:
+                self.rows(0, np.array(nav, dtype=float), np.zeros(3), np.zeros(2), None, aux=aux)
+            else:
+                self.rows(0, np.array(nav, dtype=float), np.zeros(3), np.zeros(2), None)
