@@ -194,6 +194,7 @@ class Engine:
         self._ends_list = self._ends.tolist()
         self._propagate = motion.propagate
         self._inject = motion.inject
+        self._recentre = est.recentre if getattr(est, "carry_mean", False) else None
         self._has_clock = lay.clk >= 0
         self._n = lay.n
         self._start_k = k0
@@ -282,8 +283,11 @@ class Engine:
         return True
 
     def _feedback(self, dx: np.ndarray) -> None:
-        """The one place a correction reaches the nominal state (and the clone's memory)."""
+        """The one place a correction reaches the nominal state (and the clone's memory);
+        an estimator that carries a mean is re-centred on the moved nominal."""
         self._inject(self.nav, self.sensor, self.clock, self.aux, dx)
+        if self._recentre is not None:
+            self._recentre(dx)
         if len(dx) > self._n:
             ci = self._ci
             self.memory[ci] = self.cloner.correct_memory(self.memory[ci], dx[self._n:])

@@ -108,6 +108,12 @@ class Estimator(Protocol):
     step's transition; ``update`` one measurement epoch; ``replace_clone`` the
     stochastic clone becoming ``J x``; ``covariance`` the (n, n) error
     covariance for the record; ``counts`` the recoveries it counts.
+
+    Optional: an estimator with ``carry_mean = True`` keeps an error-state mean
+    and has ``recentre(dx)``, which the engine calls after feeding ``dx`` back.
+    A composite (an IMM) holds such children, routes each epoch to those whose
+    measurement set holds ``epoch.model``, predicts them all with the one
+    transition, and re-centres them all on the combined correction.
     """
 
     counts: dict

@@ -25,6 +25,7 @@ from ..engine.result import FilterResult  # noqa: F401  (re-exported)
 from ..errors import ArgumentError, NumericalError
 from ..ins.error_model import ClockModel, StateLayout
 from ..ins.imu_model import ImuErrorModel
+from ..ins._error_kernels import covariance_predict
 from ..ins.motion import StrapdownMotion
 from ._ekf_kernels import NEEDS_REPAIR, OK, kalman_correct
 
@@ -47,12 +48,20 @@ class KalmanEstimator:
     absurd_sigma : float
         Innovations beyond this many predicted standard deviations are
         rejected as blunders (counted as ``rejected_absurd``).
+    carry_mean : bool
+        Carry an error-state mean ``x`` instead of assuming it zero (closed loop).
+        A composite estimator (an IMM) needs it for its children: each child
+        predicts its own ``x`` and ``P`` (``Phi x``, ``Phi P Phi^T + Qd``), its
+        correction is its posterior mean, and after the composite's combined
+        ``dx`` is fed back it calls :meth:`recentre` (``x -= dx``). Alone, with
+        the engine, it gives the closed-loop filter's numbers.
     """
 
-    def __init__(self, absurd_sigma: float = 1e4):
+    def __init__(self, absurd_sigma: float = 1e4, carry_mean: bool = False):
         if not absurd_sigma > 0:
             raise ArgumentError(f"must be positive, got {absurd_sigma}", argument="absurd_sigma")
         self.absurd_sigma = float(absurd_sigma)
+        self.carry_mean = bool(carry_mean)
         self.counts = {"rejected_not_pd": 0, "rejected_absurd": 0, "covariance_repair": 0}
 
     # --- the estimator protocol --------------------------------------------------------------
@@ -66,16 +75,32 @@ class KalmanEstimator:
         self.have_clone = False
         self.rng = rng
         self.counts = {"rejected_not_pd": 0, "rejected_absurd": 0, "covariance_repair": 0}
+        if self.carry_mean:
+            if n_clone:
+                raise ArgumentError("a mean-carrying estimator does not carry a stochastic clone",
+                                    argument="carry_mean")
+            self.x = np.zeros(n)
+            self._scratch = np.zeros((n, n))
+            self._tmp = np.empty((n, n))
 
     @property
     def kernel_covariance(self) -> np.ndarray:
-        """``P`` itself: the motion model's compiled step propagates it in place."""
-        return self.P
+        """``P`` itself: the motion model's compiled step propagates it in place (a
+        mean-carrying child propagates its own: a zeroed scratch then)."""
+        return self._scratch if self.carry_mean else self.P
 
     def predict(self, step: Transition) -> None:
         """``P`` was propagated by the motion model's kernel; move the clone's cross block."""
+        if self.carry_mean:
+            self._scratch[:, :] = 0.0
+            covariance_predict(self.P, step.Phi, step.Qd, self._tmp)
+            self.x = step.Phi @ self.x
         if self.have_clone:
             self.P_xc = step.Phi @ self.P_xc
+
+    def recentre(self, dx: np.ndarray) -> None:
+        """The nominal moved by ``dx`` (fed back by the engine): ``x -= dx``."""
+        self.x = self.x - dx[:self.n]
 
     def correct(self, P, z, H, r):
         """One gated Kalman correction: ``(P_post, dx, nis, status)`` (no feedback)."""
@@ -105,6 +130,12 @@ class KalmanEstimator:
         if H.shape[1] != n:
             raise NumericalError("a measurement model returned H for a clone the "
                                  "filter does not carry")  # a bug, not bad input
+        if self.carry_mean:  # the innovation about the mean, and the posterior mean
+            P_new, dx, nis, status = self.correct(self.P, z - H @ self.x, H, r)
+            if status == OK or status == NEEDS_REPAIR:
+                self.P = P_new
+                self.x = self.x + dx
+            return Correction(self.x.copy(), nis, status, len(z))
         P_new, dx, nis, status = self.correct(self.P, z, H, r)
         if status == OK or status == NEEDS_REPAIR:
             self.P = P_new
