@@ -30,7 +30,7 @@ import numpy as np
 from mixnav.config import load_scenario
 from mixnav.experiment.montecarlo import run_experiment, write_experiment_outputs
 from mixnav.experiment.run import solution_table
-from mixnav.filters import registry
+from mixnav.experiment import methods as registry
 from mixnav.ins.error_model import ClockModel
 from mixnav.sim.scenario import simulate, truth_and_ideal_imu
 

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from mixnav.config.loader import load_scenario
-from mixnav.filters import registry
+from mixnav.experiment import methods as registry
 from mixnav.filters.colored import ColoredMixtureEkf
 from mixnav.ins.error_model import ClockModel
 from mixnav.measurements.differenced import DifferencedMeasurement

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from mixnav.config.loader import load_scenario
-from mixnav.filters import registry
+from mixnav.experiment import methods as registry
 from mixnav.filters._bank_kernels import bank_epoch
 from mixnav.filters.gmekf import BankMixtures, GaussianMixtureEkf, StandardMixture, _warm_bank
 from mixnav.filters.online import OnlineSettings

@@ -10,7 +10,7 @@ import pytest
 
 from mixnav.config.loader import load_scenario, resolve
 from mixnav.errors import ArgumentError, ConfigError
-from mixnav.filters import registry
+from mixnav.experiment import methods as registry
 from mixnav.filters.colored import N_W, ColoredMixtureEkf, colored_split, fit_coefficient
 from mixnav.filters.gmekf import BankMixtures, GaussianMixtureEkf, StandardMixture
 from mixnav.ins.error_model import ClockModel

@@ -10,7 +10,7 @@ from scipy.stats import norm
 
 from mixnav.config.loader import load_scenario, resolve
 from mixnav.errors import ConfigError
-from mixnav.filters import registry
+from mixnav.experiment import methods as registry
 from mixnav.filters._bank_kernels import bank_epoch, bank_moments, bank_reduce, bank_update
 from mixnav.filters._ekf_kernels import ekf_correct_dx
 from mixnav.filters.gmekf import BankMixtures, GaussianMixtureEkf, StandardMixture, learn_mixture

@@ -13,7 +13,7 @@ from mixnav.config.loader import load_scenario, resolve
 from mixnav.errors import ConfigError
 from mixnav.experiment import run as runmod
 from mixnav.experiment.run import solution_table
-from mixnav.filters import registry
+from mixnav.experiment import methods as registry
 from mixnav.filters._bank_kernels import bank_epoch, bank_epoch_collect, bank_moments
 from mixnav.filters.gmekf import BankMixtures, GaussianMixtureEkf, StandardMixture
 from mixnav.filters.online import OnlineMixtureLearner, OnlineSettings

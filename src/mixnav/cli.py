@@ -39,7 +39,7 @@ def main(version: bool = typer.Option(False, "--version", callback=_version, is_
 def scenarios():
     """List the scenarios shipped with mixnav."""
     from .config import list_datasets, list_scenarios
-    from .filters.registry import METHODS
+    from .experiment.methods import ESTIMATORS, METHODS
 
     t = Table("scenario", "description", title="shipped scenarios (mixnav run)")
     for name, desc in list_scenarios().items():
@@ -53,6 +53,10 @@ def scenarios():
     for name, desc in METHODS.items():
         m.add_row(name, desc)
     out.print(m)
+    e = Table("estimator", "what it is", title="estimators (estimator = ..., on every method type)")
+    for name, desc in ESTIMATORS.items():
+        e.add_row(name, desc)
+    out.print(e)
 
 
 @app.command()

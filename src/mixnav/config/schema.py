@@ -8,10 +8,10 @@ validation, so nothing downstream parses units again.
 
 from __future__ import annotations
 
-from typing import Annotated, Literal, Union
+from typing import Annotated, Any, Literal, Union
 
 import numpy as np
-from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, model_validator
+from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, field_validator, model_validator
 
 from .. import units as u
 
@@ -404,10 +404,13 @@ class MixtureConfig(Strict):
 class MethodConfig(Strict):
     name: str
     type: Literal["loose-ekf", "tight-ekf", "tdcp-ekf"]
-    #: "ekf" (M1), "robust-adaptive" (M2), "gaussian-mixture" (M3; M4/M5 with mixture.learn)
-    estimator: Literal["ekf", "robust-adaptive", "gaussian-mixture"] = "ekf"
+    #: a name of mixnav.filters.catalog.ESTIMATORS: "ekf" (M1), "robust-adaptive" (M2),
+    #: "gaussian-mixture" (M3; M4/M5 with mixture.learn), "sage-husa", ...
+    estimator: str = "ekf"
     robust: RobustConfig | None = None
     mixture: MixtureConfig | None = None
+    #: keyword arguments of an estimator without a table of its own (e.g. sage-husa's fading)
+    options: dict[str, Any] = Field(default_factory=dict)
     states: Literal[15, 17, 21, 23] = 15
     covariance_interval: Duration = 1.0
     imu_grade: str | None = None
@@ -417,8 +420,19 @@ class MethodConfig(Strict):
     #: clock) or "known" (the shortcut that takes the previous estimate as exact)
     tdcp_previous: Literal["clone", "known"] = "clone"
 
+    @field_validator("estimator")
+    @classmethod
+    def _known_estimator(cls, v):
+        from ..filters.catalog import ESTIMATORS
+        if v not in ESTIMATORS:
+            raise ValueError(f"unknown estimator '{v}' (known: {', '.join(ESTIMATORS)})")
+        return v
+
     @model_validator(mode="after")
     def _estimator_tables(self):
+        if self.options and self.estimator in ("robust-adaptive", "gaussian-mixture"):
+            raise ValueError(f"estimator \"{self.estimator}\" takes its settings from its own table "
+                             f"([{'robust' if self.estimator == 'robust-adaptive' else 'mixture'}]), not [options]")
         if self.robust is not None and self.estimator != "robust-adaptive":
             raise ValueError("a [robust] table needs estimator = \"robust-adaptive\"")
         if self.mixture is not None and self.estimator != "gaussian-mixture":

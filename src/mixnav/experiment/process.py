@@ -27,7 +27,7 @@ from ..config.dataset_schema import Dataset
 from ..config.loader import corruption, imu_model
 from ..data import GnssFixes, ImuData, Trajectory
 from ..errors import ConfigError, DataError
-from ..filters import registry
+from . import methods
 from ..filters.ekf import FilterResult, InitialState
 from ..ins.mechanization import nav_vector
 from ..io import drive0708, generic_csv, kfgins, psins, rtklib
@@ -203,7 +203,7 @@ def process(ds: Dataset, source: str, data: str | None = None):
     t_filt = _time.perf_counter()
     model = imu_model(ds.imu.grade, ds.imu.errors, source, "imu.errors", "imu.grade")
     for i, m in enumerate(ds.methods):
-        filt, meas = registry.build(m, model, fixes, lever, source, i)
+        filt, meas = methods.build(m, model, fixes, lever, source, i)
         results[m.name] = filt.run(imu, init, meas, output_times=out_times)
     filter_time = _time.perf_counter() - t_filt
     return ProcessOutput(ds, source, folder, t0, imu, fixes, all_fixes, reference, lever, results, init,

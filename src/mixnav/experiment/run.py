@@ -22,7 +22,7 @@ from .. import __version__
 from ..attitude import attitude_error, quat_to_dcm, quat_to_euler, wrap_angle
 from ..config.schema import Scenario
 from ..data import Trajectory
-from ..filters import registry
+from . import methods
 from ..filters.ekf import FilterResult
 from ..geodesy.frames import ned_displacement
 from ..measurements.loose import antenna_lla
@@ -56,7 +56,7 @@ def run_scenario(sc: Scenario, source: str | None = None, seed: int | None = Non
         clock = ClockModel(q_bias=s.clock_bias_noise ** 2, q_drift=s.clock_drift_noise ** 2)
     training = _training(sc, seed, source)
     for i, m in enumerate(sc.methods):
-        filt, meas = registry.build(m, sim.imu_model, sim.fixes, lever, source, i,
+        filt, meas = methods.build(m, sim.imu_model, sim.fixes, lever, source, i,
                                     observations=sim.observations, clock=clock, training=training,
                                     seed=seed)
         results[m.name] = filt.run(sim.imu, sim.init, meas)

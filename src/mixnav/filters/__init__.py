@@ -1,7 +1,11 @@
-"""Filters: the Kalman kernel, IMU/event time alignment, and the filter engines.
+"""Estimators on the engine, and the filters users run.
 
-``kalman``    pure compiled Kalman correction (Joseph form, Cholesky)
-``timing``    split IMU increments at measurement times
-``ekf``       the closed-loop error-state EKF engine (M1)
-``registry``  method names usable in scenario files
+``kalman``       pure compiled Kalman correction (Joseph form, Cholesky)
+``ekf``          M1: ``KalmanEstimator`` and the ``ErrorStateEkf`` filter
+``robust``       M2: IGG-III weights + Yang's adaptive factor
+``gmekf``        M3-M5: the bank of Gaussian components (``BankEstimator``)
+``colored``      M6: the bank with AR(1) process-noise states and differencing
+``online``       M4 online re-learning of the measurement mixtures
+``sage_husa``    Sage-Husa adaptive EKF (a variance scale per observable kind)
+``catalog``      estimator names usable in scenario files (one line each, imported lazily)
 """

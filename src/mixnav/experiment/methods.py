@@ -1,38 +1,41 @@
-"""Method names usable in scenario and dataset files, and how each is built."""
+"""Building filters and measurement models from a method of a scenario or dataset file.
+
+The configuration stops here: below this module every object takes plain,
+validated Python arguments and names the *argument* that is wrong
+(:class:`mixnav.errors.ArgumentError`); :func:`build` maps those to the
+config file's keys (:func:`mixnav.config.errors.config_keys`). Estimators are
+found by name in :mod:`mixnav.filters.catalog`; one without a dedicated table
+(``robust``, ``mixture``) gets the method's ``[methods.options]`` as its
+keyword arguments.
+"""
 
 from __future__ import annotations
 
+import inspect
+
 import numpy as np
 
+from ..config.errors import config_keys
 from ..config.loader import imu_model
 from ..config.schema import MethodConfig, MixtureConfig, RobustConfig
 from ..errors import ConfigError
+from ..filters.catalog import ESTIMATORS as _CATALOG
+from ..filters.catalog import METHOD_TYPES, filter_class
 from ..ins.error_model import ClockModel, get_layout
 from ..ins.imu_model import ImuErrorModel
 from ..measurements.loose import LooseGnss
-from ..measurements.tdcp import TdcpGnss
-from ..measurements.tight import TightGnss
-from .ekf import ErrorStateEkf
-from .gmekf import GaussianMixtureEkf, learn_mixtures, mixtures_from_config
-from .online import OnlineSettings
-from .robust import RobustAdaptiveEkf
 
 #: Method type -> one-line description (listed by ``mixnav scenarios``).
-METHODS = {
-    "loose-ekf": "M1 closed-loop error-state EKF, GNSS position/velocity (loose coupling)",
-    "tight-ekf": "M1 closed-loop error-state EKF, pseudorange + Doppler (tight coupling, 17 states)",
-    "tdcp-ekf": "M1 closed-loop error-state EKF, pseudorange + TDCP (P1 eqs. 1-4; stochastic cloning "
-                "of the previous antenna position and clock)",
-}
+METHODS = {k: "M1 closed-loop error-state EKF, " + v for k, v in METHOD_TYPES.items()}
 
 #: Estimators (``estimator = ...`` of a method) -> description; each runs on every method type.
-ESTIMATORS = {
-    "ekf": "M1 extended Kalman filter (the default)",
-    "robust-adaptive": "M2 robust adaptive EKF: IGG-III equivalent weights + Yang's adaptive factor",
-    "gaussian-mixture": "M3 Gaussian-mixture EKF (bank of components); M4/M5 when [mixture.learn] "
-                        "uses vb/gibbs; M4 re-learned online with mixture.learn.online; M6 (coloured "
-                        "noise, paper P2) with [mixture.colored]",
-}
+ESTIMATORS = {k: v[1] for k, v in _CATALOG.items()}
+
+#: Arguments of the built-in estimators -> the method's keys where they differ.
+_RENAME = {"k0": "robust.k0", "k1": "robust.k1", "c": "robust.c", "max_components": "mixture.max_components",
+           "psi": "mixture.colored.measurement", "psi_channels": "mixture.colored.channels",
+           "psi_process": "mixture.colored.process", "psi_measurement": "mixture.colored.measurement",
+           "process_interval": "mixture.colored.process_interval", "kinds": "mixture.learn.observables"}
 
 
 def build(method: MethodConfig, default_imu: ImuErrorModel, fixes, lever_arm, source=None, index: int = 0,
@@ -46,6 +49,11 @@ def build(method: MethodConfig, default_imu: ImuErrorModel, fixes, lever_arm, so
     the receiver ``clock`` model. A Gaussian-mixture method that learns its
     mixtures needs ``training`` residuals (:func:`mixnav.sim.training.training_residuals`).
     """
+    with config_keys(f"methods[{index}]", source, _RENAME):
+        return _build(method, default_imu, fixes, lever_arm, source, index, observations, clock, training, seed)
+
+
+def _build(method, default_imu, fixes, lever_arm, source, index, observations, clock, training, seed):
     layout = get_layout(method.states)
     model = default_imu
     if method.imu_grade is not None or method.imu_errors is not None:
@@ -59,6 +67,8 @@ def build(method: MethodConfig, default_imu: ImuErrorModel, fixes, lever_arm, so
             raise ConfigError(f"method '{method.name}' is tightly coupled but there are no raw "
                               "GNSS observations", file=source, key=f"methods[{index}].type")
         clock = clock or ClockModel()
+        from ..measurements.tdcp import TdcpGnss
+        from ..measurements.tight import TightGnss
         if method.type == "tdcp-ekf":
             meas = [TdcpGnss(observations, lever_arm, layout, clone=method.tdcp_previous == "clone")]
         else:
@@ -68,8 +78,10 @@ def build(method: MethodConfig, default_imu: ImuErrorModel, fixes, lever_arm, so
     common = dict(covariance_interval=method.covariance_interval, clock=clock)
     if method.estimator == "robust-adaptive":
         rc = method.robust or RobustConfig()
-        return RobustAdaptiveEkf(layout, model, k0=rc.k0, k1=rc.k1, c=rc.c, **common), meas
+        return filter_class("robust-adaptive")(layout, model, k0=rc.k0, k1=rc.k1, c=rc.c, **common), meas
     if method.estimator == "gaussian-mixture":
+        from ..filters.gmekf import GaussianMixtureEkf, learn_mixtures, mixtures_from_config
+        from ..filters.online import OnlineSettings
         mc = method.mixture or MixtureConfig()
         learning_time = 0.0
         if mc.colored is not None:
@@ -89,7 +101,18 @@ def build(method: MethodConfig, default_imu: ImuErrorModel, fixes, lever_arm, so
             mixtures = mixtures_from_config(mc)
         return GaussianMixtureEkf(layout, model, mixtures, max_components=mc.max_components,
                                   learning_time_s=learning_time, online=online, **common), meas
-    return ErrorStateEkf(layout, model, **common), meas
+    cls = filter_class(method.estimator)
+    options = dict(method.options or {})
+    params = inspect.signature(cls).parameters
+    named = {k for k, p in params.items() if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
+    reserved = {"layout", "imu_model", "covariance_interval", "clock"}
+    for k in options:
+        if k not in named or k in reserved:
+            known = sorted(named - reserved)
+            raise ConfigError(f"estimator '{method.estimator}' has no option '{k}' (its options: "
+                              f"{', '.join(known) or 'none'})", file=source, key=f"methods[{index}].options.{k}")
+    with config_keys(f"methods[{index}].options", source):
+        return cls(layout, model, **common, **options), meas
 
 
 def _colored(method, mc, layout, model, meas, training, source, index, common, seed):
@@ -102,7 +125,8 @@ def _colored(method, mc, layout, model, meas, training, source, index, common, s
     import time
     from ..measurements.differenced import DifferencedMeasurement
     from ..noise.ar import whiten_ar1
-    from .colored import ColoredMixtureEkf, fit_coefficient
+    from ..filters.colored import ColoredMixtureEkf, fit_coefficient
+    from ..filters.gmekf import learn_mixtures, mixtures_from_config
     cc = mc.colored
     key = f"methods[{index}].mixture.colored"
     if mc.learn is not None and mc.learn.online is not None:

@@ -1,0 +1,46 @@
+"""The estimators a scenario or dataset file can name (``estimator = "..."``).
+
+One line per estimator: its name, where its filter class lives (imported only
+when a method uses it, so listing the catalogue imports no kernel) and what it
+is. Adding an estimator is one new file and one line here; the experiment
+layer (:mod:`mixnav.experiment.methods`) builds it from a method's
+``[methods.options]`` table, which are its keyword arguments.
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+
+from ..errors import ArgumentError
+
+#: name -> ("module:FilterClass", one-line description)
+ESTIMATORS = {
+    "ekf": ("mixnav.filters.ekf:ErrorStateEkf", "M1 extended Kalman filter (the default)"),
+    "robust-adaptive": ("mixnav.filters.robust:RobustAdaptiveEkf",
+                        "M2 robust adaptive EKF: IGG-III equivalent weights + Yang's adaptive factor"),
+    "gaussian-mixture": ("mixnav.filters.gmekf:GaussianMixtureEkf",
+                         "M3 Gaussian-mixture EKF (bank of components); M4/M5 when [mixture.learn] uses vb/gibbs; "
+                         "M4 re-learned online with mixture.learn.online; M6 (coloured noise, paper P2) with "
+                         "[mixture.colored]"),
+    "sage-husa": ("mixnav.filters.sage_husa:SageHusaEkf",
+                  "Sage-Husa adaptive EKF: a measurement-noise variance scale per observable kind, learned "
+                  "online with a fading memory (options: fading, scale0)"),
+}
+
+#: measurement types (``type = "..."``) -> one-line description
+METHOD_TYPES = {
+    "loose-ekf": "GNSS position/velocity (loose coupling)",
+    "tight-ekf": "pseudorange + Doppler (tight coupling, 17 states)",
+    "tdcp-ekf": "pseudorange + TDCP (P1 eqs. 1-4; stochastic cloning of the previous antenna position and clock)",
+}
+
+
+def filter_class(name: str):
+    """The filter class registered as ``name`` (imported now)."""
+    try:
+        target = ESTIMATORS[name][0]
+    except KeyError:
+        raise ArgumentError(f"unknown estimator '{name}' (known: {', '.join(ESTIMATORS)})",
+                            argument="estimator") from None
+    module, _, attr = target.partition(":")
+    return getattr(import_module(module), attr)
