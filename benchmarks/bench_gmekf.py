@@ -32,8 +32,9 @@ import numpy as np
 from mixnav.config.loader import load_scenario
 from mixnav.experiment import methods as registry
 from mixnav.filters._bank_kernels import bank_epoch
+from mixnav.measurements.kinds import KINDS
 from mixnav.filters.gmekf import BankMixtures, GaussianMixtureEkf, StandardMixture, _warm_bank
-from mixnav.filters.online import OnlineSettings
+from mixnav.noise.learn.online import OnlineSettings
 from mixnav.ins.error_model import ClockModel
 from mixnav.sim.scenario import simulate
 
@@ -133,7 +134,7 @@ def kernel_vs_numpy(N=16, m=18, na=21, n=17, reps=300):
     H = rng.standard_normal((m, na)) * (rng.random((m, na)) < 0.5)
     z, r = rng.standard_normal(m), np.ones(m)
     mix = StandardMixture((0.1, 0.9), (0.0, 0.0), (1.0, 1.0 / 3.0))
-    tb = BankMixtures({"pseudorange": mix}).tables()
+    tb = BankMixtures({"pseudorange": mix}).tables(KINDS)
     kinds = np.zeros(m, dtype=np.int64)
     _warm_bank()
     bank_epoch(lw, X, P, z, H, r, kinds, *tb, 1e4, N, n)
@@ -172,7 +173,7 @@ def main():
     for name, t in rows.items():
         lines.append(f"| {name} | {t['epoch_time_mean_us']:.0f} | {t['update_time_mean_us']:.0f} | "
                      f"{t['epoch_time_mean_us'] / ekf:.2f} |")
-    lines += ["", "Online re-learning (M4 beyond P1, `mixnav.filters.online`; 2 observable kinds, windows of "
+    lines += ["", "Online re-learning (M4 beyond P1, `mixnav.noise.learn.online`; 2 observable kinds, windows of "
               "600 rows, the first refit once a window is full, ~67 s; refits in the last 233 of the 300 "
               "epochs):", "",
               "| filter | refits | refit time total [ms] | per refit [ms] | refit time per epoch, over 300 "

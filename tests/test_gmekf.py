@@ -13,6 +13,7 @@ from mixnav.errors import ConfigError
 from mixnav.experiment import methods as registry
 from mixnav.filters._bank_kernels import bank_epoch, bank_moments, bank_reduce, bank_update
 from mixnav.filters._ekf_kernels import ekf_correct_dx
+from mixnav.measurements.kinds import KINDS
 from mixnav.filters.gmekf import BankMixtures, GaussianMixtureEkf, StandardMixture, learn_mixture
 from mixnav.ins.error_model import ClockModel, get_layout
 from mixnav.noise.mixture import merge_moments
@@ -28,7 +29,7 @@ def _bank(rng, N, na, spread=0.3):
 
 
 def _tables(mix: StandardMixture, kind="pseudorange"):
-    return BankMixtures({kind: mix}).tables()
+    return BankMixtures({kind: mix}).tables(KINDS)
 
 
 def test_one_row_equals_explicit_split_and_merge():
@@ -71,7 +72,7 @@ def test_single_component_update_equals_the_ekf():
     nav = np.array([1.0, 0, 0, 0, 1.0, 2.0, 0.1, 0.6, 1.9, 100.0])
     args = (np.zeros(12), np.zeros(2), lay.as_array())
     P_e, dx_e, nis_e, st_e = ekf_correct_dx(P[0], z, H, r, 1e4, nav.copy(), *args)
-    tb = BankMixtures().tables()
+    tb = BankMixtures().tables(KINDS)
     st, nis, lw2, X2, P2, dx = bank_epoch(np.zeros(1), np.zeros((1, n)), P.copy(), z, H, r,
                                           np.zeros(8, dtype=np.int64), *tb, 1e4, 1, n)
     assert st == st_e == 0

@@ -1,4 +1,4 @@
-"""Online re-learning of the noise mixtures (M4 beyond P1, mixnav.filters.online):
+"""Online re-learning of the noise mixtures (M4 beyond P1, mixnav.noise.learn.online):
 the moment deconvolution against samples of a known convolved mixture, the
 gate, the window bookkeeping, the collecting kernel against numpy and against
 bank_epoch (bitwise), a stationary and a changing noise on a tight drive
@@ -16,7 +16,7 @@ from mixnav.experiment.run import solution_table
 from mixnav.experiment import methods as registry
 from mixnav.filters._bank_kernels import bank_epoch, bank_epoch_collect, bank_moments
 from mixnav.filters.gmekf import BankMixtures, GaussianMixtureEkf, StandardMixture
-from mixnav.filters.online import OnlineMixtureLearner, OnlineSettings
+from mixnav.noise.learn.online import OnlineMixtureLearner, OnlineSettings
 from mixnav.ins.error_model import ClockModel
 from mixnav.measurements.kinds import KINDS
 from mixnav.sim.scenario import simulate
@@ -54,7 +54,7 @@ def test_moment_deconvolution_recovers_the_noise_mixture():
     subtraction is needed and right. (With q spread over 0.1-1.5 the narrow scale
     comes out 0.35 instead of 0.44: see the module docstring.)"""
     rng = np.random.default_rng(0)
-    lrn = OnlineMixtureLearner(["pseudorange"], {"pseudorange": StandardMixture.gaussian()}, 3000, 1, 10.0)
+    lrn = OnlineMixtureLearner(["pseudorange"], {"pseudorange": StandardMixture.gaussian()}, 3000, 1, 10.0, codes=KINDS)
     est, raw = [], []
     m = StandardMixture.gaussian()
     for i in range(25):                  # successive windows, each fit warm-started from the last
@@ -77,7 +77,7 @@ def test_compiled_steps_equal_their_numpy_formulas():
     """Gate, start responsibilities (with the birth column) and the per-component
     prediction shares against the formulas of the module docstring in numpy."""
     from scipy.stats import norm
-    from mixnav.filters.online import BIRTH_SIGMA, component_shares, start_responsibilities
+    from mixnav.noise.learn.online import BIRTH_SIGMA, component_shares, start_responsibilities
     rng = np.random.default_rng(5)
     u = np.concatenate([rng.standard_normal(300), [40.0, -60.0], rng.normal(0, 5, 20)])
     q = rng.uniform(0.05, 0.5, len(u))
@@ -105,13 +105,13 @@ def test_gate_keeps_an_absurd_row_out_of_the_fit():
     rng = np.random.default_rng(1)
     u = _sample(rng, TRUE, 600)
     q = np.full(600, 0.05)
-    a = OnlineMixtureLearner(["pseudorange"], {"pseudorange": TRUE}, 600, 1, 10.0)
+    a = OnlineMixtureLearner(["pseudorange"], {"pseudorange": TRUE}, 600, 1, 10.0, codes=KINDS)
     clean = a.fit_window(u[1:], q[1:], TRUE)
     u[0] = 1e4                           # a gross error: 1e4 sigma
     gated = a.fit_window(u, q, TRUE)
     assert a.rows_gated == 1
     np.testing.assert_allclose(gated.scales, clean.scales, rtol=1e-9)
-    b = OnlineMixtureLearner(["pseudorange"], {"pseudorange": TRUE}, 600, 1, 1e9)   # no gate
+    b = OnlineMixtureLearner(["pseudorange"], {"pseudorange": TRUE}, 600, 1, 1e9, codes=KINDS)   # no gate
     poisoned = b.fit_window(u, q, TRUE)
     assert max(poisoned.scales) > 1e3 * max(clean.scales)
 
@@ -120,7 +120,7 @@ def test_window_bookkeeping_and_refit_schedule():
     """Refits only every `every` epochs once the window is full and has new rows;
     rows of rejected epochs and of other kinds are not collected; the ring
     buffer holds the last `window` rows."""
-    lrn = OnlineMixtureLearner(["pseudorange"], {"pseudorange": StandardMixture.gaussian()}, 100, 5, 10.0)
+    lrn = OnlineMixtureLearner(["pseudorange"], {"pseudorange": StandardMixture.gaussian()}, 100, 5, 10.0, codes=KINDS)
     rng = np.random.default_rng(2)
     kinds = np.array([PR] * 8 + [KINDS["range_rate"]] * 8)
     for e in range(1, 31):
@@ -148,7 +148,7 @@ def test_collecting_kernel_is_bank_epoch_plus_the_innovations():
     H = rng.standard_normal((m, na)) * (rng.random((m, na)) < 0.6)
     z, r = rng.standard_normal(m), rng.random(m) + 0.2
     kinds = np.zeros(m, dtype=np.int64)
-    tb = BankMixtures({"pseudorange": TRUE}).tables()
+    tb = BankMixtures({"pseudorange": TRUE}).tables(KINDS)
     a = bank_epoch(lw, X, P, z, H, r, kinds, *tb, 1e4, 2, n)
     u, q = np.empty(m + 3), np.empty(m + 3)
     b = bank_epoch_collect(lw, X, P, z, H, r, kinds, *tb, 1e4, 2, n, u, q)
@@ -368,7 +368,7 @@ def test_online_from_given_mixtures_needs_no_training_and_starts_from_them(tmp_p
     f, _ = registry.build(sc.methods[0], sim.imu_model, sim.fixes, np.zeros(3), src, 0,
                           observations=sim.observations, clock=ClockModel())
     assert f.mixtures.measurement["pseudorange"].scales == (0.5, 3.0)
-    lrn = f.online.learner(f.mixtures)
+    lrn = f.online.learner(f.mixtures, KINDS)
     assert lrn.current["pseudorange"].weights == (0.5, 0.5)
 
 

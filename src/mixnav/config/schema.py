@@ -298,7 +298,7 @@ class MixtureSpec(Strict):
 
 class OnlineLearnConfig(Strict):
     """Online re-learning of the measurement mixtures (M4 beyond paper P1,
-    ``mixture.learn.online``; see :mod:`mixnav.filters.online`): per observable
+    ``mixture.learn.online``; see :mod:`mixnav.noise.learn.online`): per observable
     kind of ``learn.observables``, the last ``window`` rows' standardised
     innovations (rows, not epochs: 600 pseudorange rows are about 70 s of 8-9
     satellites at 1 Hz) are refitted by VB, warm-started from the mixture in

@@ -35,7 +35,10 @@ ESTIMATORS = {k: v[1] for k, v in _CATALOG.items()}
 _RENAME = {"k0": "robust.k0", "k1": "robust.k1", "c": "robust.c", "max_components": "mixture.max_components",
            "psi": "mixture.colored.measurement", "psi_channels": "mixture.colored.channels",
            "psi_process": "mixture.colored.process", "psi_measurement": "mixture.colored.measurement",
-           "process_interval": "mixture.colored.process_interval", "kinds": "mixture.learn.observables"}
+           "process_interval": "mixture.colored.process_interval", "kinds": "mixture.learn.observables",
+           "mixtures": "mixture", "observables": "mixture.learn.observables", "process": "mixture.process",
+           "prior": "mixture.prior", "window": "mixture.learn.online.window",
+           "every": "mixture.learn.online.every", "gate": "mixture.learn.online.gate"}
 
 
 def build(method: MethodConfig, default_imu: ImuErrorModel, fixes, lever_arm, source=None, index: int = 0,
@@ -80,8 +83,8 @@ def _build(method, default_imu, fixes, lever_arm, source, index, observations, c
         rc = method.robust or RobustConfig()
         return filter_class("robust-adaptive")(layout, model, k0=rc.k0, k1=rc.k1, c=rc.c, **common), meas
     if method.estimator == "gaussian-mixture":
-        from ..filters.gmekf import GaussianMixtureEkf, learn_mixtures, mixtures_from_config
-        from ..filters.online import OnlineSettings
+        from ..filters.gmekf import GaussianMixtureEkf
+        from ..noise.learn.online import OnlineSettings
         mc = method.mixture or MixtureConfig()
         learning_time = 0.0
         if mc.colored is not None:
@@ -96,11 +99,13 @@ def _build(method, default_imu, fixes, lever_arm, source, index, observations, c
                 raise ConfigError(f"method '{method.name}' learns its mixtures from a training stretch, "
                                   "which only simulated scenarios provide", file=source,
                                   key=f"methods[{index}].mixture.learn")
-            mixtures, learning_time = learn_mixtures(mc, training, seed)
+            learned = _learn(mc, training, seed)
+            mixtures, learning_time, failed = learned.mixtures, learned.learning_time_s, learned.not_converged
         else:
-            mixtures = mixtures_from_config(mc)
+            mixtures, failed = mixtures_from_config(mc), 0
         return GaussianMixtureEkf(layout, model, mixtures, max_components=mc.max_components,
-                                  learning_time_s=learning_time, online=online, **common), meas
+                                  learning_time_s=learning_time, online=online, learner_not_converged=failed,
+                                  **common), meas
     cls = filter_class(method.estimator)
     options = dict(method.options or {})
     params = inspect.signature(cls).parameters
@@ -126,7 +131,6 @@ def _colored(method, mc, layout, model, meas, training, source, index, common, s
     from ..measurements.differenced import DifferencedMeasurement
     from ..noise.ar import whiten_ar1
     from ..filters.colored import ColoredMixtureEkf, fit_coefficient
-    from ..filters.gmekf import learn_mixtures, mixtures_from_config
     cc = mc.colored
     key = f"methods[{index}].mixture.colored"
     if mc.learn is not None and mc.learn.online is not None:
@@ -170,12 +174,35 @@ def _colored(method, mc, layout, model, meas, training, source, index, common, s
         if missing:
             raise ConfigError(f"the coloured-noise filter learns pseudorange and range-rate mixtures, not {missing}",
                               file=source, key=f"methods[{index}].mixture.learn.observables")
-        mixtures, _ = learn_mixtures(mc, white, seed)
+        learned = _learn(mc, white, seed)
+        mixtures, failed = learned.mixtures, learned.not_converged
         learning_time += time.perf_counter() - t0
     else:
-        mixtures = mixtures_from_config(mc)
+        mixtures, failed = mixtures_from_config(mc), 0
     if any(v != 0.0 for v in psi_m.values()) or channels:  # all white: nothing to difference (exact)
         meas = [DifferencedMeasurement(m, layout, psi_m, channels) for m in meas]
     return ColoredMixtureEkf(layout, model, mixtures, psi_process=psi_p, psi_measurement=psi_m,
                              process_interval=cc.process_interval, max_components=mc.max_components,
-                             learning_time_s=learning_time, **common), meas
+                             learning_time_s=learning_time, learner_not_converged=failed, **common), meas
+
+
+def _learn(mc: MixtureConfig, training: dict, seed: int):
+    """The mixtures of ``mc.learn`` from training residuals (given ones kept)."""
+    from ..noise.learn.offline import learn_mixtures
+    lc = mc.learn
+    return learn_mixtures(training, lc.observables, lc.method, mixtures_from_config(mc),
+                          n_components=lc.n_components, gibbs_samples=lc.gibbs_samples, prune=lc.prune,
+                          training_samples=lc.training_samples, learn_process=lc.learn_process, seed=seed)
+
+
+def mixtures_from_config(cfg: MixtureConfig):
+    """The given (not learned) mixtures of a ``[mixture]`` table."""
+    from ..noise.mixture import BankMixtures, StandardMixture
+    return BankMixtures({k: _spec(v) for k, v in cfg.measurement.items()},
+                        _spec(cfg.process) if cfg.process is not None else StandardMixture.gaussian(),
+                        _spec(cfg.prior) if cfg.prior is not None else StandardMixture.gaussian())
+
+
+def _spec(s):
+    from ..noise.mixture import StandardMixture
+    return StandardMixture(tuple(s.weights), tuple(s.means or [0.0] * len(s.weights)), tuple(s.scales))

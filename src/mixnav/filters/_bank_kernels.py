@@ -383,7 +383,7 @@ def bank_epoch_collect(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_si
     innovation of the merged prediction ``u[k] = (z_k - h_k x_m) / sigma_k``
     and the state's share of its variance ``q[k] = h_k P_m h_k^T / sigma_k^2``
     (``sigma_k^2 = r_k``; ``u``, ``q`` preallocated, length >= m) -- what the
-    online mixture learner (:mod:`mixnav.filters.online`) collects. Written
+    online mixture learner (:mod:`mixnav.noise.learn.online`) collects. Written
     before the gate, so also for a rejected epoch. The returned values are
     bitwise those of :func:`bank_epoch`."""
     return _epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n,

@@ -49,7 +49,7 @@ from numba import njit
 
 from ..errors import ArgumentError
 from ..measurements.kinds import MAX_KINDS, kind_code
-from .gmekf import BankEstimator, GaussianMixtureEkf, _padded
+from .gmekf import BankEstimator, GaussianMixtureEkf
 
 #: Error states the coloured process noise lives on (attitude, velocity, position).
 N_W = 9
@@ -169,7 +169,7 @@ class ColoredBankEstimator(BankEstimator):
     def _tables_for(self, mixtures):
         """Kinds k (differenced, zeta) and their stationary twins k + MAX_KINDS
         (undifferenced, stationary noise: means grown by sqrt((1 + psi) / (1 - psi)))."""
-        lw, mu, var = _padded(mixtures.tables())
+        lw, mu, var = super()._tables_for(mixtures)
         grow = np.sqrt((1.0 + self.psi_m) / (1.0 - self.psi_m))[:, None]
         return np.vstack([lw, lw]), np.vstack([mu, mu * grow]), np.vstack([var, var])
 

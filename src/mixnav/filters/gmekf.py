@@ -32,7 +32,7 @@ must be zero, a non-zero mean being a bias the bias states carry); the prior
 mixture scales the initial covariance.
 
 M4 can also re-learn the measurement mixtures online from a sliding window
-of the bank's standardised innovations (:mod:`mixnav.filters.online`; the
+of the bank's standardised innovations (:mod:`mixnav.noise.learn.online`; the
 hook is :meth:`BankBelief.epoch`).
 
 When an event has no measurement (a GNSS outage), the accumulated white
@@ -43,110 +43,22 @@ apart, so merging them at once is exact.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 
 from ..engine.protocols import Correction, Epoch, Transition
-from ..errors import ArgumentError, ConfigError
+from ..errors import ArgumentError
 from ..ins._error_kernels import covariance_predict, discrete_noise
 from ..ins.error_model import ClockModel, StateLayout
 from ..ins.imu_model import ImuErrorModel
-from ..measurements.kinds import KINDS, MAX_KINDS
-from ..noise.mixture import GaussianMixture
+from ..measurements.kinds import KINDS, MAX_KINDS, kind_code
+from ..noise.learn.offline import learn_mixture  # noqa: F401  (re-exported)
+from ..noise.mixture import BankMixtures, GaussianMixture, StandardMixture  # noqa: F401  (re-exported)
 from ._bank_kernels import (bank_epoch, bank_epoch_collect, bank_moments, bank_propagate, bank_reduce, bank_split,
                             bank_update, predicted_nis)
 from ._ekf_kernels import NEEDS_REPAIR, OK
 from .ekf import ErrorStateEkf, repair_covariance
-
-
-@dataclass(frozen=True)
-class StandardMixture:
-    """A 1-D mixture of a standardised noise: weights, means, variance scales."""
-
-    weights: tuple
-    means: tuple
-    scales: tuple
-
-    def __post_init__(self):
-        w, mu, v = (np.atleast_1d(np.asarray(a, dtype=float)) for a in (self.weights, self.means, self.scales))
-        if not (w.shape == mu.shape == v.shape) or w.ndim != 1 or len(w) == 0:
-            raise ConfigError(f"weights, means and scales need one entry per component, got "
-                              f"{len(w)}, {len(mu)}, {len(v)}", key="weights")
-        if not (np.all(np.isfinite(w)) and np.all(np.isfinite(mu)) and np.all(np.isfinite(v))):
-            raise ConfigError("weights, means and scales must be finite", key="weights")
-        if np.any(w < 0) or abs(w.sum() - 1.0) > 1e-6:
-            raise ConfigError(f"weights must be non-negative and sum to 1, got {w.tolist()}", key="weights")
-        if np.any(v <= 0):
-            raise ConfigError(f"variance scales must be positive, got {v.tolist()}", key="scales")
-        object.__setattr__(self, "weights", tuple(w / w.sum()))
-        object.__setattr__(self, "means", tuple(mu))
-        object.__setattr__(self, "scales", tuple(v))
-
-    @classmethod
-    def gaussian(cls) -> "StandardMixture":
-        return cls((1.0,), (0.0,), (1.0,))
-
-    @classmethod
-    def from_mixture(cls, gm: GaussianMixture, sigma: float = 1.0) -> "StandardMixture":
-        """From a fitted 1-D :class:`GaussianMixture` of residuals in units of ``sigma``."""
-        if gm.dim != 1:
-            raise ConfigError(f"a noise mixture must be one-dimensional, got d = {gm.dim}")
-        return cls(tuple(gm.weights), tuple(gm.means[:, 0] / sigma), tuple(gm.covariances[:, 0, 0] / sigma ** 2))
-
-    @property
-    def n_components(self) -> int:
-        return len(self.weights)
-
-    @property
-    def mean_scale(self) -> float:
-        return float(np.dot(self.weights, self.scales))
-
-    def variance(self) -> float:
-        w, mu, v = map(np.asarray, (self.weights, self.means, self.scales))
-        m = w @ mu
-        return float(w @ (v + mu ** 2) - m ** 2)
-
-
-@dataclass(frozen=True)
-class BankMixtures:
-    """The three mixtures of a Gaussian-mixture EKF.
-
-    ``measurement`` maps an observable kind (``"pseudorange"``, ``"tdcp"``,
-    ``"range_rate"``, ``"position"``, ``"velocity"``; see
-    :mod:`mixnav.measurements.kinds`) to its standardised noise mixture;
-    kinds not listed are Gaussian with the model's sigma.
-    """
-
-    measurement: dict = field(default_factory=dict)
-    process: StandardMixture = field(default_factory=StandardMixture.gaussian)
-    prior: StandardMixture = field(default_factory=StandardMixture.gaussian)
-
-    def __post_init__(self):
-        for k in self.measurement:
-            if k not in KINDS:
-                raise ConfigError(f"unknown observable '{k}' (known: {', '.join(KINDS)})",
-                                  key=f"mixture.measurement.{k}")
-        if any(m != 0.0 for m in self.process.means):
-            raise ConfigError("process-noise mixture means must be zero", key="mixture.process.means")
-        if any(m != 0.0 for m in self.prior.means):
-            raise ConfigError("prior mixture means must be zero", key="mixture.prior.means")
-
-    def tables(self):
-        """``(log_w, mu, var)``, each (n_kinds, L_max), rows in kind-code order."""
-        L = max([m.n_components for m in self.measurement.values()] + [1])
-        nk = len(KINDS)
-        lw = np.full((nk, L), -np.inf)
-        mu = np.zeros((nk, L))
-        var = np.ones((nk, L))
-        for name, code in KINDS.items():
-            m = self.measurement.get(name, StandardMixture.gaussian())
-            k = m.n_components
-            with np.errstate(divide="ignore"):
-                lw[code, :k] = np.log(m.weights)
-            mu[code, :k] = m.means
-            var[code, :k] = m.scales
-        return lw, mu, var
 
 
 def independent_rows(z, r) -> tuple[np.ndarray, np.ndarray]:
@@ -156,7 +68,7 @@ def independent_rows(z, r) -> tuple[np.ndarray, np.ndarray]:
     r = np.asarray(r, dtype=float)
     if r.ndim != 1:
         if np.any(r - np.diag(np.diag(r))):
-            raise ConfigError("the Gaussian-mixture EKF needs independent measurement rows (a diagonal R)")
+            raise ArgumentError("the Gaussian-mixture EKF needs independent measurement rows (a diagonal R)", argument="R")
         r = np.diag(r).copy()
     return z, r
 
@@ -187,7 +99,7 @@ class BankEstimator:
         The bank is reduced to at most this many components after each update.
     absurd_sigma : float
         Innovations beyond this many predicted sigmas reject the epoch (counted).
-    online : mixnav.filters.online.OnlineSettings, optional
+    online : mixnav.noise.learn.online.OnlineSettings, optional
         Re-learn these kinds' measurement mixtures online (M4 beyond the paper).
     """
 
@@ -231,8 +143,11 @@ class BankEstimator:
             self.Pb[i, :n, :n] = s * P0
         self.mixtures = mixtures
         self.tables = self._tables_for(mixtures)
-        #: optional :class:`mixnav.filters.online.OnlineMixtureLearner` (M4 online re-learning)
-        self.online = None if self.online_settings is None else self.online_settings.learner(mixtures)
+        #: optional :class:`mixnav.noise.learn.online.OnlineMixtureLearner` (M4 online re-learning)
+        self.online = None
+        if self.online_settings is not None:
+            codes = {k: kind_code(k, argument="online.kinds") for k in self.online_settings.kinds}
+            self.online = self.online_settings.learner(mixtures, codes)
         self._u = np.empty(0)
         self._q = np.empty(0)
         proc = mixtures.process
@@ -337,7 +252,9 @@ class BankEstimator:
         return out
 
     def _tables_for(self, mixtures):
-        return _padded(mixtures.tables())
+        for k in mixtures.measurement:  # an unknown kind is an error, not an unused row
+            kind_code(k, argument=f"mixtures.measurement.{k}")
+        return _padded(mixtures.tables(KINDS))
 
     def replace_clone(self, J):
         n, ic = self.n, self.ic
@@ -370,8 +287,8 @@ class BankEstimator:
         """Compile (or load from the numba cache) the bank kernels once per process,
         outside the timed loop."""
         if self.online_settings is not None:
-            from .online import warm_online
-            warm_online()
+            from ..noise.learn.online import OnlineMixtureLearner
+            OnlineMixtureLearner.warm_up()
         if _BANK_WARM:
             return
         n, na = 3, 4
@@ -411,9 +328,9 @@ class GaussianMixtureEkf(ErrorStateEkf):
     learning_time_s : float
         Time spent learning the mixtures (reported beside the filter's own
         timing; M4/M5 learn them offline).
-    online : mixnav.filters.online.OnlineSettings, optional
+    online : mixnav.noise.learn.online.OnlineSettings, optional
         Re-learn these kinds' measurement mixtures online from a sliding window
-        of innovations (M4 beyond the paper; :mod:`mixnav.filters.online`),
+        of innovations (M4 beyond the paper; :mod:`mixnav.noise.learn.online`),
         starting from ``mixtures``. Every run starts again from ``mixtures``.
     learner_not_converged : int
         Offline mixture fits that did not converge (reported in ``recoveries``).
@@ -450,71 +367,3 @@ class GaussianMixtureEkf(ErrorStateEkf):
         return None if self._last is None else self._last.online
 
 
-def learn_mixture(samples: np.ndarray, method: str, n_components: int = 4, gibbs_samples: int = 1000,
-                  prune: float = 0.01, seed: int = 0) -> StandardMixture:
-    """Fit a standardised 1-D noise mixture to training residuals.
-
-    ``"vb"`` uses P1's settings (alpha0 = 1, beta0 = 1, nu0 = 1, W0 = 2,
-    m0 = the sample mean, K = ``n_components``, stop at a lower-bound change
-    below 1e-6, prune below ``prune``); ``"gibbs"`` the same conjugate model
-    sampled ``gibbs_samples`` times (P1 schemes 3-4); ``"em"`` maximum
-    likelihood.
-    """
-    from ..noise.learn import EMGaussianMixture, GibbsGaussianMixture, VariationalGaussianMixture
-    x = np.asarray(samples, dtype=float).reshape(-1, 1)
-    if method == "vb":
-        est = VariationalGaussianMixture(n_components=n_components, alpha0=1.0, beta0=1.0, nu0=1.0,
-                                         W0=np.array([[2.0]]), tol=1e-6, prune_threshold=prune,
-                                         random_state=seed)
-    elif method == "gibbs":
-        est = GibbsGaussianMixture(n_components=n_components, n_samples=gibbs_samples, alpha0=1.0,
-                                   beta0=1.0, nu0=1.0, W0=np.array([[2.0]]), prune_threshold=prune,
-                                   random_state=seed)
-    elif method == "em":
-        est = EMGaussianMixture(n_components=n_components, random_state=seed)
-    else:
-        raise ConfigError(f"unknown learner '{method}' (vb, gibbs, em)", key="mixture.learn.method")
-    import warnings
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # a non-converged fit is still a usable mixture; counted below
-        est.fit(x)
-    gm = est.mixture_
-    if method == "em":  # EM has no pruning of its own
-        gm = gm.prune(prune)
-    return StandardMixture.from_mixture(gm)
-
-
-def learn_mixtures(cfg, training: dict, seed: int = 0) -> tuple[BankMixtures, float]:
-    """The mixtures of ``cfg.learn`` from training residuals, and the learning time [s].
-
-    ``cfg`` is a :class:`mixnav.config.schema.MixtureConfig`; mixtures it
-    gives explicitly are kept, the ones listed in ``learn`` are learned.
-    """
-    import time
-    lc = cfg.learn
-    t0 = time.perf_counter()
-    meas = {k: _spec(v) for k, v in cfg.measurement.items()}
-    if not lc.offline:  # only online learning: start from the given mixtures
-        return mixtures_from_config(cfg), 0.0
-    for kind in lc.observables:
-        meas[kind] = learn_mixture(training[kind][:lc.training_samples], lc.method, lc.n_components, lc.gibbs_samples, lc.prune, seed)
-    process = _spec(cfg.process) if cfg.process is not None else StandardMixture.gaussian()
-    if lc.learn_process:
-        p = learn_mixture(training["process"][:lc.training_samples], lc.method, lc.n_components, lc.gibbs_samples, lc.prune, seed)
-        # process-noise means are zero by construction (module docstring): keep weights and scales,
-        # the scales about zero (E[x^2] per component)
-        process = StandardMixture(p.weights, (0.0,) * p.n_components,
-                                  tuple(np.asarray(p.scales) + np.asarray(p.means) ** 2))
-    prior = _spec(cfg.prior) if cfg.prior is not None else StandardMixture.gaussian()
-    return BankMixtures(meas, process, prior), time.perf_counter() - t0
-
-
-def mixtures_from_config(cfg) -> BankMixtures:
-    """The given (not learned) mixtures of a :class:`mixnav.config.schema.MixtureConfig`."""
-    return BankMixtures({k: _spec(v) for k, v in cfg.measurement.items()},
-                        _spec(cfg.process) if cfg.process is not None else StandardMixture.gaussian(),
-                        _spec(cfg.prior) if cfg.prior is not None else StandardMixture.gaussian())
-
-
-def _spec(s) -> StandardMixture:
-    return StandardMixture(tuple(s.weights), tuple(s.means or [0.0] * len(s.weights)), tuple(s.scales))

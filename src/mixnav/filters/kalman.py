@@ -15,28 +15,7 @@ from numba import njit
 
 #: Status codes returned by :func:`kalman_update`.
 from ..engine.status import OK, S_NOT_POSITIVE_DEFINITE  # noqa: E402,F401
-
-
-@njit(cache=True)
-def cholesky_lower(a, out):
-    """Cholesky factor of a symmetric matrix into ``out``; False if not PD."""
-    m = a.shape[0]
-    for j in range(m):
-        s = a[j, j]
-        for k in range(j):
-            s -= out[j, k] * out[j, k]
-        if not (s > 0.0):
-            return False
-        d = math.sqrt(s)
-        out[j, j] = d
-        for i in range(j + 1, m):
-            s = a[i, j]
-            for k in range(j):
-                s -= out[i, k] * out[j, k]
-            out[i, j] = s / d
-        for i in range(j):
-            out[i, j] = 0.0
-    return True
+from ..linalg import cholesky_lower  # noqa: E402,F401  (re-exported: the bank kernels use it)
 
 
 @njit(cache=True)

@@ -17,8 +17,12 @@ exactly (moment-preserving merge).
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 from scipy.special import logsumexp
+
+from ..errors import ArgumentError
 
 _LOG2PI = np.log(2.0 * np.pi)
 
@@ -75,6 +79,10 @@ class GaussianMixture:
                 raise MixtureError(f"covariance of component {i} is not positive definite "
                                    f"(eigenvalues {np.linalg.eigvalsh(cov[i])})") from None
         self.weights, self.means, self.covariances, self.cholesky = w, mu, cov, chol
+
+    def standardised(self, sigma: float = 1.0) -> "StandardMixture":
+        """The 1-D mixture in units of ``sigma`` (:class:`StandardMixture`, the filters' view)."""
+        return StandardMixture.from_mixture(self, sigma)
 
     # --- basic properties -------------------------------------------------
     @property
@@ -188,3 +196,99 @@ def _pair_costs(w, mu, P):
     cost = 0.5 * (wij * ldij - w[:, None] * ld[:, None] - w[None, :] * ld[None, :])
     np.fill_diagonal(cost, np.inf)
     return cost, wij, mij, Pij
+
+
+@dataclass(frozen=True)
+class StandardMixture:
+    """The standardised view of a 1-D :class:`GaussianMixture`: weights, means and
+    variance *scales* of a noise in units of a model's sigma (``sigma (mu_l +
+    sqrt(v_l) N(0, 1))``), the form the filters' per-kind tables read.
+
+    ``GaussianMixture.standardised(sigma)`` gives it, :meth:`mixture` goes back.
+    """
+
+    weights: tuple
+    means: tuple
+    scales: tuple
+
+    def __post_init__(self):
+        w, mu, v = (np.atleast_1d(np.asarray(a, dtype=float)) for a in (self.weights, self.means, self.scales))
+        if not (w.shape == mu.shape == v.shape) or w.ndim != 1 or len(w) == 0:
+            raise ArgumentError(f"weights, means and scales need one entry per component, got "
+                                f"{len(w)}, {len(mu)}, {len(v)}", argument="weights")
+        if not (np.all(np.isfinite(w)) and np.all(np.isfinite(mu)) and np.all(np.isfinite(v))):
+            raise ArgumentError("weights, means and scales must be finite", argument="weights")
+        if np.any(w < 0) or abs(w.sum() - 1.0) > 1e-6:
+            raise ArgumentError(f"weights must be non-negative and sum to 1, got {w.tolist()}", argument="weights")
+        if np.any(v <= 0):
+            raise ArgumentError(f"variance scales must be positive, got {v.tolist()}", argument="scales")
+        object.__setattr__(self, "weights", tuple(w / w.sum()))
+        object.__setattr__(self, "means", tuple(mu))
+        object.__setattr__(self, "scales", tuple(v))
+
+    @classmethod
+    def gaussian(cls) -> "StandardMixture":
+        return cls((1.0,), (0.0,), (1.0,))
+
+    @classmethod
+    def from_mixture(cls, gm: "GaussianMixture", sigma: float = 1.0) -> "StandardMixture":
+        """From a fitted 1-D :class:`GaussianMixture` of residuals in units of ``sigma``."""
+        if gm.dim != 1:
+            raise ArgumentError(f"a noise mixture must be one-dimensional, got d = {gm.dim}", argument="gm")
+        return cls(tuple(gm.weights), tuple(gm.means[:, 0] / sigma), tuple(gm.covariances[:, 0, 0] / sigma ** 2))
+
+    def mixture(self, sigma: float = 1.0) -> "GaussianMixture":
+        """The :class:`GaussianMixture` of the noise for a model sigma ``sigma``."""
+        return GaussianMixture(np.asarray(self.weights), sigma * np.asarray(self.means),
+                               sigma ** 2 * np.asarray(self.scales))
+
+    @property
+    def n_components(self) -> int:
+        return len(self.weights)
+
+    @property
+    def mean_scale(self) -> float:
+        return float(np.dot(self.weights, self.scales))
+
+    def variance(self) -> float:
+        w, mu, v = map(np.asarray, (self.weights, self.means, self.scales))
+        m = w @ mu
+        return float(w @ (v + mu ** 2) - m ** 2)
+
+
+@dataclass(frozen=True)
+class BankMixtures:
+    """The three mixtures of a Gaussian-mixture EKF.
+
+    ``measurement`` maps an observable kind name (``"pseudorange"``, ``"tdcp"``,
+    ``"range_rate"``, ``"position"``, ``"velocity"``, any registered kind; the
+    filter checks the names against :mod:`mixnav.measurements.kinds`) to its
+    standardised noise mixture; kinds not listed are Gaussian with the model's sigma.
+    """
+
+    measurement: dict = field(default_factory=dict)
+    process: StandardMixture = field(default_factory=StandardMixture.gaussian)
+    prior: StandardMixture = field(default_factory=StandardMixture.gaussian)
+
+    def __post_init__(self):
+        if any(m != 0.0 for m in self.process.means):
+            raise ArgumentError("process-noise mixture means must be zero", argument="process.means")
+        if any(m != 0.0 for m in self.prior.means):
+            raise ArgumentError("prior mixture means must be zero", argument="prior.means")
+
+    def tables(self, codes: dict):
+        """``(log_w, mu, var)``, each (len(codes), L_max), one row per kind code
+        (``codes``: kind name -> code, e.g. :data:`mixnav.measurements.kinds.KINDS`)."""
+        L = max([m.n_components for m in self.measurement.values()] + [1])
+        nk = len(codes)
+        lw = np.full((nk, L), -np.inf)
+        mu = np.zeros((nk, L))
+        var = np.ones((nk, L))
+        for name, code in codes.items():
+            m = self.measurement.get(name, StandardMixture.gaussian())
+            k = m.n_components
+            with np.errstate(divide="ignore"):
+                lw[code, :k] = np.log(m.weights)
+            mu[code, :k] = m.means
+            var[code, :k] = m.scales
+        return lw, mu, var

@@ -16,6 +16,7 @@ import numpy as np
 from scipy.special import logsumexp
 
 from mixnav.noise.learn import ConvergenceWarning
+from mixnav.noise.learn.base import MixtureLearner
 from mixnav.noise.mixture import GaussianMixture
 
 _LOG2PI = np.log(2.0 * np.pi)
@@ -153,7 +154,7 @@ def gaussian_logpdf(X: np.ndarray, means: np.ndarray, chol: np.ndarray) -> np.nd
 # --------------------------------------------------------------------------
 # EM
 # --------------------------------------------------------------------------
-class EMGaussianMixture:
+class EMGaussianMixture(MixtureLearner):
     """Maximum likelihood Gaussian mixture by EM, with sample weights.
 
     Parameters
@@ -251,6 +252,3 @@ class EMGaussianMixture:
         w = self.weights_ / self.weights_.sum()
         return GaussianMixture(w, self.means_, self.covariances_)
 
-    def score_samples(self, X) -> np.ndarray:
-        """Log density of each sample under the fitted mixture, (n,)."""
-        return self.mixture_.logpdf(X)

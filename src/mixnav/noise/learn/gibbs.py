@@ -57,6 +57,7 @@ import math
 import numba
 import numpy as np
 
+from mixnav.noise.learn.base import MixtureLearner
 from mixnav.noise.learn.em import check_random_state, kmeanspp_resp, validate_data
 from mixnav.noise.learn.vb import (_BLOCK, VariationalGaussianMixture, _chol_lower, _exp_nonpos, _m_step,
                                    _tril_inv)
@@ -406,7 +407,7 @@ def relabel_to_pivot(cw, cm, cc, max_passes: int = 20) -> int:
     return max_passes
 
 
-class GibbsGaussianMixture:
+class GibbsGaussianMixture(MixtureLearner):
     """Posterior-mean Gaussian mixture from a Gibbs sampler.
 
     Parameters

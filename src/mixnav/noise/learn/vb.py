@@ -100,6 +100,7 @@ import numpy as np
 from scipy.special import digamma, gammaln, logsumexp
 
 from mixnav.noise.learn import ConvergenceWarning
+from mixnav.noise.learn.base import MixtureLearner
 from mixnav.noise.learn.em import (check_random_state, check_resp, kmeanspp_resp, validate_data,
                                    validate_weights, weighted_moments)
 from mixnav.noise.mixture import GaussianMixture
@@ -228,44 +229,8 @@ def _digamma(x):
 _NUMBA_MAX_DIM = 16     # fused kernel for d <= this (measured faster than numpy up to d = 16)
 
 
-@numba.njit(cache=True)
-def _chol_lower(A, L):
-    """Lower Cholesky factor ``L L^T = A`` of a small SPD matrix, written into ``L``.
-
-    Returns False (``L`` partly written) if ``A`` is not numerically positive definite.
-    """
-    d = A.shape[0]
-    for j in range(d):
-        s = A[j, j]
-        for p in range(j):
-            s -= L[j, p] * L[j, p]
-        if not s > 0.0:
-            return False
-        ljj = math.sqrt(s)
-        L[j, j] = ljj
-        for i in range(j + 1, d):
-            s = A[i, j]
-            for p in range(j):
-                s -= L[i, p] * L[j, p]
-            L[i, j] = s / ljj
-        for i in range(j):
-            L[i, j] = 0.0
-    return True
-
-
-@numba.njit(cache=True)
-def _tril_inv(L, Li):
-    """Inverse ``Li`` of a lower-triangular ``L`` (also lower triangular)."""
-    d = L.shape[0]
-    for j in range(d):
-        Li[j, j] = 1.0 / L[j, j]
-        for i in range(j + 1, d):
-            s = 0.0
-            for p in range(j, i):
-                s -= L[i, p] * Li[p, j]
-            Li[i, j] = s / L[i, i]
-        for i in range(j):
-            Li[i, j] = 0.0
+from mixnav.linalg import cholesky_lower as _chol_lower  # noqa: E402  (shared with the Kalman kernels)
+from mixnav.linalg import tril_inv as _tril_inv  # noqa: E402
 
 
 # --- blocked E-step: samples in blocks of _BLOCK, inner loops over samples (SIMD) ---
@@ -957,7 +922,7 @@ def _merge_candidates(X, w, params, min_overlap=_MERGE_MIN_OVERLAP):
 # --------------------------------------------------------------------------
 # estimator
 # --------------------------------------------------------------------------
-class VariationalGaussianMixture:
+class VariationalGaussianMixture(MixtureLearner):
     """Variational Bayes Gaussian mixture with pruning, merging and warm start (paper P1).
 
     Parameters
@@ -1246,6 +1211,3 @@ class VariationalGaussianMixture:
         """The fitted mixture (expected weights, posterior means, ``W_k^-1 / nu_k``)."""
         return GaussianMixture(self.weights_, self.means_, 0.5 * (self.covariances_ + np.swapaxes(self.covariances_, 1, 2)))
 
-    def score_samples(self, X) -> np.ndarray:
-        """Log density of each sample under :attr:`mixture_`, (n,)."""
-        return self.mixture_.logpdf(X)

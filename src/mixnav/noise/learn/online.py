@@ -112,8 +112,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..errors import ConfigError
-from ..measurements.kinds import KINDS
+from ...errors import ArgumentError
+from ..mixture import StandardMixture
 
 _LOG2PI = math.log(2.0 * math.pi)
 #: Rows this many standard deviations from every current component start a birth.
@@ -133,32 +133,28 @@ class OnlineSettings:
     prune: float = 0.01
 
     def __post_init__(self):
-        for k in self.kinds:
-            if k not in KINDS:
-                raise ConfigError(f"unknown observable '{k}' (known: {', '.join(KINDS)})",
-                                  key="mixture.learn.observables")
         if int(self.window) < 10 * int(self.n_components):
-            raise ConfigError(f"needs at least 10 rows per component ({10 * int(self.n_components)}), "
-                              f"got {self.window}", key="mixture.learn.online.window")
+            raise ArgumentError(f"needs at least 10 rows per component ({10 * int(self.n_components)}), "
+                              f"got {self.window}", argument="window")
         if int(self.every) < 1:
-            raise ConfigError(f"must be at least 1, got {self.every}", key="mixture.learn.online.every")
+            raise ArgumentError(f"must be at least 1, got {self.every}", argument="every")
         if not float(self.gate) >= 3.0:
-            raise ConfigError(f"must be at least 3 (standard deviations), got {self.gate}",
-                              key="mixture.learn.online.gate")
+            raise ArgumentError(f"must be at least 3 (standard deviations), got {self.gate}",
+                                argument="gate")
 
-    def learner(self, mixtures) -> "OnlineMixtureLearner":
+    def learner(self, mixtures, codes: dict) -> "OnlineMixtureLearner":
         """A fresh learner starting from the measurement mixtures of ``mixtures``
-        (:class:`mixnav.filters.gmekf.BankMixtures`; a kind it lacks starts Gaussian)."""
-        from .gmekf import StandardMixture
+        (:class:`mixnav.noise.mixture.BankMixtures`; a kind it lacks starts Gaussian);
+        ``codes`` maps each kind name to the code the filter's rows carry."""
         start = {k: mixtures.measurement.get(k, StandardMixture.gaussian()) for k in self.kinds}
         return OnlineMixtureLearner(self.kinds, start, self.window, self.every, self.gate, self.n_components,
-                                    self.prune)
+                                    self.prune, codes=codes)
 
 
 _WARM = []
 
 
-def warm_online() -> None:
+def warm_online() -> None:  # the module-level name of OnlineMixtureLearner.warm_up
     """Compile (or load from the numba cache) the VB kernel once per process,
     outside the timed loop."""
     if _WARM:
@@ -169,7 +165,7 @@ def warm_online() -> None:
               zi.copy(), zi.copy(), 1)
     component_shares(z, z, np.ones(1), np.zeros(1), np.ones(1))
     start_responsibilities(z, z, np.ones(1), np.zeros(1), np.ones(1), 10.0, True, 0.01)
-    from ..noise.learn import VariationalGaussianMixture
+    from . import VariationalGaussianMixture
     x = np.random.default_rng(0).standard_normal((40, 1))
     resp = np.zeros((40, 2))
     resp[:20, 0] = resp[20:, 1] = 1.0
@@ -334,9 +330,11 @@ class OnlineMixtureLearner:
     """
 
     def __init__(self, kinds, start: dict, window: int, every: int, gate: float, n_components: int = 4,
-                 prune: float = 0.01, max_iter: int = 200):
+                 prune: float = 0.01, max_iter: int = 200, codes: dict | None = None):
         self.kinds = list(kinds)
-        self.codes = np.array([KINDS[k] for k in self.kinds], dtype=np.int64)
+        if codes is None or any(k not in codes for k in self.kinds):
+            raise ArgumentError(f"a kind code is needed for each of {self.kinds}", argument="codes")
+        self.codes = np.array([codes[k] for k in self.kinds], dtype=np.int64)
         self.current = {k: start[k] for k in self.kinds}
         self._mean0 = {k: float(np.dot(start[k].weights, start[k].means)) for k in self.kinds}
         self.window, self.every, self.gate = int(window), int(every), float(gate)
@@ -419,8 +417,7 @@ class OnlineMixtureLearner:
         docstring), its overall mean held at ``mean``; ``n_epochs``: how many
         epochs the rows come from (default: one per row), for the floor. None
         when the fit fails (the caller keeps ``cur``)."""
-        from ..noise.learn import VariationalGaussianMixture
-        from .gmekf import StandardMixture
+        from . import VariationalGaussianMixture
         w, mu, v = (np.asarray(a, dtype=float) for a in (cur.weights, cur.means, cur.scales))
         live = w > 0
         w, mu, v = w[live], mu[live], v[live]
@@ -459,3 +456,6 @@ class OnlineMixtureLearner:
         return {"online_refits": float(self.refits), "online_refit_time_s": self.refit_time_s,
                 "online_floored": float(self.floored), "online_failed": float(self.failed),
                 "online_rows_gated": float(self.rows_gated)}
+
+
+OnlineMixtureLearner.warm_up = staticmethod(warm_online)
