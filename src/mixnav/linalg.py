@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 
@@ -51,3 +52,22 @@ def tril_inv(L, Li):
             Li[i, j] = s / L[i, i]
         for i in range(j):
             Li[i, j] = 0.0
+
+
+@njit(cache=True)
+def ar1_recursion(w, a, x0):
+    """``y_k = a y_{k-1} + w_k`` per column, ``y_{-1} = x0``: (n, c) from ``w`` (n, c),
+    ``a`` (c,), ``x0`` (c,).
+
+    The same operations as ``scipy.signal.lfilter([1], [1, -a], w, axis=0, zi=a x0)``
+    (equal bitwise, tested), without importing scipy.signal (half a second at start-up).
+    """
+    n, c = w.shape
+    y = np.empty((n, c))
+    for j in range(c):
+        prev = x0[j]
+        aj = a[j]
+        for k in range(n):
+            prev = w[k, j] + aj * prev
+            y[k, j] = prev
+    return y

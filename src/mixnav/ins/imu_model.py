@@ -32,11 +32,11 @@ from __future__ import annotations
 from dataclasses import dataclass, fields, replace
 
 import numpy as np
-from scipy.signal import lfilter
 
 from .. import units as u
 from ..data import ImuData
 from ..errors import ConfigError
+from ..linalg import ar1_recursion
 
 #: Datasheet text and dimension of every field, in field order.
 FIELD_UNITS = {
@@ -180,8 +180,7 @@ def _gauss_markov(rng, n, dt, sigma, tau):
     w = rng.standard_normal((n, 3)) * sigma * np.sqrt(1.0 - a * a)
     x0 = rng.standard_normal(3) * sigma
     # x_k = a x_{k-1} + w_k, started in steady state.
-    y, _ = lfilter([1.0], [1.0, -a], w, axis=0, zi=(a * x0)[None, :])
-    return y
+    return ar1_recursion(w, np.full(3, a), x0)
 
 
 def check_hold(hold: float, dt: float, duration: float) -> int:

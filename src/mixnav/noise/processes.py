@@ -51,9 +51,9 @@ from typing import Any
 
 import numpy as np
 from scipy import linalg as sla
-from scipy.signal import lfilter
 
 from ..errors import ConfigError
+from ..linalg import ar1_recursion
 from ..units import DIMENSIONLESS, TIME, Dimension, UnitError, parse_quantity
 from .mixture import GaussianMixture
 
@@ -437,7 +437,7 @@ class AR1(NoiseProcess):
     (second-order) stationary from the first epoch. With a non-Gaussian
     innovation the marginal distribution of the first ~1/(1-|Psi|) epochs is
     Gaussian rather than the exact stationary shape; the covariance is right
-    throughout. The filtering uses ``scipy.signal.lfilter`` per channel
+    throughout. The filtering uses ``mixnav.linalg.ar1_recursion`` per channel
     (after a complex Schur decomposition when Psi is a full matrix).
     """
 
@@ -538,15 +538,15 @@ class AR1(NoiseProcess):
             return x
         if self.coefficient.ndim == 0:     # one filter for all channels
             a0 = float(self.coefficient)
-            x[1:], _ = lfilter([1.0], [1.0, -a0], w[1:], axis=0, zi=(a0 * x0)[None, :])
+            x[1:] = ar1_recursion(np.ascontiguousarray(w[1:]), np.full(c, a0), np.asarray(x0, dtype=float))
             return x
         if self.coefficient.ndim == 1:
-            for j in range(c):   # loop over channels, lfilter over samples
-                x[1:, j], _ = lfilter([1.0], [1.0, -a[j]], w[1:, j], zi=[a[j] * x0[j]])
+            x[1:] = ar1_recursion(np.ascontiguousarray(w[1:]), np.asarray(a, dtype=float), np.asarray(x0, dtype=float))
             return x
         # matrix Psi = Z T Z^H (complex Schur, T upper triangular): z = Z^H x obeys
         # z_k = T z_{k-1} + Z^H w_k; solve from the last mode up, each one a scalar
         # lfilter whose input includes the lagged modes below it.
+        from scipy.signal import lfilter   # complex modes: rare, imported when needed
         tt, zz = sla.schur(psi.astype(complex), output="complex")
         u = w[1:] @ zz.conj()            # (n-1, c): rows are (Z^H w_k)^T
         z = np.empty((n, c), dtype=complex)
