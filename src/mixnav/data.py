@@ -108,6 +108,10 @@ class ImuData:
         for name in ("time", "dt", "dtheta", "dvel"):
             _finite(name, getattr(self, name), self.source)
         _check(bool(np.all(self.dt > 0)), "IMU dt must be positive", self.source)
+        if n > 1:
+            bad = np.nonzero(np.diff(self.time) <= 0)[0]
+            _check(not len(bad), f"IMU times must increase strictly: sample {bad[0] + 1 if len(bad) else 0} "
+                   f"(t = {self.time[bad[0] + 1] if len(bad) else 0:.6f} s) is not after the one before", self.source)
 
     @property
     def start_time(self) -> float:
@@ -149,6 +153,10 @@ class GnssFixes:
         _check((self.vel_n is None) == (self.vel_sigma is None),
                "GNSS velocity and its sigma must be given together", self.source)
         _finite("lla", self.lla, self.source)
+        if m:
+            lat, lon = np.abs(self.lla[:, 0]).max(), np.abs(self.lla[:, 1]).max()
+            _check(lat <= np.pi / 2 and lon <= 2 * np.pi, f"GNSS latitude/longitude must be in radians (largest "
+                   f"|lat| {lat:.6g}, |lon| {lon:.6g}: degrees?)", self.source)
         _check(bool(np.all(self.pos_sigma > 0)), "GNSS position sigma must be positive", self.source)
         if self.vel_n is not None:
             _check(self.vel_n.shape == (m, 3) and self.vel_sigma.shape == (m, 3),

@@ -142,6 +142,7 @@ class Engine:
         for model in self.measurements:  # compile their kernels outside the timed loop too
             model.warm_up(init.nav, {name: np.zeros(sl.stop - sl.start) for name, sl in lay.aux})
         t0, t1 = init.time, float(imu.time[-1])
+        self._t0 = t0
         if t0 < imu.start_time - 1e-9:
             raise ArgumentError(f"initial time {t0} is before the first IMU sample {imu.start_time}",
                                 argument="init.time")
@@ -303,6 +304,11 @@ class Engine:
             r["aux"][name][io] = v
         self._io = io + 1
         return finite
+
+    @property
+    def time(self) -> float:
+        """Time of the last event processed [s] (the initial time before the first step)."""
+        return float(self._times[self._ti - 1]) if self._ti > 0 else float(self._t0)
 
     # --- the result -------------------------------------------------------------------------
     def result(self) -> FilterResult:

@@ -1,0 +1,208 @@
+"""The library API for notebooks: everything ``mixnav`` does, from Python, as DataFrames.
+
+    import mixnav
+    run = mixnav.run_scenario("loose-demo", seed=1)
+    run.metrics                      # one row per method
+    run.solutions["ekf"]             # the solution table (docs/outputs.md)
+
+    res = mixnav.filter_loose(imu, fixes, init, imu_model=mixnav.imu_grade("mems"))
+    res.table                        # your own data, one call
+
+Every function validates its arguments and names the one that is wrong
+(:class:`mixnav.errors.ArgumentError`); units and shapes are in the
+docstrings (SI units, radians).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .data import GnssFixes, ImuData, InitialState
+from .errors import ArgumentError
+
+__all__ = ["RunResult", "LooseResult", "run_scenario", "process_dataset", "filter_loose", "imu_grade"]
+
+
+@dataclass
+class RunResult:
+    """A scenario run or a processed dataset, as DataFrames.
+
+    Attributes
+    ----------
+    solutions : dict of str -> pandas.DataFrame
+        Per method, the solution table (columns in docs/outputs.md; errors
+        against the truth or reference when there is one).
+    metrics : pandas.DataFrame
+        One row per method: RMSE and maxima, NEES/NIS, timing, recovery counts.
+    results : dict of str -> FilterResult
+        The raw results (arrays, covariances, ``estimates`` per state block).
+    truth : pandas.DataFrame or None
+        The truth (scenario) or reference (dataset) trajectory: time_s, lat_deg, lon_deg, height_m.
+    """
+
+    solutions: dict
+    metrics: "object"
+    results: dict
+    truth: "object" = None
+    _output: object = field(default=None, repr=False)
+    _config_text: str | None = field(default=None, repr=False)
+
+    def write(self, out_dir) -> dict:
+        """Write what ``mixnav run`` / ``mixnav process`` writes (tables, metrics.json,
+        figures, report.html) into ``out_dir``; returns the metrics dictionary."""
+        from .experiment.process import write_process
+        from .experiment.run import write_run
+        if hasattr(self._output, "sim"):  # a simulated run
+            return write_run(Path(out_dir), self._output, self._config_text)
+        return write_process(Path(out_dir), self._output, self._config_text)
+
+
+def _metrics_frame(metrics: dict):
+    import pandas as pd
+    rows = {}
+    for name, m in metrics.items():
+        row = {k: v for k, v in m.items() if not isinstance(v, (dict, list))}
+        row.update({f"recoveries.{k}": v for k, v in m.get("recoveries", {}).items()})
+        rows[name] = row
+    return pd.DataFrame.from_dict(rows, orient="index")
+
+
+def _frame(time, lla):
+    import pandas as pd
+    return pd.DataFrame({"time_s": time, "lat_deg": np.degrees(lla[:, 0]), "lon_deg": np.degrees(lla[:, 1]),
+                         "height_m": lla[:, 2]})
+
+
+def run_scenario(name_or_path: str, seed: int | None = None) -> RunResult:
+    """Simulate one seeded run of a scenario and filter it with every method.
+
+    Parameters
+    ----------
+    name_or_path : str
+        A shipped scenario (``mixnav.config.list_scenarios()``) or a .toml file.
+    seed : int, optional
+        Seed of the run (default: the scenario's own).
+    """
+    from .config import load_scenario
+    from .experiment.run import method_metrics, run_scenario as _run, solution_table
+    if seed is not None and (not isinstance(seed, (int, np.integer)) or seed < 0):
+        raise ArgumentError(f"must be a non-negative integer, got {seed!r}", argument="seed")
+    sc, source, text = load_scenario(str(name_or_path))
+    run = _run(sc, source, seed=seed)
+    sim = run.sim
+    tables = {name: solution_table(res, sim.truth, sim.outages) for name, res in run.results.items()}
+    metrics = {name: method_metrics(res, tables[name], sim.outages) for name, res in run.results.items()}
+    return RunResult(tables, _metrics_frame(metrics), run.results, _frame(sim.truth.time, sim.truth.lla), run, text)
+
+
+def process_dataset(name_or_path: str, data: str | None = None) -> RunResult:
+    """Run the methods of a dataset config on real recorded data and score them.
+
+    Parameters
+    ----------
+    name_or_path : str
+        A shipped dataset config (``mixnav.config.list_datasets()``) or a .toml file.
+    data : str, optional
+        Folder holding the data files (default: the config's ``data_dir``).
+
+    A raw-GNSS dataset (``kind = "gnss-raw"``) gives one ``"spp"`` solution
+    (epoch-by-epoch single-point positions) and no filter results.
+    """
+    from .config import load_dataset
+    from .experiment.process import process
+    from .experiment.run import method_metrics, solution_table
+    ds, source, text = load_dataset(str(name_or_path))
+    po = process(ds, source, data)
+    if ds.dataset.kind == "gnss-raw":
+        from .experiment.spp_process import solution_table as spp_table, spp_metrics
+        t = spp_table(po)
+        return RunResult({"spp": t}, _metrics_frame({"spp": spp_metrics(t, po.solve_time_s)}), {}, None, po, text)
+    withheld = tuple(tuple(w) for w in ds.gnss.withhold)
+    lever = po.lever if ds.reference is not None and ds.reference.point == "antenna" else None
+    tables = {name: solution_table(res, po.reference, withheld, lever=lever) for name, res in po.results.items()}
+    metrics = {name: method_metrics(res, tables[name], withheld) for name, res in po.results.items()}
+    truth = None if po.reference is None else _frame(po.reference.time, po.reference.lla)
+    return RunResult(tables, _metrics_frame(metrics), po.results, truth, po, text)
+
+
+def imu_grade(grade: str, **overrides: str):
+    """An IMU error model from a named grade (``"navigation"``, ``"tactical"``, ``"mems"``),
+    with datasheet overrides as text with units (``gyro_bias="2 deg/h"``)."""
+    from .ins.imu_model import GRADES, ImuErrorModel
+    if grade not in GRADES:
+        raise ArgumentError(f"unknown IMU grade '{grade}' (known: {', '.join(GRADES)})", argument="grade")
+    return ImuErrorModel.from_datasheet(dict(overrides), grade=grade)
+
+
+@dataclass
+class LooseResult:
+    """:func:`filter_loose`'s result: the solution ``table`` (docs/outputs.md columns; error
+    columns when a ``truth`` was given) and the raw ``result`` (FilterResult)."""
+
+    table: "object"
+    result: "object"
+
+
+def filter_loose(imu: ImuData, fixes: GnssFixes, init: InitialState, *, imu_model, lever_arm=(0.0, 0.0, 0.0),
+                 estimator: str = "ekf", states: int = 15, output_times=None, truth=None,
+                 **options) -> LooseResult:
+    """Run a loosely coupled GNSS/INS filter on your own data.
+
+    Parameters
+    ----------
+    imu : ImuData
+        Angle and velocity increments [rad, m/s] in the body frame, times [s] strictly increasing.
+    fixes : GnssFixes
+        Antenna positions (lat, lon [rad], h [m]) with 1-sigma N/E/D [m], optional NED velocity [m/s].
+    init : InitialState
+        Initial navigation state (``nav = [q_nb, v_n, lat, lon, h]``, radians) and sigmas, at a time
+        inside the IMU data.
+    imu_model : ImuErrorModel
+        The filter's IMU model (:func:`imu_grade`).
+    lever_arm : array_like (3,)
+        Antenna position relative to the IMU in the body frame [m].
+    estimator : str
+        A name of :data:`mixnav.filters.catalog.ESTIMATORS` (``"ekf"``, ``"robust-adaptive"``,
+        ``"sage-husa"``...); ``options`` are its keyword arguments.
+    states : int
+        Error-state layout: 15, or 21 with scale factors.
+    output_times : array_like, optional
+        Where to record the solution [s] (default: every fix and every second).
+    truth : Trajectory, optional
+        When given, the table has error columns against it.
+    """
+    from .experiment.run import solution_table
+    from .filters.catalog import filter_class
+    from .ins.error_model import get_layout
+    from .ins.imu_model import ImuErrorModel
+    from .measurements.loose import LooseGnss
+    if not isinstance(imu, ImuData):
+        raise ArgumentError(f"expected mixnav.data.ImuData, got {type(imu).__name__}", argument="imu")
+    if not isinstance(fixes, GnssFixes):
+        raise ArgumentError(f"expected mixnav.data.GnssFixes, got {type(fixes).__name__}", argument="fixes")
+    if not isinstance(init, InitialState):
+        raise ArgumentError(f"expected mixnav.data.InitialState, got {type(init).__name__}", argument="init")
+    if not isinstance(imu_model, ImuErrorModel):
+        raise ArgumentError("expected an ImuErrorModel (e.g. mixnav.imu_grade('mems'))", argument="imu_model")
+    lever = np.asarray(lever_arm, dtype=float)
+    if lever.shape != (3,) or not np.all(np.isfinite(lever)):
+        raise ArgumentError(f"must be 3 finite numbers [m] (body frame), got shape {lever.shape}",
+                            argument="lever_arm")
+    if states not in (15, 21):
+        raise ArgumentError(f"a loose filter carries 15 or 21 states, got {states}", argument="states")
+    t0, t1 = imu.start_time, float(imu.time[-1])
+    if not t0 - 1e-9 <= init.time < t1:
+        raise ArgumentError(f"initial time {init.time} s is outside the IMU data [{t0}, {t1}] s", argument="init")
+    inside = (fixes.time > init.time) & (fixes.time <= t1)
+    if not inside.any():
+        raise ArgumentError(f"no fix falls inside the IMU data after the initial time ({init.time}, {t1}] s",
+                            argument="fixes")
+    cls = filter_class(estimator)
+    layout = get_layout(states)
+    filt = cls(layout, imu_model, **options)
+    res = filt.run(imu, init, [LooseGnss(fixes, lever, layout)],
+                   output_times=None if output_times is None else np.asarray(output_times, dtype=float))
+    return LooseResult(solution_table(res, truth), res)
