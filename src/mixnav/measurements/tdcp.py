@@ -142,7 +142,10 @@ class TdcpGnss(TightGnss):
         return a[ia], b[ib]
 
     def _kinds_tdcp(self, n_pr: int, m: int) -> np.ndarray:
-        return np.array([PSEUDORANGE] * n_pr + [TDCP] * (m - n_pr), dtype=np.int64)
+        k = self._kind_rows.get((n_pr, m))
+        if k is None:
+            k = self._kind_rows[(n_pr, m)] = np.array([PSEUDORANGE] * n_pr + [TDCP] * (m - n_pr), dtype=np.int64)
+        return k
 
     def rows(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock, memory: TdcpMemory | None = None):
         """The rows of epoch ``i``: pseudoranges [m], then TDCP [m]; ``H`` has ``n + 4``

@@ -66,6 +66,7 @@ class TightGnss(MeasurementModel):
         self.min_satellites = int(min_satellites)
         self._n_valid = obs.valid.sum(axis=1)
         self._kind_rows = {}  # rows per satellite count -> kind codes (built once per count)
+        self._channels = {}   # (epoch, rows) -> channel ids (a pure function of the epoch: built once)
 
     kinds = ("pseudorange", "range_rate")
 
@@ -119,8 +120,11 @@ class TightGnss(MeasurementModel):
     def row_channels(self, i: int, m: int) -> np.ndarray:
         """A channel id per row, the same for the same satellite and observable at
         every epoch: ``kind * 1000 + prn`` (rows in the order of :meth:`row_kinds`)."""
-        prn = self.obs.prn[i, self.obs.valid[i]]
-        return self._kinds_of(m) * 1000 + np.concatenate([prn] * (m // len(prn)))
+        ch = self._channels.get((i, m))
+        if ch is None:
+            prn = self.obs.prn[i, self.obs.valid[i]]
+            ch = self._channels[(i, m)] = self._kinds_of(m) * 1000 + np.concatenate([prn] * (m // len(prn)))
+        return ch
 
     def measure_numpy(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock):
         """:meth:`measure` in plain numpy."""
