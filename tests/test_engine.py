@@ -247,3 +247,51 @@ def test_a_composite_holds_children_with_their_own_measurement_sets(loose):
     # child B's mean is minus every correction fed back, carried by Phi: non-zero and
     # the composite's record uses child A only.
     assert np.abs(b.x[6:8]).max() > 1.0 and np.abs(a.x).max() < 1e-12
+
+
+def test_batched_mechanization_is_the_single_state_kernel(loose):
+    """The ensemble motion model: N states through one compiled call equal N single runs."""
+    from mixnav.ins._error_kernels import propagate_block
+    sc, sim = loose
+    lay = get_layout(15)
+    motion = StrapdownMotion(lay, sim.imu_model)
+    rng = np.random.default_rng(0)
+    navs = np.tile(sim.init.nav, (3, 1))
+    navs[:, 4:7] += rng.normal(0, 0.5, (3, 3))
+    navs[:, 9] += rng.normal(0, 3.0, 3)
+    sensors = rng.normal(0, 1e-4, (3, 12))
+    prevs = np.zeros((3, 6))
+    sl = slice(0, 250)
+    imu = sim.imu
+    batch = navs.copy()
+    motion.propagate_batch(batch, prevs, sensors, imu.dtheta[sl], imu.dvel[sl], imu.dt[sl])
+    for p in range(3):
+        one = navs[p].copy()
+        propagate_block(one, np.zeros(6), sensors[p], imu.dtheta[sl], imu.dvel[sl], imu.dt[sl], np.empty((0, 0)),
+                        motion.qc, motion.layout_array, motion.tau, np.empty((4, 15, 15)))
+        np.testing.assert_array_equal(batch[p], one)
+    assert np.abs(batch[:, 9] - navs[:, 9]).max() > 0.0
+
+
+def test_batched_h_of_the_loose_model_matches_its_rows(loose):
+    """y - h(x) at the nominal is the rows' innovation; a small error dx of the state
+    moves h by H dx (the Jacobian the linearised family uses)."""
+    from mixnav.attitude import quat_multiply, rotvec_to_quat
+    from mixnav.geodesy.frames import displace
+    sc, sim = loose
+    lay = get_layout(15)
+    model = LooseGnss(sim.fixes, np.array([0.8, -0.3, -1.2]), lay)
+    nav = sim.init.nav.copy()
+    w = np.array([0.02, -0.01, 0.3])
+    i = 5
+    rows = model.rows(i, nav, w)
+    y, Y, R = model.predict_batch(i, nav[None], w)
+    np.testing.assert_allclose(y - Y[0], rows.z, rtol=0, atol=1e-8)
+    np.testing.assert_array_equal(R, rows.R)
+    for k, eps in [(0, 1e-4), (2, 1e-4), (3, 1e-2), (7, 1e-1), (8, 1e-1)]:
+        dx = np.zeros(15)
+        dx[k] = eps
+        q = quat_multiply(rotvec_to_quat(dx[0:3]), nav[0:4])
+        true = np.concatenate([q, nav[4:7] + dx[3:6], displace(nav[7:10], dx[6:9])])
+        _, Yt, _ = model.predict_batch(i, true[None], w)
+        np.testing.assert_allclose((Yt[0] - Y[0]) / eps, rows.H[:, k], rtol=1e-3, atol=2e-3)

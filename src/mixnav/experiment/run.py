@@ -28,6 +28,7 @@ from ..geodesy.frames import ned_displacement
 from ..measurements.loose import antenna_lla
 from ..io.atomic import atomic_write_dataframe, atomic_write_json
 from ..sim.gnss import in_windows
+from ..sim.rng import Streams
 from ..sim.scenario import SimulatedRun, simulate
 from . import figures
 from .metrics import compute_metrics
@@ -59,7 +60,8 @@ def run_scenario(sc: Scenario, source: str | None = None, seed: int | None = Non
         filt, meas = methods.build(m, sim.imu_model, sim.fixes, lever, source, i,
                                     observations=sim.observations, clock=clock, training=training,
                                     seed=seed)
-        results[m.name] = filt.run(sim.imu, sim.init, meas)
+        # each estimator its own stream, independent of the simulation's and of the other methods'
+        results[m.name] = filt.run(sim.imu, sim.init, meas, rng=Streams(seed).get(f"filter:{m.name}"))
     return RunOutput(sc, source or sc.scenario.name, sim, results)
 
 

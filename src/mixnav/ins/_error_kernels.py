@@ -348,3 +348,38 @@ def apply_feedback(nav, sensor, clock, dx, layout):
     if i_clk >= 0:
         clock[0] += dx[i_clk]
         clock[1] += dx[i_clk + 1]
+
+
+@njit(cache=True)
+def mechanize_batch(navs, prevs, sensors, dtheta, dvel, dt):
+    """Mechanize a block of raw increments from each of N states (in place).
+
+    The ensemble estimators' motion model (UKF sigma points, particles): the
+    same compensation and mechanization step as :func:`propagate_block`, for
+    every state, in one compiled call.
+
+    Parameters
+    ----------
+    navs : ndarray (N, 10)
+        ``[q_nb, v_n, lat, lon, h]`` per state; advanced in place.
+    prevs : ndarray (N, 6)
+        Previous compensated increments per state (coning/sculling); updated.
+    sensors : ndarray (N, 12)
+        Sensor-error estimates per state ``[bg, ba, sg, sa]``.
+    dtheta, dvel : ndarray (K, 3)
+        Raw increments of the block; ``dt`` (K,).
+    """
+    dth = np.empty(3)
+    dv = np.empty(3)
+    dvn = np.empty(3)
+    for p in range(navs.shape[0]):
+        nav, prev, sensor = navs[p], prevs[p], sensors[p]
+        for k in range(dtheta.shape[0]):
+            h = dt[k]
+            for i in range(3):
+                dth[i] = (dtheta[k, i] - sensor[i] * h) / (1.0 + sensor[6 + i])
+                dv[i] = (dvel[k, i] - sensor[3 + i] * h) / (1.0 + sensor[9 + i])
+            mechanize_step(nav, dth, dv, prev[0:3], prev[3:6], h, dvn)
+            for i in range(3):
+                prev[i] = dth[i]
+                prev[3 + i] = dv[i]

@@ -11,10 +11,10 @@ A motion model gives the engine three things (see :mod:`mixnav.engine`):
   sensor and clock estimates incremented, auxiliary blocks added);
 - ``initial_covariance``: P0 from an :class:`~mixnav.data.InitialState`.
 
-The ensemble family (UKF, particle filters) will need ``propagate_batch``:
-the mechanization of a batch of full states (N, n) over a block; that seam
-is declared here and filled by the P3/P5 issues. A vehicle dead-reckoning or
-constant-velocity model is another class with the same methods.
+The ensemble family (UKF, particle filters) uses ``propagate_batch``: the
+mechanization of a batch of full states over a block in one compiled call.
+A vehicle dead-reckoning or constant-velocity model is another class with the
+same methods.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..data import InitialState
-from ._error_kernels import apply_feedback, propagate_block
+from ._error_kernels import apply_feedback, mechanize_batch, propagate_block
 from .error_model import ClockModel, StateLayout, process_noise
 from .imu_model import ImuErrorModel
 
@@ -86,10 +86,16 @@ class StrapdownMotion:
         for name, sl in self.layout.aux:
             aux[name] += dx[sl]
 
-    def propagate_batch(self, states, dtheta, dvel, dt):
-        """Mechanize a batch of full states (N, n_full) over a block: the seam of the
-        ensemble estimators (UKF, particle filters); not implemented yet."""
-        raise NotImplementedError("batched mechanization arrives with the UKF and particle-filter issues")
+    def propagate_batch(self, navs, prevs, sensors, dtheta, dvel, dt) -> None:
+        """Mechanize a block of raw increments from a batch of N full states, in place, in
+        one compiled call (:func:`~mixnav.ins._error_kernels.mechanize_batch`): the motion
+        model of the ensemble estimators (UKF sigma points, particles).
+
+        ``navs`` (N, 10), ``prevs`` (N, 6) previous compensated increments, ``sensors``
+        (N, 12) sensor-error states per member; ``dtheta``, ``dvel`` (K, 3) [rad, m/s],
+        ``dt`` (K,) [s].
+        """
+        mechanize_batch(navs, prevs, sensors, dtheta, dvel, dt)
 
     def warm_up(self) -> None:
         """Compile (or load from numba's cache) the kernels for this layout size once per

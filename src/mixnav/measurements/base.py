@@ -21,8 +21,8 @@ and the clone part of each correction is handed to
 :mod:`mixnav.engine`).
 
 The ensemble family (UKF, particle filters) evaluates ``h`` on a batch of
-full states instead of linearising: :meth:`predict_batch` is that seam (not
-implemented by the current models; the P3/P5 issues add it).
+full states instead of linearising: :meth:`predict_batch` (the loose model
+has it; the others follow with the P3/P5 issues).
 """
 
 from __future__ import annotations
@@ -115,9 +115,11 @@ class MeasurementModel:
         """``J`` (c, n): the clone as a linear function of the error state."""
         raise NotImplementedError(f"{type(self).__name__} has no clone")
 
-    def predict_batch(self, i: int, states: np.ndarray) -> np.ndarray:
-        """Predicted measurements ``h(x)`` (N, m) of full states (N, n_full): the seam of
-        the ensemble estimators (UKF, particle filters); not yet implemented."""
+    def predict_batch(self, i: int, navs: np.ndarray, w_b: np.ndarray):
+        """``h`` at a batch of full states, for the ensemble estimators (UKF, particle
+        filters): ``(y (m,), Y (N, m), R (m,))`` with ``y - Y[j]`` the innovation of state
+        ``navs[j]`` (N, 10). Implemented by the loose model; the tight, TDCP and
+        differenced models add it with the UKF and particle-filter issues."""
         raise NotImplementedError(f"{type(self).__name__} does not evaluate h on a batch of states yet")
 
     def warm_up(self, nav: np.ndarray, aux: dict | None = None) -> None:
