@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 from scipy import linalg as sla
 
-from mixnav.errors import ConfigError
+from mixnav.config.noise_spec import from_config
+from mixnav.errors import ArgumentError, ConfigError
 from mixnav.noise.mixture import GaussianMixture
 from mixnav.noise.processes import (AR1, BiasSegments, Gaussian, GrossErrors, Mixture, Outages, Sum,
-                                    VarianceProfile, from_config)
+                                    VarianceProfile)
 from mixnav.units import LENGTH, VELOCITY
 
 
@@ -109,16 +110,16 @@ def test_ar1_with_mixture_innovation():
 @pytest.mark.parametrize("coef", [1.0, 1.5, -1.2, [0.5, 1.1], [[0.9, 0.5], [0.5, 0.9]]])
 def test_non_stationary_ar1_is_refused(coef):
     # [[0.9, 0.5], [0.5, 0.9]] has eigenvalue 1.4 although each entry is < 1
-    with pytest.raises(ConfigError, match="grows without bound"):
+    with pytest.raises(ArgumentError, match="grows without bound"):
         AR1(coef, 1.0)
 
 
 def test_ar1_needs_exactly_one_driving_noise():
-    with pytest.raises(ConfigError, match="exactly one"):
+    with pytest.raises(ArgumentError, match="exactly one"):
         AR1(0.5)
-    with pytest.raises(ConfigError, match="exactly one"):
+    with pytest.raises(ArgumentError, match="exactly one"):
         AR1(0.5, 1.0, innovation=Gaussian(1.0))
-    with pytest.raises(ConfigError, match="white"):
+    with pytest.raises(ArgumentError, match="white"):
         AR1(0.5, innovation=AR1(0.3, 1.0))
 
 
@@ -157,7 +158,7 @@ def test_mixture_with_means_and_from_gaussian_mixture():
     assert np.allclose(p2.sigmas, [2.0, 0.5]) and np.allclose(p2.means, [0.0, 1.0])
     x = p2.sample(np.arange(50_000), 2, np.random.default_rng(8))
     assert abs(x.mean() - 0.7) < 0.03                 # sd of the mean sqrt(1.4/1e5) = 0.004
-    with pytest.raises(ConfigError, match="dimension 2"):
+    with pytest.raises(ArgumentError, match="dimension 2"):
         Mixture(GaussianMixture([1.0], [[0.0, 0.0]], [np.eye(2)]))
 
 
@@ -196,13 +197,13 @@ def test_gross_error_mask_survives_composition():
 
 
 def test_gross_errors_bad_arguments():
-    with pytest.raises(ConfigError, match="exactly one"):
+    with pytest.raises(ArgumentError, match="exactly one"):
         GrossErrors(1.0)
-    with pytest.raises(ConfigError, match="exactly one"):
+    with pytest.raises(ArgumentError, match="exactly one"):
         GrossErrors(1.0, every=3, probability=0.1)
-    with pytest.raises(ConfigError, match="probability"):
+    with pytest.raises(ArgumentError, match="probability"):
         GrossErrors(1.0, probability=1.5)
-    with pytest.raises(ConfigError, match="sign"):
+    with pytest.raises(ArgumentError, match="sign"):
         GrossErrors(1.0, every=2, sign="up")
 
 
@@ -264,7 +265,7 @@ def test_sample_argument_checks():
         Gaussian(1.0).sample(np.arange(3), 0, np.random.default_rng(0))
     with pytest.raises(ValueError, match="1-D"):
         Gaussian(1.0).sample(np.zeros((3, 2)), 1, np.random.default_rng(0))
-    with pytest.raises(ConfigError, match="negative"):
+    with pytest.raises(ArgumentError, match="negative"):
         Gaussian(-1.0)
 
 

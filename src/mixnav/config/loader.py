@@ -112,7 +112,7 @@ def observable_noise(sc, source):
     """Noise processes of the raw observables ``(pseudorange, range rate, carrier)``;
     each None when not given (or when the scenario has no satellites)."""
     from .. import units as u
-    from ..noise.processes import from_config
+    from .noise_spec import from_config
     s = sc.gnss.satellites
     if s is None:
         return None, None, None
@@ -192,7 +192,7 @@ def sweep_variants(sc: Scenario, text: str, source: str) -> list[tuple[float, Sc
 def imu_white_noise(sc, source):
     """The scenario's IMU white-noise process (dimensionless), or None."""
     from .. import units as u
-    from ..noise.processes import from_config
+    from .noise_spec import from_config
     w = sc.imu.white_noise
     return None if w is None else from_config(w, u.DIMENSIONLESS, "imu.white_noise", source)
 
@@ -200,7 +200,7 @@ def imu_white_noise(sc, source):
 def gnss_noise(sc, source):
     """The scenario's GNSS position and velocity noise processes (or None)."""
     from .. import units as u
-    from ..noise.processes import from_config
+    from .noise_spec import from_config
     g = sc.gnss
     pos = None if g.position_noise is None else from_config(g.position_noise, u.LENGTH, "gnss.position_noise",
                                                             source)
@@ -274,7 +274,7 @@ def _check_kind(ds, source):
 def corruption(ds, source):
     """The noise process added to a dataset's recorded fixes (or None)."""
     from .. import units as u
-    from ..noise.processes import from_config
+    from .noise_spec import from_config
     c = ds.gnss.corrupt_position
     return None if c is None else from_config(c, u.LENGTH, "gnss.corrupt_position", source)
 

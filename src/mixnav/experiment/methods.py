@@ -38,7 +38,7 @@ _RENAME = {"k0": "robust.k0", "k1": "robust.k1", "c": "robust.c", "max_component
            "process_interval": "mixture.colored.process_interval", "kinds": "mixture.learn.observables",
            "mixtures": "mixture", "observables": "mixture.learn.observables", "process": "mixture.process",
            "prior": "mixture.prior", "window": "mixture.learn.online.window",
-           "every": "mixture.learn.online.every", "gate": "mixture.learn.online.gate"}
+           "every": "mixture.learn.online.every", "gate": "mixture.learn.online.gate", "layout": "states"}
 
 
 def build(method: MethodConfig, default_imu: ImuErrorModel, fixes, lever_arm, source=None, index: int = 0,

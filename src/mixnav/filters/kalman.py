@@ -8,8 +8,6 @@ Joseph form, which keeps P symmetric positive semi-definite under round-off.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 

@@ -42,7 +42,7 @@ import numpy as np
 from ..errors import ArgumentError, NumericalError
 from ..ins.error_model import StateLayout
 from .base import MeasurementModel, Rows
-from .kinds import KINDS, MAX_KINDS, kind_code
+from .kinds import MAX_KINDS, kind_code
 from .loose import LooseGnss
 from .tight import TightGnss
 

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..attitude import quat_to_dcm, skew
-from ..errors import ConfigError
+from ..errors import ArgumentError
 from ..geodesy.frames import dcm_ecef_to_ned, lla_to_ecef
 from ..gnss.observables import GnssObservations
 from ..ins.error_model import StateLayout
@@ -57,8 +57,8 @@ class TightGnss(MeasurementModel):
     def __init__(self, obs: GnssObservations, lever_arm, layout: StateLayout,
                  use_range_rate: bool = True, min_satellites: int = 1):
         if layout.clk < 0:
-            raise ConfigError(f"tight coupling needs the receiver clock states: use states = 17, "
-                              f"not {layout.n}", key="states")
+            raise ArgumentError(f"tight coupling needs the receiver clock states: use states = 17, "
+                              f"not {layout.n}", argument="layout")
         self.obs = obs
         self.lever = np.asarray(lever_arm, dtype=float).reshape(3)
         self.layout = layout

@@ -5,14 +5,15 @@
                  marginals, pruning and Runnalls' moment-preserving merge
 ``processes``    seeded noise processes to inject into any observable: Gaussian,
                  mixture, gross errors, AR(1) (scalar, vector or matrix), bias
-                 segments, variance profiles, outages, sums; ``from_config``
+                 segments, variance profiles, outages, sums (built from config tables by
+                 :mod:`mixnav.config.noise_spec`)
 ``diagnostics``  Q-Q, autocorrelation, normality tests, kurtosis, AR(1) and
                  mixture fits of a residual series; ``mixnav diagnose``
 """
 
 from .mixture import GaussianMixture
 from .processes import (AR1, BiasSegments, Gaussian, GrossErrors, Mixture, NoiseProcess, Outages, Sum,
-                        VarianceProfile, from_config)
+                        VarianceProfile)
 
 __all__ = ["GaussianMixture", "AR1", "BiasSegments", "Gaussian", "GrossErrors", "Mixture", "NoiseProcess",
-           "Outages", "Sum", "VarianceProfile", "from_config"]
+           "Outages", "Sum", "VarianceProfile"]

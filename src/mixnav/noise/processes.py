@@ -33,18 +33,15 @@ Processes:
 - :class:`Sum` of any of the above,
 - :class:`Outages`, not additive: a boolean availability mask.
 
-:func:`from_config` builds any of them from a TOML-like table, with units
-parsed by :func:`mixnav.units.parse_quantity` and errors as
-:class:`mixnav.errors.ConfigError` naming the key path.
-
-Errors in direct construction are :class:`~mixnav.errors.ConfigError` too
-(``key`` is the argument name); :func:`from_config` re-raises them with the
-full key path and file.
+The configuration layer builds any of them from a scenario's tables
+(:func:`mixnav.config.noise_spec.from_config`: units parsed, errors naming
+the key path). Errors in direct construction are
+:class:`~mixnav.errors.ArgumentError` naming the argument; the config layer
+re-raises them with the full key path and file.
 """
 
 from __future__ import annotations
 
-import difflib
 import numbers
 from dataclasses import dataclass, field
 from typing import Any
@@ -52,14 +49,13 @@ from typing import Any
 import numpy as np
 from scipy import linalg as sla
 
-from ..errors import ConfigError
+from ..errors import ArgumentError
 from ..linalg import ar1_recursion
-from ..units import DIMENSIONLESS, TIME, Dimension, UnitError, parse_quantity
 from .mixture import GaussianMixture
 
 __all__ = [
     "NoiseProcess", "Gaussian", "Mixture", "GrossErrors", "AR1", "BiasSegments",
-    "VarianceProfile", "Sum", "Outages", "from_config",
+    "VarianceProfile", "Sum", "Outages",
 ]
 
 
@@ -76,21 +72,21 @@ def _real_array(value, key: str, *, ndim_max: int = 1, nonnegative: bool = False
                 positive: bool = False) -> np.ndarray:
     """A finite float array of at most ``ndim_max`` dimensions, checked."""
     if isinstance(value, bool):
-        raise ConfigError(f"expected a number, got {value!r}", key=key)
+        raise ArgumentError(f"expected a number, got {value!r}", argument=key)
     try:
         a = np.array(value, dtype=float)
     except (TypeError, ValueError):
-        raise ConfigError(f"expected a number or a list of numbers, got {value!r}", key=key) from None
+        raise ArgumentError(f"expected a number or a list of numbers, got {value!r}", argument=key) from None
     if a.ndim > ndim_max:
-        raise ConfigError(f"expected at most {ndim_max} dimension(s), got shape {a.shape}", key=key)
+        raise ArgumentError(f"expected at most {ndim_max} dimension(s), got shape {a.shape}", argument=key)
     if a.size == 0:
-        raise ConfigError("must not be empty", key=key)
+        raise ArgumentError("must not be empty", argument=key)
     if not np.all(np.isfinite(a)):
-        raise ConfigError(f"must be finite, got {value!r}", key=key)
+        raise ArgumentError(f"must be finite, got {value!r}", argument=key)
     if nonnegative and np.any(a < 0):
-        raise ConfigError(f"must not be negative, got {value!r}", key=key)
+        raise ArgumentError(f"must not be negative, got {value!r}", argument=key)
     if positive and np.any(a <= 0):
-        raise ConfigError(f"must be positive, got {value!r}", key=key)
+        raise ArgumentError(f"must be positive, got {value!r}", argument=key)
     a.setflags(write=False)
     return a
 
@@ -224,15 +220,15 @@ class Mixture(NoiseProcess):
         w = self.weights
         if isinstance(w, GaussianMixture):
             if w.dim != 1:
-                raise ConfigError(f"a GaussianMixture of dimension {w.dim} was given; "
-                                  "Mixture noise needs dimension 1 (one scalar per channel)", key="weights")
+                raise ArgumentError(f"a GaussianMixture of dimension {w.dim} was given; "
+                                  "Mixture noise needs dimension 1 (one scalar per channel)", argument="weights")
             if self.sigmas is not None:
-                raise ConfigError("give either a GaussianMixture or sigmas, not both", key="sigmas")
+                raise ArgumentError("give either a GaussianMixture or sigmas, not both", argument="sigmas")
             gm = w
             w, sig, mu = gm.weights, np.sqrt(gm.covariances[:, 0, 0]), gm.means[:, 0]
         else:
             if self.sigmas is None:
-                raise ConfigError("sigmas are required (one per component)", key="sigmas")
+                raise ArgumentError("sigmas are required (one per component)", argument="sigmas")
             sig, mu = self.sigmas, self.means
         w = _real_array(w, "weights", nonnegative=True)
         sig = _real_array(sig, "sigmas", nonnegative=True)
@@ -240,14 +236,14 @@ class Mixture(NoiseProcess):
         if w.ndim != 1:
             w = _readonly(np.atleast_1d(w))
         if sig.shape != w.shape:
-            raise ConfigError(f"{sig.size} sigmas for {w.size} weights; give one per component",
-                              key="sigmas")
+            raise ArgumentError(f"{sig.size} sigmas for {w.size} weights; give one per component",
+                              argument="sigmas")
         if mu.ndim == 0:
             mu = _readonly(np.full(w.shape, float(mu)))
         elif mu.shape != w.shape:
-            raise ConfigError(f"{mu.size} means for {w.size} weights; give one per component", key="means")
+            raise ArgumentError(f"{mu.size} means for {w.size} weights; give one per component", argument="means")
         if abs(w.sum() - 1.0) > 1e-6:
-            raise ConfigError(f"weights sum to {w.sum():.9g}, not 1", key="weights")
+            raise ArgumentError(f"weights sum to {w.sum():.9g}, not 1", argument="weights")
         w = _readonly(w / w.sum())
         object.__setattr__(self, "weights", w)
         object.__setattr__(self, "sigmas", sig)
@@ -332,17 +328,17 @@ class GrossErrors(NoiseProcess):
         size = float(_real_array(self.size, "size", ndim_max=0, nonnegative=True))
         object.__setattr__(self, "size", size)
         if (self.every is None) == (self.probability is None):
-            raise ConfigError("give exactly one of 'every' (epochs) and 'probability'", key="every")
+            raise ArgumentError("give exactly one of 'every' (epochs) and 'probability'", argument="every")
         if self.every is not None:
             _int(self.every, "every", minimum=1)
         if self.probability is not None:
             p = float(_real_array(self.probability, "probability", ndim_max=0, nonnegative=True))
             if p > 1:
-                raise ConfigError(f"must be in [0, 1], got {p:g}", key="probability")
+                raise ArgumentError(f"must be in [0, 1], got {p:g}", argument="probability")
             object.__setattr__(self, "probability", p)
         _int(self.start, "start", minimum=0)
         if isinstance(self.sign, bool) or not isinstance(self.sign, (str, int)) or self.sign not in _SIGNS:
-            raise ConfigError(f"sign must be 'random', '+' or '-', got {self.sign!r}", key="sign")
+            raise ArgumentError(f"sign must be 'random', '+' or '-', got {self.sign!r}", argument="sign")
         if self.channels is not None:
             ch = [_int(v, f"channels[{i}]", minimum=0) for i, v in enumerate(np.atleast_1d(self.channels))]
             object.__setattr__(self, "channels", tuple(ch))
@@ -389,10 +385,10 @@ class GrossErrors(NoiseProcess):
 def _int(v, key: str, minimum: int | None = None) -> int:
     if isinstance(v, bool) or not isinstance(v, (numbers.Integral, float, np.floating)) \
             or (isinstance(v, (float, np.floating)) and not float(v).is_integer()):
-        raise ConfigError(f"expected an integer, got {v!r}", key=key)
+        raise ArgumentError(f"expected an integer, got {v!r}", argument=key)
     v = int(v)
     if minimum is not None and v < minimum:
-        raise ConfigError(f"must be at least {minimum}, got {v}", key=key)
+        raise ArgumentError(f"must be at least {minimum}, got {v}", argument=key)
     return v
 
 
@@ -419,7 +415,7 @@ class AR1(NoiseProcess):
     coefficient : float, array_like (c,) or array_like (c, c)
         Psi: one coefficient for all channels, one per channel, or a matrix
         coupling the channels. Its spectral radius must be < 1 (stationary);
-        otherwise the process grows without bound and a ConfigError says so.
+        otherwise the process grows without bound and an ArgumentError says so.
     sigma : float or array_like (c,), optional
         Standard deviation of the *innovation* (driving noise) w_k [unit],
         white Gaussian, independent across channels. Not the stationary sd:
@@ -448,29 +444,29 @@ class AR1(NoiseProcess):
     def __post_init__(self):
         psi = _real_array(self.coefficient, "coefficient", ndim_max=2)
         if psi.ndim == 2 and psi.shape[0] != psi.shape[1]:
-            raise ConfigError(f"a coefficient matrix must be square (c, c), got shape {psi.shape}",
-                              key="coefficient")
+            raise ArgumentError(f"a coefficient matrix must be square (c, c), got shape {psi.shape}",
+                              argument="coefficient")
         rho = float(np.max(np.abs(np.linalg.eigvals(psi)))) if psi.ndim == 2 else float(np.max(np.abs(psi)))
         if not rho < 1.0:
-            raise ConfigError(
+            raise ArgumentError(
                 f"AR(1) coefficient has spectral radius {rho:.6g} >= 1: the process is not stationary "
                 "and grows without bound (coefficients of 1.0-1.5 as printed in some papers diverge); "
                 "use a coefficient with |Psi| < 1, e.g. exp(-dt/tau) for correlation time tau",
-                key="coefficient")
+                argument="coefficient")
         object.__setattr__(self, "coefficient", psi)
         if (self.sigma is None) == (self.innovation is None):
-            raise ConfigError("give exactly one of 'sigma' (Gaussian innovation sd) and 'innovation'",
-                              key="sigma")
+            raise ArgumentError("give exactly one of 'sigma' (Gaussian innovation sd) and 'innovation'",
+                              argument="sigma")
         if self.sigma is not None:
             object.__setattr__(self, "sigma", _real_array(self.sigma, "sigma", nonnegative=True))
         else:
             if not _is_white(self.innovation):
-                raise ConfigError("innovation must be a stationary white process (Gaussian, Mixture, "
-                                  f"or a Sum of them), got {self.innovation!r}", key="innovation")
+                raise ArgumentError("innovation must be a stationary white process (Gaussian, Mixture, "
+                                  f"or a Sum of them), got {self.innovation!r}", argument="innovation")
         nc = self._fixed_channels()
         if nc is not None and self.sigma is not None and self.sigma.ndim == 1 and self.sigma.size != nc:
-            raise ConfigError(f"{self.sigma.size} innovation sigmas for a {nc}-channel coefficient",
-                              key="sigma")
+            raise ArgumentError(f"{self.sigma.size} innovation sigmas for a {nc}-channel coefficient",
+                              argument="sigma")
 
     def _fixed_channels(self) -> int | None:
         return None if self.coefficient.ndim == 0 else self.coefficient.shape[0]
@@ -584,11 +580,11 @@ class BiasSegments(NoiseProcess):
         for i, seg in enumerate(self.segments):
             key = f"segments[{i}]"
             if not isinstance(seg, (tuple, list)) or len(seg) != 3:
-                raise ConfigError(f"expected (start, end, bias), got {seg!r}", key=key)
+                raise ArgumentError(f"expected (start, end, bias), got {seg!r}", argument=key)
             t0 = float(_real_array(seg[0], key + ".start", ndim_max=0))
             t1 = float(_real_array(seg[1], key + ".end", ndim_max=0))
             if not t1 > t0:
-                raise ConfigError(f"end ({t1:g} s) must be after start ({t0:g} s)", key=key)
+                raise ArgumentError(f"end ({t1:g} s) must be after start ({t0:g} s)", argument=key)
             out.append((t0, t1, _real_array(seg[2], key + ".bias")))
         object.__setattr__(self, "segments", tuple(out))
 
@@ -632,22 +628,22 @@ class VarianceProfile(NoiseProcess):
 
     def __post_init__(self):
         if not isinstance(self.base, NoiseProcess):
-            raise ConfigError(f"base must be a noise process, got {self.base!r}", key="base")
+            raise ArgumentError(f"base must be a noise process, got {self.base!r}", argument="base")
         st = []
         for i, s in enumerate(self.steps):
             if not isinstance(s, (tuple, list)) or len(s) != 2:
-                raise ConfigError(f"expected (t, factor), got {s!r}", key=f"steps[{i}]")
+                raise ArgumentError(f"expected (t, factor), got {s!r}", argument=f"steps[{i}]")
             st.append((float(_real_array(s[0], f"steps[{i}].at", ndim_max=0)),
                        float(_real_array(s[1], f"steps[{i}].factor", ndim_max=0, nonnegative=True))))
         st.sort(key=lambda p: p[0])
         dr = []
         for i, d in enumerate(self.drifts):
             if not isinstance(d, (tuple, list)) or len(d) != 3:
-                raise ConfigError(f"expected (start, end, factor), got {d!r}", key=f"drifts[{i}]")
+                raise ArgumentError(f"expected (start, end, factor), got {d!r}", argument=f"drifts[{i}]")
             t0 = float(_real_array(d[0], f"drifts[{i}].start", ndim_max=0))
             t1 = float(_real_array(d[1], f"drifts[{i}].end", ndim_max=0))
             if not t1 > t0:
-                raise ConfigError(f"end ({t1:g} s) must be after start ({t0:g} s)", key=f"drifts[{i}]")
+                raise ArgumentError(f"end ({t1:g} s) must be after start ({t0:g} s)", argument=f"drifts[{i}]")
             dr.append((t0, t1, float(_real_array(d[2], f"drifts[{i}].factor", ndim_max=0, nonnegative=True))))
         object.__setattr__(self, "steps", tuple(st))
         object.__setattr__(self, "drifts", tuple(dr))
@@ -694,7 +690,7 @@ class Sum(NoiseProcess):
             processes = tuple(processes[0])
         for i, p in enumerate(processes):
             if not isinstance(p, NoiseProcess):
-                raise ConfigError(f"not an additive noise process: {p!r}", key=f"parts[{i}]")
+                raise ArgumentError(f"not an additive noise process: {p!r}", argument=f"parts[{i}]")
         object.__setattr__(self, "processes", tuple(processes))
 
     def sample_with_mask(self, times, n_channels, rng):
@@ -745,17 +741,17 @@ class Outages:
         win = []
         for i, w in enumerate(self.windows):
             if not isinstance(w, (tuple, list)) or len(w) != 2:
-                raise ConfigError(f"expected (start, end), got {w!r}", key=f"windows[{i}]")
+                raise ArgumentError(f"expected (start, end), got {w!r}", argument=f"windows[{i}]")
             t0 = float(_real_array(w[0], f"windows[{i}].start", ndim_max=0))
             t1 = float(_real_array(w[1], f"windows[{i}].end", ndim_max=0))
             if not t1 > t0:
-                raise ConfigError(f"end ({t1:g} s) must be after start ({t0:g} s)", key=f"windows[{i}]")
+                raise ArgumentError(f"end ({t1:g} s) must be after start ({t0:g} s)", argument=f"windows[{i}]")
             win.append((t0, t1))
         object.__setattr__(self, "windows", tuple(win))
         if self.fraction is not None:
             f = float(_real_array(self.fraction, "fraction", ndim_max=0, nonnegative=True))
             if f > 1:
-                raise ConfigError(f"must be in [0, 1], got {f:g}", key="fraction")
+                raise ArgumentError(f"must be in [0, 1], got {f:g}", argument="fraction")
             object.__setattr__(self, "fraction", f)
         if self.channels is not None:
             ch = [_int(v, f"channels[{i}]", minimum=0) for i, v in enumerate(np.atleast_1d(self.channels))]
@@ -786,216 +782,3 @@ class Outages:
         if self.fraction is not None:
             parts.append(f"random {100 * self.fraction:g} % of epochs")
         return "outages: " + (", ".join(parts) or "none")
-
-
-# --------------------------------------------------------------------------
-# config
-# --------------------------------------------------------------------------
-_KEYS = {
-    "gaussian": {"sigma"},
-    "mixture": {"weights", "sigmas", "means"},
-    "gross": {"size", "every", "probability", "start", "sign", "channels"},
-    "ar1": {"coefficient", "sigma", "innovation"},
-    "bias_segments": {"segments"},
-    "variance_profile": {"base", "steps", "drifts"},
-    "sum": {"parts"},
-    "outages": {"windows", "fraction", "channels"},
-}
-_ALIASES = {"normal": "gaussian", "gross_errors": "gross", "ar(1)": "ar1", "bias": "bias_segments",
-            "multipath": "bias_segments", "profile": "variance_profile"}
-
-
-def from_config(table: dict, dimension: Dimension, key_prefix: str = "noise",
-                source: str | None = None):
-    """Build a noise process from a TOML-like table.
-
-    Parameters
-    ----------
-    table : dict
-        ``type`` plus the keys of that type (values with units are text,
-        e.g. ``"0.3 m"``; times such as segment bounds are text too,
-        ``"10 s"``)::
-
-            {type="gaussian", sigma="0.3 m"}            # or a list per channel
-            {type="mixture", weights=[0.1, 0.9], sigmas=["0.3 m", "0.173 m"], means=["0 m", "0 m"]}
-            {type="gross", size="2.5 m", every=20, start=0, sign="random", channels=[0, 3]}
-            {type="gross", size="2.5 m", probability=0.05}
-            {type="ar1", coefficient=0.9, sigma="0.3 m"}          # sigma: innovation sd
-            {type="ar1", coefficient=[[0.5, 0.1], [0.0, 0.7]], innovation={type="mixture", ...}}
-            {type="bias_segments", segments=[["100 s", "160 s", "4 m"], {start="300 s", end="320 s", bias="-2 m"}]}
-            {type="variance_profile", base={...}, steps=[["100 s", 3]], drifts=[["200 s", "400 s", 2]]}
-            {type="sum", parts=[{...}, {...}]}
-            {type="outages", windows=[["100 s", "130 s"]], fraction=0.1, channels=[2]}
-
-        Aliases: normal, gross_errors, ar(1), bias, multipath, profile.
-    dimension : mixnav.units.Dimension
-        Dimension of the observable, e.g. ``LENGTH`` for pseudorange,
-        ``VELOCITY`` for Doppler; sigmas, means, sizes and biases must have it.
-    key_prefix : str
-        Dotted path of ``table`` in the config file, used in error messages.
-    source : str, optional
-        The config file, used in error messages.
-
-    Returns
-    -------
-    NoiseProcess or Outages
-
-    Raises
-    ------
-    ConfigError
-        Unknown type or key, missing key, missing or wrong unit, negative
-        sigma, weights not summing to 1, non-stationary AR coefficient, ...;
-        ``key`` is the full path, e.g. ``noise.parts[1].sigmas[0]``.
-    """
-    return _Builder(dimension, source).build(table, key_prefix)
-
-
-class _Builder:
-    def __init__(self, dim: Dimension, source):
-        self.dim, self.source = dim, source
-
-    def err(self, msg, key):
-        return ConfigError(msg, file=self.source, key=key)
-
-    def quantity(self, v, key, dim=None, nonnegative=False, positive=False):
-        dim = self.dim if dim is None else dim
-        try:
-            x = parse_quantity(v, dim)
-        except UnitError as exc:
-            raise self.err(str(exc), key) from None
-        if nonnegative and x < 0:
-            raise self.err(f"must not be negative, got {v!r}", key)
-        if positive and not x > 0:
-            raise self.err(f"must be positive, got {v!r}", key)
-        return x
-
-    def quantities(self, v, key, dim=None, nonnegative=False, scalar_ok=True):
-        if isinstance(v, (list, tuple)):
-            if not v:
-                raise self.err("must not be an empty list", key)
-            return [self.quantity(x, f"{key}[{i}]", dim, nonnegative) for i, x in enumerate(v)]
-        if not scalar_ok:
-            raise self.err(f"expected a list, got {v!r}", key)
-        return self.quantity(v, key, dim, nonnegative)
-
-    def number_list(self, v, key):
-        if isinstance(v, (list, tuple)):
-            return [self.number_list(x, f"{key}[{i}]") for i, x in enumerate(v)]
-        return self.quantity(v, key, DIMENSIONLESS)
-
-    def table_list(self, v, key):
-        if not isinstance(v, (list, tuple)):
-            raise self.err(f"expected a list, got {v!r}", key)
-        return v
-
-    def record(self, item, key, names, dims):
-        """(a, b, ...) from a list of len(names) or a table with those keys."""
-        if isinstance(item, dict):
-            self.check_keys(item, set(names), key)
-            missing = [n for n in names if n not in item]
-            if missing:
-                raise self.err(f"missing key '{missing[0]}'", key)
-            vals = [item[n] for n in names]
-        elif isinstance(item, (list, tuple)) and len(item) == len(names):
-            vals = list(item)
-        else:
-            raise self.err(f"expected [{', '.join(names)}] or a table with those keys, got {item!r}", key)
-        out = []
-        for n, v, d in zip(names, vals, dims):
-            k = f"{key}.{n}"
-            # only a bias may be a per-channel list
-            out.append(self.quantities(v, k, d) if n == "bias" else self.quantity(v, k, d))
-        return tuple(out)
-
-    def check_keys(self, table, allowed, key):
-        for k in table:
-            if k not in allowed:
-                close = difflib.get_close_matches(str(k), sorted(allowed), n=1)
-                hint = f"; did you mean '{close[0]}'?" if close else f"; allowed: {', '.join(sorted(allowed))}"
-                raise self.err(f"unknown key '{k}'{hint}", f"{key}.{k}" if key else str(k))
-
-    def build(self, table, key):
-        if not isinstance(table, dict):
-            raise self.err(f"expected a table such as {{type=\"gaussian\", sigma=\"1 m\"}}, got {table!r}", key)
-        if "type" not in table:
-            raise self.err(f"missing key 'type' (one of {', '.join(_KEYS)})", key)
-        typ = str(table["type"]).lower()
-        typ = _ALIASES.get(typ, typ)
-        if typ not in _KEYS:
-            close = difflib.get_close_matches(typ, list(_KEYS) + list(_ALIASES), n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
-            raise self.err(f"unknown noise type '{table['type']}' (one of {', '.join(_KEYS)}){hint}",
-                           f"{key}.type")
-        body = {k: v for k, v in table.items() if k != "type"}
-        self.check_keys(body, _KEYS[typ], key)
-        return getattr(self, "_" + typ)(body, key)
-
-    def make(self, cls, key, *args, **kw):
-        """Call a constructor; its errors name the argument, so prefix the key path."""
-        try:
-            return cls(*args, **kw)
-        except ConfigError as exc:
-            raise self.err(exc.message, f"{key}.{exc.key}" if exc.key else key) from None
-
-    def need(self, body, name, key):
-        if name not in body:
-            raise self.err(f"missing key '{name}'", f"{key}.{name}")
-        return body[name]
-
-    def _gaussian(self, b, key):
-        return self.make(Gaussian, key, self.quantities(self.need(b, "sigma", key), f"{key}.sigma", nonnegative=True))
-
-    def _mixture(self, b, key):
-        w = self.need(b, "weights", key)
-        if not isinstance(w, (list, tuple)) or not w:
-            raise self.err(f"expected a list of weights, got {w!r}", f"{key}.weights")
-        w = [self.quantity(x, f"{key}.weights[{i}]", DIMENSIONLESS, nonnegative=True) for i, x in enumerate(w)]
-        s = self.quantities(self.need(b, "sigmas", key), f"{key}.sigmas", nonnegative=True, scalar_ok=False)
-        m = self.quantities(b["means"], f"{key}.means") if "means" in b else 0.0
-        return self.make(Mixture, key, w, s, m)
-
-    def _gross(self, b, key):
-        kw = dict(size=self.quantity(self.need(b, "size", key), f"{key}.size", nonnegative=True))
-        for name in ("every", "probability", "start", "sign", "channels"):
-            if name in b:
-                kw[name] = b[name]
-        return self.make(GrossErrors, key, **kw)
-
-    def _ar1(self, b, key):
-        coef = self.number_list(self.need(b, "coefficient", key), f"{key}.coefficient")
-        sigma = self.quantities(b["sigma"], f"{key}.sigma", nonnegative=True) if "sigma" in b else None
-        inn = self.build(b["innovation"], f"{key}.innovation") if "innovation" in b else None
-        if inn is not None and not _is_white(inn):
-            raise self.err("innovation must be white: type gaussian, mixture, gross with probability, "
-                           "or a sum of them",
-                           f"{key}.innovation.type")
-        return self.make(AR1, key, coef, sigma=sigma, innovation=inn)
-
-    def _bias_segments(self, b, key):
-        segs = self.table_list(self.need(b, "segments", key), f"{key}.segments")
-        return self.make(BiasSegments, key, [self.record(s, f"{key}.segments[{i}]", ("start", "end", "bias"),
-                                         (TIME, TIME, self.dim)) for i, s in enumerate(segs)])
-
-    def _variance_profile(self, b, key):
-        base = self.build(self.need(b, "base", key), f"{key}.base")
-        if not isinstance(base, NoiseProcess):
-            raise self.err("base must be an additive noise process (not outages)", f"{key}.base.type")
-        steps = [self.record(s, f"{key}.steps[{i}]", ("at", "factor"), (TIME, DIMENSIONLESS))
-                 for i, s in enumerate(self.table_list(b.get("steps", []), f"{key}.steps"))]
-        drifts = [self.record(s, f"{key}.drifts[{i}]", ("start", "end", "factor"), (TIME, TIME, DIMENSIONLESS))
-                  for i, s in enumerate(self.table_list(b.get("drifts", []), f"{key}.drifts"))]
-        return self.make(VarianceProfile, key, base, steps, drifts)
-
-    def _sum(self, b, key):
-        parts = self.table_list(self.need(b, "parts", key), f"{key}.parts")
-        built = [self.build(p, f"{key}.parts[{i}]") for i, p in enumerate(parts)]
-        for i, p in enumerate(built):
-            if not isinstance(p, NoiseProcess):
-                raise self.err("outages are not additive noise; configure them separately",
-                               f"{key}.parts[{i}].type")
-        return self.make(Sum, key, *built)
-
-    def _outages(self, b, key):
-        wins = [self.record(w, f"{key}.windows[{i}]", ("start", "end"), (TIME, TIME))
-                for i, w in enumerate(self.table_list(b.get("windows", []), f"{key}.windows"))]
-        return self.make(Outages, key, wins, fraction=b.get("fraction"), channels=b.get("channels"))
