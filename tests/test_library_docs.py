@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "library.md"
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+from .conftest import DATA_DIR as SHARED  # MIXNAV_DATA or ../shared/data
 
 
 def test_library_doc_examples_run(tmp_path, monkeypatch, capsys):

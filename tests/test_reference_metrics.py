@@ -19,7 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent / "reference"))
 from cases import CASES, compute  # noqa: E402
 
 REF = json.loads((Path(__file__).resolve().parent / "data" / "reference_metrics.json").read_text())
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+from .conftest import DATA_DIR as SHARED  # MIXNAV_DATA or ../shared/data
 
 
 def _diffs(stored, now, where=""):

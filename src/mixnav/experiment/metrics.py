@@ -52,10 +52,13 @@ METRIC_KEYS_DOC: dict[str, str] = {
     "online_floored": "M4 online re-learning: refitted components whose deconvolved scale was raised to its floor",
     "online_failed": "M4 online re-learning: refits that failed (the mixture in use was kept)",
     "online_rows_gated": "M4 online re-learning: window rows left out of a fit by the gate (counted per refit)",
+    "sage_husa_scale_<kind>": "Sage-Husa EKF: the measurement-noise variance scale learned for an observable kind "
+                              "at the end of the run (1: the model's R was right)",
     "total_time_s": "wall_time_s + learning_time_s [s]",
     "measurement_epochs": "number of GNSS epochs processed",
-    "recoveries": "counts of numerical recoveries (see mixnav.filters.ekf); the robust adaptive EKF "
-                  "adds its row and epoch counts (see mixnav.filters.robust)",
+    "recoveries": "counts of numerical recoveries (see mixnav.engine.engine); the robust adaptive EKF "
+                  "adds its row and epoch counts (see mixnav.filters.robust); learned-mixture methods add "
+                  "learner_not_converged (offline fits that stopped before converging)",
     "nis_mean_per_dof": "mean NIS divided by the measurement dimension (1 if consistent)",
 }
 
