@@ -3,8 +3,9 @@
     python benchmarks/bench_engine_redesign.py            # drives both, writes results/engine_redesign.{md,json}
     python benchmarks/bench_engine_redesign.py --one      # times the mixnav on the path, prints JSON
 
-The driver runs ``--one`` alternately with the old code (``OLD_SRC``, a checkout
-of commit 15ef457, default ../wt-ref/src) and the new one, ROUNDS times, and
+The driver runs ``--one`` alternately with the old code (``OLD_SRC``: the src of a
+checkout of commit 15ef457, e.g. ``git worktree add ../wt-ref 15ef457``, the
+default ../wt-ref/src) and the new one, ROUNDS times, and
 takes each filter's best time per epoch over the rounds of each code (the
 machine is shared: the minimum is the steady-state cost, the alternation
 cancels drift). Every filter runs the same simulated data (same seed) in both.
