@@ -87,13 +87,13 @@ def run_scenario(name_or_path: str, seed: int | None = None) -> RunResult:
         Seed of the run (default: the scenario's own).
     """
     from .config import load_scenario
-    from .experiment.run import method_metrics, run_scenario as _run, solution_table
+    from .experiment.run import method_metrics, run_scenario as _run, run_tables
     if seed is not None and (not isinstance(seed, (int, np.integer)) or seed < 0):
         raise ArgumentError(f"must be a non-negative integer, got {seed!r}", argument="seed")
     sc, source, text = load_scenario(str(name_or_path))
     run = _run(sc, source, seed=seed)
     sim = run.sim
-    tables = {name: solution_table(res, sim.truth, sim.outages) for name, res in run.results.items()}
+    tables = run_tables(run)
     metrics = {name: method_metrics(res, tables[name], sim.outages) for name, res in run.results.items()}
     return RunResult(tables, _metrics_frame(metrics), run.results, _frame(sim.truth.time, sim.truth.lla), run, text)
 
@@ -112,17 +112,16 @@ def process_dataset(name_or_path: str, data: str | None = None) -> RunResult:
     (epoch-by-epoch single-point positions) and no filter results.
     """
     from .config import load_dataset
-    from .experiment.process import process
-    from .experiment.run import method_metrics, solution_table
+    from .experiment.process import process, process_tables, withheld_windows
+    from .experiment.run import method_metrics
     ds, source, text = load_dataset(str(name_or_path))
     po = process(ds, source, data)
     if ds.dataset.kind == "gnss-raw":
         from .experiment.spp_process import solution_table as spp_table, spp_metrics
         t = spp_table(po)
         return RunResult({"spp": t}, _metrics_frame({"spp": spp_metrics(t, po.solve_time_s)}), {}, None, po, text)
-    withheld = tuple(tuple(w) for w in ds.gnss.withhold)
-    lever = po.lever if ds.reference is not None and ds.reference.point == "antenna" else None
-    tables = {name: solution_table(res, po.reference, withheld, lever=lever) for name, res in po.results.items()}
+    withheld = withheld_windows(po)
+    tables = process_tables(po)
     metrics = {name: method_metrics(res, tables[name], withheld) for name, res in po.results.items()}
     truth = None if po.reference is None else _frame(po.reference.time, po.reference.lla)
     return RunResult(tables, _metrics_frame(metrics), po.results, truth, po, text)

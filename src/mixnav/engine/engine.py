@@ -73,6 +73,13 @@ def _event_index(times: np.ndarray, query: np.ndarray) -> np.ndarray:
     return k
 
 
+def check_covariance_interval(value: float) -> float:
+    """The longest propagation step [s], which must be in (0, 1] (an :class:`ArgumentError` otherwise)."""
+    if not 0.0 < value <= 1.0:
+        raise ArgumentError(f"must be in (0, 1] s, got {value}", argument="covariance_interval")
+    return float(value)
+
+
 _WARM = []
 
 
@@ -105,8 +112,7 @@ class Engine:
 
     def __init__(self, motion, estimator, measurements=(), covariance_interval: float = 1.0, rng=None,
                  history: bool = False):
-        if not 0.0 < covariance_interval <= 1.0:
-            raise ArgumentError(f"must be in (0, 1] s, got {covariance_interval}", argument="covariance_interval")
+        self.covariance_interval = check_covariance_interval(covariance_interval)
         self.motion = motion
         self.estimator = estimator
         self.measurements = list(measurements)
@@ -124,7 +130,6 @@ class Engine:
         self.cloner = cloners[0] if cloners else None
         self._ci = self.measurements.index(self.cloner) if cloners else -1
         self.n_clone = self.cloner.clone_size if self.cloner is not None else 0
-        self.covariance_interval = float(covariance_interval)
         self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(0 if rng is None else rng)
         self.keep_history = bool(history)
 
@@ -139,8 +144,9 @@ class Engine:
         motion.warm_up()
         est.warm_up()
         _warm_record()
+        self.aux = {name: np.zeros(sl.stop - sl.start) for name, sl in lay.aux}
         for model in self.measurements:  # compile their kernels outside the timed loop too
-            model.warm_up(init.nav, {name: np.zeros(sl.stop - sl.start) for name, sl in lay.aux})
+            model.warm_up(init.nav, self.aux)
         t0, t1 = init.time, float(imu.time[-1])
         self._t0 = t0
         if t0 < imu.start_time - 1e-9:
@@ -184,7 +190,6 @@ class Engine:
         self.prev = np.zeros(6)
         self.sensor = np.zeros(12) if init.sensor0 is None else np.array(init.sensor0, dtype=float)
         self.clock = np.zeros(2)
-        self.aux = {name: np.zeros(sl.stop - sl.start) for name, sl in lay.aux}
         self.memory = [None] * len(self.measurements)
         est.init(motion, motion.initial_covariance(init), self.n_clone, self.rng)
         self.counts = est.counts

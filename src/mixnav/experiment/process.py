@@ -18,6 +18,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 import mixnav
 
@@ -210,16 +211,27 @@ def process(ds: Dataset, source: str, data: str | None = None):
                          read_time, filter_time)
 
 
+def withheld_windows(po: ProcessOutput) -> tuple:
+    """The GNSS windows withheld from the filters, ``((start, end), ...)`` [s]."""
+    return tuple(tuple(w) for w in po.dataset.gnss.withhold)
+
+
+def process_tables(po: ProcessOutput) -> dict[str, pd.DataFrame]:
+    """The solution table of every method, errors against the reference for the point it
+    gives (the antenna or the IMU)."""
+    ref = po.dataset.reference
+    lever = po.lever if ref is not None and ref.point == "antenna" else None
+    return {name: solution_table(res, po.reference, withheld_windows(po), lever=lever)
+            for name, res in po.results.items()}
+
+
 def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = None) -> dict:
     """Solutions, metrics (against the reference), figures and report of a processed dataset."""
     if po.dataset.dataset.kind == "gnss-raw":
         from .spp_process import write_raw
         return write_raw(out_dir, po, config_text)
-    withheld = tuple(tuple(w) for w in po.dataset.gnss.withhold)
-    ref = po.dataset.reference
-    lever = po.lever if ref is not None and ref.point == "antenna" else None
-    tables = {name: solution_table(res, po.reference, withheld, lever=lever)
-              for name, res in po.results.items()}
+    withheld = withheld_windows(po)
+    tables = process_tables(po)
     for t in tables.values():
         t.insert(1, "gps_time_s", t["time_s"] + po.time_origin)
     duration = float(po.imu.time[-1] - po.init.time)

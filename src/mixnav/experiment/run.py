@@ -224,10 +224,15 @@ def _lla_frame(time, lla) -> pd.DataFrame:
                          "lon_deg": np.degrees(lla[:, 1]), "height_m": lla[:, 2]})
 
 
+def run_tables(run: RunOutput) -> dict[str, pd.DataFrame]:
+    """The solution table of every method of a simulated run, errors against the truth."""
+    return {name: solution_table(res, run.sim.truth, run.sim.outages) for name, res in run.results.items()}
+
+
 def write_run(out_dir: Path, run: RunOutput, config_text: str | None = None) -> dict:
     """Write solutions, metrics, figures and the report of one simulated run."""
     sim = run.sim
-    tables = {name: solution_table(res, sim.truth, sim.outages) for name, res in run.results.items()}
+    tables = run_tables(run)
     notes = [f"Seed {sim.seed}; IMU errors drawn: gyro bias "
              f"{np.round(np.degrees(sim.imu_draw.gyro_bias) * 3600, 2).tolist()} deg/h, "
              f"accelerometer bias {np.round(sim.imu_draw.accel_bias / 9.80665e-6, 1).tolist()} ug.",

@@ -20,6 +20,7 @@ import numpy as np
 
 from ..data import ImuData, InitialState  # noqa: F401  (InitialState re-exported)
 from ..engine import Engine
+from ..engine.engine import check_covariance_interval
 from ..engine.protocols import Correction, Epoch, Transition
 from ..engine.result import FilterResult  # noqa: F401  (re-exported)
 from ..errors import ArgumentError, NumericalError
@@ -114,11 +115,7 @@ class KalmanEstimator:
         z, H, r = rows.z, rows.H, rows.R
         n, nc = self.n, self.nc
         if self.have_clone:
-            Pa = np.empty((n + nc, n + nc))
-            Pa[:n, :n] = self.P
-            Pa[:n, n:] = self.P_xc
-            Pa[n:, :n] = self.P_xc.T
-            Pa[n:, n:] = self.P_cc
+            Pa = self.augmented_covariance()
             if H.shape[1] == n:
                 H = np.hstack([H, np.zeros((len(z), nc))])
             Pa_new, dx, nis, status = self.correct(Pa, z, H, r)
@@ -140,6 +137,16 @@ class KalmanEstimator:
         if status == OK or status == NEEDS_REPAIR:
             self.P = P_new
         return Correction(dx, nis, status, len(z))
+
+    def augmented_covariance(self) -> np.ndarray:
+        """``[[P, P_xc], [P_xc^T, P_cc]]`` (n + c, n + c): the error state and its clone."""
+        n, nc = self.n, self.nc
+        Pa = np.empty((n + nc, n + nc))
+        Pa[:n, :n] = self.P
+        Pa[:n, n:] = self.P_xc
+        Pa[n:, :n] = self.P_xc.T
+        Pa[n:, n:] = self.P_cc
+        return Pa
 
     def replace_clone(self, J: np.ndarray) -> None:
         """The clone becomes ``J x`` of the current (updated) state."""
@@ -198,10 +205,8 @@ class ErrorStateEkf:
     def __init__(self, layout: StateLayout, imu_model: ImuErrorModel,
                  covariance_interval: float = 1.0, absurd_sigma: float = 1e4,
                  clock: ClockModel | None = None):
-        if not 0.0 < covariance_interval <= 1.0:
-            raise ArgumentError(f"must be in (0, 1] s, got {covariance_interval}", argument="covariance_interval")
-        if not absurd_sigma > 0:
-            raise ArgumentError(f"must be positive, got {absurd_sigma}", argument="absurd_sigma")
+        check_covariance_interval(covariance_interval)  # now, not at the first run
+        KalmanEstimator(absurd_sigma)                    # checks absurd_sigma
         self.layout = layout
         self.imu_model = imu_model
         self.covariance_interval = float(covariance_interval)

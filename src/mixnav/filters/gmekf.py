@@ -341,8 +341,7 @@ class GaussianMixtureEkf(ErrorStateEkf):
                  clock: ClockModel | None = None, learning_time_s: float = 0.0, online=None,
                  learner_not_converged: int = 0):
         super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
-        if int(max_components) < 1:
-            raise ArgumentError(f"must be at least 1, got {max_components}", argument="max_components")
+        BankEstimator(mixtures, max_components, absurd_sigma, online)  # validate now, not at the first run
         self.mixtures = mixtures
         self.max_components = int(max_components)
         self.learning_time_s = float(learning_time_s)

@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..engine.protocols import Correction, Epoch
+from ..engine.status import NEEDS_REPAIR, OK
 from ..errors import ArgumentError
 from .ekf import ErrorStateEkf, KalmanEstimator
 
@@ -75,12 +76,12 @@ class SageHusaEstimator(KalmanEstimator):
         s = np.array([self.scale.get(int(k), self.scale0) for k in kinds])
         scaled = rows._replace(R=r * s)
         corr = super().update(_Scaled(epoch, scaled))
-        if corr is None or corr.status not in (0, 4):  # rejected: nothing learned
+        if corr is None or corr.status not in (OK, NEEDS_REPAIR):  # rejected: nothing learned
             return corr
         H = scaled.H
-        dx = corr.dx[:H.shape[1]] if len(corr.dx) >= H.shape[1] else corr.dx
-        e = rows.z - H @ dx
-        P = self._posterior(H.shape[1])
+        ncol = H.shape[1]  # n, or n + c when the rows reach the clone
+        e = rows.z - H @ corr.dx[:ncol]
+        P = self.P if ncol == self.n else self.augmented_covariance()
         hph = np.einsum("ij,jk,ik->i", H, P, H)
         u_row = (e * e + hph) / r
         b = self.fading
@@ -92,18 +93,6 @@ class SageHusaEstimator(KalmanEstimator):
             self.updates[int(k)] = j + 1
             self.trace.append((epoch.time, int(k), self.scale[int(k)]))
         return corr
-
-    def _posterior(self, ncol: int) -> np.ndarray:
-        """The posterior covariance over the columns of ``H`` (error states, then the clone)."""
-        n = self.n
-        if ncol == n:
-            return self.P
-        Pa = np.empty((ncol, ncol))
-        Pa[:n, :n] = self.P
-        Pa[:n, n:] = self.P_xc
-        Pa[n:, :n] = self.P_xc.T
-        Pa[n:, n:] = self.P_cc
-        return Pa
 
     def diagnostics(self) -> dict:
         from ..measurements.kinds import kind_name
