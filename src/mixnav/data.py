@@ -199,3 +199,64 @@ class Trajectory:
 
     def __len__(self) -> int:
         return len(self.time)
+
+
+#: Largest plausible land-vehicle speed [m/s] (about 360 km/h): a faster odometer
+#: sample is a unit or parsing error, never a measurement.
+MAX_VEHICLE_SPEED = 100.0
+
+
+@dataclass(frozen=True)
+class OdometerData:
+    """Odometer (wheel-speed) measurements: the forward speed of a wheel point.
+
+    Attributes
+    ----------
+    time : ndarray (M,)
+        Sample times [s], strictly increasing, on the IMU time axis.
+    speed : ndarray (M,)
+        Forward speed [m/s] along the vehicle's x axis, >= 0 unless ``signed``
+        (an unsigned wheel-speed sensor cannot say it reverses), below
+        :data:`MAX_VEHICLE_SPEED`.
+    sigma : ndarray (M,)
+        1-sigma noise of each sample [m/s], positive.
+    signed : bool
+        The speed may be negative (reversing).
+    source : str or None
+        File the samples came from (named in errors).
+    """
+
+    time: np.ndarray
+    speed: np.ndarray
+    sigma: np.ndarray
+    signed: bool = False
+    source: str | None = None
+
+    def __post_init__(self):
+        m = len(self.time)
+        _check(np.shape(self.speed) == (m,) and np.shape(self.sigma) == (m,),
+               f"odometer time, speed and sigma disagree in shape ({m}, {np.shape(self.speed)}, "
+               f"{np.shape(self.sigma)})", self.source)
+        _finite("odometer time", self.time, self.source)
+        _finite("odometer speed", self.speed, self.source)
+        if m:
+            if not self.signed and self.speed.min() < 0:
+                i = int(np.argmin(self.speed))
+                raise DataError(f"odometer speed is negative ({self.speed[i]:.6g} m/s at sample {i}, "
+                                f"t = {self.time[i]:.3f} s); give signed speeds as signed", file=self.source)
+            big = np.abs(self.speed) > MAX_VEHICLE_SPEED
+            if big.any():
+                i = int(np.argmax(big))
+                raise DataError(f"odometer speed {self.speed[i]:.6g} m/s at sample {i} (t = {self.time[i]:.3f} s) "
+                                f"is above {MAX_VEHICLE_SPEED:g} m/s: wrong unit (km/h? mm/s?)", file=self.source)
+            _check(bool(np.all(self.sigma > 0)) and bool(np.all(np.isfinite(self.sigma))),
+                   "odometer sigma must be finite and positive", self.source)
+        if m > 1:
+            d = np.diff(self.time)
+            if not np.all(d > 0):
+                i = int(np.argmax(~(d > 0)))
+                raise DataError(f"odometer times must increase strictly: sample {i + 1} (t = {self.time[i + 1]:.6f} s)"
+                                f" is not after sample {i} (t = {self.time[i]:.6f} s)", file=self.source)
+
+    def __len__(self) -> int:
+        return len(self.time)
