@@ -1,0 +1,131 @@
+"""Which IMU samples were taken at rest: the epochs of ZUPT and ZARU.
+
+A vehicle is taken as still over a window when, in that window,
+
+* the specific-force magnitude barely varies: its standard deviation is below
+  ``accel_std`` [m/s^2] (a moving car's road vibration and speed changes
+  give 0.1-1 m/s^2; a parked one with the engine running 0.01-0.05 on a
+  car-roof MEMS unit), and
+* the body turns slowly: the mean angular-rate magnitude is below
+  ``gyro_rate`` [rad/s] (it includes the gyro bias, so the threshold sits above
+  an automotive MEMS bias of ~0.05 deg/s = 1e-3 rad/s and below the turn rate
+  of a car creeping round a corner, ~0.05 rad/s), and
+* when GNSS velocity is given, the nearest fix within ``gnss_gap`` says the
+  speed is below ``gnss_speed`` [m/s] (a fix further away does not vote).
+
+A sample is still when every window containing it is still (an erosion, so the
+first and last half-window of a stop are not used: the vehicle may still be
+rolling there). Thresholds and the counts of what was detected are returned
+for the report (:class:`Stillness`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..data import GnssFixes, ImuData
+from ..errors import ArgumentError
+
+
+@dataclass(frozen=True)
+class Stillness:
+    """The result of :func:`detect_still`.
+
+    Attributes
+    ----------
+    mask : ndarray of bool (N,)
+        Per IMU sample: still.
+    intervals : ndarray (K, 2)
+        Start and end [s] of each still stretch.
+    settings : dict
+        The thresholds used (SI units), for the report.
+    """
+
+    mask: np.ndarray
+    intervals: np.ndarray
+    settings: dict
+
+    @property
+    def still_time_s(self) -> float:
+        """Total time detected still [s]."""
+        return float(np.sum(self.intervals[:, 1] - self.intervals[:, 0])) if len(self.intervals) else 0.0
+
+    def epochs(self, rate: float, start: float | None = None, end: float | None = None) -> np.ndarray:
+        """Regularly spaced epochs [s] at ``rate`` [Hz] inside the still stretches."""
+        if not (np.isfinite(rate) and rate > 0):
+            raise ArgumentError(f"must be a positive rate [Hz], got {rate!r}", argument="rate")
+        out = []
+        for a, b in self.intervals:
+            a = a if start is None else max(a, start)
+            b = b if end is None else min(b, end)
+            if b > a:
+                out.append(np.arange(np.ceil(a * rate) / rate, b + 1e-9, 1.0 / rate))
+        return np.concatenate(out) if out else np.zeros(0)
+
+
+def _moving(x: np.ndarray, w: int) -> np.ndarray:
+    """Mean over the windows of ``w`` samples starting at each sample (N - w + 1,)."""
+    c = np.concatenate([[0.0], np.cumsum(x)])
+    return (c[w:] - c[:-w]) / w
+
+
+def detect_still(imu: ImuData, window: float = 1.0, accel_std: float = 0.05, gyro_rate: float = 0.01,
+                 fixes: GnssFixes | None = None, gnss_speed: float = 0.1, gnss_gap: float = 1.0,
+                 min_duration: float = 1.0) -> Stillness:
+    """Detect the still stretches of an IMU record (see the module docstring).
+
+    Parameters
+    ----------
+    imu : ImuData
+    window : float
+        Window length [s].
+    accel_std : float
+        Largest standard deviation of the specific-force magnitude at rest [m/s^2].
+    gyro_rate : float
+        Largest mean angular-rate magnitude at rest [rad/s].
+    fixes : GnssFixes, optional
+        With velocities, a fix moving faster than ``gnss_speed`` [m/s] vetoes its time
+        (within ``gnss_gap`` [s]).
+    min_duration : float
+        Shorter still stretches are dropped [s].
+    """
+    for name, v in (("window", window), ("accel_std", accel_std), ("gyro_rate", gyro_rate),
+                    ("gnss_speed", gnss_speed), ("gnss_gap", gnss_gap)):
+        if not (np.isfinite(v) and v > 0):
+            raise ArgumentError(f"must be positive, got {v!r}", argument=name)
+    if not (np.isfinite(min_duration) and min_duration >= 0):
+        raise ArgumentError(f"must be >= 0 s, got {min_duration!r}", argument="min_duration")
+    n = len(imu)
+    dt = float(np.median(imu.dt))
+    w = max(int(round(window / dt)), 2)
+    settings = dict(window_s=float(window), accel_std_mps2=float(accel_std), gyro_rate_radps=float(gyro_rate),
+                    gnss_speed_mps=float(gnss_speed) if fixes is not None else None,
+                    min_duration_s=float(min_duration))
+    if n < w:
+        return Stillness(np.zeros(n, dtype=bool), np.zeros((0, 2)), settings)
+    f = np.linalg.norm(imu.dvel, axis=1) / imu.dt
+    rate = np.linalg.norm(imu.dtheta, axis=1) / imu.dt
+    mean_f = _moving(f, w)
+    var_f = np.maximum(_moving(f * f, w) - mean_f ** 2, 0.0)
+    ok = (var_f < accel_std ** 2) & (_moving(rate, w) < gyro_rate)   # window starting at sample j
+    # sample i is still when all windows j in [i - w + 1, i] that contain it are
+    bad = np.concatenate([[0], np.cumsum(~ok)])
+    j0 = np.clip(np.arange(n) - w + 1, 0, len(ok))
+    j1 = np.clip(np.arange(n) + 1, 0, len(ok))
+    covered = j1 - j0 >= 1
+    mask = covered & (bad[j1] - bad[j0] == 0) & (np.arange(n) >= w - 1) & (np.arange(n) <= n - w)
+    if fixes is not None and fixes.vel_n is not None and len(fixes):
+        k = np.clip(np.searchsorted(fixes.time, imu.time), 1, len(fixes) - 1)
+        near = np.where(np.abs(fixes.time[k - 1] - imu.time) < np.abs(fixes.time[k] - imu.time), k - 1, k)
+        close = np.abs(fixes.time[near] - imu.time) <= gnss_gap
+        moving = np.linalg.norm(fixes.vel_n[near], axis=1) > gnss_speed
+        mask &= ~(close & moving)
+    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    starts, ends = np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0] - 1
+    iv = np.column_stack([imu.time[starts], imu.time[ends]]) if len(starts) else np.zeros((0, 2))
+    keep = (iv[:, 1] - iv[:, 0]) >= min_duration if len(iv) else np.zeros(0, dtype=bool)
+    for a, b in zip(starts[~keep], ends[~keep]):
+        mask[a:b + 1] = False
+    return Stillness(mask, iv[keep], settings)

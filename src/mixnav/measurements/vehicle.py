@@ -1,0 +1,297 @@
+"""Land-vehicle aiding: non-holonomic constraints, odometer, zero velocity, zero angular rate.
+
+Frames: the body frame ``b`` is the IMU's (after the dataset's installation
+rotation); the vehicle frame ``v`` is x forward, y right, z down. The IMU sits
+in the vehicle at the mounting angles ``(roll, pitch, yaw)``:
+``C_vb = C(roll, pitch, yaw)`` (``mixnav.attitude.euler_to_dcm``) takes body
+vectors to the vehicle frame. The velocity of a vehicle point at lever arm
+``l`` (body frame, from the IMU; e.g. the rear-axle centre, where the
+constraints hold best) in the vehicle frame::
+
+    v_v = C_vb (C_bn v_n + w_b x l)
+
+(the Earth-rate part of ``w_nb``, below 1e-4 m/s for metre-size arms, is left
+out of the prediction and the Jacobian, as in the loose GNSS model).
+
+With the error state ``dx = x_true - x_est`` and ``C_true = exp([phi x]) C_est``
+(``mixnav.ins.error_model``)::
+
+    d v_b / d phi = C_bn [v_n x],   d v_b / d dv = C_bn,   d v_b / d dbg = [l x]
+
+and for the optional mounting states (corrections of the mounting pitch and
+yaw, auxiliary block ``mounting``; roll is not observable from these rows),
+with ``C_vb = Rz(y) Ry(p) Rx(r)``::
+
+    d v_v / d yaw = e_z x v_v,      d v_v / d pitch = (Rz(y) e_y) x v_v
+
+* :class:`NonHolonomic`: ``v_v[1] = v_v[2] = 0`` (two rows, kind ``nhc``).
+* :class:`Odometer`: ``speed = (1 + k) v_v[0]`` with ``k`` the odometer scale
+  error (auxiliary block ``odometer_scale`` when estimated; kind ``odometer``).
+* :class:`ZeroVelocity` (ZUPT): ``v_n = 0`` at rest (three rows, kind ``zupt``).
+* :class:`ZeroAngularRate` (ZARU): at rest the compensated gyro reads the Earth
+  rate, ``w_b = C_bn w_ie_n``; the rows observe the gyro biases (kind ``zaru``).
+
+The epochs of the ZUPT and ZARU models come from
+:func:`mixnav.measurements.stillness.detect_still`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..attitude import euler_to_dcm, quat_to_dcm, skew
+from ..data import OdometerData
+from ..errors import ArgumentError
+from ..geodesy.earth import OMEGA_EARTH as OMEGA_E
+from ..ins.error_model import StateBlock, StateLayout
+from .base import MeasurementModel, Rows
+from .kinds import register_kind
+
+NHC = register_kind("nhc")
+ODOMETER = register_kind("odometer")
+ZUPT = register_kind("zupt")
+ZARU = register_kind("zaru")
+
+#: Auxiliary block of the mounting corrections: pitch, yaw of the IMU in the vehicle [rad].
+MOUNTING = "mounting"
+#: Auxiliary block of the odometer scale-factor error [fraction].
+ODOMETER_SCALE = "odometer_scale"
+
+
+def mounting_block(sigma0: float, walk: float = 0.0) -> StateBlock:
+    """The mounting-correction states (pitch, yaw [rad]), initial 1-sigma ``sigma0`` [rad]."""
+    return StateBlock(MOUNTING, 2, "random_walk", "aux", float(sigma0), float(walk), ("mount_pitch", "mount_yaw"))
+
+
+def odometer_scale_block(sigma0: float, walk: float = 0.0) -> StateBlock:
+    """The odometer scale-factor error state [fraction], initial 1-sigma ``sigma0``."""
+    return StateBlock(ODOMETER_SCALE, 1, "random_walk", "aux", float(sigma0), float(walk), ("odo_scale",))
+
+
+def _vec3(v, argument):
+    a = np.asarray(v, dtype=float)
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise ArgumentError(f"must be 3 finite numbers, got {v!r}", argument=argument)
+    return a
+
+
+def _sigma(v, argument):
+    if not (np.isfinite(v) and v > 0):
+        raise ArgumentError(f"must be a positive 1-sigma, got {v!r}", argument=argument)
+    return float(v)
+
+
+def _times(t, argument):
+    t = np.asarray(t, dtype=float).ravel()
+    if not np.all(np.isfinite(t)) or (len(t) > 1 and not np.all(np.diff(t) > 0)):
+        raise ArgumentError("times must be finite and strictly increasing", argument=argument)
+    return t
+
+
+class VehicleVelocity(MeasurementModel):
+    """Base of the models that see the velocity of a vehicle point in the vehicle frame.
+
+    Parameters
+    ----------
+    layout : StateLayout
+        With an auxiliary block ``mounting`` the mounting pitch/yaw corrections are
+        estimated (:func:`mounting_block`).
+    mounting : (3,) array
+        Roll, pitch, yaw of the IMU body frame in the vehicle frame [rad].
+    lever_arm : (3,) array
+        The vehicle point in the body frame, from the IMU [m].
+    """
+
+    def __init__(self, layout: StateLayout, mounting=(0.0, 0.0, 0.0), lever_arm=(0.0, 0.0, 0.0)):
+        if not isinstance(layout, StateLayout):
+            raise ArgumentError(f"expected a StateLayout, got {type(layout).__name__}", argument="layout")
+        self.layout = layout
+        self.mounting = _vec3(mounting, "mounting")
+        self.lever = _vec3(lever_arm, "lever_arm")
+        self._n = layout.n
+        self._mount = layout.slice(MOUNTING) if layout.has(MOUNTING) else None
+        self._l_skew = skew(self.lever)
+
+    def vehicle_velocity(self, nav, w_b, aux=None):
+        """``v_v`` (3,) [m/s] and its Jacobian over the error state (3, n)."""
+        rpy = self.mounting
+        if self._mount is not None and aux:
+            est = aux[MOUNTING]
+            rpy = np.array([rpy[0], rpy[1] + est[0], rpy[2] + est[1]])
+        C_vb = euler_to_dcm(rpy)
+        C_nb = quat_to_dcm(nav[0:4])
+        v_n = nav[4:7]
+        v_b = C_nb.T @ v_n + np.cross(w_b, self.lever)
+        C_vn = C_vb @ C_nb.T
+        v_v = C_vb @ v_b
+        H = np.zeros((3, self._n))
+        H[:, 0:3] = C_vn @ skew(v_n)
+        H[:, 3:6] = C_vn
+        H[:, 9:12] = C_vb @ self._l_skew
+        if self._mount is not None:
+            cy, sy = np.cos(rpy[2]), np.sin(rpy[2])
+            o = self._mount.start
+            H[:, o] = np.cross(np.array([-sy, cy, 0.0]), v_v)      # pitch: axis Rz(yaw) e_y
+            H[:, o + 1] = np.cross(np.array([0.0, 0.0, 1.0]), v_v)  # yaw: axis e_z
+        return v_v, H
+
+
+class NonHolonomic(VehicleVelocity):
+    """Non-holonomic constraints: no lateral and no vertical velocity of the vehicle point.
+
+    Parameters
+    ----------
+    times : (M,) array
+        Epochs [s] (e.g. a regular grid at 1-10 Hz over the drive).
+    layout, mounting, lever_arm
+        See :class:`VehicleVelocity`.
+    sigma : (2,) array or float
+        1-sigma of the lateral and vertical velocity the vehicle really has
+        (slip, bumps) [m/s].
+    min_speed : float
+        No rows while the nominal speed is below this [m/s] (the constraint
+        still holds at rest, but a ZUPT says more there); 0 uses every epoch.
+    """
+
+    kinds = ("nhc",)
+
+    def __init__(self, times, layout, mounting=(0.0, 0.0, 0.0), lever_arm=(0.0, 0.0, 0.0),
+                 sigma=(0.1, 0.1), min_speed: float = 0.0):
+        super().__init__(layout, mounting, lever_arm)
+        self._times = _times(times, "times")
+        s = np.broadcast_to(np.asarray(sigma, dtype=float), (2,))
+        for k in range(2):
+            _sigma(s[k], "sigma")
+        self.r = s ** 2
+        if not (np.isfinite(min_speed) and min_speed >= 0):
+            raise ArgumentError(f"must be >= 0 m/s, got {min_speed!r}", argument="min_speed")
+        self.min_speed = float(min_speed)
+        self._kinds = np.array([NHC, NHC], dtype=np.int64)
+        self._channels = self._kinds * 1000 + np.array([1, 2])
+
+    @property
+    def times(self) -> np.ndarray:
+        return self._times
+
+    def rows(self, i, nav, w_b, clock=None, memory=None, aux=None):
+        if self.min_speed > 0 and np.dot(nav[4:7], nav[4:7]) < self.min_speed ** 2:
+            return None
+        v_v, H = self.vehicle_velocity(nav, w_b, aux)
+        return Rows(-v_v[1:3], H[1:3].copy(), self.r.copy(), self._kinds, self._channels)
+
+
+class Odometer(VehicleVelocity):
+    """Odometer: the forward speed of the wheel point, ``(1 + k) v_v[0]``.
+
+    Parameters
+    ----------
+    data : OdometerData
+        Speeds [m/s] and their 1-sigma, on the IMU time axis.
+    layout, mounting, lever_arm
+        See :class:`VehicleVelocity`; ``lever_arm`` to the wheel (or axle
+        centre) the speed is of. With an auxiliary block ``odometer_scale`` the
+        scale error ``k`` is estimated (:func:`odometer_scale_block`), otherwise
+        it is ``scale`` (a known calibration).
+    scale : float
+        Known scale error ``k`` when it is not estimated [fraction].
+    """
+
+    kinds = ("odometer",)
+
+    def __init__(self, data: OdometerData, layout, mounting=(0.0, 0.0, 0.0), lever_arm=(0.0, 0.0, 0.0),
+                 scale: float = 0.0):
+        if not isinstance(data, OdometerData):
+            raise ArgumentError(f"expected OdometerData, got {type(data).__name__}", argument="data")
+        super().__init__(layout, mounting, lever_arm)
+        if not (np.isfinite(scale) and abs(scale) < 0.5):
+            raise ArgumentError(f"must be a fraction in (-0.5, 0.5), got {scale!r}", argument="scale")
+        self.data = data
+        self.scale = float(scale)
+        self._k = layout.slice(ODOMETER_SCALE).start if layout.has(ODOMETER_SCALE) else -1
+        self._kinds = np.array([ODOMETER], dtype=np.int64)
+        self._channels = self._kinds * 1000
+
+    @property
+    def times(self) -> np.ndarray:
+        return self.data.time
+
+    def rows(self, i, nav, w_b, clock=None, memory=None, aux=None):
+        v_v, H = self.vehicle_velocity(nav, w_b, aux)
+        k = self.scale + (float(aux[ODOMETER_SCALE][0]) if self._k >= 0 and aux else 0.0)
+        h = (1.0 + k) * v_v[0]
+        Hr = (1.0 + k) * H[0:1]
+        if self._k >= 0:
+            Hr[0, self._k] = v_v[0]
+        z = np.array([self.data.speed[i] - h])
+        return Rows(z, Hr, np.array([self.data.sigma[i] ** 2]), self._kinds, self._channels)
+
+
+class ZeroVelocity(MeasurementModel):
+    """ZUPT: the IMU is at rest, ``v_n = 0`` (three rows, kind ``zupt``).
+
+    Parameters
+    ----------
+    times : (M,) array
+        Epochs detected still [s] (:func:`mixnav.measurements.stillness.detect_still`).
+    layout : StateLayout
+    sigma : float
+        1-sigma of the velocity at rest (vibration, a creeping vehicle) [m/s].
+    """
+
+    kinds = ("zupt",)
+
+    def __init__(self, times, layout: StateLayout, sigma: float = 0.02):
+        self._times = _times(times, "times")
+        self.r = np.full(3, _sigma(sigma, "sigma") ** 2)
+        self._H = np.zeros((3, layout.n))
+        self._H[:, layout.vel] = np.eye(3)
+        self._kinds = np.full(3, ZUPT, dtype=np.int64)
+        self._channels = self._kinds * 1000 + np.arange(3)
+
+    @property
+    def times(self) -> np.ndarray:
+        return self._times
+
+    def rows(self, i, nav, w_b, clock=None, memory=None, aux=None):
+        return Rows(-np.asarray(nav[4:7], dtype=float), self._H.copy(), self.r.copy(), self._kinds, self._channels)
+
+
+class ZeroAngularRate(MeasurementModel):
+    """ZARU: at rest the vehicle does not turn, so the compensated gyro should read the
+    Earth rate, ``w_b = C_bn w_ie_n``; the innovation observes the gyro biases.
+
+    ``h = w_b - C_bn w_ie_n`` (the turn rate relative to the Earth), measured 0;
+    ``H_bg = -I``, ``H_phi = -C_bn [w_ie_n x]``.
+
+    Parameters
+    ----------
+    times : (M,) array
+        Epochs detected still [s].
+    layout : StateLayout
+    sigma : float
+        1-sigma of one compensated rate sample at rest [rad/s]: the gyro's
+        white noise over one IMU interval (``arw / sqrt(dt)``) plus vibration.
+    """
+
+    kinds = ("zaru",)
+
+    def __init__(self, times, layout: StateLayout, sigma: float):
+        self._times = _times(times, "times")
+        self.r = np.full(3, _sigma(sigma, "sigma") ** 2)
+        self._n = layout.n
+        self._kinds = np.full(3, ZARU, dtype=np.int64)
+        self._channels = self._kinds * 1000 + np.arange(3)
+
+    @property
+    def times(self) -> np.ndarray:
+        return self._times
+
+    def rows(self, i, nav, w_b, clock=None, memory=None, aux=None):
+        C_bn = quat_to_dcm(nav[0:4]).T
+        lat = nav[7]
+        w_ie = OMEGA_E * np.array([np.cos(lat), 0.0, -np.sin(lat)])
+        H = np.zeros((3, self._n))
+        H[:, 0:3] = -C_bn @ skew(w_ie)
+        H[:, 9:12] = -np.eye(3)
+        z = C_bn @ w_ie - np.asarray(w_b, dtype=float)
+        return Rows(z, H, self.r.copy(), self._kinds, self._channels)

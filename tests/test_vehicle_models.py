@@ -1,0 +1,115 @@
+"""Land-vehicle aiding models: Jacobians against finite differences of h(x), with the
+error state applied exactly as the engine feeds it back (StrapdownMotion.inject)."""
+
+import numpy as np
+import pytest
+
+from mixnav.attitude import euler_to_dcm, quat_to_dcm
+from mixnav.data import OdometerData
+from mixnav.errors import ArgumentError
+from mixnav.ins.error_model import StateLayout
+from mixnav.ins.imu_model import ImuErrorModel
+from mixnav.ins.motion import StrapdownMotion
+from mixnav.ins.mechanization import nav_vector
+from mixnav.measurements.vehicle import (MOUNTING, ODOMETER_SCALE, NonHolonomic, Odometer, ZeroAngularRate,
+                                         ZeroVelocity, mounting_block, odometer_scale_block)
+from mixnav.attitude import euler_to_quat
+
+LAYOUT = StateLayout("vehicle", ["gyro_scale", "accel_scale", mounting_block(0.02), odometer_scale_block(0.01)])
+
+
+def _state(rng):
+    q = euler_to_quat(np.array([0.05, -0.03, 1.1]))
+    nav = nav_vector(q, np.array([8.0, -11.0, 0.4]), np.array([0.7, -1.9, 300.0]))
+    aux = {MOUNTING: np.array([0.01, -0.02]), ODOMETER_SCALE: np.array([0.004])}
+    w_b = np.array([0.02, -0.01, 0.3])
+    return nav, aux, w_b
+
+
+def _perturbed(nav, aux, w_b, dx):
+    """The state ``x_est (+) dx`` as the engine's feedback makes it, and the body rate it implies."""
+    nav2, sensor, clock = nav.copy(), np.zeros(12), np.zeros(2)
+    aux2 = {k: v.copy() for k, v in aux.items()}
+    StrapdownMotion(LAYOUT, ImuErrorModel()).inject(nav2, sensor, clock, aux2, dx)
+    return nav2, aux2, w_b - sensor[0:3]  # w = w_meas - bg: a larger bias estimate lowers the rate
+
+
+def _fd_check(model, i, nav, aux, w_b, meas_offset=0.0):
+    rows = model.rows(i, nav, w_b, np.zeros(2), None, aux=aux)
+    n = LAYOUT.n
+    H_fd = np.zeros_like(rows.H)
+    eps = 1e-6
+    for j in range(n):
+        dx = np.zeros(n)
+        dx[j] = eps
+        up = model.rows(i, *_perturbed(nav, aux, w_b, dx)[0:1], _perturbed(nav, aux, w_b, dx)[2], np.zeros(2),
+                        None, aux=_perturbed(nav, aux, w_b, dx)[1])
+        dx[j] = -eps
+        dn = model.rows(i, *_perturbed(nav, aux, w_b, dx)[0:1], _perturbed(nav, aux, w_b, dx)[2], np.zeros(2),
+                        None, aux=_perturbed(nav, aux, w_b, dx)[1])
+        # z = meas - h: H = dh/dx = -dz/dx
+        H_fd[:, j] = -(up.z - dn.z) / (2 * eps)
+    return rows, H_fd
+
+
+@pytest.mark.parametrize("which", ["nhc", "odometer", "zupt", "zaru"])
+def test_jacobian_matches_finite_differences(which):
+    rng = np.random.default_rng(3)
+    nav, aux, w_b = _state(rng)
+    lever = np.array([-1.2, 0.3, 0.8])
+    mount = np.radians([1.0, -2.0, 3.0])
+    if which == "nhc":
+        model = NonHolonomic(np.array([1.0]), LAYOUT, mount, lever, sigma=0.1)
+    elif which == "odometer":
+        model = Odometer(OdometerData(np.array([1.0]), np.array([13.0]), np.array([0.05])), LAYOUT, mount, lever)
+    elif which == "zupt":
+        model = ZeroVelocity(np.array([1.0]), LAYOUT)
+    else:
+        model = ZeroAngularRate(np.array([1.0]), LAYOUT, sigma=0.01)
+    rows, H_fd = _fd_check(model, 0, nav, aux, w_b)
+    scale = np.abs(H_fd).max()
+    # central differences at eps = 1e-6 are good to ~1e-9 of the entries here;
+    # a wrong sign or a missing term is an O(1) relative error
+    np.testing.assert_allclose(rows.H, H_fd, atol=1e-6 * scale)
+    assert np.abs(rows.H).max() > 0
+
+
+def test_nhc_zero_for_a_vehicle_moving_along_its_axis():
+    """A car driving straight along its x axis with the IMU mounted at known angles gives
+    zero NHC innovations; the odometer innovation is zero at the true speed and scale."""
+    mount = np.radians([2.0, -3.0, 4.0])
+    C_nv = euler_to_dcm(np.array([0.0, 0.02, 0.7]))
+    C_nb = C_nv @ euler_to_dcm(mount)           # C_vb = C(mount): body -> vehicle
+    from mixnav.attitude import dcm_to_quat
+    v_n = C_nv @ np.array([15.0, 0.0, 0.0])
+    nav = nav_vector(dcm_to_quat(C_nb), v_n, np.array([0.7, -1.9, 300.0]))
+    lay = StateLayout("plain")
+    nhc = NonHolonomic([1.0], lay, mount)
+    r = nhc.rows(0, nav, np.zeros(3))
+    np.testing.assert_allclose(r.z, 0.0, atol=1e-12)
+    odo = Odometer(OdometerData(np.array([1.0]), np.array([15.0 * 1.01]), np.array([0.05])), lay, mount,
+                   scale=0.01)
+    np.testing.assert_allclose(odo.rows(0, nav, np.zeros(3)).z, 0.0, atol=1e-12)
+
+
+def test_zaru_zero_at_rest_with_earth_rate():
+    from mixnav.geodesy.earth import OMEGA_EARTH
+    lay = StateLayout("plain")
+    q = euler_to_quat(np.array([0.01, 0.02, 0.3]))
+    nav = nav_vector(q, np.zeros(3), np.array([0.7, 0.1, 10.0]))
+    w_ie = OMEGA_EARTH * np.array([np.cos(0.7), 0.0, -np.sin(0.7)])
+    w_b = quat_to_dcm(q).T @ w_ie
+    r = ZeroAngularRate([1.0], lay, sigma=0.01).rows(0, nav, w_b)
+    np.testing.assert_allclose(r.z, 0.0, atol=1e-15)
+
+
+def test_bad_arguments_name_themselves():
+    lay = StateLayout("plain")
+    with pytest.raises(ArgumentError, match="sigma"):
+        NonHolonomic([1.0], lay, sigma=0.0)
+    with pytest.raises(ArgumentError, match="mounting"):
+        NonHolonomic([1.0], lay, mounting=[0, 0])
+    with pytest.raises(ArgumentError, match="times"):
+        ZeroVelocity([2.0, 1.0], lay)
+    with pytest.raises(ArgumentError, match="scale"):
+        Odometer(OdometerData(np.array([1.0]), np.array([1.0]), np.array([0.1])), lay, scale=2.0)
