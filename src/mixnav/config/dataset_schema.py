@@ -11,7 +11,7 @@ from typing import Literal
 from pydantic import Field
 
 from .. import units as u
-from .schema import (AngleVec, AngSigma, LengthVec, MethodConfig, PosSigma, Strict, VelSigma, Windows,
+from .schema import (AidingConfig, AngleVec, AngSigma, LengthVec, MethodConfig, PosSigma, Strict, VelSigma, Windows,
                      _quantity)
 
 Offset = _quantity(u.TIME)
@@ -149,5 +149,6 @@ class Dataset(Strict):
     installation: Installation = Installation()
     alignment: Alignment | None = None
     methods: list[MethodConfig] | None = Field(default=None, min_length=1)
+    aiding: AidingConfig | None = None
     raw_gnss: RawGnss | None = None
     reference_point: ReferencePoint | None = None

@@ -401,6 +401,83 @@ class MixtureConfig(Strict):
     colored: ColoredConfig | None = None
 
 
+Fraction = _quantity(u.DIMENSIONLESS)
+NonNegSpeed = _quantity(u.VELOCITY, nonnegative=True)
+PosSpeed = _quantity(u.VELOCITY, positive=True)
+PosAccel = _quantity(u.ACCELERATION, positive=True)
+PosRate = _quantity(u.ANGULAR_RATE, positive=True)
+PosAngle = _quantity(u.ANGLE, positive=True)
+
+
+class NhcConfig(Strict):
+    """Non-holonomic constraints (``mixnav.measurements.vehicle.NonHolonomic``):
+    epochs at ``rate``; ``sigma`` the lateral and vertical velocity the vehicle
+    really has (slip, bumps); no rows below ``min_speed``."""
+
+    rate: Frequency = 10.0
+    sigma: tuple[PosSpeed, PosSpeed] = (0.1, 0.1)
+    min_speed: NonNegSpeed = 0.0
+
+
+class OdometerConfig(Strict):
+    """Odometer aiding (``mixnav.measurements.vehicle.Odometer``). In a dataset,
+    ``format``/``file`` name the speeds (``csv``: docs/data_formats.md); in a
+    scenario the simulated odometer is used. ``sigma`` [m/s] when the file gives
+    none; ``scale`` a known scale error; ``scale_sigma`` the initial 1-sigma of
+    the estimated one (method ``estimate = ["odometer_scale"]``); ``lever_arm``
+    the wheel (axle centre) in the body frame from the IMU, default the
+    vehicle point."""
+
+    format: Literal["csv", "comma2k19"] | None = None
+    file: str | None = None
+    sigma: PosSpeed = 0.05
+    scale: Fraction = 0.0
+    scale_sigma: Fraction = 0.01
+    lever_arm: LengthVec | None = None
+    rate: Frequency | None = None
+
+
+class ZuptConfig(Strict):
+    """Zero-velocity updates at the epochs the stillness detector finds
+    (``mixnav.measurements.stillness.detect_still``: window, thresholds), at
+    ``rate``; ``sigma`` the velocity at rest."""
+
+    rate: Frequency = 5.0
+    sigma: PosSpeed = 0.02
+    window: Duration = 1.0
+    accel_std: PosAccel = 0.1
+    gyro_rate: PosRate = 0.03
+    gnss_speed: PosSpeed = 0.1
+    min_duration: Time = 1.0
+
+
+class ZaruConfig(Strict):
+    """Zero angular-rate updates at the ZUPT epochs; ``sigma`` of one compensated
+    gyro sample at rest."""
+
+    sigma: PosRate = 0.01
+
+
+class AidingConfig(Strict):
+    """Land-vehicle aiding shared by the methods that list it (``aiding = [...]``).
+
+    ``vehicle_mounting``: roll, pitch, yaw of the IMU body frame in the vehicle
+    frame (x forward, y right, z down); NHC and the odometer need it (a dataset
+    whose body frame is not a vehicle frame cannot use them).
+    ``vehicle_point``: where the constraints hold (rear-axle centre), body frame
+    from the IMU. ``mounting_sigma``: initial 1-sigma of the estimated mounting
+    pitch/yaw corrections (method ``estimate = ["mounting"]``).
+    """
+
+    vehicle_mounting: AngleVec | None = None
+    vehicle_point: LengthVec = (0.0, 0.0, 0.0)
+    mounting_sigma: PosAngle = 0.05
+    nhc: NhcConfig | None = None
+    odometer: OdometerConfig | None = None
+    zupt: ZuptConfig | None = None
+    zaru: ZaruConfig | None = None
+
+
 class MethodConfig(Strict):
     name: str
     type: Literal["loose-ekf", "tight-ekf", "tdcp-ekf"]
@@ -419,6 +496,13 @@ class MethodConfig(Strict):
     #: tdcp-ekf: "clone" (stochastic cloning of the previous antenna position and
     #: clock) or "known" (the shortcut that takes the previous estimate as exact)
     tdcp_previous: Literal["clone", "known"] = "clone"
+    #: land-vehicle aiding this method uses (each configured in the file's [aiding] table)
+    aiding: list[Literal["nhc", "odometer", "zupt", "zaru"]] = Field(default_factory=list)
+    #: installation states this method estimates: "mounting" (pitch/yaw in the vehicle),
+    #: "odometer_scale"
+    estimate: list[Literal["mounting", "odometer_scale"]] = Field(default_factory=list)
+    #: also run the fixed-interval RTS smoother: adds a method "<name>-smoothed"
+    smooth: bool = False
 
     @field_validator("estimator")
     @classmethod
@@ -473,6 +557,7 @@ class Scenario(Strict):
     gnss: GnssConfig
     init: InitConfig
     methods: list[MethodConfig] = Field(min_length=1)
+    aiding: AidingConfig | None = None
     sweep: SweepConfig | None = None
 
     @model_validator(mode="after")

@@ -21,7 +21,7 @@ from ..config.schema import MethodConfig, MixtureConfig, RobustConfig
 from ..errors import ConfigError
 from ..filters.catalog import ESTIMATORS as _CATALOG
 from ..filters.catalog import METHOD_TYPES, filter_class
-from ..ins.error_model import ClockModel, get_layout
+from ..ins.error_model import ClockModel
 from ..ins.imu_model import ImuErrorModel
 from ..measurements.loose import LooseGnss
 
@@ -42,7 +42,8 @@ _RENAME = {"k0": "robust.k0", "k1": "robust.k1", "c": "robust.c", "max_component
 
 
 def build(method: MethodConfig, default_imu: ImuErrorModel, fixes, lever_arm, source=None, index: int = 0,
-          observations=None, clock: ClockModel | None = None, training: dict | None = None, seed: int = 0):
+          observations=None, clock: ClockModel | None = None, training: dict | None = None, seed: int = 0,
+          aiding=None):
     """The filter and its measurement models for one method of a config.
 
     The filter models the IMU with the method's own ``imu_grade``/``imu_errors``
@@ -51,13 +52,23 @@ def build(method: MethodConfig, default_imu: ImuErrorModel, fixes, lever_arm, so
     ``observations`` (:class:`mixnav.gnss.observables.GnssObservations`) and
     the receiver ``clock`` model. A Gaussian-mixture method that learns its
     mixtures needs ``training`` residuals (:func:`mixnav.sim.training.training_residuals`).
+    A method with land-vehicle ``aiding`` needs the run's
+    :class:`~mixnav.experiment.aiding.AidingInputs`.
     """
     with config_keys(f"methods[{index}]", source, _RENAME):
-        return _build(method, default_imu, fixes, lever_arm, source, index, observations, clock, training, seed)
+        filt, meas = _build(method, default_imu, fixes, lever_arm, source, index, observations, clock, training,
+                            seed, aiding)
+    if method.smooth and not getattr(filt, "can_smooth", False):
+        raise ConfigError(f"estimator '{method.estimator}' cannot be smoothed (the RTS smoother needs one "
+                          "Gaussian belief per event; a bank of components has none)", file=source,
+                          key=f"methods[{index}].smooth")
+    return filt, meas
 
 
-def _build(method, default_imu, fixes, lever_arm, source, index, observations, clock, training, seed):
-    layout = get_layout(method.states)
+def _build(method, default_imu, fixes, lever_arm, source, index, observations, clock, training, seed, aiding):
+    from .aiding import aiding_models, method_layout
+    layout = method_layout(method, aiding, source, index)
+    aids = aiding_models(method, layout, aiding, source, index)
     model = default_imu
     if method.imu_grade is not None or method.imu_errors is not None:
         model = imu_model(method.imu_grade, method.imu_errors or {}, source,
@@ -78,6 +89,7 @@ def _build(method, default_imu, fixes, lever_arm, source, index, observations, c
             meas = [TightGnss(observations, lever_arm, layout, use_range_rate=method.use_range_rate)]
     else:
         raise KeyError(method.type)  # unreachable: the schema admits only known types
+    meas = meas + aids
     common = dict(covariance_interval=method.covariance_interval, clock=clock)
     if method.estimator == "robust-adaptive":
         rc = method.robust or RobustConfig()

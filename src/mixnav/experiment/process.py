@@ -26,9 +26,10 @@ from ..alignment import align_from_gnss_velocity, coarse_align
 from ..attitude import euler_to_dcm
 from ..config.dataset_schema import Dataset
 from ..config.loader import corruption, imu_model
-from ..data import GnssFixes, ImuData, Trajectory
+from ..data import GnssFixes, ImuData, OdometerData, Trajectory
 from ..errors import ConfigError, DataError
 from . import methods
+from .aiding import AidingInputs
 from ..filters.ekf import FilterResult, InitialState
 from ..ins.mechanization import nav_vector
 from ..io import drive0708, generic_csv, kfgins, psins, rtklib
@@ -104,6 +105,17 @@ def read_gnss(ds: Dataset, folder: Path) -> GnssFixes:
     if not c.use_velocity and fixes.vel_n is not None:
         fixes = replace(fixes, vel_n=None, vel_sigma=None)
     return fixes
+
+
+def read_odometer(ds: Dataset, folder: Path, t0: float) -> OdometerData | None:
+    """The odometer samples of ``[aiding.odometer]`` on the processing time axis (``t0``: the
+    first IMU sample's time, subtracted like from the IMU and GNSS), or None."""
+    c = ds.aiding.odometer if ds.aiding is not None else None
+    if c is None or c.file is None:
+        return None
+    from ..io import odometer_csv
+    odo = odometer_csv.read_odometer_csv(folder / c.file, sigma=c.sigma)
+    return _shift(odo, t0)
 
 
 def read_reference(ds: Dataset, folder: Path) -> Trajectory | None:
@@ -203,8 +215,10 @@ def process(ds: Dataset, source: str, data: str | None = None):
     results = {}
     t_filt = _time.perf_counter()
     model = imu_model(ds.imu.grade, ds.imu.errors, source, "imu.errors", "imu.grade")
+    aiding = AidingInputs(ds.aiding, imu, fixes, init.time, float(imu.time[-1]),
+                          odometer=read_odometer(ds, folder, t0), source=source)
     for i, m in enumerate(ds.methods):
-        filt, meas = methods.build(m, model, fixes, lever, source, i)
+        filt, meas = methods.build(m, model, fixes, lever, source, i, aiding=aiding)
         results[m.name] = filt.run(imu, init, meas, output_times=out_times)
     filter_time = _time.perf_counter() - t_filt
     return ProcessOutput(ds, source, folder, t0, imu, fixes, all_fixes, reference, lever, results, init,

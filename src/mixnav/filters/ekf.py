@@ -202,6 +202,9 @@ class ErrorStateEkf:
     A subclass with another belief overrides :meth:`make_estimator` only.
     """
 
+    #: the RTS smoother applies (one Gaussian belief per event: ``FilterResult.history``)
+    can_smooth = True
+
     def __init__(self, layout: StateLayout, imu_model: ImuErrorModel,
                  covariance_interval: float = 1.0, absurd_sigma: float = 1e4,
                  clock: ClockModel | None = None):

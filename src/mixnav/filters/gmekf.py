@@ -336,6 +336,9 @@ class GaussianMixtureEkf(ErrorStateEkf):
         Offline mixture fits that did not converge (reported in ``recoveries``).
     """
 
+    #: the RTS smoother applies (one Gaussian belief per event: ``FilterResult.history``)
+    can_smooth = False
+
     def __init__(self, layout: StateLayout, imu_model: ImuErrorModel, mixtures: BankMixtures,
                  max_components: int = 16, covariance_interval: float = 1.0, absurd_sigma: float = 1e4,
                  clock: ClockModel | None = None, learning_time_s: float = 0.0, online=None,

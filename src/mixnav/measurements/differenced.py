@@ -153,12 +153,12 @@ class DifferencedMeasurement(MeasurementModel):
         return (i, ch, z - Hc @ dx_c, Hc)
 
     # --- the measurement ---------------------------------------------------------------------
-    def rows(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock, memory=None) -> Rows | None:
+    def rows(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock, memory=None, aux=None) -> Rows | None:
         """``(z*, H*, r)``: ``H*`` has ``n + c`` columns (the clone last), or ``n`` when
         no row is differenced; rows of channels measured at the previous epoch are
         differenced (kind ``k``, noise ``zeta``), the others are not (kind
         ``k + STATIONARY``, the stationary noise of the AR(1) process)."""
-        inner = self.inner.rows(i, nav, w_b, clock)
+        inner = self.inner.rows(i, nav, w_b, clock, aux=aux)
         if inner is None:
             return None
         z, H, r = inner.z, inner.H, inner.R

@@ -67,7 +67,7 @@ class LooseGnss(MeasurementModel):
     def times(self) -> np.ndarray:
         return self.fixes.time
 
-    def rows(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock=None, memory=None) -> Rows:
+    def rows(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock=None, memory=None, aux=None) -> Rows:
         """The rows of fix ``i`` given the INS state ``nav`` and body rate ``w_b``:
         three position rows (NED [m]), then with velocity three velocity rows
         (NED [m/s]); ``R`` as its diagonal (independent axes)."""

@@ -3,13 +3,12 @@
 A vehicle is taken as still over a window when, in that window,
 
 * the specific-force magnitude barely varies: its standard deviation is below
-  ``accel_std`` [m/s^2] (a moving car's road vibration and speed changes
-  give 0.1-1 m/s^2; a parked one with the engine running 0.01-0.05 on a
-  car-roof MEMS unit), and
+  ``accel_std`` [m/s^2] (default 0.1; on drive-0708's roof-mounted MEMS unit,
+  1 s windows read 0.02-0.08 parked with the engine running and 0.13-1.7 moving), and
 * the body turns slowly: the mean angular-rate magnitude is below
-  ``gyro_rate`` [rad/s] (it includes the gyro bias, so the threshold sits above
-  an automotive MEMS bias of ~0.05 deg/s = 1e-3 rad/s and below the turn rate
-  of a car creeping round a corner, ~0.05 rad/s), and
+  ``gyro_rate`` [rad/s] (default 0.03; it includes the gyro bias and the
+  vibration, 0.005-0.025 parked on drive-0708, and a car pulling away or creeping
+  round a corner reads 0.03-0.5), and
 * when GNSS velocity is given, the nearest fix within ``gnss_gap`` says the
   speed is below ``gnss_speed`` [m/s] (a fix further away does not vote).
 
@@ -71,7 +70,7 @@ def _moving(x: np.ndarray, w: int) -> np.ndarray:
     return (c[w:] - c[:-w]) / w
 
 
-def detect_still(imu: ImuData, window: float = 1.0, accel_std: float = 0.05, gyro_rate: float = 0.01,
+def detect_still(imu: ImuData, window: float = 1.0, accel_std: float = 0.1, gyro_rate: float = 0.03,
                  fixes: GnssFixes | None = None, gnss_speed: float = 0.1, gnss_gap: float = 1.0,
                  min_duration: float = 1.0) -> Stillness:
     """Detect the still stretches of an IMU record (see the module docstring).

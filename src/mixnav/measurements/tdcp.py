@@ -147,7 +147,7 @@ class TdcpGnss(TightGnss):
             k = self._kind_rows[(n_pr, m)] = np.array([PSEUDORANGE] * n_pr + [TDCP] * (m - n_pr), dtype=np.int64)
         return k
 
-    def rows(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock, memory: TdcpMemory | None = None):
+    def rows(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock, memory: TdcpMemory | None = None, aux=None):
         """The rows of epoch ``i``: pseudoranges [m], then TDCP [m]; ``H`` has ``n + 4``
         columns when TDCP rows are present and the model clones, else ``n``.
         ``memory`` is what :meth:`remember` returned at the previous epoch."""

@@ -97,7 +97,7 @@ class TightGnss(MeasurementModel):
         rr = np.einsum("ij,ij->i", u_e, o.sat_vel[i, sel]) - u_n @ v_a_n
         return rng + clock[0], rr + clock[1], u_n, l_n, C_nb
 
-    def rows(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock, memory=None) -> Rows | None:
+    def rows(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock, memory=None, aux=None) -> Rows | None:
         """The rows of epoch ``i`` (pseudoranges [m], then range rates [m/s] of the
         same satellites), or None with too few satellites.
 

@@ -1,0 +1,126 @@
+"""Land-vehicle aiding of a config's methods: the ``[aiding]`` table -> measurement models.
+
+One :class:`AidingInputs` per run holds what the aiding models of every method
+share (the IMU, the fixes, the odometer samples and the stillness detection,
+computed once); :func:`method_layout` adds the installation states a method
+estimates to its layout, and :func:`aiding_models` builds the models a method
+lists in ``aiding = [...]``. Errors name the config key.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..config.schema import AidingConfig, MethodConfig
+from ..data import GnssFixes, ImuData, OdometerData
+from ..errors import ConfigError
+from ..ins.error_model import StateLayout, get_layout
+from ..measurements.stillness import Stillness, detect_still
+from ..measurements.vehicle import (NonHolonomic, Odometer, ZeroAngularRate, ZeroVelocity, mounting_block,
+                                    odometer_scale_block)
+
+
+@dataclass
+class AidingInputs:
+    """What the aiding models of one run share.
+
+    ``start``/``end``: the filtered span [s]; ``odometer``: the samples (a dataset's
+    file, or the simulated odometer); ``stillness``: computed on first use.
+    """
+
+    config: AidingConfig | None
+    imu: ImuData
+    fixes: GnssFixes | None
+    start: float
+    end: float
+    odometer: OdometerData | None = None
+    source: str | None = None
+    _still: Stillness | None = field(default=None, repr=False)
+
+    @property
+    def stillness(self) -> Stillness:
+        if self._still is None:
+            z = self.config.zupt if self.config is not None and self.config.zupt is not None else None
+            if z is None:
+                from ..config.schema import ZuptConfig
+                z = ZuptConfig()
+            self._still = detect_still(self.imu, window=z.window, accel_std=z.accel_std, gyro_rate=z.gyro_rate,
+                                       fixes=self.fixes, gnss_speed=z.gnss_speed, min_duration=z.min_duration)
+        return self._still
+
+    def summary(self) -> dict:
+        """Counts for metrics.json: the still stretches found and the thresholds used."""
+        if self._still is None:
+            return {}
+        s = self._still
+        return {"still_intervals": int(len(s.intervals)), "still_time_s": s.still_time_s,
+                "still_settings": s.settings}
+
+
+def _need(cfg, name: str, method: MethodConfig, index: int, source):
+    if cfg is None or getattr(cfg, name) is None:
+        raise ConfigError(f"method '{method.name}' uses {name} aiding but the file has no [aiding.{name}] table",
+                          file=source, key=f"methods[{index}].aiding")
+    return getattr(cfg, name)
+
+
+def method_layout(method: MethodConfig, inputs: AidingInputs | None, source=None, index: int = 0) -> StateLayout:
+    """The method's error-state layout (``states``) plus the installation states it estimates."""
+    base = get_layout(method.states)
+    if not method.estimate:
+        return base
+    cfg = inputs.config if inputs is not None else None
+    blocks = list(base.blocks[5:])
+    for e in method.estimate:
+        if e == "mounting":
+            if not ({"nhc", "odometer"} & set(method.aiding)):
+                raise ConfigError("the mounting is observed by NHC or the odometer: add one to the method's aiding",
+                                  file=source, key=f"methods[{index}].estimate")
+            blocks.append(mounting_block(cfg.mounting_sigma))
+        elif e == "odometer_scale":
+            if "odometer" not in method.aiding:
+                raise ConfigError("an odometer scale state needs odometer aiding", file=source,
+                                  key=f"methods[{index}].estimate")
+            blocks.append(odometer_scale_block(cfg.odometer.scale_sigma))
+    return StateLayout(base.name + "+" + "+".join(method.estimate), blocks)
+
+
+def aiding_models(method: MethodConfig, layout: StateLayout, inputs: AidingInputs | None, source=None,
+                  index: int = 0) -> list:
+    """The aiding measurement models a method lists (``aiding = [...]``)."""
+    if not method.aiding:
+        return []
+    cfg = inputs.config if inputs is not None else None
+    key = f"methods[{index}].aiding"
+    models = []
+    needs_frame = {"nhc", "odometer"} & set(method.aiding)
+    if needs_frame and (cfg is None or cfg.vehicle_mounting is None):
+        raise ConfigError(f"{' and '.join(sorted(needs_frame))} need a vehicle frame: set aiding.vehicle_mounting "
+                          "(roll, pitch, yaw of the IMU body frame in the vehicle: x forward, y right, z down)",
+                          file=source, key=key)
+    span = (inputs.start, inputs.end)
+    for name in method.aiding:
+        c = _need(cfg, name, method, index, source)
+        if name == "nhc":
+            t = np.arange(np.floor(span[0] * c.rate) / c.rate + 1.0 / c.rate, span[1] + 1e-9, 1.0 / c.rate)
+            models.append(NonHolonomic(t, layout, cfg.vehicle_mounting, cfg.vehicle_point, np.asarray(c.sigma),
+                                       c.min_speed))
+        elif name == "odometer":
+            if inputs.odometer is None:
+                raise ConfigError("odometer aiding needs odometer samples: a dataset's aiding.odometer.file, or "
+                                  "a scenario's simulated [odometer]", file=source, key=key)
+            data = inputs.odometer
+            if c.rate is not None:  # decimate to the configured rate
+                step = max(int(round(1.0 / (c.rate * np.median(np.diff(data.time))))), 1) if len(data) > 1 else 1
+                data = OdometerData(data.time[::step], data.speed[::step], data.sigma[::step], data.signed,
+                                    data.source)
+            lever = cfg.vehicle_point if c.lever_arm is None else c.lever_arm
+            models.append(Odometer(data, layout, cfg.vehicle_mounting, lever, c.scale))
+        elif name == "zupt":
+            models.append(ZeroVelocity(inputs.stillness.epochs(c.rate, *span), layout, c.sigma))
+        elif name == "zaru":
+            rate = cfg.zupt.rate if cfg.zupt is not None else 5.0
+            models.append(ZeroAngularRate(inputs.stillness.epochs(rate, *span), layout, c.sigma))
+    return models
