@@ -63,9 +63,9 @@ def test_jacobian_matches_finite_differences(which):
     elif which == "odometer":
         model = Odometer(OdometerData(np.array([1.0]), np.array([13.0]), np.array([0.05])), LAYOUT, mount, lever)
     elif which == "zupt":
-        model = ZeroVelocity(np.array([1.0]), LAYOUT)
+        model = ZeroVelocity(np.array([1.0]), LAYOUT, max_speed=100.0)  # the test state moves
     else:
-        model = ZeroAngularRate(np.array([1.0]), LAYOUT, sigma=0.01)
+        model = ZeroAngularRate(np.array([1.0]), LAYOUT, sigma=0.01, max_speed=100.0)
     rows, H_fd = _fd_check(model, 0, nav, aux, w_b)
     scale = np.abs(H_fd).max()
     # central differences at eps = 1e-6 are good to ~1e-9 of the entries here;
@@ -113,3 +113,13 @@ def test_bad_arguments_name_themselves():
         ZeroVelocity([2.0, 1.0], lay)
     with pytest.raises(ArgumentError, match="scale"):
         Odometer(OdometerData(np.array([1.0]), np.array([1.0]), np.array([0.1])), lay, scale=2.0)
+
+
+def test_zupt_not_used_when_the_solution_moves():
+    """An IMU-only detection during a smooth drive is contradicted by the navigation speed."""
+    lay = StateLayout("plain")
+    nav = nav_vector(euler_to_quat(np.zeros(3)), np.array([5.0, 0.0, 0.0]), np.array([0.7, 0.1, 10.0]))
+    assert ZeroVelocity([1.0], lay, max_speed=1.0).rows(0, nav, np.zeros(3)) is None
+    assert ZeroAngularRate([1.0], lay, sigma=0.01, max_speed=1.0).rows(0, nav, np.zeros(3)) is None
+    nav[4:7] = [0.5, 0.0, 0.0]
+    assert ZeroVelocity([1.0], lay, max_speed=1.0).rows(0, nav, np.zeros(3)) is not None

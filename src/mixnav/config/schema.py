@@ -440,7 +440,9 @@ class OdometerConfig(Strict):
 class ZuptConfig(Strict):
     """Zero-velocity updates at the epochs the stillness detector finds
     (``mixnav.measurements.stillness.detect_still``: window, thresholds), at
-    ``rate``; ``sigma`` the velocity at rest."""
+    ``rate``; ``sigma`` the velocity at rest; no update while the navigation
+    solution moves faster than ``max_speed`` (an IMU alone cannot tell rest from
+    a smooth constant-velocity drive)."""
 
     rate: Frequency = 5.0
     sigma: PosSpeed = 0.02
@@ -449,6 +451,7 @@ class ZuptConfig(Strict):
     gyro_rate: PosRate = 0.03
     gnss_speed: PosSpeed = 0.1
     min_duration: Time = 1.0
+    max_speed: PosSpeed = 1.0
 
 
 class ZaruConfig(Strict):

@@ -164,6 +164,9 @@ class Engine:
         out_t = out_t[(out_t > t0) & (out_t <= t1)]
         if output_times is None and meas_events:
             out_t = np.union1d(out_t, [e[0] for e in meas_events])
+        # merge output times closer than the event tolerance, as the event times are
+        # merged below: one record per event, so the record and out_t stay aligned
+        out_t = out_t[np.concatenate([[True], np.diff(out_t) > 1e-6])] if len(out_t) else out_t
         times = np.union1d(np.union1d(grid, out_t), [e[0] for e in meas_events])
         times = times[np.concatenate([[True], np.diff(times) > 1e-6])] if len(times) else times
         # Start at the first IMU sample at or after t0.

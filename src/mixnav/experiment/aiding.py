@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..config.schema import AidingConfig, MethodConfig
+from ..config.schema import AidingConfig, MethodConfig, ZuptConfig
 from ..data import GnssFixes, ImuData, OdometerData
 from ..errors import ConfigError
 from ..ins.error_model import StateLayout, get_layout
@@ -44,7 +44,6 @@ class AidingInputs:
         if self._still is None:
             z = self.config.zupt if self.config is not None and self.config.zupt is not None else None
             if z is None:
-                from ..config.schema import ZuptConfig
                 z = ZuptConfig()
             self._still = detect_still(self.imu, window=z.window, accel_std=z.accel_std, gyro_rate=z.gyro_rate,
                                        fixes=self.fixes, gnss_speed=z.gnss_speed, min_duration=z.min_duration)
@@ -119,8 +118,8 @@ def aiding_models(method: MethodConfig, layout: StateLayout, inputs: AidingInput
             lever = cfg.vehicle_point if c.lever_arm is None else c.lever_arm
             models.append(Odometer(data, layout, cfg.vehicle_mounting, lever, c.scale))
         elif name == "zupt":
-            models.append(ZeroVelocity(inputs.stillness.epochs(c.rate, *span), layout, c.sigma))
+            models.append(ZeroVelocity(inputs.stillness.epochs(c.rate, *span), layout, c.sigma, c.max_speed))
         elif name == "zaru":
-            rate = cfg.zupt.rate if cfg.zupt is not None else 5.0
-            models.append(ZeroAngularRate(inputs.stillness.epochs(rate, *span), layout, c.sigma))
+            z = cfg.zupt if cfg.zupt is not None else ZuptConfig()
+            models.append(ZeroAngularRate(inputs.stillness.epochs(z.rate, *span), layout, c.sigma, z.max_speed))
     return models

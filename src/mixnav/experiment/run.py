@@ -23,6 +23,7 @@ from ..attitude import attitude_error, quat_to_dcm, quat_to_euler, wrap_angle
 from ..config.schema import Scenario
 from ..data import Trajectory
 from . import methods
+from .aiding import AidingInputs
 from ..filters.ekf import FilterResult
 from ..geodesy.frames import ned_displacement
 from ..measurements.loose import antenna_lla
@@ -56,10 +57,12 @@ def run_scenario(sc: Scenario, source: str | None = None, seed: int | None = Non
         s = sc.gnss.satellites
         clock = ClockModel(q_bias=s.clock_bias_noise ** 2, q_drift=s.clock_drift_noise ** 2)
     training = _training(sc, seed, source)
+    aiding = AidingInputs(sc.aiding, sim.imu, sim.fixes, sim.init.time, float(sim.imu.time[-1]),
+                          odometer=getattr(sim, "odometer", None), source=source)
     for i, m in enumerate(sc.methods):
         filt, meas = methods.build(m, sim.imu_model, sim.fixes, lever, source, i,
                                     observations=sim.observations, clock=clock, training=training,
-                                    seed=seed)
+                                    seed=seed, aiding=aiding)
         # each estimator its own stream, independent of the simulation's and of the other methods'
         results[m.name] = filt.run(sim.imu, sim.init, meas, rng=Streams(seed).get(f"filter:{m.name}"))
     return RunOutput(sc, source or sc.scenario.name, sim, results)

@@ -236,13 +236,18 @@ class ZeroVelocity(MeasurementModel):
     layout : StateLayout
     sigma : float
         1-sigma of the velocity at rest (vibration, a creeping vehicle) [m/s].
+    max_speed : float
+        No rows while the nominal speed is above this [m/s]: an IMU alone cannot tell
+        rest from a smooth constant-velocity drive (a simulated one, or a very smooth
+        road), so a detection the navigation solution contradicts is not used.
     """
 
     kinds = ("zupt",)
 
-    def __init__(self, times, layout: StateLayout, sigma: float = 0.02):
+    def __init__(self, times, layout: StateLayout, sigma: float = 0.02, max_speed: float = 1.0):
         self._times = _times(times, "times")
         self.r = np.full(3, _sigma(sigma, "sigma") ** 2)
+        self.max_speed2 = _sigma(max_speed, "max_speed") ** 2
         self._H = np.zeros((3, layout.n))
         self._H[:, layout.vel] = np.eye(3)
         self._kinds = np.full(3, ZUPT, dtype=np.int64)
@@ -253,6 +258,8 @@ class ZeroVelocity(MeasurementModel):
         return self._times
 
     def rows(self, i, nav, w_b, clock=None, memory=None, aux=None):
+        if np.dot(nav[4:7], nav[4:7]) > self.max_speed2:
+            return None
         return Rows(-np.asarray(nav[4:7], dtype=float), self._H.copy(), self.r.copy(), self._kinds, self._channels)
 
 
@@ -271,13 +278,16 @@ class ZeroAngularRate(MeasurementModel):
     sigma : float
         1-sigma of one compensated rate sample at rest [rad/s]: the gyro's
         white noise over one IMU interval (``arw / sqrt(dt)``) plus vibration.
+    max_speed : float
+        No rows while the nominal speed is above this [m/s] (see :class:`ZeroVelocity`).
     """
 
     kinds = ("zaru",)
 
-    def __init__(self, times, layout: StateLayout, sigma: float):
+    def __init__(self, times, layout: StateLayout, sigma: float, max_speed: float = 1.0):
         self._times = _times(times, "times")
         self.r = np.full(3, _sigma(sigma, "sigma") ** 2)
+        self.max_speed2 = _sigma(max_speed, "max_speed") ** 2
         self._n = layout.n
         self._kinds = np.full(3, ZARU, dtype=np.int64)
         self._channels = self._kinds * 1000 + np.arange(3)
@@ -287,6 +297,8 @@ class ZeroAngularRate(MeasurementModel):
         return self._times
 
     def rows(self, i, nav, w_b, clock=None, memory=None, aux=None):
+        if np.dot(nav[4:7], nav[4:7]) > self.max_speed2:
+            return None
         C_bn = quat_to_dcm(nav[0:4]).T
         lat = nav[7]
         w_ie = OMEGA_E * np.array([np.cos(lat), 0.0, -np.sin(lat)])
