@@ -215,7 +215,7 @@ class Engine:
                      "clock": np.empty((n_out, 2)), "pv": np.empty((n_out, 6, 6)), "w_b": np.empty((n_out, 3)),
                      "aux": {name: np.empty((n_out, len(v))) for name, v in self.aux.items()}}
         self._nis, self._nis_dim, self._nis_kind = [], [], []
-        self._history = [] if self.keep_history else None
+        self._history = self._allocate_history(len(times), lay.n) if self.keep_history else None
         self._update_time = 0.0
         self._n_updates = 0
         self._wall = 0.0
@@ -244,9 +244,10 @@ class Engine:
             clock[0] += clock[1] * T
         self._start_k = end
         hist = self._history
-        if hist is not None:
-            P_pred = est.covariance().copy()
-            dx_sum = np.zeros(self._n)
+        if hist is not None:  # written in place: no per-event allocation
+            hist.P_pred[ti] = est.covariance()
+            dx_sum = hist.dx[ti]
+            dx_sum[:] = 0.0
         used = False
         for (mi, i) in events:
             tu = perf()
@@ -285,11 +286,29 @@ class Engine:
         if not finite:
             raise NumericalError(f"INS state became non-finite at t = {t:.3f} s")
         if hist is not None:
-            Phi = work[1].copy() if T > 0.0 else np.eye(self._n)
-            hist.append((t, Phi, P_pred, est.covariance().copy(), dx_sum, nav.copy(), used))
+            hist.time[ti] = t
+            if T > 0.0:
+                hist.Phi[ti] = work[1]
+            else:
+                hist.Phi[ti] = 0.0
+                hist.Phi[ti].flat[::self._n + 1] = 1.0
+            hist.P_filt[ti] = est.covariance()
+            hist.nav[ti] = nav
+            hist.updated[ti] = used
         self._ti = ti + 1
         self._wall += perf() - wall0
         return True
+
+    @staticmethod
+    def _allocate_history(n_events: int, n: int) -> History:
+        """One preallocated array per field, ``n_events`` rows: ``3 n^2 + n + 11`` doubles and
+        one byte per event, nothing else (no per-event Python objects). ``np.empty`` only
+        reserves address space; the pages are committed as the run writes them, so a run
+        stopped early (step API) costs what it has done."""
+        return History(time=np.empty(n_events), Phi=np.empty((n_events, n, n)),
+                       P_pred=np.empty((n_events, n, n)), P_filt=np.empty((n_events, n, n)),
+                       dx=np.empty((n_events, n)), nav=np.empty((n_events, 10)),
+                       updated=np.zeros(n_events, dtype=bool))
 
     def _feedback(self, dx: np.ndarray) -> None:
         """The one place a correction reaches the nominal state (and the clone's memory);
@@ -338,13 +357,10 @@ class Engine:
         kinds = {}
         nis_kind = np.array([kinds.setdefault(id(m), "+".join(m.kinds)) for m in self._nis_kind], dtype=object)
         history = None
-        if self._history is not None:
-            h = list(zip(*self._history)) if self._history else [[]] * 7
-            n = self._n
-            history = History(time=np.array(h[0], dtype=float),
-                              Phi=np.array(h[1]).reshape(-1, n, n), P_pred=np.array(h[2]).reshape(-1, n, n),
-                              P_filt=np.array(h[3]).reshape(-1, n, n), dx=np.array(h[4]).reshape(-1, n),
-                              nav=np.array(h[5]).reshape(-1, 10), updated=np.array(h[6], dtype=bool))
+        if self._history is not None:  # views of the events done (rows already written never change)
+            h, e = self._history, self._ti
+            history = History(time=h.time[:e], Phi=h.Phi[:e], P_pred=h.P_pred[:e], P_filt=h.P_filt[:e],
+                              dx=h.dx[:e], nav=h.nav[:e], updated=h.updated[:e])
         outputs = getattr(self.estimator, "outputs", lambda: {})()
         return FilterResult(
             time=self._out_t[:io], nav=r["nav"][:io], sigma=r["sigma"][:io], gnss_used=r["used"][:io],

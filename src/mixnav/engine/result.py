@@ -96,9 +96,22 @@ class History:
         Nominal state after the event.
     updated : ndarray of bool (E,)
 
-    Memory: ``3 n^2 + n + 11`` doubles per event (21 states: about 11 kB; an hour of
-    1 s events about 40 MB). The clone blocks are not stored: a clone lives within
-    one epoch pair, and the smoother works on the error states.
+    Memory: exactly ``3 n^2 + n + 11`` doubles and one byte (``updated``) per event,
+    in one preallocated array per field (the engine writes each event's row in
+    place; no per-event Python objects):
+
+    ====  =====================  ==============================
+    n     per event              one hour at 4 events/s (14400)
+    ====  =====================  ==============================
+    15    701 doubles, 5.61 kB   80.8 MB
+    17    895 doubles, 7.16 kB   103.1 MB
+    21    1355 doubles, 10.84 kB 156.1 MB
+    23    1621 doubles, 12.97 kB 186.8 MB
+    ====  =====================  ==============================
+
+    (1 s events: a quarter of that.) The stochastic-clone blocks are not stored:
+    the smoother (:func:`mixnav.engine.smoother.rts_smooth`) works on the marginal
+    of the error state, an approximation for a cloning model (docs/smoother.md).
     """
 
     time: np.ndarray
