@@ -65,6 +65,28 @@ def build(method: MethodConfig, default_imu: ImuErrorModel, fixes, lever_arm, so
     return filt, meas
 
 
+def run_method(method: MethodConfig, filt, imu, init, meas, source=None, index: int = 0, taken=(),
+               **kwargs) -> dict:
+    """Run one method's filter; with ``smooth = true`` also its RTS smoother.
+
+    Returns ``{name: FilterResult}``: the causal result under the method's name and,
+    when smoothed, ``"<name>-smoothed"`` (:func:`mixnav.engine.smoother.rts_smooth`),
+    with its own covariance, so metrics, tables and figures treat it as a method.
+    ``taken``: the names of the file's methods (a smoothed name may not clash).
+    """
+    res = filt.run(imu, init, meas, history=method.smooth, **kwargs)
+    if not method.smooth:
+        return {method.name: res}
+    from ..engine.smoother import rts_smooth
+    name = f"{method.name}-smoothed"
+    if name in taken:
+        raise ConfigError(f"method '{method.name}' is smoothed into '{name}', which another method is named",
+                          file=source, key=f"methods[{index}].smooth")
+    smoothed = rts_smooth(res)
+    res.history = None  # the backward pass is done: do not keep 3 n^2 doubles per event
+    return {method.name: res, name: smoothed}
+
+
 def _build(method, default_imu, fixes, lever_arm, source, index, observations, clock, training, seed, aiding):
     from .aiding import aiding_models, method_layout
     layout = method_layout(method, aiding, source, index)

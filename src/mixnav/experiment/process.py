@@ -219,7 +219,8 @@ def process(ds: Dataset, source: str, data: str | None = None):
                           odometer=read_odometer(ds, folder, t0), source=source)
     for i, m in enumerate(ds.methods):
         filt, meas = methods.build(m, model, fixes, lever, source, i, aiding=aiding)
-        results[m.name] = filt.run(imu, init, meas, output_times=out_times)
+        results.update(methods.run_method(m, filt, imu, init, meas, source, i, [x.name for x in ds.methods],
+                                          output_times=out_times))
     filter_time = _time.perf_counter() - t_filt
     return ProcessOutput(ds, source, folder, t0, imu, fixes, all_fixes, reference, lever, results, init,
                          read_time, filter_time)

@@ -64,7 +64,8 @@ def run_scenario(sc: Scenario, source: str | None = None, seed: int | None = Non
                                     observations=sim.observations, clock=clock, training=training,
                                     seed=seed, aiding=aiding)
         # each estimator its own stream, independent of the simulation's and of the other methods'
-        results[m.name] = filt.run(sim.imu, sim.init, meas, rng=Streams(seed).get(f"filter:{m.name}"))
+        results.update(methods.run_method(m, filt, sim.imu, sim.init, meas, source, i, [x.name for x in sc.methods],
+                                          rng=Streams(seed).get(f"filter:{m.name}")))
     return RunOutput(sc, source or sc.scenario.name, sim, results)
 
 
