@@ -283,13 +283,13 @@ class VehicleConfig(Strict):
     bump_time: Duration = 1.0
     seed: Annotated[int, Field(ge=0)] = 0
 
-    @model_validator(mode="after")
-    def _small(self):
-        for k in ("slip_sigma", "bump_sigma"):
-            if getattr(self, k) > np.radians(10.0):
-                raise ValueError(f"{k} = {np.degrees(getattr(self, k)):.3g} deg: NHC violations of a land "
-                                 "vehicle are small angles (at most 10 deg)")
-        return self
+    @field_validator("slip_sigma", "bump_sigma")
+    @classmethod
+    def _small(cls, v):
+        if v > np.radians(10.0):
+            raise ValueError(f"{np.degrees(v):.3g} deg: NHC violations of a land vehicle are small "
+                             "angles (at most 10 deg)")
+        return v
 
 
 class InstallationConfig(Strict):
