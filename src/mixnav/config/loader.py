@@ -95,6 +95,18 @@ def _check_scenario(sc, source: str) -> None:
     imu_white_noise(sc, source)
     _check_hold(sc, source)
     observable_noise(sc, source)
+    _check_odometer(sc, source)
+
+
+def _check_odometer(sc, source) -> None:
+    """``odometer.rate``: samples fall on IMU samples (the IMU rate a whole multiple of it)."""
+    o = sc.odometer
+    if o is None:
+        return
+    step = sc.imu.rate / o.rate
+    if abs(step - round(step)) > 1e-9 * step or round(step) < 1:
+        raise ConfigError(f"odometer rate {o.rate:g} Hz must divide the IMU rate ({sc.imu.rate:g} Hz): "
+                          "odometer samples fall on IMU samples", file=source, key="odometer.rate")
 
 
 def _check_hold(sc, source) -> None:

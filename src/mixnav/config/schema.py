@@ -261,6 +261,77 @@ class InitConfig(Strict):
         (10.0, 1.0)
 
 
+class VehicleConfig(Strict):
+    """Violations of the non-holonomic constraints by the simulated vehicle
+    (``[vehicle]``; absent: none, the velocity stays along the vehicle's x axis).
+
+    ``slip_sigma`` / ``slip_time``: sideslip angle ``beta`` (std, correlation
+    time) between the velocity and the vehicle's x axis in its x-y plane;
+    ``bump_sigma`` / ``bump_time``: the angle ``alpha`` out of that plane (down
+    positive). In the vehicle frame the velocity is
+    ``speed * [sqrt(1 - sin^2 beta - sin^2 alpha), sin beta, sin alpha]``, so
+    the violations vanish at rest. Each angle is a first-order Gauss-Markov
+    sequence at knots every quarter correlation time (whole IMU intervals)
+    joined by a C2 cubic spline (smooth, so the ideal IMU has finite rates).
+    The realisation is part of the trajectory: drawn from stream ``vehicle``
+    of ``seed`` (not the run's seed), the same for every run of the scenario.
+    A sigma of zero (default) switches that violation off."""
+
+    slip_sigma: _quantity(u.ANGLE, nonnegative=True) = 0.0  # type: ignore[valid-type]
+    slip_time: Duration = 5.0
+    bump_sigma: _quantity(u.ANGLE, nonnegative=True) = 0.0  # type: ignore[valid-type]
+    bump_time: Duration = 1.0
+    seed: Annotated[int, Field(ge=0)] = 0
+
+    @field_validator("slip_sigma", "bump_sigma")
+    @classmethod
+    def _small(cls, v):
+        if v > np.radians(10.0):
+            raise ValueError(f"{np.degrees(v):.3g} deg: NHC violations of a land vehicle are small "
+                             "angles (at most 10 deg)")
+        return v
+
+
+class InstallationConfig(Strict):
+    """How the simulated IMU sits in the vehicle (``[installation]``).
+
+    ``imu_misalignment``: roll, pitch, yaw of the IMU axes b relative to the
+    vehicle axes v (x forward, y right, z down), ``C_vb = C(misalignment)``
+    with ``C(r, p, y) = Rz(y) Ry(p) Rx(r)`` (the dataset configs' key of the
+    same name, with ``imu_rotation`` zero). The truth attitude is then the
+    IMU's, ``C_nb = C_nv C_vb``, and the IMU measures in b."""
+
+    imu_misalignment: AngleVec = (0.0, 0.0, 0.0)
+
+    @field_validator("imu_misalignment")
+    @classmethod
+    def _small(cls, v):
+        if max(abs(a) for a in v) > np.radians(45.0):
+            raise ValueError("misalignment angles are at most 45 deg")
+        return v
+
+
+class OdometerConfig(Strict):
+    """A simulated odometer (``[odometer]``; absent: none): the forward speed,
+    in the vehicle frame, of the wheel point at ``lever_arm`` (from the IMU,
+    in the IMU body frame), times ``1 + scale_factor``, plus Gaussian noise of
+    ``sigma`` (stream ``odometer``), rounded to a multiple of ``quantum`` when
+    given; negative readings (noise at rest) are clipped to zero."""
+
+    rate: Frequency
+    sigma: _quantity(u.VELOCITY, positive=True)  # type: ignore[valid-type]
+    scale_factor: _quantity(u.DIMENSIONLESS) = 0.0  # type: ignore[valid-type]
+    quantum: _quantity(u.VELOCITY, positive=True) | None = None  # type: ignore[valid-type]
+    lever_arm: LengthVec = (0.0, 0.0, 0.0)
+
+    @field_validator("scale_factor")
+    @classmethod
+    def _scale(cls, v):
+        if not abs(v) < 0.5:
+            raise ValueError(f"scale factor error {v:g} is not a small fraction (write e.g. \"0.5 %\")")
+        return v
+
+
 class RobustConfig(Strict):
     """Robust adaptive EKF (``estimator = "robust-adaptive"``): IGG-III
     thresholds ``k0 < k1`` on standardised innovations and the adaptive-factor
@@ -562,6 +633,9 @@ class Scenario(Strict):
     methods: list[MethodConfig] = Field(min_length=1)
     aiding: AidingConfig | None = None
     sweep: SweepConfig | None = None
+    vehicle: VehicleConfig | None = None
+    installation: InstallationConfig | None = None
+    odometer: OdometerConfig | None = None
 
     @model_validator(mode="after")
     def _unique_methods(self):

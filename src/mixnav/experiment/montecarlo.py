@@ -143,7 +143,9 @@ def _load(scenario: str, expect_sha: str | None = None):
 def _ideal(sc, source: str, sha: str):
     from ..sim.scenario import truth_and_ideal_imu
     # keyed by what the truth depends on, so sweep variants share it when they can
-    key = (source, sha, sc.trajectory.model_dump_json(), sc.imu.rate)
+    key = (source, sha, sc.trajectory.model_dump_json(), sc.imu.rate,
+           None if sc.vehicle is None else sc.vehicle.model_dump_json(),
+           None if sc.installation is None else sc.installation.model_dump_json())
     if key not in _IDEAL_CACHE:
         _IDEAL_CACHE[key] = truth_and_ideal_imu(sc, source)
     return _IDEAL_CACHE[key]

@@ -6,23 +6,58 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..attitude import quat_multiply, rotvec_to_quat
+from ..attitude import euler_to_dcm, quat_multiply, rotvec_to_quat
 from ..config.loader import gnss_noise, imu_model, imu_white_noise
 from ..config.schema import (AccelerateSegment, ClimbSegment, Scenario, StaticSegment,
                              TurnSegment, UniformSegment)
-from ..data import GnssFixes, ImuData, Trajectory
+from ..data import GnssFixes, ImuData, OdometerData, Trajectory
 from ..data import InitialState
 from ..ins.imu_model import ImuErrorDraw, ImuErrorModel, corrupt
 from .gnss import GnssFixModel, simulate_fixes
+from .odometer import simulate_odometer
 from .rng import Streams
 from .trajectory import InitialState as TrajectoryStart
-from .trajectory import MotionSegment, generate
+from .trajectory import MotionSegment, draw_violations, generate, mount
 from ..geodesy.frames import displace
 
 
 @dataclass(frozen=True)
+class VehicleTruth:
+    """The true installation and odometer errors of a simulated land vehicle.
+
+    Attributes
+    ----------
+    imu_misalignment : ndarray (3,)
+        Roll, pitch, yaw of the IMU axes b in the vehicle axes v [rad]
+        (``[installation] imu_misalignment``; zeros without it).
+    C_vb : ndarray (3, 3)
+        ``euler_to_dcm(imu_misalignment)``: IMU-frame vectors into the
+        vehicle frame (x forward, y right, z down).
+    odometer_scale : float or None
+        The true odometer scale-factor error k (speed = (1 + k) v^v_x + noise);
+        None without ``[odometer]``.
+    odometer_lever_arm : ndarray (3,) or None
+        The wheel point from the IMU in the IMU frame b [m].
+
+    The per-sample truth of the vehicle is in ``SimulatedRun.truth.extra``:
+    ``q_nv`` (vehicle attitude), ``w_nb_b`` (body rate w.r.t. NED, b frame),
+    ``w_ib_b``, and with ``[vehicle]`` the angles ``slip`` and ``bump`` [rad].
+    """
+
+    imu_misalignment: np.ndarray
+    C_vb: np.ndarray
+    odometer_scale: float | None = None
+    odometer_lever_arm: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
 class SimulatedRun:
-    """Everything one seeded run of a scenario needs and knows."""
+    """Everything one seeded run of a scenario needs and knows.
+
+    ``truth`` is the IMU's (its attitude ``C_nb = C_nv C_vb`` with a
+    mounting); ``odometer`` the simulated wheel speeds (None without
+    ``[odometer]``); ``vehicle`` the true mounting and odometer errors.
+    """
 
     seed: int
     truth: Trajectory
@@ -34,6 +69,8 @@ class SimulatedRun:
     init: InitialState
     outages: tuple
     observations: object = None  # GnssObservations when the scenario has [gnss.satellites]
+    odometer: OdometerData | None = None
+    vehicle: VehicleTruth | None = None
 
 
 def motion_segments(sc: Scenario) -> list[MotionSegment]:
@@ -51,17 +88,46 @@ def motion_segments(sc: Scenario) -> list[MotionSegment]:
     return out
 
 
+def mounting(sc: Scenario) -> np.ndarray:
+    """``C_vb`` of the scenario's ``[installation]`` (identity without it)."""
+    inst = sc.installation
+    return euler_to_dcm(np.zeros(3) if inst is None else np.asarray(inst.imu_misalignment, dtype=float))
+
+
 def truth_and_ideal_imu(sc: Scenario, source: str | None = None):
-    """The deterministic part of a scenario: truth and ideal increments."""
+    """The deterministic part of a scenario: truth and ideal increments.
+
+    With ``[vehicle]`` the sideslip/bump angles are drawn from stream
+    ``vehicle`` of ``vehicle.seed`` (part of the trajectory, not of a run);
+    with ``[installation]`` the truth and increments are the mounted IMU's.
+    """
     tr = sc.trajectory
     start = TrajectoryStart(lla=tuple(tr.start), speed=tr.speed, rpy=tuple(tr.attitude))
-    return generate(motion_segments(sc), start, sc.imu.rate, source=source)
+    viol = None
+    v = sc.vehicle
+    if v is not None and (v.slip_sigma > 0 or v.bump_sigma > 0):
+        viol = draw_violations(sc.duration, sc.imu.rate, v.slip_sigma, v.slip_time, v.bump_sigma,
+                               v.bump_time, Streams(v.seed).get("vehicle"))
+    truth, imu = generate(motion_segments(sc), start, sc.imu.rate, source=source, violations=viol)
+    if sc.installation is not None and any(a != 0.0 for a in sc.installation.imu_misalignment):
+        truth, imu = mount(truth, imu, mounting(sc))
+    return truth, imu
+
+
+def vehicle_truth(sc: Scenario) -> VehicleTruth:
+    """The true mounting and odometer errors of a scenario."""
+    mis = np.zeros(3) if sc.installation is None else np.asarray(sc.installation.imu_misalignment, dtype=float)
+    o = sc.odometer
+    return VehicleTruth(imu_misalignment=mis, C_vb=mounting(sc),
+                        odometer_scale=None if o is None else float(o.scale_factor),
+                        odometer_lever_arm=None if o is None else np.asarray(o.lever_arm, dtype=float))
 
 
 def simulate(sc: Scenario, seed: int, source: str | None = None, ideal=None) -> SimulatedRun:
     """Draw one run: IMU errors, GNSS noise and the initial estimation error.
 
-    Streams (independent, from ``seed``): ``imu``, ``gnss``, ``init``.
+    Streams (independent, from ``seed``): ``imu``, ``gnss``, ``init``, and
+    ``odometer`` (drawn only with ``[odometer]``).
     ``ideal`` may pass a precomputed ``(truth, imu_ideal)`` for Monte Carlo.
     """
     streams = Streams(seed)
@@ -90,7 +156,14 @@ def simulate(sc: Scenario, seed: int, source: str | None = None, ideal=None) -> 
         lost = {tuple(o.window) for o in g.satellites.outages
                 if o.keep is not None and o.keep < 4 and o.fraction is None}
         outages = tuple(sorted(set(outages) | lost))
-    return SimulatedRun(seed, truth, imu_ideal, imu, draw, model, fixes, init, outages, obs)
+    vehicle = vehicle_truth(sc)
+    odo = None
+    if sc.odometer is not None:
+        o = sc.odometer
+        odo = simulate_odometer(truth, o.rate, o.sigma, o.scale_factor, vehicle.odometer_lever_arm,
+                                vehicle.C_vb, streams.get("odometer"), quantum=o.quantum, source=source)
+    return SimulatedRun(seed, truth, imu_ideal, imu, draw, model, fixes, init, outages, obs,
+                        odometer=odo, vehicle=vehicle)
 
 
 def _without_fixes_below_four(fixes: GnssFixes, obs):

@@ -15,7 +15,17 @@ mechanization, so the round-trip test of ``tests/test_mechanization.py``
 checks the strapdown algorithm against an independent truth.
 
 The velocity is along the body x axis rotated by pitch and yaw (no sideslip,
-no angle of attack): the motion of a car or of a coordinated aircraft.
+no angle of attack): the motion of a car or of a coordinated aircraft. With
+:class:`NhcViolations` a land vehicle also slips sideways and bounces: in the
+vehicle (body) frame its velocity is
+
+    v^v = speed * [sqrt(1 - sin^2 beta - sin^2 alpha), sin beta, sin alpha]
+
+with smooth random angles ``beta(t)`` (sideslip) and ``alpha(t)`` (bumps, down
+positive), so ``v_n = C_nv v^v`` and ``dv_n/dt = C_nv (w_nv^v x v^v + dv^v/dt)``
+exactly; the attitude still follows the segments (a stopped car neither turns
+nor slides). :func:`mount` then turns the vehicle's truth and ideal IMU into
+those of an IMU mounted at a fixed rotation ``C_vb`` in the vehicle.
 """
 
 from __future__ import annotations
@@ -24,8 +34,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.integrate import cumulative_simpson
+from scipy.interpolate import CubicSpline
 
-from ..attitude import euler_to_dcm, euler_to_quat
+from ..attitude import dcm_to_quat, euler_to_dcm, euler_to_quat, quat_multiply
 from ..data import ImuData, Trajectory
 from ..errors import ConfigError
 from ..geodesy import earth
@@ -69,6 +80,80 @@ class InitialState:
     lla: tuple[float, float, float]
     speed: float
     rpy: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class NhcViolations:
+    """Sideslip ``slip(t)`` and bump ``bump(t)`` angles [rad] of a land vehicle.
+
+    Each is None (no violation) or a callable ``f(t, nu)`` giving the angle
+    (``nu = 0``) or its ``nu``-th time derivative at times ``t`` [s] since the
+    start of the trajectory, e.g. a :class:`scipy.interpolate.CubicSpline`
+    from :func:`smooth_gauss_markov`. They must be twice continuously
+    differentiable between IMU samples (the ideal IMU integrates their
+    derivative with Simpson's rule).
+    """
+
+    slip: object = None
+    bump: object = None
+
+
+def smooth_gauss_markov(duration: float, sigma: float, tau: float, dt: float,
+                        rng: np.random.Generator) -> CubicSpline:
+    """A smooth random angle with std ``sigma`` and correlation time ``tau``.
+
+    A first-order Gauss-Markov sequence (stationary start) at knots every
+    ``tau / 4`` rounded to a whole number ``m >= 1`` of IMU intervals ``dt``
+    (so every IMU interval lies inside one spline piece), joined by a natural
+    C2 cubic spline over ``[0, duration]``. Its std at the knots is ``sigma``,
+    between them slightly less (0.99 sigma averaged over time, measured over
+    20 x 4000 s for tau = 0.5-5 s: the spline smooths the sequence's steps);
+    its autocorrelation at lags beyond a knot spacing is close to
+    ``exp(-lag / tau)``. Its rate is about ``sigma sqrt(8) / tau``: a short
+    ``tau`` makes a jerky vehicle.
+    """
+    m = max(1, int(round(tau / 4.0 / dt)))
+    h = m * dt
+    n = max(2, int(np.ceil(duration / h - 1e-9)) + 1)
+    phi = np.exp(-h / tau)
+    w = rng.standard_normal(n)
+    x = np.empty(n)
+    x[0] = sigma * w[0]
+    q = sigma * np.sqrt(1.0 - phi * phi)
+    for k in range(1, n):
+        x[k] = phi * x[k - 1] + q * w[k]
+    return CubicSpline(h * np.arange(n), x, bc_type="natural")
+
+
+def draw_violations(duration: float, imu_rate: float, slip_sigma: float, slip_time: float,
+                    bump_sigma: float, bump_time: float, rng: np.random.Generator) -> NhcViolations:
+    """Slip, then bump angles from ``rng`` (a zero sigma: that violation off, nothing drawn)."""
+    dt = 1.0 / imu_rate
+    slip = smooth_gauss_markov(duration, slip_sigma, slip_time, dt, rng) if slip_sigma > 0 else None
+    bump = smooth_gauss_markov(duration, bump_sigma, bump_time, dt, rng) if bump_sigma > 0 else None
+    return NhcViolations(slip, bump)
+
+
+def _violate(kin, times, viol: NhcViolations, acc):
+    """Add the slip/bump velocity (and its derivative) to one node's kinematics."""
+    speed, rpy, v_n, a_n, w = kin
+    z = np.zeros_like(times)
+    sb = db = sa = da = z
+    if viol.slip is not None:
+        b, b1 = viol.slip(times, 0), viol.slip(times, 1)
+        sb, db = np.sin(b), np.cos(b) * b1
+    if viol.bump is not None:
+        a, a1 = viol.bump(times, 0), viol.bump(times, 1)
+        sa, da = np.sin(a), np.cos(a) * a1
+    r = np.sqrt(1.0 - sb * sb - sa * sa)
+    delta = np.stack([r - 1.0, sb, sa], -1)
+    ddelta = np.stack([-(sb * db + sa * da) / r, db, da], -1)
+    c_nv = euler_to_dcm(rpy)
+    dv_v = speed[:, None] * delta
+    da_v = (acc * np.ones_like(speed))[:, None] * delta + speed[:, None] * (np.cross(w, delta) + ddelta)
+    v_n = v_n + np.einsum("kij,kj->ki", c_nv, dv_v)
+    a_n = a_n + np.einsum("kij,kj->ki", c_nv, da_v)
+    return (speed, rpy, v_n, a_n, w), np.arcsin(sb), np.arcsin(sa)
 
 
 def _kinematics(s0, acc, ang0, rates, tau):
@@ -123,7 +208,8 @@ def _segment_table(segments, initial: InitialState, imu_rate: float, source: str
 
 
 def generate(segments, initial: InitialState, imu_rate: float, t0: float = 0.0,
-             source: str | None = None) -> tuple[Trajectory, ImuData]:
+             source: str | None = None,
+             violations: NhcViolations | None = None) -> tuple[Trajectory, ImuData]:
     """Fly the segments; return the truth at the IMU rate and ideal increments.
 
     Parameters
@@ -136,11 +222,17 @@ def generate(segments, initial: InitialState, imu_rate: float, t0: float = 0.0,
         Start time [s].
     source : str, optional
         Scenario file, named in error messages.
+    violations : NhcViolations, optional
+        Sideslip and bump angles of a land vehicle (functions of ``t - t0``);
+        None: the velocity stays along the body x axis.
 
     Returns
     -------
     truth : Trajectory
-        States at ``t0 + k/imu_rate``, k = 0..N (N + 1 rows).
+        States at ``t0 + k/imu_rate``, k = 0..N (N + 1 rows). ``extra``:
+        ``w_ib_b`` and ``w_nb_b`` (body rates at the samples [rad/s]),
+        ``q_nv`` (the vehicle's attitude; here the body's), and with
+        ``violations`` the angles ``slip`` and ``bump`` [rad] at the samples.
     imu : ImuData
         N error-free increments; increment k covers ``(t_{k-1}, t_k]``.
     """
@@ -157,6 +249,13 @@ def generate(segments, initial: InitialState, imu_rate: float, t0: float = 0.0,
     # Three Simpson nodes per interval: start, middle, end (offsets in the segment).
     taus = [k_in_seg * dt, (k_in_seg + 0.5) * dt, (k_in_seg + 1.0) * dt]
     kin = [_kinematics(s0, acc, ang0, rates, tau) for tau in taus]
+    angles = None
+    if violations is not None and (violations.slip is not None or violations.bump is not None):
+        k_all = np.arange(n, dtype=float)
+        out = [_violate(kin[j], (k_all + f) * dt, violations, acc) for j, f in enumerate((0.0, 0.5, 1.0))]
+        kin = [o[0] for o in out]
+        angles = {"slip": np.concatenate([out[0][1][:1], out[2][1]]),
+                  "bump": np.concatenate([out[0][2][:1], out[2][2]])}
 
     # Half-step grid: node 2k is t_k, node 2k+1 the middle of interval k+1.
     v_grid = np.empty((2 * n + 1, 3))
@@ -198,7 +297,35 @@ def generate(segments, initial: InitialState, imu_rate: float, t0: float = 0.0,
     v_t = np.vstack([kin[0][2][:1], kin[2][2]])
     lla_t = np.stack([lat[::2], lon[::2], h[::2]], -1)
     t_imu = t0 + dt * np.arange(n + 1)
-    truth = Trajectory(time=t_imu, lla=lla_t, v_n=v_t, q_nb=euler_to_quat(rpy_t),
-                       extra={"w_ib_b": np.vstack([w0[:1], w2])})
+    q_t = euler_to_quat(rpy_t)
+    extra = {"w_ib_b": np.vstack([w0[:1], w2]), "w_nb_b": np.vstack([kin[0][4][:1], kin[2][4]]),
+             "q_nv": q_t}
+    if angles is not None:
+        extra.update(angles)
+    truth = Trajectory(time=t_imu, lla=lla_t, v_n=v_t, q_nb=q_t, extra=extra)
     imu = ImuData(time=t_imu[1:], dt=np.full(n, dt), dtheta=dtheta, dvel=dvel, source=source)
     return truth, imu
+
+
+def mount(truth: Trajectory, imu: ImuData, c_vb: np.ndarray) -> tuple[Trajectory, ImuData]:
+    """The truth and ideal IMU of an IMU mounted at ``C_vb`` in the vehicle.
+
+    ``truth``/``imu`` are the vehicle's (body = vehicle frame v, as
+    :func:`generate` gives them); ``C_vb`` maps IMU-frame (b) vectors into
+    the vehicle frame. Returns the truth with the IMU's attitude
+    ``C_nb = C_nv C_vb`` (``extra["q_nv"]`` keeps the vehicle's, ``w_ib_b``
+    and ``w_nb_b`` are rotated into b) and the increments in b,
+    ``dtheta_b = C_bv dtheta_v`` (exact: the rotation is constant).
+    Position and velocity are unchanged (the IMU is the reference point).
+    """
+    c_vb = np.asarray(c_vb, dtype=float)
+    q_vb = dcm_to_quat(c_vb)
+    extra = dict(truth.extra)
+    extra["q_nv"] = truth.q_nb
+    for k in ("w_ib_b", "w_nb_b"):
+        if k in extra:
+            extra[k] = extra[k] @ c_vb  # rows: (C_bv w)^T = w^T C_vb
+    out = Trajectory(time=truth.time, lla=truth.lla, v_n=truth.v_n,
+                     q_nb=quat_multiply(truth.q_nb, q_vb), extra=extra)
+    return out, ImuData(time=imu.time, dt=imu.dt, dtheta=imu.dtheta @ c_vb, dvel=imu.dvel @ c_vb,
+                        source=imu.source, gaps=imu.gaps)
