@@ -46,7 +46,8 @@ class AidingInputs:
             if z is None:
                 z = ZuptConfig()
             self._still = detect_still(self.imu, window=z.window, accel_std=z.accel_std, gyro_rate=z.gyro_rate,
-                                       fixes=self.fixes, gnss_speed=z.gnss_speed, min_duration=z.min_duration)
+                                       fixes=self.fixes, gnss_speed=z.gnss_speed, min_duration=z.min_duration,
+                                       odometer=self.odometer)
         return self._still
 
     def summary(self) -> dict:

@@ -10,7 +10,11 @@ A vehicle is taken as still over a window when, in that window,
   vibration, 0.005-0.025 parked on drive-0708, and a car pulling away or creeping
   round a corner reads 0.03-0.5), and
 * when GNSS velocity is given, the nearest fix within ``gnss_gap`` says the
-  speed is below ``gnss_speed`` [m/s] (a fix further away does not vote).
+  speed is below ``gnss_speed`` [m/s] (a fix further away does not vote), and
+  when odometer speeds are given, the nearest sample within ``gnss_gap`` says
+  the wheels turn slower than ``gnss_speed`` too. An IMU alone cannot tell rest
+  from a perfectly smooth drive (a simulated one): in GNSS outages without an
+  odometer only the models' own speed gate (``max_speed``) guards against that.
 
 A sample is still when every window containing it is still (an erosion, so the
 first and last half-window of a stop are not used: the vehicle may still be
@@ -24,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..data import GnssFixes, ImuData
+from ..data import GnssFixes, ImuData, OdometerData
 from ..errors import ArgumentError
 
 
@@ -72,7 +76,7 @@ def _moving(x: np.ndarray, w: int) -> np.ndarray:
 
 def detect_still(imu: ImuData, window: float = 1.0, accel_std: float = 0.1, gyro_rate: float = 0.03,
                  fixes: GnssFixes | None = None, gnss_speed: float = 0.1, gnss_gap: float = 1.0,
-                 min_duration: float = 1.0) -> Stillness:
+                 min_duration: float = 1.0, odometer: OdometerData | None = None) -> Stillness:
     """Detect the still stretches of an IMU record (see the module docstring).
 
     Parameters
@@ -89,6 +93,8 @@ def detect_still(imu: ImuData, window: float = 1.0, accel_std: float = 0.1, gyro
         (within ``gnss_gap`` [s]).
     min_duration : float
         Shorter still stretches are dropped [s].
+    odometer : OdometerData, optional
+        A wheel speed above ``gnss_speed`` within ``gnss_gap`` vetoes its time.
     """
     for name, v in (("window", window), ("accel_std", accel_std), ("gyro_rate", gyro_rate),
                     ("gnss_speed", gnss_speed), ("gnss_gap", gnss_gap)):
@@ -100,7 +106,7 @@ def detect_still(imu: ImuData, window: float = 1.0, accel_std: float = 0.1, gyro
     dt = float(np.median(imu.dt))
     w = max(int(round(window / dt)), 2)
     settings = dict(window_s=float(window), accel_std_mps2=float(accel_std), gyro_rate_radps=float(gyro_rate),
-                    gnss_speed_mps=float(gnss_speed) if fixes is not None else None,
+                    gnss_speed_mps=float(gnss_speed) if fixes is not None or odometer is not None else None,
                     min_duration_s=float(min_duration))
     if n < w:
         return Stillness(np.zeros(n, dtype=bool), np.zeros((0, 2)), settings)
@@ -121,6 +127,12 @@ def detect_still(imu: ImuData, window: float = 1.0, accel_std: float = 0.1, gyro
         close = np.abs(fixes.time[near] - imu.time) <= gnss_gap
         moving = np.linalg.norm(fixes.vel_n[near], axis=1) > gnss_speed
         mask &= ~(close & moving)
+    for t_v, speed in ([] if odometer is None or not len(odometer) else [(odometer.time, np.abs(odometer.speed))]):
+        k = np.clip(np.searchsorted(t_v, imu.time), 1, max(len(t_v) - 1, 1))
+        k0 = np.maximum(k - 1, 0)
+        near = np.where(np.abs(t_v[k0] - imu.time) < np.abs(t_v[np.minimum(k, len(t_v) - 1)] - imu.time), k0,
+                        np.minimum(k, len(t_v) - 1))
+        mask &= ~((np.abs(t_v[near] - imu.time) <= gnss_gap) & (speed[near] > gnss_speed))
     edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
     starts, ends = np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0] - 1
     iv = np.column_stack([imu.time[starts], imu.time[ends]]) if len(starts) else np.zeros((0, 2))
