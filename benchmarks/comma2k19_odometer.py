@@ -107,9 +107,16 @@ def main():
     for s, o in odo.items():
         series[f"can_{s}"] = (o.time, o.speed)
     out["lag_to_add_s"] = {}
+    mid = 0.5 * (t_imu[0] + t_imu[-1])
     for name, (t, y) in series.items():
         lag, c = lag_against_imu(t_imu, a_fwd, t, y, lags)
-        out["lag_to_add_s"][name] = {"lag": lag, "corr": c}
+        halves = []
+        for lo, hi in ((t_imu[0], mid), (mid, t_imu[-1])):
+            mi, ms = (t_imu > lo - 1) & (t_imu < hi + 1), (t > lo) & (t < hi)
+            halves.append(lag_against_imu(t_imu[mi], a_fwd[mi], t[ms], y[ms], lags)[0])
+        c_edges = [lag_against_imu(t_imu, a_fwd, t, y, [lag + e])[1] for e in (-0.1, 0.1)]
+        out["lag_to_add_s"][name] = {"lag": lag, "corr": c, "lag_first_half": halves[0],
+                                     "lag_second_half": halves[1], "corr_at_lag_pm_0.1s": c_edges}
 
     # --- speeds ----------------------------------------------------------------------------
     # GNSS ground speed at its fix (UTC) time against the odometer interpolated there.
@@ -138,6 +145,14 @@ def main():
     ref = np.column_stack([np.interp(tg, pose.time, pose.lla[:, i]) for i in range(3)])
     d = np.array([lla_to_ned(gnss.lla[inside][k], ref[k]) for k in range(len(tg))])
     out["gnss_minus_pose_m"] = {"north": robust(d[:, 0]), "east": robust(d[:, 1]), "down": robust(d[:, 2])}
+    # along track: a lever arm is constant, a time offset grows with speed
+    vp = np.column_stack([np.interp(tg, pose.time, pose.v_n[:, i]) for i in range(2)])
+    sp = np.linalg.norm(vp, axis=1)
+    along = np.sum(d[:, :2] * vp / sp[:, None], axis=1)
+    cross = (-d[:, 0] * vp[:, 1] + d[:, 1] * vp[:, 0]) / sp
+    (a, b), *_ = np.linalg.lstsq(np.column_stack([sp, np.ones_like(sp)]), along, rcond=None)
+    out["gnss_minus_pose_m"]["along_track_fit"] = {"seconds_times_speed": float(a), "constant_m": float(b),
+                                                   "cross_track_median_m": float(np.median(cross))}
 
     print(json.dumps(out, indent=1))
     (ROOT / "benchmarks" / "results" / "comma2k19_odometer.json").write_text(json.dumps(out, indent=1) + "\n")
