@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import os
 import time as _time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -53,6 +53,7 @@ class ProcessOutput:
     init: InitialState
     read_time_s: float
     filter_time_s: float
+    aiding: dict = field(default_factory=dict)   # AidingInputs.summary(): still intervals, thresholds
 
 
 def find_data_dir(ds: Dataset, data: str | None, source: str) -> Path:
@@ -223,7 +224,7 @@ def process(ds: Dataset, source: str, data: str | None = None):
                                           output_times=out_times))
     filter_time = _time.perf_counter() - t_filt
     return ProcessOutput(ds, source, folder, t0, imu, fixes, all_fixes, reference, lever, results, init,
-                         read_time, filter_time)
+                         read_time, filter_time, aiding.summary())
 
 
 def withheld_windows(po: ProcessOutput) -> tuple:
@@ -256,6 +257,8 @@ def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = No
               "real_time_factor": duration / (po.read_time_s + po.filter_time_s),
               "gnss_withheld_s": [list(w) for w in withheld],
               "imu_gaps_accepted": int(po.imu.gaps)}
+    if po.aiding:
+        header["aiding"] = po.aiding
     notes = [f"Times are seconds since the first IMU sample (GPS time {po.time_origin:.3f} s since 1970).",
              f"Aligned at t = {po.init.time:.2f} s ({po.dataset.alignment.method}).",
              "Errors are estimate minus reference, at the reference's valid epochs, for the point the "

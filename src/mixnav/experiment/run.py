@@ -12,7 +12,7 @@ docs/outputs.md for the columns and keys):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -42,6 +42,7 @@ class RunOutput:
     source: str
     sim: SimulatedRun
     results: dict[str, FilterResult]
+    aiding: dict = field(default_factory=dict)   # AidingInputs.summary(): still intervals, thresholds
 
 
 def run_scenario(sc: Scenario, source: str | None = None, seed: int | None = None,
@@ -66,7 +67,7 @@ def run_scenario(sc: Scenario, source: str | None = None, seed: int | None = Non
         # each estimator its own stream, independent of the simulation's and of the other methods'
         results.update(methods.run_method(m, filt, sim.imu, sim.init, meas, source, i, [x.name for x in sc.methods],
                                           rng=Streams(seed).get(f"filter:{m.name}")))
-    return RunOutput(sc, source or sc.scenario.name, sim, results)
+    return RunOutput(sc, source or sc.scenario.name, sim, results, aiding.summary())
 
 
 def _training(sc: Scenario, seed: int, source):
@@ -242,6 +243,8 @@ def write_run(out_dir: Path, run: RunOutput, config_text: str | None = None) -> 
              f"accelerometer bias {np.round(sim.imu_draw.accel_bias / 9.80665e-6, 1).tolist()} ug.",
              "Errors are estimate minus truth; bounds are the filter's own 3-sigma."]
     header = {"scenario": run.scenario.scenario.name, "source": run.source, "seed": sim.seed}
+    if run.aiding:
+        header["aiding"] = run.aiding
     return write_outputs(out_dir, f"mixnav run: {run.scenario.scenario.name}", header, run.results, tables,
                          sim.outages, _lla_frame(sim.truth.time, sim.truth.lla)[::10],
                          _lla_frame(sim.fixes.time, sim.fixes.lla), notes, config_text)
