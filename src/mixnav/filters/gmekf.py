@@ -274,8 +274,15 @@ class BankEstimator:
         self.counts["covariance_repair"] += 1
 
     def covariance(self):
+        """The bank's merged covariance of the error states (n, n), including the white
+        process noise held apart until the next split (``mean_scale * Qw``: the moments of
+        its mixture), so that after a measured step it is the predicted covariance
+        ``Phi P Phi^T + Qd`` (what the engine's history records as ``P_pred``)."""
         _, _, Pm = bank_moments(self.lw, self.X, self.Pb)
-        return np.ascontiguousarray(Pm[:self.n, :self.n])
+        P = np.ascontiguousarray(Pm[:self.n, :self.n])
+        if self.Qw_pending and not getattr(self, "nw", 0):  # M6 drives its noise through w instead
+            P += self.mean_scale * self.Qw
+        return P
 
     def diagnostics(self) -> dict:
         out = {"bank_components_max": float(self.largest_bank)}
