@@ -97,11 +97,12 @@ aiding = ["nhc"]
              aiding=AIDING + '[aiding.odometer]\nsigma = "0.1 m/s"\n', match="odometer samples")
     smooth = """
 [[methods]]
-name = "gm"
+name = "m6"
 type = "loose-ekf"
-states = 21
 estimator = "gaussian-mixture"
 smooth = true
+[methods.mixture]
+colored = { process = 0.0, measurement = { position = 0.5 } }
 """
     e = _err(tmp_path, smooth, match="cannot be smoothed")
     assert e.key == "methods[0].smooth"

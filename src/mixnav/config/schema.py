@@ -502,7 +502,7 @@ class OdometerAidingConfig(Strict):
     the wheel (axle centre) in the body frame from the IMU, default the
     vehicle point."""
 
-    format: Literal["csv", "comma2k19"] | None = None
+    format: Literal["csv"] = "csv"
     file: str | None = None
     sigma: PosSpeed = 0.05
     scale: Fraction = 0.0

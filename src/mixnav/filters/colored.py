@@ -247,6 +247,9 @@ class ColoredMixtureEkf(GaussianMixtureEkf):
         (the tests use it to check the zero-coefficient invariant).
     """
 
+    #: its AR(1) process-noise states are not in the history: the smoother does not apply
+    can_smooth = False
+
     def __init__(self, layout, imu_model, mixtures, psi_process=0.0, psi_measurement=None,
                  process_interval: float = 1.0, max_components: int = 16, covariance_interval: float = 1.0,
                  absurd_sigma: float = 1e4, clock=None, learning_time_s: float = 0.0,

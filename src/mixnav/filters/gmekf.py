@@ -343,8 +343,8 @@ class GaussianMixtureEkf(ErrorStateEkf):
         Offline mixture fits that did not converge (reported in ``recoveries``).
     """
 
-    #: the RTS smoother applies (one Gaussian belief per event: ``FilterResult.history``)
-    can_smooth = False
+    #: the RTS smoother applies on the bank's merged Gaussian (an approximation, docs/smoother.md)
+    can_smooth = True
 
     def __init__(self, layout: StateLayout, imu_model: ImuErrorModel, mixtures: BankMixtures,
                  max_components: int = 16, covariance_interval: float = 1.0, absurd_sigma: float = 1e4,
