@@ -158,3 +158,24 @@ def test_drive0708_peer_windows():
         causal, smoothed = _window_max(t["aided"], a, b), _window_max(t["aided-smoothed"], a, b)
         assert causal <= bound, (a, causal)
         assert smoothed < causal, (a, smoothed, causal)
+
+
+def test_installation_check_reads_level_and_rest():
+    """A level IMU at rest reads roll = pitch = 0 and no warning; the same IMU upside down
+    (a wrong imu_rotation) is flagged; a 'rest' window that moves is flagged."""
+    from mixnav.data import ImuData
+    from mixnav.experiment.aiding import installation_check
+    from mixnav.measurements.stillness import detect_still
+    n, dt = 3000, 0.01
+    t = (np.arange(n) + 1) * dt
+    rng = np.random.default_rng(0)
+    f = np.tile([0.3, -0.2, -9.79], (n, 1)) + 0.01 * rng.standard_normal((n, 3))
+    level = ImuData(t, np.full(n, dt), 1e-5 * rng.standard_normal((n, 3)), f * dt)
+    c = installation_check(level, 20.0, stillness=detect_still(level))
+    assert c["warnings"] == []
+    assert abs(c["rest_pitch_deg"] - np.degrees(np.arctan2(0.3, np.hypot(0.2, 9.79)))) < 0.05
+    upside = ImuData(t, np.full(n, dt), level.dtheta, level.dvel * np.array([1.0, -1.0, -1.0]))
+    assert any("not level" in w for w in installation_check(upside, 20.0)["warnings"])
+    shaking = ImuData(t, np.full(n, dt), level.dtheta, (f + 0.5 * rng.standard_normal((n, 3))) * dt)
+    c = installation_check(shaking, 20.0, stillness=detect_still(shaking))
+    assert any("rest window" in w for w in c["warnings"]), c

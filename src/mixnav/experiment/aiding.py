@@ -124,3 +124,46 @@ def aiding_models(method: MethodConfig, layout: StateLayout, inputs: AidingInput
             z = cfg.zupt if cfg.zupt is not None else ZuptConfig()
             models.append(ZeroAngularRate(inputs.stillness.epochs(z.rate, *span), layout, c.sigma, z.max_speed))
     return models
+
+
+def installation_check(imu: ImuData, static_duration: float, results: dict | None = None,
+                       stillness: Stillness | None = None) -> dict:
+    """What the data say about the installation, for a user with a new recorder.
+
+    From the configured rest window (the first ``static_duration`` [s] of the
+    installed IMU data): its roll and pitch as the mean specific force reads them
+    (a car parked on a road reads within a few degrees of level; an IMU installed
+    upside down or on its side reads ~180 or ~90 deg), the fraction of it the
+    stillness detector calls still, and the gyro rate mean there. From the results:
+    the final estimates of any installation states (``mounting`` [deg],
+    ``odometer_scale``). ``warnings`` lists what looks wrong.
+    """
+    still_window = imu.time <= imu.start_time + static_duration
+    out: dict = {"rest_window_s": float(static_duration), "warnings": []}
+    if still_window.sum() < 10:
+        out["warnings"].append("the configured rest window holds fewer than 10 IMU samples")
+        return out
+    f = imu.dvel[still_window].sum(0) / imu.dt[still_window].sum()   # mean specific force, body
+    roll = float(np.degrees(np.arctan2(-f[1], -f[2])))
+    pitch = float(np.degrees(np.arctan2(f[0], np.hypot(f[1], f[2]))))
+    out.update(rest_roll_deg=roll, rest_pitch_deg=pitch,
+               rest_gyro_rate_dps=float(np.degrees(np.linalg.norm(imu.dtheta[still_window].sum(0)
+                                                                  / imu.dt[still_window].sum()))))
+    if max(abs(roll), abs(pitch)) > 10.0:
+        out["warnings"].append(f"the installed IMU is not level at rest (roll {roll:.1f} deg, pitch {pitch:.1f} "
+                               "deg): check installation.imu_rotation / imu_misalignment")
+    if stillness is not None:
+        frac = float(stillness.mask[still_window].mean())
+        out["rest_window_still_fraction"] = frac
+        if frac < 0.5:
+            out["warnings"].append(f"only {100 * frac:.0f} % of the configured rest window looks still: check "
+                                   "alignment.static_duration")
+    for name, res in (results or {}).items():
+        est = getattr(res, "estimates", {})
+        if "mounting" in est and len(est["mounting"]):
+            out.setdefault("estimated", {})[name] = {"mounting_pitch_yaw_deg":
+                                                     np.degrees(est["mounting"][-1]).round(3).tolist()}
+        if "odometer_scale" in est and len(est["odometer_scale"]):
+            out.setdefault("estimated", {}).setdefault(name, {})["odometer_scale"] = \
+                float(est["odometer_scale"][-1, 0])
+    return out

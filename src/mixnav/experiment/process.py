@@ -29,7 +29,7 @@ from ..config.loader import corruption, imu_model
 from ..data import GnssFixes, ImuData, OdometerData, Trajectory
 from ..errors import ConfigError, DataError
 from . import methods
-from .aiding import AidingInputs
+from .aiding import AidingInputs, installation_check
 from ..filters.ekf import FilterResult, InitialState
 from ..ins.mechanization import nav_vector
 from ..io import drive0708, generic_csv, kfgins, psins, rtklib
@@ -54,6 +54,7 @@ class ProcessOutput:
     read_time_s: float
     filter_time_s: float
     aiding: dict = field(default_factory=dict)   # AidingInputs.summary(): still intervals, thresholds
+    installation: dict = field(default_factory=dict)  # aiding.installation_check: level, rest, estimates
 
 
 def find_data_dir(ds: Dataset, data: str | None, source: str) -> Path:
@@ -224,7 +225,8 @@ def process(ds: Dataset, source: str, data: str | None = None):
                                           output_times=out_times))
     filter_time = _time.perf_counter() - t_filt
     return ProcessOutput(ds, source, folder, t0, imu, fixes, all_fixes, reference, lever, results, init,
-                         read_time, filter_time, aiding.summary())
+                         read_time, filter_time, aiding.summary(),
+                         installation_check(imu, ds.alignment.static_duration, results, aiding.stillness))
 
 
 def withheld_windows(po: ProcessOutput) -> tuple:
@@ -263,6 +265,10 @@ def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = No
              f"Aligned at t = {po.init.time:.2f} s ({po.dataset.alignment.method}).",
              "Errors are estimate minus reference, at the reference's valid epochs, for the point the "
              "reference gives (antenna or IMU); windows are the GNSS epochs withheld from the filter."]
+    if po.installation:
+        header["installation_check"] = po.installation
+        for w in po.installation.get("warnings", []):
+            notes.append("Installation check: " + w + ".")
     ref = None if po.reference is None else _lla_frame(po.reference.time, po.reference.lla)
     return write_outputs(out_dir, f"mixnav process: {po.dataset.dataset.name}", header, po.results, tables,
                          withheld, ref, _lla_frame(po.fixes.time, po.fixes.lla), notes, config_text)
