@@ -179,3 +179,26 @@ def test_installation_check_reads_level_and_rest():
     shaking = ImuData(t, np.full(n, dt), level.dtheta, (f + 0.5 * rng.standard_normal((n, 3))) * dt)
     c = installation_check(shaking, 20.0, stillness=detect_still(shaking))
     assert any("rest window" in w for w in c["warnings"]), c
+
+
+def test_every_estimator_takes_the_aiding_and_the_smoother(tmp_path):
+    """The aiding models are models of the one engine: the robust, mixture-bank and
+    Sage-Husa estimators run them too (their rows reach each estimator's NIS by kind),
+    each at least halves the unaided EKF's outage error on loose-demo, and the
+    smoothed versions of the robust and bank filters improve on their causal ones."""
+    ms = "\n[[methods]]\nname = \"plain\"\ntype = \"loose-ekf\"\nstates = 21\n"
+    for name, est, extra in (("robust", "robust-adaptive", "smooth = true\n"),
+                             ("gm", "gaussian-mixture", "smooth = true\n[methods.mixture]\n"
+                              "measurement.position = { weights = [0.9, 0.1], scales = [1.0, 3.0] }\n"),
+                             ("sh", "sage-husa", "")):
+        ms += (f"\n[[methods]]\nname = \"{name}\"\ntype = \"loose-ekf\"\nstates = 21\nestimator = \"{est}\"\n"
+               f"aiding = [\"nhc\", \"zupt\", \"zaru\"]\n" + extra)
+    sc, src, _ = _scenario(tmp_path, ms)
+    run = run_scenario(sc, src, seed=1)
+    t = run_tables(run)
+    e = {k: _window_max(v, 300, 360) for k, v in t.items()}
+    for name in ("robust", "gm", "sh"):
+        assert e[name] < 0.5 * e["plain"], e
+        assert {"nhc", "zupt", "zaru"} <= set(run.results[name].nis_kind)
+    for name in ("robust", "gm"):
+        assert e[f"{name}-smoothed"] < e[name], e
