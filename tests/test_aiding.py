@@ -202,3 +202,21 @@ def test_every_estimator_takes_the_aiding_and_the_smoother(tmp_path):
         assert {"nhc", "zupt", "zaru"} <= set(run.results[name].nis_kind)
     for name in ("robust", "gm"):
         assert e[f"{name}-smoothed"] < e[name], e
+
+
+def test_mounting_states_recover_a_wrong_configured_mounting(tmp_path):
+    """vehicle-demo's IMU sits at pitch -2 deg, yaw 3 deg in the car; configured as -0.5 and
+    1 deg, the mounting states must find the missing -1.5 and +2 deg (pitch, yaw) within
+    0.25 deg and within 4 of their own sigmas (NHC + odometer over the 600 s drive)."""
+    sc, src, text = load_scenario("vehicle-demo")
+    text = text.replace('vehicle_mounting = ["1.5 deg", "-2 deg", "3 deg"]',
+                        'vehicle_mounting = ["1.5 deg", "-0.5 deg", "1 deg"]\nmounting_sigma = "3 deg"')
+    p = tmp_path / "wrong-mount.toml"
+    p.write_text(text)
+    sc, src, _ = load_scenario(str(p))
+    res = run_scenario(sc, src).results["aided-est"]
+    est = np.degrees(res.estimates["mounting"][-1])
+    sig = np.degrees(res.sigma[-1][res.layout.slice("mounting")])
+    err = est - np.array([-1.5, 2.0])
+    assert np.all(np.abs(err) < 0.25), (est, sig)
+    assert np.all(np.abs(err) < 4 * sig), (est, sig)
