@@ -220,3 +220,48 @@ def test_mounting_states_recover_a_wrong_configured_mounting(tmp_path):
     err = est - np.array([-1.5, 2.0])
     assert np.all(np.abs(err) < 0.25), (est, sig)
     assert np.all(np.abs(err) < 4 * sig), (est, sig)
+
+
+def test_comma2k19_nhc_and_odometer_bridge_an_outage():
+    """A minute of a real car (phone-grade IMU, u-blox fixes, CAN wheel speeds): with the
+    GNSS withheld for 20 s at highway speed, NHC + the rear-wheel odometer (scale state)
+    keep the worst horizontal error against comma's own pose below a third of the
+    GNSS-only filter's (measured: 4.2 m against 30.7 m), and the odometer's scale state
+    finds the ~1 % low reading the readers' comparison with GNSS speed measured
+    (k = -0.0095; the state ends within [-0.015, -0.003] after one minute)."""
+    from mixnav.alignment.motion import align_from_gnss_velocity
+    from mixnav.data import GnssFixes, InitialState
+    from mixnav.experiment.run import solution_table
+    from mixnav.filters.ekf import ErrorStateEkf
+    from mixnav.ins.error_model import StateLayout
+    from mixnav.ins.mechanization import nav_vector
+    from mixnav.io.comma2k19 import read_comma_segment
+    from mixnav.config.loader import imu_model
+    from mixnav.measurements.loose import LooseGnss
+    from mixnav.measurements.vehicle import NonHolonomic, Odometer, odometer_scale_block
+    from .conftest import data_file
+    seg = read_comma_segment(data_file("comma2k19-example1"))
+    imu, gnss, odo, ref = seg.imu, seg.gnss, seg.odometer, seg.reference
+    win = (imu.time[0] + 20, imu.time[0] + 40)
+    keep = ~((gnss.time >= win[0]) & (gnss.time <= win[1]))
+    fx = GnssFixes(gnss.time[keep], gnss.lla[keep], gnss.pos_sigma[keep], source=gnss.source)
+    m = align_from_gnss_velocity(fx, np.zeros(3), 5.0, after=imu.start_time)
+    init = InitialState(time=m.time, nav=nav_vector(m.q_nb, m.v_n, m.lla), sigma_att=np.radians([2, 2, 5]),
+                        sigma_vel=np.full(3, 0.3), sigma_pos=np.full(3, 3.0))
+    model = imu_model("mems", {}, None, "imu.errors", "imu.grade")
+    out_t = ref.time[(ref.time > init.time) & (ref.time < imu.time[-1])]
+    err = {}
+    for name in ("gnss", "aided"):
+        lay = StateLayout("c", [odometer_scale_block(0.02)]) if name == "aided" else StateLayout("c")
+        meas = [LooseGnss(fx, np.zeros(3), lay)]
+        if name == "aided":
+            meas += [NonHolonomic(np.arange(init.time + 1, imu.time[-1], 1.0), lay, sigma=(0.2, 0.1)),
+                     Odometer(odo, lay)]
+        res = ErrorStateEkf(lay, model, covariance_interval=0.1).run(imu, init, meas, output_times=out_t)
+        t = solution_table(res, ref, (win,))
+        o = t[t.in_outage]
+        err[name] = float(np.hypot(o.err_n_m, o.err_e_m).max())
+        if name == "aided":
+            k = res.estimates["odometer_scale"][-1, 0]
+    assert err["aided"] < err["gnss"] / 3, err
+    assert -0.015 < k < -0.003, k
