@@ -204,3 +204,75 @@ if __name__ == "__main__":
         base = with_(config_dict(), withhold=WINDOWS_EXTRA, **RECORDER)
         for off in np.arange(-0.40, 0.1001, 0.025):
             summary(with_(base, offset=round(float(off), 3)), label=f"recorder extra, offset {off:+.3f}")
+    if what == "vdelay":
+        base = with_(config_dict(), **RECORDER)
+        for d in (0.0, 0.1, 0.125, 0.15):
+            summary(with_(base, gnss__velocity_delay=f"{d} s"), label=f"recorder, vel delay {d}")
+        summary(with_(base, gnss__use_velocity=False), label="recorder, no GNSS velocity")
+    if what == "offset-vd":
+        base = with_(config_dict(), gnss__velocity_delay="0.125 s", **RECORDER)
+        for off in np.arange(-0.30, 0.1001, 0.025):
+            summary(with_(base, offset=round(float(off), 3)), label=f"recorder+vd, offset {off:+.3f}")
+    if what == "which":
+        base = with_(config_dict(), **RECORDER)
+        summary(with_(base, states=21), label="recorder, 21 states")
+        summary(with_(base, arw="0.038 deg/s/sqrt(Hz)"), label="recorder, arw x10 only")
+        summary(with_(base, vrw="700 ug/sqrt(Hz)"), label="recorder, vrw x10 only")
+        summary(with_(base, vrw="1000 ug/sqrt(Hz)"), label="recorder, vrw 1000 (rest adev)")
+        summary(with_(base, errors={"accel_bias_walk": "70 ug/s/sqrt(Hz)"}), label="recorder, ba walk x10")
+        summary(with_(base, errors={"gyro_bias_walk": "3.8e-4 deg/s^2/sqrt(Hz)"}), label="recorder, bg walk x10")
+        summary(with_(base, gnss__use_velocity=False, vrw="700 ug/sqrt(Hz)"), label="vrw x10, no GNSS vel")
+    if what == "scale":
+        base = with_(config_dict(), states=21, errors={"gyro_scale": "1 %", "accel_scale": "1 %"}, **RECORDER)
+        po, table, log, ns, errs = summary(base, label="recorder, 21 states, scale 1 %")
+        res = po.results["ekf"]
+        for tq in (100, 200, 300, 400, 500):
+            k = int(np.searchsorted(res.time, tq))
+            print(f"t {tq}: gyro scale [ppm] {np.round(res.estimates['gyro_scale'][k] * 1e6)}  "
+                  f"accel scale [ppm] {np.round(res.estimates['accel_scale'][k] * 1e6)}")
+    if what == "uniform":
+        # the IMU ticks jitter 0-2 ms about an exact 10 ms grid: time the samples on the grid
+        from mixnav.io import drive0708 as _d
+        from mixnav.experiment import process as _p
+        orig = _d.read_drive_imu
+
+        def uniform(*a, **k):
+            imu = orig(*a, **k)
+            n = len(imu.time) + 1
+            k_ = np.arange(n)
+            t_all = np.concatenate([[imu.time[0] - imu.dt[0]], imu.time])
+            c = np.polyfit(k_, t_all, 1)
+            tu = np.polyval(c, k_)
+            w = imu.dtheta / imu.dt[:, None]
+            # undo the trapezoid: recover samples is ill-posed; rescale increments instead
+            from dataclasses import replace as _r
+            dtu = np.diff(tu)
+            return _r(imu, time=tu[1:], dt=dtu, dtheta=imu.dtheta * (dtu / imu.dt)[:, None],
+                      dvel=imu.dvel * (dtu / imu.dt)[:, None])
+        _p.drive0708.read_drive_imu = uniform
+        base = with_(config_dict(), **RECORDER)
+        summary(base, label="recorder, uniform 10 ms grid")
+        summary(with_(base, gnss__velocity_delay="0.125 s"), label="recorder, uniform grid + vel delay")
+    if what == "shipped-vd":
+        for wins, tag in ((None, "shipped windows"), (WINDOWS_EXTRA, "extra windows")):
+            base = config_dict() if wins is None else with_(config_dict(), withhold=wins)
+            summary(base, label=f"shipped, {tag}")
+            for off in (-0.25, -0.2, -0.15, -0.125, -0.1, -0.05, 0.0):
+                summary(with_(base, gnss__velocity_delay="0.125 s", offset=off),
+                        label=f"shipped+vd, off {off:+.3f}, {tag[:5]}")
+    if what == "tune":
+        for wins in (None, WINDOWS_EXTRA):
+            base = with_(config_dict(), gnss__velocity_delay="0.125 s", offset=-0.2)
+            if wins:
+                base = with_(base, withhold=wins)
+            for arw, vrw in (("0.038", "350"), ("0.025", "700"), ("0.038", "1000")):
+                summary(with_(base, arw=f"{arw} deg/s/sqrt(Hz)", vrw=f"{vrw} ug/sqrt(Hz)"),
+                        label=f"vd, -0.2, arw {arw} vrw {vrw} {'extra' if wins else ''}")
+    if what == "tagfix":
+        for wins in (None, WINDOWS_EXTRA):
+            base = with_(config_dict(), gnss__velocity_delay="0.125 s")
+            if wins:
+                base = with_(base, withhold=wins)
+            for off in (-0.2, -0.15, -0.125, -0.1, -0.075):
+                summary(with_(base, offset=off), label=f"tagfix+vd, off {off:+.3f} {'extra' if wins else ''}")
+            summary(with_(base, offset=-0.125, **RECORDER), label=f"tagfix+vd recorder -0.125 {'extra' if wins else ''}")
