@@ -1080,3 +1080,20 @@ def test_real_imu_and_gnss_spans_overlap(real_imu, real_pos):
     hi = min(real_imu.time[-1], real_pos.time[-1])
     # Both record the same ~549 s drive: they should share most of it.
     assert hi - lo > 500.0
+
+
+def test_rtklib_velocity_delay_moves_velocity_to_epoch_times():
+    """A velocity valid 0.125 s before each 4 Hz epoch is interpolated to the epoch."""
+    import numpy as np
+    from mixnav.io.rtklib import PosSolution
+    t = 1000.0 + 0.25 * np.arange(8)
+    true_v = lambda tt: np.column_stack([2.0 * (tt - 1000.0), -tt + 1000.0, 0.0 * tt])  # noqa: E731
+    sol = PosSolution(time=t, lla=np.zeros((8, 3)), quality=np.ones(8, int), n_sat=np.full(8, 9),
+                      sd_ned=np.full((8, 3), 0.01), vel_ned=true_v(t - 0.125), sd_vel=np.full((8, 3), 0.05),
+                      source="x")
+    v = sol.velocity_at_epochs(0.125)
+    np.testing.assert_allclose(v[:-1], true_v(t)[:-1], atol=1e-12)
+    np.testing.assert_array_equal(v[-1], sol.vel_ned[-1])  # no later velocity: kept as reported
+    f = sol.fixes(qualities=(1,), velocity_delay=0.125)
+    np.testing.assert_allclose(f.vel_n[:-1], true_v(t)[:-1], atol=1e-12)
+    np.testing.assert_array_equal(sol.fixes(qualities=(1,)).vel_n, sol.vel_ned)

@@ -48,6 +48,9 @@ class GnssFile(Strict):
     qualities: list[int] = Field(default_factory=lambda: [1, 2, 5])
     min_sigma: _quantity(u.LENGTH, nonnegative=True) = 0.0  # type: ignore[valid-type]
     use_velocity: bool = True
+    # the file's velocity is valid this long before its epoch time (rtklib-pos
+    # only): it is interpolated to the epoch times (io.rtklib.PosSolution.velocity_at_epochs)
+    velocity_delay: _quantity(u.TIME, nonnegative=True) = 0.0  # type: ignore[valid-type]
     withhold: Windows = Field(default_factory=list)
     # optional corruption of the recorded fixes (NED metres per axis), e.g. to
     # test a method under mixture noise or outliers on real data

@@ -96,8 +96,12 @@ def read_imu(ds: Dataset, folder: Path) -> ImuData:
 def read_gnss(ds: Dataset, folder: Path) -> GnssFixes:
     c = ds.gnss
     f = folder / c.file
+    if c.velocity_delay and c.format != "rtklib-pos":
+        raise ConfigError(f"velocity_delay is supported for the rtklib-pos format only, not '{c.format}'",
+                          key="gnss.velocity_delay")
     if c.format == "rtklib-pos":
-        fixes = rtklib.read_pos(f).fixes(qualities=c.qualities, min_sigma=c.min_sigma)
+        fixes = rtklib.read_pos(f).fixes(qualities=c.qualities, min_sigma=c.min_sigma,
+                                         velocity_delay=c.velocity_delay)
     elif c.format == "kf-gins":
         fixes = kfgins.read_kfgins_gnss(f)
     else:

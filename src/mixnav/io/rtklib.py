@@ -58,17 +58,50 @@ class PosSolution:
         """Mask of the epochs whose quality flag is in ``qualities``."""
         return np.isin(self.quality, list(qualities))
 
-    def fixes(self, qualities=(1, 2, 5), min_sigma: float = 0.0) -> GnssFixes:
-        """GNSS fixes of the chosen qualities; sigmas floored at ``min_sigma`` [m]."""
+    def fixes(self, qualities=(1, 2, 5), min_sigma: float = 0.0, velocity_delay: float = 0.0) -> GnssFixes:
+        """GNSS fixes of the chosen qualities; sigmas floored at ``min_sigma`` [m].
+
+        ``velocity_delay`` [s]: the velocity columns are valid at ``t - velocity_delay``
+        (:meth:`velocity_at_epochs`); they are moved to the epoch times.
+        """
         m = self.select(qualities)
         if not m.any():
             raise DataError(f"no epoch with quality in {list(qualities)}", file=self.source)
         sd = np.maximum(self.sd_ned[m], max(min_sigma, 1e-4))
         if self.vel_ned is None:
             return GnssFixes(time=self.time[m], lla=self.lla[m], pos_sigma=sd, source=self.source)
+        vel = self.velocity_at_epochs(velocity_delay) if velocity_delay else self.vel_ned
         sv = np.maximum(self.sd_vel[m], 1e-4)
-        return GnssFixes(time=self.time[m], lla=self.lla[m], pos_sigma=sd, vel_n=self.vel_ned[m],
+        return GnssFixes(time=self.time[m], lla=self.lla[m], pos_sigma=sd, vel_n=vel[m],
                          vel_sigma=sv, source=self.source)
+
+    def velocity_at_epochs(self, delay: float) -> np.ndarray:
+        """The velocity at the epoch times when the file's velocity is valid ``delay`` [s] earlier.
+
+        RTKLIB's velocity can be an average over the interval before the epoch
+        (a backward difference of positions, or a Doppler over the interval):
+        then it is the velocity at ``t - dt/2``, not at ``t``
+        (drive-0708: 0.125 s at 4 Hz, see
+        ``benchmarks/results/drive0708_installation.md``). Each epoch's velocity
+        is interpolated linearly between the two reported velocities whose
+        validity times ``t_j - delay`` bracket it. Where they do not (the last
+        ``delay`` of the file, or a gap longer than 1.5 times the median
+        interval) the reported value is kept.
+        """
+        v = self.vel_ned
+        t = self.time
+        if v is None or delay == 0.0 or len(t) < 2:
+            return v
+        tv = t - delay                       # when each reported velocity is valid
+        j = np.searchsorted(tv, t, side="right")  # tv[j-1] <= t < tv[j]
+        ok = (j >= 1) & (j < len(t))
+        jj = np.clip(j, 1, len(t) - 1)
+        span = tv[jj] - tv[jj - 1]
+        ok &= span <= 1.5 * float(np.median(np.diff(t)))
+        w = np.where(ok, (t - tv[jj - 1]) / np.where(span > 0, span, 1.0), 0.0)[:, None]
+        out = v.copy()
+        out[ok] = ((1.0 - w) * v[jj - 1] + w * v[jj])[ok]
+        return out
 
     def reference(self, qualities=(1,)) -> Trajectory:
         """Reference trajectory (position, and velocity when present) of the chosen qualities."""
