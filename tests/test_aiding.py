@@ -148,16 +148,17 @@ def test_vehicle_demo_aiding_and_smoother_from_the_shipped_file():
 def test_drive0708_peer_windows():
     """drive-0708 with the GNSS withheld in the GNSS_IMU project's own windows: the aided
     causal filter's maximum horizontal errors must be at most 0.7 x the peer's with its
-    zero-velocity updates (18.7 / 5.2 / 23.7 m -> 13.1 / 3.6 / 16.6 m; issue 16), and the
-    smoother must improve on the causal filter in every window."""
+    zero-velocity updates (18.7 / 5.2 / 23.7 m -> 13.1 / 3.6 / 16.6 m), and the smoothed
+    ones at most the peer's smoother's (2.94 / 3.37 / 1.42 m; issue 16)."""
     from mixnav.api import process_dataset
     from .conftest import data_file
     r = process_dataset("drive-0708-peer", str(data_file("drive-0708")))
     t = r.solutions
-    for (a, b), bound in zip(((100, 130), (250, 280), (400, 430)), (13.1, 3.6, 16.6)):
+    wins = ((100, 130), (250, 280), (400, 430))
+    for (a, b), causal_bound, smooth_bound in zip(wins, (13.1, 3.6, 16.6), (2.94, 3.37, 1.42)):
         causal, smoothed = _window_max(t["aided"], a, b), _window_max(t["aided-smoothed"], a, b)
-        assert causal <= bound, (a, causal)
-        assert smoothed < causal, (a, smoothed, causal)
+        assert causal <= causal_bound, (a, causal)
+        assert smoothed <= smooth_bound, (a, smoothed)
 
 
 def test_installation_check_reads_level_and_rest():
