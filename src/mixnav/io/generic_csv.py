@@ -33,7 +33,7 @@ from ..attitude import euler_to_quat
 from ..data import GnssFixes, ImuData, Trajectory
 from ..errors import DataError
 from .imu_checks import check_plausible, rates_to_increments
-from .tables import check_times, read_numeric
+from .tables import check_times, header_fields, read_numeric
 
 _COL = re.compile(r"^\s*([A-Za-z_]+)\s*\[(.*)\]\s*$")
 
@@ -54,14 +54,8 @@ _REF = ["time", "lat", "lon", "height"]
 
 
 def _header(path: Path, layouts: list[list[str]], what: str):
-    if not path.is_file():
-        raise DataError(f"{what} file does not exist", file=str(path))
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        head = fh.readline()
-    if not head.strip():
-        raise DataError(f"{what} file is empty (no header line)", file=str(path), line=1)
     names, factors = [], []
-    for col in head.strip().split(","):
+    for col in header_fields(path, what):
         m = _COL.match(col)
         if not m:
             raise DataError(f"header column {col.strip()!r} is not 'name[unit]'", file=str(path), line=1)

@@ -48,7 +48,7 @@ import numpy as np
 from .. import units as u
 from ..data import MAX_VEHICLE_SPEED, OdometerData
 from ..errors import ArgumentError, DataError
-from .tables import check_times, read_numeric
+from .tables import check_times, header_fields, read_numeric
 
 _COL = re.compile(r"^\s*([A-Za-z_]+)\s*(?:\[(.*)\])?\s*$")
 
@@ -80,14 +80,8 @@ def _check_arguments(sigma, max_gap, gap_action, units):
 
 def _header(path: Path, units: Mapping[str, str]):
     """Column names and their factors to SI, from the header and ``units``."""
-    if not path.is_file():
-        raise DataError("odometer file does not exist", file=str(path))
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        head = fh.readline()
-    if not head.strip():
-        raise DataError("odometer file is empty (no header line)", file=str(path), line=1)
     names, factors = [], []
-    for col in head.strip().split(","):
+    for col in header_fields(path, "odometer"):
         m = _COL.match(col)
         if not m:
             raise DataError(f"header column {col.strip()!r} is not 'name[unit]'", file=str(path), line=1)

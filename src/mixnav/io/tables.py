@@ -37,6 +37,18 @@ def _is_float(tok: str) -> bool:
     return True
 
 
+def header_fields(path: Path, what: str) -> list[str]:
+    """The comma-separated fields of a file's header line (a ``DataError`` naming the file
+    when it does not exist or its first line is empty)."""
+    if not path.is_file():
+        raise DataError(f"{what} file does not exist", file=str(path))
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        head = fh.readline()
+    if not head.strip():
+        raise DataError(f"{what} file is empty (no header line)", file=str(path), line=1)
+    return head.strip().split(",")
+
+
 def read_numeric(path, ncols: int | tuple[int, ...], *, delimiter: str | None = None,
                  comment: str | None = None, skip_lines: int = 0, drop_edges: bool = False,
                  converters=None, what: str = "data") -> Table:

@@ -74,6 +74,15 @@ def _moving(x: np.ndarray, w: int) -> np.ndarray:
     return (c[w:] - c[:-w]) / w
 
 
+def _vetoed(t_ref: np.ndarray, speed: np.ndarray, t: np.ndarray, gap: float, threshold: float) -> np.ndarray:
+    """Per time of ``t``: the nearest sample of ``t_ref`` (within ``gap`` [s]) moves faster
+    than ``threshold`` [m/s] (``speed`` per sample of ``t_ref``)."""
+    k = np.clip(np.searchsorted(t_ref, t), 0, len(t_ref) - 1)
+    before = np.maximum(k - 1, 0)
+    near = np.where(np.abs(t_ref[before] - t) < np.abs(t_ref[k] - t), before, k)
+    return (np.abs(t_ref[near] - t) <= gap) & (speed[near] > threshold)
+
+
 def detect_still(imu: ImuData, window: float = 1.0, accel_std: float = 0.1, gyro_rate: float = 0.03,
                  fixes: GnssFixes | None = None, gnss_speed: float = 0.1, gnss_gap: float = 1.0,
                  min_duration: float = 1.0, odometer: OdometerData | None = None) -> Stillness:
@@ -115,24 +124,16 @@ def detect_still(imu: ImuData, window: float = 1.0, accel_std: float = 0.1, gyro
     mean_f = _moving(f, w)
     var_f = np.maximum(_moving(f * f, w) - mean_f ** 2, 0.0)
     ok = (var_f < accel_std ** 2) & (_moving(rate, w) < gyro_rate)   # window starting at sample j
-    # sample i is still when all windows j in [i - w + 1, i] that contain it are
+    # sample i is still when all w windows j in [i - w + 1, i] that contain it are (so the
+    # first and last w - 1 samples, which fewer windows cover, never are)
     bad = np.concatenate([[0], np.cumsum(~ok)])
-    j0 = np.clip(np.arange(n) - w + 1, 0, len(ok))
-    j1 = np.clip(np.arange(n) + 1, 0, len(ok))
-    covered = j1 - j0 >= 1
-    mask = covered & (bad[j1] - bad[j0] == 0) & (np.arange(n) >= w - 1) & (np.arange(n) <= n - w)
+    i = np.arange(w - 1, n - w + 1)
+    mask = np.zeros(n, dtype=bool)
+    mask[i] = bad[i + 1] - bad[i - w + 1] == 0
     if fixes is not None and fixes.vel_n is not None and len(fixes):
-        k = np.clip(np.searchsorted(fixes.time, imu.time), 1, len(fixes) - 1)
-        near = np.where(np.abs(fixes.time[k - 1] - imu.time) < np.abs(fixes.time[k] - imu.time), k - 1, k)
-        close = np.abs(fixes.time[near] - imu.time) <= gnss_gap
-        moving = np.linalg.norm(fixes.vel_n[near], axis=1) > gnss_speed
-        mask &= ~(close & moving)
-    for t_v, speed in ([] if odometer is None or not len(odometer) else [(odometer.time, np.abs(odometer.speed))]):
-        k = np.clip(np.searchsorted(t_v, imu.time), 1, max(len(t_v) - 1, 1))
-        k0 = np.maximum(k - 1, 0)
-        near = np.where(np.abs(t_v[k0] - imu.time) < np.abs(t_v[np.minimum(k, len(t_v) - 1)] - imu.time), k0,
-                        np.minimum(k, len(t_v) - 1))
-        mask &= ~((np.abs(t_v[near] - imu.time) <= gnss_gap) & (speed[near] > gnss_speed))
+        mask &= ~_vetoed(fixes.time, np.linalg.norm(fixes.vel_n, axis=1), imu.time, gnss_gap, gnss_speed)
+    if odometer is not None and len(odometer):
+        mask &= ~_vetoed(odometer.time, np.abs(odometer.speed), imu.time, gnss_gap, gnss_speed)
     edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
     starts, ends = np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0] - 1
     iv = np.column_stack([imu.time[starts], imu.time[ends]]) if len(starts) else np.zeros((0, 2))

@@ -42,7 +42,7 @@ import numpy as np
 from ..attitude import euler_to_dcm, quat_to_dcm, skew
 from ..data import OdometerData
 from ..errors import ArgumentError
-from ..geodesy.earth import OMEGA_EARTH as OMEGA_E
+from ..geodesy.earth import earth_rate_ned
 from ..ins.error_model import StateBlock, StateLayout
 from .base import MeasurementModel, Rows
 from .kinds import register_kind
@@ -226,7 +226,29 @@ class Odometer(VehicleVelocity):
         return Rows(z, Hr, np.array([self.data.sigma[i] ** 2]), self._kinds, self._channels)
 
 
-class ZeroVelocity(MeasurementModel):
+class _AtRest(MeasurementModel):
+    """Rows that hold only at rest (ZUPT, ZARU): epochs from the stillness detector, and no
+    rows while the nominal speed is above ``max_speed`` [m/s]: an IMU alone cannot tell
+    rest from a smooth constant-velocity drive (a simulated one, or a very smooth road),
+    so a detection the navigation solution contradicts is not used."""
+
+    def __init__(self, times, layout: StateLayout, sigma: float, max_speed: float, kind: int):
+        self._times = _times(times, "times")
+        self.r = np.full(3, _sigma(sigma, "sigma") ** 2)
+        self.max_speed2 = _sigma(max_speed, "max_speed") ** 2
+        self._kinds = np.full(3, kind, dtype=np.int64)
+        self._channels = self._kinds * 1000 + np.arange(3)
+
+    @property
+    def times(self) -> np.ndarray:
+        return self._times
+
+    def moving(self, nav) -> bool:
+        """The nominal moves faster than ``max_speed``."""
+        return float(np.dot(nav[4:7], nav[4:7])) > self.max_speed2
+
+
+class ZeroVelocity(_AtRest):
     """ZUPT: the IMU is at rest, ``v_n = 0`` (three rows, kind ``zupt``).
 
     Parameters
@@ -237,33 +259,23 @@ class ZeroVelocity(MeasurementModel):
     sigma : float
         1-sigma of the velocity at rest (vibration, a creeping vehicle) [m/s].
     max_speed : float
-        No rows while the nominal speed is above this [m/s]: an IMU alone cannot tell
-        rest from a smooth constant-velocity drive (a simulated one, or a very smooth
-        road), so a detection the navigation solution contradicts is not used.
+        No rows while the nominal speed is above this [m/s] (see :class:`_AtRest`).
     """
 
     kinds = ("zupt",)
 
     def __init__(self, times, layout: StateLayout, sigma: float = 0.02, max_speed: float = 1.0):
-        self._times = _times(times, "times")
-        self.r = np.full(3, _sigma(sigma, "sigma") ** 2)
-        self.max_speed2 = _sigma(max_speed, "max_speed") ** 2
+        super().__init__(times, layout, sigma, max_speed, ZUPT)
         self._H = np.zeros((3, layout.n))
         self._H[:, layout.vel] = np.eye(3)
-        self._kinds = np.full(3, ZUPT, dtype=np.int64)
-        self._channels = self._kinds * 1000 + np.arange(3)
-
-    @property
-    def times(self) -> np.ndarray:
-        return self._times
 
     def rows(self, i, nav, w_b, clock=None, memory=None, aux=None):
-        if np.dot(nav[4:7], nav[4:7]) > self.max_speed2:
+        if self.moving(nav):
             return None
         return Rows(-np.asarray(nav[4:7], dtype=float), self._H.copy(), self.r.copy(), self._kinds, self._channels)
 
 
-class ZeroAngularRate(MeasurementModel):
+class ZeroAngularRate(_AtRest):
     """ZARU: at rest the vehicle does not turn, so the compensated gyro should read the
     Earth rate, ``w_b = C_bn w_ie_n``; the innovation observes the gyro biases.
 
@@ -285,23 +297,14 @@ class ZeroAngularRate(MeasurementModel):
     kinds = ("zaru",)
 
     def __init__(self, times, layout: StateLayout, sigma: float, max_speed: float = 1.0):
-        self._times = _times(times, "times")
-        self.r = np.full(3, _sigma(sigma, "sigma") ** 2)
-        self.max_speed2 = _sigma(max_speed, "max_speed") ** 2
+        super().__init__(times, layout, sigma, max_speed, ZARU)
         self._n = layout.n
-        self._kinds = np.full(3, ZARU, dtype=np.int64)
-        self._channels = self._kinds * 1000 + np.arange(3)
-
-    @property
-    def times(self) -> np.ndarray:
-        return self._times
 
     def rows(self, i, nav, w_b, clock=None, memory=None, aux=None):
-        if np.dot(nav[4:7], nav[4:7]) > self.max_speed2:
+        if self.moving(nav):
             return None
         C_bn = quat_to_dcm(nav[0:4]).T
-        lat = nav[7]
-        w_ie = OMEGA_E * np.array([np.cos(lat), 0.0, -np.sin(lat)])
+        w_ie = earth_rate_ned(nav[7])
         H = np.zeros((3, self._n))
         H[:, 0:3] = -C_bn @ skew(w_ie)
         H[:, 9:12] = -np.eye(3)
