@@ -41,6 +41,10 @@ class RunResult:
         The raw results (arrays, covariances, ``estimates`` per state block).
     truth : pandas.DataFrame or None
         The truth (scenario) or reference (dataset) trajectory: time_s, lat_deg, lon_deg, height_m.
+    installation : dict
+        A processed dataset's installation check (level at rest, rest window, the
+        estimated installation states and the values to configure; docs/aiding.md);
+        empty for a scenario.
     """
 
     solutions: dict
@@ -49,6 +53,10 @@ class RunResult:
     truth: "object" = None
     _output: object = field(default=None, repr=False)
     _config_text: str | None = field(default=None, repr=False)
+
+    @property
+    def installation(self) -> dict:
+        return dict(getattr(self._output, "installation", None) or {})
 
     def write(self, out_dir) -> dict:
         """Write what ``mixnav run`` / ``mixnav process`` writes (tables, metrics.json,

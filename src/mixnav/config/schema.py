@@ -478,6 +478,7 @@ PosSpeed = _quantity(u.VELOCITY, positive=True)
 PosAccel = _quantity(u.ACCELERATION, positive=True)
 PosRate = _quantity(u.ANGULAR_RATE, positive=True)
 PosAngle = _quantity(u.ANGLE, positive=True)
+PosLength = _quantity(u.LENGTH, positive=True)
 
 
 class NhcConfig(Strict):
@@ -544,11 +545,17 @@ class AidingConfig(Strict):
     ``vehicle_point``: where the constraints hold (rear-axle centre), body frame
     from the IMU. ``mounting_sigma``: initial 1-sigma of the estimated mounting
     pitch/yaw corrections (method ``estimate = ["mounting"]``).
+    ``gnss_lever_sigma`` and ``time_offset_sigma``: initial 1-sigma of the
+    estimated corrections of the antenna lever arm (``estimate = ["gnss_lever"]``)
+    and of the IMU time offset (``estimate = ["imu_time_offset"]``), loose
+    coupling (:mod:`mixnav.measurements.loose`).
     """
 
     vehicle_mounting: AngleVec | None = None
     vehicle_point: LengthVec = (0.0, 0.0, 0.0)
     mounting_sigma: PosAngle = 0.05
+    gnss_lever_sigma: PosLength = 0.5
+    time_offset_sigma: Duration = 0.1
     nhc: NhcConfig | None = None
     odometer: OdometerAidingConfig | None = None
     zupt: ZuptConfig | None = None
@@ -576,8 +583,9 @@ class MethodConfig(Strict):
     #: land-vehicle aiding this method uses (each configured in the file's [aiding] table)
     aiding: list[Literal["nhc", "odometer", "zupt", "zaru"]] = Field(default_factory=list)
     #: installation states this method estimates: "mounting" (pitch/yaw in the vehicle),
-    #: "odometer_scale"
-    estimate: list[Literal["mounting", "odometer_scale"]] = Field(default_factory=list)
+    #: "odometer_scale", "gnss_lever" (antenna lever-arm correction), "imu_time_offset"
+    estimate: list[Literal["mounting", "odometer_scale", "gnss_lever", "imu_time_offset"]] = \
+        Field(default_factory=list)
     #: also run the fixed-interval RTS smoother: adds a method "<name>-smoothed"
     smooth: bool = False
 

@@ -17,6 +17,7 @@ from ..config.schema import AidingConfig, MethodConfig, ZuptConfig
 from ..data import GnssFixes, ImuData, OdometerData
 from ..errors import ConfigError
 from ..ins.error_model import StateLayout, get_layout
+from ..measurements.loose import gnss_lever_block, time_offset_block
 from ..measurements.stillness import Stillness, detect_still
 from ..measurements.vehicle import (NonHolonomic, Odometer, ZeroAngularRate, ZeroVelocity, mounting_block,
                                     odometer_scale_block)
@@ -73,6 +74,9 @@ def method_layout(method: MethodConfig, inputs: AidingInputs | None, source=None
         return base
     cfg = inputs.config if inputs is not None else None
     blocks = list(base.blocks[5:])
+    if len(set(method.estimate)) != len(method.estimate):
+        raise ConfigError(f"a state is listed twice: {method.estimate}", file=source,
+                          key=f"methods[{index}].estimate")
     for e in method.estimate:
         if e == "mounting":
             if not ({"nhc", "odometer"} & set(method.aiding)):
@@ -84,6 +88,13 @@ def method_layout(method: MethodConfig, inputs: AidingInputs | None, source=None
                 raise ConfigError("an odometer scale state needs odometer aiding", file=source,
                                   key=f"methods[{index}].estimate")
             blocks.append(odometer_scale_block(cfg.odometer.scale_sigma))
+        elif e in ("gnss_lever", "imu_time_offset"):
+            if method.type != "loose-ekf":
+                raise ConfigError(f"{e} is estimated by the loose GNSS model only (method type 'loose-ekf')",
+                                  file=source, key=f"methods[{index}].estimate")
+            c = cfg if cfg is not None else AidingConfig()
+            blocks.append(gnss_lever_block(c.gnss_lever_sigma) if e == "gnss_lever"
+                          else time_offset_block(c.time_offset_sigma))
     return StateLayout(base.name + "+" + "+".join(method.estimate), blocks)
 
 
@@ -127,7 +138,7 @@ def aiding_models(method: MethodConfig, layout: StateLayout, inputs: AidingInput
 
 
 def installation_check(imu: ImuData, static_duration: float, results: dict | None = None,
-                       stillness: Stillness | None = None) -> dict:
+                       stillness: Stillness | None = None, configured: dict | None = None) -> dict:
     """What the data say about the installation, for a user with a new recorder.
 
     From the configured rest window (the first ``static_duration`` [s] of the
@@ -136,7 +147,11 @@ def installation_check(imu: ImuData, static_duration: float, results: dict | Non
     upside down or on its side reads ~180 or ~90 deg), the fraction of it the
     stillness detector calls still, and the gyro rate mean there. From the results:
     the final estimates of any installation states (``mounting`` [deg],
-    ``odometer_scale``). ``warnings`` lists what looks wrong.
+    ``odometer_scale``, the antenna lever-arm correction [m] and the IMU
+    time-offset correction [s] with their 1-sigma) and, given the
+    ``configured`` installation (``antenna_position`` (3,) [m],
+    ``imu_time_offset`` [s]), the values to configure instead
+    (``suggested_*``). ``warnings`` lists what looks wrong.
     """
     still_window = imu.time <= imu.start_time + static_duration
     out: dict = {"rest_window_s": float(static_duration), "warnings": []}
@@ -160,10 +175,25 @@ def installation_check(imu: ImuData, static_duration: float, results: dict | Non
                                    "alignment.static_duration")
     for name, res in (results or {}).items():
         est = getattr(res, "estimates", {})
-        if "mounting" in est and len(est["mounting"]):
-            out.setdefault("estimated", {})[name] = {"mounting_pitch_yaw_deg":
-                                                     np.degrees(est["mounting"][-1]).round(3).tolist()}
-        if "odometer_scale" in est and len(est["odometer_scale"]):
-            out.setdefault("estimated", {}).setdefault(name, {})["odometer_scale"] = \
-                float(est["odometer_scale"][-1, 0])
+        sig = getattr(res, "sigma", None)
+        found = {}
+        for block, key, scale, digits in (("mounting", "mounting_pitch_yaw_deg", np.degrees(1.0), 3),
+                                          ("odometer_scale", "odometer_scale", 1.0, 6),
+                                          ("gnss_lever", "gnss_lever_correction_m", 1.0, 4),
+                                          ("imu_time_offset", "imu_time_offset_correction_s", 1.0, 5)):
+            if block not in est or not len(est[block]):
+                continue
+            value = (scale * est[block][-1]).round(digits)
+            found[key] = float(value[0]) if block in ("odometer_scale", "imu_time_offset") else value.tolist()
+            if block in ("gnss_lever", "imu_time_offset") and sig is not None:
+                s = (scale * sig[-1][res.layout.slice(block)]).round(digits)
+                found[key.replace("_correction", "_sigma")] = float(s[0]) if len(s) == 1 else s.tolist()
+        if configured and "gnss_lever_correction_m" in found and "antenna_position" in configured:
+            found["suggested_antenna_position_m"] = (np.asarray(configured["antenna_position"], dtype=float)
+                                                     + found["gnss_lever_correction_m"]).round(4).tolist()
+        if configured and "imu_time_offset_correction_s" in found and "imu_time_offset" in configured:
+            found["suggested_imu_time_offset_s"] = round(float(configured["imu_time_offset"])
+                                                         + found["imu_time_offset_correction_s"], 5)
+        if found:
+            out.setdefault("estimated", {})[name] = found
     return out

@@ -230,7 +230,9 @@ def process(ds: Dataset, source: str, data: str | None = None):
     filter_time = _time.perf_counter() - t_filt
     return ProcessOutput(ds, source, folder, t0, imu, fixes, all_fixes, reference, lever, results, init,
                          read_time, filter_time, aiding.summary(),
-                         installation_check(imu, ds.alignment.static_duration, results, aiding.stillness))
+                         installation_check(imu, ds.alignment.static_duration, results, aiding.stillness,
+                                            configured={"antenna_position": inst.antenna_position,
+                                                        "imu_time_offset": inst.imu_time_offset}))
 
 
 def withheld_windows(po: ProcessOutput) -> tuple:
@@ -273,6 +275,10 @@ def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = No
         header["installation_check"] = po.installation
         for w in po.installation.get("warnings", []):
             notes.append("Installation check: " + w + ".")
+        for name, est in po.installation.get("estimated", {}).items():
+            said = [f"{k.removeprefix('suggested_')} = {v}" for k, v in est.items() if k.startswith("suggested_")]
+            if said:
+                notes.append(f"Installation estimated by '{name}': " + ", ".join(said) + ".")
     ref = None if po.reference is None else _lla_frame(po.reference.time, po.reference.lla)
     return write_outputs(out_dir, f"mixnav process: {po.dataset.dataset.name}", header, po.results, tables,
                          withheld, ref, _lla_frame(po.fixes.time, po.fixes.lla), notes, config_text)

@@ -25,7 +25,7 @@ from ..data import Trajectory
 from . import methods
 from .aiding import AidingInputs
 from ..filters.ekf import FilterResult
-from ..geodesy.frames import ned_displacement
+from ..geodesy.frames import displace, ned_displacement
 from ..measurements.loose import antenna_lla
 from ..io.atomic import atomic_write_dataframe, atomic_write_json
 from ..sim.gnss import in_windows
@@ -127,21 +127,33 @@ def solution_table(res: FilterResult, truth: Trajectory | None = None, outages=(
     truth is of that point (a GNSS antenna serving as reference) and the
     solution is moved there before the errors are taken. Error columns of a
     quantity the truth lacks (velocity, attitude) are left out.
+
+    A method that estimates the IMU time offset (``imu_time_offset`` states,
+    :mod:`mixnav.measurements.loose`) reports its state at the true time of
+    each record: the INS labelled ``t`` is the vehicle at ``t + dt``, so the
+    position is moved by ``-v dt`` and the velocity by ``-a dt`` (``a`` from
+    the records' velocities). One that estimates the antenna lever arm moves
+    the solution to the antenna with the corrected lever ``lever + dl``.
     """
     lay = res.layout
     rpy = quat_to_euler(res.nav[:, 0:4])
+    lla_out, v_out = _at_true_time(res)
     d = {"time_s": res.time,
-         "lat_deg": np.degrees(res.nav[:, 7]), "lon_deg": np.degrees(res.nav[:, 8]),
-         "height_m": res.nav[:, 9],
-         "vn_mps": res.nav[:, 4], "ve_mps": res.nav[:, 5], "vd_mps": res.nav[:, 6],
+         "lat_deg": np.degrees(lla_out[:, 0]), "lon_deg": np.degrees(lla_out[:, 1]),
+         "height_m": lla_out[:, 2],
+         "vn_mps": v_out[:, 0], "ve_mps": v_out[:, 1], "vd_mps": v_out[:, 2],
          "roll_deg": np.degrees(rpy[:, 0]), "pitch_deg": np.degrees(rpy[:, 1]),
          "yaw_deg": np.degrees(rpy[:, 2])}
     if truth is not None:
         tt = truth_at(truth, res.time)
-        pos, vel = res.nav[:, 7:10], res.nav[:, 4:7]
+        pos, vel = lla_out, v_out
         if lever is not None:
-            lever = np.asarray(lever, dtype=float)
-            pos = np.array([antenna_lla(n, lever) for n in res.nav])
+            lever = np.broadcast_to(np.asarray(lever, dtype=float), (len(res.time), 3))
+            if "gnss_lever" in res.estimates:
+                lever = lever + res.estimates["gnss_lever"]
+            nav = res.nav.copy()
+            nav[:, 7:10] = lla_out
+            pos = np.array([antenna_lla(n, la) for n, la in zip(nav, lever)])
             vel = vel + np.einsum("kij,kj->ki", quat_to_dcm(res.nav[:, 0:4]), np.cross(res.w_b, lever))
         e_pos = -ned_displacement(tt.lla, pos)  # estimate - truth
         for i, ax in enumerate("ned"):
@@ -173,6 +185,19 @@ def solution_table(res: FilterResult, truth: Trajectory | None = None, outages=(
     d["gnss_used"] = res.gnss_used
     d["in_outage"] = in_windows(res.time, outages)
     return pd.DataFrame(d)
+
+
+def _at_true_time(res: FilterResult) -> tuple[np.ndarray, np.ndarray]:
+    """Position (lla) and NED velocity of each record at its true time (see
+    :func:`solution_table`): the INS's own without an ``imu_time_offset`` estimate."""
+    lla, v = res.nav[:, 7:10], res.nav[:, 4:7]
+    est = res.estimates.get("imu_time_offset")
+    if est is None or len(res.time) < 2:
+        return lla, v
+    dt = est[:, 0:1]
+    # records at repeated times (none from the engine today) would make the gradient infinite
+    a = np.gradient(v, res.time, axis=0) if np.all(np.diff(res.time) > 0) else np.zeros_like(v)
+    return displace(lla, -v * dt), v - a * dt
 
 
 def method_metrics(res: FilterResult, table: pd.DataFrame, outages) -> dict:

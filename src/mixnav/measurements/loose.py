@@ -1,16 +1,112 @@
-"""Loosely coupled GNSS position and velocity, with the antenna lever arm."""
+"""Loosely coupled GNSS position and velocity, with the antenna lever arm.
+
+Two installation quantities can be estimated as auxiliary states (blocks of
+the layout, :func:`gnss_lever_block`, :func:`time_offset_block`):
+
+* ``gnss_lever`` (3, [m]): a correction ``dl`` of the configured antenna lever
+  arm, ``l = l_cfg + dl`` (body frame). ``d h_pos / d dl = C_nb``,
+  ``d h_vel / d dl = C_nb [w_b x]``: the position rows see it through the
+  attitude changing, the velocity rows through the turn rate.
+* ``imu_time_offset`` (1, [s]): a correction ``dt`` of the configured IMU time
+  offset (``installation.imu_time_offset``, added to the IMU time tags): with
+  the true offset ``o_cfg + dt`` the INS state labelled ``t`` is the state at
+  true time ``t + dt``, so a fix at ``t`` is predicted by the state at label
+  ``t - dt``: ``h_pos = p_ant - v_n dt``, ``h_vel = v_ant - a_n dt``, hence
+  ``H_dt = -v_n`` and ``-a_n``. The acceleration ``a_n`` at each fix comes
+  from differences of the fixes' own velocities (neighbours at most
+  :data:`ACCEL_MAX_SPACING` away, :func:`fix_accelerations`); its error
+  times the current offset is added to the velocity rows' variance. That
+  matters: where a turn starts between two fixes the differenced acceleration
+  is off by metres per second squared, and with centimetre-per-second RTK
+  velocities an offset of 0.08 s then settled 12 sigma wrong in simulation
+  (it is right with the added variance, ``tests/test_installation_states.py``).
+
+At constant speed ``v`` in a straight line the forward lever component and the
+offset move the predicted antenna alike (``l_x - v dt``): only speed changes
+separate them, so estimated together on a drive with few of them they slide
+along that ridge (docs/aiding.md, "Installation states").
+"""
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..attitude import quat_to_dcm
+from ..attitude import quat_to_dcm, skew
 from ..data import GnssFixes
-from ..ins.error_model import StateLayout
+from ..errors import ArgumentError
+from ..ins.error_model import StateBlock, StateLayout
 from ._loose_kernel import loose_zhr
 from .base import MeasurementModel, Rows
 from .kinds import POSITION, VELOCITY
 from ..geodesy.frames import displace
+
+
+#: Auxiliary block of the antenna lever-arm correction, body frame [m].
+GNSS_LEVER = "gnss_lever"
+#: Auxiliary block of the IMU time-offset correction [s].
+TIME_OFFSET = "imu_time_offset"
+#: Largest spacing of the fixes differenced for the acceleration of the time-offset rows [s].
+ACCEL_MAX_SPACING = 1.0
+
+
+def gnss_lever_block(sigma0: float, walk: float = 0.0) -> StateBlock:
+    """The antenna lever-arm correction states (x, y, z body [m]), initial 1-sigma ``sigma0`` [m]."""
+    return StateBlock(GNSS_LEVER, 3, "random_walk", "aux", float(sigma0), float(walk),
+                      ("lever_x", "lever_y", "lever_z"))
+
+
+def time_offset_block(sigma0: float, walk: float = 0.0) -> StateBlock:
+    """The IMU time-offset correction state [s], initial 1-sigma ``sigma0`` [s]."""
+    return StateBlock(TIME_OFFSET, 1, "random_walk", "aux", float(sigma0), float(walk), ("time_offset",))
+
+
+def fix_accelerations(time: np.ndarray, vel_n: np.ndarray, vel_sigma: np.ndarray | None = None,
+                      max_spacing: float = ACCEL_MAX_SPACING) -> tuple[np.ndarray, np.ndarray]:
+    """NED acceleration at each fix and its 1-sigma [m/s^2], both (M, 3), from the
+    neighbours' velocities.
+
+    The acceleration is the mean of the backward and forward differences whose
+    spacing is at most ``max_spacing`` [s] (one of them at the ends of a
+    stretch; zero, with an unknown-sized sigma of 10 m/s^2, for an isolated fix):
+    a withheld window or a gap is not differenced across. Its sigma is half the
+    spread of the two differences (a jerk, a turn starting between the fixes)
+    plus the velocity noise carried through a difference (``sqrt(2) sigma_v /
+    spacing``); one-sided, the acceleration itself stands for the spread.
+    """
+    t = np.asarray(time, dtype=float)
+    v = np.asarray(vel_n, dtype=float)
+    m = len(t)
+    acc = np.zeros_like(v)
+    sig = np.full_like(v, 10.0)
+    if m < 2:
+        return acc, sig
+    dt = np.diff(t)
+    d = np.diff(v, axis=0) / dt[:, None]
+    ok = dt <= max_spacing
+    sv = np.zeros_like(v) if vel_sigma is None else np.asarray(vel_sigma, dtype=float)
+    dn = np.sqrt(sv[1:] ** 2 + sv[:-1] ** 2) / dt[:, None]       # noise of each difference
+    back = np.zeros(m, bool)
+    back[1:] = ok                  # fix k has a backward difference d[k-1]
+    fwd = np.zeros(m, bool)
+    fwd[:-1] = ok                  # fix k has a forward difference d[k]
+    db = np.zeros_like(v)
+    db[1:] = d
+    df = np.zeros_like(v)
+    df[:-1] = d
+    nb = np.zeros_like(v)
+    nb[1:] = dn
+    nf = np.zeros_like(v)
+    nf[:-1] = dn
+    both = back & fwd
+    acc[both] = 0.5 * (db[both] + df[both])
+    sig[both] = 0.5 * np.abs(df[both] - db[both]) + 0.5 * np.hypot(nb[both], nf[both])
+    only_b = back & ~fwd
+    acc[only_b] = db[only_b]
+    sig[only_b] = np.abs(db[only_b]) + nb[only_b]
+    only_f = fwd & ~back
+    acc[only_f] = df[only_f]
+    sig[only_f] = np.abs(df[only_f]) + nf[only_f]
+    return acc, sig
 
 
 def antenna_lla(nav: np.ndarray, lever_b: np.ndarray) -> np.ndarray:
@@ -43,6 +139,9 @@ class LooseGnss(MeasurementModel):
     layout : StateLayout
     use_velocity : bool
         Use the velocity of the fixes when they have one.
+
+    With an auxiliary block ``gnss_lever`` and/or ``imu_time_offset`` in the
+    layout, those corrections are estimated (module docstring).
     """
 
     def __init__(self, fixes: GnssFixes, lever_arm, layout: StateLayout, use_velocity: bool = True):
@@ -60,6 +159,10 @@ class LooseGnss(MeasurementModel):
         m = 6 if self.use_velocity else 3
         self._kinds = np.array([POSITION] * 3 + [VELOCITY] * (m - 3), dtype=np.int64)
         self._channels = self._kinds * 1000 + np.arange(m) % 3
+        self._lever_sl = layout.slice(GNSS_LEVER) if layout.has(GNSS_LEVER) else None
+        self._dt_col = layout.slice(TIME_OFFSET).start if layout.has(TIME_OFFSET) else -1
+        self._acc, self._acc_sigma = (fix_accelerations(fixes.time, fixes.vel_n, fixes.vel_sigma)
+                                      if self._dt_col >= 0 and self.use_velocity else (None, None))
 
     kinds = ("position", "velocity")
 
@@ -71,7 +174,31 @@ class LooseGnss(MeasurementModel):
         """The rows of fix ``i`` given the INS state ``nav`` and body rate ``w_b``:
         three position rows (NED [m]), then with velocity three velocity rows
         (NED [m/s]); ``R`` as its diagonal (independent axes)."""
-        z, H, r = loose_zhr(nav, self.lever, self._rows[i], w_b, self.use_velocity, self._n, self._i_bg)
+        if (self._lever_sl is None and self._dt_col < 0) or not aux:
+            z, H, r = loose_zhr(nav, self.lever, self._rows[i], w_b, self.use_velocity, self._n, self._i_bg)
+            return Rows(z, H, r, self._kinds, self._channels)
+        return self._rows_installation(i, nav, np.asarray(w_b, dtype=float), aux)
+
+    def _rows_installation(self, i, nav, w_b, aux) -> Rows:
+        """The rows with the estimated lever-arm and time-offset corrections (module docstring)."""
+        lever = self.lever if self._lever_sl is None else self.lever + aux[GNSS_LEVER]
+        z, H, r = loose_zhr(nav, lever, self._rows[i], w_b, self.use_velocity, self._n, self._i_bg)
+        C = quat_to_dcm(nav[0:4])
+        if self._lever_sl is not None:
+            H[0:3, self._lever_sl] = C
+            if self.use_velocity:
+                H[3:6, self._lever_sl] = C @ skew(w_b)
+        if self._dt_col >= 0:
+            dt = float(aux[TIME_OFFSET][0])
+            v = nav[4:7]
+            z[0:3] += v * dt             # h_pos = p_ant - v dt
+            H[0:3, self._dt_col] = -v
+            H[0:3, 3:6] -= dt * np.eye(3)
+            if self.use_velocity:
+                a = self._acc[i]
+                z[3:6] += a * dt         # h_vel = v_ant - a dt
+                H[3:6, self._dt_col] = -a
+                r[3:6] += (self._acc_sigma[i] * dt) ** 2   # the differenced acceleration's error
         return Rows(z, H, r, self._kinds, self._channels)
 
     def row_kinds(self, i: int, m: int) -> np.ndarray:
@@ -93,6 +220,9 @@ class LooseGnss(MeasurementModel):
         At the nominal state, ``y - Y[0]`` is :meth:`rows`' ``z``.
         """
         from ..geodesy.earth import radii
+        if self._lever_sl is not None or self._dt_col >= 0:
+            raise ArgumentError("the ensemble prediction does not carry the estimated lever arm or time "
+                                "offset yet: use a layout without those blocks", argument="layout")
         navs = np.atleast_2d(np.asarray(navs, dtype=float))
         fix = self._rows[i]
         C = quat_to_dcm(navs[:, 0:4])                          # (N, 3, 3)
