@@ -39,11 +39,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..attitude import euler_to_dcm, quat_to_dcm, skew
+from ..attitude import quat_to_dcm, skew
 from ..data import OdometerData
 from ..errors import ArgumentError
 from ..geodesy.earth import earth_rate_ned
 from ..ins.error_model import StateBlock, StateLayout
+from ._vehicle_kernel import vehicle_velocity_jac
 from .base import MeasurementModel, Rows
 from .kinds import register_kind
 
@@ -110,30 +111,16 @@ class VehicleVelocity(MeasurementModel):
         self.lever = _vec3(lever_arm, "lever_arm")
         self._n = layout.n
         self._mount = layout.slice(MOUNTING) if layout.has(MOUNTING) else None
-        self._l_skew = skew(self.lever)
 
     def vehicle_velocity(self, nav, w_b, aux=None):
-        """``v_v`` (3,) [m/s] and its Jacobian over the error state (3, n)."""
+        """``v_v`` (3,) [m/s] and its Jacobian over the error state (3, n) (one compiled
+        call, :func:`mixnav.measurements._vehicle_kernel.vehicle_velocity_jac`)."""
         rpy = self.mounting
         if self._mount is not None and aux:
             est = aux[MOUNTING]
             rpy = np.array([rpy[0], rpy[1] + est[0], rpy[2] + est[1]])
-        C_vb = euler_to_dcm(rpy)
-        C_nb = quat_to_dcm(nav[0:4])
-        v_n = nav[4:7]
-        v_b = C_nb.T @ v_n + np.cross(w_b, self.lever)
-        C_vn = C_vb @ C_nb.T
-        v_v = C_vb @ v_b
-        H = np.zeros((3, self._n))
-        H[:, 0:3] = C_vn @ skew(v_n)
-        H[:, 3:6] = C_vn
-        H[:, 9:12] = C_vb @ self._l_skew
-        if self._mount is not None:
-            cy, sy = np.cos(rpy[2]), np.sin(rpy[2])
-            o = self._mount.start
-            H[:, o] = np.cross(np.array([-sy, cy, 0.0]), v_v)      # pitch: axis Rz(yaw) e_y
-            H[:, o + 1] = np.cross(np.array([0.0, 0.0, 1.0]), v_v)  # yaw: axis e_z
-        return v_v, H
+        return vehicle_velocity_jac(np.asarray(nav, dtype=float), np.asarray(w_b, dtype=float), self.lever, rpy,
+                                    self._n, -1 if self._mount is None else self._mount.start)
 
 
 class NonHolonomic(VehicleVelocity):
