@@ -1,0 +1,344 @@
+"""Interacting multiple models over the INS error state (method M9, paper P4 eqs. 6-16).
+
+An :class:`ImmEstimator` holds ``r`` mode-conditioned estimators (children that carry
+their own error-state mean, ``KalmanEstimator(carry_mean=True)`` or a subclass such as
+the robust EKF) about the one nominal INS. Each mode has its own measurement set: the
+models whose epochs update it. At every measurement epoch of a model in any set:
+
+1. **Mixing** (eqs. 6-9): with the Markov transition matrix ``Pi`` for the time since
+   the last cycle, ``c_j = sum_i Pi_ij mu_i``, ``mu_{i|j} = Pi_ij mu_i / c_j``, and each
+   mode restarts from ``x0_j = sum_i mu_{i|j} x_i``,
+   ``P0_j = sum_i mu_{i|j} (P_i + (x_i - x0_j)(x_i - x0_j)^T)``. The modes share one
+   transition ``Phi``, ``Qd`` (one motion model), so mixing the predicted moments at the
+   epoch equals mixing the previous posteriors and predicting them (exact, linear).
+2. **Likelihoods** (eq. 13), made comparable across measurement sets: every mode scores
+   *the same rows* -- the epoch's -- with its own predictive density
+   ``N(z; H x_j, H P_j H^T + R)``, whether or not the epoch's model is in its set. The
+   set decides only who is updated. P4 scores each sub-filter on its own measurement
+   (GNSS metres against odometer metres per second), whose densities are not comparable:
+   their ratio changes with the units. Here a mode that ignores the GNSS is judged by how
+   well its own belief, grown without the GNSS, predicts the GNSS fix; a mode that
+   ignores the odometer, by how well it predicts the odometer.
+3. **Mode-matched updates** (eqs. 10-12) of the modes whose set holds the model.
+4. **Probabilities** (eq. 14): ``mu_j ∝ Lambda_j c_j``; **combination** (eqs. 15-16):
+   ``x = sum_j mu_j x_j`` is the correction the engine feeds back once, every mode is
+   re-centred on it, and ``P = sum_j mu_j (P_j + (x_j - x)(x_j - x)^T)`` is recorded.
+
+``Pi`` is given per ``transition_interval`` seconds (default 1 s: "the probability of
+being in mode j one second after mode i") and raised to the fractional power ``dt / T``
+for the time ``dt`` since the previous cycle, so the switching rate does not depend on
+how many epochs (odometer at 125 Hz, GNSS at 1 Hz) a second holds. That needs real,
+non-negative eigenvalues (a "sticky" matrix, ``Pi_ii >= 1/2`` for two modes);
+``transition_interval=None`` applies ``Pi`` once per epoch instead (P4's form).
+
+Model probabilities are outputs: ``result.outputs["mode_probabilities"]`` (K, r) at the
+cycle times ``result.outputs["mode_times"]``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..engine.protocols import Correction, Epoch, Transition
+from ..errors import ArgumentError
+from ..engine.status import ABSURD, NEEDS_REPAIR, NON_FINITE, OK
+
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+def check_transition(transition, r: int | None = None, argument: str = "transition") -> np.ndarray:
+    """The transition matrix as an (r, r) array, or ArgumentError naming ``argument``: square,
+    finite, non-negative, rows summing to one (to 1e-9)."""
+    P = np.asarray(transition, dtype=float)
+    if P.ndim != 2 or P.shape[0] != P.shape[1] or (r is not None and P.shape[0] != r):
+        want = f"({r}, {r})" if r is not None else "square"
+        raise ArgumentError(f"must be a {want} matrix, got shape {P.shape}", argument=argument)
+    if not np.all(np.isfinite(P)):
+        raise ArgumentError("has entries that are not finite", argument=argument)
+    if np.any(P < 0):
+        i, j = np.argwhere(P < 0)[0]
+        raise ArgumentError(f"entry [{i}][{j}] is negative ({P[i, j]:g}): probabilities are >= 0", argument=argument)
+    s = P.sum(axis=1)
+    bad = np.nonzero(np.abs(s - 1.0) > 1e-9)[0]
+    if bad.size:
+        raise ArgumentError(f"row {bad[0]} sums to {s[bad[0]]:.6g}, not 1 (row i: the probabilities of "
+                            f"going from mode i to each mode)", argument=argument)
+    return P
+
+
+class _FractionalPower:
+    """``Pi ** s`` for real ``s >= 0`` through the eigen-decomposition, cached per ``s``."""
+
+    def __init__(self, P: np.ndarray, argument: str):
+        lam, V = np.linalg.eig(P)
+        if np.max(np.abs(lam.imag)) > 1e-12 or np.min(lam.real) < -1e-12:
+            raise ArgumentError("has complex or negative eigenvalues, so it is not the one-interval "
+                                "matrix of a switching that goes on in time (make the diagonal larger, "
+                                "e.g. >= 0.5 for two modes, or apply it per epoch with "
+                                "transition_interval = None)", argument=argument)
+        self.lam = np.clip(lam.real, 0.0, None)
+        self.V = V.real
+        self.Vi = np.linalg.inv(self.V)
+        self._cache: dict = {}
+
+    def __call__(self, s: float) -> np.ndarray:
+        key = round(s, 9)
+        out = self._cache.get(key)
+        if out is None:
+            out = (self.V * self.lam ** s) @ self.Vi
+            out = np.clip(out, 0.0, None)
+            out /= out.sum(axis=1, keepdims=True)      # round-off only
+            if len(self._cache) < 4096:
+                self._cache[key] = out
+        return out
+
+
+def mix(mu: np.ndarray, Pi: np.ndarray, xs: np.ndarray, Ps: np.ndarray):
+    """IMM mixing (P4 eqs. 6-9).
+
+    Parameters
+    ----------
+    mu : (r,) mode probabilities; Pi : (r, r) transition, ``Pi[i, j] = p(j | i)``;
+    xs : (r, n) mode means; Ps : (r, n, n) mode covariances.
+
+    Returns
+    -------
+    c : (r,) predicted mode probabilities ``sum_i Pi_ij mu_i``;
+    x0 : (r, n), P0 : (r, n, n) the mixed starting moments of each mode.
+    """
+    c = mu @ Pi
+    w = Pi * mu[:, None]                       # w[i, j] = Pi_ij mu_i
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w = np.where(c > 0, w / c, 0.0)        # mu_{i|j}; a mode predicted impossible keeps zeros
+    x0 = w.T @ xs
+    P0 = np.einsum("ij,ikl->jkl", w, Ps)
+    for j in range(len(mu)):
+        if c[j] <= 0:     # mode j cannot be entered: it keeps its moments (they carry no weight)
+            x0[j], P0[j] = xs[j], Ps[j]
+            continue
+        d = xs - x0[j]
+        P0[j] += (w[:, j, None] * d).T @ d
+    return c, x0, P0
+
+
+def combine(mu: np.ndarray, xs: np.ndarray, Ps: np.ndarray):
+    """The combined mean and covariance (P4 eqs. 15-16): ``(x (n,), P (n, n))``."""
+    x = mu @ xs
+    d = xs - x
+    P = np.einsum("j,jkl->kl", mu, Ps) + (mu[:, None] * d).T @ d
+    return x, P
+
+
+def log_likelihood(x: np.ndarray, P: np.ndarray, z: np.ndarray, H: np.ndarray, R: np.ndarray) -> float:
+    """``log N(z; H x, H P H^T + R)`` (``R`` (m,) variances or (m, m)); -inf when ``S`` is
+    not positive definite."""
+    y = z - H @ x
+    S = H @ P @ H.T
+    if R.ndim == 1:
+        S[np.diag_indices_from(S)] += R
+    else:
+        S = S + R
+    try:
+        L = np.linalg.cholesky(S)
+    except np.linalg.LinAlgError:
+        return -np.inf
+    w = np.linalg.solve(L, y)
+    return float(-0.5 * (w @ w + 2.0 * np.log(np.diag(L)).sum() + len(z) * _LOG_2PI))
+
+
+class ImmEstimator:
+    """Interacting multiple models of mode-conditioned error-state estimators (module docstring).
+
+    Parameters
+    ----------
+    children : list of estimators, r >= 1
+        Each with ``carry_mean = True`` (``KalmanEstimator(carry_mean=True)``, the robust
+        EKF with ``carry_mean=True``...): they predict their own ``x`` and ``P``.
+    measurement_sets : list of r collections of measurement models
+        The models that update each mode (the same objects given to the engine); none
+        may be empty. An epoch of a model in no set is ignored.
+    transition : (r, r) array
+        ``transition[i][j]``: probability of mode j one ``transition_interval`` after mode
+        i (rows sum to one).
+    initial_probabilities : (r,) array, optional
+        Default: uniform.
+    transition_interval : float or None
+        Seconds per application of ``transition`` (default 1 s); None: once per epoch.
+    names : list of str, optional
+        Mode names for the outputs.
+    """
+
+    carry_mean = False   # the composite re-centres its children itself
+
+    def __init__(self, children, measurement_sets, transition, initial_probabilities=None,
+                 transition_interval: float | None = 1.0, names=None):
+        children = list(children)
+        r = len(children)
+        if r < 1:
+            raise ArgumentError("needs at least one mode", argument="children")
+        for k, c in enumerate(children):
+            if not getattr(c, "carry_mean", False) or not hasattr(c, "recentre"):
+                raise ArgumentError(f"mode {k} does not carry its own mean: use "
+                                    "KalmanEstimator(carry_mean=True) or a subclass", argument="children")
+        sets = [frozenset(s) for s in measurement_sets]
+        if len(sets) != r:
+            raise ArgumentError(f"one set per mode: {r} modes, {len(sets)} sets", argument="measurement_sets")
+        for k, s in enumerate(sets):
+            if not s:
+                raise ArgumentError(f"mode {k} has no measurements: it could never be told apart from "
+                                    "pure inertial navigation", argument="measurement_sets")
+        self.children = children
+        self.sets = sets
+        self.Pi = check_transition(transition, r)
+        mu0 = np.full(r, 1.0 / r) if initial_probabilities is None else np.asarray(initial_probabilities, float)
+        if mu0.shape != (r,) or np.any(mu0 < 0) or not np.all(np.isfinite(mu0)) or abs(mu0.sum() - 1) > 1e-9:
+            raise ArgumentError(f"must be {r} non-negative probabilities summing to 1, got {mu0}",
+                                argument="initial_probabilities")
+        self.mu0 = mu0
+        if transition_interval is not None:
+            if not (np.isfinite(transition_interval) and transition_interval > 0):
+                raise ArgumentError(f"must be a positive time [s] or None, got {transition_interval!r}",
+                                    argument="transition_interval")
+            self._power = _FractionalPower(self.Pi, "transition")
+        else:
+            self._power = None
+        self.transition_interval = transition_interval
+        self.names = list(names) if names is not None else [f"mode{k}" for k in range(r)]
+        if len(self.names) != r:
+            raise ArgumentError(f"one name per mode: {r} modes, {len(self.names)} names", argument="names")
+        self.counts = {"rejected_not_pd": 0, "rejected_absurd": 0, "covariance_repair": 0,
+                       "imm_no_likelihood": 0}
+
+    # --- the estimator protocol ---------------------------------------------------------------
+    def init(self, motion, P0: np.ndarray, n_clone: int, rng: np.random.Generator) -> None:
+        if n_clone:
+            raise ArgumentError("the IMM does not carry a stochastic clone (TDCP with clone)",
+                                argument="measurements")
+        for c in self.children:
+            c.init(motion, P0, 0, rng)
+        self.n = motion.layout.n
+        self._scratch = np.zeros((self.n, self.n))
+        self.mu = self.mu0.copy()
+        self._t_last = None
+        self._times: list = []
+        self._mus: list = []
+        for k in ("rejected_not_pd", "rejected_absurd", "covariance_repair"):
+            self.counts[k] = 0
+        self.counts["imm_no_likelihood"] = 0
+
+    @property
+    def kernel_covariance(self) -> np.ndarray:
+        """A zeroed scratch: each mode propagates its own covariance in :meth:`predict`."""
+        return self._scratch
+
+    def predict(self, step: Transition) -> None:
+        self._scratch[:, :] = 0.0
+        for c in self.children:
+            c.predict(step)
+
+    def _transition(self, t: float) -> np.ndarray:
+        if self._power is None:
+            return self.Pi
+        if self._t_last is None:
+            return np.eye(len(self.mu))   # the first cycle: mu0 is the probability at that time
+        return self._power(max(t - self._t_last, 0.0) / self.transition_interval)
+
+    def update(self, epoch: Epoch) -> Correction | None:
+        users = [epoch.model in s for s in self.sets]
+        if not any(users):
+            return None
+        rows = epoch.rows()
+        if rows is None:
+            return None
+        z, H, R = rows.z, rows.H, np.asarray(rows.R, dtype=float)
+        if H.shape[1] != self.n:
+            raise ArgumentError("the IMM does not carry a stochastic clone", argument="measurements")
+        ch = self.children
+        m = len(z)
+        # 1. mixing
+        Pi = self._transition(epoch.time)
+        xs = np.array([c.x for c in ch])
+        Ps = np.array([c.P for c in ch])
+        cbar, x0, P0 = mix(self.mu, Pi, xs, Ps)
+        for j, c in enumerate(ch):
+            c.x = x0[j].copy()
+            c.P = P0[j].copy()
+        # 2. every mode scores the epoch's rows with its own predictive density
+        logl = self.log_likelihoods(z, H, R)
+        # 3. mode-matched updates (a child's rejection is counted here; the IMM's own
+        #    correction is the combination, fed back unless every updating mode rejected)
+        applied = np.zeros(len(ch), dtype=bool)
+        corrs = [None] * len(ch)
+        for j, c in enumerate(ch):
+            if users[j]:
+                corr = c.update(epoch)
+                corrs[j] = corr
+                if corr.status == OK or corr.status == NEEDS_REPAIR:
+                    applied[j] = True
+                    if corr.status == NEEDS_REPAIR:
+                        c.repair()
+                        self.counts["covariance_repair"] += 1
+                elif corr.status == NON_FINITE:
+                    return corr
+                else:
+                    self.counts["rejected_absurd" if corr.status == ABSURD else "rejected_not_pd"] += 1
+        if not applied.any():
+            self.mu = cbar
+            self._t_last = epoch.time
+            self._times.append(epoch.time)
+            self._mus.append(cbar.copy())
+            worst = next(c for c in corrs if c is not None)
+            # the engine counts this epoch's rejection once; the per-mode counts above are per mode
+            self.counts["rejected_absurd" if worst.status == ABSURD else "rejected_not_pd"] -= 1
+            return worst
+        # 4. probabilities and combination
+        a = logl + np.log(np.maximum(cbar, 1e-300))
+        if not np.isfinite(a).any():
+            self.counts["imm_no_likelihood"] += 1
+            mu = cbar
+        else:
+            a = np.where(np.isfinite(a), a, -np.inf)
+            mu = np.exp(a - a.max())
+            mu /= mu.sum()
+        self.mu = mu
+        self._t_last = epoch.time
+        self._times.append(epoch.time)
+        self._mus.append(mu.copy())
+        dx = mu @ np.array([c.x for c in ch])
+        for c in ch:
+            c.recentre(dx)
+        best = int(np.argmax(np.where(applied, mu, -1.0)))   # NIS of the most probable updated mode
+        return Correction(dx, corrs[best].nis, OK, m)
+
+    def log_likelihoods(self, z: np.ndarray, H: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """``log N(z; H x_j, H P_j H^T + R)`` of every mode (r,), after mixing."""
+        return np.array([log_likelihood(c.x, c.P, z, H, R) for c in self.children])
+
+    def covariance(self) -> np.ndarray:
+        xs = np.array([c.x for c in self.children])
+        return combine(self.mu, xs, np.array([c.P for c in self.children]))[1]
+
+    def replace_clone(self, J: np.ndarray) -> None:
+        raise ArgumentError("the IMM does not carry a stochastic clone", argument="measurements")
+
+    def repair(self) -> None:
+        for c in self.children:
+            c.repair()
+        self.counts["covariance_repair"] += 1
+
+    def diagnostics(self) -> dict:
+        return {}
+
+    def outputs(self) -> dict:
+        """Mode probabilities at the cycle times: ``mode_times`` (K,) [s],
+        ``mode_probabilities`` (K, r), ``mode_names``."""
+        r = len(self.children)
+        return {"mode_times": np.array(self._times, dtype=float),
+                "mode_probabilities": np.array(self._mus, dtype=float).reshape(-1, r),
+                "mode_names": list(self.names)}
+
+    def warm_up(self) -> None:
+        for c in self.children:
+            c.warm_up()

@@ -1,0 +1,149 @@
+"""The IMM estimator (M9, P4 eqs. 6-16): closed-form mixing, reductions to one filter,
+the likelihood of the same rows under every mode, and argument errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.stats import multivariate_normal
+
+from mixnav.engine import Engine
+from mixnav.errors import ArgumentError
+from mixnav.filters.ekf import KalmanEstimator
+from mixnav.filters.imm import ImmEstimator, check_transition, combine, log_likelihood, mix
+from mixnav.ins.error_model import get_layout
+from mixnav.ins.motion import StrapdownMotion
+from mixnav.measurements.loose import LooseGnss
+from mixnav.measurements.vehicle import NonHolonomic
+
+
+@pytest.fixture(scope="module")
+def loose():
+    from mixnav.config.loader import load_scenario
+    from mixnav.sim.scenario import simulate
+    sc, src, _ = load_scenario("loose-demo")
+    return sc, simulate(sc, 2, src)
+
+
+def _random_modes(rng, r=3, n=5):
+    mu = rng.dirichlet(np.ones(r))
+    Pi = rng.dirichlet(np.ones(r), size=r)
+    xs = rng.normal(size=(r, n))
+    A = rng.normal(size=(r, n, n))
+    Ps = A @ A.transpose(0, 2, 1) + 0.1 * np.eye(n)
+    return mu, Pi, xs, Ps
+
+
+def test_mixing_preserves_the_combined_mean_and_covariance():
+    """Mixing redistributes the mixture without changing it: with c = mu Pi the mixed
+    modes combined with weights c have the mean and covariance of the modes combined with
+    mu (the law of total expectation and variance over the previous mode)."""
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        mu, Pi, xs, Ps = _random_modes(rng)
+        c, x0, P0 = mix(mu, Pi, xs, Ps)
+        np.testing.assert_allclose(c, mu @ Pi)
+        np.testing.assert_allclose(c.sum(), 1.0)
+        x_a, P_a = combine(mu, xs, Ps)
+        x_b, P_b = combine(c, x0, P0)
+        np.testing.assert_allclose(x_b, x_a, atol=1e-12)
+        np.testing.assert_allclose(P_b, P_a, atol=1e-12)
+        # and each mixed mode is the mixture of the previous modes with weights mu_{i|j}
+        w = Pi[:, 0] * mu / c[0]
+        np.testing.assert_allclose(combine(w, xs, Ps)[0], x0[0])
+        np.testing.assert_allclose(combine(w, xs, Ps)[1], P0[0])
+
+
+def test_log_likelihood_is_scipys_gaussian_density():
+    rng = np.random.default_rng(2)
+    n, m = 6, 3
+    x = rng.normal(size=n)
+    A = rng.normal(size=(n, n))
+    P = A @ A.T + np.eye(n)
+    H = rng.normal(size=(m, n))
+    R = rng.uniform(0.5, 2.0, m)
+    z = rng.normal(size=m)
+    ref = multivariate_normal(H @ x, H @ P @ H.T + np.diag(R)).logpdf(z)
+    assert log_likelihood(x, P, z, H, R) == pytest.approx(ref, rel=1e-12)
+    assert log_likelihood(x, P, z, H, np.diag(R)) == pytest.approx(ref, rel=1e-12)
+
+
+def _gnss_engine(sim, sc, estimator, extra=()):
+    lay = get_layout(15)
+    gnss = LooseGnss(sim.fixes, np.asarray(sc.gnss.lever_arm, float), lay)
+    motion = StrapdownMotion(lay, sim.imu_model)
+    return Engine(motion, estimator, [gnss, *extra]), gnss, lay
+
+
+@pytest.mark.parametrize("Pi", [[[0.5, 0.5], [0.5, 0.5]], [[0.9, 0.1], [0.3, 0.7]]])
+def test_identical_modes_are_the_single_filter(loose, Pi):
+    """Two identical modes (same estimator, same measurement set): whatever the transition
+    matrix, the IMM is the EKF (mixing identical Gaussians gives them back)."""
+    sc, sim = loose
+    ekf = _gnss_engine(sim, sc, KalmanEstimator())[0].run(sim.imu, sim.init)
+    lay = get_layout(15)
+    gnss = LooseGnss(sim.fixes, np.asarray(sc.gnss.lever_arm, float), lay)
+    imm = ImmEstimator([KalmanEstimator(carry_mean=True), KalmanEstimator(carry_mean=True)], [{gnss}, {gnss}], Pi,
+                       initial_probabilities=[0.3, 0.7], transition_interval=None)
+    res = Engine(StrapdownMotion(lay, sim.imu_model), imm, [gnss]).run(sim.imu, sim.init)
+    np.testing.assert_allclose(res.nav, ekf.nav, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(res.sigma, ekf.sigma, rtol=1e-9)
+    p = res.outputs["mode_probabilities"]
+    np.testing.assert_allclose(p.sum(axis=1), 1.0, atol=1e-12)
+
+
+class _Deaf(ImmEstimator):
+    """An IMM whose second mode's likelihood is forced to zero."""
+
+    def log_likelihoods(self, z, H, R):
+        out = super().log_likelihoods(z, H, R)
+        out[1] = -np.inf
+        return out
+
+
+def test_a_mode_with_zero_likelihood_leaves_the_other_filter(loose):
+    """Mode 0 uses the GNSS, mode 1 the GNSS and NHC (at the GNSS times, so the IMU is split
+    at the same instants as the EKF's). With mode 1's likelihood forced to zero its
+    probability is zero after the first epoch, mode 0 never mixes it in, and the IMM is the
+    GNSS-only EKF; mode 1 still runs (its own updates, re-started from mode 0)."""
+    sc, sim = loose
+    ekf = _gnss_engine(sim, sc, KalmanEstimator())[0].run(sim.imu, sim.init)
+    lay = get_layout(15)
+    gnss = LooseGnss(sim.fixes, np.asarray(sc.gnss.lever_arm, float), lay)
+    nhc = NonHolonomic(sim.fixes.time, lay, sigma=0.3)
+    imm = _Deaf([KalmanEstimator(carry_mean=True), KalmanEstimator(carry_mean=True)], [{gnss}, {gnss, nhc}],
+                [[0.95, 0.05], [0.05, 0.95]])
+    res = Engine(StrapdownMotion(lay, sim.imu_model), imm, [gnss, nhc]).run(sim.imu, sim.init)
+    np.testing.assert_allclose(res.nav, ekf.nav, rtol=0, atol=1e-9)
+    p = res.outputs["mode_probabilities"]
+    assert np.all(p[:, 1] == 0.0) and np.all(p[:, 0] == 1.0)
+    # the modes did differ: mode 1 took NHC updates
+    assert np.abs(imm.children[1].P - imm.children[0].P).max() > 1e-6
+
+
+def test_transition_matrix_and_sets_are_checked():
+    with pytest.raises(ArgumentError, match="row 1 sums to"):
+        check_transition([[0.9, 0.1], [0.2, 0.7]])
+    with pytest.raises(ArgumentError, match=r"entry \[0\]\[1\] is negative"):
+        check_transition([[1.1, -0.1], [0.2, 0.8]])
+    with pytest.raises(ArgumentError, match="shape"):
+        check_transition([[1.0, 0.0]])
+    k = KalmanEstimator(carry_mean=True)
+    with pytest.raises(ArgumentError, match="mode 1 has no measurements"):
+        ImmEstimator([k, KalmanEstimator(carry_mean=True)], [{object()}, set()], np.eye(2))
+    with pytest.raises(ArgumentError, match="does not carry its own mean"):
+        ImmEstimator([KalmanEstimator(), k], [{1}, {2}], np.eye(2))
+    with pytest.raises(ArgumentError, match="eigenvalues"):   # anti-sticky: no fractional power
+        ImmEstimator([k, KalmanEstimator(carry_mean=True)], [{1}, {2}], [[0.2, 0.8], [0.8, 0.2]])
+    ImmEstimator([k, KalmanEstimator(carry_mean=True)], [{1}, {2}], [[0.2, 0.8], [0.8, 0.2]],
+                 transition_interval=None)
+
+
+def test_fractional_transition_is_the_one_second_matrix_over_time():
+    """Applied per time, Pi^(0.5) twice is Pi (10 epochs of 0.1 s make one second's switching)."""
+    from mixnav.filters.imm import _FractionalPower
+    Pi = np.array([[0.99, 0.01], [0.05, 0.95]])
+    pw = _FractionalPower(Pi, "transition")
+    np.testing.assert_allclose(pw(0.5) @ pw(0.5), Pi, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.matrix_power(pw(0.1), 10), Pi, atol=1e-12)
+    np.testing.assert_allclose(pw(0.0), np.eye(2), atol=1e-12)
