@@ -54,6 +54,32 @@ def test_mixing_preserves_the_combined_mean_and_covariance():
         np.testing.assert_allclose(combine(w, xs, Ps)[1], P0[0])
 
 
+def test_compiled_cycle_is_the_numpy_reference():
+    """The compiled mixing-and-scoring kernel equals mix() and log_likelihood() (the readable
+    reference), including a mode that cannot be entered (its column of Pi zero)."""
+    from mixnav.filters._imm_kernels import imm_combine, imm_mix_score
+    rng = np.random.default_rng(4)
+    for zero_col in (False, True):
+        mu, Pi, xs, Ps = _random_modes(rng, r=3, n=7)
+        if zero_col:
+            Pi[:, 2] = 0.0
+            Pi /= Pi.sum(1, keepdims=True)
+        H = rng.normal(size=(4, 7))
+        R = np.diag(rng.uniform(0.5, 2, 4))
+        z = rng.normal(size=4)
+        x0, P0, logl = np.empty((3, 7)), np.empty((3, 7, 7)), np.empty(3)
+        c = imm_mix_score(mu, Pi, xs, Ps, z, H, R, x0, P0, logl)
+        c_ref, x0_ref, P0_ref = mix(mu, Pi, xs, Ps)
+        np.testing.assert_allclose(c, c_ref, atol=1e-14)
+        np.testing.assert_allclose(x0, x0_ref, atol=1e-12)
+        np.testing.assert_allclose(P0, P0_ref, atol=1e-12)
+        np.testing.assert_allclose(logl, [log_likelihood(x0[j], P0[j], z, H, R) for j in range(3)], rtol=1e-12)
+        P = np.empty((7, 7))
+        x = imm_combine(mu, xs, Ps, P)
+        np.testing.assert_allclose(x, combine(mu, xs, Ps)[0], atol=1e-12)
+        np.testing.assert_allclose(P, combine(mu, xs, Ps)[1], atol=1e-12)
+
+
 def test_log_likelihood_is_scipys_gaussian_density():
     rng = np.random.default_rng(2)
     n, m = 6, 3
@@ -95,10 +121,9 @@ def test_identical_modes_are_the_single_filter(loose, Pi):
 class _Deaf(ImmEstimator):
     """An IMM whose second mode's likelihood is forced to zero."""
 
-    def log_likelihoods(self, z, H, R):
-        out = super().log_likelihoods(z, H, R)
-        out[1] = -np.inf
-        return out
+    def weigh(self, logl):
+        logl[1] = -np.inf
+        return logl
 
 
 def test_a_mode_with_zero_likelihood_leaves_the_other_filter(loose):
