@@ -562,6 +562,66 @@ class AidingConfig(Strict):
     zaru: ZaruConfig | None = None
 
 
+class ImmModeConfig(Strict):
+    """One mode of an IMM (``[[methods.imm.modes]]``): its name, the measurements that update
+    it (``"gnss"``, the method type's GNSS model, and any of the method's ``aiding``) and
+    its estimator (``"ekf"`` or ``"robust-adaptive"`` with an optional ``[robust]`` table)."""
+
+    name: str = Field(min_length=1)
+    measurements: list[Literal["gnss", "nhc", "odometer", "zupt", "zaru"]] = Field(
+        min_length=1, description="a mode with no measurements is pure inertial navigation, never told apart")
+    estimator: Literal["ekf", "robust-adaptive"] = "ekf"
+    robust: RobustConfig | None = None
+
+    @model_validator(mode="after")
+    def _unique(self):
+        if len(set(self.measurements)) != len(self.measurements):
+            raise ValueError(f"a measurement is listed twice: {self.measurements}")
+        if self.robust is not None and self.estimator != "robust-adaptive":
+            raise ValueError("a [robust] table needs estimator = \"robust-adaptive\"")
+        return self
+
+
+class ImmConfig(Strict):
+    """Interacting multiple models (``estimator = "imm"``, :mod:`mixnav.filters.imm`).
+
+    ``transition[i][j]``: probability of mode j one ``transition_interval`` after mode i
+    (rows sum to one; default interval 1 s, or ``"epoch"`` to apply it once per
+    measurement epoch as P4 does); ``initial_probabilities`` default uniform.
+    """
+
+    modes: list[ImmModeConfig] = Field(min_length=2)
+    transition: list[list[float]]
+    transition_interval: Union[Duration, Literal["epoch"]] = 1.0  # type: ignore[valid-type]
+    initial_probabilities: list[float] | None = None
+
+    @field_validator("transition")
+    @classmethod
+    def _stochastic(cls, v):
+        from ..filters.imm import check_transition
+        from ..errors import ArgumentError
+        try:
+            check_transition(v)
+        except ArgumentError as e:
+            raise ValueError(e.message) from None
+        return v
+
+    @model_validator(mode="after")
+    def _shapes(self):
+        r = len(self.modes)
+        if len(self.transition) != r:
+            raise ValueError(f"transition must be {r} x {r} (one row and column per mode), got "
+                             f"{len(self.transition)} rows")
+        if self.initial_probabilities is not None:
+            p = self.initial_probabilities
+            if len(p) != r or any(x < 0 for x in p) or abs(sum(p) - 1.0) > 1e-9:
+                raise ValueError(f"initial_probabilities must be {r} non-negative numbers summing to 1, got {p}")
+        names = [m.name for m in self.modes]
+        if len(set(names)) != len(names):
+            raise ValueError(f"mode names must be unique, got {names}")
+        return self
+
+
 class MethodConfig(Strict):
     name: str
     type: Literal["loose-ekf", "tight-ekf", "tdcp-ekf"]
@@ -570,6 +630,7 @@ class MethodConfig(Strict):
     estimator: str = "ekf"
     robust: RobustConfig | None = None
     mixture: MixtureConfig | None = None
+    imm: ImmConfig | None = None
     #: keyword arguments of an estimator without a table of its own (e.g. sage-husa's fading)
     options: dict[str, Any] = Field(default_factory=dict)
     states: Literal[15, 17, 21, 23] = 15
@@ -606,6 +667,14 @@ class MethodConfig(Strict):
             raise ValueError("a [robust] table needs estimator = \"robust-adaptive\"")
         if self.mixture is not None and self.estimator != "gaussian-mixture":
             raise ValueError("a [mixture] table needs estimator = \"gaussian-mixture\"")
+        if (self.imm is not None) != (self.estimator == "imm"):
+            raise ValueError("estimator = \"imm\" and an [imm] table go together")
+        if self.imm is not None:
+            for k, mode in enumerate(self.imm.modes):
+                missing = [x for x in mode.measurements if x != "gnss" and x not in self.aiding]
+                if missing:
+                    raise ValueError(f"imm.modes[{k}] ('{mode.name}') uses {missing}, which the method's "
+                                     f"aiding does not list ({self.aiding})")
         return self
 
 

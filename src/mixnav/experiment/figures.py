@@ -18,7 +18,7 @@ from matplotlib.figure import Figure
 
 from ..geodesy import earth
 
-__all__ = ["error_figure", "horizontal_error_figure", "trajectory_figure"]
+__all__ = ["error_figure", "horizontal_error_figure", "mode_probability_figure", "trajectory_figure"]
 
 # kind -> (column stems, column unit suffix, title)
 _KINDS = {
@@ -184,4 +184,30 @@ def trajectory_figure(solutions: dict[str, pd.DataFrame], reference: pd.DataFram
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(alpha=0.3)
     ax.legend(fontsize="small")
+    return fig
+
+
+def mode_probability_figure(solutions: dict[str, pd.DataFrame],
+                            outages: Sequence[tuple[float, float]] = ()) -> Figure | None:
+    """IMM mode probabilities against time: one panel per method that has ``p_mode_<name>``
+    columns (:func:`mixnav.experiment.run.solution_table`), one line per mode; None when
+    no method has them."""
+    imms = {name: [c for c in df.columns if c.startswith("p_mode_")] for name, df in solutions.items()}
+    imms = {k: v for k, v in imms.items() if v}
+    if not imms:
+        return None
+    fig = Figure(figsize=(9, 1.2 + 2.0 * len(imms)), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(len(imms), 1, sharex=True, squeeze=False)[:, 0])
+    for ax, (name, cols) in zip(axes, imms.items()):
+        df = solutions[name]
+        _shade(ax, outages)
+        t = df["time_s"].to_numpy(dtype=float)
+        for k, c in enumerate(cols):
+            ax.plot(t, df[c].to_numpy(dtype=float), color=f"C{k}", lw=1.0, label=c.removeprefix("p_mode_"))
+        ax.set_ylim(-0.02, 1.02)
+        ax.set_ylabel("probability")
+        ax.set_title(f"{name}: mode probabilities; grey: GNSS outage")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize="small", loc="center right")
+    axes[-1].set_xlabel("time [s]")
     return fig

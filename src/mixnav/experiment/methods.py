@@ -113,6 +113,8 @@ def _build(method, default_imu, fixes, lever_arm, source, index, observations, c
         raise KeyError(method.type)  # unreachable: the schema admits only known types
     meas = meas + aids
     common = dict(covariance_interval=method.covariance_interval, clock=clock)
+    if method.estimator == "imm":
+        return _imm(method, layout, model, meas[0], aids, source, index, common), meas
     if method.estimator == "robust-adaptive":
         rc = method.robust or RobustConfig()
         return filter_class("robust-adaptive")(layout, model, k0=rc.k0, k1=rc.k1, c=rc.c, **common), meas
@@ -152,6 +154,27 @@ def _build(method, default_imu, fixes, lever_arm, source, index, observations, c
                               f"{', '.join(known) or 'none'})", file=source, key=f"methods[{index}].options.{k}")
     with config_keys(f"methods[{index}].options", source):
         return cls(layout, model, **common, **options), meas
+
+
+def _imm(method, layout, model, gnss, aids, source, index, common):
+    """M9: the IMM of the method's modes, each updated by the measurements it lists."""
+    from ..filters.ekf import KalmanEstimator
+    from ..filters.imm import ImmEkf
+    from ..filters.robust import RobustEstimator
+    ic = method.imm
+    by_name = {"gnss": gnss, **dict(zip(method.aiding, aids))}
+    sets = [[by_name[x] for x in mode.measurements] for mode in ic.modes]
+    makers = []
+    for mode in ic.modes:
+        if mode.estimator == "robust-adaptive":
+            rc = mode.robust or RobustConfig()
+            makers.append(lambda rc=rc: RobustEstimator(rc.k0, rc.k1, rc.c, carry_mean=True))
+        else:
+            makers.append(lambda: KalmanEstimator(carry_mean=True))
+    interval = None if ic.transition_interval == "epoch" else float(ic.transition_interval)
+    with config_keys(f"methods[{index}].imm", source):
+        return ImmEkf(layout, model, sets, ic.transition, ic.initial_probabilities, interval,
+                      [m.name for m in ic.modes], makers, **common)
 
 
 def _colored(method, mc, layout, model, meas, training, source, index, common, seed):

@@ -184,7 +184,20 @@ def solution_table(res: FilterResult, truth: Trajectory | None = None, outages=(
         d[f"sig_{ax}_deg"] = np.degrees(s[:, lay.att][:, i])
     d["gnss_used"] = res.gnss_used
     d["in_outage"] = in_windows(res.time, outages)
+    d.update(_mode_columns(res))
     return pd.DataFrame(d)
+
+
+def _mode_columns(res: FilterResult) -> dict:
+    """``p_mode_<name>``: an IMM's mode probabilities at each record, those of the latest
+    cycle at or before it (the initial ones before the first)."""
+    out = getattr(res, "outputs", None) or {}
+    if "mode_probabilities" not in out:
+        return {}
+    t = out["mode_times"]
+    p = np.vstack([out["mode_initial"], out["mode_probabilities"]])   # row 0: before any cycle
+    held = p[np.searchsorted(t, res.time + 1e-9, side="right")]       # the latest cycle at or before
+    return {f"p_mode_{name}": held[:, j] for j, name in enumerate(out["mode_names"])}
 
 
 def _at_true_time(res: FilterResult) -> tuple[np.ndarray, np.ndarray]:
@@ -209,6 +222,13 @@ def method_metrics(res: FilterResult, table: pd.DataFrame, outages) -> dict:
     m["recoveries"] = dict(res.recoveries)
     if len(res.nis):
         m["nis_mean_per_dof"] = float(np.mean(res.nis / res.nis_dim))
+    modes = [c for c in table.columns if c.startswith("p_mode_")]
+    if modes:   # an IMM: mean probability of each mode, overall and inside the windows
+        m["mode_probability_mean"] = {c.removeprefix("p_mode_"): float(table[c].mean()) for c in modes}
+        inside = table["in_outage"].to_numpy(dtype=bool)
+        if inside.any():
+            m["mode_probability_mean_in_windows"] = {c.removeprefix("p_mode_"): float(table.loc[inside, c].mean())
+                                                     for c in modes}
     return m
 
 
@@ -243,6 +263,9 @@ def write_outputs(out_dir: Path, title: str, header: dict, results: dict[str, Fi
     if "err_roll_deg" in first:
         figs["errors_attitude"] = figures.error_figure(tables, "attitude", outages)
     figs["trajectory"] = figures.trajectory_figure(tables, reference, gnss, outages)
+    modes = figures.mode_probability_figure(tables, outages)
+    if modes is not None:
+        figs["mode_probabilities"] = modes
     # metrics.json last: its presence marks a complete output folder.
     write_report(out_dir, title, metrics, figs, notes=list(notes), config_text=config_text)
     atomic_write_json(out_dir / "metrics.json", metrics)

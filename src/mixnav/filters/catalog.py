@@ -22,6 +22,9 @@ ESTIMATORS = {
                          "M3 Gaussian-mixture EKF (bank of components); M4/M5 when [mixture.learn] uses vb/gibbs; "
                          "M4 re-learned online with mixture.learn.online; M6 (coloured noise, paper P2) with "
                          "[mixture.colored]"),
+    "imm": ("mixnav.filters.imm:ImmEkf",
+            "M9 interacting multiple models (paper P4): EKF or robust modes with their own measurement "
+            "sets ([methods.imm])"),
     "sage-husa": ("mixnav.filters.sage_husa:SageHusaEkf",
                   "Sage-Husa adaptive EKF: a measurement-noise variance scale per observable kind, learned "
                   "online with a fading memory (options: fading, scale0)"),

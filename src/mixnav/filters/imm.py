@@ -44,6 +44,9 @@ import numpy as np
 from ..engine.protocols import Correction, Epoch, Transition
 from ._imm_kernels import imm_combine, imm_mix_score
 from ..errors import ArgumentError
+from ..ins.error_model import ClockModel, StateLayout
+from ..ins.imu_model import ImuErrorModel
+from .ekf import ErrorStateEkf, KalmanEstimator
 from ..engine.status import ABSURD, NEEDS_REPAIR, NON_FINITE, OK
 
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -348,11 +351,12 @@ class ImmEstimator:
 
     def outputs(self) -> dict:
         """Mode probabilities at the cycle times: ``mode_times`` (K,) [s],
-        ``mode_probabilities`` (K, r), ``mode_names``."""
+        ``mode_probabilities`` (K, r), ``mode_initial`` (r,) before the first cycle,
+        ``mode_names``."""
         r = len(self.children)
         return {"mode_times": np.array(self._times, dtype=float),
                 "mode_probabilities": np.array(self._mus, dtype=float).reshape(-1, r),
-                "mode_names": list(self.names)}
+                "mode_initial": self.mu0.copy(), "mode_names": list(self.names)}
 
     def warm_up(self) -> None:
         for c in self.children:
@@ -363,3 +367,41 @@ class ImmEstimator:
         imm_mix_score(np.array([0.5, 0.5]), np.eye(2), np.zeros((2, n)), np.tile(np.eye(n), (2, 1, 1)),
                       np.zeros(3), H, np.eye(3), np.empty((2, n)), np.empty((2, n, n)), np.empty(2))
         imm_combine(np.array([0.5, 0.5]), np.zeros((2, n)), np.tile(np.eye(n), (2, 1, 1)), np.empty((n, n)))
+
+
+class ImmEkf(ErrorStateEkf):
+    """The IMM as a filter a user runs (method M9): the strapdown motion model, an
+    :class:`ImmEstimator` of EKF (or robust EKF) modes, and the engine.
+
+    Parameters
+    ----------
+    layout, imu_model, covariance_interval, absurd_sigma, clock
+        As :class:`~mixnav.filters.ekf.ErrorStateEkf`.
+    measurement_sets : list of r collections of measurement models
+        The models that update each mode (pass the same objects to :meth:`run`).
+    transition, initial_probabilities, transition_interval, names
+        As :class:`ImmEstimator`.
+    mode_estimators : list of r callables, optional
+        Each returns a fresh mean-carrying estimator for its mode (default:
+        ``KalmanEstimator(absurd_sigma, carry_mean=True)``).
+    """
+
+    #: a mixture of modes: the RTS smoother needs one Gaussian per event
+    can_smooth = False
+
+    def __init__(self, layout: StateLayout, imu_model: ImuErrorModel, measurement_sets, transition,
+                 initial_probabilities=None, transition_interval: float | None = 1.0, names=None,
+                 mode_estimators=None, covariance_interval: float = 1.0, absurd_sigma: float = 1e4,
+                 clock: ClockModel | None = None):
+        super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
+        self.measurement_sets = [frozenset(s) for s in measurement_sets]
+        r = len(self.measurement_sets)
+        if mode_estimators is None:
+            mode_estimators = [lambda: KalmanEstimator(self.absurd_sigma, carry_mean=True)] * r
+        self.mode_estimators = list(mode_estimators)
+        self.options = dict(transition=transition, initial_probabilities=initial_probabilities,
+                            transition_interval=transition_interval, names=names)
+        self.make_estimator()   # checks every argument now, not at the first run
+
+    def make_estimator(self) -> ImmEstimator:
+        return ImmEstimator([make() for make in self.mode_estimators], self.measurement_sets, **self.options)

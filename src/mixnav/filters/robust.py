@@ -71,12 +71,13 @@ class RobustEstimator(KalmanEstimator):
         IGG-III thresholds on standardised innovations, ``0 < k0 < k1``.
     c : float
         Threshold of the adaptive factor, positive.
-    absurd_sigma : float
-        As :class:`~mixnav.filters.ekf.KalmanEstimator`.
+    absurd_sigma, carry_mean : float, bool
+        As :class:`~mixnav.filters.ekf.KalmanEstimator` (``carry_mean`` for a mode of an IMM).
     """
 
-    def __init__(self, k0: float = 2.5, k1: float = 5.0, c: float = 1.5, absurd_sigma: float = 1e4):
-        super().__init__(absurd_sigma)
+    def __init__(self, k0: float = 2.5, k1: float = 5.0, c: float = 1.5, absurd_sigma: float = 1e4,
+                 carry_mean: bool = False):
+        super().__init__(absurd_sigma, carry_mean)
         if not 0.0 < k0 < k1:
             raise ArgumentError(f"need 0 < k0 < k1, got k0 = {k0}, k1 = {k1}", argument="k0")
         if not c > 0.0:
