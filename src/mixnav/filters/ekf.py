@@ -109,7 +109,10 @@ class KalmanEstimator:
 
     def update(self, epoch: Epoch) -> Correction | None:
         """Apply one measurement epoch; the correction is for the engine to feed back."""
-        rows = epoch.rows()
+        return self.update_rows(epoch.rows())
+
+    def update_rows(self, rows) -> Correction | None:
+        """Apply one epoch's :class:`~mixnav.measurements.base.Rows` (None: no data)."""
         if rows is None:
             return None
         z, H, r = rows.z, rows.H, rows.R

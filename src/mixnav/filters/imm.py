@@ -278,7 +278,15 @@ class ImmEstimator:
         for j, c in enumerate(ch):
             c.x = x0[j].copy()
             c.P = P0[j].copy()
-        logl = self.weigh(logl.copy())
+        logl = logl.copy()
+        for j, c in enumerate(ch):
+            # a mode that changes the rows (the EM-IMM's bias removal) is scored on its rows
+            adjust = getattr(c, "adjusted_rows", None)
+            if adjust is not None and users[j]:
+                rj = adjust(epoch)
+                if rj is not rows:
+                    logl[j] = log_likelihood(c.x, c.P, rj.z, rj.H, np.asarray(rj.R, dtype=float))
+        logl = self.weigh(logl)
         # 3. mode-matched updates (a child's rejection is counted here; the IMM's own
         #    correction is the combination, fed back unless every updating mode rejected)
         applied = np.zeros(len(ch), dtype=bool)

@@ -1,0 +1,189 @@
+"""EM estimate of a GNSS multipath bias from a sliding window of innovations (P4 eqs. 17-27).
+
+P4 models the GNSS position error under multipath as a two-component Gaussian mixture,
+one component biased (``z = H x + a + w``, eq. 17), fits it by EM and removes the biased
+component's mean from the measurement, using its covariance as R. The paper fits the
+joint vector ``[X; Z]`` (eqs. 18-24); the error state is not observed, so its part of
+that fit carries no information the innovation does not, and here the fit is of what is
+observed: the GNSS mode's position innovations ``y = z - H x`` of the last ``window``
+epochs (the noise toolkit's :class:`~mixnav.noise.learn.em.EMGaussianMixture`, seeded
+from the estimator's own random stream).
+
+Settings (:class:`EmBiasSettings`, documented in docs/imm.md):
+
+* ``window`` [s]: the sliding window's length (P4 does not say; 60 s spans a multipath
+  episode's start without remembering the previous one for long). It is a duration, not
+  a count: across an outage a count-based window kept minutes-old innovations;
+* ``min_samples``: no fit before the window holds this many;
+* only innovations whose state part is small enter the window: the predicted position
+  covariance ``H P H^T`` at most ``max_state_share`` of ``R`` (trace). After an outage the
+  first innovations are metres wide because the state drifted, not because of
+  multipath; windowed, they looked like a second component (a 3-7 m "bias" declared
+  100 s after an outage in simulation). Such epochs are also used as they are, never
+  classified;
+* ``min_separation`` [m]: a bias is declared only when the two component means are at
+  least this far apart (and the smaller component has at least ``min_weight`` of the
+  window): otherwise the window is one cloud and nothing is removed;
+* an epoch whose innovation the biased component explains (responsibility > 1/2) has
+  the bias ``a`` (the biased mean minus the clean mean) subtracted from its position
+  rows and the biased component's covariance as their R (P4: "its covariance becomes
+  R"; this counts the state's own uncertainty in it once more, which errs on the safe
+  side); other epochs are used as they are.
+
+The bias applied at each GNSS epoch is an output (``result.outputs["bias_*"]``).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import ArgumentError
+from ..measurements.base import Rows
+from ..measurements.kinds import POSITION
+from .ekf import KalmanEstimator
+
+
+@dataclass(frozen=True)
+class EmBiasSettings:
+    """See the module docstring. ``window`` [s], ``min_samples`` [epochs], ``min_separation``
+    [m], ``min_weight`` (fraction), ``max_state_share`` (ratio of traces), ``max_iter`` of
+    each EM fit."""
+
+    window: float = 60.0
+    min_samples: int = 20
+    min_separation: float = 3.0
+    min_weight: float = 0.05
+    max_state_share: float = 1.0
+    max_iter: int = 100
+
+    def __post_init__(self):
+        if not (np.isfinite(self.window) and self.window > 0):
+            raise ArgumentError(f"must be a positive duration [s], got {self.window!r}", argument="window")
+        if not (isinstance(self.min_samples, (int, np.integer)) and self.min_samples >= 2):
+            raise ArgumentError(f"must be an integer >= 2 (two components), got {self.min_samples!r}",
+                                argument="min_samples")
+        if not (np.isfinite(self.min_separation) and self.min_separation > 0):
+            raise ArgumentError(f"must be a positive distance [m], got {self.min_separation!r}",
+                                argument="min_separation")
+        if not (np.isfinite(self.max_state_share) and self.max_state_share > 0):
+            raise ArgumentError(f"must be a positive ratio, got {self.max_state_share!r}", argument="max_state_share")
+        if not (0 <= self.min_weight < 0.5):
+            raise ArgumentError(f"must be a fraction in [0, 0.5), got {self.min_weight!r}", argument="min_weight")
+
+
+def fit_bias(Y: np.ndarray, settings: EmBiasSettings, rng: np.random.Generator):
+    """Two-component EM fit of innovations ``Y`` (N, d) [m].
+
+    Returns ``(bias (d,), clean_mean (d,), biased_cov (d, d), model, converged)`` where
+    ``bias`` is the biased mean minus the clean mean and ``model`` the fitted
+    :class:`~mixnav.noise.learn.em.EMGaussianMixture`, or None when no bias is declared
+    (means closer than ``min_separation`` or the smaller component below ``min_weight``).
+    The clean component is the heavier one (multipath is the exception).
+    """
+    from ..noise.learn import ConvergenceWarning
+    from ..noise.learn.em import EMGaussianMixture
+    em = EMGaussianMixture(2, tol=1e-6, max_iter=settings.max_iter, reg_covar=1e-6, random_state=rng)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        try:
+            em.fit(Y)
+        except ValueError:      # zero variance or a collapsed component: one cloud
+            return None
+    clean = int(np.argmax(em.weights_))
+    biased = 1 - clean
+    bias = em.means_[biased] - em.means_[clean]
+    if np.linalg.norm(bias) < settings.min_separation or em.weights_[biased] < settings.min_weight:
+        return None
+    return bias, em.means_[clean], em.covariances_[biased], em, bool(em.converged_)
+
+
+class EmBiasKalman(KalmanEstimator):
+    """A Kalman estimator that removes an EM-estimated multipath bias from the position rows of
+    the models in ``models`` (module docstring); the GNSS mode of the EM-IMM.
+
+    Parameters
+    ----------
+    models : collection of measurement models
+        Whose position rows are checked (the GNSS model).
+    settings : EmBiasSettings
+    absurd_sigma, carry_mean
+        As :class:`~mixnav.filters.ekf.KalmanEstimator`.
+    """
+
+    def __init__(self, models, settings: EmBiasSettings = EmBiasSettings(), absurd_sigma: float = 1e4,
+                 carry_mean: bool = False):
+        super().__init__(absurd_sigma, carry_mean)
+        self.models = frozenset(models)
+        if not isinstance(settings, EmBiasSettings):
+            raise ArgumentError(f"expected EmBiasSettings, got {type(settings).__name__}", argument="settings")
+        self.settings = settings
+
+    def init(self, motion, P0, n_clone, rng):
+        super().init(motion, P0, n_clone, rng)
+        self._window: deque = deque()     # (time [s], innovation (3,))
+        self._cache = (None, None)
+        self._log_t, self._log_bias, self._log_applied = [], [], []
+        self.counts.update(em_fits=0, em_not_converged=0, em_bias_epochs=0)
+
+    def adjusted_rows(self, epoch) -> Rows | None:
+        """The epoch's rows with the bias removed when the biased component explains them (the
+        same object for repeated calls within one epoch, so the window grows once)."""
+        if self._cache[0] is epoch:
+            return self._cache[1]
+        rows = epoch.rows()
+        out = rows
+        if rows is not None and epoch.model in self.models:
+            out = self._remove_bias(epoch.time, rows)
+        self._cache = (epoch, out)
+        return out
+
+    def update(self, epoch):
+        return self.update_rows(self.adjusted_rows(epoch))
+
+    def _remove_bias(self, t: float, rows: Rows) -> Rows:
+        pos = np.nonzero(rows.kinds == POSITION)[0]
+        if len(pos) == 0:
+            return rows
+        x = self.x if self.carry_mean else np.zeros(self.n)
+        Hp = rows.H[pos]
+        y = rows.z[pos] - Hp @ x
+        r = rows.R[pos] if np.ndim(rows.R) == 1 else np.diag(rows.R)[pos]
+        w = self._window
+        while w and w[0][0] < t - self.settings.window:
+            w.popleft()
+        settled = np.einsum("ij,jk,ik->", Hp, self.P, Hp) <= self.settings.max_state_share * r.sum()
+        if settled:
+            w.append((t, y))
+        applied = np.zeros(len(pos))
+        result = None
+        if settled and len(w) >= self.settings.min_samples:
+            self.counts["em_fits"] += 1
+            result = fit_bias(np.array([v for _, v in w]), self.settings, self.rng)
+        if result is not None:
+            bias, clean_mean, cov_b, em, converged = result
+            if not converged:
+                self.counts["em_not_converged"] += 1
+            biased = 1 - int(np.argmax(em.weights_))
+            if em.predict_proba(y[None, :])[0, biased] > 0.5:
+                applied = bias
+                z = rows.z.copy()
+                z[pos] -= bias
+                R = np.diag(rows.R) if np.ndim(rows.R) == 1 else rows.R.copy()
+                R[np.ix_(pos, pos)] = cov_b
+                rows = Rows(z, rows.H, R, rows.kinds, rows.channels)
+                self.counts["em_bias_epochs"] += 1
+        self._log_t.append(t)
+        self._log_bias.append(np.asarray(applied, dtype=float))
+        self._log_applied.append(result is not None)
+        return rows
+
+    def outputs(self) -> dict:
+        """The bias removed at each checked epoch: ``bias_times`` (K,) [s], ``bias`` (K, 3) [m]
+        (zeros where none was), ``bias_declared`` (K,) whether the window held a bias."""
+        return {"bias_times": np.array(self._log_t, dtype=float),
+                "bias": np.array(self._log_bias, dtype=float).reshape(-1, 3),
+                "bias_declared": np.array(self._log_applied, dtype=bool)}
