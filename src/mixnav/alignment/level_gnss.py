@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..attitude import dcm_to_euler, dcm_to_quat, euler_to_dcm
+from ..attitude import dcm_to_euler, dcm_to_quat, euler_to_dcm, wrap_angle
 from ..data import GnssFixes, ImuData
 from ..errors import ArgumentError
 from ..geodesy import earth
@@ -247,7 +247,7 @@ def align_level_then_gnss(imu: ImuData, fixes: GnssFixes, lever_b: np.ndarray, r
                             f"(roll {np.degrees(roll):.1f} deg, pitch {np.degrees(pitch):.1f} deg)",
                             argument="forward_b")
     track = np.arctan2(v[i, 1], v[i, 0])
-    psi = (track - np.arctan2(u[1], u[0]) + np.pi) % (2 * np.pi) - np.pi
+    psi = float(wrap_angle(track - np.arctan2(u[1], u[0])))
     rpy = np.array([roll, pitch, psi])
     c_nb = euler_to_dcm(rpy)
     lla = displace(fixes.lla[i], -(c_nb @ np.asarray(lever_b, dtype=float)))
