@@ -96,10 +96,21 @@ class Alignment(Strict):
     and heading from the gyros over the first ``static_duration`` seconds
     (navigation and tactical grade). With ``gyro_bias_from_static`` the mean
     gyro rate over the first ``static_duration`` seconds (the vehicle at rest)
-    starts the gyro-bias estimate.
+    starts the gyro-bias estimate. ``level-then-gnss`` (MEMS units on a
+    vehicle that starts parked): roll and pitch from the accelerometers and
+    the gyro bias from the gyros over the first ``static_duration`` seconds,
+    which must be at rest (1 s blocks: specific-force magnitude scatter below
+    0.1 m/s^2 and mean rate magnitude below 0.03 rad/s in at least 80 % of
+    them; the last second's mean specific force within 1 deg of the window's;
+    mean specific force gravity within 5 %; no fix at ``min_speed``); the
+    attitude carried
+    by the bias-compensated gyros to the first fix after the window at or
+    above ``min_speed``, where the heading turns the vehicle's forward axis
+    (``[aiding] vehicle_mounting``, else the body x axis) onto the GNSS track
+    (:func:`mixnav.alignment.align_level_then_gnss`).
     """
 
-    method: Literal["gnss-velocity", "static"] = "gnss-velocity"
+    method: Literal["gnss-velocity", "static", "level-then-gnss"] = "gnss-velocity"
     min_speed: MinSpeed = 5.0
     static_duration: Gap = 30.0
     gyro_bias_from_static: bool = False

@@ -22,12 +22,12 @@ import pandas as pd
 
 import mixnav
 
-from ..alignment import align_from_gnss_velocity, coarse_align
+from ..alignment import align_from_gnss_velocity, align_level_then_gnss, coarse_align
 from ..attitude import euler_to_dcm
 from ..config.dataset_schema import Dataset
 from ..config.loader import corruption, imu_model
 from ..data import GnssFixes, ImuData, OdometerData, Trajectory
-from ..errors import ConfigError, DataError
+from ..errors import ArgumentError, ConfigError, DataError
 from . import methods
 from .aiding import AidingInputs, installation_check
 from ..filters.ekf import FilterResult, InitialState
@@ -157,6 +157,18 @@ def initial_state(ds: Dataset, imu: ImuData, fixes: GnssFixes, lever: np.ndarray
     al = ds.alignment
     sig = dict(sigma_att=np.asarray(al.attitude_sigma), sigma_vel=np.asarray(al.velocity_sigma),
                sigma_pos=np.asarray(al.position_sigma))
+    if al.method == "level-then-gnss":
+        mounting = None if ds.aiding is None else ds.aiding.vehicle_mounting
+        forward = None if mounting is None else euler_to_dcm(mounting)[0]   # C_vb^T e_x: the row
+        keys = {"rest_duration": "alignment.static_duration", "min_speed": "alignment.min_speed",
+                "forward_b": "aiding.vehicle_mounting"}
+        try:
+            a = align_level_then_gnss(imu, fixes, lever, al.static_duration, al.min_speed, forward_b=forward)
+        except ArgumentError as exc:
+            raise ConfigError(exc.message, key=keys.get(exc.argument, "alignment")) from None
+        sensor0 = np.zeros(12)
+        sensor0[0:3] = a.gyro_bias
+        return InitialState(time=a.time, nav=nav_vector(a.q_nb, a.v_n, a.lla), sensor0=sensor0, **sig)
     t_static = imu.start_time + al.static_duration
     still = imu.time <= t_static
     sensor0 = None
