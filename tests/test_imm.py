@@ -254,3 +254,26 @@ def test_imm_mode_must_use_the_methods_aiding(tmp_path):
     p = _vehicle_demo_with(tmp_path, IMM_METHOD.replace('aiding = ["nhc", "odometer"]', 'aiding = ["nhc"]'))
     with pytest.raises(ConfigError, match="odometer"):
         load_scenario(str(p))
+
+
+def test_em_imm_mode_from_config(tmp_path):
+    """An "em-bias" mode reads its [em] table; its bias is an output (solution columns
+    bias_n/e/d_m); a window with fewer samples than the two components, or an [em] table
+    on a plain mode, is a ConfigError naming the key."""
+    from mixnav.api import run_scenario
+    from mixnav.config.loader import load_scenario
+    em = IMM_METHOD.replace('name = "gnss"\nmeasurements = ["gnss", "nhc", "odometer"]',
+                            'name = "gnss"\nmeasurements = ["gnss", "nhc", "odometer"]\nestimator = "em-bias"\n'
+                            '[methods.imm.modes.em]\nwindow = "30 s"\nmin_samples = 10\nmin_separation = "4 m"')
+    r = run_scenario(str(_vehicle_demo_with(tmp_path, em)))
+    t = r.solutions["imm"]
+    assert {"bias_n_m", "bias_e_m", "bias_d_m", "p_mode_gnss"} <= set(t.columns)
+    imm = r.results["imm"]
+    assert len(imm.outputs["bias_times"]) == int((imm.outputs["bias_times"] > 0).sum()) > 100
+    bad = em.replace("min_samples = 10", "min_samples = 1")
+    with pytest.raises(ConfigError) as e:
+        load_scenario(str(_vehicle_demo_with(tmp_path, bad)))
+    assert e.value.key == "methods[0].imm.modes[0].em.min_samples", e.value.key
+    bad = em.replace('estimator = "em-bias"\n', "")
+    with pytest.raises(ConfigError, match=r"\[em\] table needs"):
+        load_scenario(str(_vehicle_demo_with(tmp_path, bad)))

@@ -562,16 +562,33 @@ class AidingConfig(Strict):
     zaru: ZaruConfig | None = None
 
 
+class EmBiasConfig(Strict):
+    """The EM multipath-bias removal of an EM-IMM mode (``[methods.imm.modes.em]``,
+    :mod:`mixnav.filters.em_bias`): the sliding ``window`` [s], ``min_samples`` in it before
+    a fit (at least the two components), ``min_separation`` [m] and ``min_weight`` of the
+    biased component before a bias is declared, ``max_state_share`` (innovations enter the
+    window only while the state's part of their covariance is at most this share of R)."""
+
+    window: Duration = 60.0  # type: ignore[valid-type]
+    min_samples: int = Field(default=20, ge=2, description="at least one sample per component")
+    min_separation: PosLength = 3.0  # type: ignore[valid-type]
+    min_weight: float = Field(default=0.05, ge=0.0, lt=0.5)
+    max_state_share: float = Field(default=1.0, gt=0.0)
+
+
 class ImmModeConfig(Strict):
     """One mode of an IMM (``[[methods.imm.modes]]``): its name, the measurements that update
     it (``"gnss"``, the method type's GNSS model, and any of the method's ``aiding``) and
-    its estimator (``"ekf"`` or ``"robust-adaptive"`` with an optional ``[robust]`` table)."""
+    its estimator: ``"ekf"``, ``"robust-adaptive"`` (optional ``[robust]`` table) or
+    ``"em-bias"`` (the EM-IMM's GNSS mode: the EKF with the EM multipath-bias removal on its
+    GNSS rows, optional ``[em]`` table)."""
 
     name: str = Field(min_length=1)
     measurements: list[Literal["gnss", "nhc", "odometer", "zupt", "zaru"]] = Field(
         min_length=1, description="a mode with no measurements is pure inertial navigation, never told apart")
-    estimator: Literal["ekf", "robust-adaptive"] = "ekf"
+    estimator: Literal["ekf", "robust-adaptive", "em-bias"] = "ekf"
     robust: RobustConfig | None = None
+    em: EmBiasConfig | None = None
 
     @model_validator(mode="after")
     def _unique(self):
@@ -579,6 +596,10 @@ class ImmModeConfig(Strict):
             raise ValueError(f"a measurement is listed twice: {self.measurements}")
         if self.robust is not None and self.estimator != "robust-adaptive":
             raise ValueError("a [robust] table needs estimator = \"robust-adaptive\"")
+        if self.em is not None and self.estimator != "em-bias":
+            raise ValueError("an [em] table needs estimator = \"em-bias\"")
+        if self.estimator == "em-bias" and "gnss" not in self.measurements:
+            raise ValueError("an em-bias mode removes a bias from the GNSS: list \"gnss\" in its measurements")
         return self
 
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..config.errors import config_keys
 from ..config.loader import imu_model
-from ..config.schema import MethodConfig, MixtureConfig, RobustConfig
+from ..config.schema import EmBiasConfig, MethodConfig, MixtureConfig, RobustConfig
 from ..errors import ConfigError
 from ..filters.catalog import ESTIMATORS as _CATALOG
 from ..filters.catalog import METHOD_TYPES, filter_class
@@ -160,6 +160,7 @@ def _imm(method, layout, model, gnss, aids, source, index, common):
     """M9: the IMM of the method's modes, each updated by the measurements it lists."""
     from ..filters.ekf import KalmanEstimator
     from ..filters.imm import ImmEkf
+    from ..filters.em_bias import EmBiasKalman, EmBiasSettings
     from ..filters.robust import RobustEstimator
     ic = method.imm
     by_name = {"gnss": gnss, **dict(zip(method.aiding, aids))}
@@ -169,6 +170,11 @@ def _imm(method, layout, model, gnss, aids, source, index, common):
         if mode.estimator == "robust-adaptive":
             rc = mode.robust or RobustConfig()
             makers.append(lambda rc=rc: RobustEstimator(rc.k0, rc.k1, rc.c, carry_mean=True))
+        elif mode.estimator == "em-bias":
+            ec = mode.em or EmBiasConfig()
+            st = EmBiasSettings(float(ec.window), ec.min_samples, float(ec.min_separation), ec.min_weight,
+                                ec.max_state_share)
+            makers.append(lambda st=st: EmBiasKalman({gnss}, st, carry_mean=True))
         else:
             makers.append(lambda: KalmanEstimator(carry_mean=True))
     interval = None if ic.transition_interval == "epoch" else float(ic.transition_interval)

@@ -185,7 +185,19 @@ def solution_table(res: FilterResult, truth: Trajectory | None = None, outages=(
     d["gnss_used"] = res.gnss_used
     d["in_outage"] = in_windows(res.time, outages)
     d.update(_mode_columns(res))
+    d.update(_bias_columns(res))
     return pd.DataFrame(d)
+
+
+def _bias_columns(res: FilterResult) -> dict:
+    """``bias_n_m``, ``bias_e_m``, ``bias_d_m``: the multipath bias an EM-IMM removed at the
+    latest GNSS epoch at or before each record (zero where it removed none)."""
+    out = getattr(res, "outputs", None) or {}
+    if "bias" not in out:
+        return {}
+    b = np.vstack([np.zeros((1, 3)), out["bias"]])
+    held = b[np.searchsorted(out["bias_times"], res.time + 1e-9, side="right")]
+    return {f"bias_{ax}_m": held[:, i] for i, ax in enumerate("ned")}
 
 
 def _mode_columns(res: FilterResult) -> dict:

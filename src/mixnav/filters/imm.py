@@ -360,11 +360,16 @@ class ImmEstimator:
     def outputs(self) -> dict:
         """Mode probabilities at the cycle times: ``mode_times`` (K,) [s],
         ``mode_probabilities`` (K, r), ``mode_initial`` (r,) before the first cycle,
-        ``mode_names``."""
+        ``mode_names``; and the modes' own outputs (an EM-IMM's ``bias_times``, ``bias``)."""
         r = len(self.children)
-        return {"mode_times": np.array(self._times, dtype=float),
-                "mode_probabilities": np.array(self._mus, dtype=float).reshape(-1, r),
-                "mode_initial": self.mu0.copy(), "mode_names": list(self.names)}
+        out = {}
+        for name, c in zip(self.names, self.children):   # the modes' own (the EM-IMM's bias)
+            for k, v in (c.outputs() if hasattr(c, "outputs") else {}).items():
+                out[k if k not in out else f"{name}:{k}"] = v
+        out.update({"mode_times": np.array(self._times, dtype=float),
+                    "mode_probabilities": np.array(self._mus, dtype=float).reshape(-1, r),
+                    "mode_initial": self.mu0.copy(), "mode_names": list(self.names)})
+        return out
 
     def warm_up(self) -> None:
         for c in self.children:
