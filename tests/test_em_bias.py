@@ -47,7 +47,7 @@ def test_no_bias_declared_in_one_cloud():
 
 
 @pytest.mark.parametrize("kw, arg", [({"window": 0.0}, "window"), ({"min_samples": 1}, "min_samples"),
-                                     ({"max_state_share": -1.0}, "max_state_share"),
+                                     ({"max_state_sigma": -1.0}, "max_state_sigma"), ({"gate": 0.2}, "gate"),
                                      ({"min_separation": 0.0}, "min_separation"), ({"min_weight": 0.6}, "min_weight")])
 def test_settings_are_checked(kw, arg):
     with pytest.raises(ArgumentError) as e:

@@ -23,7 +23,7 @@ from ..units import DIMENSIONLESS, TIME, Dimension, UnitError, parse_quantity
 # --------------------------------------------------------------------------
 _KEYS = {
     "gaussian": {"sigma"},
-    "mixture": {"weights", "sigmas", "means"},
+    "mixture": {"weights", "sigmas", "means", "joint"},
     "gross": {"size", "every", "probability", "start", "sign", "channels"},
     "ar1": {"coefficient", "sigma", "innovation"},
     "bias_segments": {"segments"},
@@ -48,6 +48,7 @@ def from_config(table: dict, dimension: Dimension, key_prefix: str = "noise",
 
             {type="gaussian", sigma="0.3 m"}            # or a list per channel
             {type="mixture", weights=[0.1, 0.9], sigmas=["0.3 m", "0.173 m"], means=["0 m", "0 m"]}
+            {type="mixture", ..., joint=true}      # one component per epoch for all channels
             {type="gross", size="2.5 m", every=20, start=0, sign="random", channels=[0, 3]}
             {type="gross", size="2.5 m", probability=0.05}
             {type="ar1", coefficient=0.9, sigma="0.3 m"}          # sigma: innovation sd
@@ -182,7 +183,10 @@ class _Builder:
         w = [self.quantity(x, f"{key}.weights[{i}]", DIMENSIONLESS, nonnegative=True) for i, x in enumerate(w)]
         s = self.quantities(self.need(b, "sigmas", key), f"{key}.sigmas", nonnegative=True, scalar_ok=False)
         m = self.quantities(b["means"], f"{key}.means") if "means" in b else 0.0
-        return self.make(Mixture, key, w, s, m)
+        joint = b.get("joint", False)
+        if not isinstance(joint, bool):
+            raise self.err(f"expected true or false, got {joint!r}", f"{key}.joint")
+        return self.make(Mixture, key, w, s, m, joint)
 
     def _gross(self, b, key):
         kw = dict(size=self.quantity(self.need(b, "size", key), f"{key}.size", nonnegative=True))

@@ -237,16 +237,29 @@ class GnssConfig(Strict):
     """Simulated fixes. ``position_sigma``/``velocity_sigma`` are what the
     filters are told (their R); the noise actually added is Gaussian with
     those sigmas unless ``position_noise``/``velocity_noise`` give a noise
-    process (see mixnav.noise.processes.from_config), in NED per axis."""
+    process (see mixnav.noise.processes.from_config), in NED per axis.
+    ``losses``: ``[start, end, probability]`` windows in which each fix is lost
+    independently with that probability (a receiver dropping epochs under foliage or
+    in a street canyon; stream ``gnss-loss``, so the other draws do not change)."""
 
     rate: Frequency
     position_sigma: PosSigma
     velocity_sigma: VelSigma | None = None
     lever_arm: LengthVec = (0.0, 0.0, 0.0)
     outages: Windows = Field(default_factory=list)
+    losses: list[tuple[Time, Time, Annotated[float, Field(ge=0.0, le=1.0)]]] = Field(default_factory=list)
     position_noise: dict | None = None
     velocity_noise: dict | None = None
     satellites: SatellitesConfig | None = None
+
+
+    @field_validator("losses")
+    @classmethod
+    def _loss_windows(cls, v):
+        for i, (a, b, _) in enumerate(v):
+            if not b > a:
+                raise ValueError(f"losses[{i}]: end ({b:g} s) must be after start ({a:g} s)")
+        return v
 
 
 class InitConfig(Strict):
@@ -566,14 +579,17 @@ class EmBiasConfig(Strict):
     """The EM multipath-bias removal of an EM-IMM mode (``[methods.imm.modes.em]``,
     :mod:`mixnav.filters.em_bias`): the sliding ``window`` [s], ``min_samples`` in it before
     a fit (at least the two components), ``min_separation`` [m] and ``min_weight`` of the
-    biased component before a bias is declared, ``max_state_share`` (innovations enter the
-    window only while the state's part of their covariance is at most this share of R)."""
+    biased component before a bias is declared, ``max_state_sigma`` [m] (innovations enter
+    the window only while the state's position sigma is at most this; default a third of
+    ``min_separation``) and ``gate`` (chi-square probability above which position rows the
+    current noise model cannot explain are kept out of the update)."""
 
     window: Duration = 60.0  # type: ignore[valid-type]
     min_samples: int = Field(default=20, ge=2, description="at least one sample per component")
     min_separation: PosLength = 3.0  # type: ignore[valid-type]
     min_weight: float = Field(default=0.05, ge=0.0, lt=0.5)
-    max_state_share: float = Field(default=1.0, gt=0.0)
+    max_state_sigma: PosLength | None = None  # type: ignore[valid-type]
+    gate: float = Field(default=0.9999, gt=0.5, lt=1.0)
 
 
 class ImmModeConfig(Strict):

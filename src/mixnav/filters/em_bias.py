@@ -16,11 +16,18 @@ Settings (:class:`EmBiasSettings`, documented in docs/imm.md):
   a count: across an outage a count-based window kept minutes-old innovations;
 * ``min_samples``: no fit before the window holds this many;
 * only innovations whose state part is small enter the window: the predicted position
-  covariance ``H P H^T`` at most ``max_state_share`` of ``R`` (trace). After an outage the
-  first innovations are metres wide because the state drifted, not because of
-  multipath; windowed, they looked like a second component (a 3-7 m "bias" declared
-  100 s after an outage in simulation). Such epochs are also used as they are, never
-  classified;
+  sigma ``sqrt(trace H P H^T)`` at most ``max_state_sigma`` (default a third of
+  ``min_separation``: the state must be sure to well within the biases to be told
+  apart). After an outage the first innovations are metres wide because the state
+  drifted, not because of multipath; windowed, they looked like a second component (a
+  3-7 m "bias" declared 100 s after an outage in simulation);
+* ``gate``: position rows whose NIS under the current noise model (configured, or the
+  window's) exceeds the chi-square quantile of that probability are kept out of the
+  update but not out of the window. At the onset of multipath the filter, told RTK's
+  centimetres, would otherwise follow every 10 m jump, and its innovations would then be
+  differences of fix errors (clusters at 0 and +-10 m), not the errors EM must fit. While
+  the window holds one cloud wider than the configured noise, its covariance is R (noise
+  that grew without a bias);
 * ``min_separation`` [m]: a bias is declared only when the two component means are at
   least this far apart (and the smaller component has at least ``min_weight`` of the
   window): otherwise the window is one cloud and nothing is removed;
@@ -28,7 +35,9 @@ Settings (:class:`EmBiasSettings`, documented in docs/imm.md):
   the bias ``a`` (the biased mean minus the clean mean) subtracted from its position
   rows and the biased component's covariance as their R (P4: "its covariance becomes
   R"; this counts the state's own uncertainty in it once more, which errs on the safe
-  side); other epochs are used as they are.
+  side); the other epochs of a window with a bias get the clean component's covariance
+  as R when it is wider (in trace) than the configured one (the clean part of a multipath episode
+  is noisier than open sky: P4-vehicle's is 1 m against RTK's centimetres).
 
 The bias applied at each GNSS epoch is an output (``result.outputs["bias_*"]``).
 """
@@ -50,15 +59,26 @@ from .ekf import KalmanEstimator
 @dataclass(frozen=True)
 class EmBiasSettings:
     """See the module docstring. ``window`` [s], ``min_samples`` [epochs], ``min_separation``
-    [m], ``min_weight`` (fraction), ``max_state_share`` (ratio of traces), ``max_iter`` of
-    each EM fit."""
+    [m], ``min_weight`` (fraction), ``max_state_sigma`` [m] (None: ``min_separation / 3``),
+    ``gate`` (chi-square probability), ``max_iter`` of each EM fit."""
 
     window: float = 60.0
     min_samples: int = 20
     min_separation: float = 3.0
     min_weight: float = 0.05
-    max_state_share: float = 1.0
+    max_state_sigma: float | None = None
+    gate: float = 0.9999
     max_iter: int = 100
+
+    @property
+    def state_sigma_limit(self) -> float:
+        """Innovations enter the window while the state's position sigma is at most this [m]."""
+        return self.min_separation / 3.0 if self.max_state_sigma is None else float(self.max_state_sigma)
+
+    def gate_nis(self, dof: int) -> float:
+        """The NIS above which the position rows are kept out of the update."""
+        from scipy.stats import chi2
+        return float(chi2.ppf(self.gate, dof))
 
     def __post_init__(self):
         if not (np.isfinite(self.window) and self.window > 0):
@@ -69,8 +89,11 @@ class EmBiasSettings:
         if not (np.isfinite(self.min_separation) and self.min_separation > 0):
             raise ArgumentError(f"must be a positive distance [m], got {self.min_separation!r}",
                                 argument="min_separation")
-        if not (np.isfinite(self.max_state_share) and self.max_state_share > 0):
-            raise ArgumentError(f"must be a positive ratio, got {self.max_state_share!r}", argument="max_state_share")
+        if self.max_state_sigma is not None and not (np.isfinite(self.max_state_sigma) and self.max_state_sigma > 0):
+            raise ArgumentError(f"must be a positive distance [m] or None, got {self.max_state_sigma!r}",
+                                argument="max_state_sigma")
+        if not (0.5 < self.gate < 1):
+            raise ArgumentError(f"must be a probability in (0.5, 1), got {self.gate!r}", argument="gate")
         if not (0 <= self.min_weight < 0.5):
             raise ArgumentError(f"must be a fraction in [0, 0.5), got {self.min_weight!r}", argument="min_weight")
 
@@ -127,7 +150,7 @@ class EmBiasKalman(KalmanEstimator):
         self._window: deque = deque()     # (time [s], innovation (3,))
         self._cache = (None, None)
         self._log_t, self._log_bias, self._log_applied = [], [], []
-        self.counts.update(em_fits=0, em_not_converged=0, em_bias_epochs=0)
+        self.counts.update(em_fits=0, em_not_converged=0, em_bias_epochs=0, em_gated_epochs=0)
 
     def adjusted_rows(self, epoch) -> Rows | None:
         """The epoch's rows with the bias removed when the biased component explains them (the
@@ -144,25 +167,33 @@ class EmBiasKalman(KalmanEstimator):
     def update(self, epoch):
         return self.update_rows(self.adjusted_rows(epoch))
 
-    def _remove_bias(self, t: float, rows: Rows) -> Rows:
+    def _remove_bias(self, t: float, rows: Rows) -> Rows | None:
         pos = np.nonzero(rows.kinds == POSITION)[0]
         if len(pos) == 0:
             return rows
+        st = self.settings
         x = self.x if self.carry_mean else np.zeros(self.n)
         Hp = rows.H[pos]
         y = rows.z[pos] - Hp @ x
-        r = rows.R[pos] if np.ndim(rows.R) == 1 else np.diag(rows.R)[pos]
+        HPH = Hp @ self.P @ Hp.T
         w = self._window
-        while w and w[0][0] < t - self.settings.window:
+        while w and w[0][0] < t - st.window:
             w.popleft()
-        settled = np.einsum("ij,jk,ik->", Hp, self.P, Hp) <= self.settings.max_state_share * r.sum()
+        settled = float(np.sqrt(np.trace(HPH))) <= st.state_sigma_limit
         if settled:
             w.append((t, y))
         applied = np.zeros(len(pos))
         result = None
-        if settled and len(w) >= self.settings.min_samples:
+        R = np.diag(rows.R) if np.ndim(rows.R) == 1 else np.array(rows.R, dtype=float)
+        z = rows.z
+        if settled and len(w) >= st.min_samples:
             self.counts["em_fits"] += 1
-            result = fit_bias(np.array([v for _, v in w]), self.settings, self.rng)
+            Y = np.array([v for _, v in w])
+            result = fit_bias(Y, st, self.rng)
+            if result is None:   # one cloud: its spread is the noise, if wider than configured
+                cov = np.cov(Y.T)
+                if np.trace(cov) > np.trace(R[np.ix_(pos, pos)]):
+                    R[np.ix_(pos, pos)] = cov
         if result is not None:
             bias, clean_mean, cov_b, em, converged = result
             if not converged:
@@ -172,14 +203,31 @@ class EmBiasKalman(KalmanEstimator):
                 applied = bias
                 z = rows.z.copy()
                 z[pos] -= bias
-                R = np.diag(rows.R) if np.ndim(rows.R) == 1 else rows.R.copy()
+                y = y - bias
                 R[np.ix_(pos, pos)] = cov_b
-                rows = Rows(z, rows.H, R, rows.kinds, rows.channels)
                 self.counts["em_bias_epochs"] += 1
+            else:   # a clean epoch of a multipath episode: the clean component's spread, if wider
+                cov_c = em.covariances_[1 - biased]
+                if np.trace(cov_c) > np.trace(R[np.ix_(pos, pos)]):
+                    R[np.ix_(pos, pos)] = cov_c
         self._log_t.append(t)
         self._log_bias.append(np.asarray(applied, dtype=float))
         self._log_applied.append(result is not None)
-        return rows
+        # the gate: position rows the current noise model cannot explain are kept out of the
+        # update (they stay in the window, which is how the model learns them)
+        S = HPH + R[np.ix_(pos, pos)]
+        try:
+            nis = float(y @ np.linalg.solve(S, y))
+        except np.linalg.LinAlgError:
+            nis = np.inf
+        if nis > st.gate_nis(len(pos)):
+            self.counts["em_gated_epochs"] += 1
+            other = np.setdiff1d(np.arange(len(rows.z)), pos)
+            if len(other) == 0:
+                return None
+            return Rows(rows.z[other], rows.H[other], R[np.ix_(other, other)], rows.kinds[other],
+                        None if rows.channels is None else rows.channels[other])
+        return Rows(z, rows.H, R, rows.kinds, rows.channels)
 
     def outputs(self) -> dict:
         """The bias removed at each checked epoch: ``bias_times`` (K,) [s], ``bias`` (K, 3) [m]

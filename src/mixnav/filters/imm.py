@@ -284,8 +284,9 @@ class ImmEstimator:
             adjust = getattr(c, "adjusted_rows", None)
             if adjust is not None and users[j]:
                 rj = adjust(epoch)
-                if rj is not rows:
+                if rj is not None and rj is not rows and len(rj.z) == len(rows.z):
                     logl[j] = log_likelihood(c.x, c.P, rj.z, rj.H, np.asarray(rj.R, dtype=float))
+                # gated rows (the mode calls the data outliers): scored on the raw rows
         logl = self.weigh(logl)
         # 3. mode-matched updates (a child's rejection is counted here; the IMM's own
         #    correction is the combination, fed back unless every updating mode rejected)
@@ -294,6 +295,8 @@ class ImmEstimator:
         for j, c in enumerate(ch):
             if users[j]:
                 corr = c.update(epoch)
+                if corr is None:       # the mode kept all the rows out (a gate): not updated
+                    continue
                 corrs[j] = corr
                 if corr.status == OK or corr.status == NEEDS_REPAIR:
                     applied[j] = True
@@ -304,7 +307,7 @@ class ImmEstimator:
                     return corr
                 else:
                     self.counts["rejected_absurd" if corr.status == ABSURD else "rejected_not_pd"] += 1
-        if not applied.any():
+        if not applied.any() and any(c is not None for c in corrs):
             self.mu = cbar
             self._t_last = epoch.time
             self._times.append(epoch.time)
@@ -326,6 +329,10 @@ class ImmEstimator:
         self._t_last = epoch.time
         self._times.append(epoch.time)
         self._mus.append(mu.copy())
+        if not applied.any():
+            # every updating mode kept the rows out (a gate): nothing to feed back; the modes
+            # keep their mixed means, whose combination the next correction carries
+            return None
         dx = mu @ np.array([c.x for c in ch])
         for c in ch:
             c.recentre(dx)

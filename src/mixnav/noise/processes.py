@@ -210,11 +210,15 @@ class Mixture(NoiseProcess):
         Component standard deviations [unit], >= 0.
     means : float or array_like (K,), default 0
         Component means [unit]. Non-zero means make the noise biased.
+    joint : bool, default False
+        One component per epoch for all channels (a multipath episode biases every
+        axis of a fix at once) instead of one per epoch and channel.
     """
 
     weights: Any
     sigmas: Any = None
     means: Any = 0.0
+    joint: bool = False
 
     def __post_init__(self):
         w = self.weights
@@ -250,7 +254,10 @@ class Mixture(NoiseProcess):
         object.__setattr__(self, "means", mu)
 
     def _sample(self, t, c, rng):
-        labels = rng.choice(self.weights.size, size=(t.size, c), p=self.weights)
+        if self.joint:
+            labels = np.repeat(rng.choice(self.weights.size, size=(t.size, 1), p=self.weights), c, axis=1)
+        else:
+            labels = rng.choice(self.weights.size, size=(t.size, c), p=self.weights)
         z = rng.standard_normal((t.size, c))
         return self.means[labels] + self.sigmas[labels] * z
 
@@ -277,6 +284,8 @@ class Mixture(NoiseProcess):
         s = f"Gaussian mixture, weights={_fmt(self.weights)}, sigmas={_fmt(self.sigmas)}"
         if np.any(self.means != 0):
             s += f", means={_fmt(self.means)}"
+        if self.joint:
+            s += ", one component per epoch for all channels"
         return s
 
 

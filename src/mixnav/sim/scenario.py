@@ -126,8 +126,8 @@ def vehicle_truth(sc: Scenario) -> VehicleTruth:
 def simulate(sc: Scenario, seed: int, source: str | None = None, ideal=None) -> SimulatedRun:
     """Draw one run: IMU errors, GNSS noise and the initial estimation error.
 
-    Streams (independent, from ``seed``): ``imu``, ``gnss``, ``init``, and
-    ``odometer`` (drawn only with ``[odometer]``).
+    Streams (independent, from ``seed``): ``imu``, ``gnss``, ``init``, ``odometer`` (drawn
+    only with ``[odometer]``) and ``gnss-loss`` (only with ``[gnss] losses``).
     ``ideal`` may pass a precomputed ``(truth, imu_ideal)`` for Monte Carlo.
     """
     streams = Streams(seed)
@@ -147,6 +147,8 @@ def simulate(sc: Scenario, seed: int, source: str | None = None, ideal=None) -> 
     pos_noise, vel_noise = gnss_noise(sc, source)
     fixes = simulate_fixes(truth, fix_model, streams.get("gnss"), position_noise=pos_noise,
                            velocity_noise=vel_noise)
+    if g.losses:
+        fixes = _lose_fixes(fixes, g.losses, streams.get("gnss-loss"))
     init = initial_estimate(truth, sc, streams.get("init"))
     obs, outages = None, fix_model.outages
     if g.satellites is not None:
@@ -164,6 +166,19 @@ def simulate(sc: Scenario, seed: int, source: str | None = None, ideal=None) -> 
                                 vehicle.C_vb, streams.get("odometer"), quantum=o.quantum, source=source)
     return SimulatedRun(seed, truth, imu_ideal, imu, draw, model, fixes, init, outages, obs,
                         odometer=odo, vehicle=vehicle)
+
+
+def _lose_fixes(fixes: GnssFixes, losses, rng) -> GnssFixes:
+    """The fixes without those lost: inside each ``(start, end, p)`` window (``start <= t <
+    end``), each fix independently with probability ``p``."""
+    u = rng.random(len(fixes.time))
+    lost = np.zeros(len(fixes.time), dtype=bool)
+    for a, b, p in losses:
+        lost |= (fixes.time >= a) & (fixes.time < b) & (u < p)
+    keep = ~lost
+    return GnssFixes(time=fixes.time[keep], lla=fixes.lla[keep], pos_sigma=fixes.pos_sigma[keep],
+                     vel_n=None if fixes.vel_n is None else fixes.vel_n[keep],
+                     vel_sigma=None if fixes.vel_sigma is None else fixes.vel_sigma[keep], source=fixes.source)
 
 
 def _without_fixes_below_four(fixes: GnssFixes, obs):
