@@ -582,7 +582,8 @@ class EmBiasConfig(Strict):
     biased component before a bias is declared, ``max_state_sigma`` [m] (innovations enter
     the window only while the state's position sigma is at most this; default a third of
     ``min_separation``) and ``gate`` (chi-square probability above which position rows the
-    current noise model cannot explain are kept out of the update)."""
+    current noise model cannot explain are kept out of the update), ``refit_every`` (epochs
+    between EM fits, each warm-started from the last)."""
 
     window: Duration = 60.0  # type: ignore[valid-type]
     min_samples: int = Field(default=20, ge=2, description="at least one sample per component")
@@ -590,6 +591,7 @@ class EmBiasConfig(Strict):
     min_weight: float = Field(default=0.05, ge=0.0, lt=0.5)
     max_state_sigma: PosLength | None = None  # type: ignore[valid-type]
     gate: float = Field(default=0.9999, gt=0.5, lt=1.0)
+    refit_every: int = Field(default=5, ge=1)
 
 
 class ImmModeConfig(Strict):

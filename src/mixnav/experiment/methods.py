@@ -173,7 +173,8 @@ def _imm(method, layout, model, gnss, aids, source, index, common):
         elif mode.estimator == "em-bias":
             ec = mode.em or EmBiasConfig()
             st = EmBiasSettings(float(ec.window), ec.min_samples, float(ec.min_separation), ec.min_weight,
-                                None if ec.max_state_sigma is None else float(ec.max_state_sigma), ec.gate)
+                                None if ec.max_state_sigma is None else float(ec.max_state_sigma), ec.gate,
+                                ec.refit_every)
             makers.append(lambda st=st: EmBiasKalman({gnss}, st, carry_mean=True))
         else:
             makers.append(lambda: KalmanEstimator(carry_mean=True))

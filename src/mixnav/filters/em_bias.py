@@ -60,7 +60,7 @@ from .ekf import KalmanEstimator
 class EmBiasSettings:
     """See the module docstring. ``window`` [s], ``min_samples`` [epochs], ``min_separation``
     [m], ``min_weight`` (fraction), ``max_state_sigma`` [m] (None: ``min_separation / 3``),
-    ``gate`` (chi-square probability), ``max_iter`` of each EM fit."""
+    ``gate`` (chi-square probability), ``refit_every`` [epochs], ``max_iter`` of each EM fit."""
 
     window: float = 60.0
     min_samples: int = 20
@@ -68,6 +68,7 @@ class EmBiasSettings:
     min_weight: float = 0.05
     max_state_sigma: float | None = None
     gate: float = 0.9999
+    refit_every: int = 5
     max_iter: int = 100
 
     @property
@@ -92,24 +93,29 @@ class EmBiasSettings:
         if self.max_state_sigma is not None and not (np.isfinite(self.max_state_sigma) and self.max_state_sigma > 0):
             raise ArgumentError(f"must be a positive distance [m] or None, got {self.max_state_sigma!r}",
                                 argument="max_state_sigma")
+        if not (isinstance(self.refit_every, (int, np.integer)) and self.refit_every >= 1):
+            raise ArgumentError(f"must be an integer >= 1, got {self.refit_every!r}", argument="refit_every")
         if not (0.5 < self.gate < 1):
             raise ArgumentError(f"must be a probability in (0.5, 1), got {self.gate!r}", argument="gate")
         if not (0 <= self.min_weight < 0.5):
             raise ArgumentError(f"must be a fraction in [0, 0.5), got {self.min_weight!r}", argument="min_weight")
 
 
-def fit_bias(Y: np.ndarray, settings: EmBiasSettings, rng: np.random.Generator):
+def fit_bias(Y: np.ndarray, settings: EmBiasSettings, rng: np.random.Generator, start=None):
     """Two-component EM fit of innovations ``Y`` (N, d) [m].
 
     Returns ``(bias (d,), clean_mean (d,), biased_cov (d, d), model, converged)`` where
     ``bias`` is the biased mean minus the clean mean and ``model`` the fitted
     :class:`~mixnav.noise.learn.em.EMGaussianMixture`, or None when no bias is declared
     (means closer than ``min_separation`` or the smaller component below ``min_weight``).
-    The clean component is the heavier one (multipath is the exception).
+    The clean component is the heavier one (multipath is the exception). ``start``: a
+    previous fit (an ``EMGaussianMixture``) whose responsibilities on ``Y`` start this one
+    (a window moved by a few epochs is nearly the same fit); default k-means++.
     """
     from ..noise.learn import ConvergenceWarning
     from ..noise.learn.em import EMGaussianMixture
-    em = EMGaussianMixture(2, tol=1e-6, max_iter=settings.max_iter, reg_covar=1e-6, random_state=rng)
+    init = "kmeans++" if start is None else start.predict_proba(Y)
+    em = EMGaussianMixture(2, tol=1e-6, max_iter=settings.max_iter, reg_covar=1e-6, init=init, random_state=rng)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         try:
@@ -149,6 +155,7 @@ class EmBiasKalman(KalmanEstimator):
         super().init(motion, P0, n_clone, rng)
         self._window: deque = deque()     # (time [s], innovation (3,))
         self._cache = (None, None)
+        self._fit, self._since_fit = None, 0
         self._log_t, self._log_bias, self._log_applied = [], [], []
         self.counts.update(em_fits=0, em_not_converged=0, em_bias_epochs=0, em_gated_epochs=0)
 
@@ -187,16 +194,23 @@ class EmBiasKalman(KalmanEstimator):
         R = np.diag(rows.R) if np.ndim(rows.R) == 1 else np.array(rows.R, dtype=float)
         z = rows.z
         if settled and len(w) >= st.min_samples:
-            self.counts["em_fits"] += 1
-            Y = np.array([v for _, v in w])
-            result = fit_bias(Y, st, self.rng)
+            self._since_fit += 1
+            if self._fit is None or self._since_fit >= st.refit_every:
+                # a window moved by a few epochs is nearly the same fit: refit every few, warm
+                self.counts["em_fits"] += 1
+                Y = np.array([v for _, v in w])
+                prev = self._fit[0][3] if self._fit is not None and self._fit[0] is not None else None
+                self._fit = (fit_bias(Y, st, self.rng, start=prev), np.cov(Y.T))
+                self._since_fit = 0
+            result, cov = self._fit
             if result is None:   # one cloud: its spread is the noise, if wider than configured
-                cov = np.cov(Y.T)
                 if np.trace(cov) > np.trace(R[np.ix_(pos, pos)]):
                     R[np.ix_(pos, pos)] = cov
+        elif not settled:
+            self._fit = None
         if result is not None:
             bias, clean_mean, cov_b, em, converged = result
-            if not converged:
+            if not converged and self._since_fit == 0:
                 self.counts["em_not_converged"] += 1
             biased = 1 - int(np.argmax(em.weights_))
             if em.predict_proba(y[None, :])[0, biased] > 0.5:

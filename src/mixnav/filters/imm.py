@@ -370,6 +370,10 @@ class ImmEstimator:
         ``mode_names``; and the modes' own outputs (an EM-IMM's ``bias_times``, ``bias``)."""
         r = len(self.children)
         out = {}
+        for name, c in zip(self.names, self.children):   # the modes' own counts (the EM's fits)
+            for k, v in c.counts.items():
+                if k not in ("rejected_not_pd", "rejected_absurd", "covariance_repair"):
+                    self.counts[f"{name}:{k}"] = v
         for name, c in zip(self.names, self.children):   # the modes' own (the EM-IMM's bias)
             for k, v in (c.outputs() if hasattr(c, "outputs") else {}).items():
                 out[k if k not in out else f"{name}:{k}"] = v
