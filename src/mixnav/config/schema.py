@@ -578,7 +578,8 @@ class AidingConfig(Strict):
 class EmBiasConfig(Strict):
     """The EM multipath-bias removal of an EM-IMM mode (``[methods.imm.modes.em]``,
     :mod:`mixnav.filters.em_bias`): the sliding ``window`` [s], ``min_samples`` in it before
-    a fit (at least the two components), ``min_separation`` [m] and ``min_weight`` of the
+    a fit (at least the two components), ``min_separation`` [m] (also at least
+    ``min_separation_sigmas`` of the biased component's spread) and ``min_weight`` of the
     biased component before a bias is declared, ``max_state_sigma`` [m] (innovations enter
     the window only while the state's position sigma is at most this; default a third of
     ``min_separation``) and ``gate`` (chi-square probability above which position rows the
@@ -589,6 +590,7 @@ class EmBiasConfig(Strict):
     min_samples: int = Field(default=20, ge=2, description="at least one sample per component")
     min_separation: PosLength = 3.0  # type: ignore[valid-type]
     min_weight: float = Field(default=0.05, ge=0.0, lt=0.5)
+    min_separation_sigmas: float = Field(default=2.0, ge=0.0)
     max_state_sigma: PosLength | None = None  # type: ignore[valid-type]
     gate: float = Field(default=0.9999, gt=0.5, lt=1.0)
     refit_every: int = Field(default=5, ge=1)

@@ -172,9 +172,11 @@ def _imm(method, layout, model, gnss, aids, source, index, common):
             makers.append(lambda rc=rc: RobustEstimator(rc.k0, rc.k1, rc.c, carry_mean=True))
         elif mode.estimator == "em-bias":
             ec = mode.em or EmBiasConfig()
-            st = EmBiasSettings(float(ec.window), ec.min_samples, float(ec.min_separation), ec.min_weight,
-                                None if ec.max_state_sigma is None else float(ec.max_state_sigma), ec.gate,
-                                ec.refit_every)
+            st = EmBiasSettings(window=float(ec.window), min_samples=ec.min_samples,
+                                min_separation=float(ec.min_separation), min_weight=ec.min_weight,
+                                min_separation_sigmas=ec.min_separation_sigmas,
+                                max_state_sigma=None if ec.max_state_sigma is None else float(ec.max_state_sigma),
+                                gate=ec.gate, refit_every=ec.refit_every)
             makers.append(lambda st=st: EmBiasKalman({gnss}, st, carry_mean=True))
         else:
             makers.append(lambda: KalmanEstimator(carry_mean=True))

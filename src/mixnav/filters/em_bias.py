@@ -29,8 +29,14 @@ Settings (:class:`EmBiasSettings`, documented in docs/imm.md):
   the window holds one cloud wider than the configured noise, its covariance is R (noise
   that grew without a bias);
 * ``min_separation`` [m]: a bias is declared only when the two component means are at
-  least this far apart (and the smaller component has at least ``min_weight`` of the
-  window): otherwise the window is one cloud and nothing is removed;
+  least this far apart, the smaller component has at least ``min_weight`` of the
+  window, and the separation is at least ``min_separation_sigmas`` times the biased
+  component's largest standard deviation: otherwise the window is one cloud (or a cloud
+  and its tail) and nothing is removed. The last rule came from the end of a multipath
+  episode: a window holding centimetre RTK innovations and a metres-wide multipath
+  cloud (clean and biased fixes together) fits as "tight cloud + broad cloud" 3 m
+  apart, and clean RTK epochs a few centimetres out were then "biased" (3-7 m bias
+  errors in 5 of 50 runs of P4-vehicle before it);
 * an epoch whose innovation the biased component explains (responsibility > 1/2) has
   the bias ``a`` (the biased mean minus the clean mean) subtracted from its position
   rows and the biased component's covariance as their R (P4: "its covariance becomes
@@ -60,12 +66,14 @@ from .ekf import KalmanEstimator
 class EmBiasSettings:
     """See the module docstring. ``window`` [s], ``min_samples`` [epochs], ``min_separation``
     [m], ``min_weight`` (fraction), ``max_state_sigma`` [m] (None: ``min_separation / 3``),
-    ``gate`` (chi-square probability), ``refit_every`` [epochs], ``max_iter`` of each EM fit."""
+    ``min_separation_sigmas``, ``gate`` (chi-square probability), ``refit_every`` [epochs],
+    ``max_iter`` of each EM fit."""
 
     window: float = 60.0
     min_samples: int = 20
     min_separation: float = 3.0
     min_weight: float = 0.05
+    min_separation_sigmas: float = 2.0
     max_state_sigma: float | None = None
     gate: float = 0.9999
     refit_every: int = 5
@@ -97,6 +105,8 @@ class EmBiasSettings:
             raise ArgumentError(f"must be an integer >= 1, got {self.refit_every!r}", argument="refit_every")
         if not (0.5 < self.gate < 1):
             raise ArgumentError(f"must be a probability in (0.5, 1), got {self.gate!r}", argument="gate")
+        if not (np.isfinite(self.min_separation_sigmas) and self.min_separation_sigmas >= 0):
+            raise ArgumentError(f"must be >= 0, got {self.min_separation_sigmas!r}", argument="min_separation_sigmas")
         if not (0 <= self.min_weight < 0.5):
             raise ArgumentError(f"must be a fraction in [0, 0.5), got {self.min_weight!r}", argument="min_weight")
 
@@ -107,7 +117,8 @@ def fit_bias(Y: np.ndarray, settings: EmBiasSettings, rng: np.random.Generator, 
     Returns ``(bias (d,), clean_mean (d,), biased_cov (d, d), model, converged)`` where
     ``bias`` is the biased mean minus the clean mean and ``model`` the fitted
     :class:`~mixnav.noise.learn.em.EMGaussianMixture`, or None when no bias is declared
-    (means closer than ``min_separation`` or the smaller component below ``min_weight``).
+    (means closer than ``min_separation`` or than ``min_separation_sigmas`` of the biased
+    component's spread, or the smaller component below ``min_weight``).
     The clean component is the heavier one (multipath is the exception). ``start``: a
     previous fit (an ``EMGaussianMixture``) whose responsibilities on ``Y`` start this one
     (a window moved by a few epochs is nearly the same fit); default k-means++.
@@ -125,7 +136,10 @@ def fit_bias(Y: np.ndarray, settings: EmBiasSettings, rng: np.random.Generator, 
     clean = int(np.argmax(em.weights_))
     biased = 1 - clean
     bias = em.means_[biased] - em.means_[clean]
-    if np.linalg.norm(bias) < settings.min_separation or em.weights_[biased] < settings.min_weight:
+    sep = float(np.linalg.norm(bias))
+    spread = float(np.sqrt(np.linalg.eigvalsh(em.covariances_[biased])[-1]))
+    if sep < settings.min_separation or em.weights_[biased] < settings.min_weight \
+            or sep < settings.min_separation_sigmas * spread:
         return None
     return bias, em.means_[clean], em.covariances_[biased], em, bool(em.converged_)
 
