@@ -31,7 +31,7 @@ SEGMENTS = {"clean": (100.0, 1200.0), "multipath": (1200.0, 1800.0), "loss": (24
 BIAS = np.array([10.0, 10.0, 10.0])
 PAPER = {"imm": {"multipath_max": 13.0}, "em-imm": {"multipath_max": 2.0, "bias_err": 0.5}}
 LABEL = {"ekf": "EKF, GNSS only", "ekf-od": "EKF, GNSS + odometer + NHC", "imm": "IMM (P4 eqs. 6-16)",
-         "em-imm": "EM-IMM (P4 eqs. 17-27)"}
+         "em-imm": "EM-IMM (P4 eqs. 17-27)", "gm-online": "GM-EKF + odometer + NHC, mixture learned online"}
 
 
 def one_run(seed: int, scenario: str = "P4-vehicle") -> list[dict]:
@@ -60,8 +60,9 @@ def one_run(seed: int, scenario: str = "P4-vehicle") -> list[dict]:
             row[f"{seg}_max"] = float(h[s].max())
             row[f"{seg}_rms"] = float(np.sqrt(np.mean(h[s] ** 2)))
         for c in (c for c in t.columns if c.startswith("p_mode_")):
-            s = (t.time_s >= 1200) & (t.time_s < 1800)
-            row[f"multipath_{c}"] = float(t.loc[s, c].mean())
+            for seg, (a, b) in SEGMENTS.items():
+                s = (t.time_s >= a) & (t.time_s < b)
+                row[f"{seg}_{c}"] = float(t.loc[s, c].mean())
         o = res.outputs or {}
         if "bias" in o:
             bt, bv = o["bias_times"], o["bias"]
@@ -101,14 +102,14 @@ def tables(df: pd.DataFrame) -> str:
         if d.empty:
             continue
         out.append(f"| {LABEL[m]} | " + " | ".join("{:.3g} ± {:.2g}".format(*_ci(d[k])) for k, _ in cols) + " |")
-    out += ["", "Mode probabilities in the multipath segment (mean over the segment, then over runs):", "",
-            "| method | SINS/GNSS | SINS/OD |", "|---|---|---|"]
+    out += ["", "Probability of the SINS/OD mode per segment (mean over the segment, then over runs):", "",
+            "| method | " + " | ".join(SEGMENTS) + " |", "|---|" + "---|" * len(SEGMENTS)]
     for m in ("imm", "em-imm"):
         d = df[df.method == m]
         if d.empty:
             continue
-        out.append(f"| {LABEL[m]} | " + " | ".join("{:.3f} ± {:.2g}".format(*_ci(d[f"multipath_p_mode_{k}"]))
-                                                    for k in ("sins-gnss", "sins-od")) + " |")
+        out.append(f"| {LABEL[m]} | " + " | ".join("{:.3f} ± {:.2g}".format(*_ci(d[f"{seg}_p_mode_sins-od"]))
+                                                    for seg in SEGMENTS) + " |")
     d = df[df.method == "em-imm"]
     if not d.empty and "bias_err" in d:
         out += ["", "EM-IMM bias estimate (at the epochs it removed a bias; true offset 10 m per axis):", "",

@@ -124,3 +124,28 @@ def imm_combine(mu, xs, Ps, P):
             for b in range(n):
                 P[a, b] += mj * Ps[j, a, b] + da * d[b]
     return x
+
+
+@njit(cache=True)
+def imm_probabilities(logl, c, mu):
+    """``mu_j ∝ exp(logl_j) c_j`` into ``mu`` (r,) (P4 eq. 14), in log space; returns False,
+    with ``mu = c``, when no mode has a finite likelihood."""
+    r = c.shape[0]
+    best = -np.inf
+    for j in range(r):
+        a = logl[j] + math.log(max(c[j], 1e-300))
+        mu[j] = a
+        if a > best:
+            best = a
+    if not best > -np.inf:
+        for j in range(r):
+            mu[j] = c[j]
+        return False
+    s = 0.0
+    for j in range(r):
+        v = math.exp(mu[j] - best) if mu[j] > -np.inf else 0.0
+        mu[j] = v
+        s += v
+    for j in range(r):
+        mu[j] /= s
+    return True

@@ -42,7 +42,7 @@ import math
 import numpy as np
 
 from ..engine.protocols import Correction, Epoch, Transition
-from ._imm_kernels import imm_combine, imm_mix_score
+from ._imm_kernels import imm_combine, imm_mix_score, imm_probabilities
 from ..errors import ArgumentError
 from ..ins.error_model import ClockModel, StateLayout
 from ..ins.imu_model import ImuErrorModel
@@ -88,7 +88,7 @@ class _FractionalPower:
         self._cache: dict = {}
 
     def __call__(self, s: float) -> np.ndarray:
-        key = round(s, 9)
+        key = int(s * 1e9 + 0.5)       # nanosecond resolution
         out = self._cache.get(key)
         if out is None:
             out = (self.V * self.lam ** s) @ self.Vi
@@ -230,6 +230,9 @@ class ImmEstimator:
         self._Ps, self._P0 = np.empty((r, n, n)), np.empty((r, n, n))
         self._logl = np.empty(r)
         self._P = np.empty((n, n))
+        self._mu_new = np.empty(r)
+        self._user_cache: dict = {}
+        self._adjusting = [j for j, c in enumerate(self.children) if hasattr(c, "adjusted_rows")]
         self._t_last = None
         self._times: list = []
         self._mus: list = []
@@ -254,8 +257,15 @@ class ImmEstimator:
             return np.eye(len(self.mu))   # the first cycle: mu0 is the probability at that time
         return self._power(max(t - self._t_last, 0.0) / self.transition_interval)
 
+    def _users(self, model) -> tuple:
+        """Which modes the model updates (a tuple of bools, cached per model)."""
+        u = self._user_cache.get(id(model))
+        if u is None:
+            u = self._user_cache[id(model)] = tuple(model in s for s in self.sets)
+        return u
+
     def update(self, epoch: Epoch) -> Correction | None:
-        users = [epoch.model in s for s in self.sets]
+        users = self._users(epoch.model)
         if not any(users):
             return None
         rows = epoch.rows()
@@ -273,24 +283,23 @@ class ImmEstimator:
         for j, c in enumerate(ch):
             xs[j] = c.x
             Ps[j] = c.P
-        cbar = imm_mix_score(self.mu, Pi, xs, Ps, np.ascontiguousarray(z, dtype=float),
-                             np.ascontiguousarray(H, dtype=float), np.diag(R) if R.ndim == 1 else R, x0, P0, logl)
+        cbar = imm_mix_score(self.mu, Pi, xs, Ps, z, H, np.diag(R) if R.ndim == 1 else R, x0, P0, logl)
         for j, c in enumerate(ch):
             c.x = x0[j].copy()
             c.P = P0[j].copy()
         logl = logl.copy()
-        for j, c in enumerate(ch):
-            # a mode that changes the rows (the EM-IMM's bias removal) is scored on its rows
-            adjust = getattr(c, "adjusted_rows", None)
-            if adjust is not None and users[j]:
-                rj = adjust(epoch)
-                if rj is not None and rj is not rows and len(rj.z) == len(rows.z):
+        for j in self._adjusting:
+            # a mode that changes the rows (the EM-IMM's bias removal) is scored on its rows;
+            # one that gated them out (calls them outliers) on the raw rows
+            if users[j]:
+                c = ch[j]
+                rj = c.adjusted_rows(epoch)
+                if rj is not None and rj is not rows and len(rj.z) == m:
                     logl[j] = log_likelihood(c.x, c.P, rj.z, rj.H, np.asarray(rj.R, dtype=float))
-                # gated rows (the mode calls the data outliers): scored on the raw rows
         logl = self.weigh(logl)
         # 3. mode-matched updates (a child's rejection is counted here; the IMM's own
         #    correction is the combination, fed back unless every updating mode rejected)
-        applied = np.zeros(len(ch), dtype=bool)
+        applied = [False] * len(ch)
         corrs = [None] * len(ch)
         for j, c in enumerate(ch):
             if users[j]:
@@ -298,46 +307,45 @@ class ImmEstimator:
                 if corr is None:       # the mode kept all the rows out (a gate): not updated
                     continue
                 corrs[j] = corr
-                if corr.status == OK or corr.status == NEEDS_REPAIR:
+                st = corr.status
+                if st == OK or st == NEEDS_REPAIR:
                     applied[j] = True
-                    if corr.status == NEEDS_REPAIR:
+                    if st == NEEDS_REPAIR:
                         c.repair()
                         self.counts["covariance_repair"] += 1
-                elif corr.status == NON_FINITE:
+                elif st == NON_FINITE:
                     return corr
                 else:
-                    self.counts["rejected_absurd" if corr.status == ABSURD else "rejected_not_pd"] += 1
-        if not applied.any() and any(c is not None for c in corrs):
-            self.mu = cbar
-            self._t_last = epoch.time
-            self._times.append(epoch.time)
-            self._mus.append(cbar.copy())
+                    self.counts["rejected_absurd" if st == ABSURD else "rejected_not_pd"] += 1
+        any_applied = any(applied)
+        if not any_applied and any(c is not None for c in corrs):
+            self._log(epoch.time, cbar)
             worst = next(c for c in corrs if c is not None)
             # the engine counts this epoch's rejection once; the per-mode counts above are per mode
             self.counts["rejected_absurd" if worst.status == ABSURD else "rejected_not_pd"] -= 1
             return worst
         # 4. probabilities and combination
-        a = logl + np.log(np.maximum(cbar, 1e-300))
-        if not np.isfinite(a).any():
+        mu = self._mu_new
+        if not imm_probabilities(logl, cbar, mu):
             self.counts["imm_no_likelihood"] += 1
-            mu = cbar
-        else:
-            a = np.where(np.isfinite(a), a, -np.inf)
-            mu = np.exp(a - a.max())
-            mu /= mu.sum()
-        self.mu = mu
-        self._t_last = epoch.time
-        self._times.append(epoch.time)
-        self._mus.append(mu.copy())
-        if not applied.any():
+        self._log(epoch.time, mu)
+        if not any_applied:
             # every updating mode kept the rows out (a gate): nothing to feed back; the modes
             # keep their mixed means, whose combination the next correction carries
             return None
-        dx = mu @ np.array([c.x for c in ch])
+        for j, c in enumerate(ch):
+            xs[j] = c.x
+        dx = mu @ xs
         for c in ch:
             c.recentre(dx)
-        best = int(np.argmax(np.where(applied, mu, -1.0)))   # NIS of the most probable updated mode
+        best = max((j for j in range(len(ch)) if applied[j]), key=lambda j: mu[j])  # NIS of the likeliest
         return Correction(dx, corrs[best].nis, OK, m)
+
+    def _log(self, t: float, mu: np.ndarray) -> None:
+        self.mu = mu.copy()
+        self._t_last = t
+        self._times.append(t)
+        self._mus.append(self.mu)
 
     def weigh(self, logl: np.ndarray) -> np.ndarray:
         """The modes' log-likelihoods of this epoch (r,), ``log N(z; H x_j, H P_j H^T + R)``
@@ -391,6 +399,7 @@ class ImmEstimator:
         imm_mix_score(np.array([0.5, 0.5]), np.eye(2), np.zeros((2, n)), np.tile(np.eye(n), (2, 1, 1)),
                       np.zeros(3), H, np.eye(3), np.empty((2, n)), np.empty((2, n, n)), np.empty(2))
         imm_combine(np.array([0.5, 0.5]), np.zeros((2, n)), np.tile(np.eye(n), (2, 1, 1)), np.empty((n, n)))
+        imm_probabilities(np.zeros(2), np.array([0.5, 0.5]), np.empty(2))
 
 
 class ImmEkf(ErrorStateEkf):
