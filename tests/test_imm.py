@@ -277,3 +277,35 @@ def test_em_imm_mode_from_config(tmp_path):
     bad = em.replace('estimator = "em-bias"\n', "")
     with pytest.raises(ConfigError, match=r"\[em\] table needs"):
         load_scenario(str(_vehicle_demo_with(tmp_path, bad)))
+
+
+def test_mode_probabilities_follow_a_simulated_switch():
+    """vehicle-demo with the GNSS noise switched from 1.5 m to 15 m between 440 and 540 s: the
+    IMM of "GNSS + NHC + odometer" and "NHC + odometer" moves its probability to the second
+    mode inside the window and back after it (measured mean 0.18 before, 0.76 inside from
+    460 s, 0.14 after; asserted: inside at least 0.5 and three times before and after)."""
+    from dataclasses import replace
+    from mixnav.config.loader import load_scenario
+    from mixnav.geodesy.frames import displace
+    from mixnav.ins.error_model import StateLayout
+    from mixnav.measurements.vehicle import Odometer
+    from mixnav.sim.scenario import simulate
+    sc, src, _ = load_scenario("vehicle-demo")
+    sim = simulate(sc, 1, src)
+    fx = sim.fixes
+    bad = (fx.time >= 440) & (fx.time <= 540)
+    off = np.zeros((len(fx.time), 3))
+    off[bad] = np.random.default_rng(5).normal(0, 15, (bad.sum(), 3))
+    lay = StateLayout("v", ["gyro_scale", "accel_scale"])
+    mnt = np.asarray(sc.installation.imu_misalignment, float)
+    gnss = LooseGnss(replace(fx, lla=displace(fx.lla, off)), np.asarray(sc.gnss.lever_arm, float), lay)
+    nhc = NonHolonomic(np.arange(sim.init.time + 1, sim.imu.time[-1], 1.0), lay, mnt, sigma=(0.2, 0.1))
+    odo = Odometer(sim.odometer, lay, mnt, np.asarray(sc.odometer.lever_arm, float), scale=0.005)
+    imm = ImmEstimator([KalmanEstimator(carry_mean=True), KalmanEstimator(carry_mean=True)],
+                       [{gnss, nhc, odo}, {nhc, odo}], [[0.98, 0.02], [0.05, 0.95]], names=["gnss", "dr"])
+    res = Engine(StrapdownMotion(lay, sim.imu_model), imm, [gnss, nhc, odo]).run(sim.imu, sim.init)
+    t, p = res.outputs["mode_times"], res.outputs["mode_probabilities"]
+    np.testing.assert_allclose(p.sum(axis=1), 1.0, atol=1e-12)
+    mean = lambda a, b: p[(t >= a) & (t < b), 1].mean()   # noqa: E731
+    before, inside, after = mean(100, 430), mean(460, 540), mean(550, 600)
+    assert inside > 0.5 and inside > 3 * before and inside > 3 * after, (before, inside, after)
