@@ -53,6 +53,7 @@ from __future__ import annotations
 import warnings
 from collections import deque
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -111,15 +112,30 @@ class EmBiasSettings:
             raise ArgumentError(f"must be a fraction in [0, 0.5), got {self.min_weight!r}", argument="min_weight")
 
 
+class BiasFit(NamedTuple):
+    """A declared bias: ``bias`` (d,) the biased mean minus the clean mean [m], the clean
+    mean (d,), the two components' covariances (d, d), the fitted ``model``
+    (:class:`~mixnav.noise.learn.em.EMGaussianMixture`), which of its components is the
+    biased one, and whether EM converged."""
+
+    bias: np.ndarray
+    clean_mean: np.ndarray
+    biased_cov: np.ndarray
+    clean_cov: np.ndarray
+    model: object
+    biased: int
+    converged: bool
+
+
 def fit_bias(Y: np.ndarray, settings: EmBiasSettings, rng: np.random.Generator, start=None):
     """Two-component EM fit of innovations ``Y`` (N, d) [m].
 
-    Returns ``(bias (d,), clean_mean (d,), biased_cov (d, d), model, converged)`` where
-    ``bias`` is the biased mean minus the clean mean and ``model`` the fitted
-    :class:`~mixnav.noise.learn.em.EMGaussianMixture`, or None when no bias is declared
+    Returns a :class:`BiasFit`, or None when no bias is declared
     (means closer than ``min_separation`` or than ``min_separation_sigmas`` of the biased
     component's spread, or the smaller component below ``min_weight``).
-    The clean component is the heavier one (multipath is the exception). ``start``: a
+    The clean component is the one whose mean is nearer zero (the innovation of a fix that
+    agrees with the prediction): by weight, a window where the biased fixes happened to be
+    the majority swapped the two and removed a -10 m "bias" from clean fixes (one run of 50). ``start``: a
     previous fit (an ``EMGaussianMixture``) whose responsibilities on ``Y`` start this one
     (a window moved by a few epochs is nearly the same fit); default k-means++.
     """
@@ -133,7 +149,9 @@ def fit_bias(Y: np.ndarray, settings: EmBiasSettings, rng: np.random.Generator, 
             em.fit(Y)
         except ValueError:      # zero variance or a collapsed component: one cloud
             return None
-    clean = int(np.argmax(em.weights_))
+    # the clean component is the one centred nearer the filter's prediction (zero innovation):
+    # the heavier one was wrong in windows where biased fixes happened to be the majority
+    clean = int(np.argmin(np.linalg.norm(em.means_, axis=1)))
     biased = 1 - clean
     bias = em.means_[biased] - em.means_[clean]
     sep = float(np.linalg.norm(bias))
@@ -141,7 +159,8 @@ def fit_bias(Y: np.ndarray, settings: EmBiasSettings, rng: np.random.Generator, 
     if sep < settings.min_separation or em.weights_[biased] < settings.min_weight \
             or sep < settings.min_separation_sigmas * spread:
         return None
-    return bias, em.means_[clean], em.covariances_[biased], em, bool(em.converged_)
+    return BiasFit(bias, em.means_[clean], em.covariances_[biased], em.covariances_[clean], em, biased,
+                   bool(em.converged_))
 
 
 class EmBiasKalman(KalmanEstimator):
@@ -213,7 +232,7 @@ class EmBiasKalman(KalmanEstimator):
                 # a window moved by a few epochs is nearly the same fit: refit every few, warm
                 self.counts["em_fits"] += 1
                 Y = np.array([v for _, v in w])
-                prev = self._fit[0][3] if self._fit is not None and self._fit[0] is not None else None
+                prev = self._fit[0].model if self._fit is not None and self._fit[0] is not None else None
                 self._fit = (fit_bias(Y, st, self.rng, start=prev), np.cov(Y.T))
                 self._since_fit = 0
             result, cov = self._fit
@@ -223,21 +242,18 @@ class EmBiasKalman(KalmanEstimator):
         elif not settled:
             self._fit = None
         if result is not None:
-            bias, clean_mean, cov_b, em, converged = result
-            if not converged and self._since_fit == 0:
+            if not result.converged and self._since_fit == 0:
                 self.counts["em_not_converged"] += 1
-            biased = 1 - int(np.argmax(em.weights_))
-            if em.predict_proba(y[None, :])[0, biased] > 0.5:
-                applied = bias
+            if result.model.predict_proba(y[None, :])[0, result.biased] > 0.5:
+                applied = result.bias
                 z = rows.z.copy()
-                z[pos] -= bias
-                y = y - bias
-                R[np.ix_(pos, pos)] = cov_b
+                z[pos] -= result.bias
+                y = y - result.bias
+                R[np.ix_(pos, pos)] = result.biased_cov
                 self.counts["em_bias_epochs"] += 1
-            else:   # a clean epoch of a multipath episode: the clean component's spread, if wider
-                cov_c = em.covariances_[1 - biased]
-                if np.trace(cov_c) > np.trace(R[np.ix_(pos, pos)]):
-                    R[np.ix_(pos, pos)] = cov_c
+            elif np.trace(result.clean_cov) > np.trace(R[np.ix_(pos, pos)]):
+                # a clean epoch of a multipath episode: the clean component's spread, if wider
+                R[np.ix_(pos, pos)] = result.clean_cov
         self._log_t.append(t)
         self._log_bias.append(np.asarray(applied, dtype=float))
         self._log_applied.append(result is not None)
