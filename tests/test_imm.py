@@ -309,3 +309,48 @@ def test_mode_probabilities_follow_a_simulated_switch():
     mean = lambda a, b: p[(t >= a) & (t < b), 1].mean()   # noqa: E731
     before, inside, after = mean(100, 430), mean(460, 540), mean(550, 600)
     assert inside > 0.5 and inside > 3 * before and inside > 3 * after, (before, inside, after)
+
+
+def test_every_mode_scores_the_same_rows():
+    """One epoch by hand: mode 0 uses the model, mode 1 does not. Both are scored on the same
+    rows with their own predictive density (scipy's), the probabilities follow P4 eq. 14
+    with them, only mode 0 is updated, and the correction is the combined mean."""
+    from mixnav.engine.protocols import Epoch
+    from mixnav.ins.imu_model import ImuErrorModel
+    from mixnav.measurements.base import MeasurementModel, Rows
+    lay = get_layout(15)
+    H = np.zeros((2, 15))
+    H[0, 6], H[1, 7] = 1.0, 1.0
+    z = np.array([0.8, -0.3])
+
+    class Fix(MeasurementModel):
+        kinds = ("position",)
+        times = np.array([1.0])
+
+        def rows(self, i, nav, w_b, clock=None, memory=None, aux=None):
+            return Rows(z, H, np.array([0.25, 0.25]), np.array([0, 0]))
+
+    fix = Fix()
+    a, b = KalmanEstimator(carry_mean=True), KalmanEstimator(carry_mean=True)
+    imm = ImmEstimator([a, b], [{fix}, {object()}], np.eye(2), initial_probabilities=[0.6, 0.4],
+                       transition_interval=None)
+    imm.init(StrapdownMotion(lay, ImuErrorModel()), np.eye(15), 0, np.random.default_rng(0))
+    b.P = 4.0 * np.eye(15)                       # mode 1 is less sure
+    b.x = np.zeros(15)
+    b.x[6] = 0.5
+    nav = np.array([1.0, 0, 0, 0, 0, 0, 0, 0.7, 0.2, 100.0])
+    corr = imm.update(Epoch(1.0, 0, fix, nav, np.zeros(3), np.zeros(2), None))
+    xb = np.zeros(15)
+    xb[6] = 0.5
+    like = [multivariate_normal(H @ x, H @ P @ H.T + 0.25 * np.eye(2)).pdf(z)
+            for x, P in ((np.zeros(15), np.eye(15)), (xb, 4.0 * np.eye(15)))]
+    mu = np.array([0.6 * like[0], 0.4 * like[1]])
+    mu /= mu.sum()
+    np.testing.assert_allclose(imm.mu, mu, rtol=1e-10)
+    # mode 0 updated (its P shrank on the observed axes), mode 1 not
+    assert a.P[6, 6] < 1.0 and b.P[6, 6] == 4.0
+    # the correction is the combined mean, and every mode is re-centred on it
+    x0_post = np.zeros(15)
+    x0_post[6], x0_post[7] = 0.8 / 1.25, -0.3 / 1.25
+    np.testing.assert_allclose(corr.dx, mu[0] * x0_post + mu[1] * xb, atol=1e-12)
+    np.testing.assert_allclose(mu[0] * a.x + mu[1] * b.x, 0.0, atol=1e-12)
