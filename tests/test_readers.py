@@ -26,7 +26,7 @@ import pytest
 
 from mixnav.attitude import euler_to_quat
 from mixnav.data import ImuData
-from mixnav.errors import DataError
+from mixnav.errors import ArgumentError, DataError
 from mixnav.geodesy.earth import A_WGS84
 from mixnav.geodesy.frames import lla_to_ecef
 from mixnav.io.drive0708 import read_drive_imu, read_time_tag
@@ -329,6 +329,24 @@ def test_check_times_counts_gaps_and_warns_with_the_line():
         check_times(t, lines, "f.txt", max_gap=0.2, gap_action="fail")
     assert_data_error(ei, "f.txt", 13, r"gap")
     assert check_times(t, lines, "f.txt").gaps == 0  # no max_gap: gaps are not looked for
+
+
+@pytest.mark.parametrize("gap_action", ["ignore", "Warn", "", None, 1])
+@pytest.mark.parametrize("max_gap", [0.2, None])
+def test_check_times_refuses_an_unknown_gap_action(gap_action, max_gap):
+    """An unknown gap_action is an error naming the argument and the allowed values (it used
+    to warn like "warn"), with or without a gap to act on."""
+    t = np.array([0.0, 0.1, 0.2, 0.5])
+    with pytest.raises(ArgumentError, match=r"'warn' or 'fail'") as ei:
+        check_times(t, np.arange(1, 5), "f.txt", max_gap=max_gap, gap_action=gap_action)
+    assert ei.value.argument == "gap_action"
+
+
+def test_readers_pass_gap_action_to_the_check(tmp_path):
+    p = write_lines(tmp_path / "imu.csv", [IMU_RATE_HEAD, "0.01,0,0,0,0,0,9.8", "0.02,0,0,0,0,0,9.8"])
+    with pytest.raises(ArgumentError) as ei:
+        read_imu_csv(p, max_gap=0.1, gap_action="skip")
+    assert ei.value.argument == "gap_action"
 
 
 @pytest.mark.parametrize("t, line, kind", [([0, 1, 2, 1.5, 3], 13, "goes backwards"),

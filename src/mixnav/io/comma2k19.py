@@ -63,7 +63,7 @@ from ..errors import ArgumentError, DataError
 from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla
 from ..units import DEG
 from .imu_checks import check_plausible, rates_to_increments
-from .tables import check_times
+from .tables import check_gap_action, check_times
 
 #: GPS - UTC [s] from 2017-01-01 until the next leap second (none announced as of 2024).
 GPS_UTC_LEAP_SECONDS = 18
@@ -135,8 +135,7 @@ def _positive(value, name: str, allow_none: bool = False):
 
 def _gap_args(max_gap, gap_action):
     _positive(max_gap, "max_gap", allow_none=True)
-    if gap_action not in ("warn", "fail"):
-        raise ArgumentError(f"must be 'warn' or 'fail', got {gap_action!r}", "gap_action")
+    check_gap_action(gap_action)
 
 
 def _sigma3(value, name: str) -> np.ndarray:

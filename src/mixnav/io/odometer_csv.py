@@ -48,7 +48,7 @@ import numpy as np
 from .. import units as u
 from ..data import MAX_VEHICLE_SPEED, OdometerData
 from ..errors import ArgumentError, DataError
-from .tables import check_times, header_fields, read_numeric
+from .tables import check_gap_action, check_times, header_fields, read_numeric
 
 _COL = re.compile(r"^\s*([A-Za-z_]+)\s*(?:\[(.*)\])?\s*$")
 
@@ -67,8 +67,7 @@ def _check_arguments(sigma, max_gap, gap_action, units):
         raise ArgumentError(f"must be a finite positive speed sigma [m/s], got {sigma!r}", "sigma")
     if max_gap is not None and not (_real(max_gap) and max_gap > 0):
         raise ArgumentError(f"must be a positive time [s] or None, got {max_gap!r}", "max_gap")
-    if gap_action not in ("warn", "fail"):
-        raise ArgumentError(f"must be 'warn' or 'fail', got {gap_action!r}", "gap_action")
+    check_gap_action(gap_action)
     for name, unit in (units or {}).items():
         if name not in _DIMS:
             raise ArgumentError(f"unknown column {name!r}; columns are {', '.join(_DIMS)}", f"units.{name}")
