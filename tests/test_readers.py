@@ -319,6 +319,20 @@ def test_read_numeric_converter_failure_names_the_line(tmp_path):
     assert_data_error(ei, p, 3, r"cannot read this thing line .*'zz'")
 
 
+@pytest.mark.parametrize("lines, skip, line, words", [
+    (["a,b"], 1, 1, r"thing file is empty: no data line after the header"),
+    (["# h1", "# h2", "", "% c"], 2, 2, r"no data line after the header"),   # blank and comment lines
+    (["a,b"], 2, None, r"thing file is empty \(no data lines\)"),            # shorter than its header
+    ([], 0, None, r"thing file is empty \(no data lines\)"),
+])
+def test_read_numeric_names_the_header_of_a_file_without_data(tmp_path, lines, skip, line, words):
+    """After ``skip_lines`` header lines, no data line is an error naming the header's last line."""
+    p = write_lines(tmp_path / "t.csv", lines)
+    with pytest.raises(DataError) as ei:
+        read_numeric(p, 2, delimiter=",", comment="%", skip_lines=skip, what="thing")
+    assert_data_error(ei, p, line, words)
+
+
 def test_check_times_counts_gaps_and_warns_with_the_line():
     t = np.array([0.0, 0.1, 0.2, 0.5, 0.6, 1.6])
     lines = np.arange(10, 16)
@@ -843,9 +857,12 @@ EMPTY_CASES = {
     "kfgins blank lines only": (["", "  "], write_lines, read_kfgins_gnss, None, r"file is empty"),
     "kfgins one line": (kfgins_imu_lines()[:1], write_lines, read_kfgins_imu, None, r"at least two"),
     "generic empty": ([], write_lines, read_imu_csv, 1, r"IMU file is empty \(no header line\)"),
-    "generic header only": ([IMU_RATE_HEAD], write_lines, read_imu_csv, None, r"empty \(no data lines\)"),
+    "generic header only": ([IMU_RATE_HEAD], write_lines, read_imu_csv, 1,
+                            r"IMU file is empty: no data line after the header"),
+    "generic header then blank lines": ([IMU_RATE_HEAD, "", " "], write_lines, read_imu_csv, 1,
+                                        r"no data line after the header"),
     "generic gnss header only": (["time[s],lat[deg],lon[deg],height[m],sd_n[m],sd_e[m],sd_d[m]"],
-                                 write_lines, read_gnss_csv, None, r"GNSS file is empty"),
+                                 write_lines, read_gnss_csv, 1, r"GNSS file is empty: no data line after"),
     "generic reference empty": ([], write_lines, read_reference_csv, 1, r"reference file is empty"),
     "drive empty": ([], _write_drive_text, read_drive_imu, None, r"IMU file is empty"),
     "drive only the two edge lines": (drive_rows()[:2], _write_drive_text, read_drive_imu, None,

@@ -106,10 +106,6 @@ def _header(path: Path, units: Mapping[str, str]):
         factors.append(f)
     if len(set(names)) != len(names):
         raise DataError("a column appears twice in the header", file=str(path), line=1)
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        fh.readline()
-        if not any(line.strip() for line in fh):
-            raise DataError("odometer file is empty: no data line after the header", file=str(path), line=1)
     motion = [n for n in names if n in _MOTION]
     if "time" not in names or len(motion) != 1:
         raise DataError(f"columns {names}: need time and exactly one of {', '.join(_MOTION)} "

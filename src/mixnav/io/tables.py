@@ -79,8 +79,9 @@ def read_numeric(path, ncols: int | tuple[int, ...], *, delimiter: str | None = 
     Raises
     ------
     DataError
-        Empty file, wrong column count, non-numeric or non-finite value, each
-        naming the file and the line.
+        Empty file (with ``skip_lines``: no data line after the header, naming
+        its last line), wrong column count, non-numeric or non-finite value,
+        each naming the file and the line.
     """
     path = Path(path)
     if not path.is_file():
@@ -95,6 +96,9 @@ def read_numeric(path, ncols: int | tuple[int, ...], *, delimiter: str | None = 
             continue
         keep_lines.append(i)
         keep_rows.append(s)
+    if skip_lines and not keep_rows and len(raw) >= skip_lines:
+        raise DataError(f"{what} file is empty: no data line after the header", file=str(path),
+                        line=skip_lines)
     if drop_edges:
         keep_lines, keep_rows = keep_lines[1:-1], keep_rows[1:-1]
     if not keep_rows:
