@@ -378,10 +378,10 @@ def read_comma_odometer(segment, *, source: str = "rear_wheels", sigma: float = 
     seg = _segment(segment)
     if source == "speed":
         rel = f"{_CAN}/speed"
-        t, speed, _ = _log(seg, rel, None, "CAN speed", max_gap, gap_action)
+        t, speed, gaps = _log(seg, rel, None, "CAN speed", max_gap, gap_action)
     else:
         rel = f"{_CAN}/wheel_speed"
-        t, v, _ = _log(seg, rel, 4, "CAN wheel speeds", max_gap, gap_action)
+        t, v, gaps = _log(seg, rel, 4, "CAN wheel speeds", max_gap, gap_action)
         speed = v[:, 2:].mean(axis=1)
     vfile = str(seg / rel / "value")
     bad = (speed < 0) | (speed > MAX_VEHICLE_SPEED)
@@ -390,7 +390,7 @@ def read_comma_odometer(segment, *, source: str = "rear_wheels", sigma: float = 
         raise DataError(f"speed {speed[k]:.6g} m/s in row {k + 1} is negative or above "
                         f"{MAX_VEHICLE_SPEED:g} m/s (wrong unit?)", file=vfile, line=k + 1)
     return OdometerData(time=t + float(time_offset), speed=speed, sigma=np.full(len(t), sigma), signed=False,
-                        source=vfile)
+                        source=vfile, gaps=gaps)
 
 
 # ---------------------------------------------------------------------------

@@ -134,14 +134,15 @@ def read_odometer_csv(path, *, sigma: float | None = None, units: Mapping[str, s
         Longest accepted interval between consecutive lines [s]; None: no limit.
     gap_action : {"warn", "fail"}
         A longer interval warns (naming the line that ends it; the data is
-        returned with the gap) or raises, as the IMU readers do.
+        returned with the gap, counted in ``OdometerData.gaps``) or raises, as
+        the IMU readers do.
 
     Returns
     -------
     OdometerData
         ``time`` (M,) [s], ``speed`` (M,) [m/s], ``sigma`` (M,) [m/s]:
         one sample per line for ``speed``, one per interval (midpoint time)
-        for the distance forms.
+        for the distance forms; ``gaps``: the gaps accepted with a warning.
 
     Raises
     ------
@@ -160,7 +161,7 @@ def read_odometer_csv(path, *, sigma: float | None = None, units: Mapping[str, s
     tab = read_numeric(path, len(names), delimiter=",", skip_lines=1, what="odometer")
     c = {n: tab.values[:, i] * fac[i] for i, n in enumerate(names)}
     t, lines, src = c["time"], tab.lines, str(path)
-    check_times(t, lines, src, max_gap=max_gap, gap_action=gap_action, what="odometer")
+    gaps = check_times(t, lines, src, max_gap=max_gap, gap_action=gap_action, what="odometer").gaps
     sig = c["sigma"] if "sigma" in c else np.full(len(t), float(sigma))
     if motion == "speed":
         time, speed, sl = t, c["speed"], lines
@@ -176,7 +177,7 @@ def read_odometer_csv(path, *, sigma: float | None = None, units: Mapping[str, s
         time, speed, sig, sl = 0.5 * (t[1:] + t[:-1]), step / np.diff(t), sig[1:], lines[1:]
     _check_samples(speed, sig, sl, src, signed, motion)
     return OdometerData(time=np.asarray(time, float), speed=np.asarray(speed, float),
-                        sigma=np.asarray(sig, float), signed=bool(signed), source=src)
+                        sigma=np.asarray(sig, float), signed=bool(signed), source=src, gaps=gaps)
 
 
 def _check_samples(speed, sig, lines, src, signed, motion):
