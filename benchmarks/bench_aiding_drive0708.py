@@ -13,12 +13,12 @@ times against the plain EKF's in the same process (best of 3).
 from __future__ import annotations
 
 import sys
-import time
 from datetime import datetime
 from pathlib import Path
 
 import numpy as np
 
+from _timing import best_time
 from mixnav.api import process_dataset
 from mixnav.engine.smoother import rts_smooth
 from mixnav.experiment.process import process
@@ -61,11 +61,7 @@ def timing(name, data):
     filt, meas = methods.build(m, model, po.fixes, po.lever, src, 1, aiding=aid)
     out_t = po.results[m.name].time
     res = filt.run(po.imu, po.init, meas, output_times=out_t, history=True)
-    bw = np.inf
-    for _ in range(3):
-        t0 = time.perf_counter()
-        rts_smooth(res)
-        bw = min(bw, time.perf_counter() - t0)
+    bw = best_time(lambda: rts_smooth(res), 3)
     duration = float(po.imu.time[-1] - po.init.time)
     return best, bw, duration, res.timing["wall_time_s"]
 

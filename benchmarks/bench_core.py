@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from _timing import best_time
 from mixnav import __version__
 from mixnav.attitude import quat_to_euler
 from mixnav.config import load_scenario
@@ -52,18 +53,6 @@ from mixnav.sim.scenario import simulate, truth_and_ideal_imu
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
-def best(fn, repeat=5, number=1):
-    """Best wall time of ``number`` calls, over ``repeat`` repeats [s per call]."""
-    fn()
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        for _ in range(number):
-            fn()
-        times.append((time.perf_counter() - t) / number)
-    return min(times)
-
-
 def bench_mechanization(truth, imu):
     import pyins.strapdown as ps
     nav0 = nav_vector(truth.q_nb[0], truth.v_n[0], truth.lla[0])
@@ -74,7 +63,7 @@ def bench_mechanization(truth, imu):
         mechanize_block(nav, np.zeros(6), imu.dtheta, imu.dvel, imu.dt, out)
         return nav
 
-    t_ours = best(ours) / len(imu)
+    t_ours = best_time(ours, 5, warmup=True) / len(imu)
     nav = ours()
     err_ours = float(np.linalg.norm(ned_displacement(nav[7:10], truth.lla[-1])))
 
@@ -95,7 +84,7 @@ def bench_mechanization(truth, imu):
         integ = ps.Integrator(pva)
         return integ.integrate(inc)
 
-    t_pyins = best(theirs, repeat=3) / len(imu)
+    t_pyins = best_time(theirs, 3, warmup=True) / len(imu)
     last = theirs().iloc[-1]
     lla_p = np.array([np.radians(last["lat"]), np.radians(last["lon"]), last["alt"]])
     err_pyins = float(np.linalg.norm(ned_displacement(lla_p, truth.lla[-1])))
@@ -133,7 +122,7 @@ def bench_ekf_epoch(run):
         P, nis, st = ekf_correct(P, z, H, r, 1e4, nav.copy(), np.zeros(12), np.zeros(2), la)
         return P
 
-    t_ours = best(ours, repeat=7, number=2000)
+    t_ours = best_time(ours, 7, number=2000, warmup=True)
     z, H, r = meas.measure(fixes_i, nav, w_b)
     R = np.diag(r)
 
@@ -149,7 +138,7 @@ def bench_ekf_epoch(run):
         ekf.update(z.reshape(6, 1), lambda x: H, lambda x: H @ x)
         return ekf.P
 
-    t_fp = best(theirs, repeat=7, number=2000)
+    t_fp = best_time(theirs, 7, number=2000, warmup=True)
     return {"mixnav_us_per_epoch": t_ours * 1e6, "filterpy_us_per_epoch": t_fp * 1e6,
             "ratio_filterpy_over_mixnav": t_fp / t_ours, "states": 15, "measurements": 6}
 
@@ -165,7 +154,7 @@ def bench_filters(sc, src, run):
     ekf = ErrorStateEkf(lay, run.imu_model)
     meas = [LooseGnss(run.fixes, np.asarray(sc.gnss.lever_arm), lay)]
     res = ekf.run(run.imu, run.init, meas)
-    t_ours = best(lambda: ekf.run(run.imu, run.init, meas), repeat=3)
+    t_ours = best_time(lambda: ekf.run(run.imu, run.init, meas), 3, warmup=True)
     n_ep = res.timing["measurement_epochs"]
 
     t = run.truth.time
@@ -204,8 +193,8 @@ def bench_filters(sc, src, run):
 
 def bench_demo(sc, src):
     ideal = truth_and_ideal_imu(sc, src)
-    t_sim_filter = best(lambda: run_scenario(sc, src, seed=1, ideal=ideal), repeat=3)
-    t_all = best(lambda: run_scenario(sc, src, seed=1), repeat=3)
+    t_sim_filter = best_time(lambda: run_scenario(sc, src, seed=1, ideal=ideal), 3, warmup=True)
+    t_all = best_time(lambda: run_scenario(sc, src, seed=1), 3, warmup=True)
     with tempfile.TemporaryDirectory() as d:
         t0 = time.perf_counter()
         subprocess.run([sys.executable, "-m", "mixnav.cli", "run", "loose-demo", "--out", d],

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from _timing import best_of
 from mixnav.config import load_dataset
 from mixnav.experiment.process import process
 from mixnav.experiment.run import method_metrics, solution_table
@@ -27,17 +28,12 @@ RESULTS = ROOT / "benchmarks" / "results"
 
 def main():
     ds, src, _ = load_dataset("drive-0708")
-    process(ds, src, str(DATA))  # warm up numba's cache
-    walls, po = [], None
-    for _ in range(3):
-        t = time.perf_counter()
-        po = process(ds, src, str(DATA))
-        walls.append(time.perf_counter() - t)
+    # the first call warms up numba's cache
+    wall, po = best_of(lambda: process(ds, src, str(DATA)), 3, warmup=True)
     res = po.results["ekf"]
     table = solution_table(res, po.reference, ds.gnss.withhold, lever=po.lever)
     m = method_metrics(res, table, ds.gnss.withhold)
     span = float(po.imu.time[-1] - po.init.time)
-    wall = min(walls)
     out = {"date": time.strftime("%Y-%m-%d %H:%M"), "processed_span_s": span, "record_s": float(po.imu.time[-1]),
            "wall_time_s": wall, "read_time_s": po.read_time_s, "filter_time_s": po.filter_time_s,
            "real_time_factor": span / wall, "gnss_epochs_used": m["measurement_epochs"],

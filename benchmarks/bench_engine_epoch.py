@@ -22,11 +22,11 @@ measured in the same process (best of several repeats):
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 import numpy as np
 
+from _timing import best_time
 from mixnav.config import load_scenario
 from mixnav.filters.ekf import ErrorStateEkf
 from mixnav.ins._error_kernels import apply_feedback, discretize, error_dynamics
@@ -38,14 +38,9 @@ from mixnav.sim.scenario import simulate
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
-def best(fn, repeat=7):
-    fn()
-    out = np.inf
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        out = min(out, time.perf_counter() - t)
-    return out
+def best(fn):
+    """Best of 7 wall times [s], after one untimed call."""
+    return best_time(fn, 7, warmup=True)
 
 
 def main():

@@ -17,7 +17,6 @@ import json
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +33,7 @@ def one() -> dict:
     from mixnav.config import load_scenario
     from mixnav.experiment.run import _training
     from mixnav.sim.scenario import simulate
+    from _timing import best_of
     try:
         from mixnav.experiment.methods import build
     except ImportError:  # before the redesign
@@ -53,12 +53,8 @@ def one() -> dict:
                 continue
             filt, meas = build(m, sim.imu_model, sim.fixes, np.asarray(sc.gnss.lever_arm), src, i,
                                observations=sim.observations, clock=clock, training=training, seed=3)
-            res = filt.run(sim.imu, sim.init, meas)  # warm-up (compilation, caches)
-            best = np.inf
-            for _ in range(REPEAT):
-                t = time.perf_counter()
-                res = filt.run(sim.imu, sim.init, meas)
-                best = min(best, time.perf_counter() - t)
+            # warm-up: compilation, caches
+            best, res = best_of(lambda: filt.run(sim.imu, sim.init, meas), REPEAT, warmup=True)
             n = res.timing["measurement_epochs"]
             out[f"{name}:{m.name}"] = {"us_per_epoch": best / n * 1e6, "epochs": n}
     return out

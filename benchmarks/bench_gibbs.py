@@ -34,6 +34,7 @@ import warnings
 import numba
 import numpy as np
 
+from _timing import best_time
 from mixnav.filters.gmekf import learn_mixture
 from mixnav.noise.learn import GibbsGaussianMixture
 from mixnav.noise.mixture import GaussianMixture
@@ -59,18 +60,13 @@ def gibbs(x, samples, backend, seed=0):
                                 backend=backend).fit(x[:, None])
 
 
-def best_of(fn, repeats):
+def cpu_best(fn, repeats):
     """Smallest CPU time of the process (``time.process_time``) over ``repeats`` calls.
 
     CPU time, not wall time: on the shared 2-core machine a wall clock also counts the
     time the process waits for a core (every learner here runs on one thread).
     """
-    best = np.inf
-    for _ in range(repeats):
-        t = time.process_time()
-        fn()
-        best = min(best, time.process_time() - t)
-    return best
+    return best_time(fn, repeats, clock=time.process_time)
 
 
 def main(out=None):
@@ -85,9 +81,9 @@ def main(out=None):
     for name, x in data.items():
         r = {"data": name}
         for S in (1000, 5000):
-            r[f"numpy_{S}"] = best_of(lambda: gibbs(x, S, "numpy"), 3)
-            r[f"numba_{S}"] = best_of(lambda: gibbs(x, S, "numba"), 5)
-        r["vb"] = float(np.median([best_of(lambda: learn_mixture(x, "vb", seed=s), 3) for s in range(3)]))
+            r[f"numpy_{S}"] = cpu_best(lambda: gibbs(x, S, "numpy"), 3)
+            r[f"numba_{S}"] = cpu_best(lambda: gibbs(x, S, "numba"), 5)
+        r["vb"] = float(np.median([cpu_best(lambda: learn_mixture(x, "vb", seed=s), 3) for s in range(3)]))
         rows.append(r)
         print(r, flush=True)
     load1 = os.getloadavg()

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from _timing import best_of
 from mixnav.config import load_scenario
 from mixnav.engine import Engine
 from mixnav.filters.ekf import KalmanEstimator
@@ -37,15 +38,6 @@ REPEATS = 5
 PI = [[0.98, 0.02], [0.05, 0.95]]
 
 
-def _best(fn):
-    best, out = np.inf, None
-    for _ in range(REPEATS):
-        t = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t)
-    return best, out
-
-
 def _case(label, sim, lay, models, sets):
     motion = StrapdownMotion(lay, sim.imu_model)
 
@@ -57,8 +49,8 @@ def _case(label, sim, lay, models, sets):
         return Engine(motion, est, models, covariance_interval=1.0).run(sim.imu, sim.init)
 
     ekf(), imm()
-    t_e, r_e = _best(ekf)
-    t_i, r_i = _best(imm)
+    t_e, r_e = best_of(ekf, REPEATS)
+    t_i, r_i = best_of(imm, REPEATS)
     e_us, i_us = r_e.timing["epoch_time_mean_us"], r_i.timing["epoch_time_mean_us"]
     return (f"| {label} | {r_e.timing['measurement_epochs']} | {e_us:.1f} | {i_us:.1f} | {i_us / e_us:.2f} | "
             f"{t_e:.3f} | {t_i:.3f} |")

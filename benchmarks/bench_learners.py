@@ -39,6 +39,7 @@ from sklearn.exceptions import ConvergenceWarning as SkConvergenceWarning
 from sklearn.mixture import BayesianGaussianMixture
 from threadpoolctl import threadpool_limits
 
+from _timing import best_of
 from mixnav.noise.learn import ConvergenceWarning, VariationalGaussianMixture
 from mixnav.noise.mixture import GaussianMixture
 
@@ -50,15 +51,6 @@ def make_data(n, d, rng):
     means = np.array([[-4.0], [0.0], [0.0], [10.0]]) * np.ones((1, d))
     covs = np.array([np.eye(d) * s for s in (1.0, 0.09, 0.03, 1.0)])
     return GaussianMixture([0.2, 0.1, 0.65, 0.05], means, covs).sample(n, rng)
-
-
-def best_of(fn, repeats=3):
-    best, out = np.inf, None
-    for _ in range(repeats):
-        t = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t)
-    return best, out
 
 
 def fit_ours(X, seed=0, parallel=False, **kw):
@@ -117,7 +109,7 @@ def main(out=None, n_seeds=3):
             t_o, i_o, t_s, i_s = [], [], [], []
             prior = None
             for seed in range(n_seeds):
-                t, ours = best_of(lambda: fit_ours(X, seed))
+                t, ours = best_of(lambda: fit_ours(X, seed), 3)
                 t_o.append(t)
                 i_o.append(ours.n_iter_)
                 prior = ours.prior_

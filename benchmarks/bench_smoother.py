@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from _timing import best_of
 from mixnav.config import load_dataset, load_scenario
 from mixnav.engine.smoother import rts_smooth
 from mixnav.experiment.run import solution_table
@@ -37,15 +38,6 @@ RESULTS = ROOT / "benchmarks" / "results"
 REPEATS = 7
 
 
-def _best(fn):
-    best, out = np.inf, None
-    for _ in range(REPEATS):
-        t = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t)
-    return best, out
-
-
 def _outage_max(table, windows):
     h = np.hypot(table["err_n_m"], table["err_e_m"]).to_numpy()
     t = table["time_s"].to_numpy()
@@ -55,9 +47,9 @@ def _outage_max(table, windows):
 def _case(name, run, truth, windows, lever=None):
     run(False)  # compile / warm the caches
     rts_smooth(run(True))
-    fwd_plain, _ = _best(lambda: run(False))
-    fwd_hist, res = _best(lambda: run(True))
-    bwd, sm = _best(lambda: rts_smooth(res))
+    fwd_plain, _ = best_of(lambda: run(False), REPEATS)
+    fwd_hist, res = best_of(lambda: run(True), REPEATS)
+    bwd, sm = best_of(lambda: rts_smooth(res), REPEATS)
     h = res.history
     E, n = len(h.time), res.layout.n
     nbytes = sum(a.nbytes for a in (h.time, h.Phi, h.P_pred, h.P_filt, h.dx, h.nav, h.updated))

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from _timing import best_time
 from mixnav import __version__
 from mixnav.config import load_scenario
 from mixnav.experiment.run import run_scenario
@@ -44,18 +45,6 @@ from mixnav.measurements.tight import TightGnss
 
 RESULTS = Path(__file__).resolve().parent / "results"
 LEVER = np.array([0.5, 0.2, -1.0])
-
-
-def best(fn, repeat=7, number=2000):
-    """Best wall time per call [s] over ``repeat`` repeats of ``number`` calls."""
-    fn()
-    out = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        for _ in range(number):
-            fn()
-        out.append((time.perf_counter() - t) / number)
-    return min(out)
 
 
 def one_epoch(n_sat: int, nav: np.ndarray, rng) -> GnssObservations:
@@ -97,7 +86,7 @@ def bench_epoch(n_sat: int) -> dict:
         z, H, r = meas.measure(0, nav, w_b, clock)
         return ekf_correct(P0, z, H, r, 1e4, nav.copy(), np.zeros(12), np.zeros(2), la)
 
-    t_ours = best(ours)
+    t_ours = best_time(ours, 7, number=2000, warmup=True)
     y = obs.pseudorange[0], obs.range_rate[0]
     z_meas = np.concatenate(y).reshape(m, 1)
 
@@ -116,7 +105,7 @@ def bench_epoch(n_sat: int) -> dict:
         ekf.P = P0.copy()
         ekf.update(z_meas, jac, hx)
 
-    t_full = best(filterpy_full, number=500)
+    t_full = best_time(filterpy_full, 7, number=500, warmup=True)
     H = jac(None)
     h0 = hx(None)
 
@@ -125,7 +114,7 @@ def bench_epoch(n_sat: int) -> dict:
         ekf.P = P0.copy()
         ekf.update(z_meas, lambda x: H, lambda x: h0)
 
-    t_upd = best(filterpy_update_only, number=1000)
+    t_upd = best_time(filterpy_update_only, 7, number=1000, warmup=True)
     # same numbers: the posterior covariance of both (the feedback does not change P)
     P_ours = ours()[0]
     ekf.x = np.zeros((17, 1))

@@ -59,6 +59,28 @@ def test_report_embeds_every_figure(demo_out):
     assert "ekf" in html and "GNSS outages" in html
 
 
+def test_smoothed_method_shows_its_own_time(tmp_path):
+    """A smoothed method's table row and metrics carry the smoother's time, not the
+    forward pass's per-epoch time copied from the causal method."""
+    out = tmp_path / "veh"
+    res = runner.invoke(app, ["run", "vehicle-demo", "--out", str(out)], env={"COLUMNS": "200"})
+    assert res.exit_code == 0, res.output
+    methods = json.loads((out / "metrics.json").read_text())["methods"]
+    causal, smoothed = methods["aided"], methods["aided-smoothed"]
+    assert set(smoothed) - {"outages"} <= set(METRIC_KEYS_DOC)
+    assert smoothed["smoother_time_s"] > 0 and "smoother_time_s" not in causal
+    for k in ("epoch_time_mean_us", "update_time_mean_us", "wall_time_s", "total_time_s", "measurement_epochs"):
+        assert k in causal and k not in smoothed, k
+    rows = {r.split("│")[1].strip(): [c.strip() for c in r.split("│")[2:-1]]
+            for r in res.output.splitlines() if r.startswith("│")}
+    assert rows["aided-smoothed"][4:] == ["-", f"{smoothed['smoother_time_s']:.3g}"], rows
+    assert rows["aided"][4:] == [f"{causal['epoch_time_mean_us']:.3g}", "-"], rows
+    html = (out / "report.html").read_text()
+    assert "<th>smoother [s]</th>" in html
+    # the time/epoch cell of the smoothed method is blank, its smoother cell filled
+    assert f"<td></td><td>{smoothed['smoother_time_s']:.3g}</td></tr>" in html
+
+
 def test_docs_list_every_metric_key():
     text = (DOCS / "outputs.md").read_text()
     for key in METRIC_KEYS_DOC:

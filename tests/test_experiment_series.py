@@ -162,3 +162,16 @@ def test_bad_sweeps_name_the_key(tmp_path, sweep, key, message):
         load_scenario(str(p))
     assert exc.value.key is not None and exc.value.key.startswith(key)
     assert exc.value.file == str(p)
+
+
+def test_summary_cell_is_blank_where_no_run_has_the_metric():
+    """A smoothed method has no forward-pass epoch time: its cell is blank, not 'nan'."""
+    from mixnav.experiment.mc_report import _mean_ci_table
+    df = pd.DataFrame({"method": ["aided", "aided", "aided-smoothed", "aided-smoothed"], "seed": [0, 1, 0, 1],
+                       "horizontal_rmse_m": [0.5, 0.7, 0.3, 0.4],
+                       "epoch_time_mean_us": [90.0, 110.0, np.nan, np.nan],
+                       "smoother_time_s": [np.nan, np.nan, 0.1, 0.2]})
+    summ = aggregate(df)
+    wide = _mean_ci_table(summ, {"horizontal_rmse_m": "h", "epoch_time_mean_us": "t"}).set_index("method")
+    assert wide.loc["aided-smoothed", "t"] == "" and wide.loc["aided", "t"].startswith("100 ±")
+    assert wide.loc["aided-smoothed", "h"].startswith("0.35 ±")

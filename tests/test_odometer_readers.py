@@ -260,9 +260,14 @@ def test_gap_warns_names_the_line_and_keeps_the_data(tmp_path):
     p = write_lines(tmp_path / "odo.csv", rows)
     with pytest.warns(UserWarning, match=rf"{re.escape(str(p))}, line {BAD}: 1 gap\(s\) longer than 0.15 s"):
         od = read_odometer_csv(p, sigma=0.1, max_gap=0.15, gap_action="warn")
-    assert len(od) == N - 1
+    assert len(od) == N - 1 and od.gaps == 1           # accepted, and counted like ImuData.gaps
     assert np.diff(od.time).max() == pytest.approx(0.2)
-    read_odometer_csv(p, sigma=0.1, max_gap=0.25, gap_action="fail")   # within the limit: silent
+    assert read_odometer_csv(p, sigma=0.1, max_gap=0.25, gap_action="fail").gaps == 0  # within the limit: silent
+    assert read_odometer_csv(p, sigma=0.1).gaps == 0    # no max_gap: gaps are not looked for
+    del rows[BAD + 2]                                   # a second gap, in the distance form too
+    rows = ["time[s],distance[m]"] + [f"{r.split(',')[0]},{k}" for k, r in enumerate(rows[1:])]
+    with pytest.warns(UserWarning, match=r"2 gap\(s\)"):
+        assert read_odometer_csv(write_lines(tmp_path / "d.csv", rows), sigma=0.1, max_gap=0.15).gaps == 2
 
 
 def test_missing_file(tmp_path):
@@ -409,6 +414,14 @@ def test_bad_segment_names_file_and_row(tmp_path, edit, file, line, pattern):
     assert ei.value.file == str(seg / file)
     assert ei.value.line == line, str(ei.value)
     assert re.search(pattern, str(ei.value)), str(ei.value)
+
+
+def test_can_gaps_accepted_are_counted(tmp_path):
+    seg = make_segment(tmp_path)
+    assert cm.read_comma_odometer(seg).gaps == 0
+    save(seg / "processed_log/CAN/wheel_speed/t", BOOT0 + 0.0125 * np.r_[0:480] + 0.5 * (np.r_[0:480] >= 100))
+    with pytest.warns(UserWarning, match=r"1 gap\(s\) longer than 0.1 s"):
+        assert cm.read_comma_odometer(seg).gaps == 1
 
 
 def test_bad_clock_and_leap_seconds(tmp_path):

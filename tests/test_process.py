@@ -2,6 +2,7 @@
 and the real drive-0708 recording when ../shared/data is present."""
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -88,6 +89,29 @@ def test_simulated_drive_through_files_is_scored_against_its_truth(simulated, tm
     assert m["start_s"] > 60.0  # in-motion alignment waits for 5 m/s; the drive starts at rest
     # position NEES against the truth: 3 for a consistent filter (one run: wide band)
     assert 1.0 < e["nees_pos_mean"] < 6.0
+
+
+def test_odometer_gaps_are_reported_next_to_the_imu_gaps(simulated, tmp_path):
+    """metrics.json counts the odometer's accepted gaps beside the IMU's when the dataset
+    reads an odometer file, and has no such key when it does not."""
+    from mixnav.experiment.process import write_process
+    run, cfg = simulated
+    t = run.truth.time[::10]
+    speed = np.linalg.norm(run.truth.v_n[::10, :2], axis=1)
+    np.savetxt(tmp_path / "odo.csv", np.column_stack([t, speed]), fmt="%.6f", delimiter=",",
+               header="time[s],speed[m/s]", comments="")
+    p = tmp_path / "odo.toml"
+    p.write_text(cfg.read_text() + f'[aiding.odometer]\nfile = "{tmp_path / "odo.csv"}"\nsigma = "0.1 m/s"\n')
+    ds, src, _ = load_dataset(str(p))
+    po = process(ds, src)
+    assert po.odometer is not None and len(po.odometer) == len(t)
+    po.odometer = replace(po.odometer, gaps=3)  # what the reader counted (none in this file)
+    header = write_process(tmp_path / "with", po)
+    keys = list(header)
+    assert header["odometer_gaps_accepted"] == 3
+    assert keys.index("odometer_gaps_accepted") == keys.index("imu_gaps_accepted") + 1
+    ds, src, _ = load_dataset(str(cfg))
+    assert "odometer_gaps_accepted" not in write_process(tmp_path / "without", process(ds, src))
 
 
 def test_withheld_fixes_are_not_given_to_the_filter(simulated):

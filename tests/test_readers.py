@@ -26,7 +26,7 @@ import pytest
 
 from mixnav.attitude import euler_to_quat
 from mixnav.data import ImuData
-from mixnav.errors import DataError
+from mixnav.errors import ArgumentError, DataError
 from mixnav.geodesy.earth import A_WGS84
 from mixnav.geodesy.frames import lla_to_ecef
 from mixnav.io.drive0708 import read_drive_imu, read_time_tag
@@ -319,6 +319,20 @@ def test_read_numeric_converter_failure_names_the_line(tmp_path):
     assert_data_error(ei, p, 3, r"cannot read this thing line .*'zz'")
 
 
+@pytest.mark.parametrize("lines, skip, line, words", [
+    (["a,b"], 1, 1, r"thing file is empty: no data line after the header"),
+    (["# h1", "# h2", "", "% c"], 2, 2, r"no data line after the header"),   # blank and comment lines
+    (["a,b"], 2, None, r"thing file is empty \(no data lines\)"),            # shorter than its header
+    ([], 0, None, r"thing file is empty \(no data lines\)"),
+])
+def test_read_numeric_names_the_header_of_a_file_without_data(tmp_path, lines, skip, line, words):
+    """After ``skip_lines`` header lines, no data line is an error naming the header's last line."""
+    p = write_lines(tmp_path / "t.csv", lines)
+    with pytest.raises(DataError) as ei:
+        read_numeric(p, 2, delimiter=",", comment="%", skip_lines=skip, what="thing")
+    assert_data_error(ei, p, line, words)
+
+
 def test_check_times_counts_gaps_and_warns_with_the_line():
     t = np.array([0.0, 0.1, 0.2, 0.5, 0.6, 1.6])
     lines = np.arange(10, 16)
@@ -329,6 +343,24 @@ def test_check_times_counts_gaps_and_warns_with_the_line():
         check_times(t, lines, "f.txt", max_gap=0.2, gap_action="fail")
     assert_data_error(ei, "f.txt", 13, r"gap")
     assert check_times(t, lines, "f.txt").gaps == 0  # no max_gap: gaps are not looked for
+
+
+@pytest.mark.parametrize("gap_action", ["ignore", "Warn", "", None, 1])
+@pytest.mark.parametrize("max_gap", [0.2, None])
+def test_check_times_refuses_an_unknown_gap_action(gap_action, max_gap):
+    """An unknown gap_action is an error naming the argument and the allowed values (it used
+    to warn like "warn"), with or without a gap to act on."""
+    t = np.array([0.0, 0.1, 0.2, 0.5])
+    with pytest.raises(ArgumentError, match=r"'warn' or 'fail'") as ei:
+        check_times(t, np.arange(1, 5), "f.txt", max_gap=max_gap, gap_action=gap_action)
+    assert ei.value.argument == "gap_action"
+
+
+def test_readers_pass_gap_action_to_the_check(tmp_path):
+    p = write_lines(tmp_path / "imu.csv", [IMU_RATE_HEAD, "0.01,0,0,0,0,0,9.8", "0.02,0,0,0,0,0,9.8"])
+    with pytest.raises(ArgumentError) as ei:
+        read_imu_csv(p, max_gap=0.1, gap_action="skip")
+    assert ei.value.argument == "gap_action"
 
 
 @pytest.mark.parametrize("t, line, kind", [([0, 1, 2, 1.5, 3], 13, "goes backwards"),
@@ -825,9 +857,12 @@ EMPTY_CASES = {
     "kfgins blank lines only": (["", "  "], write_lines, read_kfgins_gnss, None, r"file is empty"),
     "kfgins one line": (kfgins_imu_lines()[:1], write_lines, read_kfgins_imu, None, r"at least two"),
     "generic empty": ([], write_lines, read_imu_csv, 1, r"IMU file is empty \(no header line\)"),
-    "generic header only": ([IMU_RATE_HEAD], write_lines, read_imu_csv, None, r"empty \(no data lines\)"),
+    "generic header only": ([IMU_RATE_HEAD], write_lines, read_imu_csv, 1,
+                            r"IMU file is empty: no data line after the header"),
+    "generic header then blank lines": ([IMU_RATE_HEAD, "", " "], write_lines, read_imu_csv, 1,
+                                        r"no data line after the header"),
     "generic gnss header only": (["time[s],lat[deg],lon[deg],height[m],sd_n[m],sd_e[m],sd_d[m]"],
-                                 write_lines, read_gnss_csv, None, r"GNSS file is empty"),
+                                 write_lines, read_gnss_csv, 1, r"GNSS file is empty: no data line after"),
     "generic reference empty": ([], write_lines, read_reference_csv, 1, r"reference file is empty"),
     "drive empty": ([], _write_drive_text, read_drive_imu, None, r"IMU file is empty"),
     "drive only the two edge lines": (drive_rows()[:2], _write_drive_text, read_drive_imu, None,

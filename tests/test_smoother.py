@@ -214,6 +214,8 @@ def test_smoother_bridges_the_outage(demo):
         # at most a third over 40 seeds; the filter's is 6-30 m)
         assert hs < 0.5 * hf, (hs, hf)
         assert sm.recoveries["smoother_not_pd"] == 0 and sm.timing["smoother_time_s"] > 0
+        # its timing is its own: the forward pass's epoch times are not the smoother's
+        assert set(sm.timing) == {"smoother_time_s"} and "epoch_time_mean_us" in res.timing
         # smoothing only adds information: no sigma grows, and the outage's largest
         # horizontal sigma (at its end for the filter, mid-way for the smoother) shrinks
         assert np.all(sm.sigma <= res.sigma * (1 + 1e-9))

@@ -23,6 +23,17 @@ def _fail(exc: Exception) -> None:
     raise typer.Exit(code=2)
 
 
+def _num(m: dict, key: str) -> str:
+    """A metric with 3 significant digits, or "-" where the method has none (a smoothed
+    method has no forward-pass time per epoch: only its ``smoother_time_s``)."""
+    return "-" if m.get(key) is None else f"{m[key]:.3g}"
+
+
+def _smoother_column(methods: dict) -> list[str]:
+    """The ``smoother [s]`` header when some method is smoothed, else nothing."""
+    return ["smoother [s]"] if any("smoother_time_s" in m for m in methods.values()) else []
+
+
 def _version(value: bool):
     if value:
         out.print(f"mixnav {__version__}")
@@ -74,12 +85,13 @@ def run(scenario: str = typer.Argument(..., help="Shipped scenario name or path 
             metrics = write_run(out_dir, result, config_text=text)
     except MixnavError as exc:
         _fail(exc)
+    smooth = _smoother_column(metrics["methods"])
     t = Table("method", "horiz. RMSE [m]", "horiz. max [m]", "yaw RMSE [deg]", "vel. RMSE [m/s]",
-              "time/epoch [us]", title=f"{sc.scenario.name} (seed {metrics['seed']})")
+              "time/epoch [us]", *smooth, title=f"{sc.scenario.name} (seed {metrics['seed']})")
     for name, m in metrics["methods"].items():
         t.add_row(name, f"{m['horizontal_rmse_m']:.3g}", f"{m['horizontal_max_m']:.3g}",
                   f"{m['yaw_rmse_deg']:.3g}", f"{m['velocity_rmse_mps']:.3g}",
-                  f"{m['epoch_time_mean_us']:.3g}")
+                  _num(m, "epoch_time_mean_us"), *(_num(m, "smoother_time_s") for _ in smooth))
     out.print(t)
     out.print(f"report: {Path(out_dir) / 'report.html'}")
 
@@ -101,14 +113,16 @@ def process(dataset: str = typer.Argument(..., help="Shipped dataset config name
             metrics = write_process(out_dir, po, config_text=text)
     except MixnavError as exc:
         _fail(exc)
-    t = Table("method", "horiz. RMSE [m]", "horiz. max [m]", "outage max [m]", "time/epoch [us]",
+    smooth = _smoother_column(metrics["methods"])
+    t = Table("method", "horiz. RMSE [m]", "horiz. max [m]", "outage max [m]", "time/epoch [us]", *smooth,
               title=f"{ds.dataset.name}: {metrics['duration_s']:.0f} s in "
                     f"{metrics['read_time_s'] + metrics['filter_time_s']:.2f} s "
                     f"(x{metrics['real_time_factor']:.0f} real time)")
     for name, m in metrics["methods"].items():
         outs = ", ".join(f"{o['horizontal_max_m']:.3g}" for o in m.get("outages", [])) or "-"
         t.add_row(name, f"{m.get('horizontal_rmse_m', float('nan')):.3g}",
-                  f"{m.get('horizontal_max_m', float('nan')):.3g}", outs, f"{m['epoch_time_mean_us']:.3g}")
+                  f"{m.get('horizontal_max_m', float('nan')):.3g}", outs, _num(m, "epoch_time_mean_us"),
+                  *(_num(m, "smoother_time_s") for _ in smooth))
     out.print(t)
     out.print(f"report: {Path(out_dir) / 'report.html'}")
 
@@ -137,8 +151,8 @@ def experiment(scenario: str = typer.Argument(..., help="Shipped scenario name o
     sweep = "sweep_value" in summary.columns
     t = Table(*(["sweep"] if sweep else []), "method", "metric", "mean", "95 % CI", "n",
               title=f"{scenario}: {df['seed'].nunique()} runs")
-    for _, r in summary[summary["metric"].isin(["horizontal_rmse_m", "yaw_rmse_deg", "velocity_rmse_mps",
-                                                "epoch_time_mean_us"])].iterrows():
+    shown = summary["metric"].isin(["horizontal_rmse_m", "yaw_rmse_deg", "velocity_rmse_mps", "epoch_time_mean_us"])
+    for _, r in summary[shown & (summary["n"] > 0)].iterrows():  # n = 0: a smoothed method's epoch time
         t.add_row(*([f"{r['sweep_value']:g}"] if sweep else []), r["method"], r["metric"],
                   f"{r['mean']:.4g}", f"+-{r['ci95_half']:.2g}", str(int(r["n"])))
     out.print(t)

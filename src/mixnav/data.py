@@ -224,6 +224,10 @@ class OdometerData:
         The speed may be negative (reversing).
     source : str or None
         File the samples came from (named in errors).
+    gaps : int
+        Number of time gaps longer than the reader's limit that were
+        accepted with a warning (as :attr:`ImuData.gaps`; reported in
+        metrics.json).
     """
 
     time: np.ndarray
@@ -231,6 +235,7 @@ class OdometerData:
     sigma: np.ndarray
     signed: bool = False
     source: str | None = None
+    gaps: int = 0
 
     def __post_init__(self):
         m = len(self.time)

@@ -38,7 +38,7 @@ CASES = [
 #: metric keys that measure compute time (not reproducible, not compared)
 TIMING = {"epoch_time_mean_us", "update_time_mean_us", "wall_time_s", "learning_time_s", "total_time_s",
           "online_refit_time_s", "solve_time_s", "solve_time_mean_us", "read_time_s", "filter_time_s",
-          "real_time_factor"}
+          "real_time_factor", "smoother_time_s"}
 
 
 def _clean(d):

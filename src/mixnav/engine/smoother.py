@@ -269,7 +269,9 @@ def rts_smooth(result: FilterResult) -> FilterResult:
         - copied from the filter: ``gnss_used``, ``w_b`` (the compensated rate of the
           forward pass; not re-compensated with the smoothed biases), ``layout``;
         - ``recoveries``: the filter's plus ``smoother_not_pd`` (module docstring);
-        - ``timing``: the filter's plus ``smoother_time_s`` (backward pass and injection);
+        - ``timing``: ``smoother_time_s`` only (backward pass and injection); the forward
+          pass's timing and counts (``epoch_time_mean_us``, ``wall_time_s``, ...) are its
+          own, not the smoother's, and stay in ``result``;
         - ``nis``, ``nis_dim``, ``nis_kind`` empty and ``outputs`` empty: innovations
           and estimator series belong to the forward pass (still in ``result``);
         - ``history`` None.
@@ -313,8 +315,7 @@ def rts_smooth(result: FilterResult) -> FilterResult:
         estimates["clock"] = clock
     for name, sl in lay.aux:
         estimates[name] = np.asarray(result.estimates[name], dtype=float) + d[:, sl]
-    timing = dict(result.timing)
-    timing["smoother_time_s"] = _time.perf_counter() - t0
+    timing = {"smoother_time_s": _time.perf_counter() - t0}
     recoveries = dict(result.recoveries)
     recoveries["smoother_not_pd"] = not_pd
     return FilterResult(

@@ -194,8 +194,8 @@ def _mean_ci_table(summary: pd.DataFrame, columns: dict[str, str] = BOX_METRICS)
     """Wide table: one row per (sweep value,) method, 'mean +- CI' per metric of ``columns``."""
     keys = ["sweep_value", "method"] if "sweep_value" in summary.columns else ["method"]
     s = summary[summary["metric"].isin(list(columns))].copy()
-    s["cell"] = [f"{m:.4g} ± {h:.2g}" if np.isfinite(h) else f"{m:.4g}"
-                 for m, h in zip(s["mean"], s["ci95_half"])]
+    s["cell"] = [f"{m:.4g} ± {h:.2g}" if np.isfinite(h) else f"{m:.4g}" if np.isfinite(m) else ""
+                 for m, h in zip(s["mean"], s["ci95_half"])]  # blank: no run has it (a smoothed method's times)
     wide = s.pivot_table(index=keys, columns="metric", values="cell", aggfunc="first")
     wide = wide[[c for c in columns if c in wide.columns]].rename(columns=columns)
     return wide.reset_index()
@@ -206,6 +206,7 @@ LABELS = {**BOX_METRICS,
           "roll_max_deg": "roll max [deg]", "pitch_max_deg": "pitch max [deg]", "yaw_max_deg": "yaw max [deg]",
           "vertical_max_m": "vertical max [m]", "learning_time_s": "learning time [s]",
           "total_time_s": "total time: filter + learning [s]",
+          "smoother_time_s": "RTS smoother time [s]",
           "online_refits": "online refits", "online_refit_time_s": "online refit time [s]",
           **{f"outage{i}_{k}_max_m": f"outage {i + 1}: max {k} error [m]" for i in range(9)
              for k in ("horizontal", "vertical")}}

@@ -55,6 +55,8 @@ METRIC_KEYS_DOC: dict[str, str] = {
     "sage_husa_scale_<kind>": "Sage-Husa EKF: the measurement-noise variance scale learned for an observable kind "
                               "at the end of the run (1: the model's R was right)",
     "total_time_s": "wall_time_s + learning_time_s [s]",
+    "smoother_time_s": "smoothed methods (<name>-smoothed): time of the RTS smoother's backward pass and "
+                       "injection [s]; they have none of the forward pass's timing keys",
     "measurement_epochs": "number of GNSS epochs processed",
     "recoveries": "counts of numerical recoveries (see mixnav.engine.engine); the robust adaptive EKF "
                   "adds its row and epoch counts (see mixnav.filters.robust); learned-mixture methods add "

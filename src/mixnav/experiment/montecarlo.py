@@ -59,7 +59,7 @@ __all__ = ["run_experiment", "aggregate", "paired_comparison", "flatten_metrics"
 ID_COLUMNS = ("scenario", "seed", "method", "sweep_value")
 #: Metrics measured with the wall clock: not reproducible from the seed.
 TIMING_METRICS = ("epoch_time_mean_us", "update_time_mean_us", "wall_time_s", "learning_time_s", "total_time_s",
-                  "online_refit_time_s")
+                  "online_refit_time_s", "smoother_time_s")
 
 RUNS_DIR = "runs"
 MANIFEST = "manifest.json"

@@ -55,6 +55,7 @@ class ProcessOutput:
     filter_time_s: float
     aiding: dict = field(default_factory=dict)   # AidingInputs.summary(): still intervals, thresholds
     installation: dict = field(default_factory=dict)  # aiding.installation_check: level, rest, estimates
+    odometer: OdometerData | None = None  # the [aiding.odometer] file's samples, when one is read
 
 
 def find_data_dir(ds: Dataset, data: str | None, source: str) -> Path:
@@ -244,7 +245,8 @@ def process(ds: Dataset, source: str, data: str | None = None):
                          read_time, filter_time, aiding.summary(),
                          installation_check(imu, ds.alignment.static_duration, results, aiding.stillness,
                                             configured={"antenna_position": inst.antenna_position,
-                                                        "imu_time_offset": inst.imu_time_offset}))
+                                                        "imu_time_offset": inst.imu_time_offset}),
+                         odometer=aiding.odometer)
 
 
 def withheld_windows(po: ProcessOutput) -> tuple:
@@ -276,7 +278,8 @@ def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = No
               "read_time_s": po.read_time_s, "filter_time_s": po.filter_time_s,
               "real_time_factor": duration / (po.read_time_s + po.filter_time_s),
               "gnss_withheld_s": [list(w) for w in withheld],
-              "imu_gaps_accepted": int(po.imu.gaps)}
+              "imu_gaps_accepted": int(po.imu.gaps),
+              **({} if po.odometer is None else {"odometer_gaps_accepted": int(po.odometer.gaps)})}
     if po.aiding:
         header["aiding"] = po.aiding
     notes = [f"Times are seconds since the first IMU sample (GPS time {po.time_origin:.3f} s since 1970).",

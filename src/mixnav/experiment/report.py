@@ -27,7 +27,7 @@ _COLUMNS = [
     ("roll_rmse_deg", "roll RMSE [deg]"), ("roll_max_deg", "roll max [deg]"),
     ("pitch_rmse_deg", "pitch RMSE [deg]"), ("pitch_max_deg", "pitch max [deg]"),
     ("yaw_rmse_deg", "yaw RMSE [deg]"), ("yaw_max_deg", "yaw max [deg]"),
-    ("epoch_time_mean_us", "time/epoch [us]"),
+    ("epoch_time_mean_us", "time/epoch [us]"), ("smoother_time_s", "smoother [s]"),
 ]
 
 _DPI = 110

@@ -230,7 +230,8 @@ def method_metrics(res: FilterResult, table: pd.DataFrame, outages) -> dict:
     # without a reference there is nothing to score: timing and health only
     m = compute_metrics(table, outages=list(outages)) if "err_n_m" in table else {}
     m.update({k: float(v) for k, v in res.timing.items()})
-    m["total_time_s"] = m["wall_time_s"] + m.get("learning_time_s", 0.0)
+    if "wall_time_s" in m:  # a smoothed method has only its smoother_time_s (rts_smooth)
+        m["total_time_s"] = m["wall_time_s"] + m.get("learning_time_s", 0.0)
     m["recoveries"] = dict(res.recoveries)
     if len(res.nis):
         m["nis_mean_per_dof"] = float(np.mean(res.nis / res.nis_dim))

@@ -63,7 +63,7 @@ from ..errors import ArgumentError, DataError
 from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla
 from ..units import DEG
 from .imu_checks import check_plausible, rates_to_increments
-from .tables import check_times
+from .tables import check_gap_action, check_times
 
 #: GPS - UTC [s] from 2017-01-01 until the next leap second (none announced as of 2024).
 GPS_UTC_LEAP_SECONDS = 18
@@ -135,8 +135,7 @@ def _positive(value, name: str, allow_none: bool = False):
 
 def _gap_args(max_gap, gap_action):
     _positive(max_gap, "max_gap", allow_none=True)
-    if gap_action not in ("warn", "fail"):
-        raise ArgumentError(f"must be 'warn' or 'fail', got {gap_action!r}", "gap_action")
+    check_gap_action(gap_action)
 
 
 def _sigma3(value, name: str) -> np.ndarray:
@@ -379,10 +378,10 @@ def read_comma_odometer(segment, *, source: str = "rear_wheels", sigma: float = 
     seg = _segment(segment)
     if source == "speed":
         rel = f"{_CAN}/speed"
-        t, speed, _ = _log(seg, rel, None, "CAN speed", max_gap, gap_action)
+        t, speed, gaps = _log(seg, rel, None, "CAN speed", max_gap, gap_action)
     else:
         rel = f"{_CAN}/wheel_speed"
-        t, v, _ = _log(seg, rel, 4, "CAN wheel speeds", max_gap, gap_action)
+        t, v, gaps = _log(seg, rel, 4, "CAN wheel speeds", max_gap, gap_action)
         speed = v[:, 2:].mean(axis=1)
     vfile = str(seg / rel / "value")
     bad = (speed < 0) | (speed > MAX_VEHICLE_SPEED)
@@ -391,7 +390,7 @@ def read_comma_odometer(segment, *, source: str = "rear_wheels", sigma: float = 
         raise DataError(f"speed {speed[k]:.6g} m/s in row {k + 1} is negative or above "
                         f"{MAX_VEHICLE_SPEED:g} m/s (wrong unit?)", file=vfile, line=k + 1)
     return OdometerData(time=t + float(time_offset), speed=speed, sigma=np.full(len(t), sigma), signed=False,
-                        source=vfile)
+                        source=vfile, gaps=gaps)
 
 
 # ---------------------------------------------------------------------------

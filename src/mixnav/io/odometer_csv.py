@@ -48,7 +48,7 @@ import numpy as np
 from .. import units as u
 from ..data import MAX_VEHICLE_SPEED, OdometerData
 from ..errors import ArgumentError, DataError
-from .tables import check_times, header_fields, read_numeric
+from .tables import check_gap_action, check_times, header_fields, read_numeric
 
 _COL = re.compile(r"^\s*([A-Za-z_]+)\s*(?:\[(.*)\])?\s*$")
 
@@ -67,8 +67,7 @@ def _check_arguments(sigma, max_gap, gap_action, units):
         raise ArgumentError(f"must be a finite positive speed sigma [m/s], got {sigma!r}", "sigma")
     if max_gap is not None and not (_real(max_gap) and max_gap > 0):
         raise ArgumentError(f"must be a positive time [s] or None, got {max_gap!r}", "max_gap")
-    if gap_action not in ("warn", "fail"):
-        raise ArgumentError(f"must be 'warn' or 'fail', got {gap_action!r}", "gap_action")
+    check_gap_action(gap_action)
     for name, unit in (units or {}).items():
         if name not in _DIMS:
             raise ArgumentError(f"unknown column {name!r}; columns are {', '.join(_DIMS)}", f"units.{name}")
@@ -107,10 +106,6 @@ def _header(path: Path, units: Mapping[str, str]):
         factors.append(f)
     if len(set(names)) != len(names):
         raise DataError("a column appears twice in the header", file=str(path), line=1)
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        fh.readline()
-        if not any(line.strip() for line in fh):
-            raise DataError("odometer file is empty: no data line after the header", file=str(path), line=1)
     motion = [n for n in names if n in _MOTION]
     if "time" not in names or len(motion) != 1:
         raise DataError(f"columns {names}: need time and exactly one of {', '.join(_MOTION)} "
@@ -139,14 +134,15 @@ def read_odometer_csv(path, *, sigma: float | None = None, units: Mapping[str, s
         Longest accepted interval between consecutive lines [s]; None: no limit.
     gap_action : {"warn", "fail"}
         A longer interval warns (naming the line that ends it; the data is
-        returned with the gap) or raises, as the IMU readers do.
+        returned with the gap, counted in ``OdometerData.gaps``) or raises, as
+        the IMU readers do.
 
     Returns
     -------
     OdometerData
         ``time`` (M,) [s], ``speed`` (M,) [m/s], ``sigma`` (M,) [m/s]:
         one sample per line for ``speed``, one per interval (midpoint time)
-        for the distance forms.
+        for the distance forms; ``gaps``: the gaps accepted with a warning.
 
     Raises
     ------
@@ -165,7 +161,7 @@ def read_odometer_csv(path, *, sigma: float | None = None, units: Mapping[str, s
     tab = read_numeric(path, len(names), delimiter=",", skip_lines=1, what="odometer")
     c = {n: tab.values[:, i] * fac[i] for i, n in enumerate(names)}
     t, lines, src = c["time"], tab.lines, str(path)
-    check_times(t, lines, src, max_gap=max_gap, gap_action=gap_action, what="odometer")
+    gaps = check_times(t, lines, src, max_gap=max_gap, gap_action=gap_action, what="odometer").gaps
     sig = c["sigma"] if "sigma" in c else np.full(len(t), float(sigma))
     if motion == "speed":
         time, speed, sl = t, c["speed"], lines
@@ -181,7 +177,7 @@ def read_odometer_csv(path, *, sigma: float | None = None, units: Mapping[str, s
         time, speed, sig, sl = 0.5 * (t[1:] + t[:-1]), step / np.diff(t), sig[1:], lines[1:]
     _check_samples(speed, sig, sl, src, signed, motion)
     return OdometerData(time=np.asarray(time, float), speed=np.asarray(speed, float),
-                        sigma=np.asarray(sig, float), signed=bool(signed), source=src)
+                        sigma=np.asarray(sig, float), signed=bool(signed), source=src, gaps=gaps)
 
 
 def _check_samples(speed, sig, lines, src, signed, motion):

@@ -17,7 +17,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..errors import DataError
+from ..errors import ArgumentError, DataError
+
+#: What a time gap beyond ``max_gap`` does: warn (counted) or raise.
+GAP_ACTIONS = ("warn", "fail")
 
 
 @dataclass(frozen=True)
@@ -76,8 +79,9 @@ def read_numeric(path, ncols: int | tuple[int, ...], *, delimiter: str | None = 
     Raises
     ------
     DataError
-        Empty file, wrong column count, non-numeric or non-finite value, each
-        naming the file and the line.
+        Empty file (with ``skip_lines``: no data line after the header, naming
+        its last line), wrong column count, non-numeric or non-finite value,
+        each naming the file and the line.
     """
     path = Path(path)
     if not path.is_file():
@@ -92,6 +96,9 @@ def read_numeric(path, ncols: int | tuple[int, ...], *, delimiter: str | None = 
             continue
         keep_lines.append(i)
         keep_rows.append(s)
+    if skip_lines and not keep_rows and len(raw) >= skip_lines:
+        raise DataError(f"{what} file is empty: no data line after the header", file=str(path),
+                        line=skip_lines)
     if drop_edges:
         keep_lines, keep_rows = keep_lines[1:-1], keep_rows[1:-1]
     if not keep_rows:
@@ -142,6 +149,13 @@ def read_numeric(path, ncols: int | tuple[int, ...], *, delimiter: str | None = 
     return Table(np.array(rows, dtype=float), lines, str(path))
 
 
+def check_gap_action(gap_action) -> None:
+    """An :class:`ArgumentError` naming ``gap_action`` unless it is one of :data:`GAP_ACTIONS`."""
+    if not (isinstance(gap_action, str) and gap_action in GAP_ACTIONS):
+        raise ArgumentError(f"must be {' or '.join(repr(a) for a in GAP_ACTIONS)}, got {gap_action!r}",
+                            "gap_action")
+
+
 @dataclass
 class TimeCheck:
     """What :func:`check_times` found (gaps are counted when only warned)."""
@@ -156,10 +170,13 @@ def check_times(t: np.ndarray, lines: np.ndarray, path: str, max_gap: float | No
 
     Raises
     ------
+    ArgumentError
+        ``gap_action`` is not one of :data:`GAP_ACTIONS` ("warn", "fail").
     DataError
         Time going backwards or repeating (naming the line), or a gap when
         ``gap_action == "fail"``.
     """
+    check_gap_action(gap_action)
     d = np.diff(t)
     bad = np.nonzero(d <= 0)[0]
     if bad.size:
