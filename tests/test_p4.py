@@ -53,7 +53,7 @@ def test_p4_vehicle_em_imm_beats_the_imm_in_multipath(p4_run):
 def test_drive0708_multipath_em_imm():
     """drive-0708 with P4's multipath injected into the recorded RTK fixes from 200 to 350 s:
     the EM-IMM's maximum horizontal error there, against the clean RTK, is below 2 m and a
-    fifth of the EKF's (measured 0.21 m against 14.4 m; the plain IMM 37 m)."""
+    fifth of the EKF's (measured 0.20 m against 14.3 m; the plain IMM 40 m)."""
     from mixnav.api import process_dataset
     from .conftest import data_file
     r = process_dataset("drive-0708-multipath", str(data_file("drive-0708")))
