@@ -39,7 +39,7 @@ class ImuFile(Strict):
     max_gap: Gap = 0.05
     gap_action: Literal["warn", "fail"] = "warn"
     grade: str | None = None
-    errors: dict[str, str] = Field(default_factory=dict)
+    errors: dict[str, str | list[str]] = Field(default_factory=dict)
 
 
 class GnssFile(Strict):
