@@ -154,9 +154,9 @@ def test_drive0708_peer_windows():
     Both must also be consistent there: mean position NEES per window at most 3 x its
     3 dof (9). The 120 reference epochs of a window are strongly correlated (one 30 s
     drift), so their mean is nearly one draw, not the mean of 120 chi-square(3): a
-    band of 3 x dof, not the chi-square bound of a 120-epoch mean (measured after the
-    per-axis ARW: causal 3.4 / 3.2 / 2.2, smoothed 4.9 / 4.7 / 4.0; before 18 / 19 / 4
-    and 42 / 39 / 18)."""
+    band of 3 x dof, not the chi-square bound of a 120-epoch mean (measured with the
+    per-axis IMU model: causal 2.1 / 2.0 / 1.9, smoothed 4.9 / 5.0 / 4.3; with one ARW
+    and the data sheet's drift 18 / 19 / 4 and 42 / 39 / 18)."""
     from mixnav.api import process_dataset
     from .conftest import data_file
     r = process_dataset("drive-0708-peer", str(data_file("drive-0708")))
