@@ -73,7 +73,7 @@ def timing(name, data):
 
 def main():
     data = sys.argv[sys.argv.index("--data") + 1] if "--data" in sys.argv else None
-    lines = [f"# Land-vehicle aiding on drive-0708 (benchmarks/bench_aiding_drive0708.py)", "",
+    lines = ["# Land-vehicle aiding on drive-0708 (benchmarks/bench_aiding_drive0708.py)", "",
              f"Recorded {datetime.now():%Y-%m-%d %H:%M}. Errors are the antenna against the withheld RTK "
              "fixes (fixed only) inside each window; NEES is the mean over the window's reference epochs "
              "(3 dof each; in brackets the share of epochs above the chi-square(3) 99 % bound, 11.3); the "

@@ -100,7 +100,7 @@ arw = ["{x}", "{y}", "{z}"]
 def _scenario(tmp_path, truth, model):
     """loose-demo with the simulated IMU's ARW ``truth`` and the filter's ``model`` (x, y, z)."""
     sc, source, text = load_scenario("loose-demo")
-    head, methods = text[:text.index("[gnss]")], text[text.index("[[methods]]"):]
+    head = text[:text.index("[gnss]")]
     gnss = text[text.index("[gnss]"):text.index("[[methods]]")]
     x, y, z = truth
     method = (f'[[methods]]\nname = "ekf"\ntype = "loose-ekf"\nstates = 15\ncovariance_interval = "1 s"\n'
