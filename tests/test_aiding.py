@@ -149,8 +149,14 @@ def test_drive0708_peer_windows():
     """drive-0708 with the GNSS withheld in the GNSS_IMU project's own windows: the aided
     causal filter's maximum horizontal errors must be at most 0.7 x the peer's with its
     zero-velocity updates (18.7 / 5.2 / 23.7 m -> 13.1 / 3.6 / 16.6 m), and the smoothed
-    ones at most the peer's smoother's (2.94 / 3.37 / 1.42 m; issue 16); and the causal
-    filter's position NEES in each window at most 9 (3x its 3 dof)."""
+    ones at most the peer's smoother's (2.94 / 3.37 / 1.42 m; issue 16).
+
+    Both must also be consistent there: mean position NEES per window at most 3 x its
+    3 dof (9). The 120 reference epochs of a window are strongly correlated (one 30 s
+    drift), so their mean is nearly one draw, not the mean of 120 chi-square(3): a
+    band of 3 x dof, not the chi-square bound of a 120-epoch mean (measured with the
+    per-axis IMU model: causal 2.1 / 2.0 / 1.9, smoothed 4.9 / 5.0 / 4.3; with one ARW
+    and the data sheet's drift 18 / 19 / 4 and 42 / 39 / 18)."""
     from mixnav.api import process_dataset
     from .conftest import data_file
     r = process_dataset("drive-0708-peer", str(data_file("drive-0708")))
@@ -160,10 +166,9 @@ def test_drive0708_peer_windows():
         causal, smoothed = _window_max(t["aided"], a, b), _window_max(t["aided-smoothed"], a, b)
         assert causal <= causal_bound, (a, causal)
         assert smoothed <= smooth_bound, (a, smoothed)
-        # consistency: the mean position NEES (3 dof) in each window within 3x its dof
-        # (measured 4.9 / 4.8 / 2.2 with the IMU noise measured at rest and NHC at 2 Hz)
-        w = t["aided"][(t["aided"].time_s >= a) & (t["aided"].time_s <= b)]
-        assert w.nees_pos.mean() <= 9.0, (a, w.nees_pos.mean())
+        for m in ("aided", "aided-smoothed"):
+            s = t[m][(t[m]["time_s"] >= a) & (t[m]["time_s"] <= b)]
+            assert s["nees_pos"].mean() <= 9.0, (m, a, s["nees_pos"].mean())
 
 
 def test_installation_check_reads_level_and_rest():

@@ -268,7 +268,7 @@ def test_batched_mechanization_is_the_single_state_kernel(loose):
     for p in range(3):
         one = navs[p].copy()
         propagate_block(one, np.zeros(6), sensors[p], imu.dtheta[sl], imu.dvel[sl], imu.dt[sl], np.empty((0, 0)),
-                        motion.qc, motion.layout_array, motion.tau, np.empty((4, 15, 15)))
+                        motion.qc, motion.layout_array, motion.tau, np.empty((4, 15, 15)), motion.qb)
         np.testing.assert_array_equal(batch[p], one)
     assert np.abs(batch[:, 9] - navs[:, 9]).max() > 0.0
 

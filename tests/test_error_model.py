@@ -55,7 +55,7 @@ def test_phi_matches_finite_differences(n_states, T):
     work = np.empty((4, lay.n, lay.n))
     P = np.eye(lay.n)
     nom = nav0.copy()
-    propagate_block(nom, np.zeros(6), np.zeros(12), *args, P, qc, lay.as_array(), tau, work)
+    propagate_block(nom, np.zeros(6), np.zeros(12), *args, P, qc, lay.as_array(), tau, work, np.zeros(6))
     phi = work[1]  # transition over the block, left in the scratch space
 
     # perturbation sizes: small enough to stay linear, large enough to beat round-off
@@ -75,7 +75,7 @@ def test_phi_matches_finite_differences(n_states, T):
             base = max(s for s in sensor_map if 0 <= s <= j)
             sensor[sensor_map[base] + (j - base)] = eps[j]
         tr = true0.copy()
-        propagate_block(tr, np.zeros(6), sensor, *args, np.empty((0, 0)), qc, lay.as_array(), tau, work)
+        propagate_block(tr, np.zeros(6), sensor, *args, np.empty((0, 0)), qc, lay.as_array(), tau, work, np.zeros(6))
         num = _error(nom, tr) / eps[j]
         pred = phi[:9, j]
         scale = np.abs(pred).max() + 1e-12

@@ -39,7 +39,7 @@ class ImuFile(Strict):
     max_gap: Gap = 0.05
     gap_action: Literal["warn", "fail"] = "warn"
     grade: str | None = None
-    errors: dict[str, str] = Field(default_factory=dict)
+    errors: dict[str, str | list[str]] = Field(default_factory=dict)
 
 
 class GnssFile(Strict):
@@ -67,6 +67,8 @@ class ReferenceFile(Strict):
     file: str
     qualities: list[int] = Field(default_factory=lambda: [1])
     point: Literal["antenna", "imu"] = "antenna"
+    #: rtklib-pos: the velocity columns are valid this long before the epoch (as ``[gnss]``'s)
+    velocity_delay: _quantity(u.TIME, nonnegative=True) = 0.0  # type: ignore[valid-type]
 
 
 class Installation(Strict):

@@ -173,7 +173,7 @@ class ImuConfig(Strict):
 
     rate: Frequency
     grade: str | None = None
-    errors: dict[str, str] = Field(default_factory=dict)
+    errors: dict[str, str | list[str]] = Field(default_factory=dict)
     white_noise: dict | None = None
     white_noise_hold: Duration | None = None
 
@@ -677,7 +677,7 @@ class MethodConfig(Strict):
     states: Literal[15, 17, 21, 23] = 15
     covariance_interval: Duration = 1.0
     imu_grade: str | None = None
-    imu_errors: dict[str, str] | None = None
+    imu_errors: dict[str, str | list[str]] | None = None
     use_range_rate: bool = True
     #: tdcp-ekf: "clone" (stochastic cloning of the previous antenna position and
     #: clock) or "known" (the shortcut that takes the previous estimate as exact)

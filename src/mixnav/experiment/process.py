@@ -130,8 +130,16 @@ def read_reference(ds: Dataset, folder: Path) -> Trajectory | None:
     if c is None:
         return None
     f = folder / c.file
+    if c.velocity_delay and c.format != "rtklib-pos":
+        raise ConfigError(f"velocity_delay is supported for the rtklib-pos format only, not '{c.format}'",
+                          key="reference.velocity_delay")
     if c.format == "rtklib-pos":
-        return rtklib.read_pos(f).reference(qualities=c.qualities)
+        pos = rtklib.read_pos(f)
+        ref = pos.reference(qualities=c.qualities)
+        if c.velocity_delay and ref.v_n is not None:
+            # the reference velocity at its epochs, as the filter's GNSS velocity is
+            ref = replace(ref, v_n=pos.velocity_at_epochs(c.velocity_delay)[pos.select(c.qualities)])
+        return ref
     if c.format == "kf-gins-nav":
         return kfgins.read_kfgins_nav(f)
     return generic_csv.read_reference_csv(f)

@@ -123,6 +123,10 @@ class BankEstimator:
     def init(self, motion, P0, n_clone, rng):
         lay = motion.layout
         n = lay.n
+        if getattr(motion, "qb", np.zeros(1)).any():
+            raise ArgumentError("the mixture banks scale a diagonal white IMU noise; per-axis ARW/VRW "
+                                "(different x, y, z values) are not supported here: give one value each",
+                                argument="imu_model")
         qc_white = np.zeros(n)  # the white IMU noise (ARW, VRW) the process mixture scales
         qc_white[lay.att] = motion.qc[lay.att]
         qc_white[lay.vel] = motion.qc[lay.vel]

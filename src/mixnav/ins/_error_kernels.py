@@ -211,6 +211,44 @@ def discrete_noise(F, qc, T, qd):
 
 
 @njit(cache=True)
+def add_body_noise(F, qb, c, T, qd, qb_n):
+    """Add the per-body-axis white noise to ``qd`` (in place).
+
+    ``Qb`` is zero but for the attitude (0:3) and velocity (3:6) blocks,
+    ``C diag(qb[0:3]) C^T`` and ``C diag(qb[3:6]) C^T`` with ``C`` the block's
+    mean ``C_nb``; it enters as ``Qc`` does in :func:`discretize`:
+    ``Qd += Qb T + (F Qb + Qb F^T) T^2/2 + F Qb F^T T^3/3``. ``qb_n`` (n, n)
+    is scratch (holds ``Qb`` on return).
+    """
+    n = F.shape[0]
+    qb_n[:, :] = 0.0
+    for blk in range(2):
+        o = 3 * blk
+        for i in range(3):
+            for j in range(3):
+                v = 0.0
+                for k in range(3):
+                    v += c[i, k] * qb[o + k] * c[j, k]
+                qb_n[o + i, o + j] = v
+    for i in range(n):
+        for j in range(i, n):
+            fq_ij = 0.0
+            fq_ji = 0.0
+            s = 0.0
+            for k in range(6):
+                fq_ij += F[i, k] * qb_n[k, j]
+                fq_ji += F[j, k] * qb_n[k, i]
+                f = F[i, k]
+                if f != 0.0:
+                    for m in range(6):
+                        s += f * qb_n[k, m] * F[j, m]
+            v = qb_n[i, j] * T + (fq_ij + fq_ji) * 0.5 * T * T + s * T * T * T / 3.0
+            qd[i, j] += v
+            if j != i:
+                qd[j, i] += v
+
+
+@njit(cache=True)
 def covariance_predict(P, phi, qd, tmp):
     """``P <- Phi P Phi^T + Qd`` in place, symmetric by construction."""
     n = P.shape[0]
@@ -232,7 +270,7 @@ def covariance_predict(P, phi, qd, tmp):
 
 
 @njit(cache=True)
-def propagate_block(nav, prev, sensor, dtheta, dvel, dt, P, qc, layout, tau, work):
+def propagate_block(nav, prev, sensor, dtheta, dvel, dt, P, qc, layout, tau, work, qb):
     """Mechanize a block of raw increments and propagate the covariance.
 
     The increments are compensated with the current sensor-error estimate
@@ -258,6 +296,9 @@ def propagate_block(nav, prev, sensor, dtheta, dvel, dt, P, qc, layout, tau, wor
         See :func:`error_dynamics`.
     work : ndarray (4, n, n)
         Scratch space.
+    qb : ndarray (6,)
+        White noise per body axis (:func:`mixnav.ins.error_model.body_noise`;
+        all zero: none beyond ``qc``), added by :func:`add_body_noise`.
 
     Returns
     -------
@@ -300,6 +341,8 @@ def propagate_block(nav, prev, sensor, dtheta, dvel, dt, P, qc, layout, tau, wor
     F, phi, qd, tmp = work[0], work[1], work[2], work[3]
     error_dynamics(F, nav, f_n, w_b, f_b, c_sum, layout, tau)
     discretize(F, qc, T, phi, qd, tmp)
+    if qb[0] != 0.0 or qb[1] != 0.0 or qb[2] != 0.0 or qb[3] != 0.0 or qb[4] != 0.0 or qb[5] != 0.0:
+        add_body_noise(F, qb, c_sum, T, qd, tmp)
     covariance_predict(P, phi, qd, tmp)
     return T
 

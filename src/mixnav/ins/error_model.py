@@ -210,6 +210,26 @@ class ClockModel:
     q_drift: float = 0.01
 
 
+def body_noise(imu: ImuErrorModel) -> np.ndarray:
+    """Per-body-axis white-noise densities ``[arw_x^2, arw_y^2, arw_z^2, vrw_x^2, vrw_y^2, vrw_z^2]``.
+
+    Non-zero only when ARW or VRW differ between the axes. The navigation-frame
+    density is then ``Qc_att = C_nb diag(arw_b^2) C_bn`` (``Qc_vel`` alike with
+    VRW), which is not diagonal; the compiled propagation adds it
+    (:func:`mixnav.ins._error_kernels.propagate_block`). When ARW and VRW
+    are the same on every axis ``C diag(q) C^T = q I`` and the diagonal
+    ``qc`` of :func:`process_noise` carries them, bit for bit as before.
+
+    Returns
+    -------
+    ndarray (6,)
+        [rad^2/s] x 3, [m^2/s^3] x 3; all zero for isotropic white noise.
+    """
+    if not (imu.is_per_axis("arw") or imu.is_per_axis("vrw")):
+        return np.zeros(6)
+    return np.concatenate([imu.axes("arw") ** 2, imu.axes("vrw") ** 2])
+
+
 def process_noise(layout: StateLayout, imu: ImuErrorModel, clock: ClockModel | None = None):
     """Continuous noise density ``qc`` (diagonal), correlation times, and P0 of sensor states.
 
@@ -217,7 +237,8 @@ def process_noise(layout: StateLayout, imu: ImuErrorModel, clock: ClockModel | N
     -------
     qc : ndarray (n,)
         Spectral densities: ARW^2 and VRW^2 on the attitude and velocity
-        errors; ``2 sigma^2 / tau + walk^2`` on the biases (Gauss-Markov
+        errors (zero there when the white noise is per body axis: then
+        :func:`body_noise` carries it); ``2 sigma^2 / tau + walk^2`` on the biases (Gauss-Markov
         plus random walk); zero on the scale factors (constants); the clock
         densities.
     tau : ndarray (4,)
@@ -229,11 +250,15 @@ def process_noise(layout: StateLayout, imu: ImuErrorModel, clock: ClockModel | N
     n = layout.n
     qc = np.zeros(n)
     s0 = np.zeros(n)
-    qc[layout.att] = imu.arw ** 2
-    qc[layout.vel] = imu.vrw ** 2
+    # white noise given per body axis lives in body_noise (rotated into the n-frame by the kernel)
+    qb = body_noise(imu)
+    if not qb.any():
+        qc[layout.att] = np.asarray(imu.arw) ** 2
+        qc[layout.vel] = np.asarray(imu.vrw) ** 2
     gm = lambda s, t: 2.0 * s * s / t if np.isfinite(t) else 0.0  # noqa: E731
-    qc[layout.bg] = gm(imu.gyro_bias_instability, imu.gyro_bias_tau) + imu.gyro_bias_walk ** 2
-    qc[layout.ba] = gm(imu.accel_bias_instability, imu.accel_bias_tau) + imu.accel_bias_walk ** 2
+    # the biases are body-frame states: a per-axis walk is simply per state
+    qc[layout.bg] = gm(imu.gyro_bias_instability, imu.gyro_bias_tau) + np.asarray(imu.gyro_bias_walk) ** 2
+    qc[layout.ba] = gm(imu.accel_bias_instability, imu.accel_bias_tau) + np.asarray(imu.accel_bias_walk) ** 2
     s0[layout.bg] = np.hypot(imu.gyro_bias, imu.gyro_bias_instability)
     s0[layout.ba] = np.hypot(imu.accel_bias, imu.accel_bias_instability)
     tau = np.array([imu.gyro_bias_tau if imu.gyro_bias_instability > 0 else np.inf,

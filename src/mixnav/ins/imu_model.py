@@ -23,6 +23,14 @@ epoch-level process noise then *is* the process ``x_k`` -- a mixture, or
 P2's coloured ``W_k = H W_{k-1} + xi_k`` (P2 eqs. 1, 6) -- instead of being
 averaged towards a Gaussian over the ~1/(dt) samples of an epoch.
 
+The white noise (``arw``, ``vrw``) and the bias random walks
+(``gyro_bias_walk``, ``accel_bias_walk``) may be given per body axis, as a
+3-vector ``(x, y, z)``: a roof-mounted MEMS unit whose pitch gyro is ten
+times noisier than its yaw gyro (drive-0708) cannot be described by one
+value for all axes. The filter rotates a per-axis white noise into the
+navigation frame (``Qc = C_nb diag(q_b) C_bn``, :mod:`mixnav.ins.error_model`);
+equal values give exactly the scalar model.
+
 Grades are written as a datasheet writes them and parsed by
 :mod:`mixnav.units`, the one place units are converted.
 """
@@ -53,6 +61,9 @@ FIELD_UNITS = {
     "vrw": u.VELOCITY_RANDOM_WALK,
     "accel_scale": u.DIMENSIONLESS,
 }
+
+#: Fields that may be a 3-vector of body-axis values (x, y, z) instead of one value.
+PER_AXIS = ("arw", "vrw", "gyro_bias_walk", "accel_bias_walk")
 
 GRADES: dict[str, dict[str, str]] = {
     # Ring-laser-gyro navigation grade (the P1 "RLG" row is of this class).
@@ -91,37 +102,56 @@ class ImuErrorModel:
         Steady-state sigma of the in-run Gauss-Markov bias [rad/s].
     gyro_bias_tau : float
         Its correlation time [s] (``inf``: no Gauss-Markov part).
-    gyro_bias_walk : float
-        Bias random-walk density [rad/s^1.5].
-    arw : float
-        Angle random walk [rad/sqrt(s)].
+    gyro_bias_walk : float or tuple of 3 floats
+        Bias random-walk density [rad/s^1.5]; per body axis when a 3-tuple.
+    arw : float or tuple of 3 floats
+        Angle random walk [rad/sqrt(s)]; per body axis when a 3-tuple.
     gyro_scale : float
         Scale-factor error, drawn per run [-].
     accel_* , vrw :
-        The accelerometer counterparts [m/s^2, s, m/s^2.5, m/s^1.5, -].
+        The accelerometer counterparts [m/s^2, s, m/s^2.5, m/s^1.5, -]
+        (``accel_bias_walk`` and ``vrw`` per axis as the gyro's).
     """
 
     gyro_bias: float = 0.0
     gyro_bias_instability: float = 0.0
     gyro_bias_tau: float = 3600.0
-    gyro_bias_walk: float = 0.0
-    arw: float = 0.0
+    gyro_bias_walk: float | tuple = 0.0
+    arw: float | tuple = 0.0
     gyro_scale: float = 0.0
     accel_bias: float = 0.0
     accel_bias_instability: float = 0.0
     accel_bias_tau: float = 3600.0
-    accel_bias_walk: float = 0.0
-    vrw: float = 0.0
+    accel_bias_walk: float | tuple = 0.0
+    vrw: float | tuple = 0.0
     accel_scale: float = 0.0
 
     def __post_init__(self):
         for f in fields(self):
             v = getattr(self, f.name)
+            if f.name in PER_AXIS and not np.isscalar(v):
+                v = tuple(float(x) for x in np.ravel(v))
+                if len(v) != 3:
+                    raise ConfigError(f"must be one value or three (x, y, z), got {len(v)}", key=f.name)
+                object.__setattr__(self, f.name, v)
+                bad = [x for x in v if not (x >= 0.0)]
+                if bad:
+                    raise ConfigError(f"must be non-negative, got {bad[0]!r}", key=f.name)
+                continue
             if not (v >= 0.0):  # also catches NaN
                 raise ConfigError(f"must be non-negative, got {v!r}", key=f.name)
         for tau in ("gyro_bias_tau", "accel_bias_tau"):
             if getattr(self, tau) <= 0.0:
                 raise ConfigError("correlation time must be positive", key=tau)
+
+    def axes(self, name: str) -> np.ndarray:
+        """The field ``name`` (one of :data:`PER_AXIS`) per body axis, shape (3,) [SI]."""
+        return np.broadcast_to(np.asarray(getattr(self, name), dtype=float), (3,)).copy()
+
+    def is_per_axis(self, name: str) -> bool:
+        """Whether ``name`` was given as three different body-axis values."""
+        v = getattr(self, name)
+        return not np.isscalar(v) and len(set(v)) > 1
 
     @classmethod
     def from_datasheet(cls, values: dict[str, str], grade: str | None = None,
@@ -132,11 +162,13 @@ class ImuErrorModel:
         Parameters
         ----------
         values : dict
-            Field name to quantity text; overrides the grade's entries.
+            Field name to quantity text; overrides the grade's entries. The
+            fields of :data:`PER_AXIS` also take a list of three texts (x, y,
+            z body axes).
         grade : str, optional
             One of :data:`GRADES`.
         """
-        texts: dict[str, str] = {}
+        texts: dict = {}
         if grade is not None:
             if grade not in GRADES:
                 raise ConfigError(f"unknown IMU grade '{grade}'; known: {', '.join(GRADES)}",
@@ -148,8 +180,16 @@ class ImuErrorModel:
             if name not in FIELD_UNITS:
                 raise ConfigError(f"unknown IMU error field; known: {', '.join(FIELD_UNITS)}",
                                   file=source, key=f"{key_prefix}.{name}")
+            if isinstance(text, (list, tuple)):
+                if name not in PER_AXIS or len(text) != 3:
+                    what = "three values (x, y, z)" if name in PER_AXIS else "one value"
+                    raise ConfigError(f"takes {what}, got a list of {len(text)}",
+                                      file=source, key=f"{key_prefix}.{name}")
             try:
-                si[name] = u.parse_quantity(text, FIELD_UNITS[name])
+                if isinstance(text, (list, tuple)):
+                    si[name] = tuple(u.parse_quantity(t, FIELD_UNITS[name]) for t in text)
+                else:
+                    si[name] = u.parse_quantity(text, FIELD_UNITS[name])
             except u.UnitError as exc:
                 raise ConfigError(str(exc), file=source, key=f"{key_prefix}.{name}") from None
         try:
@@ -159,7 +199,8 @@ class ImuErrorModel:
 
     def scaled_noise(self, factor: float) -> "ImuErrorModel":
         """The same model with white noise (ARW, VRW) scaled by ``factor``."""
-        return replace(self, arw=self.arw * factor, vrw=self.vrw * factor)
+        scale = lambda v: v * factor if np.isscalar(v) else tuple(x * factor for x in v)  # noqa: E731
+        return replace(self, arw=scale(self.arw), vrw=scale(self.vrw))
 
 
 @dataclass(frozen=True)
@@ -284,10 +325,13 @@ def corrupt(imu: ImuData, model: ImuErrorModel, rng: np.random.Generator,
     noise = white_noise or (lambda g, times, c: g.standard_normal((len(times), c)))
     bg = draw.gyro_bias + _gauss_markov(rng, n, dt, model.gyro_bias_instability, model.gyro_bias_tau)
     ba = draw.accel_bias + _gauss_markov(rng, n, dt, model.accel_bias_instability, model.accel_bias_tau)
-    if model.gyro_bias_walk > 0:
-        bg = bg + np.cumsum(rng.standard_normal((n, 3)) * model.gyro_bias_walk * np.sqrt(dt), axis=0)
-    if model.accel_bias_walk > 0:
-        ba = ba + np.cumsum(rng.standard_normal((n, 3)) * model.accel_bias_walk * np.sqrt(dt), axis=0)
+    # scalars stay scalars (the draws of a scalar model are unchanged); 3-tuples act per axis
+    walk_g, walk_a = (v if np.isscalar(v) else np.asarray(v) for v in (model.gyro_bias_walk, model.accel_bias_walk))
+    arw, vrw = (v if np.isscalar(v) else np.asarray(v) for v in (model.arw, model.vrw))
+    if np.any(walk_g > 0):
+        bg = bg + np.cumsum(rng.standard_normal((n, 3)) * walk_g * np.sqrt(dt), axis=0)
+    if np.any(walk_a > 0):
+        ba = ba + np.cumsum(rng.standard_normal((n, 3)) * walk_a * np.sqrt(dt), axis=0)
     if hold is None:
         times, scale, index = imu.time, np.sqrt(imu.dt)[:, None], slice(None)
     else:
@@ -296,7 +340,7 @@ def corrupt(imu: ImuData, model: ImuErrorModel, rng: np.random.Generator,
         # zero-order-held rate noise: the increments of interval k sum to x_k sqrt(L_k)
         scale = (imu.dt / np.sqrt(length[index]))[:, None]
     dtheta = (1.0 + draw.gyro_scale) * imu.dtheta + bg * imu.dt[:, None] + \
-        noise(rng, times, 3)[index] * model.arw * scale
+        noise(rng, times, 3)[index] * arw * scale
     dvel = (1.0 + draw.accel_scale) * imu.dvel + ba * imu.dt[:, None] + \
-        noise(rng, times, 3)[index] * model.vrw * scale
+        noise(rng, times, 3)[index] * vrw * scale
     return ImuData(time=imu.time, dt=imu.dt, dtheta=dtheta, dvel=dvel, source=imu.source), draw

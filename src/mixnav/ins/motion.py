@@ -23,7 +23,7 @@ import numpy as np
 
 from ..data import InitialState
 from ._error_kernels import apply_feedback, mechanize_batch, propagate_block
-from .error_model import ClockModel, StateLayout, process_noise
+from .error_model import ClockModel, StateLayout, body_noise, process_noise
 from .imu_model import ImuErrorModel
 
 _WARM: set = set()
@@ -45,6 +45,9 @@ class StrapdownMotion:
     ----------
     qc : ndarray (n,)
         Diagonal continuous noise density (:func:`~mixnav.ins.error_model.process_noise`).
+    qb : ndarray (6,)
+        White noise per body axis (:func:`~mixnav.ins.error_model.body_noise`; zero
+        unless ARW or VRW differ between the axes).
     tau : ndarray (4,)
         Correlation times of the sensor biases and scale factors [s].
     sensor_sigma0 : ndarray (n,)
@@ -56,6 +59,7 @@ class StrapdownMotion:
         self.imu_model = imu_model
         self.clock = clock
         self.qc, self.tau, self.sensor_sigma0 = process_noise(layout, imu_model, clock)
+        self.qb = body_noise(imu_model)
         self.layout_array = layout.as_array()
 
     def initial_covariance(self, init: InitialState) -> np.ndarray:
@@ -78,7 +82,7 @@ class StrapdownMotion:
         block length ``T`` [s] (0: nothing was propagated).
         """
         return propagate_block(nav, prev, sensor, dtheta, dvel, dt, P, self.qc, self.layout_array, self.tau,
-                               work)
+                               work, self.qb)
 
     def inject(self, nav, sensor, clock, aux, dx) -> None:
         """Feed the error estimate ``dx`` (n,) back into the nominal state (in place)."""
@@ -106,6 +110,6 @@ class StrapdownMotion:
         nav = np.array([1.0, 0, 0, 0, 0, 0, 0, 0.5, 0.5, 0.0])
         one = np.zeros((1, 3))
         propagate_block(nav, np.zeros(6), np.zeros(12), one, one, np.full(1, 0.01), np.eye(n),
-                        np.zeros(n), self.layout_array, np.full(4, np.inf), np.empty((4, n, n)))
+                        np.zeros(n), self.layout_array, np.full(4, np.inf), np.empty((4, n, n)), np.ones(6))
         apply_feedback(nav, np.zeros(12), np.zeros(2), np.zeros(n), self.layout_array)
         _WARM.add(n)
