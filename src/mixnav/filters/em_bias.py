@@ -53,6 +53,7 @@ from __future__ import annotations
 import warnings
 from collections import deque
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
@@ -61,6 +62,13 @@ from ..errors import ArgumentError
 from ..measurements.base import Rows
 from ..measurements.kinds import POSITION
 from .ekf import KalmanEstimator
+
+
+@lru_cache(maxsize=64)
+def _chi2_quantile(p: float, dof: int) -> float:
+    """``chi2.ppf(p, dof)``, cached: the gate asks at every GNSS epoch (~60 us a call)."""
+    from scipy.stats import chi2
+    return float(chi2.ppf(p, dof))
 
 
 @dataclass(frozen=True)
@@ -87,8 +95,7 @@ class EmBiasSettings:
 
     def gate_nis(self, dof: int) -> float:
         """The NIS above which the position rows are kept out of the update."""
-        from scipy.stats import chi2
-        return float(chi2.ppf(self.gate, dof))
+        return _chi2_quantile(self.gate, int(dof))
 
     def __post_init__(self):
         if not (np.isfinite(self.window) and self.window > 0):
