@@ -195,8 +195,7 @@ def _bias_columns(res: FilterResult) -> dict:
     out = getattr(res, "outputs", None) or {}
     if "bias" not in out:
         return {}
-    b = np.vstack([np.zeros((1, 3)), out["bias"]])
-    held = b[np.searchsorted(out["bias_times"], res.time + 1e-9, side="right")]
+    held = _held(out["bias_times"], out["bias"], np.zeros(3), res.time)
     return {f"bias_{ax}_m": held[:, i] for i, ax in enumerate("ned")}
 
 
@@ -206,10 +205,16 @@ def _mode_columns(res: FilterResult) -> dict:
     out = getattr(res, "outputs", None) or {}
     if "mode_probabilities" not in out:
         return {}
-    t = out["mode_times"]
-    p = np.vstack([out["mode_initial"], out["mode_probabilities"]])   # row 0: before any cycle
-    held = p[np.searchsorted(t, res.time + 1e-9, side="right")]       # the latest cycle at or before
+    held = _held(out["mode_times"], out["mode_probabilities"], out["mode_initial"], res.time)
     return {f"p_mode_{name}": held[:, j] for j, name in enumerate(out["mode_names"])}
+
+
+def _held(times: np.ndarray, values: np.ndarray, before: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """``values`` (K, d) at ``times`` (K,) held to the query times ``at`` (N,): the latest
+    row at or before each (``before`` (d,) ahead of the first); (N, d)."""
+    rows = np.vstack([np.asarray(before, dtype=float)[None, :],
+                      np.asarray(values, dtype=float).reshape(len(times), -1)])
+    return rows[np.searchsorted(times, at + 1e-9, side="right")]
 
 
 def _at_true_time(res: FilterResult) -> tuple[np.ndarray, np.ndarray]:
