@@ -50,6 +50,8 @@ from .ekf import ErrorStateEkf, KalmanEstimator
 from ..engine.status import ABSURD, NEEDS_REPAIR, NON_FINITE, OK
 
 _LOG_2PI = math.log(2.0 * math.pi)
+#: the recoveries an IMM counts itself (per mode for the rejections)
+_COUNTS = ("rejected_not_pd", "rejected_absurd", "covariance_repair", "imm_no_likelihood")
 
 
 def check_transition(transition, r: int | None = None, argument: str = "transition") -> np.ndarray:
@@ -212,8 +214,7 @@ class ImmEstimator:
         self.names = list(names) if names is not None else [f"mode{k}" for k in range(r)]
         if len(self.names) != r:
             raise ArgumentError(f"one name per mode: {r} modes, {len(self.names)} names", argument="names")
-        self.counts = {"rejected_not_pd": 0, "rejected_absurd": 0, "covariance_repair": 0,
-                       "imm_no_likelihood": 0}
+        self.counts = dict.fromkeys(_COUNTS, 0)
 
     # --- the estimator protocol ---------------------------------------------------------------
     def init(self, motion, P0: np.ndarray, n_clone: int, rng: np.random.Generator) -> None:
@@ -236,9 +237,7 @@ class ImmEstimator:
         self._t_last = None
         self._times: list = []
         self._mus: list = []
-        for k in ("rejected_not_pd", "rejected_absurd", "covariance_repair"):
-            self.counts[k] = 0
-        self.counts["imm_no_likelihood"] = 0
+        self.counts = dict.fromkeys(_COUNTS, 0)   # a fresh run (the modes' own join in outputs())
 
     @property
     def kernel_covariance(self) -> np.ndarray:
@@ -380,7 +379,7 @@ class ImmEstimator:
         out = {}
         for name, c in zip(self.names, self.children):   # the modes' own counts (the EM's fits)
             for k, v in c.counts.items():
-                if k not in ("rejected_not_pd", "rejected_absurd", "covariance_repair"):
+                if k not in _COUNTS:
                     self.counts[f"{name}:{k}"] = v
         for name, c in zip(self.names, self.children):   # the modes' own (the EM-IMM's bias)
             for k, v in (c.outputs() if hasattr(c, "outputs") else {}).items():
