@@ -99,3 +99,21 @@ def test_filter_removes_the_bias_in_a_multipath_window():
     assert np.linalg.norm(o["bias"][applied].mean(axis=0) - [10.0, 0.0, 0.0]) < 1.5, o["bias"][applied].mean(axis=0)
     assert out["em"] < 0.7 * out["ekf"], out
     assert not np.any(o["bias"][o["bias_times"] > 360])
+
+
+def test_bias_metrics_against_the_systematic_error():
+    """bias_metrics by hand: 4 logged epochs (one not a fix time, ignored), true bias 10 m
+    north-east on two of them; removals on epochs 0 (right within (0.3, -0.4, 0)), 1 (clean:
+    a false removal) and none on the biased epoch 3 (missed)."""
+    from types import SimpleNamespace
+    from mixnav.experiment.run import bias_metrics
+    tb = np.array([1.0, 2.0, 3.0, 4.0])
+    b_true = np.array([[10.0, 10.0, 0.0], [0, 0, 0], [0, 0, 0], [10.0, 10.0, 0.0]])
+    est = np.array([[10.3, 9.6, 0.0], [1.0, 0.0, 0.0], [0, 0, 0], [0, 0, 0], [5.0, 5.0, 5.0]])
+    res = SimpleNamespace(outputs={"bias_times": np.array([1.0, 2.0, 3.0, 4.0, 4.5]), "bias": est})
+    m = bias_metrics(res, (tb, b_true))
+    assert m["bias_epochs_removed"] == 2 and m["bias_epochs_biased"] == 2
+    assert m["bias_error_rms_m"] == pytest.approx(np.sqrt((0.3 ** 2 + 0.4 ** 2 + 1.0) / 2))
+    assert m["bias_error_horizontal_axis_rms_m"] == pytest.approx(np.sqrt((0.09 + 0.16 + 1.0 + 0.0) / 4))
+    assert m["bias_false_share"] == 0.5 and m["bias_detected_share"] == 0.5
+    assert bias_metrics(res, None) == {} and bias_metrics(SimpleNamespace(outputs={}), (tb, b_true)) == {}

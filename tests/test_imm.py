@@ -354,3 +354,41 @@ def test_every_mode_scores_the_same_rows():
     x0_post[6], x0_post[7] = 0.8 / 1.25, -0.3 / 1.25
     np.testing.assert_allclose(corr.dx, mu[0] * x0_post + mu[1] * xb, atol=1e-12)
     np.testing.assert_allclose(mu[0] * a.x + mu[1] * b.x, 0.0, atol=1e-12)
+
+
+MIXTURE_MODE = '''
+[[methods.imm.modes]]
+name = "multipath"
+measurements = ["gnss", "nhc", "odometer"]
+estimator = "gaussian-mixture"
+[methods.imm.modes.mixture]
+max_components = 4
+[methods.imm.modes.mixture.measurement.position]
+weights = [0.9, 0.05, 0.05]
+means = [0.0, 10.0, -10.0]
+scales = [1.0, 4.0, 4.0]
+'''
+
+
+def test_mixture_mode_from_a_scenario_file(tmp_path):
+    """A third mode, a bank with a multipath position tail, from the scenario file: it runs,
+    its probability is an output column, the three probabilities sum to one, and on
+    Gaussian GNSS noise it is less probable than the Gaussian GNSS mode; a [mixture]
+    table on a plain mode, or a coloured one, is a ConfigError naming the mode."""
+    from mixnav.api import run_scenario
+    from mixnav.config.loader import load_scenario
+    text = IMM_METHOD.replace("transition = [[0.98, 0.02], [0.05, 0.95]]",
+                              "transition = [[0.96, 0.02, 0.02], [0.05, 0.9, 0.05], [0.05, 0.05, 0.9]]")
+    r = run_scenario(str(_vehicle_demo_with(tmp_path, text + MIXTURE_MODE)))
+    t = r.solutions["imm"]
+    cols = ["p_mode_gnss", "p_mode_dead-reckoning", "p_mode_multipath"]
+    np.testing.assert_allclose(t[cols].sum(axis=1), 1.0, atol=1e-12)
+    # vehicle-demo's GNSS noise is Gaussian: the multipath tail costs the bank likelihood
+    assert t.loc[~t.in_outage, "p_mode_multipath"].mean() < t.loc[~t.in_outage, "p_mode_gnss"].mean()
+    bad = text + MIXTURE_MODE.replace('estimator = "gaussian-mixture"\n', "")
+    with pytest.raises(ConfigError, match=r"\[mixture\] table needs") as e:
+        load_scenario(str(_vehicle_demo_with(tmp_path, bad)))
+    assert e.value.key.startswith("methods[0].imm.modes[2]"), e.value.key
+    bad = text + MIXTURE_MODE + "[methods.imm.modes.mixture.colored]\nprocess = 0.5\n"
+    with pytest.raises(ConfigError, match="coloured"):
+        load_scenario(str(_vehicle_demo_with(tmp_path, bad)))

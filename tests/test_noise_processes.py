@@ -322,3 +322,32 @@ def test_config_errors_name_the_key(table, key, words):
     err = info.value
     assert err.key == key and err.file == "scenario.toml"
     assert words in str(err) and "scenario.toml" in str(err)
+
+
+def test_sample_detail_gives_the_same_draws_and_their_systematic_part():
+    """sample_detail draws the same numbers as sample (same generator state) and returns the
+    mean of the component each sample came from: with joint components 0 and 10 every row
+    is all 0 or all 10, the share of 10s is the weight (binomial 4-sigma), and the noise
+    about it has each component's sigma; a profile scales it, a sum adds it, a bias segment
+    is its own systematic part and white Gaussian noise has none."""
+    from mixnav.noise.processes import BiasSegments, Gaussian, Mixture, Sum, VarianceProfile
+    t = np.arange(1.0, 20001.0)
+    mix = Mixture([0.7, 0.3], [1.0, 2.0], [0.0, 10.0], joint=True)
+    proc = Sum(Gaussian(0.02), VarianceProfile(mix, steps=[(0.0, 0.0), (5000.0, 1.0), (15000.0, 0.0)]),
+               BiasSegments([(100.0, 200.0, [0.5, 0.0, -0.5])]))
+    x_ref = proc.sample(t, 3, np.random.default_rng(5))
+    x, mask, b = proc.sample_detail(t, 3, np.random.default_rng(5))
+    np.testing.assert_array_equal(x, x_ref)
+    assert not mask.any()
+    inside = (t >= 5000) & (t < 15000)
+    np.testing.assert_array_equal(b[~inside & ((t < 100) | (t >= 200))], 0.0)
+    assert np.all(b[(t >= 100) & (t < 200)] == [0.5, 0.0, -0.5])
+    bi = b[inside]
+    assert set(np.unique(bi)) == {0.0, 10.0} and np.all(bi == bi[:, :1])   # joint: one label per epoch
+    share = (bi[:, 0] == 10.0).mean()
+    assert abs(share - 0.3) < 4 * np.sqrt(0.3 * 0.7 / inside.sum())
+    e = (x - b)[inside]
+    for level, sigma in ((0.0, 1.0), (10.0, 2.0)):
+        sel = bi[:, 0] == level
+        s = e[sel].std()
+        assert abs(s - np.hypot(sigma, 0.02)) < 4 * sigma / np.sqrt(2 * e[sel].size), (level, s)

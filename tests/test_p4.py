@@ -44,6 +44,13 @@ def test_p4_vehicle_em_imm_beats_the_imm_in_multipath(p4_run):
     assert applied.sum() > 100
     assert np.sqrt(np.mean((b[applied] - 10.0) ** 2)) < 0.7
     assert seg["p_mode_sins-gnss"].mean() > 0.9
+    # the same score in the run's metrics, against the simulation's own record of which fixes
+    # were biased (the multipath component drawn), not the nominal 10 m
+    m = p4_run.metrics.loc["em-imm"]
+    assert m["bias_error_horizontal_axis_rms_m"] < 0.7 and m["bias_error_rms_m"] < 1.2
+    assert m["bias_detected_share"] > 0.8 and m["bias_false_share"] < 0.05
+    assert m["bias_epochs_biased"] > 100
+    assert "bias_error_rms_m" not in p4_run.metrics.columns or np.isnan(p4_run.metrics.loc["imm", "bias_error_rms_m"])
     s = t["imm"][(t["imm"].time_s >= 1200) & (t["imm"].time_s < 1800)]
     assert s["p_mode_sins-gnss"].mean() < 0.5
     # before the multipath every filter is at RTK level
@@ -60,3 +67,6 @@ def test_drive0708_multipath_em_imm():
     t = r.solutions
     em, ekf = _segment_max(t["em-imm"], 200, 350), _segment_max(t["ekf"], 200, 350)
     assert em < 2.0 and em < ekf / 5, (em, ekf)
+    # the injected corruption's systematic part is the truth of the bias metrics
+    m = r.metrics.loc["em-imm"]
+    assert m["bias_error_horizontal_axis_rms_m"] < 1.0 and m["bias_detected_share"] > 0.7, m.filter(like="bias")

@@ -102,7 +102,7 @@ def run_scenario(name_or_path: str, seed: int | None = None) -> RunResult:
     run = _run(sc, source, seed=seed)
     sim = run.sim
     tables = run_tables(run)
-    metrics = {name: method_metrics(res, tables[name], sim.outages) for name, res in run.results.items()}
+    metrics = {name: method_metrics(res, tables[name], sim.outages, sim.gnss_bias) for name, res in run.results.items()}
     return RunResult(tables, _metrics_frame(metrics), run.results, _frame(sim.truth.time, sim.truth.lla), run, text)
 
 
@@ -130,7 +130,7 @@ def process_dataset(name_or_path: str, data: str | None = None) -> RunResult:
         return RunResult({"spp": t}, _metrics_frame({"spp": spp_metrics(t, po.solve_time_s)}), {}, None, po, text)
     withheld = withheld_windows(po)
     tables = process_tables(po)
-    metrics = {name: method_metrics(res, tables[name], withheld) for name, res in po.results.items()}
+    metrics = {name: method_metrics(res, tables[name], withheld, po.gnss_bias) for name, res in po.results.items()}
     truth = None if po.reference is None else _frame(po.reference.time, po.reference.lla)
     return RunResult(tables, _metrics_frame(metrics), po.results, truth, po, text)
 

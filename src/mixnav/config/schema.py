@@ -599,16 +599,18 @@ class EmBiasConfig(Strict):
 class ImmModeConfig(Strict):
     """One mode of an IMM (``[[methods.imm.modes]]``): its name, the measurements that update
     it (``"gnss"``, the method type's GNSS model, and any of the method's ``aiding``) and
-    its estimator: ``"ekf"``, ``"robust-adaptive"`` (optional ``[robust]`` table) or
+    its estimator: ``"ekf"``, ``"robust-adaptive"`` (optional ``[robust]`` table),
     ``"em-bias"`` (the EM-IMM's GNSS mode: the EKF with the EM multipath-bias removal on its
-    GNSS rows, optional ``[em]`` table)."""
+    GNSS rows, optional ``[em]`` table) or ``"gaussian-mixture"`` (a bank, optional
+    ``[mixture]`` table as a method's, learned offline or online; not coloured)."""
 
     name: str = Field(min_length=1)
     measurements: list[Literal["gnss", "nhc", "odometer", "zupt", "zaru"]] = Field(
         min_length=1, description="a mode with no measurements is pure inertial navigation, never told apart")
-    estimator: Literal["ekf", "robust-adaptive", "em-bias"] = "ekf"
+    estimator: Literal["ekf", "robust-adaptive", "em-bias", "gaussian-mixture"] = "ekf"
     robust: RobustConfig | None = None
     em: EmBiasConfig | None = None
+    mixture: MixtureConfig | None = None
 
     @model_validator(mode="after")
     def _unique(self):
@@ -618,6 +620,11 @@ class ImmModeConfig(Strict):
             raise ValueError("a [robust] table needs estimator = \"robust-adaptive\"")
         if self.em is not None and self.estimator != "em-bias":
             raise ValueError("an [em] table needs estimator = \"em-bias\"")
+        if self.mixture is not None and self.estimator != "gaussian-mixture":
+            raise ValueError("a [mixture] table needs estimator = \"gaussian-mixture\"")
+        if self.mixture is not None and self.mixture.colored is not None:
+            raise ValueError("a mode cannot be the coloured-noise bank (M6: it differences the measurements "
+                             "and carries AR(1) states the other modes do not have)")
         if self.estimator == "em-bias" and "gnss" not in self.measurements:
             raise ValueError("an em-bias mode removes a bias from the GNSS: list \"gnss\" in its measurements")
         return self

@@ -114,31 +114,17 @@ def _build(method, default_imu, fixes, lever_arm, source, index, observations, c
     meas = meas + aids
     common = dict(covariance_interval=method.covariance_interval, clock=clock)
     if method.estimator == "imm":
-        return _imm(method, layout, model, meas[0], aids, source, index, common), meas
+        return _imm(method, layout, model, meas[0], aids, source, index, common, training, seed), meas
     if method.estimator == "robust-adaptive":
         rc = method.robust or RobustConfig()
         return filter_class("robust-adaptive")(layout, model, k0=rc.k0, k1=rc.k1, c=rc.c, **common), meas
     if method.estimator == "gaussian-mixture":
         from ..filters.gmekf import GaussianMixtureEkf
-        from ..noise.learn.online import OnlineSettings
         mc = method.mixture or MixtureConfig()
-        learning_time = 0.0
         if mc.colored is not None:
             return _colored(method, mc, layout, model, meas, training, source, index, common, seed)
-        online = None
-        if mc.learn is not None and mc.learn.online is not None:
-            oc = mc.learn.online
-            online = OnlineSettings(tuple(mc.learn.observables), window=oc.window, every=oc.every, gate=oc.gate,
-                                    n_components=mc.learn.n_components, prune=mc.learn.prune)
-        if mc.learn is not None and mc.learn.offline:
-            if training is None:
-                raise ConfigError(f"method '{method.name}' learns its mixtures from a training stretch, "
-                                  "which only simulated scenarios provide", file=source,
-                                  key=f"methods[{index}].mixture.learn")
-            learned = _learn(mc, training, seed)
-            mixtures, learning_time, failed = learned.mixtures, learned.learning_time_s, learned.not_converged
-        else:
-            mixtures, failed = mixtures_from_config(mc), 0
+        mixtures, online, learning_time, failed = _bank_parts(mc, training, seed, method.name, source,
+                                                              f"methods[{index}].mixture")
         return GaussianMixtureEkf(layout, model, mixtures, max_components=mc.max_components,
                                   learning_time_s=learning_time, online=online, learner_not_converged=failed,
                                   **common), meas
@@ -156,17 +142,36 @@ def _build(method, default_imu, fixes, lever_arm, source, index, observations, c
         return cls(layout, model, **common, **options), meas
 
 
-def _imm(method, layout, model, gnss, aids, source, index, common):
+def _bank_parts(mc: MixtureConfig, training, seed: int, name: str, source, key: str):
+    """A ``[mixture]`` table's bank: ``(mixtures, online settings or None, learning time [s],
+    fits not converged)``, the mixtures given or learned offline from ``training``."""
+    from ..noise.learn.online import OnlineSettings
+    online = None
+    if mc.learn is not None and mc.learn.online is not None:
+        oc = mc.learn.online
+        online = OnlineSettings(tuple(mc.learn.observables), window=oc.window, every=oc.every, gate=oc.gate,
+                                n_components=mc.learn.n_components, prune=mc.learn.prune)
+    if mc.learn is not None and mc.learn.offline:
+        if training is None:
+            raise ConfigError(f"'{name}' learns its mixtures from a training stretch, which only simulated "
+                              "scenarios provide", file=source, key=f"{key}.learn")
+        learned = _learn(mc, training, seed)
+        return learned.mixtures, online, learned.learning_time_s, learned.not_converged
+    return mixtures_from_config(mc), online, 0.0, 0
+
+
+def _imm(method, layout, model, gnss, aids, source, index, common, training=None, seed=0):
     """M9: the IMM of the method's modes, each updated by the measurements it lists."""
     from ..filters.ekf import KalmanEstimator
     from ..filters.imm import ImmEkf
     from ..filters.em_bias import EmBiasKalman, EmBiasSettings
+    from ..filters.gmekf import BankEstimator
     from ..filters.robust import RobustEstimator
     ic = method.imm
     by_name = {"gnss": gnss, **dict(zip(method.aiding, aids))}
     sets = [[by_name[x] for x in mode.measurements] for mode in ic.modes]
     makers = []
-    for mode in ic.modes:
+    for k, mode in enumerate(ic.modes):
         if mode.estimator == "robust-adaptive":
             rc = mode.robust or RobustConfig()
             makers.append(lambda rc=rc: RobustEstimator(rc.k0, rc.k1, rc.c, carry_mean=True))
@@ -178,6 +183,12 @@ def _imm(method, layout, model, gnss, aids, source, index, common):
                                 max_state_sigma=None if ec.max_state_sigma is None else float(ec.max_state_sigma),
                                 gate=ec.gate, refit_every=ec.refit_every)
             makers.append(lambda st=st: EmBiasKalman({gnss}, st, carry_mean=True))
+        elif mode.estimator == "gaussian-mixture":
+            mc = mode.mixture or MixtureConfig()
+            mixtures, online, _, _ = _bank_parts(mc, training, seed, f"mode '{mode.name}' of '{method.name}'",
+                                                 source, f"methods[{index}].imm.modes[{k}].mixture")
+            makers.append(lambda mixtures=mixtures, mc=mc, online=online: BankEstimator(
+                mixtures, mc.max_components, online=online, carry_mean=True))
         else:
             makers.append(lambda: KalmanEstimator(carry_mean=True))
     interval = None if ic.transition_interval == "epoch" else float(ic.transition_interval)

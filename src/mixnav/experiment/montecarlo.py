@@ -183,7 +183,7 @@ def _compute_run(scenario: str, sha: str, seed: int, variant: int | None = None)
         row = {"scenario": sc.scenario.name, "seed": int(seed), "method": name}
         if variant is not None:
             row["sweep_value"] = value
-        rows.append({**row, **flatten_metrics(method_metrics(res, table, out.sim.outages))})
+        rows.append({**row, **flatten_metrics(method_metrics(res, table, out.sim.outages, out.sim.gnss_bias))})
         series.append(_series(name, res, table))
     return pd.DataFrame(rows), pd.concat(series, ignore_index=True)
 

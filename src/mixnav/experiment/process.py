@@ -56,6 +56,7 @@ class ProcessOutput:
     aiding: dict = field(default_factory=dict)   # AidingInputs.summary(): still intervals, thresholds
     installation: dict = field(default_factory=dict)  # aiding.installation_check: level, rest, estimates
     odometer: OdometerData | None = None  # the [aiding.odometer] file's samples, when one is read
+    gnss_bias: tuple | None = None  # (times, (M, 3) NED m): the systematic part of the injected corruption
 
 
 def find_data_dir(ds: Dataset, data: str | None, source: str) -> Path:
@@ -145,9 +146,11 @@ def read_reference(ds: Dataset, folder: Path) -> Trajectory | None:
     return generic_csv.read_reference_csv(f)
 
 
-def _corrupt(fixes: GnssFixes, process, rng) -> GnssFixes:
-    """Add a noise process (NED metres) to recorded fixes."""
-    return replace(fixes, lla=displace(fixes.lla, process.sample(fixes.time, 3, rng)))
+def _corrupt(fixes: GnssFixes, process, rng) -> tuple[GnssFixes, np.ndarray]:
+    """Add a noise process (NED metres) to recorded fixes; also the systematic part of what
+    was added (M, 3) (:meth:`~mixnav.noise.processes.NoiseProcess.sample_detail`)."""
+    dp, _, bias = process.sample_detail(fixes.time, 3, rng)
+    return replace(fixes, lla=displace(fixes.lla, dp)), bias
 
 
 def _shift(obj, t0):
@@ -224,7 +227,10 @@ def process(ds: Dataset, source: str, data: str | None = None):
         reference = _shift(reference, t0)
     corrupt = corruption(ds, source)
     if corrupt is not None:
-        all_fixes = _corrupt(all_fixes, corrupt, np.random.default_rng(ds.gnss.corrupt_seed))
+        all_fixes, bias = _corrupt(all_fixes, corrupt, np.random.default_rng(ds.gnss.corrupt_seed))
+        gnss_bias = (all_fixes.time.copy(), bias)
+    else:
+        gnss_bias = None
     withheld = tuple(tuple(w) for w in ds.gnss.withhold)
     keep = ~in_windows(all_fixes.time, withheld)
     fixes = GnssFixes(time=all_fixes.time[keep], lla=all_fixes.lla[keep], pos_sigma=all_fixes.pos_sigma[keep],
@@ -254,7 +260,7 @@ def process(ds: Dataset, source: str, data: str | None = None):
                          installation_check(imu, ds.alignment.static_duration, results, aiding.stillness,
                                             configured={"antenna_position": inst.antenna_position,
                                                         "imu_time_offset": inst.imu_time_offset}),
-                         odometer=aiding.odometer)
+                         odometer=aiding.odometer, gnss_bias=gnss_bias)
 
 
 def withheld_windows(po: ProcessOutput) -> tuple:
@@ -304,4 +310,4 @@ def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = No
                 notes.append(f"Installation estimated by '{name}': " + ", ".join(said) + ".")
     ref = None if po.reference is None else _lla_frame(po.reference.time, po.reference.lla)
     return write_outputs(out_dir, f"mixnav process: {po.dataset.dataset.name}", header, po.results, tables,
-                         withheld, ref, _lla_frame(po.fixes.time, po.fixes.lla), notes, config_text)
+                         withheld, ref, _lla_frame(po.fixes.time, po.fixes.lla), notes, config_text, po.gnss_bias)

@@ -73,8 +73,10 @@ def run_scenario(sc: Scenario, source: str | None = None, seed: int | None = Non
 def _training(sc: Scenario, seed: int, source):
     """Training residuals for the methods that learn their mixtures (one draw shared by all),
     and training series for the coloured-noise methods (M6) that fit or whiten with them."""
-    learners = [m.mixture.learn for m in sc.methods
-                if m.mixture is not None and m.mixture.learn is not None and m.mixture.learn.offline]
+    mixture_tables = [m.mixture for m in sc.methods if m.mixture is not None]
+    mixture_tables += [mode.mixture for m in sc.methods if m.imm is not None for mode in m.imm.modes
+                       if mode.mixture is not None]           # an IMM's mixture modes learn too
+    learners = [mc.learn for mc in mixture_tables if mc.learn is not None and mc.learn.offline]
     colored = [m.mixture for m in sc.methods if m.mixture is not None and m.mixture.colored is not None]
     if not learners and not colored:
         return None
@@ -230,8 +232,40 @@ def _at_true_time(res: FilterResult) -> tuple[np.ndarray, np.ndarray]:
     return displace(lla, -v * dt), v - a * dt
 
 
-def method_metrics(res: FilterResult, table: pd.DataFrame, outages) -> dict:
-    """Accuracy metrics plus timing, recoveries and NIS of one method."""
+def bias_metrics(res: FilterResult, gnss_bias) -> dict:
+    """How well a method that removes a GNSS position bias (an EM-IMM: ``outputs["bias"]``
+    (K, 3) NED [m] at ``outputs["bias_times"]``) knew it, against ``gnss_bias = (times (M,),
+    bias (M, 3))``, the systematic part of each fix's error (the simulation's multipath
+    component means, :attr:`mixnav.sim.scenario.SimulatedRun.gnss_bias`). At the epochs it
+    removed a bias: ``bias_error_rms_m`` (3-D) and ``bias_error_horizontal_axis_rms_m`` (per
+    north/east axis, P4's measure); ``bias_detected_share`` of the truly biased epochs it
+    saw, ``bias_false_share`` of its removals on unbiased ones; the epoch counts. Empty
+    without either."""
+    out = res.outputs or {}
+    if gnss_bias is None or "bias" not in out or not len(out["bias_times"]):
+        return {}
+    tb, b_true = gnss_bias
+    bt, be = np.asarray(out["bias_times"], float), np.asarray(out["bias"], float)
+    k = np.clip(np.searchsorted(tb, bt - 1e-6), 0, len(tb) - 1)
+    same = np.abs(tb[k] - bt) < 1e-6
+    be, bk = be[same], b_true[k[same]]
+    removed = np.linalg.norm(be, axis=1) > 0
+    biased = np.linalg.norm(bk, axis=1) > 0
+    m = {"bias_epochs_removed": int(removed.sum()), "bias_epochs_biased": int(biased.sum())}
+    if removed.any():
+        e = be[removed] - bk[removed]
+        m["bias_error_rms_m"] = float(np.sqrt(np.mean(np.sum(e ** 2, axis=1))))
+        m["bias_error_horizontal_axis_rms_m"] = float(np.sqrt(np.mean(e[:, :2] ** 2)))
+        m["bias_false_share"] = float((removed & ~biased).sum() / removed.sum())
+    if biased.any():
+        m["bias_detected_share"] = float((removed & biased).sum() / biased.sum())
+    return m
+
+
+def method_metrics(res: FilterResult, table: pd.DataFrame, outages, gnss_bias=None) -> dict:
+    """Accuracy metrics plus timing, recoveries and NIS of one method; with ``gnss_bias``
+    (the fixes' systematic error, simulation or injected) the bias-estimate metrics
+    (:func:`bias_metrics`)."""
     # without a reference there is nothing to score: timing and health only
     m = compute_metrics(table, outages=list(outages)) if "err_n_m" in table else {}
     m.update({k: float(v) for k, v in res.timing.items()})
@@ -247,12 +281,13 @@ def method_metrics(res: FilterResult, table: pd.DataFrame, outages) -> dict:
         if inside.any():
             m["mode_probability_mean_in_windows"] = {c.removeprefix("p_mode_"): float(table.loc[inside, c].mean())
                                                      for c in modes}
+    m.update(bias_metrics(res, gnss_bias))
     return m
 
 
 def write_outputs(out_dir: Path, title: str, header: dict, results: dict[str, FilterResult],
                   tables: dict[str, pd.DataFrame], outages, reference: pd.DataFrame | None,
-                  gnss: pd.DataFrame | None, notes=(), config_text: str | None = None) -> dict:
+                  gnss: pd.DataFrame | None, notes=(), config_text: str | None = None, gnss_bias=None) -> dict:
     """Write solution tables, metrics.json, figures and report.html; returns the metrics.
 
     Shared by ``mixnav run`` (simulation, truth as reference) and ``mixnav
@@ -263,7 +298,7 @@ def write_outputs(out_dir: Path, title: str, header: dict, results: dict[str, Fi
     metrics = dict(header)
     metrics["mixnav_version"] = __version__
     metrics["outages_s"] = [list(map(float, o)) for o in outages]
-    metrics["methods"] = {name: method_metrics(results[name], tables[name], outages) for name in tables}
+    metrics["methods"] = {name: method_metrics(results[name], tables[name], outages, gnss_bias) for name in tables}
     for name, table in tables.items():
         atomic_write_dataframe(out_dir / f"solution_{name}.csv", table)
         atomic_write_dataframe(out_dir / f"solution_{name}.parquet", table)
@@ -313,4 +348,4 @@ def write_run(out_dir: Path, run: RunOutput, config_text: str | None = None) -> 
         header["aiding"] = run.aiding
     return write_outputs(out_dir, f"mixnav run: {run.scenario.scenario.name}", header, run.results, tables,
                          sim.outages, _lla_frame(sim.truth.time, sim.truth.lla)[::10],
-                         _lla_frame(sim.fixes.time, sim.fixes.lla), notes, config_text)
+                         _lla_frame(sim.fixes.time, sim.fixes.lla), notes, config_text, sim.gnss_bias)

@@ -258,6 +258,28 @@ def bank_update(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var):
 
 
 @njit(cache=True)
+def bank_log_likelihood(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var):
+    """``log p(z)`` of an epoch under the bank (an IMM mode's score): the rise of the log
+    total weight over a sequential update of a copy (:func:`bank_update`); -inf when that
+    update fails. The bank itself is unchanged."""
+    lw2, X2, P2 = lw.copy(), X.copy(), P.copy()
+    if not bank_update(lw2, X2, P2, z, H, r, kinds, mix_logw, mix_mu, mix_var):
+        return -np.inf
+    return _logsumexp(lw2) - _logsumexp(lw)
+
+
+@njit(cache=True)
+def _logsumexp(a):
+    m = a.max()
+    if not np.isfinite(m):
+        return m
+    s = 0.0
+    for v in a:
+        s += math.exp(v - m)
+    return m + math.log(s)
+
+
+@njit(cache=True)
 def bank_reduce(lw, X, P, max_components, n):
     """Merge pairs until at most ``max_components`` remain (Salmond's criterion).
 

@@ -46,6 +46,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from scipy.linalg import solve_triangular
 
 from ..engine.protocols import Correction, Epoch, Transition
 from ..errors import ArgumentError
@@ -55,8 +56,8 @@ from ..ins.imu_model import ImuErrorModel
 from ..measurements.kinds import KINDS, MAX_KINDS, kind_code
 from ..noise.learn.offline import learn_mixture  # noqa: F401  (re-exported)
 from ..noise.mixture import BankMixtures, GaussianMixture, StandardMixture  # noqa: F401  (re-exported)
-from ._bank_kernels import (bank_epoch, bank_epoch_collect, bank_moments, bank_propagate, bank_reduce, bank_split,
-                            bank_update, predicted_nis)
+from ._bank_kernels import (bank_epoch, bank_epoch_collect, bank_log_likelihood, bank_moments, bank_propagate,
+                            bank_reduce, bank_split, bank_update, predicted_nis)
 from ._ekf_kernels import NEEDS_REPAIR, OK
 from .ekf import ErrorStateEkf, repair_covariance
 
@@ -101,12 +102,21 @@ class BankEstimator:
         Innovations beyond this many predicted sigmas reject the epoch (counted).
     online : mixnav.noise.learn.online.OnlineSettings, optional
         Re-learn these kinds' measurement mixtures online (M4 beyond the paper).
+    carry_mean : bool
+        Keep the bank's components about the nominal *before* the engine's feedback
+        (their merged mean is the correction) and re-centre them in :meth:`recentre`:
+        the form an IMM mode needs (:mod:`mixnav.filters.imm`), with :meth:`moments`,
+        :meth:`set_moments` (the mixed moments imposed by an affine map of the whole
+        bank, its shape kept) and :meth:`log_likelihood` (the bank's own mixture
+        density of an epoch, not a Gaussian of its moments). Alone with the engine it
+        gives the closed-loop bank's numbers.
     """
 
     def __init__(self, mixtures: BankMixtures, max_components: int = 16, absurd_sigma: float = 1e4,
-                 online=None):
+                 online=None, carry_mean: bool = False):
         if int(max_components) < 1:
             raise ArgumentError(f"must be at least 1, got {max_components}", argument="max_components")
+        self.carry_mean = bool(carry_mean)
         self.mixtures0 = mixtures
         self.max_components = int(max_components)
         self.absurd_sigma = float(absurd_sigma)
@@ -132,12 +142,15 @@ class BankEstimator:
         qc_white[lay.vel] = motion.qc[lay.vel]
         mixtures = self.mixtures0
         nk = self._kept_states()
+        if self.carry_mean and (nk or n_clone):
+            raise ArgumentError("a mean-carrying bank (an IMM mode) carries no stochastic clone and no "
+                                "coloured-noise states", argument="carry_mean")
         na = n + nk + n_clone
         self.n, self.na, self.nc = n, na, n_clone
         #: first index of the stochastic clone; states n:ic (M6's process-noise states)
         #: are kept as estimates after an update, not fed back into the nominal
         self.ic = n + nk
-        self.P = np.zeros((n, n))  # scratch for the propagation kernel (gives Phi and Qd)
+        self._scratch = np.zeros((n, n))  # for the propagation kernel (gives Phi and Qd)
         pr = mixtures.prior
         I = pr.n_components
         self.lw = np.log(np.asarray(pr.weights))
@@ -176,11 +189,11 @@ class BankEstimator:
     @property
     def kernel_covariance(self) -> np.ndarray:
         """A zeroed scratch: the kernel's step leaves this step's ``Phi`` and ``Qd`` in the work array."""
-        return self.P
+        return self._scratch
 
     def predict(self, step: Transition) -> None:
         F, phi, qd, T, measured = step.F, step.Phi, step.Qd, step.T, step.measured
-        self.P[:, :] = 0.0
+        self._scratch[:, :] = 0.0
         if not self.white:
             bank_propagate(self.X, self.Pb, phi, qd, self.n)
             return
@@ -227,10 +240,65 @@ class BankEstimator:
         status, nis, lw, X, Pb, dx = self.epoch(z, np.ascontiguousarray(H), r, kinds)
         if status in (OK, NEEDS_REPAIR):
             X[:, n:ic] += dx[n:ic]  # kept states are estimates, not errors of the nominal: undo the re-centring
+            if self.carry_mean:     # about the nominal before feedback: the IMM re-centres on its own dx
+                X += dx
             self.lw, self.X, self.Pb = lw, X, Pb
             if self.have_clone:
                 return Correction(np.concatenate([dx[:n], dx[ic:]]), nis, status, len(z))
         return Correction(dx[:n], nis, status, len(z))
+
+    # --- the mean-carrying form (an IMM mode) ---------------------------------------------------
+    def recentre(self, dx: np.ndarray) -> None:
+        """The nominal moved by ``dx`` (fed back by the engine or the IMM): every component's
+        mean ``-= dx``."""
+        self.X[:, :self.n] -= dx[:self.n]
+
+    def moments(self) -> tuple[np.ndarray, np.ndarray]:
+        """The bank's merged error-state mean (n,) and covariance (n, n) (with the white
+        process noise held apart until the next split, :meth:`covariance`)."""
+        _, xm, _ = bank_moments(self.lw, self.X, self.Pb)
+        return xm[:self.n].copy(), self.covariance()
+
+    def set_moments(self, x0: np.ndarray, P0: np.ndarray) -> None:
+        """Give the bank the merged mean ``x0`` and covariance ``P0`` (an IMM's mixing),
+        keeping its shape: with ``m``, ``Pm`` the current moments, ``L0``, ``Lm`` Cholesky
+        factors and ``A = L0 Lm^-1``, every component goes to ``x0 + A (x_c - m)``,
+        ``A P_c A^T`` (and the white noise held for the next split to ``A Q_w A^T``). An
+        affine map of a mixture moves its moments exactly so (``A Pm A^T = P0``) and keeps
+        every covariance positive definite. When either factorisation fails the bank
+        collapses to the one Gaussian ``(x0, P0)``, counted ``mode_collapsed``."""
+        n = self.n
+        xm, Pm = self.moments()
+        if np.array_equal(xm, x0) and np.array_equal(Pm, P0):
+            return
+        try:
+            Lm = np.linalg.cholesky(Pm)
+            L0 = np.linalg.cholesky(P0)
+        except np.linalg.LinAlgError:
+            self.lw = np.zeros(1)
+            self.X = np.array(x0, dtype=float).reshape(1, n)
+            self.Pb = np.array(P0, dtype=float).reshape(1, n, n)
+            self.Qw[:, :] = 0.0
+            self.Qw_pending = False
+            self.counts["mode_collapsed"] = self.counts.get("mode_collapsed", 0) + 1
+            return
+        A = L0 @ solve_triangular(Lm, np.eye(n), lower=True)
+        self.X = np.ascontiguousarray(x0 + (self.X - xm) @ A.T)
+        self.Pb = np.ascontiguousarray(A @ self.Pb @ A.T)
+        if self.Qw_pending:
+            self.Qw = A @ self.Qw @ A.T
+
+    def log_likelihood(self, rows) -> float:
+        """``log p(z)`` of an epoch's rows under the bank's own predictive mixture: every
+        component (split by the pending process-noise mixture) and every row's noise
+        mixture, rows in sequence (``p(z) = prod_i p(z_i | z_<i)``, the normaliser of the
+        bank's update). Nothing in the bank changes; -inf when a variance is not positive."""
+        z, r = independent_rows(rows.z, rows.R)
+        lw, X, Pb = self.lw, self.X, self.Pb
+        if self.Qw_pending:
+            lw, X, Pb = bank_split(lw, X, Pb, self.Qw, self.proc_logw, self.proc_scale)
+        kinds = np.asarray(rows.kinds, dtype=np.int64)
+        return bank_log_likelihood(lw, X, Pb, z, np.ascontiguousarray(rows.H), r, kinds, *self.tables)
 
     def epoch(self, z, H, r, kinds):
         """The bank's measurement epoch in one compiled call, ``(status, nis, lw, X, P, dx)``
@@ -313,6 +381,8 @@ class BankEstimator:
         bank_update(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
                     np.zeros((1, 1)), np.ones((1, 1)))
         bank_reduce(lw, X, P, 1, n)
+        bank_log_likelihood(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
+                            np.zeros((1, 1)), np.ones((1, 1)))
         bank_epoch(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
                    np.zeros((1, 1)), np.ones((1, 1)), 1e4, 1, n)
         bank_epoch_collect(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),

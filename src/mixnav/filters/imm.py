@@ -31,6 +31,14 @@ how many epochs (odometer at 125 Hz, GNSS at 1 Hz) a second holds. That needs re
 non-negative eigenvalues (a "sticky" matrix, ``Pi_ii >= 1/2`` for two modes);
 ``transition_interval=None`` applies ``Pi`` once per epoch instead (P4's form).
 
+A mode may be a Gaussian-mixture bank (``BankEstimator(carry_mean=True)``,
+:mod:`mixnav.filters.gmekf`). It mixes through its merged moments: mixing gives it the
+mean and covariance ``x0_j``, ``P0_j`` and it takes them by one affine map of all its
+components (``x_c -> x0 + A (x_c - m)``, ``P_c -> A P_c A^T``, ``A = L0 Lm^-1``), which
+moves a mixture's first two moments exactly and keeps its shape. It is scored by its own
+predictive density of the rows (components x noise mixtures), not a Gaussian of its
+moments: a mode whose noise model has a multipath tail is judged with that tail.
+
 Model probabilities are outputs: ``result.outputs["mode_probabilities"]`` (K, r) at the
 cycle times ``result.outputs["mode_times"]``.
 """
@@ -161,7 +169,8 @@ class ImmEstimator:
     ----------
     children : list of estimators, r >= 1
         Each with ``carry_mean = True`` (``KalmanEstimator(carry_mean=True)``, the robust
-        EKF with ``carry_mean=True``...): they predict their own ``x`` and ``P``.
+        EKF with ``carry_mean=True``, ``BankEstimator(carry_mean=True)``...): they predict
+        their own ``x`` and ``P`` (a bank: ``moments()``, ``set_moments()``).
     measurement_sets : list of r collections of measurement models
         The models that update each mode (the same objects given to the engine); none
         may be empty. An epoch of a model in no set is ignored.
@@ -187,7 +196,8 @@ class ImmEstimator:
         for k, c in enumerate(children):
             if not getattr(c, "carry_mean", False) or not hasattr(c, "recentre"):
                 raise ArgumentError(f"mode {k} does not carry its own mean: use "
-                                    "KalmanEstimator(carry_mean=True) or a subclass", argument="children")
+                                    "KalmanEstimator(carry_mean=True) or a subclass, or "
+                                    "BankEstimator(carry_mean=True)", argument="children")
         sets = [frozenset(s) for s in measurement_sets]
         if len(sets) != r:
             raise ArgumentError(f"one set per mode: {r} modes, {len(sets)} sets", argument="measurement_sets")
@@ -234,6 +244,10 @@ class ImmEstimator:
         self._mu_new = np.empty(r)
         self._user_cache: dict = {}
         self._adjusting = [j for j, c in enumerate(self.children) if hasattr(c, "adjusted_rows")]
+        # modes with more than one Gaussian (a mixture bank): their moments through
+        # moments()/set_moments(), their score from their own predictive density
+        self._shaped = [j for j, c in enumerate(self.children) if hasattr(c, "set_moments")]
+        self._scoring = [j for j, c in enumerate(self.children) if hasattr(c, "log_likelihood")]
         self._t_last = None
         self._times: list = []
         self._mus: list = []
@@ -279,14 +293,18 @@ class ImmEstimator:
         #    density, in one compiled call (mix and log_likelihood are the numpy reference)
         Pi = self._transition(epoch.time)
         xs, Ps, x0, P0, logl = self._xs, self._Ps, self._x0, self._P0, self._logl
-        for j, c in enumerate(ch):
-            xs[j] = c.x
-            Ps[j] = c.P
+        self._gather()
         cbar = imm_mix_score(self.mu, Pi, xs, Ps, z, H, np.diag(R) if R.ndim == 1 else R, x0, P0, logl)
+        shaped = self._shaped
         for j, c in enumerate(ch):
-            c.x = x0[j].copy()
-            c.P = P0[j].copy()
+            if shaped and j in shaped:
+                c.set_moments(x0[j], P0[j])
+            else:
+                c.x = x0[j].copy()
+                c.P = P0[j].copy()
         logl = logl.copy()
+        for j in self._scoring:      # a mixture mode: its own density of the rows, not a Gaussian's
+            logl[j] = ch[j].log_likelihood(rows)
         for j in self._adjusting:
             # a mode that changes the rows (the EM-IMM's bias removal) is scored on its rows;
             # one that gated them out (calls them outliers) on the raw rows
@@ -332,8 +350,9 @@ class ImmEstimator:
             # every updating mode kept the rows out (a gate): nothing to feed back; the modes
             # keep their mixed means, whose combination the next correction carries
             return None
+        shaped = self._shaped
         for j, c in enumerate(ch):
-            xs[j] = c.x
+            xs[j] = c.moments()[0] if shaped and j in shaped else c.x
         dx = mu @ xs
         for c in ch:
             c.recentre(dx)
@@ -351,13 +370,20 @@ class ImmEstimator:
         after mixing; a subclass may change them (the tests force one mode's to zero)."""
         return logl
 
+    def _gather(self) -> None:
+        """Every mode's mean and covariance into ``_xs``, ``_Ps``."""
+        xs, Ps, shaped = self._xs, self._Ps, self._shaped
+        for j, c in enumerate(self.children):
+            if shaped and j in shaped:
+                xs[j], Ps[j] = c.moments()
+            else:
+                xs[j] = c.x
+                Ps[j] = c.P
+
     def covariance(self) -> np.ndarray:
         """The combined covariance (eq. 16) of the current modes."""
-        xs, Ps = self._xs, self._Ps
-        for j, c in enumerate(self.children):
-            xs[j] = c.x
-            Ps[j] = c.P
-        imm_combine(self.mu, xs, Ps, self._P)
+        self._gather()
+        imm_combine(self.mu, self._xs, self._Ps, self._P)
         return self._P
 
     def replace_clone(self, J: np.ndarray) -> None:

@@ -150,6 +150,15 @@ class NoiseProcess:
         x = self._sample(t, n_channels, rng)
         return x, np.zeros(x.shape, dtype=bool)
 
+    def sample_detail(self, times, n_channels: int, rng: np.random.Generator):
+        """Noise, gross-error mask and the *systematic* part (n, c) of the noise drawn: the
+        mean of the component each sample came from (a multipath bias), a bias segment's
+        value, zero for zero-mean white or coloured noise. The same draws as
+        :meth:`sample_with_mask` (the same numbers from the same generator): the truth
+        a bias estimator is scored against in simulation."""
+        x, mask = self.sample_with_mask(times, n_channels, rng)
+        return x, mask, np.zeros(x.shape)
+
     def _sample(self, t, n_channels, rng):  # pragma: no cover - abstract
         raise NotImplementedError
 
@@ -254,12 +263,22 @@ class Mixture(NoiseProcess):
         object.__setattr__(self, "means", mu)
 
     def _sample(self, t, c, rng):
+        return self._draw(t, c, rng)[0]
+
+    def _draw(self, t, c, rng):
+        """The samples and the mean of each sample's component."""
         if self.joint:
             labels = np.repeat(rng.choice(self.weights.size, size=(t.size, 1), p=self.weights), c, axis=1)
         else:
             labels = rng.choice(self.weights.size, size=(t.size, c), p=self.weights)
         z = rng.standard_normal((t.size, c))
-        return self.means[labels] + self.sigmas[labels] * z
+        mu = self.means[labels]
+        return mu + self.sigmas[labels] * z, mu
+
+    def sample_detail(self, times, n_channels, rng):
+        t = _check_call(times, n_channels, rng)
+        x, mu = self._draw(t, n_channels, rng)
+        return x, np.zeros(x.shape, dtype=bool), mu
 
     @property
     def mean(self) -> float:
@@ -604,6 +623,10 @@ class BiasSegments(NoiseProcess):
             x[inside] += _per_channel(b, c, "bias")
         return x
 
+    def sample_detail(self, times, n_channels, rng):
+        x, mask = self.sample_with_mask(times, n_channels, rng)
+        return x, mask, x.copy()
+
     def describe(self) -> str:
         return "bias segments " + ", ".join(f"[{a:g}, {b:g}) s: {_fmt(v)}" for a, b, v in self.segments)
 
@@ -676,6 +699,12 @@ class VarianceProfile(NoiseProcess):
         x, mask = self.base.sample_with_mask(t, n_channels, rng)
         return x * self.scale(t)[:, None], mask
 
+    def sample_detail(self, times, n_channels, rng):
+        t = _check_call(times, n_channels, rng)
+        x, mask, b = self.base.sample_detail(t, n_channels, rng)
+        s = self.scale(t)[:, None]
+        return x * s, mask, b * s
+
     def describe(self) -> str:
         parts = [f"sd of ({self.base.describe()}) scaled"]
         parts += [f"x{f:g} from {t:g} s" for t, f in self.steps]
@@ -711,6 +740,18 @@ class Sum(NoiseProcess):
             x += xi
             mask |= mi
         return x, mask
+
+    def sample_detail(self, times, n_channels, rng):
+        t = _check_call(times, n_channels, rng)
+        x = np.zeros((t.size, n_channels))
+        mask = np.zeros((t.size, n_channels), dtype=bool)
+        b = np.zeros((t.size, n_channels))
+        for p in self.processes:
+            xi, mi, bi = p.sample_detail(t, n_channels, rng)
+            x += xi
+            mask |= mi
+            b += bi
+        return x, mask, b
 
     @property
     def variance(self):

@@ -46,7 +46,7 @@ def in_windows(t: np.ndarray, windows) -> np.ndarray:
 
 
 def simulate_fixes(truth: Trajectory, model: GnssFixModel, rng: np.random.Generator,
-                   noise=None, position_noise=None, velocity_noise=None) -> GnssFixes:
+                   noise=None, position_noise=None, velocity_noise=None, with_bias: bool = False):
     """Fixes of the antenna at every ``1/rate`` on the truth's time grid.
 
     Parameters
@@ -64,11 +64,17 @@ def simulate_fixes(truth: Trajectory, model: GnssFixModel, rng: np.random.Genera
         quantity; the fixes still carry the model's sigmas (what a filter is
         told).
 
+    with_bias : bool
+        Also return the systematic part of the position noise (the means of the mixture
+        components drawn, bias segments; :meth:`~mixnav.noise.processes.NoiseProcess.sample_detail`).
+
     Returns
     -------
     GnssFixes
         Noise is added in NED metres and mapped to latitude/longitude with
         the radii at the fix.
+    bias : ndarray (M, 3), only with ``with_bias``
+        The systematic position error of each fix, NED [m] (zeros for Gaussian noise).
     """
     step = int(round(1.0 / (model.rate * np.median(np.diff(truth.time)))))
     idx = np.arange(step, len(truth.time), step)
@@ -85,17 +91,20 @@ def simulate_fixes(truth: Trajectory, model: GnssFixModel, rng: np.random.Genera
         w_b = truth.extra.get("w_ib_b")
         w = w_b[k] if w_b is not None else np.zeros(3)
         vel[j] = truth.v_n[k] + quat_to_dcm(truth.q_nb[k]) @ np.cross(w, lever)
+    bias = np.zeros((len(idx), 3))
     if position_noise is not None:
-        dp = position_noise.sample(t, 3, rng)
+        dp, _, bias = position_noise.sample_detail(t, 3, rng)
     else:
         dp = noise(rng, (len(idx), 3)) * model.pos_sigma
     lla = displace(lla, dp)
     pos_sigma = np.tile(model.pos_sigma, (len(idx), 1))
     if model.vel_sigma is None:
-        return GnssFixes(time=t, lla=lla, pos_sigma=pos_sigma)
+        out = GnssFixes(time=t, lla=lla, pos_sigma=pos_sigma)
+        return (out, bias) if with_bias else out
     if velocity_noise is not None:
         vel = vel + velocity_noise.sample(t, 3, rng)
     else:
         vel = vel + noise(rng, (len(idx), 3)) * model.vel_sigma
-    return GnssFixes(time=t, lla=lla, pos_sigma=pos_sigma, vel_n=vel,
-                     vel_sigma=np.tile(model.vel_sigma, (len(idx), 1)))
+    out = GnssFixes(time=t, lla=lla, pos_sigma=pos_sigma, vel_n=vel,
+                    vel_sigma=np.tile(model.vel_sigma, (len(idx), 1)))
+    return (out, bias) if with_bias else out

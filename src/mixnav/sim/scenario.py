@@ -71,6 +71,9 @@ class SimulatedRun:
     observations: object = None  # GnssObservations when the scenario has [gnss.satellites]
     odometer: OdometerData | None = None
     vehicle: VehicleTruth | None = None
+    #: (times (M,) [s], bias (M, 3) NED [m]): the systematic part of each simulated fix's
+    #: position error (multipath component means), what a bias estimate is scored against
+    gnss_bias: tuple | None = None
 
 
 def motion_segments(sc: Scenario) -> list[MotionSegment]:
@@ -145,8 +148,9 @@ def simulate(sc: Scenario, seed: int, source: str | None = None, ideal=None) -> 
         vel_sigma=None if g.velocity_sigma is None else np.asarray(g.velocity_sigma),
         lever_arm=np.asarray(g.lever_arm), outages=tuple(tuple(o) for o in g.outages))
     pos_noise, vel_noise = gnss_noise(sc, source)
-    fixes = simulate_fixes(truth, fix_model, streams.get("gnss"), position_noise=pos_noise,
-                           velocity_noise=vel_noise)
+    fixes, bias = simulate_fixes(truth, fix_model, streams.get("gnss"), position_noise=pos_noise,
+                                 velocity_noise=vel_noise, with_bias=True)
+    gnss_bias = (fixes.time.copy(), bias)   # before losses: looked up by time
     if g.losses:
         fixes = _lose_fixes(fixes, g.losses, streams.get("gnss-loss"))
     init = initial_estimate(truth, sc, streams.get("init"))
@@ -165,7 +169,7 @@ def simulate(sc: Scenario, seed: int, source: str | None = None, ideal=None) -> 
         odo = simulate_odometer(truth, o.rate, o.sigma, o.scale_factor, vehicle.odometer_lever_arm,
                                 vehicle.C_vb, streams.get("odometer"), quantum=o.quantum, source=source)
     return SimulatedRun(seed, truth, imu_ideal, imu, draw, model, fixes, init, outages, obs,
-                        odometer=odo, vehicle=vehicle)
+                        odometer=odo, vehicle=vehicle, gnss_bias=gnss_bias)
 
 
 def _lose_fixes(fixes: GnssFixes, losses, rng) -> GnssFixes:
