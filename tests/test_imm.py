@@ -392,3 +392,32 @@ def test_mixture_mode_from_a_scenario_file(tmp_path):
     bad = text + MIXTURE_MODE + "[methods.imm.modes.mixture.colored]\nprocess = 0.5\n"
     with pytest.raises(ConfigError, match="coloured"):
         load_scenario(str(_vehicle_demo_with(tmp_path, bad)))
+
+
+class _SlowKalman(KalmanEstimator):
+    """A Kalman mode the IMM does not recognise as plain: it takes the general path."""
+
+
+@pytest.mark.parametrize("absurd", [1e4, 2.0])
+def test_compiled_epoch_is_the_general_path(loose, absurd):
+    """The fast path for plain Kalman modes (modes stacked, one compiled call per epoch and
+    one per prediction) gives the general path's numbers: modes with different sets (GNSS;
+    GNSS + NHC at 10 Hz), a non-trivial transition, and with a 2-sigma gate also the
+    rejections (counted the same)."""
+    sc, sim = loose
+    lay = get_layout(15)
+    runs = []
+    for cls in (KalmanEstimator, _SlowKalman):
+        gnss = LooseGnss(sim.fixes, np.asarray(sc.gnss.lever_arm, float), lay)
+        nhc = NonHolonomic(np.arange(sim.init.time + 0.1, sim.imu.time[-1], 0.1), lay, sigma=0.3)
+        imm = ImmEstimator([KalmanEstimator(absurd, carry_mean=True), cls(absurd, carry_mean=True)],
+                           [{gnss}, {gnss, nhc}], [[0.9, 0.1], [0.2, 0.8]])
+        runs.append(Engine(StrapdownMotion(lay, sim.imu_model), imm, [gnss, nhc]).run(sim.imu, sim.init))
+        assert imm._fast == (cls is KalmanEstimator)
+    fast, slow = runs
+    np.testing.assert_allclose(fast.nav, slow.nav, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(fast.sigma, slow.sigma, rtol=1e-9)
+    np.testing.assert_allclose(fast.outputs["mode_probabilities"], slow.outputs["mode_probabilities"], atol=1e-10)
+    assert fast.recoveries == slow.recoveries
+    if absurd == 2.0:
+        assert fast.recoveries["rejected_absurd"] > 0

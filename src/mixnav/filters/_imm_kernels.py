@@ -1,4 +1,5 @@
-"""Compiled IMM cycle: mixing and the modes' predictive log-likelihoods in one call.
+"""Compiled IMM cycle: mixing and the modes' predictive log-likelihoods in one call, and
+for modes that are plain Kalman filters the whole epoch and prediction of all modes.
 
 In numpy the two cost ~140 us per epoch for two 21-state modes (einsum, Cholesky and
 solve calls with an allocation each), seven times an EKF epoch; here they cost a few
@@ -13,7 +14,10 @@ import math
 import numpy as np
 from numba import njit
 
+from ..engine.status import NEEDS_REPAIR, OK
+from ..ins._error_kernels import covariance_predict
 from ..linalg import cholesky_lower
+from ._ekf_kernels import kalman_correct
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -149,3 +153,57 @@ def imm_probabilities(logl, c, mu):
     for j in range(r):
         mu[j] /= s
     return True
+
+
+@njit(cache=True)
+def imm_predict(xs, Ps, phi, qd, tmp):
+    """Every mode's ``x <- Phi x``, ``P <- Phi P Phi^T + Qd`` in place (one call for all)."""
+    r, n = xs.shape
+    x = np.empty(n)
+    for j in range(r):
+        covariance_predict(Ps[j], phi, qd, tmp)
+        for i in range(n):
+            s = 0.0
+            for k in range(n):
+                f = phi[i, k]
+                if f != 0.0:
+                    s += f * xs[j, k]
+            x[i] = s
+        for i in range(n):
+            xs[j, i] = x[i]
+
+
+@njit(cache=True)
+def imm_epoch(mu, Pi, xs, Ps, z, H, r, users, n_sigma, x0, P0, logl, status, nis):
+    """One IMM cycle up to the probabilities for modes that are plain Kalman filters:
+    :func:`imm_mix_score`, then the gated Kalman update (:func:`kalman_correct` about each
+    mixed mean) of the modes with ``users[j]``; the modes' new moments are written into
+    ``xs``, ``Ps`` (in place), each mode's update status into ``status`` (-1: not updated)
+    and NIS into ``nis``. ``r`` (m,) variances or (m, m). Returns ``c = mu Pi``."""
+    if r.ndim == 1:
+        R = np.diag(r)
+    else:
+        R = r
+    c = imm_mix_score(mu, Pi, xs, Ps, z, H, R, x0, P0, logl)
+    nm, n = xs.shape
+    m = z.shape[0]
+    y = np.empty(m)
+    for j in range(nm):
+        status[j] = -1
+        nis[j] = np.inf
+        if users[j]:
+            for i in range(m):
+                s = z[i]
+                for k in range(n):
+                    s -= H[i, k] * x0[j, k]
+                y[i] = s
+            P_post, dx, nj, st = kalman_correct(P0[j], y, H, R, n_sigma)
+            status[j] = st
+            nis[j] = nj
+            if st == OK or st == NEEDS_REPAIR:
+                for k in range(n):
+                    x0[j, k] += dx[k]
+                P0[j] = P_post
+    xs[:, :] = x0
+    Ps[:, :, :] = P0
+    return c

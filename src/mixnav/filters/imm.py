@@ -50,7 +50,7 @@ import math
 import numpy as np
 
 from ..engine.protocols import Correction, Epoch, Transition
-from ._imm_kernels import imm_combine, imm_mix_score, imm_probabilities
+from ._imm_kernels import imm_combine, imm_epoch, imm_mix_score, imm_predict, imm_probabilities
 from ..errors import ArgumentError
 from ..ins.error_model import ClockModel, StateLayout
 from ..ins.imu_model import ImuErrorModel
@@ -248,6 +248,20 @@ class ImmEstimator:
         # moments()/set_moments(), their score from their own predictive density
         self._shaped = [j for j, c in enumerate(self.children) if hasattr(c, "set_moments")]
         self._scoring = [j for j, c in enumerate(self.children) if hasattr(c, "log_likelihood")]
+        # every mode a plain Kalman filter: the modes' moments live in the stacked _xs, _Ps (the
+        # children's x and P are views of them) and one compiled call predicts them all, one
+        # runs the epoch up to the probabilities (tested equal to the general path)
+        self._fast = all(type(c) is KalmanEstimator for c in self.children)
+        if self._fast:
+            self._views = [(self._xs[j], self._Ps[j]) for j in range(r)]
+            self._sync()
+            self._users_arr: dict = {}
+            self._status = np.empty(r, dtype=np.int64)
+            self._nis = np.empty(r)
+            self._tmp = np.empty((n, n))
+            self._absurd = min(c.absurd_sigma for c in self.children)
+            if len({c.absurd_sigma for c in self.children}) > 1:
+                self._fast = False     # one gate per call: modes with different gates go the long way
         self._t_last = None
         self._times: list = []
         self._mus: list = []
@@ -260,6 +274,10 @@ class ImmEstimator:
 
     def predict(self, step: Transition) -> None:
         self._scratch[:, :] = 0.0
+        if self._fast:
+            self._sync()
+            imm_predict(self._xs, self._Ps, step.Phi, step.Qd, self._tmp)
+            return
         for c in self.children:
             c.predict(step)
 
@@ -289,6 +307,8 @@ class ImmEstimator:
             raise ArgumentError("the IMM does not carry a stochastic clone", argument="measurements")
         ch = self.children
         m = len(z)
+        if self._fast:
+            return self._update_fast(epoch, users, z, H, R)
         # 1. mixing and 2. every mode scoring the epoch's rows with its own predictive
         #    density, in one compiled call (mix and log_likelihood are the numpy reference)
         Pi = self._transition(epoch.time)
@@ -359,6 +379,60 @@ class ImmEstimator:
         best = max((j for j in range(len(ch)) if applied[j]), key=lambda j: mu[j])  # NIS of the likeliest
         return Correction(dx, corrs[best].nis, OK, m)
 
+    def _sync(self) -> None:
+        """Fast path: a mode whose ``x`` or ``P`` was replaced from outside (a user setting a
+        mode's state) is copied into the stacks and given its views back."""
+        for c, (xv, Pv) in zip(self.children, self._views):
+            if c.x is not xv:
+                xv[:] = c.x
+                c.x = xv
+            if c.P is not Pv:
+                Pv[:, :] = c.P
+                c.P = Pv
+
+    def _update_fast(self, epoch: Epoch, users: tuple, z, H, R) -> Correction | None:
+        """:meth:`update` for plain Kalman modes: the same steps, the mixing, scoring and
+        mode updates in one compiled call (:func:`~mixnav.filters._imm_kernels.imm_epoch`)."""
+        self._sync()
+        ua = self._users_arr.get(users)
+        if ua is None:
+            ua = self._users_arr[users] = np.array(users, dtype=np.bool_)
+        xs, Ps, status, nis = self._xs, self._Ps, self._status, self._nis
+        cbar = imm_epoch(self.mu, self._transition(epoch.time), xs, Ps, z, H, R, ua, self._absurd,
+                         self._x0, self._P0, self._logl, status, nis)
+        logl = self.weigh(self._logl.copy())
+        applied, best, worst = False, -1, -1
+        counts = self.counts
+        for j, st in enumerate(status):
+            if st < 0:
+                continue
+            if st == OK or st == NEEDS_REPAIR:
+                applied = True
+                if st == NEEDS_REPAIR:
+                    self.children[j].repair()
+                    counts["covariance_repair"] += 1
+            elif st == NON_FINITE:
+                return Correction(np.zeros(self.n), np.inf, NON_FINITE, len(z))
+            else:
+                counts["rejected_absurd" if st == ABSURD else "rejected_not_pd"] += 1
+                if worst < 0:
+                    worst = j
+        if not applied:
+            self._log(epoch.time, cbar)
+            st = int(status[worst])
+            counts["rejected_absurd" if st == ABSURD else "rejected_not_pd"] -= 1   # the engine counts it
+            return Correction(np.zeros(self.n), np.inf, st, len(z))
+        mu = self._mu_new
+        if not imm_probabilities(logl, cbar, mu):
+            counts["imm_no_likelihood"] += 1
+        self._log(epoch.time, mu)
+        dx = mu @ xs
+        xs -= dx
+        for j in range(len(mu)):
+            if (status[j] == OK or status[j] == NEEDS_REPAIR) and (best < 0 or mu[j] > mu[best]):
+                best = j
+        return Correction(dx, float(nis[best]), OK, len(z))
+
     def _log(self, t: float, mu: np.ndarray) -> None:
         self.mu = mu.copy()
         self._t_last = t
@@ -371,7 +445,9 @@ class ImmEstimator:
         return logl
 
     def _gather(self) -> None:
-        """Every mode's mean and covariance into ``_xs``, ``_Ps``."""
+        """Every mode's mean and covariance into ``_xs``, ``_Ps`` (already there on the fast path)."""
+        if self._fast:
+            return
         xs, Ps, shaped = self._xs, self._Ps, self._shaped
         for j, c in enumerate(self.children):
             if shaped and j in shaped:
