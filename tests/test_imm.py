@@ -421,3 +421,44 @@ def test_compiled_epoch_is_the_general_path(loose, absurd):
     assert fast.recoveries == slow.recoveries
     if absurd == 2.0:
         assert fast.recoveries["rejected_absurd"] > 0
+
+
+@pytest.mark.parametrize("cls", [KalmanEstimator, _SlowKalman])
+def test_most_probable_output_feeds_back_the_likeliest_mode(cls):
+    """output = "most-probable": the correction is the likeliest mode's posterior mean (not
+    the combination), that mode ends at zero after re-centring, and the recorded covariance
+    is its own; on both the compiled and the general path."""
+    from mixnav.engine.protocols import Epoch
+    from mixnav.ins.imu_model import ImuErrorModel
+    from mixnav.measurements.base import MeasurementModel, Rows
+    lay = get_layout(15)
+    H = np.zeros((2, 15))
+    H[0, 6], H[1, 7] = 1.0, 1.0
+    z = np.array([0.8, -0.3])
+
+    class Fix(MeasurementModel):
+        kinds = ("position",)
+        times = np.array([1.0])
+
+        def rows(self, i, nav, w_b, clock=None, memory=None, aux=None):
+            return Rows(z, H, np.array([0.25, 0.25]), np.array([0, 0]))
+
+    fix = Fix()
+    a, b = cls(carry_mean=True), cls(carry_mean=True)
+    imm = ImmEstimator([a, b], [{fix}, {object()}], np.eye(2), initial_probabilities=[0.3, 0.7],
+                       transition_interval=None, output="most-probable")
+    imm.init(StrapdownMotion(lay, ImuErrorModel()), np.eye(15), 0, np.random.default_rng(0))
+    b.P = 4.0 * np.eye(15)
+    b.x = np.zeros(15)
+    b.x[6] = 3.0                                  # mode 1 far from the fix: mode 0 wins
+    nav = np.array([1.0, 0, 0, 0, 0, 0, 0, 0.7, 0.2, 100.0])
+    corr = imm.update(Epoch(1.0, 0, fix, nav, np.zeros(3), np.zeros(2), None))
+    assert imm.mu[0] > imm.mu[1]
+    x0_post = np.zeros(15)
+    x0_post[6], x0_post[7] = 0.8 / 1.25, -0.3 / 1.25
+    np.testing.assert_allclose(corr.dx, x0_post, atol=1e-12)
+    np.testing.assert_allclose(a.x, 0.0, atol=1e-12)
+    np.testing.assert_allclose(b.x[6], 3.0 - x0_post[6], atol=1e-12)
+    np.testing.assert_allclose(imm.covariance(), a.P)
+    with pytest.raises(ArgumentError, match="most-probable"):
+        ImmEstimator([a, b], [{fix}, {fix}], np.eye(2), output="best")

@@ -635,13 +635,16 @@ class ImmConfig(Strict):
 
     ``transition[i][j]``: probability of mode j one ``transition_interval`` after mode i
     (rows sum to one; default interval 1 s, or ``"epoch"`` to apply it once per
-    measurement epoch as P4 does); ``initial_probabilities`` default uniform.
+    measurement epoch as P4 does); ``initial_probabilities`` default uniform; ``output``
+    ``"combined"`` (P4, default) or ``"most-probable"`` (the likeliest mode fed back and
+    recorded).
     """
 
     modes: list[ImmModeConfig] = Field(min_length=2)
     transition: list[list[float]]
     transition_interval: Union[Duration, Literal["epoch"]] = 1.0  # type: ignore[valid-type]
     initial_probabilities: list[float] | None = None
+    output: Literal["combined", "most-probable"] = "combined"
 
     @field_validator("transition")
     @classmethod

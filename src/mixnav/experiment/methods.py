@@ -194,7 +194,7 @@ def _imm(method, layout, model, gnss, aids, source, index, common, training=None
     interval = None if ic.transition_interval == "epoch" else float(ic.transition_interval)
     with config_keys(f"methods[{index}].imm", source):
         return ImmEkf(layout, model, sets, ic.transition, ic.initial_probabilities, interval,
-                      [m.name for m in ic.modes], makers, **common)
+                      [m.name for m in ic.modes], makers, output=ic.output, **common)
 
 
 def _colored(method, mc, layout, model, meas, training, source, index, common, seed):

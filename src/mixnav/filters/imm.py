@@ -183,12 +183,21 @@ class ImmEstimator:
         Seconds per application of ``transition`` (default 1 s); None: once per epoch.
     names : list of str, optional
         Mode names for the outputs.
+    output : ``"combined"`` or ``"most-probable"``
+        What is fed back and recorded: the combination of the modes (P4 eqs. 15-16,
+        default), or the most probable mode's mean and covariance. The combination
+        blends in modes that do not fit (on clean GNSS, a mode without it), which costs
+        accuracy; the most probable mode is what a user who wants one model at a time
+        expects. Every mode is re-centred on what is fed back either way.
     """
 
     carry_mean = False   # the composite re-centres its children itself
 
     def __init__(self, children, measurement_sets, transition, initial_probabilities=None,
-                 transition_interval: float | None = 1.0, names=None):
+                 transition_interval: float | None = 1.0, names=None, output: str = "combined"):
+        if output not in ("combined", "most-probable"):
+            raise ArgumentError(f"must be 'combined' or 'most-probable', got {output!r}", argument="output")
+        self.output = output
         children = list(children)
         r = len(children)
         if r < 1:
@@ -373,7 +382,7 @@ class ImmEstimator:
         shaped = self._shaped
         for j, c in enumerate(ch):
             xs[j] = c.moments()[0] if shaped and j in shaped else c.x
-        dx = mu @ xs
+        dx = mu @ xs if self.output == "combined" else xs[int(np.argmax(mu))].copy()
         for c in ch:
             c.recentre(dx)
         best = max((j for j in range(len(ch)) if applied[j]), key=lambda j: mu[j])  # NIS of the likeliest
@@ -426,7 +435,7 @@ class ImmEstimator:
         if not imm_probabilities(logl, cbar, mu):
             counts["imm_no_likelihood"] += 1
         self._log(epoch.time, mu)
-        dx = mu @ xs
+        dx = mu @ xs if self.output == "combined" else xs[int(np.argmax(mu))].copy()
         xs -= dx
         for j in range(len(mu)):
             if (status[j] == OK or status[j] == NEEDS_REPAIR) and (best < 0 or mu[j] > mu[best]):
@@ -457,9 +466,13 @@ class ImmEstimator:
                 Ps[j] = c.P
 
     def covariance(self) -> np.ndarray:
-        """The combined covariance (eq. 16) of the current modes."""
+        """The combined covariance (eq. 16) of the current modes, or with ``output =
+        "most-probable"`` that mode's own."""
         self._gather()
-        imm_combine(self.mu, self._xs, self._Ps, self._P)
+        if self.output == "combined":
+            imm_combine(self.mu, self._xs, self._Ps, self._P)
+        else:
+            self._P[:, :] = self._Ps[int(np.argmax(self.mu))]
         return self._P
 
     def replace_clone(self, J: np.ndarray) -> None:
@@ -513,7 +526,7 @@ class ImmEkf(ErrorStateEkf):
         As :class:`~mixnav.filters.ekf.ErrorStateEkf`.
     measurement_sets : list of r collections of measurement models
         The models that update each mode (pass the same objects to :meth:`run`).
-    transition, initial_probabilities, transition_interval, names
+    transition, initial_probabilities, transition_interval, names, output
         As :class:`ImmEstimator`.
     mode_estimators : list of r callables, optional
         Each returns a fresh mean-carrying estimator for its mode (default:
@@ -526,7 +539,7 @@ class ImmEkf(ErrorStateEkf):
     def __init__(self, layout: StateLayout, imu_model: ImuErrorModel, measurement_sets, transition,
                  initial_probabilities=None, transition_interval: float | None = 1.0, names=None,
                  mode_estimators=None, covariance_interval: float = 1.0, absurd_sigma: float = 1e4,
-                 clock: ClockModel | None = None):
+                 clock: ClockModel | None = None, output: str = "combined"):
         super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
         self.measurement_sets = [frozenset(s) for s in measurement_sets]
         r = len(self.measurement_sets)
@@ -534,7 +547,7 @@ class ImmEkf(ErrorStateEkf):
             mode_estimators = [lambda: KalmanEstimator(self.absurd_sigma, carry_mean=True)] * r
         self.mode_estimators = list(mode_estimators)
         self.options = dict(transition=transition, initial_probabilities=initial_probabilities,
-                            transition_interval=transition_interval, names=names)
+                            transition_interval=transition_interval, names=names, output=output)
         self.make_estimator()   # checks every argument now, not at the first run
 
     def make_estimator(self) -> ImmEstimator:
