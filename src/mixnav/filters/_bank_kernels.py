@@ -25,6 +25,26 @@ prior, so this merge has a closed form that costs one scalar Kalman update::
 component it is the plain scalar Kalman update. This is how per-satellite
 mixtures avoid the ``L^m`` explosion of a joint bank: ``m`` rows cost ``m N``
 scalar updates, not ``N L^m`` components.
+
+The row-by-row update decides each row's component from the state as the rows
+before it left it, so when gross errors meet an unconverged state the first
+rows set the state and the later, correct rows are explained as outliers (P1's
+epoch-0 trap). The *whole-epoch* update (:func:`bank_epoch_whole`) decides the
+assignments from all rows at once: a variational-Bayes fixed point on the bank's
+merged Gaussian, ``q(x) q(labels)``, alternating
+
+    rows -> effective rows: lambda_k = sum_l rho_kl / (v_l r_k),
+                            o_k = sum_l rho_kl mu_l sigma_k / (v_l r_k) / lambda_k
+    q(x) = Kalman update by (y_k - o_k, 1 / lambda_k) of every row
+    rho_kl ∝ pi_l (v_l r_k)^-1/2 exp(-((e_k - mu_l sigma_k)^2 + h_k P h_k^T) / (2 v_l r_k)),
+             e_k = y_k - h_k x   (the expectations under q(x))
+
+from the prior-predictive responsibilities until they change by less than
+``tol``; then every component takes the same effective rows, and its weight the
+rise of its evidence ``sum_k log N(effective innovation; 0, s_k)`` (the
+variational bound of the epoch's evidence less terms common to all
+components). With one noise component ``rho = 1`` and it is the Kalman
+update, as the row-by-row update is.
 """
 
 from __future__ import annotations
@@ -158,8 +178,14 @@ def predicted_nis(xm, Pm, z, H, r):
 
 
 # reassociation lets the row loops vectorise; no 'nnan'/'ninf', so the infinity checks stay
-@njit(cache=True, fastmath={"reassoc", "contract"})
+@njit(cache=True)
 def bank_update(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var):
+    """:func:`bank_update_gated` with no gate (every row updated with its noise mixture)."""
+    return bank_update_gated(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, np.inf)
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def bank_update_gated(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, gate):
     """Sequential scalar update of every component by every row (module docstring).
 
     Parameters
@@ -172,6 +198,11 @@ def bank_update(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var):
     mix_logw, mix_mu, mix_var : ndarray (n_kinds, L)
         Per kind, log-weights (``-inf`` pads unused slots), means and variance
         scales of the standardised noise mixture.
+    gate : float
+        A row whose state share of the predicted variance ``h P h^T`` exceeds
+        ``gate * r`` (the component's state is not yet known better than the
+        noise) is updated with its mixture's moment-matched Gaussian, not the
+        mixture (``inf``: never): the epoch-0 trap guard (module docstring).
 
     Returns
     -------
@@ -214,6 +245,31 @@ def bank_update(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var):
             for q in range(n_nz[k]):
                 hPh += H[k, nz[k, q]] * Ph[nz[k, q]]
             y = z[k] - hx
+            if hPh > gate * rk:     # unconverged: the mixture's moment-matched Gaussian
+                mbar = 0.0
+                m2 = 0.0
+                for l in range(L):
+                    if mix_logw[kd, l] > -np.inf:
+                        wl = math.exp(mix_logw[kd, l])
+                        mbar += wl * mix_mu[kd, l]
+                        m2 += wl * (mix_var[kd, l] + mix_mu[kd, l] * mix_mu[kd, l])
+                s = hPh + (m2 - mbar * mbar) * rk
+                if not (s > 0.0):
+                    return False
+                e = y - mbar * sig
+                lam = -0.5 * (_LOG2PI + math.log(s) + e * e / s)
+                a = e / s
+                b = 1.0 / s
+                if not (np.isfinite(a) and np.isfinite(lam)):
+                    return False
+                for i in range(na):
+                    Xc[i] += Ph[i] * a
+                for i in range(na):
+                    bi = b * Ph[i]
+                    for j in range(na):
+                        Pc[i, j] -= bi * Ph[j]
+                lw[c] += lam
+                continue
             lmax = -np.inf
             for l in range(L):
                 if mix_logw[kd, l] == -np.inf:
@@ -380,6 +436,187 @@ def bank_reduce(lw, X, P, max_components, n):
     return lw2, X2, P2
 
 
+@njit(cache=True)
+def _row_nonzeros(H):
+    m, na = H.shape
+    nz = np.empty((m, na), dtype=np.int64)
+    n_nz = np.zeros(m, dtype=np.int64)
+    for k in range(m):
+        for j in range(na):
+            if H[k, j] != 0.0:
+                nz[k, n_nz[k]] = j
+                n_nz[k] += 1
+    return nz, n_nz
+
+
+@njit(cache=True)
+def _effective_pass(x, P, z, H, r, lam, off, nz, n_nz, Ph):
+    """Sequential scalar Kalman updates of ``(x, P)`` (in place) by the effective rows
+    ``(z_k - off_k, 1 / lam_k)``; returns the sum of their predictive log-densities, or
+    NaN when a predicted variance is not positive."""
+    m, na = H.shape
+    ll = 0.0
+    for k in range(m):
+        for i in range(na):
+            Ph[i] = 0.0
+        hx = 0.0
+        for q in range(n_nz[k]):
+            j = nz[k, q]
+            h = H[k, j]
+            hx += h * x[j]
+            for i in range(na):
+                Ph[i] += P[j, i] * h
+        hPh = 0.0
+        for q in range(n_nz[k]):
+            hPh += H[k, nz[k, q]] * Ph[nz[k, q]]
+        s = hPh + 1.0 / lam[k]
+        if not (s > 0.0):
+            return np.nan
+        y = z[k] - off[k] - hx
+        ll += -0.5 * (_LOG2PI + math.log(s) + y * y / s)
+        g = y / s
+        for i in range(na):
+            x[i] += Ph[i] * g
+        for i in range(na):
+            bi = Ph[i] / s
+            for j in range(na):
+                P[i, j] -= bi * Ph[j]
+    return ll
+
+
+@njit(cache=True)
+def _effective_rows(rho, r, kinds, mix_mu, mix_var, lam, off):
+    m, L = rho.shape
+    for k in range(m):
+        kd = kinds[k]
+        a = 0.0
+        b = 0.0
+        sig = math.sqrt(r[k])
+        for l in range(L):
+            if rho[k, l] > 0.0:
+                inv = rho[k, l] / (mix_var[kd, l] * r[k])
+                a += inv
+                b += inv * mix_mu[kd, l] * sig
+        lam[k] = a
+        off[k] = b / a
+
+
+@njit(cache=True)
+def _responsibilities(x, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, nz, n_nz, rho, expected):
+    """``rho`` (m, L) of every row's noise components given ``q(x) = N(x, P)``: with
+    ``expected`` the variational ones (the state's variance ``h P h^T`` in the exponent),
+    else the predictive ones (in the variance). Returns the largest change."""
+    m, L = rho.shape
+    ll = np.empty(L)
+    change = 0.0
+    for k in range(m):
+        kd = kinds[k]
+        hx = 0.0
+        hPh = 0.0
+        for q in range(n_nz[k]):
+            j = nz[k, q]
+            hx += H[k, j] * x[j]
+            for q2 in range(n_nz[k]):
+                hPh += H[k, j] * P[j, nz[k, q2]] * H[k, nz[k, q2]]
+        y = z[k] - hx
+        sig = math.sqrt(r[k])
+        lmax = -np.inf
+        for l in range(L):
+            if mix_logw[kd, l] == -np.inf:
+                ll[l] = -np.inf
+                continue
+            v = mix_var[kd, l] * r[k]
+            e = y - mix_mu[kd, l] * sig
+            if expected:
+                ll[l] = mix_logw[kd, l] - 0.5 * (math.log(v) + (e * e + hPh) / v)
+            else:
+                s = v + hPh
+                ll[l] = mix_logw[kd, l] - 0.5 * (math.log(s) + e * e / s)
+            if ll[l] > lmax:
+                lmax = ll[l]
+        tot = 0.0
+        for l in range(L):
+            ll[l] = math.exp(ll[l] - lmax) if ll[l] > -np.inf else 0.0
+            tot += ll[l]
+        for l in range(L):
+            v = ll[l] / tot
+            d = abs(v - rho[k, l])
+            if d > change:
+                change = d
+            rho[k, l] = v
+    return change
+
+
+@njit(cache=True)
+def bank_update_whole(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, xm, Pm, iterations, tol, rho):
+    """The whole-epoch mixture update (module docstring) of every component, in place.
+
+    ``xm``, ``Pm``: the bank's merged moments (the variational fixed point runs on them);
+    ``iterations`` (>= 1) the most passes, ``tol`` the largest change of a responsibility
+    that ends them; ``rho`` (m, L) receives the responsibilities used. Returns the number
+    of passes, or -1 when a variance is not positive or a value not finite (the caller
+    rejects the epoch).
+    """
+    N, na = X.shape
+    m = z.shape[0]
+    nz, n_nz = _row_nonzeros(H)
+    lam = np.empty(m)
+    off = np.empty(m)
+    Ph = np.empty(na)
+    for k in range(m):
+        for l in range(rho.shape[1]):
+            rho[k, l] = 0.0
+    _responsibilities(xm, Pm, z, H, r, kinds, mix_logw, mix_mu, mix_var, nz, n_nz, rho, False)
+    x = np.empty(na)
+    Pc = np.empty((na, na))
+    new = np.empty_like(rho)
+    L = rho.shape[1]
+    passes = 0
+    # 1. one row at a time: while some row's assignment would change by more than a half,
+    #    move only the row that would change most, then re-fit the state (coordinate ascent
+    #    of the same bound; like data snooping, it does not let a majority of rows that
+    #    disagree with a few gross ones swing together into a wrong fixed point)
+    for it in range(m + 1):
+        passes += 1
+        _effective_rows(rho, r, kinds, mix_mu, mix_var, lam, off)
+        x[:] = xm
+        Pc[:, :] = Pm
+        if not np.isfinite(_effective_pass(x, Pc, z, H, r, lam, off, nz, n_nz, Ph)):
+            return -1
+        new[:, :] = rho
+        _responsibilities(x, Pc, z, H, r, kinds, mix_logw, mix_mu, mix_var, nz, n_nz, new, True)
+        worst, kw = 0.0, -1
+        for k in range(m):
+            for l in range(L):
+                d = abs(new[k, l] - rho[k, l])
+                if d > worst:
+                    worst, kw = d, k
+        if worst <= 0.5:
+            break
+        for l in range(L):
+            rho[kw, l] = new[kw, l]
+    # 2. then all rows together until no responsibility moves by more than tol
+    rho[:, :] = new
+    for it in range(iterations):
+        if it > 0:
+            passes += 1
+        _effective_rows(rho, r, kinds, mix_mu, mix_var, lam, off)
+        x[:] = xm
+        Pc[:, :] = Pm
+        if not np.isfinite(_effective_pass(x, Pc, z, H, r, lam, off, nz, n_nz, Ph)):
+            return -1
+        change = _responsibilities(x, Pc, z, H, r, kinds, mix_logw, mix_mu, mix_var, nz, n_nz, rho, True)
+        if change < tol:
+            break
+    _effective_rows(rho, r, kinds, mix_mu, mix_var, lam, off)
+    for c in range(N):
+        ll = _effective_pass(X[c], P[c], z, H, r, lam, off, nz, n_nz, Ph)
+        if not np.isfinite(ll):
+            return -1
+        lw[c] += ll
+    return passes
+
+
 #: Status codes of :func:`bank_epoch` (the values of mixnav.filters._ekf_kernels).
 _OK, _NOT_PD, _ABSURD, _NON_FINITE, _NEEDS_REPAIR = 0, 1, 2, 3, 4
 
@@ -395,7 +632,7 @@ def bank_epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max
     """
     empty = np.empty(0)
     return _epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n,
-                  False, empty, empty)
+                  False, empty, empty, 0, 0.0, np.empty((0, 0)))
 
 
 @njit(cache=True)
@@ -409,11 +646,31 @@ def bank_epoch_collect(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_si
     before the gate, so also for a rejected epoch. The returned values are
     bitwise those of :func:`bank_epoch`."""
     return _epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n,
-                  True, u, q)
+                  True, u, q, 0, 0.0, np.empty((0, 0)))
 
 
 @njit(cache=True)
-def _epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n, collect, u, q):
+def bank_epoch_gated(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n, gate,
+                     collect, u, q):
+    """:func:`bank_epoch` (with ``collect``: :func:`bank_epoch_collect`) with the row-by-row
+    update's convergence gate (:func:`bank_update_gated`)."""
+    return _epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n,
+                  collect, u, q, 0, 0.0, np.empty((0, 0)), gate)
+
+
+@njit(cache=True)
+def bank_epoch_whole(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n,
+                     iterations, tol, rho, collect, u, q):
+    """:func:`bank_epoch` (with ``collect``: :func:`bank_epoch_collect`) with the whole-epoch
+    mixture update (:func:`bank_update_whole`: ``iterations`` >= 1, ``tol``; the
+    responsibilities used written into ``rho`` (>= m, L)) instead of the row-by-row one."""
+    return _epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n,
+                  collect, u, q, iterations, tol, rho)
+
+
+@njit(cache=True)
+def _epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n, collect, u, q,
+           iterations, tol, rho, gate=np.inf):
     na = X.shape[1]
     zero = np.zeros(na)
     w, xm, Pm = bank_moments(lw, X, P)
@@ -443,7 +700,11 @@ def _epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_com
     if not np.isfinite(nis):
         return _NOT_PD, nis, lw, X, P, zero
     lw2, X2, P2 = lw.copy(), X.copy(), P.copy()
-    if not bank_update(lw2, X2, P2, z, H, r, kinds, mix_logw, mix_mu, mix_var):
+    if iterations > 0:
+        if bank_update_whole(lw2, X2, P2, z, H, r, kinds, mix_logw, mix_mu, mix_var, xm, Pm, iterations, tol,
+                             rho[:m]) < 0:
+            return _NOT_PD, nis, lw, X, P, zero
+    elif not bank_update_gated(lw2, X2, P2, z, H, r, kinds, mix_logw, mix_mu, mix_var, gate):
         return _NOT_PD, nis, lw, X, P, zero
     lw2, X2, P2 = bank_reduce(lw2, X2, P2, max_components, n)
     K = lw2.shape[0]

@@ -56,8 +56,8 @@ from ..ins.imu_model import ImuErrorModel
 from ..measurements.kinds import KINDS, MAX_KINDS, kind_code
 from ..noise.learn.offline import learn_mixture  # noqa: F401  (re-exported)
 from ..noise.mixture import BankMixtures, GaussianMixture, StandardMixture  # noqa: F401  (re-exported)
-from ._bank_kernels import (bank_epoch, bank_epoch_collect, bank_log_likelihood, bank_moments, bank_propagate,
-                            bank_reduce, bank_split, bank_update, predicted_nis)
+from ._bank_kernels import (bank_epoch, bank_epoch_collect, bank_epoch_gated, bank_epoch_whole, bank_log_likelihood, bank_moments,
+                            bank_propagate, bank_reduce, bank_split, bank_update, predicted_nis)
 from ._ekf_kernels import NEEDS_REPAIR, OK
 from .ekf import ErrorStateEkf, repair_covariance
 
@@ -110,12 +110,55 @@ class BankEstimator:
         bank, its shape kept) and :meth:`log_likelihood` (the bank's own mixture
         density of an epoch, not a Gaussian of its moments). Alone with the engine it
         gives the closed-loop bank's numbers.
+    update : ``"row"`` or ``"epoch"``
+        The measurement update: row by row (each row's noise component decided from the
+        state the rows before it left), or the whole epoch at once (the assignments of all
+        rows decided jointly by a variational-Bayes fixed point on the bank's merged
+        Gaussian, :func:`~mixnav.filters._bank_kernels.bank_update_whole`), which gross
+        errors meeting an unconverged state cannot trap.
+    iterations : int
+        Whole-epoch update: the most variational passes per epoch (>= 1).
+    tolerance : float
+        Whole-epoch update: the passes stop when no responsibility changes by more.
+    divergence_window, divergence_nis : int, float
+        The divergence safeguard: when the merged prediction's NIS per row (each row's
+        variance the state's share plus the model's own ``r``, the sigma the user gave)
+        exceeds ``divergence_nis`` at ``divergence_window`` epochs in a row, the bank's
+        state no longer agrees with what the measurements support: it is lost (gross
+        errors met a state that was off and the mixture explained the rows away). Every
+        component's error-state covariance then gets the run's initial covariance added
+        back, so the next epochs re-acquire the state, counted ``bank_reset``.
+        ``divergence_window = 0`` turns it off. Epochs of gross errors or multipath are
+        what the mixture is there for; the window keeps them from firing it unless they
+        persist (with biased epochs at random with probability p, a false reset needs p^W:
+        3e-7 per epoch for P4's p = 0.3 and W = 10).
     """
 
     def __init__(self, mixtures: BankMixtures, max_components: int = 16, absurd_sigma: float = 1e4,
-                 online=None, carry_mean: bool = False):
+                 online=None, carry_mean: bool = False, update: str = "row", iterations: int = 20,
+                 tolerance: float = 1e-4, divergence_window: int = 0, divergence_nis: float = 9.0,
+                 gate: float = 1.0):
         if int(max_components) < 1:
             raise ArgumentError(f"must be at least 1, got {max_components}", argument="max_components")
+        if update not in ("row", "gated", "epoch"):
+            raise ArgumentError(f"must be 'row', 'gated' or 'epoch', got {update!r}", argument="update")
+        if not (gate > 0):
+            raise ArgumentError(f"must be positive, got {gate}", argument="gate")
+        self.gate = float(gate)
+        if int(iterations) < 1:
+            raise ArgumentError(f"must be at least 1, got {iterations}", argument="iterations")
+        if not (np.isfinite(tolerance) and tolerance > 0):
+            raise ArgumentError(f"must be positive, got {tolerance}", argument="tolerance")
+        if int(divergence_window) < 0:
+            raise ArgumentError(f"must be >= 0 (0: off), got {divergence_window}", argument="divergence_window")
+        if not (np.isfinite(divergence_nis) and divergence_nis > 0):
+            raise ArgumentError(f"must be positive, got {divergence_nis}", argument="divergence_nis")
+        self.divergence_window = int(divergence_window)
+        self.divergence_nis = float(divergence_nis)
+        self.update_mode = update
+        self.iterations = int(iterations)
+        self.tolerance = float(tolerance)
+        self._rho = np.empty((0, 0))
         self.carry_mean = bool(carry_mean)
         self.mixtures0 = mixtures
         self.max_components = int(max_components)
@@ -181,8 +224,10 @@ class BankEstimator:
         self.Qw_pending = False
         self._qdw = np.empty((n, n))
         self._tmp = np.empty((n, n))
-        self.counts = {"rejected_not_pd": 0, "rejected_absurd": 0, "covariance_repair": 0}
+        self.counts = {"rejected_not_pd": 0, "rejected_absurd": 0, "covariance_repair": 0, "bank_reset": 0}
         self.largest_bank = I
+        self.P0 = np.array(P0, dtype=float)
+        self._high = 0            # consecutive epochs the bank did not explain (divergence safeguard)
         self.have_clone = False
         self.rng = rng
 
@@ -237,7 +282,10 @@ class BankEstimator:
         if self.Qw_pending:
             self._split()
         kinds = np.asarray(rows.kinds, dtype=np.int64)
-        status, nis, lw, X, Pb, dx = self.epoch(z, np.ascontiguousarray(H), r, kinds)
+        H = np.ascontiguousarray(H)
+        if self.divergence_window and self._diverged(z, H, r, kinds):
+            self._reset()
+        status, nis, lw, X, Pb, dx = self.epoch(z, H, r, kinds)
         if status in (OK, NEEDS_REPAIR):
             X[:, n:ic] += dx[n:ic]  # kept states are estimates, not errors of the nominal: undo the re-centring
             if self.carry_mean:     # about the nominal before feedback: the IMM re-centres on its own dx
@@ -246,6 +294,21 @@ class BankEstimator:
             if self.have_clone:
                 return Correction(np.concatenate([dx[:n], dx[ic:]]), nis, status, len(z))
         return Correction(dx[:n], nis, status, len(z))
+
+    def _diverged(self, z, H, r, kinds) -> bool:
+        """The divergence test (class docstring) on this epoch's rows, before its update."""
+        _, xm, Pm = bank_moments(self.lw, self.X, self.Pb)
+        nis, _ = predicted_nis(xm, Pm, z, H, r)
+        self._high = self._high + 1 if nis > self.divergence_nis * len(z) else 0
+        return self._high >= self.divergence_window
+
+    def _reset(self) -> None:
+        """The state is lost: the run's initial covariance added back to every component's
+        error states (their means and weights kept), so the next rows re-acquire it."""
+        n = self.n
+        self.Pb[:, :n, :n] += self.P0
+        self._high = 0
+        self.counts["bank_reset"] += 1
 
     # --- the mean-carrying form (an IMM mode) ---------------------------------------------------
     def recentre(self, dx: np.ndarray) -> None:
@@ -311,12 +374,29 @@ class BankEstimator:
         """
         args = (self.lw, self.X, self.Pb, z, H, r, kinds, *self.tables, self.absurd_sigma,
                 self.max_components, self.n)
-        if self.online is None:
-            return bank_epoch(*args)
         m = len(z)
-        if len(self._u) < m:
-            self._u, self._q = np.empty(2 * m), np.empty(2 * m)
-        out = bank_epoch_collect(*args, self._u, self._q)
+        if self.update_mode == "gated":
+            if self.online is not None and len(self._u) < m:
+                self._u, self._q = np.empty(2 * m), np.empty(2 * m)
+            out = bank_epoch_gated(*args, self.gate, self.online is not None, self._u, self._q)
+            if self.online is None:
+                return out
+        elif self.update_mode == "epoch":
+            L = self.tables[0].shape[1]
+            if self._rho.shape[0] < m or self._rho.shape[1] != L:
+                self._rho = np.empty((2 * m, L))
+            if self.online is not None and len(self._u) < m:
+                self._u, self._q = np.empty(2 * m), np.empty(2 * m)
+            out = bank_epoch_whole(*args, self.iterations, self.tolerance, self._rho, self.online is not None,
+                                   self._u, self._q)
+            if self.online is None:
+                return out
+        elif self.online is None:
+            return bank_epoch(*args)
+        else:
+            if len(self._u) < m:
+                self._u, self._q = np.empty(2 * m), np.empty(2 * m)
+            out = bank_epoch_collect(*args, self._u, self._q)
         if self.online.observe(out[0] in (OK, NEEDS_REPAIR), kinds, self._u[:m], self._q[:m]):
             self.mixtures = replace(self.mixtures, measurement={**self.mixtures.measurement,
                                                                 **self.online.current})
@@ -385,6 +465,11 @@ class BankEstimator:
                             np.zeros((1, 1)), np.ones((1, 1)))
         bank_epoch(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
                    np.zeros((1, 1)), np.ones((1, 1)), 1e4, 1, n)
+        bank_epoch_gated(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
+                         np.zeros((1, 1)), np.ones((1, 1)), 1e4, 1, n, 1.0, False, np.empty(1), np.empty(1))
+        bank_epoch_whole(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
+                         np.zeros((1, 1)), np.ones((1, 1)), 1e4, 1, n, 2, 1e-4, np.empty((1, 1)), False, np.empty(1),
+                         np.empty(1))
         bank_epoch_collect(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
                            np.zeros((1, 1)), np.ones((1, 1)), 1e4, 1, n, np.empty(1), np.empty(1))
         _BANK_WARM.append(True)
@@ -415,6 +500,8 @@ class GaussianMixtureEkf(ErrorStateEkf):
         starting from ``mixtures``. Every run starts again from ``mixtures``.
     learner_not_converged : int
         Offline mixture fits that did not converge (reported in ``recoveries``).
+    update, iterations, tolerance, divergence_window, divergence_nis
+        The measurement update and the divergence safeguard, as :class:`BankEstimator`.
     """
 
     #: the RTS smoother applies on the bank's merged Gaussian (an approximation, docs/smoother.md)
@@ -423,9 +510,13 @@ class GaussianMixtureEkf(ErrorStateEkf):
     def __init__(self, layout: StateLayout, imu_model: ImuErrorModel, mixtures: BankMixtures,
                  max_components: int = 16, covariance_interval: float = 1.0, absurd_sigma: float = 1e4,
                  clock: ClockModel | None = None, learning_time_s: float = 0.0, online=None,
-                 learner_not_converged: int = 0):
+                 learner_not_converged: int = 0, update: str = "row", iterations: int = 20,
+                 tolerance: float = 1e-4, divergence_window: int = 0, divergence_nis: float = 9.0,
+                 gate: float = 1.0):
         super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
-        BankEstimator(mixtures, max_components, absurd_sigma, online)  # validate now, not at the first run
+        self.update_options = dict(update=update, iterations=iterations, tolerance=tolerance,
+                                   divergence_window=divergence_window, divergence_nis=divergence_nis, gate=gate)
+        BankEstimator(mixtures, max_components, absurd_sigma, online, **self.update_options)  # validate now
         self.mixtures = mixtures
         self.max_components = int(max_components)
         self.learning_time_s = float(learning_time_s)
@@ -434,7 +525,8 @@ class GaussianMixtureEkf(ErrorStateEkf):
         self._last = None
 
     def make_estimator(self):
-        self._last = BankEstimator(self.mixtures, self.max_components, self.absurd_sigma, self.online)
+        self._last = BankEstimator(self.mixtures, self.max_components, self.absurd_sigma, self.online,
+                                   **self.update_options)
         return self._last
 
     def run(self, imu, init, measurements=(), output_times=None, rng=None, history: bool = False):
