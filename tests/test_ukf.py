@@ -177,12 +177,13 @@ def test_on_the_ins_with_small_errors_the_ukf_and_the_ekf_agree(runs):
 
 
 def test_merged_substeps_agree_with_the_full_rate_sigma_points(runs):
-    """The sigma points mechanized over 10 merged sub-intervals (the default) against
+    """The sigma points mechanized over 4 merged sub-intervals (the default) against
     every IMU increment: the merging error is common to the points and the reference
-    and cancels in the difference (docs/ukf.md); 1 mm, 0.1 % of each 1-sigma (measured 0.1 mm, 0.004 %)."""
+    and cancels in the difference (docs/ukf.md); 5 mm, 0.1 % of each 1-sigma
+    (measured: 1 mm, 0.02 %; 0.1 mm with 10 sub-intervals)."""
     (r0, t0), (r1, t1) = runs["ukf-full-rate"], runs["ukf"]
     cols = ["err_n_m", "err_e_m", "err_d_m"]
-    assert np.abs(t0[cols].to_numpy() - t1[cols].to_numpy()).max() < 0.001
+    assert np.abs(t0[cols].to_numpy() - t1[cols].to_numpy()).max() < 0.005
     assert np.abs(r1.sigma / r0.sigma - 1).max() < 0.001
 
 

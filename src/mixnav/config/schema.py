@@ -674,7 +674,7 @@ class UnscentedOptions(Strict):
     alpha: float = Field(default=1.0, gt=0)
     beta: float = 2.0
     kappa: float = 0.0
-    substeps: int = Field(default=10, ge=0)
+    substeps: int = Field(default=4, ge=0)
     absurd_sigma: float = Field(default=1e4, gt=0)
 
 

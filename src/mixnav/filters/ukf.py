@@ -107,7 +107,7 @@ class UnscentedEstimator:
     needs_step_inputs = True
     carry_mean = True
 
-    def __init__(self, alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0, substeps: int = 10,
+    def __init__(self, alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0, substeps: int = 4,
                  absurd_sigma: float = 1e4, noise: ChannelNoise | None = None):
         if not absurd_sigma > 0:
             raise ArgumentError(f"must be positive, got {absurd_sigma}", argument="absurd_sigma")
@@ -285,7 +285,7 @@ class UnscentedKalmanFilter(ErrorStateEkf):
     can_smooth = False
 
     def __init__(self, layout, imu_model, alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0,
-                 substeps: int = 10, covariance_interval: float = 1.0, absurd_sigma: float = 1e4, clock=None):
+                 substeps: int = 4, covariance_interval: float = 1.0, absurd_sigma: float = 1e4, clock=None):
         super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
         ut_weights(layout.n, alpha, beta, kappa)
         UnscentedEstimator(alpha, beta, kappa, substeps, absurd_sigma)
@@ -308,7 +308,7 @@ class VbAdaptiveUkf(UnscentedKalmanFilter):
 
     def __init__(self, layout, imu_model, rho: float = 0.95, prior_shape: float = 1.0, prior_scale: float = 1.0,
                  iterations: int = 3, tolerance: float = 1e-4, alpha: float = 1.0, beta: float = 2.0,
-                 kappa: float = 0.0, substeps: int = 10, covariance_interval: float = 1.0,
+                 kappa: float = 0.0, substeps: int = 4, covariance_interval: float = 1.0,
                  absurd_sigma: float = 1e4, clock=None):
         super().__init__(layout, imu_model, alpha, beta, kappa, substeps, covariance_interval, absurd_sigma, clock)
         check_vb_settings(rho, prior_shape, prior_scale, iterations, tolerance)
