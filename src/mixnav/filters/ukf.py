@@ -154,6 +154,7 @@ class UnscentedEstimator:
 
     def predict(self, step: Transition) -> None:
         """Sigma points mechanized over the step's block (one compiled call)."""
+        self._scratch[:, :] = 0.0   # what the engine's kernel propagated there is not used
         inp = step.inputs
         if inp is None:
             raise ArgumentError("the UKF needs the engine's step inputs (needs_step_inputs)", argument="engine")
