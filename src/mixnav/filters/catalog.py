@@ -29,8 +29,8 @@ ESTIMATORS = {
                   "Sage-Husa adaptive EKF: a measurement-noise variance scale per observable kind, learned "
                   "online with a fading memory (options: fading, scale0)"),
     "ukf": ("mixnav.filters.ukf:UnscentedKalmanFilter",
-            "M7 unscented Kalman filter: sigma points mechanized as full states, loose GNSS through "
-            "predict_batch (options: alpha, beta, kappa, substeps)"),
+            "M7 unscented Kalman filter: sigma points mechanized as full states, loose or tight GNSS "
+            "through predict_batch (options: alpha, beta, kappa, substeps)"),
     "vb-aukf": ("mixnav.filters.ukf:VbAdaptiveUkf",
                 "M7 variational-Bayes adaptive UKF (paper P5): an inverse-Gamma noise variance per "
                 "measurement channel with forgetting (options: rho, prior_shape, prior_scale, iterations, "

@@ -23,8 +23,8 @@ one compiled call):
 
 At a measurement epoch the sigma points are drawn again about the current
 nominal, ``h`` is evaluated on all of them by ``epoch.model.predict_batch``
-(the loose GNSS model; the gyro-bias deviation of each point enters its body
-rate), and the unscented update gives the posterior mean, returned as the
+(the loose GNSS model, or the tight pseudorange/Doppler one with each point's
+receiver clock; the gyro-bias deviation of each point enters its body rate), and the unscented update gives the posterior mean, returned as the
 correction; the engine feeds it back and calls :meth:`recentre`.
 
 Scaled unscented transform (Julier 2002; Wan & van der Merwe 2000) weights::
@@ -128,6 +128,7 @@ class UnscentedEstimator:
         n = lay.n
         self.n = n
         self.layout_array = lay.as_array()
+        self._clk = lay.clk
         self.tau = np.asarray(motion.tau, dtype=float)
         self.wm, self.wc, self.c = ut_weights(n, self.alpha, self.beta, self.kappa)
         N = 2 * n + 1
@@ -199,7 +200,11 @@ class UnscentedEstimator:
                                 "unscented filters need it", argument="measurements")
         D, navs = self.sigma_points(epoch.nav)
         w_b = np.asarray(epoch.w_b, dtype=float) - D[:, 9:12]   # each point's gyro bias moves its rate
-        out = predict_batch(epoch.index, navs, w_b)
+        if self._clk >= 0:   # each point's receiver clock (tight coupling)
+            clocks = np.asarray(epoch.clock, dtype=float) + D[:, self._clk:self._clk + 2]
+            out = predict_batch(epoch.index, navs, w_b, clocks)
+        else:
+            out = predict_batch(epoch.index, navs, w_b)
         if out is None:
             return None
         y, Y, r = out

@@ -215,7 +215,7 @@ class LooseGnss(MeasurementModel):
         if len(self.times) and self._lever_sl is None and self._dt_col < 0:
             self.predict_batch(0, np.array(nav, dtype=float)[None], np.zeros(3))
 
-    def predict_batch(self, i: int, navs: np.ndarray, w_b: np.ndarray):
+    def predict_batch(self, i: int, navs: np.ndarray, w_b: np.ndarray, clocks=None):
         """``h`` at a batch of full states, for the ensemble estimators.
 
         Returns ``(y, Y, R)``: the measurement ``y`` (m,) and the predictions ``Y``
@@ -223,7 +223,8 @@ class LooseGnss(MeasurementModel):
         innovation of state ``j``: position as NED metres from the fix (so ``y``
         is zero there; radii at each state's antenna), velocity in NED [m/s];
         ``R`` (m,) the variances. ``w_b`` (3,) or (N, 3) body rate [rad/s].
-        At the nominal state, ``y - Y[0]`` is :meth:`rows`' ``z``.
+        At the nominal state, ``y - Y[0]`` is :meth:`rows`' ``z``. ``clocks`` (the
+        receiver clock of each state) is not used by the loose model.
         """
         if self._lever_sl is not None or self._dt_col >= 0:
             raise ArgumentError("the ensemble prediction does not carry the estimated lever arm or time "
