@@ -198,3 +198,25 @@ def test_the_p5_scenario_runs_and_reports_the_tracked_sigma():
     assert {f"vb_sigma_{k}_{a}" for k in ("position", "velocity") for a in "ned"} <= set(tab.columns)
     m = method_metrics(res, tab, ())
     assert set(m["vb_sigma_mean"]) == {f"{k}_{a}" for k in ("position", "velocity") for a in "ned"}
+
+
+def test_per_satellite_channels_get_their_own_columns():
+    """Tight coupling: the channels are satellites that rise and set; each gets its own
+    vb_sigma_<kind>_<prn> column, held from its own updates (not the row position)."""
+    from mixnav.experiment.run import _noise_columns
+
+    class R:
+        time = np.array([0.5, 1.0, 2.0, 3.0])
+        outputs = {"vb_time": np.array([1.0, 2.0, 3.0]),
+                   "vb_channel": np.array([[8005, 8007], [8007, 8009], [8009, -1]]),
+                   "vb_sigma": np.array([[1.0, 2.0], [3.0, 4.0], [5.0, np.nan]])}
+
+    from mixnav.measurements.kinds import kind_code
+    pr = kind_code("pseudorange")
+    R.outputs["vb_channel"] = np.where(R.outputs["vb_channel"] >= 0,
+                                       R.outputs["vb_channel"] - 8000 + pr * 1000, -1)
+    cols = _noise_columns(R)
+    assert list(cols) == ["vb_sigma_pseudorange_5", "vb_sigma_pseudorange_7", "vb_sigma_pseudorange_9"]
+    np.testing.assert_array_equal(cols["vb_sigma_pseudorange_5"], [np.nan, 1.0, 1.0, 1.0])
+    np.testing.assert_array_equal(cols["vb_sigma_pseudorange_7"], [np.nan, 2.0, 3.0, 3.0])
+    np.testing.assert_array_equal(cols["vb_sigma_pseudorange_9"], [np.nan, np.nan, 4.0, 5.0])

@@ -237,8 +237,9 @@ def noise_sigma_figure(solutions: dict[str, pd.DataFrame], truth=None,
                 if not label.startswith(kind + "_"):
                     continue
                 axis = label.rsplit("_", 1)[1]
-                ax.plot(t, df[c].to_numpy(dtype=float), color=f"C{'ned'.find(axis) % 10}",
-                        ls=styles[m % len(styles)], lw=1.0, label=f"{name} {axis}")
+                k = "ned".find(axis) if axis in ("n", "e", "d") else cs.index(c)
+                ax.plot(t, df[c].to_numpy(dtype=float), color=f"C{k % 10}",
+                        ls=styles[m % len(styles)], lw=1.0, label=f"{name} {axis}" if len(cs) <= 12 else None)
         if truth is not None:
             tt, sd = truth
             for axis in "ned":
@@ -246,7 +247,7 @@ def noise_sigma_figure(solutions: dict[str, pd.DataFrame], truth=None,
                 if key in sd:
                     ax.plot(tt, sd[key], color="k", lw=0.8, alpha=0.6,
                             label="true sd" if axis == "n" else None)
-        ax.set_ylabel("m/s" if kind == "velocity" else "m")
+        ax.set_ylabel("m/s" if kind in ("velocity", "range_rate") else "m")
         ax.set_title(f"{kind}: tracked noise sigma; grey: GNSS outage")
         ax.grid(alpha=0.3)
         ax.legend(fontsize="x-small", loc="upper left", ncol=4)

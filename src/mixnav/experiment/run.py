@@ -192,16 +192,20 @@ def solution_table(res: FilterResult, truth: Trajectory | None = None, outages=(
 
 def _noise_columns(res: FilterResult) -> dict:
     """``vb_sigma_<channel>`` (e.g. ``vb_sigma_position_n`` [m], ``vb_sigma_velocity_d``
-    [m/s]): the measurement-noise standard deviation a VB-adaptive filter (vb-aukf,
-    vb-akf) tracked, at its latest update at or before each record (NaN before the first)."""
+    [m/s], ``vb_sigma_pseudorange_12`` [m] for PRN 12): the measurement-noise standard
+    deviation a VB-adaptive filter (vb-aukf, vb-akf) tracked for each channel, at that
+    channel's latest update at or before each record (NaN before its first)."""
     out = getattr(res, "outputs", None) or {}
     if "vb_sigma" not in out or not len(out["vb_time"]):
         return {}
     from ..filters.vb import channel_label
-    channels = out["vb_channel"][0]
-    m = int((channels >= 0).sum())
-    held = _held(out["vb_time"], out["vb_sigma"][:, :m], np.full(m, np.nan), res.time)
-    return {f"vb_sigma_{channel_label(ch)}": held[:, j] for j, ch in enumerate(channels[:m])}
+    t, chans, sig = out["vb_time"], out["vb_channel"], out["vb_sigma"]
+    cols = {}
+    for ch in dict.fromkeys(chans[chans >= 0].tolist()):   # first-seen order
+        k, j = np.nonzero(chans == ch)
+        held = _held(t[k], sig[k, j][:, None], np.full(1, np.nan), res.time)
+        cols[f"vb_sigma_{channel_label(ch)}"] = held[:, 0]
+    return cols
 
 
 def gnss_noise_sd(scenario, source: str, times: np.ndarray) -> dict:
