@@ -100,7 +100,7 @@ def filterpy_run(sim, lever, n_epochs, substeps=4):
         apply_feedback(navs[0], np.zeros(12), clock, dx, la)
         return model.predict_batch(i, navs, w_b - dx[9:12])[1][0]
 
-    pts = MerweScaledSigmaPoints(n, alpha=1.0, beta=2.0, kappa=0.0)
+    pts = MerweScaledSigmaPoints(n, alpha=0.6, beta=2.0, kappa=0.0)
     ukf = FUkf(dim_x=n, dim_z=6, dt=1.0, hx=hx, fx=fx, points=pts)
     ukf.P = motion.initial_covariance(sim.init)
     ukf.x = np.zeros(n)

@@ -671,7 +671,7 @@ class UnscentedOptions(Strict):
     must not be negative for the method's number of states (checked when built,
     naming the key)."""
 
-    alpha: float = Field(default=1.0, gt=0)
+    alpha: float = Field(default=0.6, gt=0)
     beta: float = 2.0
     kappa: float = 0.0
     substeps: int = Field(default=4, ge=0)

@@ -59,7 +59,7 @@ __all__ = ["ut_weights", "UnscentedEstimator", "UnscentedKalmanFilter", "VbAdapt
 _WARM: set = set()
 
 
-def ut_weights(n: int, alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0):
+def ut_weights(n: int, alpha: float = 0.6, beta: float = 2.0, kappa: float = 0.0):
     """Scaled unscented-transform weights ``(wm, wc, c)`` for ``n`` states (module docstring).
 
     Raises ArgumentError (naming ``kappa`` or ``alpha``) when ``n + lambda <= 0`` or
@@ -91,8 +91,9 @@ class UnscentedEstimator:
     Parameters
     ----------
     alpha, beta, kappa : float
-        Scaled unscented-transform parameters (defaults 1, 2, 0: all weights
-        positive, spread ``sqrt(n)`` sigma).
+        Scaled unscented-transform parameters (defaults 0.6, 2, 0: the points
+        ``0.6 sqrt(n)`` sigma out, 2.3 sigma at 15 states; the centre's covariance
+        weight 0.86 >= 0; see docs/ukf.md for why not alpha = 1).
     substeps : int
         The sigma points are mechanized over at most this many merged
         sub-intervals of each propagation step (0: every IMU increment); the
@@ -107,7 +108,7 @@ class UnscentedEstimator:
     needs_step_inputs = True
     carry_mean = True
 
-    def __init__(self, alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0, substeps: int = 4,
+    def __init__(self, alpha: float = 0.6, beta: float = 2.0, kappa: float = 0.0, substeps: int = 4,
                  absurd_sigma: float = 1e4, noise: ChannelNoise | None = None):
         if not absurd_sigma > 0:
             raise ArgumentError(f"must be positive, got {absurd_sigma}", argument="absurd_sigma")
@@ -290,7 +291,7 @@ class UnscentedKalmanFilter(ErrorStateEkf):
 
     can_smooth = False
 
-    def __init__(self, layout, imu_model, alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0,
+    def __init__(self, layout, imu_model, alpha: float = 0.6, beta: float = 2.0, kappa: float = 0.0,
                  substeps: int = 4, covariance_interval: float = 1.0, absurd_sigma: float = 1e4, clock=None):
         super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
         ut_weights(layout.n, alpha, beta, kappa)
@@ -313,7 +314,7 @@ class VbAdaptiveUkf(UnscentedKalmanFilter):
     """
 
     def __init__(self, layout, imu_model, rho: float = 0.95, prior_shape: float = 1.0, prior_scale: float = 1.0,
-                 iterations: int = 3, tolerance: float = 1e-4, alpha: float = 1.0, beta: float = 2.0,
+                 iterations: int = 3, tolerance: float = 1e-4, alpha: float = 0.6, beta: float = 2.0,
                  kappa: float = 0.0, substeps: int = 4, covariance_interval: float = 1.0,
                  absurd_sigma: float = 1e4, clock=None):
         super().__init__(layout, imu_model, alpha, beta, kappa, substeps, covariance_interval, absurd_sigma, clock)
