@@ -6,7 +6,9 @@ measurement epochs, feedback, stochastic clones, recording.
    event are split at it once, up front (:mod:`mixnav.engine.timing`).
 2. Per event the motion model mechanizes the increments up to it and gives
    the step's ``Phi`` and ``Qd`` (one compiled call); the estimator sees the
-   :class:`~mixnav.engine.protocols.Transition`.
+   :class:`~mixnav.engine.protocols.Transition` (with the step's
+   :class:`~mixnav.engine.protocols.StepInputs` only for an estimator that sets
+   ``needs_step_inputs``: the UKF family mechanizes its sigma points from them).
 3. At a measurement epoch the estimator gets an
    :class:`~mixnav.engine.protocols.Epoch` (lazy rows) and returns a
    :class:`~mixnav.engine.protocols.Correction`; **only the engine feeds it

@@ -48,7 +48,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..engine.protocols import Correction, Epoch, Transition
-from ..errors import ArgumentError
+from ..errors import ArgumentError, NumericalError
 from ..engine.status import NEEDS_REPAIR, OK
 from ._ukf_kernels import linearized_pyy, measurement_moments, ukf_predict, ukf_sigma_navs, vb_correct
 from .ekf import ErrorStateEkf, repair_covariance
@@ -169,8 +169,8 @@ class UnscentedEstimator:
                 break
             self._repair_sigma()
         else:
-            raise ArgumentError("the UKF covariance stayed not positive definite after a repair",
-                                argument="P")  # pragma: no cover (the repair makes it PD)
+            raise NumericalError("the UKF covariance stayed not positive definite after a "
+                                 "repair")  # pragma: no cover (the repair makes it PD)
         self.x, self._xo = self._xo, self.x
         self.P, self._Po = self._Po, self.P
 
@@ -190,8 +190,8 @@ class UnscentedEstimator:
             if ukf_sigma_navs(nav, self.x, self.P, self.c, self.layout_array, self._L, self._D, self._navs):
                 return self._D, self._navs[:2 * self.n + 1]
             self._repair_sigma()
-        raise ArgumentError("the UKF covariance stayed not positive definite after a repair",
-                            argument="P")  # pragma: no cover
+        raise NumericalError("the UKF covariance stayed not positive definite after a "
+                             "repair")  # pragma: no cover
 
     def update(self, epoch: Epoch) -> Correction | None:
         model = epoch.model
