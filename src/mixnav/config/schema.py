@@ -686,6 +686,44 @@ class ImmConfig(Strict):
         return self
 
 
+class UnscentedOptions(Strict):
+    """``[methods.options]`` of ``estimator = "ukf"`` (mixnav.filters.ukf, docs/ukf.md):
+    the scaled unscented transform's ``alpha`` (> 0), ``beta``, ``kappa`` and the
+    number of merged sub-intervals the sigma points are mechanized over per step
+    (``substeps``, 0: every IMU increment). The centre point's covariance weight
+    must not be negative for the method's number of states (checked when built,
+    naming the key)."""
+
+    alpha: float = Field(default=0.6, gt=0)
+    beta: float = 2.0
+    kappa: float = 0.0
+    substeps: int = Field(default=4, ge=0)
+    absurd_sigma: float = Field(default=1e4, gt=0)
+
+
+class VbOptions(Strict):
+    """The variational-Bayes noise settings (mixnav.filters.vb): forgetting factor
+    ``rho`` in (0, 1], the inverse-Gamma prior of a new channel (``prior_shape`` > 0,
+    ``prior_scale`` > 0: its variance relative to the model's), fixed-point
+    ``iterations`` (>= 1) and ``tolerance`` (relative variance change, >= 0)."""
+
+    rho: float = Field(default=0.95, gt=0, le=1)
+    prior_shape: float = Field(default=1.0, gt=0)
+    prior_scale: float = Field(default=1.0, gt=0)
+    iterations: int = Field(default=3, ge=1)
+    tolerance: float = Field(default=1e-4, ge=0)
+    absurd_sigma: float = Field(default=1e4, gt=0)
+
+
+class VbUnscentedOptions(VbOptions, UnscentedOptions):
+    """``[methods.options]`` of ``estimator = "vb-aukf"``: :class:`VbOptions` and :class:`UnscentedOptions`."""
+
+
+#: estimators whose ``[methods.options]`` table is validated against a schema at load time
+#: (the others' options are checked by the estimator when built)
+ESTIMATOR_OPTIONS = {"ukf": UnscentedOptions, "vb-aukf": VbUnscentedOptions, "vb-akf": VbOptions}
+
+
 class MethodConfig(Strict):
     name: str
     type: Literal["loose-ekf", "tight-ekf", "tdcp-ekf"]
@@ -721,6 +759,22 @@ class MethodConfig(Strict):
         if v not in ESTIMATORS:
             raise ValueError(f"unknown estimator '{v}' (known: {', '.join(ESTIMATORS)})")
         return v
+
+    @field_validator("options")
+    @classmethod
+    def _typed_options(cls, v, info):
+        schema = ESTIMATOR_OPTIONS.get(info.data.get("estimator"))
+        if schema is None or not v:
+            return v
+        from pydantic import ValidationError
+        try:
+            checked = schema.model_validate(v)
+        except ValidationError as exc:
+            err = exc.errors()[0]
+            what = "unknown option" if err["type"] == "extra_forbidden" else err["msg"]
+            raise ValueError(f"options.{'.'.join(map(str, err['loc']))}: {what} (options of "
+                             f"\"{info.data.get('estimator')}\": {', '.join(schema.model_fields)})") from None
+        return {k: getattr(checked, k) for k in v}
 
     @model_validator(mode="after")
     def _estimator_tables(self):

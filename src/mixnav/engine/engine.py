@@ -6,7 +6,9 @@ measurement epochs, feedback, stochastic clones, recording.
    event are split at it once, up front (:mod:`mixnav.engine.timing`).
 2. Per event the motion model mechanizes the increments up to it and gives
    the step's ``Phi`` and ``Qd`` (one compiled call); the estimator sees the
-   :class:`~mixnav.engine.protocols.Transition`.
+   :class:`~mixnav.engine.protocols.Transition` (with the step's
+   :class:`~mixnav.engine.protocols.StepInputs` only for an estimator that sets
+   ``needs_step_inputs``: the UKF family mechanizes its sigma points from them).
 3. At a measurement epoch the estimator gets an
    :class:`~mixnav.engine.protocols.Epoch` (lazy rows) and returns a
    :class:`~mixnav.engine.protocols.Correction`; **only the engine feeds it
@@ -58,7 +60,7 @@ import numpy as np
 from ..data import ImuData, InitialState
 from ..errors import ArgumentError, NumericalError
 from ..measurements.kinds import kind_code
-from .protocols import Epoch, Transition
+from .protocols import Epoch, StepInputs, Transition
 from .result import FilterResult, History
 from .status import ABSURD, NEEDS_REPAIR, NON_FINITE, OK, S_NOT_POSITIVE_DEFINITE
 from ._record_kernel import record_epoch
@@ -204,6 +206,8 @@ class Engine:
         self._propagate = motion.propagate
         self._inject = motion.inject
         self._recentre = est.recentre if getattr(est, "carry_mean", False) else None
+        # the pre-step nominal for an estimator that mechanizes its own states (UKF)
+        self._pre = (np.empty(10), np.empty(6), np.empty(2)) if getattr(est, "needs_step_inputs", False) else None
         self._has_clock = lay.clk >= 0
         self._n = lay.n
         self._start_k = k0
@@ -235,11 +239,21 @@ class Engine:
         end = self._ends_list[ti] + 1
         s = self._start_k
         work = self._work
+        pre = self._pre
+        if pre is not None:
+            pre[0][:] = nav
+            pre[1][:] = prev
+            pre[2][:] = clock
         T = self._propagate(nav, prev, sensor, imu.dtheta[s:end], imu.dvel[s:end], imu.dt[s:end],
                             est.kernel_covariance, work)
         events = self._events.get(ti, ())
         if T > 0.0:
-            est.predict(Transition(work[0], work[1], work[2], T, bool(events)))
+            if pre is None:
+                est.predict(Transition(work[0], work[1], work[2], T, bool(events)))
+            else:
+                est.predict(Transition(work[0], work[1], work[2], T, bool(events),
+                                       StepInputs(pre[0], pre[1], pre[2], sensor, imu.dtheta[s:end],
+                                                  imu.dvel[s:end], imu.dt[s:end], nav)))
         if self._has_clock:
             clock[0] += clock[1] * T
         self._start_k = end

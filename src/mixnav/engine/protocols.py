@@ -24,12 +24,40 @@ import numpy as np
 from .status import ABSURD, NEEDS_REPAIR, NON_FINITE, OK, S_NOT_POSITIVE_DEFINITE  # noqa: F401
 
 
+class StepInputs(NamedTuple):
+    """What the motion model started from and was driven by over one step.
+
+    Given (as ``Transition.inputs``) only to an estimator that sets
+    ``needs_step_inputs = True`` (the unscented filters, which mechanize their
+    sigma points over the same block); for every other estimator the engine
+    neither copies nor builds anything.
+
+    ``nav0`` (10,), ``prev0`` (6,), ``clock0`` (2,): the nominal state, the
+    previous compensated increments and the receiver clock *before* the step
+    (copies in the engine's scratch, valid until the next step); ``sensor``
+    (12,) the sensor-error estimates the step compensated with; ``dtheta``,
+    ``dvel`` (K, 3), ``dt`` (K,) the raw increments of the block; ``nav`` (10,)
+    the nominal *after* the step (the engine's own array: read, never write).
+    """
+
+    nav0: np.ndarray
+    prev0: np.ndarray
+    clock0: np.ndarray
+    sensor: np.ndarray
+    dtheta: np.ndarray
+    dvel: np.ndarray
+    dt: np.ndarray
+    nav: np.ndarray
+
+
 class Transition(NamedTuple):
     """One propagation step of the error state, as the motion model gave it.
 
     ``F``, ``Phi``, ``Qd`` (n, n) are views into the engine's scratch, valid
     until the next step; ``T`` [s] the step length; ``measured`` whether a
-    measurement epoch follows at the end of the step.
+    measurement epoch follows at the end of the step; ``inputs`` a
+    :class:`StepInputs` for an estimator with ``needs_step_inputs = True``,
+    else None.
     """
 
     F: np.ndarray
@@ -37,6 +65,7 @@ class Transition(NamedTuple):
     Qd: np.ndarray
     T: float
     measured: bool
+    inputs: StepInputs | None = None
 
 
 class Correction(NamedTuple):
@@ -114,6 +143,11 @@ class Estimator(Protocol):
     A composite (an IMM) holds such children, routes each epoch to those whose
     measurement set holds ``epoch.model``, predicts them all with the one
     transition, and re-centres them all on the combined correction.
+
+    Optional: an estimator with ``needs_step_inputs = True`` gets each step's
+    :class:`StepInputs` in ``Transition.inputs`` (the nominal before the step and
+    the IMU block: what sigma points are mechanized from); the engine copies the
+    pre-step nominal only for such an estimator.
     """
 
     counts: dict

@@ -211,3 +211,45 @@ def mode_probability_figure(solutions: dict[str, pd.DataFrame],
         ax.legend(fontsize="small", loc="center right")
     axes[-1].set_xlabel("time [s]")
     return fig
+
+
+def noise_sigma_figure(solutions: dict[str, pd.DataFrame], truth=None,
+                       outages: Sequence[tuple[float, float]] = ()) -> Figure | None:
+    """The measurement-noise sigma VB-adaptive filters tracked (``vb_sigma_<channel>``
+    columns) against time: one panel per observable (position, velocity), one colour per
+    axis, one line style per method; the true sd of the simulated noise in black where
+    ``truth = (times, {channel: sd})`` has it. None when no method tracked a sigma."""
+    cols = {name: [c for c in df.columns if c.startswith("vb_sigma_")] for name, df in solutions.items()}
+    cols = {k: v for k, v in cols.items() if v}
+    if not cols:
+        return None
+    kinds = sorted({c.removeprefix("vb_sigma_").rsplit("_", 1)[0] for v in cols.values() for c in v})
+    fig = Figure(figsize=(9, 1.2 + 2.4 * len(kinds)), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(len(kinds), 1, sharex=True, squeeze=False)[:, 0])
+    styles = ["-", "--", ":", "-."]
+    for ax, kind in zip(axes, kinds):
+        _shade(ax, outages)
+        for m, (name, cs) in enumerate(cols.items()):
+            df = solutions[name]
+            t = df["time_s"].to_numpy(dtype=float)
+            for c in cs:
+                label = c.removeprefix("vb_sigma_")
+                if not label.startswith(kind + "_"):
+                    continue
+                axis = label.rsplit("_", 1)[1]
+                k = "ned".find(axis) if axis in ("n", "e", "d") else cs.index(c)
+                ax.plot(t, df[c].to_numpy(dtype=float), color=f"C{k % 10}",
+                        ls=styles[m % len(styles)], lw=1.0, label=f"{name} {axis}" if len(cs) <= 12 else None)
+        if truth is not None:
+            tt, sd = truth
+            for axis in "ned":
+                key = f"{kind}_{axis}"
+                if key in sd:
+                    ax.plot(tt, sd[key], color="k", lw=0.8, alpha=0.6,
+                            label="true sd" if axis == "n" else None)
+        ax.set_ylabel("m/s" if kind in ("velocity", "range_rate") else "m")
+        ax.set_title(f"{kind}: tracked noise sigma; grey: GNSS outage")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize="x-small", loc="upper left", ncol=4)
+    axes[-1].set_xlabel("time [s]")
+    return fig

@@ -54,6 +54,10 @@ METRIC_KEYS_DOC: dict[str, str] = {
     "online_rows_gated": "M4 online re-learning: window rows left out of a fit by the gate (counted per refit)",
     "sage_husa_scale_<kind>": "Sage-Husa EKF: the measurement-noise variance scale learned for an observable kind "
                               "at the end of the run (1: the model's R was right)",
+    "vb_sigma_<channel>": "VB-adaptive filters (vb-aukf, vb-akf): the measurement-noise standard deviation "
+                          "tracked for a channel (position_n ... velocity_d) at the end of the run [m, m/s]",
+    "vb_sigma_mean": "VB-adaptive filters: per channel, the tracked noise standard deviation averaged over "
+                     "the solution records [m, m/s]",
     "total_time_s": "wall_time_s + learning_time_s [s]",
     "smoother_time_s": "smoothed methods (<name>-smoothed): time of the RTS smoother's backward pass and "
                        "injection [s]; they have none of the forward pass's timing keys",

@@ -188,7 +188,48 @@ def solution_table(res: FilterResult, truth: Trajectory | None = None, outages=(
     d["in_outage"] = in_windows(res.time, outages)
     d.update(_mode_columns(res))
     d.update(_bias_columns(res))
+    d.update(_noise_columns(res))
     return pd.DataFrame(d)
+
+
+def _noise_columns(res: FilterResult) -> dict:
+    """``vb_sigma_<channel>`` (e.g. ``vb_sigma_position_n`` [m], ``vb_sigma_velocity_d``
+    [m/s], ``vb_sigma_pseudorange_12`` [m] for PRN 12): the measurement-noise standard
+    deviation a VB-adaptive filter (vb-aukf, vb-akf) tracked for each channel, at that
+    channel's latest update at or before each record (NaN before its first)."""
+    out = getattr(res, "outputs", None) or {}
+    if "vb_sigma" not in out or not len(out["vb_time"]):
+        return {}
+    from ..filters.vb import channel_label
+    t, chans, sig = out["vb_time"], out["vb_channel"], out["vb_sigma"]
+    cols = {}
+    for ch in dict.fromkeys(chans[chans >= 0].tolist()):   # first-seen order
+        k, j = np.nonzero(chans == ch)
+        held = _held(t[k], sig[k, j][:, None], np.full(1, np.nan), res.time)
+        cols[f"vb_sigma_{channel_label(ch)}"] = held[:, 0]
+    return cols
+
+
+def gnss_noise_sd(scenario, source: str, times: np.ndarray) -> dict:
+    """The true standard deviation of the simulated GNSS noise per loose channel at
+    ``times``: ``{"position_n": (n,), ..., "velocity_d": (n,)}`` (the noise process's
+    :meth:`~mixnav.noise.processes.NoiseProcess.sd`, or the stated sigma when the file
+    gives no process); a channel whose process has no closed-form sd is left out."""
+    from ..config.loader import gnss_noise
+    pos, vel = gnss_noise(scenario, source)
+    g = scenario.gnss
+    t = np.asarray(times, dtype=float)
+    out = {}
+    for name, proc, stated in (("position", pos, g.position_sigma), ("velocity", vel, g.velocity_sigma)):
+        if proc is not None:
+            sd = proc.sd(t, 3)
+        elif stated is not None:
+            sd = np.broadcast_to(np.asarray(stated, dtype=float), (t.size, 3))
+        else:
+            sd = None
+        if sd is not None:
+            out.update({f"{name}_{ax}": sd[:, i] for i, ax in enumerate("ned")})
+    return out
 
 
 def _bias_columns(res: FilterResult) -> dict:
@@ -274,6 +315,9 @@ def method_metrics(res: FilterResult, table: pd.DataFrame, outages, gnss_bias=No
     m["recoveries"] = dict(res.recoveries)
     if len(res.nis):
         m["nis_mean_per_dof"] = float(np.mean(res.nis / res.nis_dim))
+    tracked = [c for c in table.columns if c.startswith("vb_sigma_")]
+    if tracked:   # a VB-adaptive filter: the mean noise sigma it tracked per channel
+        m["vb_sigma_mean"] = {c.removeprefix("vb_sigma_"): float(np.nanmean(table[c])) for c in tracked}
     modes = [c for c in table.columns if c.startswith("p_mode_")]
     if modes:   # an IMM: mean probability of each mode, overall and inside the windows
         m["mode_probability_mean"] = {c.removeprefix("p_mode_"): float(table[c].mean()) for c in modes}
@@ -287,11 +331,14 @@ def method_metrics(res: FilterResult, table: pd.DataFrame, outages, gnss_bias=No
 
 def write_outputs(out_dir: Path, title: str, header: dict, results: dict[str, FilterResult],
                   tables: dict[str, pd.DataFrame], outages, reference: pd.DataFrame | None,
-                  gnss: pd.DataFrame | None, notes=(), config_text: str | None = None, gnss_bias=None) -> dict:
+                  gnss: pd.DataFrame | None, notes=(), config_text: str | None = None, gnss_bias=None,
+                  noise_truth: tuple | None = None) -> dict:
     """Write solution tables, metrics.json, figures and report.html; returns the metrics.
 
     Shared by ``mixnav run`` (simulation, truth as reference) and ``mixnav
-    process`` (real data, e.g. RTK fixes as reference).
+    process`` (real data, e.g. RTK fixes as reference). ``noise_truth``: ``(times,
+    {channel: sd})`` of the simulated GNSS noise, drawn under the sigma a VB-adaptive
+    filter tracked.
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -319,6 +366,9 @@ def write_outputs(out_dir: Path, title: str, header: dict, results: dict[str, Fi
     modes = figures.mode_probability_figure(tables, outages)
     if modes is not None:
         figs["mode_probabilities"] = modes
+    tracked = figures.noise_sigma_figure(tables, noise_truth, outages)
+    if tracked is not None:
+        figs["tracked_noise_sigma"] = tracked
     # metrics.json last: its presence marks a complete output folder.
     write_report(out_dir, title, metrics, figs, notes=list(notes), config_text=config_text)
     atomic_write_json(out_dir / "metrics.json", metrics)
@@ -346,6 +396,10 @@ def write_run(out_dir: Path, run: RunOutput, config_text: str | None = None) -> 
     header = {"scenario": run.scenario.scenario.name, "source": run.source, "seed": sim.seed}
     if run.aiding:
         header["aiding"] = run.aiding
+    truth = None
+    if any(c.startswith("vb_sigma_") for t in tables.values() for c in t.columns):
+        truth = (sim.fixes.time, gnss_noise_sd(run.scenario, run.source, sim.fixes.time))
     return write_outputs(out_dir, f"mixnav run: {run.scenario.scenario.name}", header, run.results, tables,
                          sim.outages, _lla_frame(sim.truth.time, sim.truth.lla)[::10],
-                         _lla_frame(sim.fixes.time, sim.fixes.lla), notes, config_text, sim.gnss_bias)
+                         _lla_frame(sim.fixes.time, sim.fixes.lla), notes, config_text, sim.gnss_bias,
+                         noise_truth=truth)

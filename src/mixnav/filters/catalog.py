@@ -28,6 +28,16 @@ ESTIMATORS = {
     "sage-husa": ("mixnav.filters.sage_husa:SageHusaEkf",
                   "Sage-Husa adaptive EKF: a measurement-noise variance scale per observable kind, learned "
                   "online with a fading memory (options: fading, scale0)"),
+    "ukf": ("mixnav.filters.ukf:UnscentedKalmanFilter",
+            "M7 unscented Kalman filter: sigma points mechanized as full states, loose or tight GNSS "
+            "through predict_batch (options: alpha, beta, kappa, substeps)"),
+    "vb-aukf": ("mixnav.filters.ukf:VbAdaptiveUkf",
+                "M7 variational-Bayes adaptive UKF (paper P5): an inverse-Gamma noise variance per "
+                "measurement channel with forgetting (options: rho, prior_shape, prior_scale, iterations, "
+                "tolerance and the UKF's)"),
+    "vb-akf": ("mixnav.filters.vb:VbAdaptiveEkf",
+               "variational-Bayes adaptive EKF: the VB-AUKF's noise step on the EKF (options: rho, "
+               "prior_shape, prior_scale, iterations, tolerance)"),
 }
 
 #: measurement types (``type = "..."``) -> one-line description

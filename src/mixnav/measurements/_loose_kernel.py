@@ -72,3 +72,37 @@ def loose_zhr(nav, lever, fix, w_b, use_vel, n, i_bg):
             for j in range(3):
                 H[3 + i, i_bg + j] = c[i, 0] * lx[0, j] + c[i, 1] * lx[1, j] + c[i, 2] * lx[2, j]
     return z, H, r
+
+
+@njit(cache=True)
+def loose_predict_batch(navs, lever, fix, w_b, use_vel, Y):
+    """``h`` of one fix at each of N states, in one call (see ``LooseGnss.predict_batch``).
+
+    ``navs`` (N, 10), ``w_b`` (N, 3) body rates, ``Y`` (N, m) written: the antenna
+    position in NED metres from the fix (radii at each state's antenna), then with
+    ``use_vel`` the antenna velocity [m/s].
+    """
+    c = np.empty((3, 3))
+    cl = np.empty(3)
+    for j in range(navs.shape[0]):
+        nav = navs[j]
+        quat_to_dcm_into(nav[0:4], c)
+        for i in range(3):
+            cl[i] = c[i, 0] * lever[0] + c[i, 1] * lever[1] + c[i, 2] * lever[2]
+        lat, lon, h = nav[7], nav[8], nav[9]
+        rm, rn = radii(lat)
+        a_lat = lat + cl[0] / (rm + h)
+        a_lon = lon + cl[1] / ((rn + h) * math.cos(lat))
+        a_h = h - cl[2]
+        rm_a, rn_a = radii(a_lat)
+        dlon = (fix[1] - a_lon + math.pi) % (2.0 * math.pi) - math.pi
+        Y[j, 0] = -(fix[0] - a_lat) * (rm_a + a_h)
+        Y[j, 1] = -dlon * (rn_a + a_h) * math.cos(a_lat)
+        Y[j, 2] = fix[2] - a_h
+        if use_vel:
+            w = w_b[j]
+            wl0 = w[1] * lever[2] - w[2] * lever[1]
+            wl1 = w[2] * lever[0] - w[0] * lever[2]
+            wl2 = w[0] * lever[1] - w[1] * lever[0]
+            for i in range(3):
+                Y[j, 3 + i] = nav[4 + i] + c[i, 0] * wl0 + c[i, 1] * wl1 + c[i, 2] * wl2

@@ -172,3 +172,46 @@ def tdcp_rows(z, H, r, row0, ra, cne, ln, clock_bias, sat_now, sat_prev, carrier
                 H[q, n + a] = (cne_prev[a, 0] * d[0] + cne_prev[a, 1] * d[1] + cne_prev[a, 2] * d[2]) / rho_c
             H[q, n + 3] = -1.0
         r[q] = 2.0 * sig_cp * sig_cp
+
+
+@njit(cache=True)
+def tight_predict_batch(navs, lever, w_b, clocks, sat_pos, sat_vel, valid, use_rr, Y):
+    """Predicted pseudoranges (then range rates) of the valid slots at each of N states,
+    in one call (see ``TightGnss.predict_batch``): ``navs`` (N, 10), ``w_b`` (N, 3),
+    ``clocks`` (N, 2) bias [m] and drift [m/s]; ``Y`` (N, m) written."""
+    K = valid.shape[0]
+    d = np.empty(3)
+    un = np.empty(3)
+    va_n = np.empty(3)
+    for p in range(navs.shape[0]):
+        nav = navs[p]
+        ra, cne, ln, c = _frame(nav, lever)
+        w = w_b[p]
+        wxl0 = w[1] * lever[2] - w[2] * lever[1]
+        wxl1 = w[2] * lever[0] - w[0] * lever[2]
+        wxl2 = w[0] * lever[1] - w[1] * lever[0]
+        for i in range(3):
+            va_n[i] = nav[4 + i] + c[i, 0] * wxl0 + c[i, 1] * wxl1 + c[i, 2] * wxl2
+        ns = 0
+        for k in range(K):
+            if valid[k]:
+                ns += 1
+        j = 0
+        for k in range(K):
+            if not valid[k]:
+                continue
+            rho2 = 0.0
+            for i in range(3):
+                d[i] = sat_pos[k, i] - ra[i]
+                rho2 += d[i] * d[i]
+            rho = math.sqrt(rho2)
+            us = 0.0
+            for i in range(3):
+                d[i] /= rho
+                us += d[i] * sat_vel[k, i]
+            Y[p, j] = rho + clocks[p, 0]
+            if use_rr:
+                for i in range(3):
+                    un[i] = cne[i, 0] * d[0] + cne[i, 1] * d[1] + cne[i, 2] * d[2]
+                Y[p, ns + j] = us - (un[0] * va_n[0] + un[1] * va_n[1] + un[2] * va_n[2]) + clocks[p, 1]
+            j += 1

@@ -115,11 +115,13 @@ class MeasurementModel:
         """``J`` (c, n): the clone as a linear function of the error state."""
         raise NotImplementedError(f"{type(self).__name__} has no clone")
 
-    def predict_batch(self, i: int, navs: np.ndarray, w_b: np.ndarray):
+    def predict_batch(self, i: int, navs: np.ndarray, w_b: np.ndarray, clocks=None):
         """``h`` at a batch of full states, for the ensemble estimators (UKF, particle
         filters): ``(y (m,), Y (N, m), R (m,))`` with ``y - Y[j]`` the innovation of state
-        ``navs[j]`` (N, 10). Implemented by the loose model; the tight, TDCP and
-        differenced models add it with the UKF and particle-filter issues."""
+        ``navs[j]`` (N, 10) with body rate ``w_b`` (3,) or (N, 3) and receiver clock
+        ``clocks`` (2,) or (N, 2) (models without a clock ignore it), or None when the
+        epoch has no data. Implemented by the loose and tight models; the TDCP and
+        differenced models add it with the particle-filter issue."""
         raise NotImplementedError(f"{type(self).__name__} does not evaluate h on a batch of states yet")
 
     def warm_up(self, nav: np.ndarray, aux: dict | None = None) -> None:

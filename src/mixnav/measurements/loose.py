@@ -35,7 +35,7 @@ from ..attitude import quat_to_dcm, skew
 from ..data import GnssFixes
 from ..errors import ArgumentError
 from ..ins.error_model import StateBlock, StateLayout
-from ._loose_kernel import loose_zhr
+from ._loose_kernel import loose_predict_batch, loose_zhr
 from .base import MeasurementModel, Rows
 from .kinds import POSITION, VELOCITY
 from ..geodesy.frames import displace
@@ -209,7 +209,13 @@ class LooseGnss(MeasurementModel):
         """A channel id per row, the same at every epoch: ``kind * 1000 + axis``."""
         return self._channels[:m]
 
-    def predict_batch(self, i: int, navs: np.ndarray, w_b: np.ndarray):
+    def warm_up(self, nav: np.ndarray, aux: dict | None = None) -> None:
+        """Compile (or load) the rows kernel and, where it serves, the batch prediction."""
+        super().warm_up(nav, aux)
+        if len(self.times) and self._lever_sl is None and self._dt_col < 0:
+            self.predict_batch(0, np.array(nav, dtype=float)[None], np.zeros(3))
+
+    def predict_batch(self, i: int, navs: np.ndarray, w_b: np.ndarray, clocks=None):
         """``h`` at a batch of full states, for the ensemble estimators.
 
         Returns ``(y, Y, R)``: the measurement ``y`` (m,) and the predictions ``Y``
@@ -217,33 +223,22 @@ class LooseGnss(MeasurementModel):
         innovation of state ``j``: position as NED metres from the fix (so ``y``
         is zero there; radii at each state's antenna), velocity in NED [m/s];
         ``R`` (m,) the variances. ``w_b`` (3,) or (N, 3) body rate [rad/s].
-        At the nominal state, ``y - Y[0]`` is :meth:`rows`' ``z``.
+        At the nominal state, ``y - Y[0]`` is :meth:`rows`' ``z``. ``clocks`` (the
+        receiver clock of each state) is not used by the loose model.
         """
-        from ..geodesy.earth import radii
         if self._lever_sl is not None or self._dt_col >= 0:
             raise ArgumentError("the ensemble prediction does not carry the estimated lever arm or time "
                                 "offset yet: use a layout without those blocks", argument="layout")
-        navs = np.atleast_2d(np.asarray(navs, dtype=float))
+        navs = np.ascontiguousarray(np.atleast_2d(np.asarray(navs, dtype=float)))
         fix = self._rows[i]
-        C = quat_to_dcm(navs[:, 0:4])                          # (N, 3, 3)
-        cl = C @ self.lever                                     # (N, 3)
-        lat, lon, h = navs[:, 7], navs[:, 8], navs[:, 9]
-        rm, rn = radii(lat)
-        a_lat = lat + cl[:, 0] / (rm + h)
-        a_lon = lon + cl[:, 1] / ((rn + h) * np.cos(lat))
-        a_h = h - cl[:, 2]
-        rm_a, rn_a = radii(a_lat)
-        dlon = (fix[1] - a_lon + np.pi) % (2.0 * np.pi) - np.pi
-        Y = np.empty((len(navs), 6 if self.use_velocity else 3))
-        Y[:, 0] = -(fix[0] - a_lat) * (rm_a + a_h)               # the antenna, NED from the fix
-        Y[:, 1] = -dlon * (rn_a + a_h) * np.cos(a_lat)
-        Y[:, 2] = (fix[2] - a_h)
-        y = np.zeros(Y.shape[1])
-        r = np.empty(Y.shape[1])
+        m = 6 if self.use_velocity else 3
+        Y = np.empty((len(navs), m))
+        w = np.ascontiguousarray(np.broadcast_to(np.asarray(w_b, dtype=float), (len(navs), 3)))
+        loose_predict_batch(navs, self.lever, fix, w, self.use_velocity, Y)   # one compiled call
+        y = np.zeros(m)
+        r = np.empty(m)
         r[:3] = fix[3:6] ** 2
         if self.use_velocity:
-            wl = np.cross(np.broadcast_to(w_b, (len(navs), 3)), self.lever)
-            Y[:, 3:6] = navs[:, 4:7] + np.einsum("nij,nj->ni", C, wl)
             y[3:6] = fix[6:9]
             r[3:6] = fix[9:12] ** 2
         return y, Y, r

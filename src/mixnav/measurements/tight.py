@@ -32,7 +32,7 @@ from ..gnss.observables import GnssObservations
 from ..ins.error_model import StateLayout
 from .base import MeasurementModel, Rows
 from .kinds import PSEUDORANGE, RANGE_RATE
-from ._tight_kernel import tight_zhr
+from ._tight_kernel import tight_predict_batch, tight_zhr
 
 
 
@@ -112,6 +112,43 @@ class TightGnss(MeasurementModel):
                             o.sigma_pr, o.sigma_rr, self.use_range_rate, lay.n, lay.bg.start, lay.clk)
         m = len(z)
         return Rows(z, H, r, self._kinds_of(m), self.row_channels(i, m))
+
+    def predict_batch(self, i: int, navs: np.ndarray, w_b: np.ndarray, clocks=None):
+        """``h`` at a batch of full states, for the ensemble estimators (UKF): ``(y, Y, R)``
+        with ``y`` (m,) the measured pseudoranges then range rates of the valid
+        satellites (the order of :meth:`rows`), ``Y`` (N, m) their predictions at the
+        states ``navs`` (N, 10) with body rates ``w_b`` (3,) or (N, 3) and receiver
+        clocks ``clocks`` (2,) or (N, 2) (bias [m], drift [m/s]; default zero), ``R`` (m,)
+        the variances; None with too few satellites. One compiled call. At the nominal,
+        ``y - Y[0]`` is :meth:`rows`' ``z``."""
+        o = self.obs
+        if self._n_valid[i] < self.min_satellites or self._n_valid[i] == 0:
+            return None
+        navs = np.ascontiguousarray(np.atleast_2d(np.asarray(navs, dtype=float)))
+        N = len(navs)
+        w = np.ascontiguousarray(np.broadcast_to(np.asarray(w_b, dtype=float), (N, 3)))
+        c = np.zeros(2) if clocks is None else np.asarray(clocks, dtype=float)
+        c = np.ascontiguousarray(np.broadcast_to(c, (N, 2)))
+        sel = o.valid[i]
+        ns = int(self._n_valid[i])
+        m = 2 * ns if self.use_range_rate else ns
+        Y = np.empty((N, m))
+        tight_predict_batch(navs, self.lever, w, c, o.sat_pos[i], o.sat_vel[i], sel, self.use_range_rate, Y)
+        y = np.empty(m)
+        r = np.empty(m)
+        y[:ns] = o.pseudorange[i, sel]
+        r[:ns] = o.sigma_pr ** 2
+        if self.use_range_rate:
+            y[ns:] = o.range_rate[i, sel]
+            r[ns:] = o.sigma_rr ** 2
+        return y, Y, r
+
+    def warm_up(self, nav: np.ndarray, aux: dict | None = None) -> None:
+        """Compile (or load) the rows kernel and the batch prediction."""
+        super().warm_up(nav, aux)
+        for i in range(len(self.times)):
+            if self.predict_batch(i, np.array(nav, dtype=float)[None], np.zeros(3)) is not None:
+                break
 
     def row_kinds(self, i: int, m: int) -> np.ndarray:
         """Pseudorange rows, then (with ``use_range_rate``) as many range-rate rows."""

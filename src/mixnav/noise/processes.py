@@ -167,6 +167,18 @@ class NoiseProcess:
         """Stationary marginal variance [unit^2], or None when not stationary."""
         return None
 
+    def sd(self, times, n_channels: int):
+        """The marginal standard deviation at ``times`` (n, c) [unit], about the process's
+        mean, or None when it is not known in closed form. Stationary processes give
+        ``sqrt(variance)``; :class:`VarianceProfile` scales its base's; :class:`Sum`
+        adds variances. The truth a noise-tracking filter (VB-AUKF) is scored against."""
+        v = self.variance
+        if v is None:
+            return None
+        t = np.asarray(times, dtype=float)
+        return np.broadcast_to(np.sqrt(_per_channel(np.asarray(v, dtype=float), n_channels, "variance")),
+                               (t.size, n_channels)).copy()
+
     def describe(self) -> str:
         return repr(self)
 
@@ -705,6 +717,10 @@ class VarianceProfile(NoiseProcess):
         s = self.scale(t)[:, None]
         return x * s, mask, b * s
 
+    def sd(self, times, n_channels: int):
+        base = self.base.sd(times, n_channels)
+        return None if base is None else base * self.scale(times)[:, None]
+
     def describe(self) -> str:
         parts = [f"sd of ({self.base.describe()}) scaled"]
         parts += [f"x{f:g} from {t:g} s" for t, f in self.steps]
@@ -760,6 +776,13 @@ class Sum(NoiseProcess):
             return None
         total = sum(np.asarray(v, dtype=float) for v in vs) if vs else 0.0
         return float(total) if np.ndim(total) == 0 else total
+
+    def sd(self, times, n_channels: int):
+        parts = [p.sd(times, n_channels) for p in self.processes]
+        if any(p is None for p in parts):
+            return None
+        t = np.asarray(times, dtype=float)
+        return np.sqrt(sum(p ** 2 for p in parts)) if parts else np.zeros((t.size, n_channels))
 
     def describe(self) -> str:
         return " + ".join(f"({p.describe()})" for p in self.processes) or "zero"

@@ -1,0 +1,326 @@
+"""The unscented Kalman filter (M7) and the variational-Bayes adaptive UKF (VB-AUKF, paper P5).
+
+The engine keeps one nominal state and feeds corrections back (docs/ukf.md);
+the UKF fits it as a *mean-carrying error-state estimator whose sigma points
+are full states*. Its belief is ``N(x, P)`` over the error state ``dx =
+x_true - x_est`` of the layout (attitude as a rotation vector about the
+nominal quaternion, ``C_true = exp([phi x]) C_est``: the minimal attitude
+parameterisation, the USQUE choice; velocity; NED position metres; sensor,
+clock and auxiliary errors). Per propagation step (:func:`_ukf_kernels.ukf_predict`,
+one compiled call):
+
+1. ``2n + 1`` scaled sigma points ``D_j = x +- c L e_k`` (``L L^T = P``,
+   ``c = sqrt(n + lambda)``, ``lambda = alpha^2 (n + kappa) - n``);
+2. each becomes a full state ``nominal_before (+) D_j`` (the engine's feedback
+   map) and is mechanized with its own sensor errors over the step's IMU block
+   (the nonlinear model: no Jacobian), as is a reference point ``D = 0``;
+3. the difference map (rotation vector of ``C_j C_ref^T``, velocity and NED
+   position differences, sensor deviations through their Gauss-Markov decay)
+   gives the propagated error states; their weighted mean and covariance plus
+   the transition's ``Qd`` (additive process noise) are the prediction. The
+   mean stays non-zero between updates (``carry_mean``): the nonlinearity's
+   bias is kept, not dropped.
+
+At a measurement epoch the sigma points are drawn again about the current
+nominal, ``h`` is evaluated on all of them by ``epoch.model.predict_batch``
+(the loose GNSS model, or the tight pseudorange/Doppler one with each point's
+receiver clock; the gyro-bias deviation of each point enters its body rate), and the unscented update gives the posterior mean, returned as the
+correction; the engine feeds it back and calls :meth:`recentre`.
+
+Scaled unscented transform (Julier 2002; Wan & van der Merwe 2000) weights::
+
+    wm_0 = lambda / (n + lambda),  wc_0 = wm_0 + 1 - alpha^2 + beta,
+    wm_j = wc_j = 1 / (2 (n + lambda))
+
+``n + lambda <= 0`` or ``wc_0 < 0`` (the covariance then is a difference that
+can lose positive definiteness) are rejected (ArgumentError naming the key).
+A sigma-point covariance that is not positive definite (Cholesky fails) is
+repaired (eigenvalues floored) and counted (``sigma_repair``).
+
+With a :class:`~mixnav.filters.vb.ChannelNoise` the update is the VB one of
+:mod:`mixnav.filters.vb` (VB-AUKF): the measurement moments come from the
+sigma points, the posterior residual moments by statistical linearisation
+(``G = Pxy^T P^-1 Pxy``), so the iterations re-use the one batch of ``h``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..engine.protocols import Correction, Epoch, Transition
+from ..errors import ArgumentError, NumericalError
+from ..engine.status import NEEDS_REPAIR, OK
+from ._ukf_kernels import linearized_pyy, measurement_moments, ukf_predict, ukf_sigma_navs, vb_correct
+from .ekf import ErrorStateEkf, repair_covariance
+from .vb import ChannelNoise, channel_label, check_vb_settings, warm_vb
+
+__all__ = ["ut_weights", "UnscentedEstimator", "UnscentedKalmanFilter", "VbAdaptiveUkf"]
+
+_WARM: set = set()
+
+
+def ut_weights(n: int, alpha: float = 0.6, beta: float = 2.0, kappa: float = 0.0):
+    """Scaled unscented-transform weights ``(wm, wc, c)`` for ``n`` states (module docstring).
+
+    Raises ArgumentError (naming ``kappa`` or ``alpha``) when ``n + lambda <= 0`` or
+    the centre's covariance weight is negative.
+    """
+    if not alpha > 0.0:
+        raise ArgumentError(f"must be positive, got {alpha}", argument="alpha")
+    if not np.isfinite(beta):
+        raise ArgumentError(f"must be finite, got {beta}", argument="beta")
+    lam = alpha * alpha * (n + kappa) - n
+    if not n + lam > 0.0:
+        raise ArgumentError(f"alpha^2 (n + kappa) must be positive (n = {n}, alpha = {alpha}, kappa = {kappa})",
+                            argument="kappa")
+    N = 2 * n + 1
+    wm = np.full(N, 0.5 / (n + lam))
+    wc = wm.copy()
+    wm[0] = lam / (n + lam)
+    wc[0] = wm[0] + 1.0 - alpha * alpha + beta
+    if wc[0] < 0.0:
+        raise ArgumentError(f"the centre point's covariance weight {wc[0]:.3g} is negative (n = {n}, alpha = "
+                            f"{alpha}, beta = {beta}, kappa = {kappa}): the covariance can lose positive "
+                            "definiteness; raise alpha or beta", argument="alpha")
+    return wm, wc, float(np.sqrt(n + lam))
+
+
+class UnscentedEstimator:
+    """The UKF's belief ``N(x, P)`` about the error state, propagated by sigma points (module docstring).
+
+    Parameters
+    ----------
+    alpha, beta, kappa : float
+        Scaled unscented-transform parameters (defaults 0.6, 2, 0: the points
+        ``0.6 sqrt(n)`` sigma out, 2.3 sigma at 15 states; the centre's covariance
+        weight 0.86 >= 0; see docs/ukf.md for why not alpha = 1).
+    substeps : int
+        The sigma points are mechanized over at most this many merged
+        sub-intervals of each propagation step (0: every IMU increment); the
+        reference point is mechanized the same way, so the merging error is common
+        and cancels in the difference (docs/ukf.md).
+    absurd_sigma : float
+        Innovations beyond this many predicted sigmas reject the epoch (counted).
+    noise : ChannelNoise, optional
+        VB-adaptive measurement noise per channel (VB-AUKF).
+    """
+
+    needs_step_inputs = True
+    carry_mean = True
+
+    def __init__(self, alpha: float = 0.6, beta: float = 2.0, kappa: float = 0.0, substeps: int = 4,
+                 absurd_sigma: float = 1e4, noise: ChannelNoise | None = None):
+        if not absurd_sigma > 0:
+            raise ArgumentError(f"must be positive, got {absurd_sigma}", argument="absurd_sigma")
+        if int(substeps) != substeps or substeps < 0:
+            raise ArgumentError(f"must be an integer >= 0, got {substeps}", argument="substeps")
+        ut_weights(15, alpha, beta, kappa)  # the smallest layout; init checks the run's n
+        self.alpha, self.beta, self.kappa = float(alpha), float(beta), float(kappa)
+        self.substeps = int(substeps)
+        self.absurd_sigma = float(absurd_sigma)
+        self.noise = noise
+        self.counts = {"rejected_not_pd": 0, "rejected_absurd": 0, "covariance_repair": 0, "sigma_repair": 0}
+
+    # --- the estimator protocol --------------------------------------------------------------
+    def init(self, motion, P0, n_clone, rng) -> None:
+        if n_clone:
+            raise ArgumentError("the UKF does not carry a stochastic clone (TDCP)", argument="estimator")
+        lay = motion.layout
+        n = lay.n
+        self.n = n
+        self.layout_array = lay.as_array()
+        self._clk = lay.clk
+        self.tau = np.asarray(motion.tau, dtype=float)
+        self.wm, self.wc, self.c = ut_weights(n, self.alpha, self.beta, self.kappa)
+        N = 2 * n + 1
+        self.P = np.array(P0, dtype=float)
+        self.x = np.zeros(n)
+        self._scratch = np.zeros((n, n))
+        self._L = np.empty((n, n))
+        self._D = np.empty((N, n))
+        self._Dn = np.empty((N, n))
+        self._navs = np.empty((N + 1, 10))
+        self._prevs = np.empty((N + 1, 6))
+        self._sensors = np.empty((N + 1, 12))
+        self._xo = np.empty(n)
+        self._Po = np.empty((n, n))
+        self.rng = rng
+        self.counts = {"rejected_not_pd": 0, "rejected_absurd": 0, "covariance_repair": 0, "sigma_repair": 0}
+        if self.noise is not None:
+            self.noise.reset()
+
+    @property
+    def kernel_covariance(self) -> np.ndarray:
+        """A scratch the motion model's kernel may propagate (its ``Qd`` is what is used)."""
+        return self._scratch
+
+    def predict(self, step: Transition) -> None:
+        """Sigma points mechanized over the step's block (one compiled call)."""
+        self._scratch[:, :] = 0.0   # what the engine's kernel propagated there is not used
+        inp = step.inputs
+        if inp is None:
+            raise ArgumentError("the UKF needs the engine's step inputs (needs_step_inputs)", argument="engine")
+        for attempt in range(2):
+            ok = ukf_predict(inp.nav0, inp.prev0, inp.sensor, self.x, self.P, step.Qd, self.c, self.wm, self.wc,
+                             inp.dtheta, inp.dvel, inp.dt, self.substeps, self.layout_array, self.tau, step.T,
+                             self._L, self._D, self._navs, self._prevs, self._sensors, self._Dn, self._xo,
+                             self._Po)
+            if ok:
+                break
+            self._repair_sigma()
+        else:
+            raise NumericalError("the UKF covariance stayed not positive definite after a "
+                                 "repair")  # pragma: no cover (the repair makes it PD)
+        self.x, self._xo = self._xo, self.x
+        self.P, self._Po = self._Po, self.P
+
+    def _repair_sigma(self) -> None:
+        repair_covariance(self.P)
+        self.P = 0.5 * (self.P + self.P.T)
+        self.counts["sigma_repair"] += 1
+
+    def recentre(self, dx: np.ndarray) -> None:
+        """The nominal moved by ``dx`` (fed back by the engine): ``x -= dx``."""
+        self.x = self.x - dx[:self.n]
+
+    def sigma_points(self, nav: np.ndarray):
+        """``(D, navs)``: the sigma points of the current belief about ``nav`` as error states
+        (2n+1, n) and as full navigation states (2n+1, 10) (views of scratch)."""
+        for attempt in range(2):
+            if ukf_sigma_navs(nav, self.x, self.P, self.c, self.layout_array, self._L, self._D, self._navs):
+                return self._D, self._navs[:2 * self.n + 1]
+            self._repair_sigma()
+        raise NumericalError("the UKF covariance stayed not positive definite after a "
+                             "repair")  # pragma: no cover
+
+    def update(self, epoch: Epoch) -> Correction | None:
+        model = epoch.model
+        predict_batch = getattr(model, "predict_batch", None)
+        if predict_batch is None:
+            raise ArgumentError(f"{type(model).__name__} has no predict_batch (h on a batch of states): the "
+                                "unscented filters need it", argument="measurements")
+        D, navs = self.sigma_points(epoch.nav)
+        w_b = np.asarray(epoch.w_b, dtype=float) - D[:, 9:12]   # each point's gyro bias moves its rate
+        if self._clk >= 0:   # each point's receiver clock (tight coupling)
+            clocks = np.asarray(epoch.clock, dtype=float) + D[:, self._clk:self._clk + 2]
+            out = predict_batch(epoch.index, navs, w_b, clocks)
+        else:
+            out = predict_batch(epoch.index, navs, w_b)
+        if out is None:
+            return None
+        y, Y, r = out
+        r = np.asarray(r, dtype=float)
+        innov, Pyy, Pxy = measurement_moments(D, np.ascontiguousarray(Y), y, self.wm, self.wc)
+        m = len(y)
+        nz = self.noise
+        if nz is None:
+            x_post, P_post, nis, status, a, b, it = vb_correct(
+                self.x, self.P, Pxy, Pyy, Pyy, innov, r, r, r, False, 1, 0.0, self.absurd_sigma)
+        else:
+            ch_fn = getattr(model, "row_channels", None)
+            channels = ch_fn(epoch.index, m) if ch_fn is not None else np.arange(m, dtype=np.int64)
+            a0, b0 = nz.predicted(channels, r)
+            G = linearized_pyy(self._L, Pxy)
+            x_post, P_post, nis, status, a, b, it = vb_correct(
+                self.x, self.P, Pxy, Pyy, G, innov, r, a0, b0, True, nz.iterations, nz.tolerance,
+                self.absurd_sigma)
+        if status == OK or status == NEEDS_REPAIR:
+            self.x, self.P = x_post, P_post
+            if nz is not None:
+                nz.store(epoch.time, channels, a, b, it)
+        return Correction(self.x.copy(), nis, status, m)
+
+    def replace_clone(self, J) -> None:  # pragma: no cover (init refuses clones)
+        raise ArgumentError("the UKF does not carry a stochastic clone", argument="estimator")
+
+    def repair(self) -> None:
+        repair_covariance(self.P)
+        self.counts["covariance_repair"] += 1
+
+    def covariance(self) -> np.ndarray:
+        return self.P
+
+    def diagnostics(self) -> dict:
+        if self.noise is None:
+            return {}
+        return {f"vb_sigma_{channel_label(ch)}": s for ch, s in sorted(self.noise.sigma().items())}
+
+    def outputs(self) -> dict:
+        return {} if self.noise is None else self.noise.outputs()
+
+    def warm_up(self) -> None:
+        """Compile (or load from numba's cache) the kernels once per process."""
+        if self.noise is not None:
+            warm_vb()
+        if "ukf" in _WARM:
+            return
+        from ..ins.error_model import LAYOUTS
+        lay = LAYOUTS[15]
+        n = lay.n
+        N = 2 * n + 1
+        wm, wc, c = ut_weights(n)
+        nav = np.array([1.0, 0, 0, 0, 0, 0, 0, 0.5, 0.5, 0.0])
+        one = np.zeros((2, 3))
+        P = np.eye(n) * 1e-4
+        L = np.empty((n, n))
+        D = np.empty((N, n))
+        navs = np.empty((N + 1, 10))
+        ukf_predict(nav, np.zeros(6), np.zeros(12), np.zeros(n), P, P, c, wm, wc, one, one, np.full(2, 0.01), 1,
+                    lay.as_array(), np.full(4, np.inf), 0.02, L, D, navs, np.empty((N + 1, 6)),
+                    np.empty((N + 1, 12)), np.empty((N, n)), np.empty(n), np.empty((n, n)))
+        ukf_sigma_navs(nav, np.zeros(n), P, c, lay.as_array(), L, D, navs)
+        Y = np.ascontiguousarray(D[:, 6:9])
+        innov, Pyy, Pxy = measurement_moments(D, Y, np.zeros(3), wm, wc)
+        linearized_pyy(L, Pxy)
+        r = np.ones(3)
+        vb_correct(np.zeros(n), P, Pxy, Pyy, Pyy, innov, r, r, r, False, 1, 0.0, 1e4)
+        _WARM.add("ukf")
+
+
+class UnscentedKalmanFilter(ErrorStateEkf):
+    """The UKF on the strapdown INS (M7): the engine, the motion model and an
+    :class:`UnscentedEstimator`.
+
+    Parameters
+    ----------
+    layout, imu_model, covariance_interval, absurd_sigma, clock
+        As :class:`~mixnav.filters.ekf.ErrorStateEkf`.
+    alpha, beta, kappa, substeps
+        As :class:`UnscentedEstimator` (checked against ``layout.n`` now).
+    """
+
+    can_smooth = False
+
+    def __init__(self, layout, imu_model, alpha: float = 0.6, beta: float = 2.0, kappa: float = 0.0,
+                 substeps: int = 4, covariance_interval: float = 1.0, absurd_sigma: float = 1e4, clock=None):
+        super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
+        ut_weights(layout.n, alpha, beta, kappa)
+        UnscentedEstimator(alpha, beta, kappa, substeps, absurd_sigma)
+        self.ut = dict(alpha=float(alpha), beta=float(beta), kappa=float(kappa), substeps=int(substeps))
+
+    def make_estimator(self):
+        return UnscentedEstimator(absurd_sigma=self.absurd_sigma, **self.ut)
+
+
+class VbAdaptiveUkf(UnscentedKalmanFilter):
+    """The variational-Bayes adaptive UKF (VB-AUKF, paper P5 / SPEC M7).
+
+    Parameters
+    ----------
+    layout, imu_model, alpha, beta, kappa, substeps, covariance_interval, absurd_sigma, clock
+        As :class:`UnscentedKalmanFilter`.
+    rho, prior_shape, prior_scale, iterations, tolerance
+        As :class:`~mixnav.filters.vb.ChannelNoise`.
+    """
+
+    def __init__(self, layout, imu_model, rho: float = 0.95, prior_shape: float = 1.0, prior_scale: float = 1.0,
+                 iterations: int = 3, tolerance: float = 1e-4, alpha: float = 0.6, beta: float = 2.0,
+                 kappa: float = 0.0, substeps: int = 4, covariance_interval: float = 1.0,
+                 absurd_sigma: float = 1e4, clock=None):
+        super().__init__(layout, imu_model, alpha, beta, kappa, substeps, covariance_interval, absurd_sigma, clock)
+        check_vb_settings(rho, prior_shape, prior_scale, iterations, tolerance)
+        self.vb = dict(rho=rho, prior_shape=prior_shape, prior_scale=prior_scale, iterations=iterations,
+                       tolerance=tolerance)
+
+    def make_estimator(self):
+        return UnscentedEstimator(absurd_sigma=self.absurd_sigma, noise=ChannelNoise(**self.vb), **self.ut)
