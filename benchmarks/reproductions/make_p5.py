@@ -1,6 +1,6 @@
 """Monte Carlo reproduction of paper P5 (VB-AUKF) on the P5-aircraft scenario.
 
-    python benchmarks/reproductions/make_p5.py [--runs 50] [--workers 2] [--out DIR] [--position-only]
+    python benchmarks/reproductions/make_p5.py [--runs 50] [--workers 2] [--out DIR] [--velocity-too]
 
 Runs the shipped ``P5-aircraft`` scenario for seeds 1..runs (its five methods: EKF, UKF,
 VB-AKF, Sage-Husa, VB-AUKF, on the same simulated data per seed) plus an *oracle*: the EKF
@@ -11,8 +11,8 @@ drift 900-1300 s, end 1300-1400 s),
 the tracked noise sigma of the VB filters against the true sd outside the transients
 (more than 60 s after each step of the noise), and the Monte Carlo NEES per epoch with
 its 95 % chi-square band. Writes ``p5_runs.csv`` into ``--out``, and ``P5_tables.md``
-and ``P5.png`` beside this file (``P5_position_only_*`` with ``--position-only``: the
-same flight with only the position noise changing, the velocity noise as stated).
+and ``P5.png`` beside this file (``P5_velocity_too_*`` with ``--velocity-too``: the
+same flight with the velocity noise changing as the position noise does).
 """
 
 from __future__ import annotations
@@ -38,14 +38,22 @@ LABEL = {"ekf": "EKF", "ukf": "UKF", "vb-akf": "VB-AKF (VB on the EKF)", "sage-h
          "vb-aukf": "VB-AUKF (P5)", "ekf-oracle": "EKF told the true sd (oracle)"}
 
 
-def _variant_text(position_only: bool) -> str:
+_VELOCITY_PROFILE = '''[gnss.velocity_noise]
+type = "profile"
+base = { type = "gaussian", sigma = ["0.1 m/s", "0.1 m/s", "0.2 m/s"] }
+steps = [["400 s", 5], ["600 s", 1]]
+drifts = [["900 s", "1300 s", 4]]
+
+'''
+
+
+def _variant_text(velocity_too: bool) -> str:
     from mixnav.config.loader import resolve
     text, _ = resolve("P5-aircraft", "scenarios", "scenario")
-    if position_only:
-        a = text.index("[gnss.velocity_noise]")
+    if velocity_too:
         b = text.index("[init]")
-        text = text[:a] + text[b:]
-        text = text.replace('name = "P5-aircraft"', 'name = "P5-aircraft-position-only"')
+        text = text[:b] + _VELOCITY_PROFILE + text[b:]
+        text = text.replace('name = "P5-aircraft"', 'name = "P5-aircraft-velocity-too"')
     return text
 
 
@@ -122,12 +130,12 @@ def main(argv=None):
     ap.add_argument("--runs", type=int, default=50)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", type=Path, default=Path("p5_out"))
-    ap.add_argument("--position-only", action="store_true")
+    ap.add_argument("--velocity-too", action="store_true")
     a = ap.parse_args(argv)
     a.out.mkdir(parents=True, exist_ok=True)
-    tag = "P5_position_only" if a.position_only else "P5"
+    tag = "P5_velocity_too" if a.velocity_too else "P5"
     scen = a.out / f"{tag}.toml"
-    scen.write_text(_variant_text(a.position_only))
+    scen.write_text(_variant_text(a.velocity_too))
     t0 = time.perf_counter()
     rows, acc = [], {}
     tasks = [(s, str(scen)) for s in range(1, a.runs + 1)]
