@@ -474,21 +474,19 @@ class MixtureConfig(Strict):
     """Gaussian-mixture EKF (``estimator = "gaussian-mixture"``): prior,
     process-noise and per-observable measurement-noise mixtures, given or
     learned, and the bank size after reduction; with ``colored``, the
-    coloured-noise variant M6. ``update``: ``"row"`` (each row's component decided
-    from the state the rows before it left) or ``"epoch"`` (all rows' components
-    decided together by a variational fixed point of at most ``epoch_iterations``
-    passes, ending when no responsibility moves by more than ``epoch_tolerance``;
-    :mod:`mixnav.filters._bank_kernels`). ``divergence_window`` epochs in a row with the
-    merged NIS per row above ``divergence_nis`` (each row's variance the model's own plus
-    the state's share) reset the bank's covariance (0: off;
-    :class:`mixnav.filters.gmekf.BankEstimator`)."""
+    coloured-noise variant M6. The update's guards (:mod:`mixnav.filters._bank_kernels`):
+    ``gate`` (rows whose state share of the predicted variance exceeds ``gate`` times the
+    noise's use the mixture's moment-matched Gaussian), ``outlier_mean`` (components
+    whose standardised mean exceeds it leave the rows they explain unused); the
+    divergence safeguard:
+    ``divergence_window`` epochs in a row with the merged NIS per row above
+    ``divergence_nis`` add the initial covariance back (0: off). ``inf``, ``inf`` and
+    0 give P1's plain update."""
 
     max_components: int = Field(default=16, ge=1)
-    update: Literal["row", "gated", "epoch"] = "row"
-    gate: float = Field(default=1.0, gt=0)
-    epoch_iterations: int = Field(default=20, ge=1)
-    epoch_tolerance: float = Field(default=1e-4, gt=0)
-    divergence_window: int = Field(default=0, ge=0)
+    gate: float = Field(default=2.0, gt=0)
+    outlier_mean: float = Field(default=4.0, gt=0)
+    divergence_window: int = Field(default=10, ge=0)
     divergence_nis: float = Field(default=9.0, gt=0)
     prior: MixtureSpec | None = None
     process: MixtureSpec | None = None

@@ -127,9 +127,8 @@ def _build(method, default_imu, fixes, lever_arm, source, index, observations, c
                                                               f"methods[{index}].mixture")
         return GaussianMixtureEkf(layout, model, mixtures, max_components=mc.max_components,
                                   learning_time_s=learning_time, online=online, learner_not_converged=failed,
-                                  update=mc.update, iterations=mc.epoch_iterations, tolerance=mc.epoch_tolerance,
-                                  divergence_window=mc.divergence_window, divergence_nis=mc.divergence_nis,
-                                  gate=mc.gate, **common), meas
+                                  gate=mc.gate, outlier_mean=mc.outlier_mean, divergence_window=mc.divergence_window,
+                                  divergence_nis=mc.divergence_nis, **common), meas
     cls = filter_class(method.estimator)
     options = dict(method.options or {})
     params = inspect.signature(cls).parameters
@@ -190,9 +189,9 @@ def _imm(method, layout, model, gnss, aids, source, index, common, training=None
             mixtures, online, _, _ = _bank_parts(mc, training, seed, f"mode '{mode.name}' of '{method.name}'",
                                                  source, f"methods[{index}].imm.modes[{k}].mixture")
             makers.append(lambda mixtures=mixtures, mc=mc, online=online: BankEstimator(
-                mixtures, mc.max_components, online=online, carry_mean=True, update=mc.update,
-                iterations=mc.epoch_iterations, tolerance=mc.epoch_tolerance,
-                divergence_window=mc.divergence_window, divergence_nis=mc.divergence_nis, gate=mc.gate))
+                mixtures, mc.max_components, online=online, carry_mean=True, gate=mc.gate,
+                outlier_mean=mc.outlier_mean, divergence_window=mc.divergence_window,
+                divergence_nis=mc.divergence_nis))
         else:
             makers.append(lambda: KalmanEstimator(carry_mean=True))
     interval = None if ic.transition_interval == "epoch" else float(ic.transition_interval)
@@ -264,7 +263,9 @@ def _colored(method, mc, layout, model, meas, training, source, index, common, s
         meas = [DifferencedMeasurement(m, layout, psi_m, channels) for m in meas]
     return ColoredMixtureEkf(layout, model, mixtures, psi_process=psi_p, psi_measurement=psi_m,
                              process_interval=cc.process_interval, max_components=mc.max_components,
-                             learning_time_s=learning_time, learner_not_converged=failed, **common), meas
+                             learning_time_s=learning_time, learner_not_converged=failed, gate=mc.gate,
+                             outlier_mean=mc.outlier_mean, divergence_window=mc.divergence_window,
+                             divergence_nis=mc.divergence_nis, **common), meas
 
 
 def _learn(mc: MixtureConfig, training: dict, seed: int):

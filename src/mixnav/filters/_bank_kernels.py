@@ -26,25 +26,24 @@ component it is the plain scalar Kalman update. This is how per-satellite
 mixtures avoid the ``L^m`` explosion of a joint bank: ``m`` rows cost ``m N``
 scalar updates, not ``N L^m`` components.
 
-The row-by-row update decides each row's component from the state as the rows
-before it left it, so when gross errors meet an unconverged state the first
-rows set the state and the later, correct rows are explained as outliers (P1's
-epoch-0 trap). The *whole-epoch* update (:func:`bank_epoch_whole`) decides the
-assignments from all rows at once: a variational-Bayes fixed point on the bank's
-merged Gaussian, ``q(x) q(labels)``, alternating
+Two guards keep this update from losing the state (P1's epoch-0 trap: gross
+errors meeting a state that is not yet known, or is off, make the first rows set
+the state and the mixture explain the later, correct rows away), both in
+:func:`bank_update_gated` / :func:`bank_epoch_guarded`:
 
-    rows -> effective rows: lambda_k = sum_l rho_kl / (v_l r_k),
-                            o_k = sum_l rho_kl mu_l sigma_k / (v_l r_k) / lambda_k
-    q(x) = Kalman update by (y_k - o_k, 1 / lambda_k) of every row
-    rho_kl ∝ pi_l (v_l r_k)^-1/2 exp(-((e_k - mu_l sigma_k)^2 + h_k P h_k^T) / (2 v_l r_k)),
-             e_k = y_k - h_k x   (the expectations under q(x))
+- *convergence gate*: a row whose state share of the predicted variance
+  ``h P h^T`` exceeds ``gate * r`` is updated with its noise mixture's
+  moment-matched Gaussian (mean ``sum pi_l mu_l``, the mixture's variance), not
+  the mixture: the assignment of a row to a component is trusted only once the
+  state is known better than the noise;
+- *outlier components*: a component whose standardised mean exceeds
+  ``outlier_mean`` weighs the row with its density, but a child it explains
+  keeps the prior (the row is not used) instead of being corrected by its mean,
+  so a state error of the size of the gross errors cannot be absorbed as
+  "gross errors on these rows" (the rows the mixture calls gross are left out,
+  and the others still pull the state back).
 
-from the prior-predictive responsibilities until they change by less than
-``tol``; then every component takes the same effective rows, and its weight the
-rise of its evidence ``sum_k log N(effective innovation; 0, s_k)`` (the
-variational bound of the epoch's evidence less terms common to all
-components). With one noise component ``rho = 1`` and it is the Kalman
-update, as the row-by-row update is.
+With ``gate = outlier_mean = inf`` it is the plain update above.
 """
 
 from __future__ import annotations
@@ -181,11 +180,11 @@ def predicted_nis(xm, Pm, z, H, r):
 @njit(cache=True)
 def bank_update(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var):
     """:func:`bank_update_gated` with no gate (every row updated with its noise mixture)."""
-    return bank_update_gated(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, np.inf)
+    return bank_update_gated(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, np.inf, np.inf)
 
 
 @njit(cache=True, fastmath={"reassoc", "contract"})
-def bank_update_gated(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, gate):
+def bank_update_gated(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, gate, outlier_mean):
     """Sequential scalar update of every component by every row (module docstring).
 
     Parameters
@@ -203,6 +202,11 @@ def bank_update_gated(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, gate)
         ``gate * r`` (the component's state is not yet known better than the
         noise) is updated with its mixture's moment-matched Gaussian, not the
         mixture (``inf``: never): the epoch-0 trap guard (module docstring).
+    outlier_mean : float
+        A noise component whose standardised mean exceeds this in magnitude is an outlier
+        component: it weighs the row (its density with its mean) but a child it explains
+        keeps the prior (the row is not used), instead of being corrected by the mean
+        (``inf``: every component corrects).
 
     Returns
     -------
@@ -294,6 +298,8 @@ def bank_update_gated(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, gate)
                 if ex[l] == 0.0:
                     continue
                 rho = ex[l] / tot
+                if abs(mix_mu[kd, l]) > outlier_mean:
+                    continue          # this child keeps the prior: g = 0, no 1/s
                 s = hPh + mix_var[kd, l] * rk
                 g = (y - mix_mu[kd, l] * sig) / s
                 a += rho * g
@@ -436,187 +442,6 @@ def bank_reduce(lw, X, P, max_components, n):
     return lw2, X2, P2
 
 
-@njit(cache=True)
-def _row_nonzeros(H):
-    m, na = H.shape
-    nz = np.empty((m, na), dtype=np.int64)
-    n_nz = np.zeros(m, dtype=np.int64)
-    for k in range(m):
-        for j in range(na):
-            if H[k, j] != 0.0:
-                nz[k, n_nz[k]] = j
-                n_nz[k] += 1
-    return nz, n_nz
-
-
-@njit(cache=True)
-def _effective_pass(x, P, z, H, r, lam, off, nz, n_nz, Ph):
-    """Sequential scalar Kalman updates of ``(x, P)`` (in place) by the effective rows
-    ``(z_k - off_k, 1 / lam_k)``; returns the sum of their predictive log-densities, or
-    NaN when a predicted variance is not positive."""
-    m, na = H.shape
-    ll = 0.0
-    for k in range(m):
-        for i in range(na):
-            Ph[i] = 0.0
-        hx = 0.0
-        for q in range(n_nz[k]):
-            j = nz[k, q]
-            h = H[k, j]
-            hx += h * x[j]
-            for i in range(na):
-                Ph[i] += P[j, i] * h
-        hPh = 0.0
-        for q in range(n_nz[k]):
-            hPh += H[k, nz[k, q]] * Ph[nz[k, q]]
-        s = hPh + 1.0 / lam[k]
-        if not (s > 0.0):
-            return np.nan
-        y = z[k] - off[k] - hx
-        ll += -0.5 * (_LOG2PI + math.log(s) + y * y / s)
-        g = y / s
-        for i in range(na):
-            x[i] += Ph[i] * g
-        for i in range(na):
-            bi = Ph[i] / s
-            for j in range(na):
-                P[i, j] -= bi * Ph[j]
-    return ll
-
-
-@njit(cache=True)
-def _effective_rows(rho, r, kinds, mix_mu, mix_var, lam, off):
-    m, L = rho.shape
-    for k in range(m):
-        kd = kinds[k]
-        a = 0.0
-        b = 0.0
-        sig = math.sqrt(r[k])
-        for l in range(L):
-            if rho[k, l] > 0.0:
-                inv = rho[k, l] / (mix_var[kd, l] * r[k])
-                a += inv
-                b += inv * mix_mu[kd, l] * sig
-        lam[k] = a
-        off[k] = b / a
-
-
-@njit(cache=True)
-def _responsibilities(x, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, nz, n_nz, rho, expected):
-    """``rho`` (m, L) of every row's noise components given ``q(x) = N(x, P)``: with
-    ``expected`` the variational ones (the state's variance ``h P h^T`` in the exponent),
-    else the predictive ones (in the variance). Returns the largest change."""
-    m, L = rho.shape
-    ll = np.empty(L)
-    change = 0.0
-    for k in range(m):
-        kd = kinds[k]
-        hx = 0.0
-        hPh = 0.0
-        for q in range(n_nz[k]):
-            j = nz[k, q]
-            hx += H[k, j] * x[j]
-            for q2 in range(n_nz[k]):
-                hPh += H[k, j] * P[j, nz[k, q2]] * H[k, nz[k, q2]]
-        y = z[k] - hx
-        sig = math.sqrt(r[k])
-        lmax = -np.inf
-        for l in range(L):
-            if mix_logw[kd, l] == -np.inf:
-                ll[l] = -np.inf
-                continue
-            v = mix_var[kd, l] * r[k]
-            e = y - mix_mu[kd, l] * sig
-            if expected:
-                ll[l] = mix_logw[kd, l] - 0.5 * (math.log(v) + (e * e + hPh) / v)
-            else:
-                s = v + hPh
-                ll[l] = mix_logw[kd, l] - 0.5 * (math.log(s) + e * e / s)
-            if ll[l] > lmax:
-                lmax = ll[l]
-        tot = 0.0
-        for l in range(L):
-            ll[l] = math.exp(ll[l] - lmax) if ll[l] > -np.inf else 0.0
-            tot += ll[l]
-        for l in range(L):
-            v = ll[l] / tot
-            d = abs(v - rho[k, l])
-            if d > change:
-                change = d
-            rho[k, l] = v
-    return change
-
-
-@njit(cache=True)
-def bank_update_whole(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, xm, Pm, iterations, tol, rho):
-    """The whole-epoch mixture update (module docstring) of every component, in place.
-
-    ``xm``, ``Pm``: the bank's merged moments (the variational fixed point runs on them);
-    ``iterations`` (>= 1) the most passes, ``tol`` the largest change of a responsibility
-    that ends them; ``rho`` (m, L) receives the responsibilities used. Returns the number
-    of passes, or -1 when a variance is not positive or a value not finite (the caller
-    rejects the epoch).
-    """
-    N, na = X.shape
-    m = z.shape[0]
-    nz, n_nz = _row_nonzeros(H)
-    lam = np.empty(m)
-    off = np.empty(m)
-    Ph = np.empty(na)
-    for k in range(m):
-        for l in range(rho.shape[1]):
-            rho[k, l] = 0.0
-    _responsibilities(xm, Pm, z, H, r, kinds, mix_logw, mix_mu, mix_var, nz, n_nz, rho, False)
-    x = np.empty(na)
-    Pc = np.empty((na, na))
-    new = np.empty_like(rho)
-    L = rho.shape[1]
-    passes = 0
-    # 1. one row at a time: while some row's assignment would change by more than a half,
-    #    move only the row that would change most, then re-fit the state (coordinate ascent
-    #    of the same bound; like data snooping, it does not let a majority of rows that
-    #    disagree with a few gross ones swing together into a wrong fixed point)
-    for it in range(m + 1):
-        passes += 1
-        _effective_rows(rho, r, kinds, mix_mu, mix_var, lam, off)
-        x[:] = xm
-        Pc[:, :] = Pm
-        if not np.isfinite(_effective_pass(x, Pc, z, H, r, lam, off, nz, n_nz, Ph)):
-            return -1
-        new[:, :] = rho
-        _responsibilities(x, Pc, z, H, r, kinds, mix_logw, mix_mu, mix_var, nz, n_nz, new, True)
-        worst, kw = 0.0, -1
-        for k in range(m):
-            for l in range(L):
-                d = abs(new[k, l] - rho[k, l])
-                if d > worst:
-                    worst, kw = d, k
-        if worst <= 0.5:
-            break
-        for l in range(L):
-            rho[kw, l] = new[kw, l]
-    # 2. then all rows together until no responsibility moves by more than tol
-    rho[:, :] = new
-    for it in range(iterations):
-        if it > 0:
-            passes += 1
-        _effective_rows(rho, r, kinds, mix_mu, mix_var, lam, off)
-        x[:] = xm
-        Pc[:, :] = Pm
-        if not np.isfinite(_effective_pass(x, Pc, z, H, r, lam, off, nz, n_nz, Ph)):
-            return -1
-        change = _responsibilities(x, Pc, z, H, r, kinds, mix_logw, mix_mu, mix_var, nz, n_nz, rho, True)
-        if change < tol:
-            break
-    _effective_rows(rho, r, kinds, mix_mu, mix_var, lam, off)
-    for c in range(N):
-        ll = _effective_pass(X[c], P[c], z, H, r, lam, off, nz, n_nz, Ph)
-        if not np.isfinite(ll):
-            return -1
-        lw[c] += ll
-    return passes
-
-
 #: Status codes of :func:`bank_epoch` (the values of mixnav.filters._ekf_kernels).
 _OK, _NOT_PD, _ABSURD, _NON_FINITE, _NEEDS_REPAIR = 0, 1, 2, 3, 4
 
@@ -632,7 +457,7 @@ def bank_epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max
     """
     empty = np.empty(0)
     return _epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n,
-                  False, empty, empty, 0, 0.0, np.empty((0, 0)))
+                  False, empty, empty, np.inf, np.inf)
 
 
 @njit(cache=True)
@@ -646,31 +471,21 @@ def bank_epoch_collect(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_si
     before the gate, so also for a rejected epoch. The returned values are
     bitwise those of :func:`bank_epoch`."""
     return _epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n,
-                  True, u, q, 0, 0.0, np.empty((0, 0)))
+                  True, u, q, np.inf, np.inf)
 
 
 @njit(cache=True)
-def bank_epoch_gated(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n, gate,
-                     collect, u, q):
-    """:func:`bank_epoch` (with ``collect``: :func:`bank_epoch_collect`) with the row-by-row
-    update's convergence gate (:func:`bank_update_gated`)."""
+def bank_epoch_guarded(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n, gate,
+                       outlier_mean, collect, u, q):
+    """:func:`bank_epoch` (with ``collect``: :func:`bank_epoch_collect`) with the two guards
+    of the module docstring (``gate``, ``outlier_mean``; ``inf`` turns each off)."""
     return _epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n,
-                  collect, u, q, 0, 0.0, np.empty((0, 0)), gate)
-
-
-@njit(cache=True)
-def bank_epoch_whole(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n,
-                     iterations, tol, rho, collect, u, q):
-    """:func:`bank_epoch` (with ``collect``: :func:`bank_epoch_collect`) with the whole-epoch
-    mixture update (:func:`bank_update_whole`: ``iterations`` >= 1, ``tol``; the
-    responsibilities used written into ``rho`` (>= m, L)) instead of the row-by-row one."""
-    return _epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n,
-                  collect, u, q, iterations, tol, rho)
+                  collect, u, q, gate, outlier_mean)
 
 
 @njit(cache=True)
 def _epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n, collect, u, q,
-           iterations, tol, rho, gate=np.inf):
+           gate, outlier_mean):
     na = X.shape[1]
     zero = np.zeros(na)
     w, xm, Pm = bank_moments(lw, X, P)
@@ -700,11 +515,7 @@ def _epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_com
     if not np.isfinite(nis):
         return _NOT_PD, nis, lw, X, P, zero
     lw2, X2, P2 = lw.copy(), X.copy(), P.copy()
-    if iterations > 0:
-        if bank_update_whole(lw2, X2, P2, z, H, r, kinds, mix_logw, mix_mu, mix_var, xm, Pm, iterations, tol,
-                             rho[:m]) < 0:
-            return _NOT_PD, nis, lw, X, P, zero
-    elif not bank_update_gated(lw2, X2, P2, z, H, r, kinds, mix_logw, mix_mu, mix_var, gate):
+    if not bank_update_gated(lw2, X2, P2, z, H, r, kinds, mix_logw, mix_mu, mix_var, gate, outlier_mean):
         return _NOT_PD, nis, lw, X, P, zero
     lw2, X2, P2 = bank_reduce(lw2, X2, P2, max_components, n)
     K = lw2.shape[0]

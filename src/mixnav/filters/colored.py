@@ -144,11 +144,13 @@ class ColoredBankEstimator(BankEstimator):
         AR(1) coefficient of each kind code's measurement noise.
     augment : bool
         Carry the 9 process-noise states.
+    **guards
+        ``gate``, ``outlier_mean``, ``divergence_window``, ``divergence_nis`` (as the bank's).
     """
 
     def __init__(self, mixtures, max_components, absurd_sigma, psi_process, process_interval, psi_measurement,
-                 augment=True):
-        super().__init__(mixtures, max_components, absurd_sigma)
+                 augment=True, **guards):
+        super().__init__(mixtures, max_components, absurd_sigma, **guards)
         self.nw = N_W if augment else 0     # 0: no process colour, M3's propagation and split
         self.psi_w = np.asarray(psi_process, dtype=float)
         self.process_interval = float(process_interval)
@@ -226,7 +228,8 @@ class ColoredMixtureEkf(GaussianMixtureEkf):
 
     Parameters
     ----------
-    layout, imu_model, mixtures, max_components, covariance_interval, absurd_sigma, clock, learning_time_s
+    layout, imu_model, mixtures, max_components, covariance_interval, absurd_sigma, clock, learning_time_s,
+    gate, outlier_mean, divergence_window, divergence_nis
         As :class:`~mixnav.filters.gmekf.GaussianMixtureEkf`. The measurement
         mixtures are those of the white driving noise ``zeta`` (P2 eq. 7), the
         process mixture that of ``xi`` (P2 eq. 6).
@@ -253,9 +256,12 @@ class ColoredMixtureEkf(GaussianMixtureEkf):
     def __init__(self, layout, imu_model, mixtures, psi_process=0.0, psi_measurement=None,
                  process_interval: float = 1.0, max_components: int = 16, covariance_interval: float = 1.0,
                  absurd_sigma: float = 1e4, clock=None, learning_time_s: float = 0.0,
-                 augment: bool | None = None, learner_not_converged: int = 0):
+                 augment: bool | None = None, learner_not_converged: int = 0, gate: float = 2.0,
+                 outlier_mean: float = 4.0, divergence_window: int = 10, divergence_nis: float = 9.0):
         super().__init__(layout, imu_model, mixtures, max_components, covariance_interval, absurd_sigma,
-                         clock, learning_time_s, learner_not_converged=learner_not_converged)
+                         clock, learning_time_s, learner_not_converged=learner_not_converged, gate=gate,
+                         outlier_mean=outlier_mean, divergence_window=divergence_window,
+                         divergence_nis=divergence_nis)
         psi_w = np.broadcast_to(np.asarray(psi_process, dtype=float), (N_W,)).copy()
         if not (np.all(np.isfinite(psi_w)) and np.all(np.abs(psi_w) < 1.0)):
             raise ArgumentError(f"AR(1) coefficient must satisfy |psi| < 1 (stationary), got {psi_process}",
@@ -272,7 +278,7 @@ class ColoredMixtureEkf(GaussianMixtureEkf):
     def make_estimator(self):
         self._last = ColoredBankEstimator(self.mixtures, self.max_components, self.absurd_sigma,
                                           self.psi_process, self.process_interval, self.psi_measurement,
-                                          self.augment)
+                                          self.augment, **self.update_options)
         return self._last
 
 

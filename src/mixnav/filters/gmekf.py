@@ -56,7 +56,7 @@ from ..ins.imu_model import ImuErrorModel
 from ..measurements.kinds import KINDS, MAX_KINDS, kind_code
 from ..noise.learn.offline import learn_mixture  # noqa: F401  (re-exported)
 from ..noise.mixture import BankMixtures, GaussianMixture, StandardMixture  # noqa: F401  (re-exported)
-from ._bank_kernels import (bank_epoch, bank_epoch_collect, bank_epoch_gated, bank_epoch_whole, bank_log_likelihood, bank_moments,
+from ._bank_kernels import (bank_epoch, bank_epoch_collect, bank_epoch_guarded, bank_log_likelihood, bank_moments,
                             bank_propagate, bank_reduce, bank_split, bank_update, predicted_nis)
 from ._ekf_kernels import NEEDS_REPAIR, OK
 from .ekf import ErrorStateEkf, repair_covariance
@@ -110,16 +110,13 @@ class BankEstimator:
         bank, its shape kept) and :meth:`log_likelihood` (the bank's own mixture
         density of an epoch, not a Gaussian of its moments). Alone with the engine it
         gives the closed-loop bank's numbers.
-    update : ``"row"`` or ``"epoch"``
-        The measurement update: row by row (each row's noise component decided from the
-        state the rows before it left), or the whole epoch at once (the assignments of all
-        rows decided jointly by a variational-Bayes fixed point on the bank's merged
-        Gaussian, :func:`~mixnav.filters._bank_kernels.bank_update_whole`), which gross
-        errors meeting an unconverged state cannot trap.
-    iterations : int
-        Whole-epoch update: the most variational passes per epoch (>= 1).
-    tolerance : float
-        Whole-epoch update: the passes stop when no responsibility changes by more.
+    gate : float
+        Convergence gate: a row whose state share of its predicted variance exceeds
+        ``gate`` times its noise variance is updated with its mixture's moment-matched
+        Gaussian, not the mixture (``inf``: never; :mod:`mixnav.filters._bank_kernels`).
+    outlier_mean : float
+        Noise components whose standardised mean exceeds this are outlier components:
+        a row they explain is not used (rather than corrected by their mean; ``inf``: off).
     divergence_window, divergence_nis : int, float
         The divergence safeguard: when the merged prediction's NIS per row (each row's
         variance the state's share plus the model's own ``r``, the sigma the user gave)
@@ -135,30 +132,22 @@ class BankEstimator:
     """
 
     def __init__(self, mixtures: BankMixtures, max_components: int = 16, absurd_sigma: float = 1e4,
-                 online=None, carry_mean: bool = False, update: str = "row", iterations: int = 20,
-                 tolerance: float = 1e-4, divergence_window: int = 0, divergence_nis: float = 9.0,
-                 gate: float = 1.0):
+                 online=None, carry_mean: bool = False, gate: float = 2.0, outlier_mean: float = 4.0,
+                 divergence_window: int = 10, divergence_nis: float = 9.0):
         if int(max_components) < 1:
             raise ArgumentError(f"must be at least 1, got {max_components}", argument="max_components")
-        if update not in ("row", "gated", "epoch"):
-            raise ArgumentError(f"must be 'row', 'gated' or 'epoch', got {update!r}", argument="update")
         if not (gate > 0):
             raise ArgumentError(f"must be positive, got {gate}", argument="gate")
         self.gate = float(gate)
-        if int(iterations) < 1:
-            raise ArgumentError(f"must be at least 1, got {iterations}", argument="iterations")
-        if not (np.isfinite(tolerance) and tolerance > 0):
-            raise ArgumentError(f"must be positive, got {tolerance}", argument="tolerance")
+        if not (outlier_mean > 0):
+            raise ArgumentError(f"must be positive, got {outlier_mean}", argument="outlier_mean")
+        self.outlier_mean = float(outlier_mean)
         if int(divergence_window) < 0:
             raise ArgumentError(f"must be >= 0 (0: off), got {divergence_window}", argument="divergence_window")
         if not (np.isfinite(divergence_nis) and divergence_nis > 0):
             raise ArgumentError(f"must be positive, got {divergence_nis}", argument="divergence_nis")
         self.divergence_window = int(divergence_window)
         self.divergence_nis = float(divergence_nis)
-        self.update_mode = update
-        self.iterations = int(iterations)
-        self.tolerance = float(tolerance)
-        self._rho = np.empty((0, 0))
         self.carry_mean = bool(carry_mean)
         self.mixtures0 = mixtures
         self.max_components = int(max_components)
@@ -375,28 +364,12 @@ class BankEstimator:
         args = (self.lw, self.X, self.Pb, z, H, r, kinds, *self.tables, self.absurd_sigma,
                 self.max_components, self.n)
         m = len(z)
-        if self.update_mode == "gated":
-            if self.online is not None and len(self._u) < m:
-                self._u, self._q = np.empty(2 * m), np.empty(2 * m)
-            out = bank_epoch_gated(*args, self.gate, self.online is not None, self._u, self._q)
-            if self.online is None:
-                return out
-        elif self.update_mode == "epoch":
-            L = self.tables[0].shape[1]
-            if self._rho.shape[0] < m or self._rho.shape[1] != L:
-                self._rho = np.empty((2 * m, L))
-            if self.online is not None and len(self._u) < m:
-                self._u, self._q = np.empty(2 * m), np.empty(2 * m)
-            out = bank_epoch_whole(*args, self.iterations, self.tolerance, self._rho, self.online is not None,
-                                   self._u, self._q)
-            if self.online is None:
-                return out
-        elif self.online is None:
-            return bank_epoch(*args)
-        else:
-            if len(self._u) < m:
-                self._u, self._q = np.empty(2 * m), np.empty(2 * m)
-            out = bank_epoch_collect(*args, self._u, self._q)
+        collect = self.online is not None
+        if collect and len(self._u) < m:
+            self._u, self._q = np.empty(2 * m), np.empty(2 * m)
+        out = bank_epoch_guarded(*args, self.gate, self.outlier_mean, collect, self._u, self._q)
+        if not collect:
+            return out
         if self.online.observe(out[0] in (OK, NEEDS_REPAIR), kinds, self._u[:m], self._q[:m]):
             self.mixtures = replace(self.mixtures, measurement={**self.mixtures.measurement,
                                                                 **self.online.current})
@@ -465,11 +438,10 @@ class BankEstimator:
                             np.zeros((1, 1)), np.ones((1, 1)))
         bank_epoch(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
                    np.zeros((1, 1)), np.ones((1, 1)), 1e4, 1, n)
-        bank_epoch_gated(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
-                         np.zeros((1, 1)), np.ones((1, 1)), 1e4, 1, n, 1.0, False, np.empty(1), np.empty(1))
-        bank_epoch_whole(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
-                         np.zeros((1, 1)), np.ones((1, 1)), 1e4, 1, n, 2, 1e-4, np.empty((1, 1)), False, np.empty(1),
-                         np.empty(1))
+        for collect in (False, True):
+            bank_epoch_guarded(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
+                               np.zeros((1, 1)), np.ones((1, 1)), 1e4, 1, n, 2.0, 4.0, collect, np.empty(1),
+                               np.empty(1))
         bank_epoch_collect(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
                            np.zeros((1, 1)), np.ones((1, 1)), 1e4, 1, n, np.empty(1), np.empty(1))
         _BANK_WARM.append(True)
@@ -500,8 +472,9 @@ class GaussianMixtureEkf(ErrorStateEkf):
         starting from ``mixtures``. Every run starts again from ``mixtures``.
     learner_not_converged : int
         Offline mixture fits that did not converge (reported in ``recoveries``).
-    update, iterations, tolerance, divergence_window, divergence_nis
-        The measurement update and the divergence safeguard, as :class:`BankEstimator`.
+    gate, outlier_mean, divergence_window, divergence_nis
+        The update's guards and the divergence safeguard, as :class:`BankEstimator`
+        (``gate = outlier_mean = inf``, ``divergence_window = 0``: P1's plain update).
     """
 
     #: the RTS smoother applies on the bank's merged Gaussian (an approximation, docs/smoother.md)
@@ -510,12 +483,11 @@ class GaussianMixtureEkf(ErrorStateEkf):
     def __init__(self, layout: StateLayout, imu_model: ImuErrorModel, mixtures: BankMixtures,
                  max_components: int = 16, covariance_interval: float = 1.0, absurd_sigma: float = 1e4,
                  clock: ClockModel | None = None, learning_time_s: float = 0.0, online=None,
-                 learner_not_converged: int = 0, update: str = "row", iterations: int = 20,
-                 tolerance: float = 1e-4, divergence_window: int = 0, divergence_nis: float = 9.0,
-                 gate: float = 1.0):
+                 learner_not_converged: int = 0, gate: float = 2.0, outlier_mean: float = 4.0,
+                 divergence_window: int = 10, divergence_nis: float = 9.0):
         super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
-        self.update_options = dict(update=update, iterations=iterations, tolerance=tolerance,
-                                   divergence_window=divergence_window, divergence_nis=divergence_nis, gate=gate)
+        self.update_options = dict(gate=gate, outlier_mean=outlier_mean, divergence_window=divergence_window,
+                                   divergence_nis=divergence_nis)
         BankEstimator(mixtures, max_components, absurd_sigma, online, **self.update_options)  # validate now
         self.mixtures = mixtures
         self.max_components = int(max_components)
