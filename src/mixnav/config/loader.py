@@ -38,17 +38,47 @@ def list_datasets() -> dict[str, str]:
 
 def resolve(name_or_path: str, folder: str = "scenarios", kind: str = "scenario") -> tuple[str, str]:
     """The text of a config and the name to cite it by in errors."""
+    if not isinstance(name_or_path, str) or not name_or_path or "\x00" in name_or_path:
+        raise ConfigError(f"not a {kind} name or file path: {name_or_path!r}")
     p = Path(name_or_path)
     if p.suffix == ".toml" or p.exists():
         if not p.is_file():
             raise ConfigError(f"no such {kind} file", file=str(p))
-        return p.read_text(encoding="utf-8"), str(p)
+        return read_config_text(p, kind), str(p)
+    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.+-]*", name_or_path):
+        raise ConfigError(f"no such {kind} file, and not a shipped {kind} name: {name_or_path!r}")
     entry = _shipped_dir(folder).joinpath(f"{name_or_path}.toml")
     if not entry.is_file():
         known = ", ".join(_list(folder, kind))
         raise ConfigError(f"unknown {kind} '{name_or_path}'; shipped: {known} "
                           "(or give the path of a .toml file)")
     return entry.read_text(encoding="utf-8"), f"{name_or_path}.toml (shipped)"
+
+
+#: largest config file read (bytes): a scenario or dataset file is a few kB
+MAX_CONFIG_BYTES = 10_000_000
+
+
+def read_config_text(p: Path, kind: str = "config") -> str:
+    """The text of a config file; unreadable, binary, oversized or non-UTF-8 files are
+    ConfigErrors naming the file (and the byte offset of a bad byte)."""
+    try:
+        size = p.stat().st_size
+        if size > MAX_CONFIG_BYTES:
+            raise ConfigError(f"{size} bytes is too large for a {kind} file "
+                              f"(at most {MAX_CONFIG_BYTES})", file=str(p))
+        data = p.read_bytes()
+    except OSError as exc:
+        raise ConfigError(f"cannot read the {kind} file: {exc.strerror or exc}", file=str(p)) from None
+    nul = data.find(bytes(1))
+    if nul >= 0:
+        raise ConfigError(f"a binary file, not a TOML {kind} file (NUL byte at offset {nul})", file=str(p))
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[:exc.start].count(b"\n") + 1
+        raise ConfigError(f"line {line}: not UTF-8 text (byte 0x{data[exc.start]:02x} at offset "
+                          f"{exc.start}); save the file as UTF-8", file=str(p)) from None
 
 
 def _key(loc) -> str:

@@ -691,6 +691,17 @@ class MethodConfig(Strict):
     #: also run the fixed-interval RTS smoother: adds a method "<name>-smoothed"
     smooth: bool = False
 
+    @field_validator("name")
+    @classmethod
+    def _file_name(cls, v):
+        # the name becomes solution_<name>.csv: one safe file-name component (docs/validation.md)
+        from ..errors import ArgumentError
+        from ..io.outdir import safe_name
+        try:
+            return safe_name(v, "method name")
+        except ArgumentError as exc:
+            raise ValueError(exc.message) from None
+
     @field_validator("estimator")
     @classmethod
     def _known_estimator(cls, v):

@@ -271,11 +271,13 @@ def process_tables(po: ProcessOutput) -> dict[str, pd.DataFrame]:
             for name, res in po.results.items()}
 
 
-def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = None) -> dict:
-    """Solutions, metrics (against the reference), figures and report of a processed dataset."""
+def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = None,
+                  overwrite: bool = False) -> dict:
+    """Solutions, metrics (against the reference), figures and report of a processed dataset
+    (the folder policy of :mod:`mixnav.io.outdir`)."""
     if po.dataset.dataset.kind == "gnss-raw":
         from .spp_process import write_raw
-        return write_raw(out_dir, po, config_text)
+        return write_raw(out_dir, po, config_text, overwrite=overwrite)
     withheld = withheld_windows(po)
     tables = process_tables(po)
     for t in tables.values():
@@ -304,4 +306,5 @@ def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = No
                 notes.append(f"Installation estimated by '{name}': " + ", ".join(said) + ".")
     ref = None if po.reference is None else _lla_frame(po.reference.time, po.reference.lla)
     return write_outputs(out_dir, f"mixnav process: {po.dataset.dataset.name}", header, po.results, tables,
-                         withheld, ref, _lla_frame(po.fixes.time, po.fixes.lla), notes, config_text)
+                         withheld, ref, _lla_frame(po.fixes.time, po.fixes.lla), notes, config_text,
+                         command="process", overwrite=overwrite, protect=[po.source, po.data_dir])

@@ -28,6 +28,7 @@ from ..filters.ekf import FilterResult
 from ..geodesy.frames import displace, ned_displacement
 from ..measurements.loose import antenna_lla
 from ..io.atomic import atomic_write_dataframe, atomic_write_json
+from ..io.outdir import staged_output
 from ..sim.gnss import in_windows
 from ..sim.rng import Streams
 from ..sim.scenario import SimulatedRun, simulate
@@ -252,21 +253,30 @@ def method_metrics(res: FilterResult, table: pd.DataFrame, outages) -> dict:
 
 def write_outputs(out_dir: Path, title: str, header: dict, results: dict[str, FilterResult],
                   tables: dict[str, pd.DataFrame], outages, reference: pd.DataFrame | None,
-                  gnss: pd.DataFrame | None, notes=(), config_text: str | None = None) -> dict:
+                  gnss: pd.DataFrame | None, notes=(), config_text: str | None = None,
+                  command: str = "run", overwrite: bool = False, protect=()) -> dict:
     """Write solution tables, metrics.json, figures and report.html; returns the metrics.
 
     Shared by ``mixnav run`` (simulation, truth as reference) and ``mixnav
-    process`` (real data, e.g. RTK fixes as reference).
+    process`` (real data, e.g. RTK fixes as reference). The folder follows the
+    output-folder policy (:mod:`mixnav.io.outdir`): written whole into a
+    temporary sibling and swapped in, a folder of another command (or with
+    foreign files) refused unless ``overwrite``.
     """
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    with staged_output(out_dir, command, overwrite, protect) as folder:
+        return _write_outputs(folder, title, header, results, tables, outages, reference, gnss, notes,
+                              config_text)
+
+
+def _write_outputs(folder, title, header, results, tables, outages, reference, gnss, notes, config_text):
+    out_dir = folder.path
     metrics = dict(header)
     metrics["mixnav_version"] = __version__
     metrics["outages_s"] = [list(map(float, o)) for o in outages]
     metrics["methods"] = {name: method_metrics(results[name], tables[name], outages) for name in tables}
     for name, table in tables.items():
-        atomic_write_dataframe(out_dir / f"solution_{name}.csv", table)
-        atomic_write_dataframe(out_dir / f"solution_{name}.parquet", table)
+        atomic_write_dataframe(folder.file(f"solution_{name}.csv"), table)
+        atomic_write_dataframe(folder.file(f"solution_{name}.parquet"), table)
     if reference is not None:
         atomic_write_dataframe(out_dir / "reference.parquet", reference)
     if gnss is not None:
@@ -300,8 +310,9 @@ def run_tables(run: RunOutput) -> dict[str, pd.DataFrame]:
     return {name: solution_table(res, run.sim.truth, run.sim.outages) for name, res in run.results.items()}
 
 
-def write_run(out_dir: Path, run: RunOutput, config_text: str | None = None) -> dict:
-    """Write solutions, metrics, figures and the report of one simulated run."""
+def write_run(out_dir: Path, run: RunOutput, config_text: str | None = None, overwrite: bool = False) -> dict:
+    """Write solutions, metrics, figures and the report of one simulated run (the folder
+    policy of :mod:`mixnav.io.outdir`; ``overwrite`` clears a folder it would refuse)."""
     sim = run.sim
     tables = run_tables(run)
     notes = [f"Seed {sim.seed}; IMU errors drawn: gyro bias "
@@ -313,4 +324,5 @@ def write_run(out_dir: Path, run: RunOutput, config_text: str | None = None) -> 
         header["aiding"] = run.aiding
     return write_outputs(out_dir, f"mixnav run: {run.scenario.scenario.name}", header, run.results, tables,
                          sim.outages, _lla_frame(sim.truth.time, sim.truth.lla)[::10],
-                         _lla_frame(sim.fixes.time, sim.fixes.lla), notes, config_text)
+                         _lla_frame(sim.fixes.time, sim.fixes.lla), notes, config_text,
+                         command="run", overwrite=overwrite, protect=[run.source])

@@ -115,10 +115,15 @@ def spp_metrics(table: pd.DataFrame, solve_time_s: float) -> dict:
     return m
 
 
-def write_raw(out_dir: Path, po: SppOutput, config_text: str | None = None) -> dict:
-    """Solution table (CSV + Parquet), metrics.json, figures and report of an SPP run."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+def write_raw(out_dir: Path, po: SppOutput, config_text: str | None = None, overwrite: bool = False) -> dict:
+    """Solution table (CSV + Parquet), metrics.json, figures and report of an SPP run
+    (the folder policy of :mod:`mixnav.io.outdir`, as ``mixnav process``)."""
+    from ..io.outdir import staged_output
+    with staged_output(out_dir, "process", overwrite, [po.source, po.data_dir]) as folder:
+        return _write_raw(folder.path, po, config_text)
+
+
+def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None) -> dict:
     table = solution_table(po)
     tr = po.track
     counts = tr.status_counts()
