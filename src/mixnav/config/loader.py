@@ -126,6 +126,20 @@ def _check_scenario(sc, source: str) -> None:
     _check_hold(sc, source)
     observable_noise(sc, source)
     _check_odometer(sc, source)
+    _check_windows(sc, source)
+
+
+def _check_windows(sc, source) -> None:
+    """GNSS fixes fall on IMU samples; outage windows lie inside the run (docs/validation.md)."""
+    step = sc.imu.rate / sc.gnss.rate
+    if round(step) < 1 or abs(step - round(step)) > 1e-9 * step:
+        raise ConfigError(f"GNSS rate {sc.gnss.rate:g} Hz must divide the IMU rate ({sc.imu.rate:g} Hz): fixes fall "
+                          "on IMU samples", file=source, key="gnss.rate")
+    end = sc.duration
+    for i, (a, b) in enumerate(sc.gnss.outages):
+        if a >= end or b > end + 1e-9:
+            raise ConfigError(f"outage [{a:g}, {b:g}] s reaches beyond the end of the run ({end:g} s)",
+                              file=source, key=f"gnss.outages[{i}]")
 
 
 def _check_odometer(sc, source) -> None:

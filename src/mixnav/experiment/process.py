@@ -33,6 +33,7 @@ from .aiding import AidingInputs, installation_check
 from ..filters.ekf import FilterResult, InitialState
 from ..ins.mechanization import nav_vector
 from ..io import drive0708, generic_csv, kfgins, psins, rtklib
+from ..io.imu_checks import check_spikes
 from ..sim.gnss import in_windows
 from .run import _lla_frame, solution_table, write_outputs
 from ..geodesy.frames import displace
@@ -56,6 +57,7 @@ class ProcessOutput:
     aiding: dict = field(default_factory=dict)   # AidingInputs.summary(): still intervals, thresholds
     installation: dict = field(default_factory=dict)  # aiding.installation_check: level, rest, estimates
     odometer: OdometerData | None = None  # the [aiding.odometer] file's samples, when one is read
+    checks: dict = field(default_factory=dict)  # data_checks: GNSS gaps, gyro-vs-track turning
 
 
 def find_data_dir(ds: Dataset, data: str | None, source: str) -> Path:
@@ -86,12 +88,13 @@ def read_imu(ds: Dataset, folder: Path) -> ImuData:
     f = folder / c.file
     if c.format == "drive-0708":
         return drive0708.read_drive_imu(f, folder / c.tag if c.tag else None, time_offset=0.0,
-                                        max_gap=c.max_gap, gap_action=c.gap_action)
+                                        max_gap=c.max_gap, gap_action=c.gap_action, spike_action=c.spike_action)
     if c.format == "kf-gins":
-        return kfgins.read_kfgins_imu(f, max_gap=c.max_gap, gap_action=c.gap_action)
+        return kfgins.read_kfgins_imu(f, max_gap=c.max_gap, gap_action=c.gap_action, spike_action=c.spike_action)
     if c.format == "psins":
-        return psins.read_psins_imu(f)[0]
-    return generic_csv.read_imu_csv(f, max_gap=c.max_gap, gap_action=c.gap_action)
+        imu = psins.read_psins_imu(f)[0]
+        return imu if c.spike_action == "fail" else check_spikes(imu, None, c.spike_action)
+    return generic_csv.read_imu_csv(f, max_gap=c.max_gap, gap_action=c.gap_action, spike_action=c.spike_action)
 
 
 def read_gnss(ds: Dataset, folder: Path) -> GnssFixes:
@@ -159,7 +162,7 @@ def install(imu: ImuData, ds: Dataset) -> ImuData:
     inst = ds.installation
     c_bi = euler_to_dcm(np.asarray(inst.imu_misalignment)) @ euler_to_dcm(np.asarray(inst.imu_rotation))
     return ImuData(time=imu.time + inst.imu_time_offset, dt=imu.dt, dtheta=imu.dtheta @ c_bi.T,
-                   dvel=imu.dvel @ c_bi.T, source=imu.source, gaps=imu.gaps)
+                   dvel=imu.dvel @ c_bi.T, source=imu.source, gaps=imu.gaps, spikes=imu.spikes)
 
 
 def initial_state(ds: Dataset, imu: ImuData, fixes: GnssFixes, lever: np.ndarray) -> InitialState:
@@ -222,6 +225,7 @@ def process(ds: Dataset, source: str, data: str | None = None):
     all_fixes = _shift(all_fixes, t0)
     if reference is not None:
         reference = _shift(reference, t0)
+    checks = data_checks(ds, source, imu, all_fixes)
     corrupt = corruption(ds, source)
     if corrupt is not None:
         all_fixes = _corrupt(all_fixes, corrupt, np.random.default_rng(ds.gnss.corrupt_seed))
@@ -254,7 +258,43 @@ def process(ds: Dataset, source: str, data: str | None = None):
                          installation_check(imu, ds.alignment.static_duration, results, aiding.stillness,
                                             configured={"antenna_position": inst.antenna_position,
                                                         "imu_time_offset": inst.imu_time_offset}),
-                         odometer=aiding.odometer)
+                         odometer=aiding.odometer, checks=checks)
+
+
+def data_checks(ds: Dataset, source: str, imu: ImuData, fixes: GnssFixes) -> dict:
+    """Plausibility of the data read, on the processing time axis (docs/validation.md).
+
+    - ``gnss.withhold`` windows must overlap the fixes (ConfigError naming the window);
+    - GNSS holes longer than ``gnss.max_gap`` outside the withheld windows are listed
+      (``gnss_gaps_s``, with a warning) or, with ``gnss.gap_action = "fail"``, an error;
+    - the gyros' turning must agree with the GNSS track's (:func:`mixnav.io.imu_checks.check_turns`).
+    """
+    import warnings
+    from ..io.imu_checks import DataWarning, check_turns
+    out: dict = {}
+    if len(fixes) == 0:
+        raise DataError("no GNSS fix of the chosen qualities", file=fixes.source)
+    t0, t1 = float(fixes.time[0]), float(fixes.time[-1])
+    for i, (a, b) in enumerate(ds.gnss.withhold):
+        if a >= t1 or b <= t0:
+            raise ConfigError(f"window [{a:g}, {b:g}] s lies outside the GNSS data ({t0:.1f}..{t1:.1f} s after the "
+                              "first IMU sample): nothing would be withheld", file=source, key=f"gnss.withhold[{i}]")
+    d = np.diff(fixes.time)
+    mid = 0.5 * (fixes.time[1:] + fixes.time[:-1])
+    withheld = in_windows(mid, tuple(tuple(w) for w in ds.gnss.withhold))
+    holes = np.flatnonzero((d > ds.gnss.max_gap) & ~withheld)
+    out["gnss_gaps_s"] = [[float(fixes.time[k]), float(fixes.time[k + 1])] for k in holes]
+    if holes.size:
+        k = int(holes[np.argmax(d[holes])])
+        msg = (f"{holes.size} hole(s) longer than gnss.max_gap = {ds.gnss.max_gap:g} s between GNSS fixes; the longest "
+               f"{d[k]:.1f} s from t = {fixes.time[k]:.1f} s (listed in metrics.json: gnss_gaps_s)")
+        if ds.gnss.gap_action == "fail":
+            raise DataError(msg, file=fixes.source)
+        warnings.warn(f"{fixes.source}: {msg}", DataWarning, stacklevel=2)
+    turns = check_turns(imu, fixes.time, fixes.lla, fixes.vel_n, f"the unit of the {ds.imu.format} format")
+    if turns is not None:
+        out["gyro_turn_check"] = turns
+    return out
 
 
 def withheld_windows(po: ProcessOutput) -> tuple:
@@ -289,6 +329,8 @@ def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = No
               "real_time_factor": duration / (po.read_time_s + po.filter_time_s),
               "gnss_withheld_s": [list(w) for w in withheld],
               "imu_gaps_accepted": int(po.imu.gaps),
+              **({"imu_spikes_rejected": int(po.imu.spikes)} if po.imu.spikes else {}),
+              **po.checks,
               **({} if po.odometer is None else {"odometer_gaps_accepted": int(po.odometer.gaps)})}
     if po.aiding:
         header["aiding"] = po.aiding

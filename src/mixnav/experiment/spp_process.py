@@ -127,6 +127,9 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None) -> dict:
     table = solution_table(po)
     tr = po.track
     counts = tr.status_counts()
+    empty = int(getattr(po.observations, "epochs_all_rejected", 0))
+    if empty:   # epochs the reader dropped whole: every measurement rejected (counted, not vanished)
+        counts = {**counts, "all measurements rejected": empty}
     used = counts.get("ok", 0)
     duration = float(table["time_s"].iloc[-1]) if len(table) else 0.0
     metrics: dict = {
@@ -135,7 +138,7 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None) -> dict:
         "gps_week_start": int(tr.week[0]), "gps_tow_start_s": float(tr.tow[0]),
         "duration_s": duration, "read_time_s": po.read_time_s, "filter_time_s": po.solve_time_s,
         "real_time_factor": duration / max(po.read_time_s + po.solve_time_s, 1e-9),
-        "epochs_total": len(table), "epochs_used": used, "epochs_skipped": len(table) - used,
+        "epochs_total": len(table) + empty, "epochs_used": used, "epochs_skipped": len(table) + empty - used,
         "epoch_status": counts, "satellites_skipped": dict(tr.skipped_satellites),
         "measurements_rejected": dict(po.observations.rejected),
         "reference_point": None if po.reference_lla is None else

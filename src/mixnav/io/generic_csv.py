@@ -86,7 +86,7 @@ def _values(path, names, factors, what):
     return tab, cols
 
 
-def read_imu_csv(path, max_gap: float | None = None, gap_action: str = "warn") -> ImuData:
+def read_imu_csv(path, max_gap: float | None = None, gap_action: str = "warn", spike_action: str = "fail") -> ImuData:
     path = Path(path)
     names, fac = _header(path, [_IMU_RATE, _IMU_INC], "IMU")
     tab, c = _values(path, names, fac, "IMU")
@@ -100,8 +100,7 @@ def read_imu_csv(path, max_gap: float | None = None, gap_action: str = "warn") -
         imu = ImuData(time=t[1:], dt=np.diff(t), dtheta=np.column_stack([c["dthx"], c["dthy"], c["dthz"]])[1:],
                       dvel=np.column_stack([c["dvx"], c["dvy"], c["dvz"]])[1:], source=str(path))
         units = (names_unit(path, "dthx"), names_unit(path, "dvx"))
-    check_plausible(imu, *units)
-    return replace(imu, gaps=gaps)
+    return replace(check_plausible(imu, *units, tab.lines[1:], spike_action), gaps=gaps)
 
 
 def names_unit(path: Path, name: str) -> str:

@@ -21,7 +21,8 @@ from .imu_checks import check_plausible
 from .tables import check_times, read_numeric
 
 
-def read_kfgins_imu(path, max_gap: float | None = None, gap_action: str = "warn") -> ImuData:
+def read_kfgins_imu(path, max_gap: float | None = None, gap_action: str = "warn",
+                    spike_action: str = "fail") -> ImuData:
     tab = read_numeric(path, 7, what="KF-GINS IMU")
     v = tab.values
     gaps = check_times(v[:, 0], tab.lines, tab.path, max_gap=max_gap, gap_action=gap_action, what="IMU").gaps
@@ -29,8 +30,7 @@ def read_kfgins_imu(path, max_gap: float | None = None, gap_action: str = "warn"
         raise DataError("need at least two IMU lines", file=tab.path)
     imu = ImuData(time=v[1:, 0], dt=np.diff(v[:, 0]), dtheta=v[1:, 1:4], dvel=v[1:, 4:7], source=tab.path,
                   gaps=gaps)
-    check_plausible(imu, "rad", "m/s")
-    return imu
+    return check_plausible(imu, "rad", "m/s", tab.lines[1:], spike_action)
 
 
 def read_kfgins_gnss(path, max_gap: float | None = None, gap_action: str = "warn") -> GnssFixes:
