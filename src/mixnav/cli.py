@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import signal
 import sys
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -42,12 +43,17 @@ def _terminate(signum, frame):
     raise KeyboardInterrupt
 
 
+def _one_line_warning(message, category, filename, lineno, line=None) -> str:
+    return f"warning: {message}\n"
+
+
 @contextmanager
 def _errors():
     """Every error a user can cause ends in one line and exit status 2 (docs/validation.md);
     an interruption in exit status 130 (Ctrl-C) or 143 (SIGTERM) after the clean-up; an
     unexpected error (a bug) in one line and exit status 3, its traceback with --debug."""
     old = None
+    warnings.formatwarning = _one_line_warning
     try:
         old = signal.signal(signal.SIGTERM, _terminate)
     except ValueError:   # not in the main thread (tests calling the app from a thread)
@@ -82,6 +88,12 @@ def _errors():
     finally:
         if old is not None:
             signal.signal(signal.SIGTERM, old)
+
+
+def _warn(metrics: dict) -> None:
+    """The warnings of a finished run (NIS far above 1, GNSS holes) on stderr, after the table."""
+    for w in metrics.get("warnings", []):
+        err.print("[bold yellow]warning:[/] " + escape(w), highlight=False)
 
 
 def _num(m: dict, key: str) -> str:
@@ -162,6 +174,7 @@ def run(scenario: str = typer.Argument(..., help="Shipped scenario name or path 
                   f"{m['yaw_rmse_deg']:.3g}", f"{m['velocity_rmse_mps']:.3g}",
                   _num(m, "epoch_time_mean_us"), *(_num(m, "smoother_time_s") for _ in smooth))
     out.print(t)
+    _warn(metrics)
     out.print(f"report: {Path(out_dir) / 'report.html'}")
 
 
@@ -194,6 +207,7 @@ def process(dataset: str = typer.Argument(..., help="Shipped dataset config name
                   f"{m.get('horizontal_max_m', float('nan')):.3g}", outs, _num(m, "epoch_time_mean_us"),
                   *(_num(m, "smoother_time_s") for _ in smooth))
     out.print(t)
+    _warn(metrics)
     out.print(f"report: {Path(out_dir) / 'report.html'}")
 
 

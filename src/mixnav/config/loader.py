@@ -72,7 +72,8 @@ def read_config_text(p: Path, kind: str = "config") -> str:
         raise ConfigError(f"cannot read the {kind} file: {exc.strerror or exc}", file=str(p)) from None
     nul = data.find(bytes(1))
     if nul >= 0:
-        raise ConfigError(f"a binary file, not a TOML {kind} file (NUL byte at offset {nul})", file=str(p))
+        raise ConfigError(f"line {data[:nul].count(10) + 1}: a binary file, not a TOML {kind} file (NUL byte at "
+                          f"offset {nul})", file=str(p))
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:

@@ -329,9 +329,9 @@ def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = No
               "real_time_factor": duration / (po.read_time_s + po.filter_time_s),
               "gnss_withheld_s": [list(w) for w in withheld],
               "imu_gaps_accepted": int(po.imu.gaps),
+              **({} if po.odometer is None else {"odometer_gaps_accepted": int(po.odometer.gaps)}),
               **({"imu_spikes_rejected": int(po.imu.spikes)} if po.imu.spikes else {}),
-              **po.checks,
-              **({} if po.odometer is None else {"odometer_gaps_accepted": int(po.odometer.gaps)})}
+              **po.checks}
     if po.aiding:
         header["aiding"] = po.aiding
     notes = [f"Times are seconds since the first IMU sample (GPS time {po.time_origin:.3f} s since 1970).",

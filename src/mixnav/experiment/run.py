@@ -241,6 +241,7 @@ def method_metrics(res: FilterResult, table: pd.DataFrame, outages) -> dict:
     m["recoveries"] = dict(res.recoveries)
     if len(res.nis):
         m["nis_mean_per_dof"] = float(np.mean(res.nis / res.nis_dim))
+        m["nis_median_per_dof"] = float(np.median(res.nis / res.nis_dim))
     modes = [c for c in table.columns if c.startswith("p_mode_")]
     if modes:   # an IMM: mean probability of each mode, overall and inside the windows
         m["mode_probability_mean"] = {c.removeprefix("p_mode_"): float(table[c].mean()) for c in modes}
@@ -249,6 +250,28 @@ def method_metrics(res: FilterResult, table: pd.DataFrame, outages) -> dict:
             m["mode_probability_mean_in_windows"] = {c.removeprefix("p_mode_"): float(table.loc[inside, c].mean())
                                                      for c in modes}
     return m
+
+
+#: median NIS per degree of freedom above which a run is warned about (docs/validation.md): a
+#: consistent filter gives about 0.8-0.9 (the chi-square median per dof); the median, unlike the
+#: mean, is not moved by a few outliers of heavy-tailed noise
+NIS_WARN_MEDIAN = 5.0
+NIS_CAUSES = ("the IMU installation (imu_rotation, misalignment) or the lever arm is wrong",
+              "a unit is wrong (rates in rad/s declared as deg/s, g as m/s^2, degrees as radians)",
+              "the IMU time offset or the GNSS velocity delay is wrong",
+              "the GNSS or IMU noise (sigmas, grade) is set far too small for the data")
+
+
+def nis_warnings(methods: dict) -> list[str]:
+    """One warning per method whose median NIS per dof exceeds :data:`NIS_WARN_MEDIAN`."""
+    out = []
+    for name, m in methods.items():
+        v = m.get("nis_median_per_dof")
+        if v is not None and v > NIS_WARN_MEDIAN:
+            out.append(f"method '{name}': median NIS per degree of freedom is {v:.3g} (a consistent filter "
+                       f"gives about 1; warned above {NIS_WARN_MEDIAN:g}): its measurements disagree with its "
+                       "model. Likely causes: " + "; ".join(NIS_CAUSES) + ".")
+    return out
 
 
 def write_outputs(out_dir: Path, title: str, header: dict, results: dict[str, FilterResult],
@@ -274,6 +297,10 @@ def _write_outputs(folder, title, header, results, tables, outages, reference, g
     metrics["mixnav_version"] = __version__
     metrics["outages_s"] = [list(map(float, o)) for o in outages]
     metrics["methods"] = {name: method_metrics(results[name], tables[name], outages) for name in tables}
+    warned = nis_warnings(metrics["methods"])
+    if warned:
+        metrics["warnings"] = warned
+        notes = [*notes, *("Warning: " + w for w in warned)]
     for name, table in tables.items():
         atomic_write_dataframe(folder.file(f"solution_{name}.csv"), table)
         atomic_write_dataframe(folder.file(f"solution_{name}.parquet"), table)

@@ -33,7 +33,7 @@ from ..attitude import euler_to_quat
 from ..data import GnssFixes, ImuData, Trajectory
 from ..errors import DataError
 from .imu_checks import check_plausible, rates_to_increments
-from .tables import check_times, header_fields, read_numeric
+from .tables import check_fix_values, check_times, header_fields, read_numeric
 
 _COL = re.compile(r"^\s*([A-Za-z_]+)\s*\[(.*)\]\s*$")
 
@@ -122,6 +122,8 @@ def read_gnss_csv(path, max_gap: float | None = None, gap_action: str = "warn") 
     if bad.size:
         raise DataError("standard deviations must be positive", file=str(path), line=int(tab.lines[bad[0]]))
     lla = np.column_stack([c["lat"], c["lon"], c["height"]])
+    check_fix_values(lla, sd, tab.lines, str(path),
+                     np.column_stack([c["vn"], c["ve"], c["vd"]]) if "vn" in c else None)
     if "vn" in c:
         return GnssFixes(time=c["time"], lla=lla, pos_sigma=sd, vel_n=np.column_stack([c["vn"], c["ve"], c["vd"]]),
                          vel_sigma=np.column_stack([c["sd_vn"], c["sd_ve"], c["sd_vd"]]), source=str(path))
