@@ -43,8 +43,9 @@ def _terminate(signum, frame):
     raise KeyboardInterrupt
 
 
-def _one_line_warning(message, category, filename, lineno, line=None) -> str:
-    return f"warning: {message}\n"
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning (a GNSS hole, a spike replaced, ...) as one line on stderr."""
+    err.print("[bold yellow]warning:[/] " + escape(str(message)), highlight=False)
 
 
 @contextmanager
@@ -53,7 +54,10 @@ def _errors():
     an interruption in exit status 130 (Ctrl-C) or 143 (SIGTERM) after the clean-up; an
     unexpected error (a bug) in one line and exit status 3, its traceback with --debug."""
     old = None
-    warnings.formatwarning = _one_line_warning
+    caught = warnings.catch_warnings()
+    caught.__enter__()
+    warnings.simplefilter("default")
+    warnings.showwarning = _show_warning
     try:
         old = signal.signal(signal.SIGTERM, _terminate)
     except ValueError:   # not in the main thread (tests calling the app from a thread)
@@ -86,6 +90,7 @@ def _errors():
              "traceback that --debug shows")
         raise typer.Exit(code=3)
     finally:
+        caught.__exit__(None, None, None)
         if old is not None:
             signal.signal(signal.SIGTERM, old)
 

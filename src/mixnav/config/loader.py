@@ -284,12 +284,24 @@ def _validate(model, text: str, source: str):
     return _validate_data(model, data, source)
 
 
+def _key_in_message(model, msg: str) -> str:
+    """The top-level key a whole-file check talks about (its error has no location):
+    the first field of ``model`` (or its singular) that the message names."""
+    best = None
+    for name in model.model_fields:
+        for word in (name, name[:-1] if name.endswith("s") else name):
+            m = re.search(rf"\b{re.escape(word)}\b", msg)
+            if m and (best is None or m.start() < best[0]):
+                best = (m.start(), name)
+    return "" if best is None else best[1]
+
+
 def _validate_data(model, data: dict, source: str):
     try:
         return model.model_validate(data)
     except ValidationError as exc:
         err = exc.errors()[0]
-        key = _key(err["loc"])
+        key = _key(err["loc"]) or _key_in_message(model, err["msg"])
         msg = {"extra_forbidden": "unknown key (check the spelling against docs/scenarios.md)",
                "missing": "required key is missing"}.get(err["type"], err["msg"])
         if msg.startswith("Value error, "):

@@ -355,8 +355,8 @@ def _check_records(out_dir: Path, scenario_name: str, sha: str, methods: list[st
         return set()
     redo = set()
     for f in sorted(runs_dir.iterdir()):
-        if f.name.startswith(".") and f.name.endswith(".tmp"):
-            continue
+        if f.name.startswith(".") and f.name.endswith(".tmp") or not os.path.lexists(f):
+            continue   # a killed writer's temporary file, or a series removed with its record
         m = _RECORD_NAME.match(f.name) or _SERIES_NAME.match(f.name)
         if m is None or not f.is_file():
             raise ConfigError(f"{f} is not a run record or series of mixnav; remove it (or use "
@@ -478,7 +478,7 @@ def run_experiment(scenario: str, runs: int, out_dir: Path, workers: int | None 
         raise ConfigError("--out holds a NUL byte")
     manifest_path = out_dir / MANIFEST
     old_seeds: list[int] = []
-    if manifest_path.is_file():
+    if manifest_path.is_file() and not overwrite:
         if not resume:
             raise ConfigError("folder already holds an experiment; pass resume (--resume) to "
                               "continue it or choose another folder", file=str(out_dir))

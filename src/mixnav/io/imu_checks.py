@@ -50,9 +50,10 @@ def check_spikes(imu: ImuData, lines=None, action: str = "fail") -> ImuData:
     deg/s, the top of the widest common MEMS gyro range) or whose mean specific
     force exceeds :data:`SPIKE_FORCE` (50 g). ``action="fail"`` (the default)
     raises a DataError naming the file and line of the first one; ``"reject"``
-    replaces each spike's rates by those interpolated from the good samples
-    around it, and counts them (``ImuData.spikes``, ``imu_spikes_rejected`` in
-    metrics.json). ``lines``: the file line of each increment.
+    replaces each spike's rates by those interpolated from the good increments
+    around it, and counts the increments replaced (``ImuData.spikes``,
+    ``imu_spikes_rejected`` in metrics.json; one bad sample of a rate file
+    spoils the two increments it ends and opens). ``lines``: the file line of each increment.
     """
     if action not in ("fail", "reject"):
         raise ValueError(f"spike action must be 'fail' or 'reject', got {action!r}")
