@@ -150,6 +150,10 @@ def refuse_run(box, text, *names, name="sc.toml"):
     ({'[[methods]]': '[bogus]\nx = 1\n\n[[methods]]'}, "bogus"),
     ({'states = 15': 'states = 16'}, "methods[0].states"),
     ({'rate = "100 Hz"': 'rate = "0 Hz"'}, "imu.rate"),
+    ({'rate = "100 Hz"': 'rate = "1e6 Hz"'}, "imu.rate"),
+    ({'"26 s" }': '"1e9 s" }'}, "trajectory.segments"),
+    ({'angle = "90 deg"': 'angle = "1e9 deg"'}, "trajectory.segments[2]"),
+    ({'lever_arm = ["0.5 m"': 'lever_arm = ["1e9 m"'}, "gnss.lever_arm"),
 ], ids=lambda v: str(v)[:40])
 def test_config_values_refused_with_key(box, repl, key):
     refuse_run(box, tiny(**repl), key)
@@ -341,6 +345,12 @@ def test_data_spike_rejected_counted_and_gap_reported(box):
 def test_data_gnss_gap_fail(box):
     gnss = [r for r in _gnss_csv() if not r.startswith(("30.", "31.", "32.", "33.", "34.", "35.", "36."))]
     _process(box, _imu_csv(), gnss, gnss_extra='gap_action = "fail"', names=["gnss.csv", "gnss.max_gap"])
+
+
+def test_data_gnss_in_another_time_base(box):
+    gnss = [r if not r[0].isdigit() else f"{float(r.split(',')[0]) + 400000:.3f}," + r.split(",", 1)[1]
+            for r in _gnss_csv()]
+    _process(box, _imu_csv(), gnss, names=["gnss.csv", "time span"])
 
 
 def test_data_withhold_outside_the_data(box):

@@ -208,8 +208,8 @@ def process(dataset: str = typer.Argument(..., help="Shipped dataset config name
                     f"(x{metrics['real_time_factor']:.0f} real time)")
     for name, m in metrics["methods"].items():
         outs = ", ".join(f"{o['horizontal_max_m']:.3g}" for o in m.get("outages", [])) or "-"
-        t.add_row(name, f"{m.get('horizontal_rmse_m', float('nan')):.3g}",
-                  f"{m.get('horizontal_max_m', float('nan')):.3g}", outs, _num(m, "epoch_time_mean_us"),
+        t.add_row(name, _num(m, "horizontal_rmse_m"), _num(m, "horizontal_max_m"), outs,
+                  _num(m, "epoch_time_mean_us"),
                   *(_num(m, "smoother_time_s") for _ in smooth))
     out.print(t)
     _warn(metrics)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import re
 import tomllib
+
+import numpy as np
 from importlib import resources
 from pathlib import Path
 
@@ -130,8 +132,35 @@ def _check_scenario(sc, source: str) -> None:
     _check_windows(sc, source)
 
 
+#: plausibility limits of a simulated run (docs/validation.md): the IMU rate, the samples of one
+#: run (memory: about 200 bytes each), a segment's turn or pitch rate, a lever arm's component
+MAX_IMU_RATE = 10e3
+MAX_IMU_SAMPLES = 20_000_000
+MAX_SEGMENT_RATE = float(np.radians(2000.0))
+MAX_LEVER = 100.0
+
+
+def check_lever(v, source, key) -> None:
+    """A lever arm or installation position [m] within +-:data:`MAX_LEVER` per component."""
+    if v is not None and not np.all(np.abs(np.asarray(v, float)) <= MAX_LEVER):
+        raise ConfigError(f"{[float(x) for x in v]} m: a component beyond {MAX_LEVER:g} m is not on a vehicle",
+                          file=source, key=key)
+
+
 def _check_windows(sc, source) -> None:
-    """GNSS fixes fall on IMU samples; outage windows lie inside the run (docs/validation.md)."""
+    """GNSS fixes fall on IMU samples; outage windows lie inside the run; the run fits in
+    memory; segments turn no faster than a gyro measures; lever arms (docs/validation.md)."""
+    if sc.imu.rate > MAX_IMU_RATE:
+        raise ConfigError(f"{sc.imu.rate:g} Hz is above {MAX_IMU_RATE:g} Hz", file=source, key="imu.rate")
+    if sc.imu.rate * sc.duration > MAX_IMU_SAMPLES:
+        raise ConfigError(f"{sc.duration:g} s at {sc.imu.rate:g} Hz is {sc.imu.rate * sc.duration:.3g} IMU samples; "
+                          f"at most {MAX_IMU_SAMPLES:.0e} per run", file=source, key="trajectory.segments")
+    for i, seg in enumerate(sc.trajectory.segments):
+        rate = getattr(seg, "rate", None)
+        if isinstance(rate, float) and not abs(rate) <= MAX_SEGMENT_RATE:
+            raise ConfigError(f"turns at {np.degrees(rate):.4g} deg/s, beyond {np.degrees(MAX_SEGMENT_RATE):g} deg/s "
+                              "(no vehicle, and no gyro, does)", file=source, key=f"trajectory.segments[{i}]")
+    check_lever(sc.gnss.lever_arm, source, "gnss.lever_arm")
     step = sc.imu.rate / sc.gnss.rate
     if round(step) < 1 or abs(step - round(step)) > 1e-9 * step:
         raise ConfigError(f"GNSS rate {sc.gnss.rate:g} Hz must divide the IMU rate ({sc.imu.rate:g} Hz): fixes fall "
@@ -323,6 +352,8 @@ def load_dataset(name_or_path: str):
         return ds, source, text
     _check_imu_models(ds, source)
     corruption(ds, source)
+    for k in ("imu_position", "antenna_position"):
+        check_lever(getattr(ds.installation, k), source, f"installation.{k}")
     return ds, source, text
 
 

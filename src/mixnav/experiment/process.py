@@ -264,6 +264,8 @@ def process(ds: Dataset, source: str, data: str | None = None):
 def data_checks(ds: Dataset, source: str, imu: ImuData, fixes: GnssFixes) -> dict:
     """Plausibility of the data read, on the processing time axis (docs/validation.md).
 
+    - some GNSS fix must fall within the IMU's time span (a different time base is an error);
+      the fixes outside it are counted (``gnss_fixes_outside_imu``);
     - ``gnss.withhold`` windows must overlap the fixes (ConfigError naming the window);
     - GNSS holes longer than ``gnss.max_gap`` outside the withheld windows are listed
       (``gnss_gaps_s``, with a warning) or, with ``gnss.gap_action = "fail"``, an error;
@@ -275,6 +277,12 @@ def data_checks(ds: Dataset, source: str, imu: ImuData, fixes: GnssFixes) -> dic
     if len(fixes) == 0:
         raise DataError("no GNSS fix of the chosen qualities", file=fixes.source)
     t0, t1 = float(fixes.time[0]), float(fixes.time[-1])
+    inside = (fixes.time >= imu.start_time) & (fixes.time <= imu.time[-1])
+    if not inside.any():
+        raise DataError(f"no GNSS fix within the IMU's time span: IMU {imu.start_time:.3f}..{imu.time[-1]:.3f} s, "
+                        f"GNSS {t0:.3f}..{t1:.3f} s (after the first IMU sample): different time bases "
+                        "(GPS time of week, Unix time, time since start)?", file=fixes.source)
+    out["gnss_fixes_outside_imu"] = int((~inside).sum())
     for i, (a, b) in enumerate(ds.gnss.withhold):
         if a >= t1 or b <= t0:
             raise ConfigError(f"window [{a:g}, {b:g}] s lies outside the GNSS data ({t0:.1f}..{t1:.1f} s after the "
