@@ -96,6 +96,9 @@ def diagnose(x, max_lag: int = 50, n_components: int | None = None, seed: int = 
     bad = np.flatnonzero(~np.isfinite(x))
     if bad.size:
         raise ValueError(f"value {bad[0]} is not finite ({x[bad[0]]}); {bad.size} such value(s)")
+    if np.abs(x).max() > 1e150:   # their squares (variances, kurtosis) would overflow
+        k = int(np.argmax(np.abs(x) > 1e150))
+        raise ValueError(f"value {k} ({x[k]:.3g}) is beyond 1e150 in magnitude: rescale the series")
     if isinstance(max_lag, bool) or not isinstance(max_lag, (int, np.integer)) or max_lag < 1:
         raise ValueError(f"max_lag must be a positive integer, got {max_lag!r}")
     if n_components is not None and (isinstance(n_components, bool)
