@@ -477,6 +477,7 @@ def test_unit_plausibility_of_data(box, imu, words):
     (["experiment", "loose-demo", "--runs", "0"], ["--runs"]),
     (["experiment", "loose-demo", "--runs", "2", "--workers", "0"], ["--workers"]),
     (["experiment", "loose-demo", "--runs", "2", "--seeds-from", "-1"], ["--seeds-from"]),
+    (["experiment", "loose-demo", "--runs", "2", "--seeds-from", str(10 ** 23)], ["--seeds-from"]),
     (["experiment", "loose-demo", "--runs", "2", "--resume", "--overwrite"], ["--resume", "--overwrite"]),
     (["experiment", "loose-demo", "--runs", "2", "--scheduler", " "], ["--scheduler"]),
     (["run", "no-such-scenario"], ["unknown scenario", "no-such-scenario"]),
@@ -486,7 +487,7 @@ def test_unit_plausibility_of_data(box, imu, words):
     (["process", "drive-0708", "--data", "/nonexistent/folder"], ["/nonexistent/folder"]),
     (["run", "loose-demo", "--seed", "-1"], ["--seed"]),
     (["run", "loose-demo", "--bogus"], ["--bogus"]),
-], ids=["runs-1e9", "runs-0", "workers-0", "seeds-from", "resume-overwrite", "scheduler",
+], ids=["runs-1e9", "runs-0", "workers-0", "seeds-from", "seeds-from-1e23", "resume-overwrite", "scheduler",
         "unknown-scenario", "path-escape", "nul-name", "unknown-dataset", "no-data", "seed", "option"])
 def test_cli_misuse(box, args, words):
     box.snapshot()
@@ -840,3 +841,110 @@ def test_no_write_lands_outside_the_folder(tmp_path):
     with pytest.raises(ArgumentError, match="outside"):
         f.file("link", "x.csv")
     assert re.match(r".*/ok\.csv$", str(f.file("ok.csv")))
+
+
+def test_full_disk_is_one_line_and_keeps_the_old_folder(box, monkeypatch):
+    import errno
+    assert _run(box)[0] == 0
+    old = {p.name: p.read_bytes() for p in box.out.iterdir()}
+    import mixnav.experiment.run as run_mod
+
+    def full(path, df):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+    monkeypatch.setattr(run_mod, "atomic_write_dataframe", full)
+    box.snapshot()
+    code, out = _run(box)
+    expect_error(code, out, "No space left on device", "solution_ekf.csv")
+    assert {p.name: p.read_bytes() for p in box.out.iterdir()} == old
+    box.check()
+
+
+# ----------------------------------------------------------------------------- counting and consistency
+
+def test_gnss_used_when_output_epochs_miss_the_gnss_epochs():
+    """Outputs between GNSS epochs: gnss_used marks an update since the previous output."""
+    from mixnav.config.loader import load_scenario
+    from mixnav.experiment import methods
+    from mixnav.experiment.run import _training  # noqa: F401  (the run's own imports)
+    from mixnav.sim.scenario import simulate
+    import tempfile
+    with tempfile.TemporaryDirectory() as d:
+        p = Path(d) / "s.toml"
+        p.write_text(TINY)
+        sc, src, _ = load_scenario(str(p))
+        sim = simulate(sc, 1, src)
+    m = sc.methods[0]
+    filt, meas = methods.build(m, sim.imu_model, sim.fixes, np.asarray(sc.gnss.lever_arm), src, 0)
+    out_t = np.arange(sim.init.time + 0.505, float(sim.imu.time[-1]) - 1, 0.5)   # never on a GNSS epoch
+    res = methods.run_method(m, filt, sim.imu, sim.init, meas, src, 0, [m.name], output_times=out_t)[m.name]
+    fix_t = sim.fixes.time[(sim.fixes.time > out_t[0]) & (sim.fixes.time <= out_t[-1])]
+    expect = np.array([np.any((fix_t > a) & (fix_t <= b)) for a, b in zip(out_t[:-1], out_t[1:])])
+    assert res.gnss_used.any()
+    np.testing.assert_array_equal(res.gnss_used[1:], expect)
+
+
+def test_outage_scored_up_to_the_next_update_with_its_rms():
+    from mixnav.experiment.metrics import compute_metrics
+    t = np.arange(0.0, 30.0, 0.5)
+    err = np.where((t >= 10) & (t < 22), t - 9.0, 0.1)       # grows until the fix at 22 s
+    used = (t % 1 == 0) & ~((t >= 10) & (t < 22))            # fixes each second, none in [10, 22)
+    table = pd.DataFrame({"time_s": t, "err_n_m": err, "err_e_m": 0.0 * t, "err_d_m": 0.0 * t, "gnss_used": used})
+    w = compute_metrics(table, outages=[(10.0, 20.0)])["outages"][0]
+    assert w["unaided_end_s"] == 22.0
+    assert w["horizontal_max_m"] == pytest.approx(21.5 - 9.0)    # the stretch after the window counts
+    sel = (t >= 10) & (t < 22)
+    assert w["horizontal_rmse_m"] == pytest.approx(float(np.sqrt(np.mean(err[sel] ** 2))))
+    assert "vertical_rmse_m" in w
+    # without gnss_used (an older table) the window alone, as before
+    w0 = compute_metrics(table.drop(columns="gnss_used"), outages=[(10.0, 20.0)])["outages"][0]
+    assert w0["horizontal_max_m"] == pytest.approx(11.0)
+
+
+def test_nis_far_above_one_is_warned_with_causes(box):
+    """An IMU that turns and accelerates beside fixes that stand still: NIS per dof far above 1."""
+    out = _process(box, _moving_imu("rad/s", 1.0), _gnss_csv(), expect=0)
+    m = json.loads((box.out / "metrics.json").read_text())
+    ekf = m["methods"]["ekf"]
+    assert ekf["nis_median_per_dof"] > 5
+    assert m["warnings"] and "installation" in m["warnings"][0] and "unit" in m["warnings"][0]
+    flat = " ".join(out.split())
+    assert "warning: method 'ekf': median NIS" in flat
+    html = (box.out / "report.html").read_text()
+    assert "NIS/dof median" in html and "Likely causes" in html
+
+
+def test_nis_quiet_for_a_consistent_run(box):
+    code, out = _run(box)
+    assert code == 0 and "NIS" not in out
+    m = json.loads((box.out / "metrics.json").read_text())
+    assert "warnings" not in m and m["methods"]["ekf"]["nis_median_per_dof"] < 2
+
+
+@needs_android
+def test_raw_gnss_epochs_with_every_measurement_rejected_are_counted(box):
+    from mixnav.io.android import read_gnsslogger
+    d = box.inp / "android"
+    d.mkdir()
+    for f in ANDROID.iterdir():
+        shutil.copy(f, d / f.name)
+    log = d / "pseudoranges_log_2016_06_30_21_26_07.txt"
+    lines = log.read_text().splitlines(keepends=True)
+    header = next(ln for ln in lines if ln.startswith("# Raw,")).strip().split(",")[1:]
+    col = header.index("ReceivedSvTimeUncertaintyNanos")
+    tcol = header.index("TimeNanos")
+    raw = [i for i, ln in enumerate(lines) if ln.startswith("Raw,")]
+    t_mid = lines[raw[len(raw) // 2]].split(",")[tcol + 1]
+    for i in raw:
+        parts = lines[i].rstrip("\n").split(",")
+        if parts[tcol + 1] == t_mid:
+            parts[col + 1] = "1e6"      # every measurement of this epoch rejected
+            lines[i] = ",".join(parts) + "\n"
+    log.write_text("".join(lines))
+    assert read_gnsslogger(log).epochs_all_rejected == 1
+    box.snapshot()
+    code, out = invoke("process", "android-static", "--data", d, "--out", box.out, cwd=box.root)
+    assert code == 0, out
+    m = json.loads((box.out / "metrics.json").read_text())
+    assert m["epoch_status"]["all measurements rejected"] == 1
+    assert m["epochs_total"] == m["epochs_used"] + m["epochs_skipped"]
+    box.check()

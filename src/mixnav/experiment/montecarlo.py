@@ -457,6 +457,8 @@ def run_experiment(scenario: str, runs: int, out_dir: Path, workers: int | None 
         raise ConfigError(f"--workers must be a positive integer, got {workers!r}")
     if isinstance(seeds_from, bool) or not isinstance(seeds_from, (int, np.integer)) or seeds_from < 0:
         raise ConfigError(f"--seeds-from must be a non-negative integer, got {seeds_from!r}")
+    if int(seeds_from) + int(runs) - 1 > 2**63 - 1:   # seeds are stored as 64-bit integers
+        raise ConfigError(f"--seeds-from {seeds_from} + --runs {runs} goes beyond the largest seed, 2**63 - 1")
     if scheduler is not None and (not isinstance(scheduler, str) or not scheduler.strip()):
         raise ConfigError(f"--scheduler must be a Dask scheduler address such as "
                           f"'tcp://127.0.0.1:8786', got {scheduler!r}")
