@@ -865,7 +865,6 @@ def test_gnss_used_when_output_epochs_miss_the_gnss_epochs():
     """Outputs between GNSS epochs: gnss_used marks an update since the previous output."""
     from mixnav.config.loader import load_scenario
     from mixnav.experiment import methods
-    from mixnav.experiment.run import _training  # noqa: F401  (the run's own imports)
     from mixnav.sim.scenario import simulate
     import tempfile
     with tempfile.TemporaryDirectory() as d:
