@@ -947,3 +947,37 @@ def test_raw_gnss_epochs_with_every_measurement_rejected_are_counted(box):
     assert m["epoch_status"]["all measurements rejected"] == 1
     assert m["epochs_total"] == m["epochs_used"] + m["epochs_skipped"]
     box.check()
+
+
+def test_parent_not_writable_rewrites_in_place_marker_first(box, monkeypatch):
+    """No temporary sibling possible (a read-only parent): the folder is rewritten in place,
+    its marker and metrics.json removed first, so an interrupted rewrite is never marked complete."""
+    import tempfile as tf
+    import mixnav.experiment.run as run_mod
+    import mixnav.io.outdir as outdir
+    assert _run(box)[0] == 0
+
+    def no_sibling(*a, **k):
+        raise PermissionError(13, "Permission denied")
+    monkeypatch.setattr(outdir.tempfile, "mkdtemp", no_sibling)
+    code, out = _run(box)
+    assert code == 0, out
+    assert (box.out / "metrics.json").exists() and json.loads((box.out / ".mixnav-output.json").read_text())["complete"]
+    real = run_mod.atomic_write_dataframe
+    calls = []
+
+    def interrupted(path, df):
+        calls.append(path)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(path, df)
+    monkeypatch.setattr(run_mod, "atomic_write_dataframe", interrupted)
+    code, out = _run(box)
+    assert code == 130
+    assert not (box.out / "metrics.json").exists()
+    assert json.loads((box.out / ".mixnav-output.json").read_text())["complete"] is False
+    monkeypatch.setattr(run_mod, "atomic_write_dataframe", real)
+    code, out = _run(box)                      # the half-written folder is this command's: rewritten
+    assert code == 0, out
+    assert json.loads((box.out / ".mixnav-output.json").read_text())["complete"] is True
+    assert tf.mkdtemp is no_sibling

@@ -100,9 +100,9 @@ def read_drive_imu(csv_path, tag_path=None, time_offset: float = -0.125, max_gap
     # truncated or foreign tag would stretch or squeeze every IMU time stamp)
     tag_span, tick_span = tag.end - tag.start, span / 1000.0
     if not abs(tag_span / tick_span - 1.0) <= TAG_SPAN_TOLERANCE:
-        raise DataError(f"the time-tag file spans {tag_span:.3f} s but the IMU's tick counter "
-                        f"{tick_span:.3f} s ({csv_path.name}): the tag is truncated or belongs to another "
-                        f"recording (they must agree within {TAG_SPAN_TOLERANCE:.0%})",
+        raise DataError(f"the time-tag file spans {tag_span:.3f} s but the IMU's tick counter in "
+                        f"{csv_path.name} {tick_span:.3f} s: one of the two files is truncated, or the tag "
+                        f"belongs to another recording (they must agree within {TAG_SPAN_TOLERANCE:.0%})",
                         file=str(tag_path or Path(str(csv_path) + ".tag")))
     t = tag.start + (ticks - first_tick) / span * (tag.end - tag.start) + time_offset
     gaps = check_times(t, tab.lines, str(csv_path), max_gap=max_gap, gap_action=gap_action, what="IMU").gaps

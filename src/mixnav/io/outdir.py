@@ -17,9 +17,10 @@ folder follows (``run``, ``process``, ``diagnose``, ``experiment``):
    interrupted rewrite leaves the old complete folder or the new complete one,
    never old and new files side by side; the sibling is removed on an error
    or Ctrl-C/SIGTERM. When the parent folder is not writable the folder is
-   rewritten in place instead: the marker and the completeness file
-   (``metrics.json``) are removed first, so a half-written folder is never
-   marked complete.
+   rewritten in place instead: the completeness file (``metrics.json``) is
+   removed first and the marker says ``complete: false`` until the end, so a
+   half-written folder is never marked complete (and is this command's to
+   rewrite).
 4. ``experiment`` builds its folder in place (it is resumable): its marker
    says ``complete: false`` until the summaries and report are written.
 5. Every file name is one path component (:func:`safe_name`): no separator,
@@ -163,6 +164,8 @@ def _owned(p: Path, command: str, marker: dict | None, extra_ok=()) -> bool:
     """Whether non-empty ``p`` is ``command``'s folder holding only its own files."""
     if marker is None or marker.get("command") != command or not isinstance(marker.get("files", []), list):
         return False
+    if marker.get("complete") is False and command != "experiment":
+        return True   # this command's half-written folder (rewritten in place, interrupted)
     return all(_owned_name(n, marker, extra_ok) for n in _contents(p))
 
 
@@ -245,6 +248,7 @@ def staged_output(out_dir, command: str, overwrite: bool = False, protect: Itera
             if state in ("same", "clear"):
                 (p / complete_file).unlink(missing_ok=True)
                 clear_folder(p)
+            write_marker(p, command, False)   # a half-written folder of this command, never complete
         except OSError as exc:
             raise _out_error(f"cannot write here ({exc.strerror})", p) from None
         folder = OutputFolder(p)

@@ -182,7 +182,8 @@ def check_times(t: np.ndarray, lines: np.ndarray, path: str, max_gap: float | No
     if bad.size:
         k = int(bad[0]) + 1
         kind = "repeats" if d[bad[0]] == 0 else "goes backwards"
-        raise DataError(f"{what} time {kind} ({t[k - 1]!r} then {t[k]!r})", file=path, line=int(lines[k]))
+        raise DataError(f"{what} time {kind} ({float(t[k - 1])!r} then {float(t[k])!r})", file=path,
+                        line=int(lines[k]))
     out = TimeCheck()
     if max_gap is not None and d.size:
         gaps = np.nonzero(d > max_gap)[0]
