@@ -992,3 +992,16 @@ def test_parent_not_writable_rewrites_in_place_marker_first(box, monkeypatch):
     assert code == 0, out
     assert json.loads((box.out / ".mixnav-output.json").read_text())["complete"] is True
     assert tf.mkdtemp is no_sibling
+
+
+def test_out_through_a_symbolic_link_writes_into_its_folder(box):
+    real = box.root / "real"
+    real.mkdir()
+    (box.root / "link").symlink_to(real)
+    p = box.write("sc.toml", TINY)
+    code, out = invoke("run", p, "--out", box.root / "link", cwd=box.root)
+    assert code == 0, out
+    assert (box.root / "link").is_symlink() and (real / "metrics.json").exists()
+    code, out = invoke("run", p, "--out", box.root / "link", cwd=box.root)   # rewritten through the link
+    assert code == 0, out
+    assert (box.root / "link").is_symlink() and (real / "metrics.json").exists()

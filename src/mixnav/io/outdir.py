@@ -104,6 +104,8 @@ def _check_path(out_dir) -> Path:
     for part in p.parts:
         if len(part.encode("utf-8", "surrogateescape")) > 255:
             raise _out_error(f"a path component is longer than 255 bytes ({part[:20]}...)", s)
+    if p.is_symlink() and p.is_dir():
+        p = Path(os.path.realpath(p))   # a link to a folder: write into the folder, keep the link
     if p.exists() and not p.is_dir():
         raise _out_error("exists and is not a folder", s)
     return p
