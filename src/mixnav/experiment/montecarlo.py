@@ -5,7 +5,8 @@ Output folder of :func:`run_experiment` (every file written atomically)::
     manifest.json          scenario, source, sha256 of the scenario text, mixnav
                            version, runs, seeds, methods
     runs/run_<seed>.parquet  one record per finished run: one row per method with
-                           scenario, seed, method and the flat scalar metrics
+                           scenario, seed, method, the flat scalar metrics and
+                           scenario_sha256 (checked by a resume: _check_records)
                            (``run_<seed>_v<i>.parquet`` and a ``sweep_value``
                            column when the scenario declares a sweep)
     runs/series_<seed>.parquet  the run's per-epoch errors, filter sigmas, NEES
