@@ -17,7 +17,7 @@ from rich.table import Table
 from . import __version__
 from .errors import MixnavError
 
-app = typer.Typer(add_completion=False, no_args_is_help=True,
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_show_locals=False,
                   help="GNSS/INS integrated navigation under non-Gaussian noise.")
 err = Console(stderr=True, soft_wrap=True)   # soft wrap: an error stays one line
 out = Console()
