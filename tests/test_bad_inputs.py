@@ -1005,3 +1005,21 @@ def test_out_through_a_symbolic_link_writes_into_its_folder(box):
     code, out = invoke("run", p, "--out", box.root / "link", cwd=box.root)   # rewritten through the link
     assert code == 0, out
     assert (box.root / "link").is_symlink() and (real / "metrics.json").exists()
+
+
+@needs_android
+def test_raw_gnss_with_no_solvable_epoch_is_refused(box):
+    """A navigation file cut before the log's satellites: nothing solved, refused (was NaN metrics)."""
+    d = box.inp / "android"
+    d.mkdir()
+    for f in ANDROID.iterdir():
+        shutil.copy(f, d / f.name)
+    nav = d / "hour1820.16n"
+    lines = nav.read_text().splitlines(keepends=True)
+    end = next(i for i, ln in enumerate(lines) if "END OF HEADER" in ln)
+    nav.write_text("".join(lines[:end + 1 + 8]))      # the header and one ephemeris
+    box.snapshot()
+    code, out = invoke("process", "android-static", "--data", d, "--out", box.out, cwd=box.root)
+    expect_error(code, out, "pseudoranges_log", "no epoch could be solved")
+    assert not box.out.exists()
+    box.check()

@@ -23,6 +23,7 @@ import pandas as pd
 from .. import __version__
 from ..config.dataset_schema import Dataset
 from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla, lla_to_ecef
+from ..errors import DataError
 from ..gnss.ephemeris import BroadcastEphemeris
 from ..gnss.spp import SppOptions, SppTrack, solve_epochs
 from ..io import android
@@ -131,6 +132,9 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None) -> dict:
     if empty:   # epochs the reader dropped whole: every measurement rejected (counted, not vanished)
         counts = {**counts, "all measurements rejected": empty}
     used = counts.get("ok", 0)
+    if used == 0:   # nothing to score or show: refused rather than a folder of NaNs
+        raise DataError(f"no epoch could be solved (status counts: {counts}); does the navigation file cover "
+                        "the log's time and satellites?", file=po.observations.source)
     duration = float(table["time_s"].iloc[-1]) if len(table) else 0.0
     metrics: dict = {
         "dataset": po.dataset.dataset.name, "kind": po.dataset.dataset.kind, "source": po.source,
