@@ -1023,3 +1023,16 @@ def test_raw_gnss_with_no_solvable_epoch_is_refused(box):
     expect_error(code, out, "pseudoranges_log", "no epoch could be solved")
     assert not box.out.exists()
     box.check()
+
+
+def test_sibling_left_by_a_killed_run_is_removed_by_the_next(box):
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    stale = box.root / f".out.mixnav-{dead.pid}-abc123"
+    stale.mkdir()
+    (stale / "solution_ekf.csv").write_text("half")
+    alive = box.root / f".out.mixnav-{os.getpid()}-def456"     # a run still going: kept
+    alive.mkdir()
+    assert _run(box)[0] == 0
+    assert not stale.exists() and alive.exists()
+    alive.rmdir()

@@ -16,7 +16,8 @@ folder follows (``run``, ``process``, ``diagnose``, ``experiment``):
    (``.<name>.mixnav-*``) and swap it in at the end (two renames), so an
    interrupted rewrite leaves the old complete folder or the new complete one,
    never old and new files side by side; the sibling is removed on an error
-   or Ctrl-C/SIGTERM. When the parent folder is not writable the folder is
+   or Ctrl-C/SIGTERM, and one left by a killed run (its pid in the name) is
+   removed by the next write to the same folder. When the parent folder is not writable the folder is
    rewritten in place instead: the completeness file (``metrics.json``) is
    removed first and the marker says ``complete: false`` until the end, so a
    half-written folder is never marked complete (and is this command's to
@@ -218,6 +219,30 @@ def check_out_dir(out_dir, command: str, overwrite: bool = False, protect: Itera
                      "pass --overwrite to clear it first", p)
 
 
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:   # another user's process: alive
+        return True
+    return True
+
+
+def _remove_stale_siblings(p: Path) -> None:
+    """Remove the temporary siblings of ``p`` left by a run that was killed (``kill -9``):
+    ``.<name>.mixnav-<pid>-*`` and ``.<name>.old-<pid>-*`` whose process no longer runs."""
+    pat = re.compile(rf"^\.{re.escape(p.name[:100])}\.(?:mixnav|old)-(\d+)-")
+    try:
+        names = os.listdir(p.parent)
+    except OSError:
+        return
+    for n in names:
+        m = pat.match(n)
+        if m and not _pid_alive(int(m.group(1))):
+            shutil.rmtree(p.parent / n, ignore_errors=True)
+
+
 def _make_dir(p: Path) -> None:
     p.mkdir(parents=True, exist_ok=True)
 
@@ -237,8 +262,9 @@ def staged_output(out_dir, command: str, overwrite: bool = False, protect: Itera
         _make_dir(parent)
     except OSError as exc:
         raise _out_error(f"cannot create the parent folder ({exc.strerror})", p) from None
+    _remove_stale_siblings(p)
     try:
-        tmp = Path(tempfile.mkdtemp(dir=parent, prefix=f".{p.name[:100]}.mixnav-"))
+        tmp = Path(tempfile.mkdtemp(dir=parent, prefix=f".{p.name[:100]}.mixnav-{os.getpid()}-"))
     except OSError:
         tmp = None
     if tmp is not None and _forbidden(p) is not None:
@@ -263,7 +289,7 @@ def staged_output(out_dir, command: str, overwrite: bool = False, protect: Itera
         yield folder
         write_marker(tmp, command, True, _contents(tmp))
         if p.exists():
-            old = Path(tempfile.mkdtemp(dir=parent, prefix=f".{p.name[:100]}.old-"))
+            old = Path(tempfile.mkdtemp(dir=parent, prefix=f".{p.name[:100]}.old-{os.getpid()}-"))
             os.rename(p, old / "x")
             try:
                 os.rename(tmp, p)
