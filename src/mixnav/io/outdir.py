@@ -17,11 +17,11 @@ folder follows (``run``, ``process``, ``diagnose``, ``experiment``):
    interrupted rewrite leaves the old complete folder or the new complete one,
    never old and new files side by side; the sibling is removed on an error
    or Ctrl-C/SIGTERM, and one left by a killed run (its pid in the name) is
-   removed by the next write to the same folder. When the parent folder is not writable the folder is
-   rewritten in place instead: the completeness file (``metrics.json``) is
-   removed first and the marker says ``complete: false`` until the end, so a
-   half-written folder is never marked complete (and is this command's to
-   rewrite).
+   removed by the next write to the same folder. When the parent folder is
+   not writable the folder is rewritten in place instead: the completeness
+   file (``metrics.json``) is removed first and the marker says ``complete:
+   false`` until the end, so a half-written folder is never marked complete
+   (and is this command's to rewrite).
 4. ``experiment`` builds its folder in place (it is resumable): its marker
    says ``complete: false`` until the summaries and report are written.
 5. Every file name is one path component (:func:`safe_name`): no separator,
