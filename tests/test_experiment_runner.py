@@ -61,7 +61,7 @@ def test_resume_recomputes_only_missing_runs(serial, tmp_path, monkeypatch, caps
     # copy the finished experiment, then simulate an interruption
     (tmp_path / "runs").mkdir()
     (tmp_path / "manifest.json").write_bytes((src / "manifest.json").read_bytes())
-    for p in (src / "runs").glob("run_*.parquet"):
+    for p in (src / "runs").glob("*.parquet"):  # records and their series
         (tmp_path / "runs" / p.name).write_bytes(p.read_bytes())
     (tmp_path / "runs" / "run_4.parquet").unlink()
     (tmp_path / "runs" / "run_6.parquet").unlink()

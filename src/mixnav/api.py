@@ -58,14 +58,16 @@ class RunResult:
     def installation(self) -> dict:
         return dict(getattr(self._output, "installation", None) or {})
 
-    def write(self, out_dir) -> dict:
+    def write(self, out_dir, overwrite: bool = False) -> dict:
         """Write what ``mixnav run`` / ``mixnav process`` writes (tables, metrics.json,
-        figures, report.html) into ``out_dir``; returns the metrics dictionary."""
+        figures, report.html) into ``out_dir``; returns the metrics dictionary. The folder
+        policy of the commands applies (docs/validation.md): a non-empty folder that is not
+        the same command's output is refused unless ``overwrite``."""
         from .experiment.process import write_process
         from .experiment.run import write_run
         if hasattr(self._output, "sim"):  # a simulated run
-            return write_run(Path(out_dir), self._output, self._config_text)
-        return write_process(Path(out_dir), self._output, self._config_text)
+            return write_run(Path(out_dir), self._output, self._config_text, overwrite=overwrite)
+        return write_process(Path(out_dir), self._output, self._config_text, overwrite=overwrite)
 
 
 def _metrics_frame(metrics: dict):

@@ -2,25 +2,103 @@
 
 from __future__ import annotations
 
+import signal
 import sys
+import warnings
+from contextlib import contextmanager
 from pathlib import Path
 
+import click
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from . import __version__
 from .errors import MixnavError
 
-app = typer.Typer(add_completion=False, no_args_is_help=True,
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_show_locals=False,
                   help="GNSS/INS integrated navigation under non-Gaussian noise.")
-err = Console(stderr=True)
+err = Console(stderr=True, soft_wrap=True)   # soft wrap: an error stays one line
 out = Console()
 
 
+#: --debug: show the traceback of an error instead of the one-line message
+_DEBUG = {"on": False}
+
+
+def _say(msg: str) -> None:
+    err.print("[bold red]error:[/] " + escape(msg), highlight=False, markup=True)
+
+
 def _fail(exc: Exception) -> None:
-    err.print(f"[bold red]error:[/] {exc}", highlight=False, markup=True)
+    _say(str(exc))
     raise typer.Exit(code=2)
+
+
+def _terminate(signum, frame):
+    # SIGTERM ends the command like Ctrl-C: every clean-up (temporary folders,
+    # worker processes, a Dask client) runs on the way out
+    _DEBUG["signal"] = signum
+    raise KeyboardInterrupt
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning (a GNSS hole, a spike replaced, ...) as one line on stderr."""
+    err.print("[bold yellow]warning:[/] " + escape(str(message)), highlight=False)
+
+
+@contextmanager
+def _errors():
+    """Every error a user can cause ends in one line and exit status 2 (docs/validation.md);
+    an interruption in exit status 130 (Ctrl-C) or 143 (SIGTERM) after the clean-up; an
+    unexpected error (a bug) in one line and exit status 3, its traceback with --debug."""
+    old = None
+    caught = warnings.catch_warnings()
+    caught.__enter__()
+    warnings.simplefilter("default")
+    warnings.showwarning = _show_warning
+    try:
+        old = signal.signal(signal.SIGTERM, _terminate)
+    except ValueError:   # not in the main thread (tests calling the app from a thread)
+        pass
+    try:
+        yield
+    except (typer.Exit, typer.Abort, click.exceptions.ClickException):
+        raise
+    except KeyboardInterrupt:
+        sig = _DEBUG.pop("signal", None)
+        _say("interrupted" + (" (SIGTERM)" if sig else "") + ": nothing half written was kept")
+        raise typer.Exit(code=143 if sig else 130)
+    except MixnavError as exc:
+        if _DEBUG["on"]:
+            raise
+        _fail(exc)
+    except OSError as exc:
+        if _DEBUG["on"]:
+            raise
+        where = exc.filename if exc.filename is not None else ""
+        _say(f"{where}{': ' if where else ''}{exc.strerror or exc}")
+        raise typer.Exit(code=2)
+    except MemoryError:
+        _say("out of memory (a smaller --runs, a shorter scenario or fewer methods may fit)")
+        raise typer.Exit(code=2)
+    except Exception as exc:  # noqa: BLE001  a bug: one line, the traceback with --debug
+        if _DEBUG["on"]:
+            raise
+        _say(f"internal error ({type(exc).__name__}: {exc}); please report it, with the "
+             "traceback that --debug shows")
+        raise typer.Exit(code=3)
+    finally:
+        caught.__exit__(None, None, None)
+        if old is not None:
+            signal.signal(signal.SIGTERM, old)
+
+
+def _warn(metrics: dict) -> None:
+    """The warnings of a finished run (NIS far above 1, GNSS holes) on stderr, after the table."""
+    for w in metrics.get("warnings", []):
+        err.print("[bold yellow]warning:[/] " + escape(w), highlight=False)
 
 
 def _num(m: dict, key: str) -> str:
@@ -42,8 +120,14 @@ def _version(value: bool):
 
 @app.callback()
 def main(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
-                                      help="Print the version and exit.")):
+                                      help="Print the version and exit."),
+         debug: bool = typer.Option(False, "--debug", help="Show the traceback of an error.")):
     """GNSS/INS integrated navigation under non-Gaussian noise."""
+    _DEBUG["on"] = debug
+
+
+_OVERWRITE = typer.Option(False, "--overwrite",
+                          help="Clear --out first when it holds anything but this command's own output.")
 
 
 @app.command()
@@ -73,18 +157,20 @@ def scenarios():
 @app.command()
 def run(scenario: str = typer.Argument(..., help="Shipped scenario name or path of a .toml file."),
         out_dir: Path = typer.Option(..., "--out", help="Folder for the solution, metrics, figures and report."),
-        seed: int = typer.Option(None, help="Seed of this run (default: the scenario's seed).")):
+        seed: int = typer.Option(None, min=0, max=2**63 - 1,
+                                 help="Seed of this run (default: the scenario's seed)."),
+        overwrite: bool = _OVERWRITE):
     """Simulate one run of a scenario, filter it with every method, write the report."""
     from .config import load_scenario
     from .experiment.run import run_scenario, write_run
+    from .io.outdir import check_out_dir
 
-    try:
+    with _errors():
         sc, source, text = load_scenario(scenario)
+        check_out_dir(out_dir, "run", overwrite, [source])   # refused before the work, not after
         with err.status(f"running {sc.scenario.name}"):
             result = run_scenario(sc, source, seed=seed)
-            metrics = write_run(out_dir, result, config_text=text)
-    except MixnavError as exc:
-        _fail(exc)
+            metrics = write_run(out_dir, result, config_text=text, overwrite=overwrite)
     smooth = _smoother_column(metrics["methods"])
     t = Table("method", "horiz. RMSE [m]", "horiz. max [m]", "yaw RMSE [deg]", "vel. RMSE [m/s]",
               "time/epoch [us]", *smooth, title=f"{sc.scenario.name} (seed {metrics['seed']})")
@@ -93,6 +179,7 @@ def run(scenario: str = typer.Argument(..., help="Shipped scenario name or path 
                   f"{m['yaw_rmse_deg']:.3g}", f"{m['velocity_rmse_mps']:.3g}",
                   _num(m, "epoch_time_mean_us"), *(_num(m, "smoother_time_s") for _ in smooth))
     out.print(t)
+    _warn(metrics)
     out.print(f"report: {Path(out_dir) / 'report.html'}")
 
 
@@ -100,19 +187,20 @@ def run(scenario: str = typer.Argument(..., help="Shipped scenario name or path 
 def process(dataset: str = typer.Argument(..., help="Shipped dataset config name or path of a .toml file."),
             out_dir: Path = typer.Option(..., "--out", help="Folder for the solution, metrics, figures and report."),
             data: Path = typer.Option(None, "--data", help="Folder holding the data files "
-                                      "(default: the config's data_dir).")):
+                                      "(default: the config's data_dir)."),
+            overwrite: bool = _OVERWRITE):
     """Run the methods of a dataset config on real recorded data and score them."""
     from .config import load_dataset
     from .experiment.process import process as run_process
     from .experiment.process import write_process
+    from .io.outdir import check_out_dir
 
-    try:
+    with _errors():
         ds, source, text = load_dataset(dataset)
+        check_out_dir(out_dir, "process", overwrite, [source, data])
         with err.status(f"processing {ds.dataset.name}"):
             po = run_process(ds, source, None if data is None else str(data))
-            metrics = write_process(out_dir, po, config_text=text)
-    except MixnavError as exc:
-        _fail(exc)
+            metrics = write_process(out_dir, po, config_text=text, overwrite=overwrite)
     smooth = _smoother_column(metrics["methods"])
     t = Table("method", "horiz. RMSE [m]", "horiz. max [m]", "outage max [m]", "time/epoch [us]", *smooth,
               title=f"{ds.dataset.name}: {metrics['duration_s']:.0f} s in "
@@ -120,10 +208,11 @@ def process(dataset: str = typer.Argument(..., help="Shipped dataset config name
                     f"(x{metrics['real_time_factor']:.0f} real time)")
     for name, m in metrics["methods"].items():
         outs = ", ".join(f"{o['horizontal_max_m']:.3g}" for o in m.get("outages", [])) or "-"
-        t.add_row(name, f"{m.get('horizontal_rmse_m', float('nan')):.3g}",
-                  f"{m.get('horizontal_max_m', float('nan')):.3g}", outs, _num(m, "epoch_time_mean_us"),
+        t.add_row(name, _num(m, "horizontal_rmse_m"), _num(m, "horizontal_max_m"), outs,
+                  _num(m, "epoch_time_mean_us"),
                   *(_num(m, "smoother_time_s") for _ in smooth))
     out.print(t)
+    _warn(metrics)
     out.print(f"report: {Path(out_dir) / 'report.html'}")
 
 
@@ -137,16 +226,15 @@ def experiment(scenario: str = typer.Argument(..., help="Shipped scenario name o
                scheduler: str = typer.Option(None, "--scheduler",
                                              help="Dask scheduler address (tcp://host:8786): run there "
                                                   "instead of on local cores; needs mixnav[dask]."),
-               progress: bool = typer.Option(True, "--progress/--no-progress")):
+               progress: bool = typer.Option(True, "--progress/--no-progress"),
+               overwrite: bool = _OVERWRITE):
     """Run every method of a scenario over N seeded runs on all local cores (or a Dask cluster); keep partial results."""
     from .experiment.montecarlo import run_experiment, write_experiment_outputs
 
-    try:
+    with _errors():
         df = run_experiment(scenario, runs, out_dir, workers=workers, resume=resume, seeds_from=seeds_from,
-                            progress=progress, scheduler=scheduler)
-    except MixnavError as exc:
-        _fail(exc)
-    paths = write_experiment_outputs(scenario, df, out_dir)
+                            progress=progress, scheduler=scheduler, overwrite=overwrite)
+        paths = write_experiment_outputs(scenario, df, out_dir)
     summary = paths["summary"]
     sweep = "sweep_value" in summary.columns
     t = Table(*(["sweep"] if sweep else []), "method", "metric", "mean", "95 % CI", "n",
@@ -163,16 +251,18 @@ def experiment(scenario: str = typer.Argument(..., help="Shipped scenario name o
 def diagnose(file: Path = typer.Argument(..., help="CSV or Parquet file holding a residual series."),
              column: str = typer.Option(..., "--column", help="Name of the column to diagnose."),
              out_dir: Path = typer.Option(..., "--out", help="Folder for diagnostics.json and the figures."),
-             max_lag: int = typer.Option(50, "--max-lag", min=1, help="Largest lag of the autocorrelation."),
+             max_lag: int = typer.Option(None, "--max-lag", min=1,
+                                         help="Largest lag of the autocorrelation (default 50, "
+                                              "fewer for a shorter series; below the series length)."),
              components: int = typer.Option(None, "--components", min=1,
-                                            help="Fit a Gaussian mixture with this many components.")):
+                                            help="Fit a Gaussian mixture with this many components."),
+             overwrite: bool = _OVERWRITE):
     """Is a residual series non-Gaussian and coloured? Q-Q, ACF, normality test, kurtosis, AR(1), mixture."""
     from .noise.diagnostics import diagnose_file
 
-    try:
-        result = diagnose_file(file, column, out_dir, max_lag=max_lag, n_components=components)
-    except MixnavError as exc:
-        _fail(exc)
+    with _errors():
+        result = diagnose_file(file, column, out_dir, max_lag=max_lag, n_components=components,
+                               overwrite=overwrite)
     out.print(result["verdict"]["summary"])
     out.print(f"numbers: {Path(out_dir) / 'diagnostics.json'}")
 

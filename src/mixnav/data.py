@@ -15,6 +15,11 @@ from .attitude import quat_to_euler
 from .errors import DataError
 
 
+#: plausible heights of GNSS fixes [m] and the largest sigma of a fix [m] (docs/validation.md)
+HEIGHT_RANGE = (-1000.0, 100e3)
+MAX_SIGMA = 1e5
+
+
 def _check(cond: bool, msg: str, source: str | None) -> None:
     if not cond:
         raise DataError(msg, file=source)
@@ -91,6 +96,8 @@ class ImuData:
     gaps : int
         Number of time gaps longer than the reader's limit that were
         accepted with a warning (reported in metrics.json).
+    spikes : int
+        Number of samples the reader replaced as spikes (reported in metrics.json).
     """
 
     time: np.ndarray
@@ -99,6 +106,7 @@ class ImuData:
     dvel: np.ndarray
     source: str | None = None
     gaps: int = 0
+    spikes: int = 0   # samples replaced by the reader's spike rule (io/imu_checks.check_spikes)
 
     def __post_init__(self):
         n = len(self.time)
@@ -158,6 +166,14 @@ class GnssFixes:
             _check(lat <= np.pi / 2 and lon <= 2 * np.pi, f"GNSS latitude/longitude must be in radians (largest "
                    f"|lat| {lat:.6g}, |lon| {lon:.6g}: degrees?)", self.source)
         _check(bool(np.all(self.pos_sigma > 0)), "GNSS position sigma must be positive", self.source)
+        if m:
+            h = self.lla[:, 2]
+            k = int(np.argmax((h < HEIGHT_RANGE[0]) | (h > HEIGHT_RANGE[1])))
+            _check(HEIGHT_RANGE[0] <= h[k] <= HEIGHT_RANGE[1], f"GNSS height {h[k]:.6g} m at fix {k} "
+                   f"(t = {self.time[k]:.3f} s) is outside {HEIGHT_RANGE[0]:g}..{HEIGHT_RANGE[1]:g} m", self.source)
+            s = self.pos_sigma
+            _check(bool(np.all(s <= MAX_SIGMA)), f"GNSS position sigma {float(s.max()):.6g} m is beyond "
+                   f"{MAX_SIGMA:g} m: not a fix", self.source)
         if self.vel_n is not None:
             _check(self.vel_n.shape == (m, 3) and self.vel_sigma.shape == (m, 3),
                    "GNSS velocity arrays disagree in shape", self.source)

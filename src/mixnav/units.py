@@ -444,6 +444,11 @@ def _scan_number(text: str) -> tuple[str, int] | None:
     return text[start:i], i
 
 
+#: largest magnitude of a parsed quantity in SI units (docs/validation.md): 1e12 m is seven
+#: astronomical units; beyond it a value is a typo, and squared (a variance) it overflows soon
+MAX_ABS_SI = 1e12
+
+
 def parse_quantity(text: str, expected: Dimension) -> float:
     """Parse ``"<number> <unit>"`` into an SI float, checking its dimension.
 
@@ -485,6 +490,8 @@ def parse_quantity(text: str, expected: Dimension) -> float:
         value = float(text)
         if not math.isfinite(value):
             raise UnitError(f"value must be a finite number, got {text!r}")
+        if not abs(value) <= MAX_ABS_SI:
+            raise UnitError(f"{text!r} is beyond {MAX_ABS_SI:g}: not a physical setting")
         return value
 
     scanned = _scan_number(text)
@@ -507,7 +514,11 @@ def parse_quantity(text: str, expected: Dimension) -> float:
     if not dim.matches(expected):
         raise UnitError(f"{text!r} has dimension {dim.describe()}, but {expected.describe()} "
                         f"is expected; write e.g. {_examples(expected, number)}")
-    return value * factor
+    si = value * factor
+    if not abs(si) <= MAX_ABS_SI:
+        raise UnitError(f"{text!r} is {si:.3g} in SI units: beyond {MAX_ABS_SI:g}, not a physical setting "
+                        "(its square would not be representable)")
+    return si
 
 
 def to_unit(value_si, unit_text: str):

@@ -8,11 +8,11 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from .. import units as u
 from .schema import (AidingConfig, AngleVec, AngSigma, LengthVec, MethodConfig, PosSigma, Strict, VelSigma, Windows,
-                     _quantity)
+                     _quantity, check_position)
 
 Offset = _quantity(u.TIME)
 Gap = _quantity(u.TIME, positive=True)
@@ -38,6 +38,9 @@ class ImuFile(Strict):
     tag: str | None = None
     max_gap: Gap = 0.05
     gap_action: Literal["warn", "fail"] = "warn"
+    #: an IMU sample beyond 2000 deg/s or 50 g: "fail" (an error naming the line) or "reject"
+    #: (replaced from its neighbours, counted: imu_spikes_rejected in metrics.json)
+    spike_action: Literal["fail", "reject"] = "fail"
     grade: str | None = None
     errors: dict[str, str | list[str]] = Field(default_factory=dict)
 
@@ -52,6 +55,10 @@ class GnssFile(Strict):
     # only): it is interpolated to the epoch times (io.rtklib.PosSolution.velocity_at_epochs)
     velocity_delay: _quantity(u.TIME, nonnegative=True) = 0.0  # type: ignore[valid-type]
     withhold: Windows = Field(default_factory=list)
+    #: a hole between used fixes longer than this (outside the withheld windows) is reported:
+    #: a warning and gnss_gaps_s in metrics.json ("warn"), or an error naming the line ("fail")
+    max_gap: Gap = 5.0
+    gap_action: Literal["warn", "fail"] = "warn"
     # optional corruption of the recorded fixes (NED metres per axis), e.g. to
     # test a method under mixture noise or outliers on real data
     corrupt_position: dict | None = None
@@ -150,6 +157,11 @@ class ReferencePoint(Strict):
     latitude: _quantity(u.ANGLE)  # type: ignore[valid-type]
     longitude: _quantity(u.ANGLE)  # type: ignore[valid-type]
     height: _quantity(u.LENGTH)  # type: ignore[valid-type]
+
+    @model_validator(mode="after")
+    def _plausible(self):
+        check_position(self.latitude, self.longitude, self.height)   # docs/validation.md
+        return self
 
 
 #: sections each kind needs, and those it must not have

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import re
 import tomllib
+
+import numpy as np
 from importlib import resources
 from pathlib import Path
 
@@ -38,17 +40,48 @@ def list_datasets() -> dict[str, str]:
 
 def resolve(name_or_path: str, folder: str = "scenarios", kind: str = "scenario") -> tuple[str, str]:
     """The text of a config and the name to cite it by in errors."""
+    if not isinstance(name_or_path, str) or not name_or_path or "\x00" in name_or_path:
+        raise ConfigError(f"not a {kind} name or file path: {name_or_path!r}")
     p = Path(name_or_path)
     if p.suffix == ".toml" or p.exists():
         if not p.is_file():
             raise ConfigError(f"no such {kind} file", file=str(p))
-        return p.read_text(encoding="utf-8"), str(p)
+        return read_config_text(p, kind), str(p)
+    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.+-]*", name_or_path):
+        raise ConfigError(f"no such {kind} file, and not a shipped {kind} name: {name_or_path!r}")
     entry = _shipped_dir(folder).joinpath(f"{name_or_path}.toml")
     if not entry.is_file():
         known = ", ".join(_list(folder, kind))
         raise ConfigError(f"unknown {kind} '{name_or_path}'; shipped: {known} "
                           "(or give the path of a .toml file)")
     return entry.read_text(encoding="utf-8"), f"{name_or_path}.toml (shipped)"
+
+
+#: largest config file read (bytes): a scenario or dataset file is a few kB
+MAX_CONFIG_BYTES = 10_000_000
+
+
+def read_config_text(p: Path, kind: str = "config") -> str:
+    """The text of a config file; unreadable, binary, oversized or non-UTF-8 files are
+    ConfigErrors naming the file (and the byte offset of a bad byte)."""
+    try:
+        size = p.stat().st_size
+        if size > MAX_CONFIG_BYTES:
+            raise ConfigError(f"{size} bytes is too large for a {kind} file "
+                              f"(at most {MAX_CONFIG_BYTES})", file=str(p))
+        data = p.read_bytes()
+    except OSError as exc:
+        raise ConfigError(f"cannot read the {kind} file: {exc.strerror or exc}", file=str(p)) from None
+    nul = data.find(bytes(1))
+    if nul >= 0:
+        raise ConfigError(f"line {data[:nul].count(10) + 1}: a binary file, not a TOML {kind} file (NUL byte at "
+                          f"offset {nul})", file=str(p))
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[:exc.start].count(b"\n") + 1
+        raise ConfigError(f"line {line}: not UTF-8 text (byte 0x{data[exc.start]:02x} at offset "
+                          f"{exc.start}); save the file as UTF-8", file=str(p)) from None
 
 
 def _key(loc) -> str:
@@ -96,6 +129,47 @@ def _check_scenario(sc, source: str) -> None:
     _check_hold(sc, source)
     observable_noise(sc, source)
     _check_odometer(sc, source)
+    _check_windows(sc, source)
+
+
+#: plausibility limits of a simulated run (docs/validation.md): the IMU rate, the samples of one
+#: run (memory: about 200 bytes each), a segment's turn or pitch rate, a lever arm's component
+MAX_IMU_RATE = 10e3
+MAX_IMU_SAMPLES = 20_000_000
+MAX_SEGMENT_RATE = float(np.radians(2000.0))
+MAX_LEVER = 100.0
+
+
+def check_lever(v, source, key) -> None:
+    """A lever arm or installation position [m] within +-:data:`MAX_LEVER` per component."""
+    if v is not None and not np.all(np.abs(np.asarray(v, float)) <= MAX_LEVER):
+        raise ConfigError(f"{[float(x) for x in v]} m: a component beyond {MAX_LEVER:g} m is not on a vehicle",
+                          file=source, key=key)
+
+
+def _check_windows(sc, source) -> None:
+    """GNSS fixes fall on IMU samples; outage windows lie inside the run; the run fits in
+    memory; segments turn no faster than a gyro measures; lever arms (docs/validation.md)."""
+    if sc.imu.rate > MAX_IMU_RATE:
+        raise ConfigError(f"{sc.imu.rate:g} Hz is above {MAX_IMU_RATE:g} Hz", file=source, key="imu.rate")
+    if sc.imu.rate * sc.duration > MAX_IMU_SAMPLES:
+        raise ConfigError(f"{sc.duration:g} s at {sc.imu.rate:g} Hz is {sc.imu.rate * sc.duration:.3g} IMU samples; "
+                          f"at most {MAX_IMU_SAMPLES:.0e} per run", file=source, key="trajectory.segments")
+    for i, seg in enumerate(sc.trajectory.segments):
+        rate = getattr(seg, "rate", None)
+        if isinstance(rate, float) and not abs(rate) <= MAX_SEGMENT_RATE:
+            raise ConfigError(f"turns at {np.degrees(rate):.4g} deg/s, beyond {np.degrees(MAX_SEGMENT_RATE):g} deg/s "
+                              "(no vehicle, and no gyro, does)", file=source, key=f"trajectory.segments[{i}]")
+    check_lever(sc.gnss.lever_arm, source, "gnss.lever_arm")
+    step = sc.imu.rate / sc.gnss.rate
+    if round(step) < 1 or abs(step - round(step)) > 1e-9 * step:
+        raise ConfigError(f"GNSS rate {sc.gnss.rate:g} Hz must divide the IMU rate ({sc.imu.rate:g} Hz): fixes fall "
+                          "on IMU samples", file=source, key="gnss.rate")
+    end = sc.duration
+    for i, (a, b) in enumerate(sc.gnss.outages):
+        if a >= end or b > end + 1e-9:
+            raise ConfigError(f"outage [{a:g}, {b:g}] s reaches beyond the end of the run ({end:g} s)",
+                              file=source, key=f"gnss.outages[{i}]")
 
 
 def _check_odometer(sc, source) -> None:
@@ -239,12 +313,24 @@ def _validate(model, text: str, source: str):
     return _validate_data(model, data, source)
 
 
+def _key_in_message(model, msg: str) -> str:
+    """The top-level key a whole-file check talks about (its error has no location):
+    the first field of ``model`` (or its singular) that the message names."""
+    best = None
+    for name in model.model_fields:
+        for word in (name, name[:-1] if name.endswith("s") else name):
+            m = re.search(rf"\b{re.escape(word)}\b", msg)
+            if m and (best is None or m.start() < best[0]):
+                best = (m.start(), name)
+    return "" if best is None else best[1]
+
+
 def _validate_data(model, data: dict, source: str):
     try:
         return model.model_validate(data)
     except ValidationError as exc:
         err = exc.errors()[0]
-        key = _key(err["loc"])
+        key = _key(err["loc"]) or _key_in_message(model, err["msg"])
         msg = {"extra_forbidden": "unknown key (check the spelling against docs/scenarios.md)",
                "missing": "required key is missing"}.get(err["type"], err["msg"])
         if msg.startswith("Value error, "):
@@ -266,6 +352,8 @@ def load_dataset(name_or_path: str):
         return ds, source, text
     _check_imu_models(ds, source)
     corruption(ds, source)
+    for k in ("imu_position", "antenna_position"):
+        check_lever(getattr(ds.installation, k), source, f"installation.{k}")
     return ds, source, text
 
 

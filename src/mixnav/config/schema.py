@@ -8,6 +8,7 @@ validation, so nothing downstream parses units again.
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, Any, Literal, Union
 
 import numpy as np
@@ -141,10 +142,33 @@ Segment = Annotated[
 ]
 
 
+#: plausible geodetic positions (docs/validation.md): the NED mechanization is singular at
+#: the poles; heights from the Dead Sea shore to far above any aircraft
+MAX_LATITUDE = math.radians(89.0)
+HEIGHT_RANGE = (-1000.0, 100e3)
+
+
+def check_position(lat: float, lon: float, h: float) -> None:
+    """A ValueError unless ``lat`` [rad], ``lon`` [rad], ``h`` [m] is a plausible position."""
+    if not abs(lat) <= MAX_LATITUDE:
+        raise ValueError(f"latitude {math.degrees(lat):.6g} deg is outside +-{math.degrees(MAX_LATITUDE):g} deg "
+                         "(beyond +-90 deg it does not exist; near the poles the NED mechanization is singular)")
+    if not -math.pi <= lon <= 2 * math.pi:
+        raise ValueError(f"longitude {math.degrees(lon):.6g} deg is outside -180..360 deg")
+    if not HEIGHT_RANGE[0] <= h <= HEIGHT_RANGE[1]:
+        raise ValueError(f"height {h:.6g} m is outside {HEIGHT_RANGE[0]:g}..{HEIGHT_RANGE[1]:g} m")
+
+
+def _position(v):
+    check_position(*v)
+    return v
+
+
 class TrajectoryConfig(Strict):
     start: Annotated[tuple[Angle, Angle, Length], BeforeValidator(
         lambda v: v if isinstance(v, (list, tuple)) and len(v) == 3 else
-        (_ for _ in ()).throw(ValueError("expected [latitude, longitude, height] with units")))]
+        (_ for _ in ()).throw(ValueError("expected [latitude, longitude, height] with units"))),
+        AfterValidator(_position)]
     attitude: AngleVec = (0.0, 0.0, 0.0)
     speed: Speed = 0.0
     segments: list[Segment]
@@ -749,6 +773,17 @@ class MethodConfig(Strict):
         Field(default_factory=list)
     #: also run the fixed-interval RTS smoother: adds a method "<name>-smoothed"
     smooth: bool = False
+
+    @field_validator("name")
+    @classmethod
+    def _file_name(cls, v):
+        # the name becomes solution_<name>.csv: one safe file-name component (docs/validation.md)
+        from ..errors import ArgumentError
+        from ..io.outdir import safe_name
+        try:
+            return safe_name(v, "method name")
+        except ArgumentError as exc:
+            raise ValueError(exc.message) from None
 
     @field_validator("estimator")
     @classmethod

@@ -213,6 +213,7 @@ class Engine:
         self._start_k = k0
         self._ti = 0
         self._io = 0
+        self._used_since_out = False  # an update since the last output epoch (gnss_used)
         n_out = len(out_t)
         self._rec = {"nav": np.empty((n_out, 10)), "sigma": np.empty((n_out, lay.n)),
                      "used": np.zeros(n_out, dtype=bool), "sensor": np.empty((n_out, 12)),
@@ -294,8 +295,12 @@ class Engine:
             self._update_time += perf() - tu
             self._n_updates += 1
         if self._is_out[ti]:
-            finite = self._record(end, used)
+            # gnss_used: an update since the previous output epoch (output epochs need not
+            # coincide with measurement epochs, e.g. at a reference's times)
+            finite = self._record(end, used or self._used_since_out)
+            self._used_since_out = False
         else:
+            self._used_since_out = self._used_since_out or used
             finite = bool(np.isfinite(nav).all())
         if not finite:
             raise NumericalError(f"INS state became non-finite at t = {t:.3f} s")

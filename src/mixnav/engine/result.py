@@ -20,7 +20,7 @@ class FilterResult:
     sigma : ndarray (K, n)
         1-sigma of each error state.
     gnss_used : ndarray of bool (K,)
-        An update was applied at this epoch.
+        An update was applied at this epoch or since the previous output epoch.
     sensor : ndarray (K, 12)
         Sensor-error estimates ``[bg, ba, sg, sa]``.
     nis : ndarray (M,)

@@ -34,8 +34,10 @@ METRIC_KEYS_DOC: dict[str, str] = {
     "velocity_max_mps": "largest 3-D velocity error norm [m/s]",
     "velocity_p95_mps": "95th percentile of the 3-D velocity error norm [m/s]",
     "n_epochs": "number of epochs scored",
-    "outages": "per GNSS outage window: start_s, end_s, horizontal_max_m, vertical_max_m, "
-               "horizontal_final_m (at the window's last epoch)",
+    "outages": "per GNSS outage window: start_s, end_s, unaided_end_s (the first epoch after end_s with a "
+               "GNSS update: the unaided stretch ends there, it is scored up to just before it), "
+               "horizontal_max_m, vertical_max_m, horizontal_rmse_m, vertical_rmse_m (over the window and "
+               "the unaided stretch after it), horizontal_final_m (at the last epoch scored)",
     "horizontal_rmse_outside_outages_m": "RMS of the horizontal error over the epochs outside every "
                                          "outage window [m] (only when there are outages)",
     "vertical_rmse_outside_outages_m": "RMS of the vertical error outside every outage window [m]",
@@ -66,6 +68,8 @@ METRIC_KEYS_DOC: dict[str, str] = {
                   "adds its row and epoch counts (see mixnav.filters.robust); learned-mixture methods add "
                   "learner_not_converged (offline fits that stopped before converging)",
     "nis_mean_per_dof": "mean NIS divided by the measurement dimension (1 if consistent)",
+    "nis_median_per_dof": "median NIS divided by the measurement dimension (about 0.8-0.9 if consistent; "
+                          "above 5 the run is warned about, see docs/validation.md)",
 }
 
 _NEEDED = ("time_s", "err_n_m", "err_e_m", "err_d_m")
@@ -154,6 +158,7 @@ def compute_metrics(solution: pd.DataFrame,
     m["n_epochs"] = int(len(hor))
 
     t = c["time_s"]
+    used = solution["gnss_used"].to_numpy(dtype=bool) if "gnss_used" in solution.columns else None
     windows = []
     for a, b in outages:
         a, b = float(a), float(b)
@@ -161,10 +166,18 @@ def compute_metrics(solution: pd.DataFrame,
         if not sel.any():
             # An empty window would give NaN maxima; refuse rather than write them.
             raise ValueError(f"outage window [{a:g}, {b:g}] s holds no solution epoch")
+        # the unaided stretch goes on after the window until the next GNSS update (a fix
+        # that is not exactly at its end, or one rejected): its epochs before that are scored too
+        unaided_end = b
+        if used is not None:
+            nxt = np.flatnonzero((t > b) & used)
+            unaided_end = float(t[nxt[0]]) if nxt.size else float(t[-1])
+            sel |= (t > b) & (t < unaided_end) if nxt.size else (t > b)
         h = hor[sel]
-        windows.append({"start_s": a, "end_s": b,
+        windows.append({"start_s": a, "end_s": b, "unaided_end_s": unaided_end,
                         "horizontal_max_m": float(h.max()),
                         "vertical_max_m": float(ver[sel].max()),
+                        "horizontal_rmse_m": _rms(h), "vertical_rmse_m": _rms(ver[sel]),
                         # rows are in time order: the last selected row ends the window
                         "horizontal_final_m": float(h[-1])})
     m["outages"] = windows

@@ -5,7 +5,8 @@ Output folder of :func:`run_experiment` (every file written atomically)::
     manifest.json          scenario, source, sha256 of the scenario text, mixnav
                            version, runs, seeds, methods
     runs/run_<seed>.parquet  one record per finished run: one row per method with
-                           scenario, seed, method and the flat scalar metrics
+                           scenario, seed, method, the flat scalar metrics and
+                           scenario_sha256 (checked by a resume: _check_records)
                            (``run_<seed>_v<i>.parquet`` and a ``sweep_value``
                            column when the scenario declares a sweep)
     runs/series_<seed>.parquet  the run's per-epoch errors, filter sigmas, NEES
@@ -39,6 +40,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import re
 import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -48,7 +50,7 @@ import numpy as np
 import pandas as pd
 
 from .. import __version__
-from ..errors import ConfigError
+from ..errors import ArgumentError, ConfigError
 from ..io.atomic import atomic_write_dataframe, atomic_write_json
 
 __all__ = ["run_experiment", "aggregate", "paired_comparison", "flatten_metrics", "series_files",
@@ -63,6 +65,14 @@ TIMING_METRICS = ("epoch_time_mean_us", "update_time_mean_us", "wall_time_s", "l
 
 RUNS_DIR = "runs"
 MANIFEST = "manifest.json"
+#: most runs (seeds x sweep values) one call runs
+MAX_RUNS = 100_000
+#: what an experiment folder holds (patterns; the output-folder policy reuses only such a folder)
+EXPERIMENT_FILES = (MANIFEST, RUNS_DIR, "results.parquet", "results.csv", "summary.csv",
+                    "series_summary.parquet", "consistency.csv", "report.html", "*.png")
+#: written after the runs: removed before a resume runs anything
+_PRODUCTS = ("results.parquet", "results.csv", "summary.csv", "series_summary.parquet",
+             "consistency.csv", "report.html")
 
 # Per process: the loaded scenario and its deterministic truth + ideal IMU,
 # keyed by (source, sha256 of the text) so an edited file is never mixed in.
@@ -183,7 +193,8 @@ def _compute_run(scenario: str, sha: str, seed: int, variant: int | None = None)
         row = {"scenario": sc.scenario.name, "seed": int(seed), "method": name}
         if variant is not None:
             row["sweep_value"] = value
-        rows.append({**row, **flatten_metrics(method_metrics(res, table, out.sim.outages, out.sim.gnss_bias))})
+        rows.append({**row, **flatten_metrics(method_metrics(res, table, out.sim.outages, out.sim.gnss_bias)),
+                     "scenario_sha256": sha})   # provenance: checked by a resume
         series.append(_series(name, res, table))
     return pd.DataFrame(rows), pd.concat(series, ignore_index=True)
 
@@ -205,7 +216,42 @@ def _run_and_write(scenario: str, sha: str, seed: int, out_dir: str,
     return seed
 
 
+def _die_with_parent() -> None:
+    """End this worker when its parent ends, however it ends (also ``kill -9``).
+
+    Linux: ``PR_SET_PDEATHSIG`` sends SIGKILL at the parent's death; elsewhere
+    (and as a second line) a daemon thread checks the parent every second.
+    Ctrl-C goes to the whole process group: the worker ignores it and leaves
+    the clean-up to the parent, which terminates its workers.
+    """
+    import signal
+    import threading
+    parent = os.getppid()
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread
+        pass
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent:  # the parent died before the signal was armed
+        os._exit(1)
+
+    def watch():
+        while True:
+            time.sleep(1.0)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="mixnav-parent-watch", daemon=True).start()
+
+
 def _worker_init(scenario: str, sha: str) -> None:
+    _die_with_parent()
     _load(scenario, sha)
 
 
@@ -252,6 +298,100 @@ class _Progress:
 
 # ---------------------------------------------------------------- experiment
 
+def _remove_products(out_dir: Path) -> None:
+    for name in _PRODUCTS:
+        (out_dir / name).unlink(missing_ok=True)
+    for png in out_dir.glob("*.png"):
+        png.unlink(missing_ok=True)
+
+
+_RECORD_NAME = re.compile(r"^run_(\d+)(?:_v(\d+))?\.parquet$")
+_SERIES_NAME = re.compile(r"^series_(\d+)(?:_v(\d+))?\.parquet$")
+
+
+def _readable_parquet(path: Path):
+    """The table in ``path``, or None when it is missing, truncated or not Parquet."""
+    try:
+        return pd.read_parquet(path)
+    except Exception:   # pyarrow raises several types for a damaged file  # noqa: BLE001
+        return None
+
+
+def _record_problem(df, scenario_name, sha, seed, variant, value, methods) -> str | None:
+    """Why a stored record does not belong to this experiment, or None."""
+    if df is None:
+        return "unreadable (truncated or not Parquet)"
+    need = {"scenario", "seed", "method"}
+    if not need <= set(df.columns):
+        return f"has no {', '.join(sorted(need - set(df.columns)))} column"
+    if "scenario_sha256" not in df.columns:
+        return "has no scenario_sha256 (written before records carried it)"
+    if set(df["scenario_sha256"].astype(str)) != {sha}:
+        return f"was run with another scenario text (sha256 {str(df['scenario_sha256'].iloc[0])[:12]}...)"
+    if set(df["scenario"].astype(str)) != {scenario_name}:
+        return f"is of scenario {sorted(set(df['scenario'].astype(str)))}"
+    if set(pd.to_numeric(df["seed"], errors="coerce")) != {seed}:
+        return f"holds seeds {sorted(set(df['seed']))}, not {seed}"
+    held = sorted(df["method"].astype(str))
+    # the configured methods, each once, plus what they add ("<name>-smoothed")
+    if not (set(methods) <= set(held) and len(set(held)) == len(held)
+            and all(h in methods or any(h.startswith(m + "-") for m in methods) for h in held)):
+        return f"holds methods {held}, not those of the scenario {sorted(methods)}"
+    if variant is not None:
+        v = pd.to_numeric(df.get("sweep_value"), errors="coerce")
+        if v is None or not np.allclose(v.to_numpy(float), value):
+            return f"is not of sweep value {value:g}"
+    return None
+
+
+def _check_records(out_dir: Path, scenario_name: str, sha: str, methods: list[str], variants,
+                   sweep, seeds: set[int]) -> set[tuple]:
+    """Check every stored record and series file against this experiment.
+
+    A record that is unreadable, from another scenario text, of another seed,
+    method set or sweep value, or whose series file is missing or unreadable,
+    is removed with its series and its run redone (returned as a task); each
+    is reported on stderr. A file of ``runs/`` that is not a record or series
+    of a seed of this experiment is refused (ConfigError naming it).
+    """
+    runs_dir = out_dir / RUNS_DIR
+    if not runs_dir.is_dir():
+        return set()
+    redo = set()
+    for f in sorted(runs_dir.iterdir()):
+        if f.name.startswith(".") and f.name.endswith(".tmp") or not os.path.lexists(f):
+            continue   # a killed writer's temporary file, or a series removed with its record
+        m = _RECORD_NAME.match(f.name) or _SERIES_NAME.match(f.name)
+        if m is None or not f.is_file():
+            raise ConfigError(f"{f} is not a run record or series of mixnav; remove it (or use "
+                              "another folder)", file=str(f))
+        seed, variant = int(m.group(1)), None if m.group(2) is None else int(m.group(2))
+        if seed not in seeds or (variant is None) != (sweep is None) or \
+                (variant is not None and variant >= len(variants)):
+            raise ConfigError(f"{f.name} is not part of this experiment (seeds {min(seeds)}..{max(seeds)}"
+                              f"{', no sweep' if sweep is None else f', {len(variants)} sweep values'}); "
+                              "remove it, or use another folder", file=str(f))
+        if not f.name.startswith("run_"):
+            if not _record_path(out_dir, seed, variant).exists():
+                f.unlink()   # a series without its record: an interrupted run, redone if asked for
+            continue
+        value = None if variant is None else variants[variant][0]
+        problem = _record_problem(_readable_parquet(f), scenario_name, sha, seed, variant, value, methods)
+        series = _series_path(out_dir, seed, variant)
+        if problem is None:
+            try:
+                import pyarrow.parquet as pq
+                pq.read_metadata(series)
+            except Exception:  # noqa: BLE001
+                problem = "has no readable series file " + series.name
+        if problem is not None:
+            print(f"warning: {f}: {problem}; the run is redone", file=sys.stderr, flush=True)
+            f.unlink()
+            series.unlink(missing_ok=True)
+            redo.add((seed, variant))
+    return redo
+
+
 def _read_records(out_dir: Path) -> pd.DataFrame:
     files = sorted((out_dir / RUNS_DIR).glob("run_*.parquet"))
     if not files:
@@ -263,7 +403,7 @@ def _read_records(out_dir: Path) -> pd.DataFrame:
 
 def run_experiment(scenario: str, runs: int, out_dir: Path, workers: int | None = None,
                    resume: bool = False, seeds_from: int = 0, progress: bool = True,
-                   scheduler: str | None = None) -> pd.DataFrame:
+                   scheduler: str | None = None, overwrite: bool = False) -> pd.DataFrame:
     """Run every method of ``scenario`` over seeds ``seeds_from .. seeds_from + runs - 1``.
 
     Parameters
@@ -294,6 +434,10 @@ def run_experiment(scenario: str, runs: int, out_dir: Path, workers: int | None 
         write the record files themselves. The connection is made only when
         some seed still needs a run, before anything is written.
 
+    overwrite : bool
+        Clear ``out_dir`` first when it holds another experiment or anything
+        else (the output-folder policy, :mod:`mixnav.io.outdir`).
+
     Returns
     -------
     pandas.DataFrame
@@ -317,21 +461,30 @@ def run_experiment(scenario: str, runs: int, out_dir: Path, workers: int | None 
         raise ConfigError(f"--workers must be a positive integer, got {workers!r}")
     if isinstance(seeds_from, bool) or not isinstance(seeds_from, (int, np.integer)) or seeds_from < 0:
         raise ConfigError(f"--seeds-from must be a non-negative integer, got {seeds_from!r}")
+    if int(seeds_from) + int(runs) - 1 > 2**63 - 1:   # seeds are stored as 64-bit integers
+        raise ConfigError(f"--seeds-from {seeds_from} + --runs {runs} goes beyond the largest seed, 2**63 - 1")
     if scheduler is not None and (not isinstance(scheduler, str) or not scheduler.strip()):
         raise ConfigError(f"--scheduler must be a Dask scheduler address such as "
                           f"'tcp://127.0.0.1:8786', got {scheduler!r}")
     variants, source, sha, sweep = _load(scenario)  # unknown scenario: the loader's ConfigError
     sc = variants[0][1]
     out_dir = Path(out_dir)
+    if int(runs) * len(variants) > MAX_RUNS:
+        raise ConfigError(f"--runs {runs} asks for {int(runs) * len(variants)} runs; at most {MAX_RUNS} per "
+                          "call (continue with --resume and a larger --runs)")
     seeds = [int(seeds_from) + i for i in range(int(runs))]
     methods = [m.name for m in sc.methods]
     # (seed, variant) of every run asked for; variant None when there is no sweep
     tasks = [(s, v) for s in seeds
              for v in ([None] if sweep is None else range(len(variants)))]
 
+    if resume and overwrite:
+        raise ConfigError("--resume continues the experiment in --out and --overwrite clears it: give one")
+    if isinstance(out_dir, str) and "\x00" in out_dir:
+        raise ConfigError("--out holds a NUL byte")
     manifest_path = out_dir / MANIFEST
     old_seeds: list[int] = []
-    if manifest_path.exists():
+    if manifest_path.is_file() and not overwrite:
         if not resume:
             raise ConfigError("folder already holds an experiment; pass resume (--resume) to "
                               "continue it or choose another folder", file=str(out_dir))
@@ -347,9 +500,26 @@ def run_experiment(scenario: str, runs: int, out_dir: Path, workers: int | None 
                 f"{str(old.get('scenario_sha256'))[:12]}...), not with {source} (sha256 "
                 f"{sha[:12]}...)", file=str(out_dir))
         old_seeds = [int(s) for s in old.get("seeds", [])]
-    elif not resume and any((out_dir / RUNS_DIR).glob("run_*.parquet")):
+    elif not resume and not overwrite and (out_dir / RUNS_DIR).is_dir() and \
+            any((out_dir / RUNS_DIR).glob("run_*.parquet")):
         raise ConfigError("folder holds run records but no manifest; remove them or choose "
                           "another folder", file=str(out_dir))
+    from ..io.outdir import check_out_dir, clear_folder, write_marker
+    try:
+        out_dir, state = check_out_dir(out_dir, "experiment", overwrite, protect=[source],
+                                       extra_ok=EXPERIMENT_FILES)
+    except ArgumentError as exc:
+        raise ConfigError(exc.message) from None
+    if state == "clear":
+        clear_folder(out_dir)
+        old_seeds = []
+    todo_redo = _check_records(out_dir, sc.scenario.name, sha, methods, variants, sweep,
+                               set(old_seeds) | set(seeds)) if state == "same" else set()
+    if state == "same":
+        _remove_products(out_dir)   # an interrupted resume never leaves old results beside new records
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_marker(out_dir, "experiment", False)
+    tasks = tasks + sorted(todo_redo - set(tasks), key=lambda t: (t[0], -1 if t[1] is None else t[1]))
 
     # Connect before writing anything: an unreachable scheduler leaves no trace.
     client = None
@@ -411,10 +581,23 @@ def _run_pool(scenario: str, sha: str, todo: list[tuple], out_dir: Path, workers
                 f.result()  # re-raises a worker's error (noted with its seed)
                 bar.advance()
     except BaseException:
-        # finished records stay on disk: the experiment can be resumed
-        pool.shutdown(wait=True, cancel_futures=True)
+        # finished records stay on disk: the experiment can be resumed. The running
+        # workers are ended now (a run can take minutes; no worker outlives the command)
+        _terminate_pool(pool)
         raise
     pool.shutdown(wait=True)
+
+
+def _terminate_pool(pool: ProcessPoolExecutor) -> None:
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in procs:
+        if p.is_alive():
+            p.terminate()
+    for p in procs:
+        p.join(timeout=5.0)
+        if p.is_alive():
+            p.kill()
 
 
 #: Seconds to wait for a Dask scheduler to answer.
@@ -529,6 +712,8 @@ def write_experiment_outputs(scenario: str, results: pd.DataFrame, out_dir: Path
                             outages=[tuple(o) for o in sc.gnss.outages],
                             sweep_name=None if sweep is None else sweep.name,
                             headline=sc.scenario.report_table)
+    from ..io.outdir import write_marker
+    write_marker(out_dir, "experiment", True, [p.name for p in out_dir.iterdir()])
     return {"summary": summary, "series": series, "consistency": consistency}
 
 

@@ -33,6 +33,7 @@ from .aiding import AidingInputs, installation_check
 from ..filters.ekf import FilterResult, InitialState
 from ..ins.mechanization import nav_vector
 from ..io import drive0708, generic_csv, kfgins, psins, rtklib
+from ..io.imu_checks import check_spikes
 from ..sim.gnss import in_windows
 from .run import _lla_frame, solution_table, write_outputs
 from ..geodesy.frames import displace
@@ -57,6 +58,7 @@ class ProcessOutput:
     installation: dict = field(default_factory=dict)  # aiding.installation_check: level, rest, estimates
     odometer: OdometerData | None = None  # the [aiding.odometer] file's samples, when one is read
     gnss_bias: tuple | None = None  # (times, (M, 3) NED m): the systematic part of the injected corruption
+    checks: dict = field(default_factory=dict)  # data_checks: GNSS gaps, gyro-vs-track turning
 
 
 def find_data_dir(ds: Dataset, data: str | None, source: str) -> Path:
@@ -87,12 +89,13 @@ def read_imu(ds: Dataset, folder: Path) -> ImuData:
     f = folder / c.file
     if c.format == "drive-0708":
         return drive0708.read_drive_imu(f, folder / c.tag if c.tag else None, time_offset=0.0,
-                                        max_gap=c.max_gap, gap_action=c.gap_action)
+                                        max_gap=c.max_gap, gap_action=c.gap_action, spike_action=c.spike_action)
     if c.format == "kf-gins":
-        return kfgins.read_kfgins_imu(f, max_gap=c.max_gap, gap_action=c.gap_action)
+        return kfgins.read_kfgins_imu(f, max_gap=c.max_gap, gap_action=c.gap_action, spike_action=c.spike_action)
     if c.format == "psins":
-        return psins.read_psins_imu(f)[0]
-    return generic_csv.read_imu_csv(f, max_gap=c.max_gap, gap_action=c.gap_action)
+        imu = psins.read_psins_imu(f)[0]
+        return imu if c.spike_action == "fail" else check_spikes(imu, None, c.spike_action)
+    return generic_csv.read_imu_csv(f, max_gap=c.max_gap, gap_action=c.gap_action, spike_action=c.spike_action)
 
 
 def read_gnss(ds: Dataset, folder: Path) -> GnssFixes:
@@ -162,7 +165,7 @@ def install(imu: ImuData, ds: Dataset) -> ImuData:
     inst = ds.installation
     c_bi = euler_to_dcm(np.asarray(inst.imu_misalignment)) @ euler_to_dcm(np.asarray(inst.imu_rotation))
     return ImuData(time=imu.time + inst.imu_time_offset, dt=imu.dt, dtheta=imu.dtheta @ c_bi.T,
-                   dvel=imu.dvel @ c_bi.T, source=imu.source, gaps=imu.gaps)
+                   dvel=imu.dvel @ c_bi.T, source=imu.source, gaps=imu.gaps, spikes=imu.spikes)
 
 
 def initial_state(ds: Dataset, imu: ImuData, fixes: GnssFixes, lever: np.ndarray) -> InitialState:
@@ -225,6 +228,7 @@ def process(ds: Dataset, source: str, data: str | None = None):
     all_fixes = _shift(all_fixes, t0)
     if reference is not None:
         reference = _shift(reference, t0)
+    checks = data_checks(ds, source, imu, all_fixes)
     corrupt = corruption(ds, source)
     if corrupt is not None:
         all_fixes, bias = _corrupt(all_fixes, corrupt, np.random.default_rng(ds.gnss.corrupt_seed))
@@ -260,7 +264,51 @@ def process(ds: Dataset, source: str, data: str | None = None):
                          installation_check(imu, ds.alignment.static_duration, results, aiding.stillness,
                                             configured={"antenna_position": inst.antenna_position,
                                                         "imu_time_offset": inst.imu_time_offset}),
-                         odometer=aiding.odometer, gnss_bias=gnss_bias)
+                         odometer=aiding.odometer, gnss_bias=gnss_bias, checks=checks)
+
+
+def data_checks(ds: Dataset, source: str, imu: ImuData, fixes: GnssFixes) -> dict:
+    """Plausibility of the data read, on the processing time axis (docs/validation.md).
+
+    - some GNSS fix must fall within the IMU's time span (a different time base is an error);
+      the fixes outside it are counted (``gnss_fixes_outside_imu``);
+    - ``gnss.withhold`` windows must overlap the fixes (ConfigError naming the window);
+    - GNSS holes longer than ``gnss.max_gap`` outside the withheld windows are listed
+      (``gnss_gaps_s``, with a warning) or, with ``gnss.gap_action = "fail"``, an error;
+    - the gyros' turning must agree with the GNSS track's (:func:`mixnav.io.imu_checks.check_turns`).
+    """
+    import warnings
+    from ..io.imu_checks import DataWarning, check_turns
+    out: dict = {}
+    if len(fixes) == 0:
+        raise DataError("no GNSS fix of the chosen qualities", file=fixes.source)
+    t0, t1 = float(fixes.time[0]), float(fixes.time[-1])
+    inside = (fixes.time >= imu.start_time) & (fixes.time <= imu.time[-1])
+    if not inside.any():
+        raise DataError(f"no GNSS fix within the IMU's time span: IMU {imu.start_time:.3f}..{imu.time[-1]:.3f} s, "
+                        f"GNSS {t0:.3f}..{t1:.3f} s (after the first IMU sample): different time bases "
+                        "(GPS time of week, Unix time, time since start)?", file=fixes.source)
+    out["gnss_fixes_outside_imu"] = int((~inside).sum())
+    for i, (a, b) in enumerate(ds.gnss.withhold):
+        if a >= t1 or b <= t0:
+            raise ConfigError(f"window [{a:g}, {b:g}] s lies outside the GNSS data ({t0:.1f}..{t1:.1f} s after the "
+                              "first IMU sample): nothing would be withheld", file=source, key=f"gnss.withhold[{i}]")
+    d = np.diff(fixes.time)
+    mid = 0.5 * (fixes.time[1:] + fixes.time[:-1])
+    withheld = in_windows(mid, tuple(tuple(w) for w in ds.gnss.withhold))
+    holes = np.flatnonzero((d > ds.gnss.max_gap) & ~withheld)
+    out["gnss_gaps_s"] = [[float(fixes.time[k]), float(fixes.time[k + 1])] for k in holes]
+    if holes.size:
+        k = int(holes[np.argmax(d[holes])])
+        msg = (f"{holes.size} hole(s) longer than gnss.max_gap = {ds.gnss.max_gap:g} s between GNSS fixes; the longest "
+               f"{d[k]:.1f} s from t = {fixes.time[k]:.1f} s (listed in metrics.json: gnss_gaps_s)")
+        if ds.gnss.gap_action == "fail":
+            raise DataError(msg, file=fixes.source)
+        warnings.warn(f"{fixes.source}: {msg}", DataWarning, stacklevel=2)
+    turns = check_turns(imu, fixes.time, fixes.lla, fixes.vel_n, f"the unit of the {ds.imu.format} format")
+    if turns is not None:
+        out["gyro_turn_check"] = turns
+    return out
 
 
 def withheld_windows(po: ProcessOutput) -> tuple:
@@ -277,11 +325,13 @@ def process_tables(po: ProcessOutput) -> dict[str, pd.DataFrame]:
             for name, res in po.results.items()}
 
 
-def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = None) -> dict:
-    """Solutions, metrics (against the reference), figures and report of a processed dataset."""
+def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = None,
+                  overwrite: bool = False) -> dict:
+    """Solutions, metrics (against the reference), figures and report of a processed dataset
+    (the folder policy of :mod:`mixnav.io.outdir`)."""
     if po.dataset.dataset.kind == "gnss-raw":
         from .spp_process import write_raw
-        return write_raw(out_dir, po, config_text)
+        return write_raw(out_dir, po, config_text, overwrite=overwrite)
     withheld = withheld_windows(po)
     tables = process_tables(po)
     for t in tables.values():
@@ -293,7 +343,9 @@ def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = No
               "real_time_factor": duration / (po.read_time_s + po.filter_time_s),
               "gnss_withheld_s": [list(w) for w in withheld],
               "imu_gaps_accepted": int(po.imu.gaps),
-              **({} if po.odometer is None else {"odometer_gaps_accepted": int(po.odometer.gaps)})}
+              **({} if po.odometer is None else {"odometer_gaps_accepted": int(po.odometer.gaps)}),
+              **({"imu_spikes_rejected": int(po.imu.spikes)} if po.imu.spikes else {}),
+              **po.checks}
     if po.aiding:
         header["aiding"] = po.aiding
     notes = [f"Times are seconds since the first IMU sample (GPS time {po.time_origin:.3f} s since 1970).",
@@ -310,4 +362,5 @@ def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = No
                 notes.append(f"Installation estimated by '{name}': " + ", ".join(said) + ".")
     ref = None if po.reference is None else _lla_frame(po.reference.time, po.reference.lla)
     return write_outputs(out_dir, f"mixnav process: {po.dataset.dataset.name}", header, po.results, tables,
-                         withheld, ref, _lla_frame(po.fixes.time, po.fixes.lla), notes, config_text, po.gnss_bias)
+                         withheld, ref, _lla_frame(po.fixes.time, po.fixes.lla), notes, config_text, po.gnss_bias,
+                         command="process", overwrite=overwrite, protect=[po.source, po.data_dir])

@@ -27,6 +27,7 @@ _COLUMNS = [
     ("roll_rmse_deg", "roll RMSE [deg]"), ("roll_max_deg", "roll max [deg]"),
     ("pitch_rmse_deg", "pitch RMSE [deg]"), ("pitch_max_deg", "pitch max [deg]"),
     ("yaw_rmse_deg", "yaw RMSE [deg]"), ("yaw_max_deg", "yaw max [deg]"),
+    ("nis_mean_per_dof", "NIS/dof mean"), ("nis_median_per_dof", "NIS/dof median"),
     ("epoch_time_mean_us", "time/epoch [us]"), ("smoother_time_s", "smoother [s]"),
 ]
 

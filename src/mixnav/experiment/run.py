@@ -28,6 +28,7 @@ from ..filters.ekf import FilterResult
 from ..geodesy.frames import displace, ned_displacement
 from ..measurements.loose import antenna_lla
 from ..io.atomic import atomic_write_dataframe, atomic_write_json
+from ..io.outdir import staged_output
 from ..sim.gnss import in_windows
 from ..sim.rng import Streams
 from ..sim.scenario import SimulatedRun, simulate
@@ -315,6 +316,7 @@ def method_metrics(res: FilterResult, table: pd.DataFrame, outages, gnss_bias=No
     m["recoveries"] = dict(res.recoveries)
     if len(res.nis):
         m["nis_mean_per_dof"] = float(np.mean(res.nis / res.nis_dim))
+        m["nis_median_per_dof"] = float(np.median(res.nis / res.nis_dim))
     tracked = [c for c in table.columns if c.startswith("vb_sigma_")]
     if tracked:   # a VB-adaptive filter: the mean noise sigma it tracked per channel
         m["vb_sigma_mean"] = {c.removeprefix("vb_sigma_"): float(np.nanmean(table[c])) for c in tracked}
@@ -329,26 +331,62 @@ def method_metrics(res: FilterResult, table: pd.DataFrame, outages, gnss_bias=No
     return m
 
 
+#: median NIS per degree of freedom above which a run is warned about (docs/validation.md): a
+#: consistent filter gives about 0.8-0.9 (the chi-square median per dof); the median, unlike the
+#: mean, is not moved by a few outliers of heavy-tailed noise
+NIS_WARN_MEDIAN = 5.0
+NIS_CAUSES = ("the IMU installation (imu_rotation, misalignment) or the lever arm is wrong",
+              "a unit is wrong (rates in rad/s declared as deg/s, g as m/s^2, degrees as radians)",
+              "the IMU time offset or the GNSS velocity delay is wrong",
+              "the GNSS or IMU noise (sigmas, grade) is set far too small for the data")
+
+
+def nis_warnings(methods: dict) -> list[str]:
+    """One warning per method whose median NIS per dof exceeds :data:`NIS_WARN_MEDIAN`."""
+    out = []
+    for name, m in methods.items():
+        v = m.get("nis_median_per_dof")
+        if v is not None and v > NIS_WARN_MEDIAN:
+            out.append(f"method '{name}': median NIS per degree of freedom is {v:.3g} (a consistent filter "
+                       f"gives about 1; warned above {NIS_WARN_MEDIAN:g}): its measurements disagree with its "
+                       "model. Likely causes: " + "; ".join(NIS_CAUSES) + ".")
+    return out
+
+
 def write_outputs(out_dir: Path, title: str, header: dict, results: dict[str, FilterResult],
                   tables: dict[str, pd.DataFrame], outages, reference: pd.DataFrame | None,
                   gnss: pd.DataFrame | None, notes=(), config_text: str | None = None, gnss_bias=None,
-                  noise_truth: tuple | None = None) -> dict:
+                  noise_truth: tuple | None = None, command: str = "run", overwrite: bool = False,
+                  protect=()) -> dict:
     """Write solution tables, metrics.json, figures and report.html; returns the metrics.
 
     Shared by ``mixnav run`` (simulation, truth as reference) and ``mixnav
-    process`` (real data, e.g. RTK fixes as reference). ``noise_truth``: ``(times,
-    {channel: sd})`` of the simulated GNSS noise, drawn under the sigma a VB-adaptive
-    filter tracked.
+    process`` (real data, e.g. RTK fixes as reference). ``gnss_bias``: the fixes'
+    systematic error (:func:`bias_metrics`); ``noise_truth``: ``(times, {channel: sd})`` of
+    the simulated GNSS noise, drawn under the sigma a VB-adaptive filter tracked. The
+    folder follows the output-folder policy (:mod:`mixnav.io.outdir`): written whole into
+    a temporary sibling and swapped in, a folder of another command (or with foreign
+    files) refused unless ``overwrite``.
     """
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    with staged_output(out_dir, command, overwrite, protect) as folder:
+        return _write_outputs(folder, title, header, results, tables, outages, reference, gnss, notes,
+                              config_text, gnss_bias, noise_truth)
+
+
+def _write_outputs(folder, title, header, results, tables, outages, reference, gnss, notes, config_text,
+                   gnss_bias, noise_truth):
+    out_dir = folder.path
     metrics = dict(header)
     metrics["mixnav_version"] = __version__
     metrics["outages_s"] = [list(map(float, o)) for o in outages]
     metrics["methods"] = {name: method_metrics(results[name], tables[name], outages, gnss_bias) for name in tables}
+    warned = nis_warnings(metrics["methods"])
+    if warned:
+        metrics["warnings"] = warned
+        notes = [*notes, *("Warning: " + w for w in warned)]
     for name, table in tables.items():
-        atomic_write_dataframe(out_dir / f"solution_{name}.csv", table)
-        atomic_write_dataframe(out_dir / f"solution_{name}.parquet", table)
+        atomic_write_dataframe(folder.file(f"solution_{name}.csv"), table)
+        atomic_write_dataframe(folder.file(f"solution_{name}.parquet"), table)
     if reference is not None:
         atomic_write_dataframe(out_dir / "reference.parquet", reference)
     if gnss is not None:
@@ -385,8 +423,9 @@ def run_tables(run: RunOutput) -> dict[str, pd.DataFrame]:
     return {name: solution_table(res, run.sim.truth, run.sim.outages) for name, res in run.results.items()}
 
 
-def write_run(out_dir: Path, run: RunOutput, config_text: str | None = None) -> dict:
-    """Write solutions, metrics, figures and the report of one simulated run."""
+def write_run(out_dir: Path, run: RunOutput, config_text: str | None = None, overwrite: bool = False) -> dict:
+    """Write solutions, metrics, figures and the report of one simulated run (the folder
+    policy of :mod:`mixnav.io.outdir`; ``overwrite`` clears a folder it would refuse)."""
     sim = run.sim
     tables = run_tables(run)
     notes = [f"Seed {sim.seed}; IMU errors drawn: gyro bias "
@@ -402,4 +441,4 @@ def write_run(out_dir: Path, run: RunOutput, config_text: str | None = None) -> 
     return write_outputs(out_dir, f"mixnav run: {run.scenario.scenario.name}", header, run.results, tables,
                          sim.outages, _lla_frame(sim.truth.time, sim.truth.lla)[::10],
                          _lla_frame(sim.fixes.time, sim.fixes.lla), notes, config_text, sim.gnss_bias,
-                         noise_truth=truth)
+                         noise_truth=truth, command="run", overwrite=overwrite, protect=[run.source])

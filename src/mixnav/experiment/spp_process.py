@@ -23,6 +23,7 @@ import pandas as pd
 from .. import __version__
 from ..config.dataset_schema import Dataset
 from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla, lla_to_ecef
+from ..errors import DataError
 from ..gnss.ephemeris import BroadcastEphemeris
 from ..gnss.spp import SppOptions, SppTrack, solve_epochs
 from ..io import android
@@ -115,14 +116,25 @@ def spp_metrics(table: pd.DataFrame, solve_time_s: float) -> dict:
     return m
 
 
-def write_raw(out_dir: Path, po: SppOutput, config_text: str | None = None) -> dict:
-    """Solution table (CSV + Parquet), metrics.json, figures and report of an SPP run."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+def write_raw(out_dir: Path, po: SppOutput, config_text: str | None = None, overwrite: bool = False) -> dict:
+    """Solution table (CSV + Parquet), metrics.json, figures and report of an SPP run
+    (the folder policy of :mod:`mixnav.io.outdir`, as ``mixnav process``)."""
+    from ..io.outdir import staged_output
+    with staged_output(out_dir, "process", overwrite, [po.source, po.data_dir]) as folder:
+        return _write_raw(folder.path, po, config_text)
+
+
+def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None) -> dict:
     table = solution_table(po)
     tr = po.track
     counts = tr.status_counts()
+    empty = int(getattr(po.observations, "epochs_all_rejected", 0))
+    if empty:   # epochs the reader dropped whole: every measurement rejected (counted, not vanished)
+        counts = {**counts, "all measurements rejected": empty}
     used = counts.get("ok", 0)
+    if used == 0:   # nothing to score or show: refused rather than a folder of NaNs
+        raise DataError(f"no epoch could be solved (status counts: {counts}); does the navigation file cover "
+                        "the log's time and satellites?", file=po.observations.source)
     duration = float(table["time_s"].iloc[-1]) if len(table) else 0.0
     metrics: dict = {
         "dataset": po.dataset.dataset.name, "kind": po.dataset.dataset.kind, "source": po.source,
@@ -130,7 +142,7 @@ def write_raw(out_dir: Path, po: SppOutput, config_text: str | None = None) -> d
         "gps_week_start": int(tr.week[0]), "gps_tow_start_s": float(tr.tow[0]),
         "duration_s": duration, "read_time_s": po.read_time_s, "filter_time_s": po.solve_time_s,
         "real_time_factor": duration / max(po.read_time_s + po.solve_time_s, 1e-9),
-        "epochs_total": len(table), "epochs_used": used, "epochs_skipped": len(table) - used,
+        "epochs_total": len(table) + empty, "epochs_used": used, "epochs_skipped": len(table) + empty - used,
         "epoch_status": counts, "satellites_skipped": dict(tr.skipped_satellites),
         "measurements_rejected": dict(po.observations.rejected),
         "reference_point": None if po.reference_lla is None else

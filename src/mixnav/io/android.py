@@ -108,6 +108,8 @@ class AndroidPseudoranges:
     sigma: np.ndarray
     cn0: np.ndarray
     rejected: dict = field(default_factory=dict)
+    #: epochs whose every measurement was rejected (absent from the arrays; counted by the SPP)
+    epochs_all_rejected: int = 0
     source: str = ""
 
     def __len__(self) -> int:
@@ -225,6 +227,7 @@ def _pseudoranges(rows: list[dict], path: Path, max_unc_ns: float) -> AndroidPse
         rejected[reason] = rejected.get(reason, 0) + 1
 
     kept = []
+    all_epochs = {r["TimeNanos"] for r in rows}
     for r in rows:
         if r["ConstellationType"] != CONSTELLATION_GPS:
             reject("not GPS")
@@ -264,6 +267,14 @@ def _pseudoranges(rows: list[dict], path: Path, max_unc_ns: float) -> AndroidPse
         sig_l.append(C_LIGHT * r["ReceivedSvTimeUncertaintyNanos"] * 1e-9)
         cn0_l.append(r.get("Cn0DbHz", np.nan))
     tn = np.array(epochs_t, dtype=np.int64)
+    # a satellite twice in one epoch: a duplicated row or epoch (docs/validation.md)
+    seen: dict[tuple, int] = {}
+    for r, e in zip(kept, epoch_l):
+        key = (e, r["Svid"])
+        if key in seen:
+            raise DataError(f"GPS PRN {r['Svid']} measured twice in the epoch of TimeNanos {r['TimeNanos']} "
+                            f"(first at line {seen[key]}): a duplicated row or epoch", file=str(path), line=r["line"])
+        seen[key] = r["line"]
     if np.any(np.diff(tn) <= 0):
         k = int(np.flatnonzero(np.diff(tn) <= 0)[0]) + 1
         line = next(r["line"] for r in kept if r["TimeNanos"] == tn[k])
@@ -272,4 +283,5 @@ def _pseudoranges(rows: list[dict], path: Path, max_unc_ns: float) -> AndroidPse
     return AndroidPseudoranges(week=np.array(week_l, dtype=np.int64), tow=np.array(tow_l), time_nanos=tn,
                                epoch=np.array(epoch_l, dtype=np.int64), prn=np.array(prn_l, dtype=np.int64),
                                pseudorange=np.array(pr_l), sigma=np.array(sig_l), cn0=np.array(cn0_l),
-                               rejected=rejected, source=str(path))
+                               rejected=rejected, source=str(path),
+                               epochs_all_rejected=len(all_epochs - set(epochs_t)))

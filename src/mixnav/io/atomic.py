@@ -20,12 +20,28 @@ from typing import Any, BinaryIO, Iterator
 import numpy as np
 
 __all__ = [
+    "default_mode",
     "atomic_write_bytes",
     "atomic_write_text",
     "atomic_write_json",
     "atomic_write_dataframe",
     "atomic_savefig",
 ]
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+#: the process's umask, read once at import (reading it means setting it)
+_UMASK = _umask()
+
+
+def default_mode(base: int = 0o666) -> int:
+    """The mode a new file (``0o666``) or folder (``0o777``) gets under the user's umask."""
+    return base & ~_UMASK
 
 
 @contextmanager
@@ -37,6 +53,8 @@ def _atomic(path: str | os.PathLike) -> Iterator[BinaryIO]:
     tmp = tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp",
                                       delete=False)
     try:
+        # NamedTemporaryFile creates 0600; the result gets what open() would give under the umask
+        os.fchmod(tmp.fileno(), default_mode())
         with tmp as fh:
             yield fh
             fh.flush()

@@ -248,8 +248,7 @@ def read_comma_imu(segment, *, gyro: str = "calibrated", max_gap: float | None =
         ta, f = ta[keep], f[keep]
         w = np.column_stack([np.interp(ta, tg, w[:, i]) for i in range(3)])
     imu = replace(rates_to_increments(ta, w, f, source=str(seg / _IMU)), gaps=gaps)
-    check_plausible(imu, "rad/s", "m/s^2")
-    return imu
+    return check_plausible(imu, "rad/s", "m/s^2")
 
 
 # ---------------------------------------------------------------------------

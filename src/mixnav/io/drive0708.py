@@ -28,6 +28,9 @@ from .tables import check_times, read_numeric
 
 _HEADER = 60
 _FIXED = 16  # tick, seconds, fraction
+#: largest relative difference between the tag's span and the IMU tick counter's (clock drift
+#: of a logger is 1e-4; drive-0708: 3e-4)
+TAG_SPAN_TOLERANCE = 0.01
 
 
 @dataclass(frozen=True)
@@ -62,7 +65,7 @@ def read_time_tag(path) -> TimeTag:
 
 
 def read_drive_imu(csv_path, tag_path=None, time_offset: float = -0.125, max_gap: float | None = 0.05,
-                   gap_action: str = "warn") -> ImuData:
+                   gap_action: str = "warn", spike_action: str = "fail") -> ImuData:
     """IMU increments of the drive-0708 recording, in the IMU's own axes (SI).
 
     Parameters
@@ -73,6 +76,8 @@ def read_drive_imu(csv_path, tag_path=None, time_offset: float = -0.125, max_gap
         Added to every IMU time [s] (logger latency).
     max_gap, gap_action :
         See :func:`mixnav.io.tables.check_times`.
+    spike_action : {"fail", "reject"}
+        See :func:`mixnav.io.imu_checks.check_spikes`.
     """
     csv_path = Path(csv_path)
     tag = read_time_tag(tag_path or Path(str(csv_path) + ".tag"))
@@ -89,13 +94,22 @@ def read_drive_imu(csv_path, tag_path=None, time_offset: float = -0.125, max_gap
     span = last_tick - first_tick
     if span <= 0:
         raise DataError("IMU ticks do not increase from the first to the last line", file=str(csv_path))
+    if len(ticks) < 2:
+        raise DataError("need at least two IMU samples", file=str(csv_path))
+    # time continuity: the tag's span and the IMU's own millisecond counter must agree (a
+    # truncated or foreign tag would stretch or squeeze every IMU time stamp)
+    tag_span, tick_span = tag.end - tag.start, span / 1000.0
+    if not abs(tag_span / tick_span - 1.0) <= TAG_SPAN_TOLERANCE:
+        raise DataError(f"the time-tag file spans {tag_span:.3f} s but the IMU's tick counter in "
+                        f"{csv_path.name} {tick_span:.3f} s: one of the two files is truncated, or the tag "
+                        f"belongs to another recording (they must agree within {TAG_SPAN_TOLERANCE:.0%})",
+                        file=str(tag_path or Path(str(csv_path) + ".tag")))
     t = tag.start + (ticks - first_tick) / span * (tag.end - tag.start) + time_offset
     gaps = check_times(t, tab.lines, str(csv_path), max_gap=max_gap, gap_action=gap_action, what="IMU").gaps
     f = tab.values[:, 0:3] * G0
     w = tab.values[:, 3:6] * DEG
     imu = replace(rates_to_increments(t, w, f, source=str(csv_path)), gaps=gaps)
-    check_plausible(imu, "deg/s", "g")
-    return imu
+    return check_plausible(imu, "deg/s", "g", tab.lines[1:], spike_action)
 
 
 def _tick(line: str, fallback: float) -> float:

@@ -33,7 +33,7 @@ from ..attitude import euler_to_quat
 from ..data import GnssFixes, ImuData, Trajectory
 from ..errors import DataError
 from .imu_checks import check_plausible, rates_to_increments
-from .tables import check_times, header_fields, read_numeric
+from .tables import check_fix_values, check_times, header_fields, read_numeric
 
 _COL = re.compile(r"^\s*([A-Za-z_]+)\s*\[(.*)\]\s*$")
 
@@ -86,7 +86,7 @@ def _values(path, names, factors, what):
     return tab, cols
 
 
-def read_imu_csv(path, max_gap: float | None = None, gap_action: str = "warn") -> ImuData:
+def read_imu_csv(path, max_gap: float | None = None, gap_action: str = "warn", spike_action: str = "fail") -> ImuData:
     path = Path(path)
     names, fac = _header(path, [_IMU_RATE, _IMU_INC], "IMU")
     tab, c = _values(path, names, fac, "IMU")
@@ -100,8 +100,7 @@ def read_imu_csv(path, max_gap: float | None = None, gap_action: str = "warn") -
         imu = ImuData(time=t[1:], dt=np.diff(t), dtheta=np.column_stack([c["dthx"], c["dthy"], c["dthz"]])[1:],
                       dvel=np.column_stack([c["dvx"], c["dvy"], c["dvz"]])[1:], source=str(path))
         units = (names_unit(path, "dthx"), names_unit(path, "dvx"))
-    check_plausible(imu, *units)
-    return replace(imu, gaps=gaps)
+    return replace(check_plausible(imu, *units, tab.lines[1:], spike_action), gaps=gaps)
 
 
 def names_unit(path: Path, name: str) -> str:
@@ -123,6 +122,8 @@ def read_gnss_csv(path, max_gap: float | None = None, gap_action: str = "warn") 
     if bad.size:
         raise DataError("standard deviations must be positive", file=str(path), line=int(tab.lines[bad[0]]))
     lla = np.column_stack([c["lat"], c["lon"], c["height"]])
+    check_fix_values(lla, sd, tab.lines, str(path),
+                     np.column_stack([c["vn"], c["ve"], c["vd"]]) if "vn" in c else None)
     if "vn" in c:
         return GnssFixes(time=c["time"], lla=lla, pos_sigma=sd, vel_n=np.column_stack([c["vn"], c["ve"], c["vd"]]),
                          vel_sigma=np.column_stack([c["sd_vn"], c["sd_ve"], c["sd_vd"]]), source=str(path))

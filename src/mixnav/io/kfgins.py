@@ -18,10 +18,11 @@ from ..attitude import euler_to_quat
 from ..data import GnssFixes, ImuData, Trajectory
 from ..errors import DataError
 from .imu_checks import check_plausible
-from .tables import check_times, read_numeric
+from .tables import check_fix_values, check_times, read_numeric
 
 
-def read_kfgins_imu(path, max_gap: float | None = None, gap_action: str = "warn") -> ImuData:
+def read_kfgins_imu(path, max_gap: float | None = None, gap_action: str = "warn",
+                    spike_action: str = "fail") -> ImuData:
     tab = read_numeric(path, 7, what="KF-GINS IMU")
     v = tab.values
     gaps = check_times(v[:, 0], tab.lines, tab.path, max_gap=max_gap, gap_action=gap_action, what="IMU").gaps
@@ -29,8 +30,7 @@ def read_kfgins_imu(path, max_gap: float | None = None, gap_action: str = "warn"
         raise DataError("need at least two IMU lines", file=tab.path)
     imu = ImuData(time=v[1:, 0], dt=np.diff(v[:, 0]), dtheta=v[1:, 1:4], dvel=v[1:, 4:7], source=tab.path,
                   gaps=gaps)
-    check_plausible(imu, "rad", "m/s")
-    return imu
+    return check_plausible(imu, "rad", "m/s", tab.lines[1:], spike_action)
 
 
 def read_kfgins_gnss(path, max_gap: float | None = None, gap_action: str = "warn") -> GnssFixes:
@@ -39,6 +39,7 @@ def read_kfgins_gnss(path, max_gap: float | None = None, gap_action: str = "warn
     check_times(v[:, 0], tab.lines, tab.path, max_gap=max_gap, gap_action=gap_action, what="GNSS")
     _check_sigma(v[:, 4:7], tab)
     lla = np.column_stack([np.radians(v[:, 1]), np.radians(v[:, 2]), v[:, 3]])
+    check_fix_values(lla, v[:, 4:7], tab.lines, tab.path, v[:, 7:10] if v.shape[1] == 13 else None)
     if v.shape[1] == 13:
         _check_sigma(v[:, 10:13], tab)
         return GnssFixes(time=v[:, 0], lla=lla, pos_sigma=v[:, 4:7], vel_n=v[:, 7:10], vel_sigma=v[:, 10:13],

@@ -26,6 +26,7 @@ import numpy as np
 from ..data import ImuData
 from ..errors import DataError
 from ..units import ARCSEC
+from .imu_checks import check_spikes
 from .tables import read_numeric
 
 #: Sensor (right, forward, up) to body (forward, right, down).
@@ -82,7 +83,8 @@ def read_psins_imu(path) -> tuple[ImuData, PsinsHeader]:
     h2 = _numbers(lines[i + 1], 6, path, i + 2)
     h3 = _numbers(lines[i + 2], 6, path, i + 3)
     first = i + 3
-    data = read_numeric(path, 6, comment="%", skip_lines=first, what="PSINS IMU").values
+    tab = read_numeric(path, 6, comment="%", skip_lines=first, what="PSINS IMU")
+    data = tab.values
     dt = h2[4] * 1e-3
     if not dt > 0:
         raise DataError("sampling interval must be positive", file=str(path), line=i + 2)
@@ -98,4 +100,5 @@ def read_psins_imu(path) -> tuple[ImuData, PsinsHeader]:
         v_n=np.array([h1[4], h1[3], -h1[5]]),
         lla=np.array([np.deg2rad(h2[0]), np.deg2rad(h2[1]), h2[2]]),
         t0=h2[3], dt=dt, g=g, gyro_scale=gyro_scale, accel_scale=accel_scale)
-    return ImuData(time=time, dt=np.full(n, dt), dtheta=dth, dvel=dv, source=str(path)), header
+    imu = ImuData(time=time, dt=np.full(n, dt), dtheta=dth, dvel=dv, source=str(path))
+    return check_spikes(imu, tab.lines), header

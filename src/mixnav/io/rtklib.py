@@ -19,7 +19,7 @@ import numpy as np
 from ..data import GnssFixes, Trajectory
 from ..errors import DataError
 from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla
-from .tables import check_times, read_numeric
+from .tables import check_fix_values, check_times, read_numeric
 
 GPS_EPOCH_UNIX = 315964800.0  # 1980-01-06 00:00:00 in Unix seconds
 _EPOCH = datetime(1970, 1, 1, tzinfo=timezone.utc)
@@ -192,12 +192,10 @@ def read_pos(path, max_gap: float | None = None, gap_action: str = "warn") -> Po
     else:
         lla = np.column_stack([np.radians(v[:, 1]), np.radians(v[:, 2]), v[:, 3]])
         sd = np.abs(v[:, 6:9])  # sdn, sde, sdu (down has the sigma of up)
-    if np.any(np.abs(lla[:, 0]) > np.pi / 2):
-        k = int(np.argmax(np.abs(lla[:, 0]) > np.pi / 2))
-        raise DataError("latitude outside [-90, 90] deg", file=str(path), line=int(tab.lines[k]))
     vel = sdv = None
     if has_vel:
         vel = np.column_stack([v[:, 14], v[:, 15], -v[:, 16]])
         sdv = np.abs(v[:, 17:20])
+    check_fix_values(lla, sd, tab.lines, str(path), vel)
     return PosSolution(time=v[:, 0], lla=lla, quality=v[:, 4].astype(int), n_sat=v[:, 5].astype(int),
                        sd_ned=sd, vel_ned=vel, sd_vel=sdv, source=str(path))

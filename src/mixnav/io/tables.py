@@ -182,7 +182,8 @@ def check_times(t: np.ndarray, lines: np.ndarray, path: str, max_gap: float | No
     if bad.size:
         k = int(bad[0]) + 1
         kind = "repeats" if d[bad[0]] == 0 else "goes backwards"
-        raise DataError(f"{what} time {kind} ({t[k - 1]!r} then {t[k]!r})", file=path, line=int(lines[k]))
+        raise DataError(f"{what} time {kind} ({float(t[k - 1])!r} then {float(t[k])!r})", file=path,
+                        line=int(lines[k]))
     out = TimeCheck()
     if max_gap is not None and d.size:
         gaps = np.nonzero(d > max_gap)[0]
@@ -196,3 +197,27 @@ def check_times(t: np.ndarray, lines: np.ndarray, path: str, max_gap: float | No
                 raise DataError(msg, file=path, line=int(lines[k]))
             warnings.warn(f"{path}, line {int(lines[k])}: {msg}", stacklevel=3)
     return out
+
+
+#: fastest plausible GNSS velocity of a vehicle [m/s] (docs/validation.md)
+MAX_SPEED = 1000.0
+
+
+def check_fix_values(lla: np.ndarray, sd: np.ndarray, lines: np.ndarray, path: str,
+                     vel: np.ndarray | None = None) -> None:
+    """Plausible GNSS fixes (docs/validation.md), a DataError naming the first bad line:
+    latitude within +-90 deg, longitude within +-360 deg, height within
+    :data:`mixnav.data.HEIGHT_RANGE`, sigmas finite and at most :data:`mixnav.data.MAX_SIGMA`,
+    speed at most :data:`MAX_SPEED`. ``lla`` [rad, rad, m], ``sd`` [m] (k, 3), ``vel`` [m/s]."""
+    from ..data import HEIGHT_RANGE, MAX_SIGMA
+    checks = [(np.abs(lla[:, 0]) > np.pi / 2, "latitude outside [-90, 90] deg"),
+              (np.abs(lla[:, 1]) > 2 * np.pi, "longitude outside [-360, 360] deg"),
+              ((lla[:, 2] < HEIGHT_RANGE[0]) | (lla[:, 2] > HEIGHT_RANGE[1]),
+               f"height outside {HEIGHT_RANGE[0]:g}..{HEIGHT_RANGE[1]:g} m"),
+              (~np.all(np.isfinite(sd) & (sd <= MAX_SIGMA), axis=1), f"a standard deviation beyond {MAX_SIGMA:g} m")]
+    if vel is not None:
+        checks.append((~(np.linalg.norm(vel, axis=1) <= MAX_SPEED), f"a speed beyond {MAX_SPEED:g} m/s"))
+    for bad, what in checks:
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise DataError(f"{what} ({int(bad.sum())} line(s))", file=path, line=int(lines[k]))

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from ..errors import DataError
+from ..errors import ArgumentError, DataError
 
 __all__ = ["diagnose", "figures", "diagnose_file", "MIN_SAMPLES", "FIGURE_FILES"]
 
@@ -96,6 +96,9 @@ def diagnose(x, max_lag: int = 50, n_components: int | None = None, seed: int = 
     bad = np.flatnonzero(~np.isfinite(x))
     if bad.size:
         raise ValueError(f"value {bad[0]} is not finite ({x[bad[0]]}); {bad.size} such value(s)")
+    if np.abs(x).max() > 1e150:   # their squares (variances, kurtosis) would overflow
+        k = int(np.argmax(np.abs(x) > 1e150))
+        raise ValueError(f"value {k} ({x[k]:.3g}) is beyond 1e150 in magnitude: rescale the series")
     if isinstance(max_lag, bool) or not isinstance(max_lag, (int, np.integer)) or max_lag < 1:
         raise ValueError(f"max_lag must be a positive integer, got {max_lag!r}")
     if n_components is not None and (isinstance(n_components, bool)
@@ -287,8 +290,8 @@ def _json_ready(result: dict) -> dict:
     return out
 
 
-def diagnose_file(path, column: str, out_dir, max_lag: int = 50, n_components: int | None = None,
-                  seed: int = 0) -> dict:
+def diagnose_file(path, column: str, out_dir, max_lag: int | None = None, n_components: int | None = None,
+                  seed: int = 0, overwrite: bool = False) -> dict:
     """Diagnose one column of a CSV or Parquet file; write JSON and PNG figures.
 
     Parameters
@@ -318,19 +321,29 @@ def diagnose_file(path, column: str, out_dir, max_lag: int = 50, n_components: i
         is the CSV line), fewer than 20 values, or a constant column.
     """
     from ..io.atomic import atomic_savefig, atomic_write_json
+    from ..io.outdir import check_out_dir, staged_output
 
     path = Path(path)
-    out_dir = Path(out_dir)
+    check_out_dir(out_dir, "diagnose", overwrite, [path])   # refused before any work
     x = _read_column(path, column)
+    if max_lag is None:
+        max_lag = 50   # clipped to the series length by diagnose
+    elif not isinstance(max_lag, bool) and isinstance(max_lag, (int, np.integer)) and max_lag >= x.size:
+        raise ArgumentError(f"{max_lag} is not below the number of values in column '{column}' of "
+                            f"{path} ({x.size}); give at most {x.size - 1}", "--max-lag")
+    if (n_components is not None and not isinstance(n_components, bool)
+            and isinstance(n_components, (int, np.integer)) and n_components > x.size // 2):
+        raise ArgumentError(f"{n_components} components need at least {2 * n_components} values; column "
+                            f"'{column}' of {path} has {x.size}", "--components")
     try:
         result = diagnose(x, max_lag=max_lag, n_components=n_components, seed=seed)
     except ValueError as exc:
         raise DataError(f"column '{column}': {exc}", file=str(path)) from None
     figs = figures(result)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    for name, fig in figs.items():
-        atomic_savefig(fig, out_dir / FIGURE_FILES[name], dpi=110)
     doc = {"source": {"file": os.fspath(path), "column": column}, **_json_ready(result),
            "figures": dict(FIGURE_FILES)}
-    atomic_write_json(out_dir / "diagnostics.json", doc)
+    with staged_output(out_dir, "diagnose", overwrite, [path], complete_file="diagnostics.json") as folder:
+        for name, fig in figs.items():
+            atomic_savefig(fig, folder.file(FIGURE_FILES[name]), dpi=110)
+        atomic_write_json(folder.file("diagnostics.json"), doc)
     return doc

@@ -1,0 +1,215 @@
+"""Seeded fuzzing of every reader on copies of the real files (issue 22; docs/validation.md).
+
+Each case takes a copy of a real file (or a slice of it, to keep the cases
+fast), damages it once (truncation at a random byte, random byte flips, or
+lines swapped, duplicated or deleted) and reads it. A reader may accept the
+copy or refuse it with a :class:`~mixnav.errors.MixnavError` (which names the
+file); anything else (a traceback), a hang, or a NaN/infinity in what it
+returns is a failure. Skipped without the shared data.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import shutil
+import signal
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mixnav.errors import MixnavError
+
+from .conftest import DATA_DIR
+
+#: seconds any one read may take before it counts as a hang
+CASE_TIMEOUT_S = 10
+
+
+# ----------------------------------------------------------------------------- mutations
+
+def truncate(b: bytes, rng) -> bytes:
+    return b[: int(rng.integers(0, len(b) + 1))]
+
+
+def flip(b: bytes, rng) -> bytes:
+    a = bytearray(b)
+    for _ in range(int(rng.integers(1, 9))):
+        k = int(rng.integers(0, len(a)))
+        a[k] = int(rng.choice([rng.integers(0, 256), ord(rng.choice(list("0123456789-.,eE \n\tnaNiIf")))]))
+    return bytes(a)
+
+
+def shuffle_lines(b: bytes, rng) -> bytes:
+    lines = b.split(b"\n")
+    if len(lines) < 3:
+        return flip(b, rng)
+    op = rng.integers(0, 3)
+    i, j = (int(x) for x in rng.integers(0, len(lines), 2))
+    if op == 0:
+        lines[i], lines[j] = lines[j], lines[i]
+    elif op == 1:
+        lines.insert(j, lines[i])
+    else:
+        del lines[i]
+    return b"\n".join(lines)
+
+
+MUTATIONS = (truncate, flip, shuffle_lines)
+
+
+# ----------------------------------------------------------------------------- checks
+
+def _finite(obj, where="result"):
+    """Every float array or number reachable from ``obj`` (dataclasses, tuples, dicts) is finite."""
+    if obj is None or isinstance(obj, (str, bytes, bool, int, Path)):
+        return
+    if isinstance(obj, float):
+        assert np.isfinite(obj), f"{where} is {obj}"
+        return
+    if isinstance(obj, np.ndarray):
+        if obj.dtype.kind == "f":
+            bad = ~np.isfinite(obj)
+            if where.endswith(("cn0", "vel_ned", "sd_vel")) and obj.dtype.kind == "f":
+                return   # optional columns: NaN marks "not given" (documented)
+            assert not bad.any(), f"{where} has {int(bad.sum())} non-finite values"
+        return
+    if dataclasses.is_dataclass(obj):
+        for f in dataclasses.fields(obj):
+            _finite(getattr(obj, f.name), f"{where}.{f.name}")
+    elif isinstance(obj, (tuple, list)):
+        for i, x in enumerate(obj):
+            _finite(x, f"{where}[{i}]")
+    elif isinstance(obj, dict):
+        for k, x in obj.items():
+            _finite(x, f"{where}.{k}")
+
+
+class _Hang(Exception):
+    pass
+
+
+def _alarm(signum, frame):
+    raise _Hang
+
+
+def _read_once(read, path, what):
+    """Read ``path``; a MixnavError is a clean refusal, anything else a failure."""
+    old = signal.signal(signal.SIGALRM, _alarm)
+    signal.alarm(CASE_TIMEOUT_S)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")   # gap warnings and the like are documented handlings
+            out = read(path)
+    except MixnavError as exc:
+        assert str(exc), what
+        return "refused"
+    except _Hang:
+        pytest.fail(f"{what}: no answer within {CASE_TIMEOUT_S} s (hang)")
+    except Exception as exc:  # noqa: BLE001
+        pytest.fail(f"{what}: {type(exc).__name__}: {exc} (a traceback instead of a message)")
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+    _finite(out, what)
+    return "read"
+
+
+# ----------------------------------------------------------------------------- readers
+
+def _head(src: Path, n_lines: int) -> bytes:
+    with open(src, "rb") as fh:
+        return b"".join(fh.readline() for _ in range(n_lines))
+
+
+def _drive(tmp: Path):
+    """The first 20 s of drive-0708's IMU, its tag cut to match, and the .pos file's first 600 epochs."""
+    d = DATA_DIR / "drive-0708"
+    csv = _head(d / "imu_1934.csv", 2000)
+    tag = (d / "imu_1934.csv.tag").read_bytes()
+    ticks = [int(x.split(b",")[6]) for x in csv.splitlines()[1:-1]]
+    pairs = np.frombuffer(tag, dtype="<u4", offset=76).reshape(-1, 2)
+    keep = int(np.searchsorted(pairs[:, 0], ticks[-1] - ticks[0], side="right"))
+    (tmp / "imu.csv").write_bytes(csv)
+    (tmp / "imu.csv.tag").write_bytes(tag[:76 + 8 * max(keep, 1)])
+    pos = d / "gnss_1934_sf.pos"
+    head = [ln for ln in pos.read_bytes().split(b"\n") if ln.startswith(b"%")]
+    body = [ln for ln in pos.read_bytes().split(b"\n") if ln and not ln.startswith(b"%")][:600]
+    (tmp / "g.pos").write_bytes(b"\n".join(head + body) + b"\n")
+
+
+def _generic_from_drive(tmp: Path):
+    """The drive's IMU and fixes in the generic CSV layout (docs/data_formats.md)."""
+    from mixnav.io.drive0708 import read_drive_imu
+    from mixnav.io.rtklib import read_pos
+    _drive(tmp)
+    imu = read_drive_imu(tmp / "imu.csv", tmp / "imu.csv.tag")
+    w, f = imu.dtheta / imu.dt[:, None], imu.dvel / imu.dt[:, None]
+    rows = ["time[s],wx[rad/s],wy[rad/s],wz[rad/s],fx[m/s^2],fy[m/s^2],fz[m/s^2]"]
+    rows += [f"{t:.4f},{a[0]:.6g},{a[1]:.6g},{a[2]:.6g},{b[0]:.6g},{b[1]:.6g},{b[2]:.6g}"
+             for t, a, b in zip(imu.time, w, f)]
+    (tmp / "imu_generic.csv").write_text("\n".join(rows) + "\n")
+    fx = read_pos(tmp / "g.pos").fixes()
+    rows = ["time[s],lat[deg],lon[deg],height[m],sd_n[m],sd_e[m],sd_d[m]"]
+    rows += [f"{t:.3f},{np.degrees(p[0]):.9f},{np.degrees(p[1]):.9f},{p[2]:.3f},{s[0]:.4f},{s[1]:.4f},{s[2]:.4f}"
+             for t, p, s in zip(fx.time, fx.lla, fx.pos_sigma)]
+    (tmp / "gnss_generic.csv").write_text("\n".join(rows) + "\n")
+
+
+def _readers():
+    from mixnav.config.loader import load_dataset, load_scenario
+    from mixnav.io import android, comma2k19, drive0708, generic_csv, psins, rtklib, smartloc
+    return [
+        # name, prepare(tmp), file to damage, read(path), cases
+        ("drive-imu", _drive, "imu.csv",
+         lambda p: drive0708.read_drive_imu(p, p.with_name("imu.csv.tag")), 45),
+        ("drive-tag", _drive, "imu.csv.tag",
+         lambda p: drive0708.read_drive_imu(p.with_name("imu.csv"), p), 35),
+        ("rtklib-pos", _drive, "g.pos", lambda p: rtklib.read_pos(p).fixes(), 45),
+        ("generic-imu", _generic_from_drive, "imu_generic.csv", generic_csv.read_imu_csv, 25),
+        ("generic-gnss", _generic_from_drive, "gnss_generic.csv", generic_csv.read_gnss_csv, 25),
+        ("psins", lambda t: (t / "l.imu").write_bytes(_head(DATA_DIR / "psins-lasergyro" / "lasergyro.imu", 3000)),
+         "l.imu", lambda p: psins.read_psins_imu(p), 30),
+        ("android", lambda t: (t / "a.txt").write_bytes(
+            _head(DATA_DIR / "android-static" / "pseudoranges_log_2016_06_30_21_26_07.txt", 1500)),
+         "a.txt", lambda p: android.read_gnsslogger(p), 40),
+        ("smartloc-pr", lambda t: (t / "in.txt").write_bytes(
+            _head(DATA_DIR / "smartloc-berlin" / "Berlin_Potsdamer_Platz_Input.txt", 1500)),
+         "in.txt", smartloc.read_pseudoranges, 25),
+        ("smartloc-gt", lambda t: (t / "gt.txt").write_bytes(
+            _head(DATA_DIR / "smartloc-berlin" / "Berlin_Potsdamer_Platz_GT.txt", 800)),
+         "gt.txt", smartloc.read_ground_truth, 20),
+        ("comma-imu", lambda t: shutil.copytree(DATA_DIR / "comma2k19-example1", t / "seg"),
+         "seg/processed_log/IMU/gyro/value", lambda p: comma2k19.read_comma_imu(p.parents[3]), 15),
+        ("comma-gnss", lambda t: shutil.copytree(DATA_DIR / "comma2k19-example1", t / "seg"),
+         "seg/processed_log/GNSS/live_gnss_ublox/value", lambda p: comma2k19.read_comma_gnss(p.parents[3]), 15),
+        ("scenario", lambda t: shutil.copy(Path(load_scenario.__code__.co_filename).parent / "scenarios" /
+                                           "loose-demo.toml", t / "s.toml"),
+         "s.toml", lambda p: load_scenario(str(p)), 40),
+        ("dataset", lambda t: shutil.copy(Path(load_dataset.__code__.co_filename).parent / "datasets" /
+                                          "drive-0708.toml", t / "d.toml"),
+         "d.toml", lambda p: load_dataset(str(p)), 30),
+    ]
+
+
+@pytest.mark.skipif(not DATA_DIR.is_dir(), reason="shared data not found")
+@pytest.mark.parametrize("spec", _readers(), ids=lambda s: s[0])
+def test_reader_survives_damaged_copies(tmp_path, spec):
+    name, prepare, target, read, cases = spec
+    base = tmp_path / "base"
+    base.mkdir()
+    prepare(base)
+    assert _read_once(read, base / target, f"{name} (undamaged)") == "read"
+    original = (base / target).read_bytes()
+    rng = np.random.default_rng(sum(map(ord, name)))   # seeded per reader
+    t0 = time.perf_counter()
+    seen = {"read": 0, "refused": 0}
+    for i in range(cases):
+        mutate = MUTATIONS[i % len(MUTATIONS)]
+        (base / target).write_bytes(mutate(original, rng))
+        seen[_read_once(read, base / target, f"{name} case {i} ({mutate.__name__})")] += 1
+    print(name, seen)
+    assert seen["refused"] > 0   # the damage is noticed at least sometimes
+    assert time.perf_counter() - t0 < 30.0
