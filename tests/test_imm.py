@@ -225,6 +225,8 @@ def test_imm_from_a_scenario_file(tmp_path):
     assert r.metrics.loc["imm", "horizontal_max_m"] < r.metrics.loc["ekf", "horizontal_max_m"] / 3
     m = r.write(tmp_path / "out")
     assert set(m["methods"]["imm"]["mode_probability_mean"]) == {"gnss", "dead-reckoning"}
+    from mixnav.experiment.metrics import METRIC_KEYS_DOC
+    assert set(m["methods"]["imm"]) - {"outages"} <= set(METRIC_KEYS_DOC)      # every key documented
     assert (tmp_path / "out" / "mode_probabilities.png").exists()
 
 

@@ -50,6 +50,8 @@ def test_p4_vehicle_em_imm_beats_the_imm_in_multipath(p4_run):
     assert m["bias_error_horizontal_axis_rms_m"] < 0.7 and m["bias_error_rms_m"] < 1.2
     assert m["bias_detected_share"] > 0.8 and m["bias_false_share"] < 0.05
     assert m["bias_epochs_biased"] > 100
+    from mixnav.experiment.metrics import METRIC_KEYS_DOC
+    assert {k for k in m.index if k.startswith("bias_")} <= set(METRIC_KEYS_DOC)
     assert "bias_error_rms_m" not in p4_run.metrics.columns or np.isnan(p4_run.metrics.loc["imm", "bias_error_rms_m"])
     s = t["imm"][(t["imm"].time_s >= 1200) & (t["imm"].time_s < 1800)]
     assert s["p_mode_sins-gnss"].mean() < 0.5

@@ -66,7 +66,17 @@ METRIC_KEYS_DOC: dict[str, str] = {
     "measurement_epochs": "number of GNSS epochs processed",
     "recoveries": "counts of numerical recoveries (see mixnav.engine.engine); the robust adaptive EKF "
                   "adds its row and epoch counts (see mixnav.filters.robust); learned-mixture methods add "
-                  "learner_not_converged (offline fits that stopped before converging)",
+                  "learner_not_converged (offline fits that stopped before converging); mixture banks add "
+                  "bank_reset (the divergence safeguard re-opened the covariance)",
+    "mode_probability_mean": "IMM methods: {mode: mean probability} over the solution records",
+    "mode_probability_mean_in_windows": "IMM methods: {mode: mean probability} inside the outage/withheld windows",
+    "bias_error_rms_m": "EM-IMM methods, when the fixes' systematic error is known (simulation, injected "
+                        "corruption): RMS of the 3-D error of the removed bias at the fixes where one was removed [m]",
+    "bias_error_horizontal_axis_rms_m": "the same per north/east axis (P4's measure) [m]",
+    "bias_detected_share": "share of the truly biased fixes where a bias was removed",
+    "bias_false_share": "share of the removals on fixes with no bias",
+    "bias_epochs_removed": "fixes where a bias was removed",
+    "bias_epochs_biased": "fixes truly biased (among those the method saw)",
     "nis_mean_per_dof": "mean NIS divided by the measurement dimension (1 if consistent)",
     "nis_median_per_dof": "median NIS divided by the measurement dimension (about 0.8-0.9 if consistent; "
                           "above 5 the run is warned about, see docs/validation.md)",
