@@ -7,7 +7,7 @@ process, best of ``REPEAT`` runs each:
 - M1 EKF, M2 robust adaptive EKF;
 - M3 banks of 1, 4, 16 and 64 components per update (kept x process-noise
   components: 1x1, 2x2, 4x4, 16x4) with a two-component noise mixture on
-  every row;
+  every row, with the update's guards (the default) and, for 16, without them;
 - M3 with 4 and 16 kept components without and with online re-learning of
   the pseudorange and TDCP mixtures (M4 beyond P1: windows of 600 rows, a
   refit every 20 epochs (the default), and every epoch as the worst case);
@@ -33,7 +33,7 @@ from mixnav.config.loader import load_scenario
 from mixnav.experiment import methods as registry
 from mixnav.filters._bank_kernels import bank_epoch
 from mixnav.measurements.kinds import KINDS
-from mixnav.filters.gmekf import BankMixtures, GaussianMixtureEkf, StandardMixture, _warm_bank
+from mixnav.filters.gmekf import BankEstimator, BankMixtures, GaussianMixtureEkf, StandardMixture
 from mixnav.noise.learn.online import OnlineSettings
 from mixnav.ins.error_model import ClockModel
 from mixnav.sim.scenario import simulate
@@ -81,6 +81,13 @@ def filters_on_p1(seed=3):
             g = GaussianMixtureEkf(f.layout, f.imu_model, mixtures, max_components=kept, clock=clock)
             return g.run(sim.imu, sim.init, meas)
         runs[f"gmekf bank {kept * J} ({kept}x{J})"] = run
+        if kept == 4:   # the same bank with P1's plain update: the guards' cost (issue 20)
+            def run_plain(kept=kept, mixtures=mixtures):
+                f, meas = build(by_name["ekf"])
+                g = GaussianMixtureEkf(f.layout, f.imu_model, mixtures, max_components=kept, clock=clock,
+                                       gate=np.inf, outlier_mean=np.inf, divergence_window=0)
+                return g.run(sim.imu, sim.init, meas)
+            runs[f"gmekf bank {kept * J} ({kept}x{J}), plain update (no guards)"] = run_plain
     # M4 online re-learning (pseudorange and TDCP windows of 600 rows, refit every 20 (default) or
     # every epoch) against the same bank without it
     # ("collect": a window that never fills, so the rows are collected and never refitted)
@@ -136,7 +143,7 @@ def kernel_vs_numpy(N=16, m=18, na=21, n=17, reps=300):
     mix = StandardMixture((0.1, 0.9), (0.0, 0.0), (1.0, 1.0 / 3.0))
     tb = BankMixtures({"pseudorange": mix}).tables(KINDS)
     kinds = np.zeros(m, dtype=np.int64)
-    _warm_bank()
+    BankEstimator(BankMixtures()).warm_up()   # compile the bank kernels outside the timing
     bank_epoch(lw, X, P, z, H, r, kinds, *tb, 1e4, N, n)
     t0 = time.perf_counter()
     for _ in range(reps):
