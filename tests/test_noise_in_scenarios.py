@@ -72,7 +72,9 @@ def test_recorded_fixes_can_be_corrupted(tmp_path):
                                    'corrupt_position = { type = "gross", size = "20 m", every = 50, sign = "+" }')
     cfg.write_text(text)
     ds, s, _ = load_dataset(str(cfg))
-    po = process(ds, s)
+    from mixnav.io.imu_checks import DataWarning
+    with pytest.warns(DataWarning, match="hole"):     # the simulated record's 60 s outage, reported
+        po = process(ds, s)
     d = ned_displacement(po.all_fixes.lla, run.fixes.lla)
     hit = np.zeros(len(d), dtype=bool)
     hit[::50] = True
