@@ -114,6 +114,33 @@ def test_odometer_gaps_are_reported_next_to_the_imu_gaps(simulated, tmp_path):
     assert "odometer_gaps_accepted" not in write_process(tmp_path / "without", process(ds, src))
 
 
+def test_odometer_max_gap_from_the_dataset_file(simulated, tmp_path):
+    """[aiding.odometer] max_gap: a 3 s hole in the speeds at 10 Hz is counted (and
+    warned about) with gap_action = "warn", and is an error naming the file and the line
+    after the hole with "fail"."""
+    from mixnav.errors import DataError
+    from mixnav.experiment.process import read_odometer
+    run, cfg = simulated
+    t = run.truth.time[::10]
+    keep = (t < 100.0) | (t > 103.0)
+    speed = np.linalg.norm(run.truth.v_n[::10, :2], axis=1)
+    np.savetxt(tmp_path / "odo.csv", np.column_stack([t[keep], speed[keep]]), fmt="%.6f", delimiter=",",
+               header="time[s],speed[m/s]", comments="")
+    for action in ("warn", "fail"):
+        p = tmp_path / f"odo-{action}.toml"
+        p.write_text(cfg.read_text() + f'[aiding.odometer]\nfile = "{tmp_path / "odo.csv"}"\nsigma = "0.1 m/s"\n'
+                     f'max_gap = "0.5 s"\ngap_action = "{action}"\n')
+        ds, src, _ = load_dataset(str(p))
+        if action == "warn":
+            with pytest.warns(UserWarning, match="gap"):
+                odo = read_odometer(ds, tmp_path, 0.0)
+            assert odo.gaps == 1
+        else:
+            with pytest.raises(DataError) as e:
+                read_odometer(ds, tmp_path, 0.0)
+            assert "odo.csv" in str(e.value) and e.value.line == int(np.argmax(t[keep] > 103.0)) + 2
+
+
 def test_withheld_fixes_are_not_given_to_the_filter(simulated):
     run, cfg = simulated
     ds, src, _ = load_dataset(str(cfg))

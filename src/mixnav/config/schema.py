@@ -549,10 +549,14 @@ class OdometerAidingConfig(Strict):
     none; ``scale`` a known scale error; ``scale_sigma`` the initial 1-sigma of
     the estimated one (method ``estimate = ["odometer_scale"]``); ``lever_arm``
     the wheel (axle centre) in the body frame from the IMU, default the
-    vehicle point."""
+    vehicle point. ``max_gap``: a hole between the file's samples longer than this
+    warns and is counted (``odometer_gaps_accepted`` in metrics.json), or with
+    ``gap_action = "fail"`` is an error naming the file and line (default: no limit)."""
 
     format: Literal["csv"] = "csv"
     file: str | None = None
+    max_gap: Duration | None = None  # type: ignore[valid-type]
+    gap_action: Literal["warn", "fail"] = "warn"
     sigma: PosSpeed = 0.05
     scale: Fraction = 0.0
     scale_sigma: Fraction = 0.01

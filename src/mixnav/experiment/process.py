@@ -125,7 +125,9 @@ def read_odometer(ds: Dataset, folder: Path, t0: float) -> OdometerData | None:
     if c is None or c.file is None:
         return None
     from ..io import odometer_csv
-    odo = odometer_csv.read_odometer_csv(folder / c.file, sigma=c.sigma)
+    odo = odometer_csv.read_odometer_csv(folder / c.file, sigma=c.sigma,
+                                         max_gap=None if c.max_gap is None else float(c.max_gap),
+                                         gap_action=c.gap_action)
     return _shift(odo, t0)
 
 
