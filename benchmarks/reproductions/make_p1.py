@@ -5,8 +5,8 @@
     python -c "import sys; from pathlib import Path; sys.path.insert(0, 'benchmarks/reproductions'); \
         import make_p1; make_p1.late_gross_variant(Path('runs'))"
     mixnav experiment runs/P1-sim1-late-gross.toml --runs 50 --out runs/P1-sim1-late-gross
-    (the same with urban_variant -> runs/P1-sim1-urban and random_gross_variant ->
-    runs/P1-sim1-random-gross)
+    (the same with urban_variant -> runs/P1-sim1-urban, random_gross_variant ->
+    runs/P1-sim1-random-gross and consumer_variant -> runs/P1-sim1-consumer)
     python benchmarks/reproductions/make_p1.py runs      # -> benchmarks/reproductions/P1_tables.md
 
 Each cell is the mean over runs with the half width of its 95 % confidence
@@ -110,6 +110,28 @@ def random_gross_variant(out: Path) -> Path:
     return p
 
 
+CONSUMER = ("a consumer-grade IMU: gyro bias 20 deg/h, ARW 0.5 deg/sqrt(h), scale factors 1 %, "
+            "accelerometer bias 1 mg, VRW 100 ug/sqrt(Hz); written by `consumer_variant`")
+_SHIPPED_IMU = ('errors = { gyro_bias = "2 deg/h", gyro_bias_instability = "0 deg/h", arw = "0.1 deg/sqrt(h)", '
+                'gyro_scale = "0.3 %", accel_bias = "0.1 mg", accel_bias_instability = "0 ug", '
+                'vrw = "30 ug/sqrt(Hz)", accel_scale = "0.3 %" }')
+
+
+def consumer_variant(out: Path) -> Path:
+    """P1-sim1 with a consumer-grade IMU (ten times the shipped gyro bias, five times its
+    ARW, 1 % scale factors): the attitude then depends on how the GNSS rows are weighted,
+    which is where a noise model can matter (issue 20); returns the TOML."""
+    from mixnav.config.loader import resolve
+    text, _ = resolve("P1-sim1")
+    assert text.count(_SHIPPED_IMU) == 1
+    worse = ('errors = { gyro_bias = "20 deg/h", gyro_bias_instability = "0 deg/h", arw = "0.5 deg/sqrt(h)", '
+             'gyro_scale = "1 %", accel_bias = "1 mg", accel_bias_instability = "0 ug", vrw = "100 ug/sqrt(Hz)", '
+             'accel_scale = "1 %" }')
+    p = out / "P1-sim1-consumer.toml"
+    p.write_text(text.replace(_SHIPPED_IMU, worse).replace('name = "P1-sim1"', 'name = "P1-sim1-consumer"'))
+    return p
+
+
 def late_gross_variant(out: Path) -> Path:
     """P1-sim1 with the first gross error at epoch 20 instead of 0 (P1.md point 2), everything
     else as shipped; returns the TOML written into ``out``."""
@@ -153,7 +175,7 @@ def main(root: Path) -> None:
              "discussion is in P1.md. Cells: mean over runs ± half width of the 95 % CI; in "
              "parentheses the paper's value.", ""]
     for name, fn in (("P1-sim1", table1), ("P1-sim2", table2), ("P1-sim1-late-gross", table1),
-                     ("P1-sim1-urban", table1), ("P1-sim1-random-gross", table1)):
+                     ("P1-sim1-urban", table1), ("P1-sim1-random-gross", table1), ("P1-sim1-consumer", table1)):
         d = root / name
         if (d / "summary.csv").exists():
             s = pd.read_csv(d / "summary.csv")
@@ -164,6 +186,9 @@ def main(root: Path) -> None:
                         "(the paper's values beside it are those of the shipped reading)")
             if name.endswith("random-gross"):
                 t[0] = (f"### P1-sim1 with independent gross errors ({RANDOM_GROSS}), {runs} runs "
+                        "(the paper's values beside it are those of the shipped reading)")
+            if name.endswith("consumer"):
+                t[0] = (f"### P1-sim1 with {CONSUMER}, {runs} runs "
                         "(the paper's values beside it are those of the shipped reading)")
             if name.endswith("urban"):
                 t[0] = (f"### P1-sim1 with a 30 deg elevation mask ({URBAN}), {runs} runs "
