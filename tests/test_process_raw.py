@@ -131,3 +131,46 @@ def test_missing_navigation_file_is_a_data_error(tmp_path):
     res = runner.invoke(app, ["process", "android-static", "--data", str(folder), "--out", str(tmp_path / "o")])
     assert res.exit_code != 0 and "hour1820.16n" in res.output and "not found" in res.output
     assert not (tmp_path / "o" / "metrics.json").exists()
+
+
+def test_reference_point_in_ecef(tmp_path):
+    """[reference_point] x, y, z (ECEF, as RINEX headers and survey reports give it) is the
+    same point as the geodetic one (lla -> ECEF -> the config -> lla, to 1e-9 rad and 1 mm);
+    both forms at once, an incomplete ECEF point, or one far from the Earth's surface are
+    errors naming the section."""
+    from mixnav.geodesy.frames import lla_to_ecef
+    ds, _, _ = load_dataset("android-static")
+    rp = ds.reference_point
+    x, y, z = lla_to_ecef(np.array([rp.latitude, rp.longitude, rp.height]))
+    geo = 'latitude = "37.422578 deg"\nlongitude = "-122.081678 deg"\nheight = "-28 m"'
+    assert geo in SHIPPED
+    ecef = f'x = "{float(x):.4f} m"\ny = "{float(y):.4f} m"\nz = "{float(z):.4f} m"'
+    ds2, _, _ = load_dataset(_cfg(tmp_path, SHIPPED.replace(geo, ecef)))
+    r2 = ds2.reference_point
+    assert r2.latitude == pytest.approx(rp.latitude, abs=1e-9) and r2.longitude == pytest.approx(rp.longitude, abs=1e-9)
+    assert r2.height == pytest.approx(rp.height, abs=1e-3)
+    for text, message in ((geo + "\n" + ecef, "not both"), (ecef.rsplit("\n", 1)[0], "all of x, y and z"),
+                          (ecef.replace(f"{float(x):.4f} m", f"{float(x):.4f} km"), "Earth's centre")):
+        with pytest.raises(ConfigError, match=message) as ei:
+            load_dataset(_cfg(tmp_path, SHIPPED.replace(geo, text), "bad.toml"))
+        assert ei.value.key.startswith("reference_point"), ei.value.key
+
+
+def test_missing_ionosphere_coefficients_are_warned_and_reported(tmp_path):
+    """A navigation file whose header has no ION ALPHA / ION BETA lines: the ionosphere
+    correction is skipped with a warning naming the file, and metrics.json says so
+    ("skipped"); with them it says "klobuchar"."""
+    from mixnav.experiment.spp_process import ionosphere_applied, process_raw
+    from mixnav.io.imu_checks import DataWarning
+    folder = data_file("android-static", LOG).parent
+    ds, src, _ = load_dataset("android-static")
+    nav = folder / ds.raw_gnss.navigation
+    lines = nav.read_text().splitlines(keepends=True)
+    kept = [ln for ln in lines if "ION ALPHA" not in ln and "ION BETA" not in ln]
+    assert len(kept) == len(lines) - 2
+    shutil.copy(folder / LOG, tmp_path / LOG)
+    (tmp_path / nav.name).write_text("".join(kept))
+    with pytest.warns(DataWarning, match=nav.name + ".*ionosphere"):
+        po = process_raw(ds, src, tmp_path)
+    assert ionosphere_applied(po) == "skipped"
+    assert ionosphere_applied(process_raw(ds, src, folder)) == "klobuchar"

@@ -152,14 +152,39 @@ class RawGnss(Strict):
 
 
 class ReferencePoint(Strict):
-    """A surveyed static point (WGS-84 geodetic, ellipsoidal height)."""
+    """A surveyed static point: WGS-84 geodetic (``latitude``, ``longitude``, ellipsoidal
+    ``height``) or Earth-centred, Earth-fixed (``x``, ``y``, ``z`` [m], as RINEX headers and
+    survey reports give it), one of the two. After validation ``latitude``,
+    ``longitude``, ``height`` are always set (ECEF converted)."""
 
-    latitude: _quantity(u.ANGLE)  # type: ignore[valid-type]
-    longitude: _quantity(u.ANGLE)  # type: ignore[valid-type]
-    height: _quantity(u.LENGTH)  # type: ignore[valid-type]
+    latitude: _quantity(u.ANGLE) | None = None  # type: ignore[valid-type]
+    longitude: _quantity(u.ANGLE) | None = None  # type: ignore[valid-type]
+    height: _quantity(u.LENGTH) | None = None  # type: ignore[valid-type]
+    x: _quantity(u.LENGTH) | None = None  # type: ignore[valid-type]
+    y: _quantity(u.LENGTH) | None = None  # type: ignore[valid-type]
+    z: _quantity(u.LENGTH) | None = None  # type: ignore[valid-type]
 
     @model_validator(mode="after")
-    def _plausible(self):
+    def _one_form(self):
+        geo = [self.latitude, self.longitude, self.height]
+        ecef = [self.x, self.y, self.z]
+        if any(v is not None for v in ecef):
+            if any(v is not None for v in geo):
+                raise ValueError("give the point either geodetic (latitude, longitude, height) or ECEF "
+                                 "(x, y, z), not both")
+            if any(v is None for v in ecef):
+                raise ValueError("an ECEF point needs all of x, y and z")
+            import numpy as np
+            from ..geodesy.frames import ecef_to_lla
+            r = float(np.linalg.norm(ecef))
+            if not 6.2e6 < r < 6.5e6:
+                raise ValueError(f"the ECEF point is {r / 1e3:.1f} km from the Earth's centre, not near its "
+                                 "surface (6356-6378 km): a unit or a sign is wrong")
+            lat, lon, h = ecef_to_lla(np.array(ecef, dtype=float))
+            for k, v in (("latitude", lat), ("longitude", lon), ("height", h)):   # frozen model: set once here
+                object.__setattr__(self, k, float(v))
+        elif any(v is None for v in geo):
+            raise ValueError("give latitude, longitude and height (or x, y, z in ECEF)")
         check_position(self.latitude, self.longitude, self.height)   # docs/validation.md
         return self
 

@@ -59,12 +59,26 @@ def process_raw(ds: Dataset, source: str, folder: Path) -> SppOutput:
     t0 = _time.perf_counter()
     obs = android.read_gnsslogger(folder / c.file, max_sv_time_uncertainty_ns=c.max_sv_time_uncertainty * 1e9)
     eph = BroadcastEphemeris.from_rinex(folder / c.navigation)
+    if c.ionosphere and eph.iono_alpha is None:   # asked for, and impossible: said, not silent
+        import warnings
+        from ..io.imu_checks import DataWarning
+        warnings.warn(f"{folder / c.navigation}: the header has no ionosphere (Klobuchar) coefficients, so the "
+                      "ionosphere correction is skipped and every pseudorange keeps its 2-10 m delay "
+                      "(metrics.json: ionosphere)", DataWarning, stacklevel=2)
     t1 = _time.perf_counter()
     track = solve_epochs(eph, obs.week, obs.tow, obs.epoch, obs.prn, obs.pseudorange, options(ds))
     t2 = _time.perf_counter()
     rp = ds.reference_point
     ref = None if rp is None else np.array([rp.latitude, rp.longitude, rp.height])
     return SppOutput(ds, source, folder, obs, eph, track, ref, t1 - t0, t2 - t1)
+
+
+def ionosphere_applied(po: SppOutput) -> str:
+    """``"klobuchar"`` (applied), ``"off"`` (``raw_gnss.ionosphere = false``) or ``"skipped"``
+    (asked for, but the navigation header has no Klobuchar coefficients; warned)."""
+    if not po.dataset.raw_gnss.ionosphere:
+        return "off"
+    return "klobuchar" if po.ephemeris.iono_alpha is not None else "skipped"
 
 
 def solution_table(po: SppOutput) -> pd.DataFrame:
@@ -148,6 +162,7 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None) -> dict:
         "reference_point": None if po.reference_lla is None else
         {"lat_deg": float(np.degrees(po.reference_lla[0])), "lon_deg": float(np.degrees(po.reference_lla[1])),
          "height_m": float(po.reference_lla[2])},
+        "ionosphere": ionosphere_applied(po),
         "methods": {METHOD: spp_metrics(table, po.solve_time_s)},
     }
     atomic_write_dataframe(out_dir / f"solution_{METHOD}.csv", table)
@@ -163,8 +178,8 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None) -> dict:
     if len(ok):
         figs["trajectory"] = figures.trajectory_figure({METHOD: ok}, ref)
     opts = options(po.dataset)
-    iono = "Klobuchar (broadcast coefficients)" if (opts.ionosphere and po.ephemeris.iono_alpha is not None) \
-        else "none"
+    iono = {"klobuchar": "Klobuchar (broadcast coefficients)", "off": "none (switched off)",
+            "skipped": "none: the navigation header has no coefficients"}[ionosphere_applied(po)]
     notes = [f"Single-point positioning, GPS L1 C/A pseudoranges, {used} of {len(table)} epochs solved "
              f"(status counts: {counts}).",
              f"Elevation mask {np.degrees(opts.elevation_mask):.1f} deg; sigma = sqrt({opts.sigma_a:g}^2 + "
