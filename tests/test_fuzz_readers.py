@@ -158,9 +158,19 @@ def _generic_from_drive(tmp: Path):
     (tmp / "gnss_generic.csv").write_text("\n".join(rows) + "\n")
 
 
+def _rinex_from_android(tmp):
+    """A RINEX 3 observation file of the first 40 epochs of the android-static log (written by
+    the test, as in tests/test_process_raw.py)."""
+    from mixnav.io import android
+    from .test_process_raw import _write_rinex3
+    a = android.read_gnsslogger(DATA_DIR / "android-static" / "pseudoranges_log_2016_06_30_21_26_07.txt")
+    sel = a.epoch < 40
+    _write_rinex3(tmp / "o.rnx", a.week[:40], a.tow[:40], a.epoch[sel], a.prn[sel], a.pseudorange[sel])
+
+
 def _readers():
     from mixnav.config.loader import load_dataset, load_scenario
-    from mixnav.io import android, comma2k19, drive0708, generic_csv, psins, rtklib, smartloc
+    from mixnav.io import android, comma2k19, drive0708, generic_csv, psins, rinex_obs, rtklib, smartloc
     return [
         # name, prepare(tmp), file to damage, read(path), cases
         ("drive-imu", _drive, "imu.csv",
@@ -175,6 +185,7 @@ def _readers():
         ("android", lambda t: (t / "a.txt").write_bytes(
             _head(DATA_DIR / "android-static" / "pseudoranges_log_2016_06_30_21_26_07.txt", 1500)),
          "a.txt", lambda p: android.read_gnsslogger(p), 40),
+        ("rinex-obs", _rinex_from_android, "o.rnx", lambda p: rinex_obs.read_rinex_obs(p), 30),
         ("smartloc-pr", lambda t: (t / "in.txt").write_bytes(
             _head(DATA_DIR / "smartloc-berlin" / "Berlin_Potsdamer_Platz_Input.txt", 1500)),
          "in.txt", smartloc.read_pseudoranges, 25),

@@ -41,7 +41,7 @@ def test_shipped_config_validates():
 @pytest.mark.parametrize("edit, key, message", [
     (('sigma_b = "3 m"', 'sigma_b = "3 m"\nsigma_c = "1 m"'), "raw_gnss.sigma_c", "unknown key"),
     (('elevation_mask = "10 deg"', 'elevation_mask = 10'), "raw_gnss.elevation_mask", "bare number"),
-    (('format = "android-gnsslogger"', 'format = "rinex-obs"'), "raw_gnss.format", "android-gnsslogger"),
+    (('format = "android-gnsslogger"', 'format = "ublox-ubx"'), "raw_gnss.format", "android-gnsslogger"),
     (('height = "-28 m"', 'height = "-28 deg"'), "reference_point.height", "length is expected"),
     (('[raw_gnss]', '[imu]\nformat = "csv"\nfile = "x"\n[raw_gnss]'), "imu", "not used by dataset.kind"),
 ])
@@ -174,3 +174,63 @@ def test_missing_ionosphere_coefficients_are_warned_and_reported(tmp_path):
         po = process_raw(ds, src, tmp_path)
     assert ionosphere_applied(po) == "skipped"
     assert ionosphere_applied(process_raw(ds, src, folder)) == "klobuchar"
+
+
+def _write_rinex3(path, week, tow, epoch, prn, pseudorange):
+    """A minimal RINEX 3.03 GPS observation file (C1C only) of these pseudoranges, written
+    here (the test's own file, not a vendored one)."""
+    gps0 = np.datetime64("1980-01-06T00:00:00", "ns")
+
+    def stamp(k):
+        t = gps0 + np.timedelta64(int(round((week[k] * 604800 + tow[k]) * 1e9)), "ns")
+        date, clock = str(t).split("T")
+        y, mo, d = date.split("-")
+        hh, mm, ss = clock.split(":")
+        return y, mo, d, hh, mm, float(ss)
+    y, mo, d, hh, mm, ss = stamp(0)
+    head = [("     3.03           OBSERVATION DATA    G (GPS)", "RINEX VERSION / TYPE"),
+            ("mixnav test", "PGM / RUN BY / DATE"), ("TEST", "MARKER NAME"), ("G    1 C1C", "SYS / # / OBS TYPES"),
+            (f"  {y:>4s}    {int(mo):2d}    {int(d):2d}    {int(hh):2d}    {int(mm):2d}   {ss:10.7f}     GPS",
+             "TIME OF FIRST OBS"), ("", "END OF HEADER")]
+    lines = [f"{a:<60s}{b:<20s}" for a, b in head]
+    for k in range(len(tow)):
+        sel = epoch == k
+        y, mo, d, hh, mm, ss = stamp(k)
+        lines.append(f"> {y} {mo} {d} {hh} {mm}{ss:11.7f}  0{int(sel.sum()):3d}")
+        lines += [f"G{int(p):02d}{r:14.3f}  " for p, r in zip(prn[sel], pseudorange[sel])]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_rinex_observation_file_gives_the_phone_logs_solution(tmp_path):
+    """raw_gnss.format = "rinex-obs": the android-static pseudoranges written as RINEX 3
+    (times to 0.1 us, ranges to 1 mm) give the same SPP solutions as the phone log
+    (horizontal RMSE within 1 cm, the same epochs solved); a damaged file is a DataError
+    naming it."""
+    from mixnav.errors import DataError
+    from mixnav.experiment.spp_process import process_raw, solution_table
+    from mixnav.io.android import read_gnsslogger
+    from mixnav.io.rinex_obs import read_rinex_obs
+    folder = data_file("android-static", LOG).parent
+    ds, src, _ = load_dataset("android-static")
+    a = read_gnsslogger(folder / LOG, max_sv_time_uncertainty_ns=ds.raw_gnss.max_sv_time_uncertainty * 1e9)
+    _write_rinex3(tmp_path / "phone.rnx", a.week, a.tow, a.epoch, a.prn, a.pseudorange)
+    r = read_rinex_obs(tmp_path / "phone.rnx")
+    assert r.code == "C1C" and len(r) == len(a)
+    np.testing.assert_allclose(r.tow, a.tow, atol=2e-6)
+    np.testing.assert_allclose(r.pseudorange, a.pseudorange, atol=6e-4)
+    shutil.copy(folder / ds.raw_gnss.navigation, tmp_path)
+    text = SHIPPED.replace('format = "android-gnsslogger"', 'format = "rinex-obs"').replace(
+        f'file = "{LOG}"', 'file = "phone.rnx"')
+    assert "phone.rnx" in text
+    ds2, src2, _ = load_dataset(_cfg(tmp_path, text))
+    t_a = solution_table(process_raw(ds, src, folder))
+    t_r = solution_table(process_raw(ds2, src2, tmp_path))
+    assert (t_a.status == "ok").sum() == (t_r.status == "ok").sum() > 200
+    ok = t_a.status == "ok"
+    h_a = np.sqrt(np.mean(np.hypot(t_a.err_n_m[ok], t_a.err_e_m[ok]) ** 2))
+    h_r = np.sqrt(np.mean(np.hypot(t_r.err_n_m[ok], t_r.err_e_m[ok]) ** 2))
+    assert abs(h_a - h_r) < 0.01, (h_a, h_r)
+    (tmp_path / "bad.rnx").write_text("this is not RINEX\n")
+    with pytest.raises(DataError) as e:
+        read_rinex_obs(tmp_path / "bad.rnx")
+    assert "bad.rnx" in str(e.value)

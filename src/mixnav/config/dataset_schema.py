@@ -137,10 +137,12 @@ class RawGnss(Strict):
     ``troposphere`` (Saastamoinen) and ``ionosphere`` (Klobuchar, when the
     navigation header has its coefficients) set the solver
     (:class:`mixnav.gnss.spp.SppOptions`); ``max_sv_time_uncertainty``
-    rejects measurements the receiver reports as worse than it.
+    rejects measurements the receiver reports as worse than it (Android logs).
+    ``format = "rinex-obs"``: a RINEX 2.x/3.x observation file, its GPS L1 C/A
+    pseudoranges (:mod:`mixnav.io.rinex_obs`).
     """
 
-    format: Literal["android-gnsslogger"]
+    format: Literal["android-gnsslogger", "rinex-obs"]
     file: str
     navigation: str
     elevation_mask: _quantity(u.ANGLE, nonnegative=True) = 10.0 * u.DEG  # type: ignore[valid-type]

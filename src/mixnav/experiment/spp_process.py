@@ -39,7 +39,7 @@ class SppOutput:
     dataset: Dataset
     source: str
     data_dir: Path
-    observations: android.AndroidPseudoranges
+    observations: object               # android.AndroidPseudoranges or rinex_obs.RinexPseudoranges
     ephemeris: BroadcastEphemeris
     track: SppTrack
     reference_lla: np.ndarray | None   # (3,) rad, rad, m
@@ -57,7 +57,12 @@ def process_raw(ds: Dataset, source: str, folder: Path) -> SppOutput:
     """Read the raw log and the navigation file, and solve every epoch."""
     c = ds.raw_gnss
     t0 = _time.perf_counter()
-    obs = android.read_gnsslogger(folder / c.file, max_sv_time_uncertainty_ns=c.max_sv_time_uncertainty * 1e9)
+    if c.format == "rinex-obs":
+        from ..io.rinex_obs import read_rinex_obs
+        obs = read_rinex_obs(folder / c.file)
+    else:
+        obs = android.read_gnsslogger(folder / c.file,
+                                      max_sv_time_uncertainty_ns=c.max_sv_time_uncertainty * 1e9)
     eph = BroadcastEphemeris.from_rinex(folder / c.navigation)
     if c.ionosphere and eph.iono_alpha is None:   # asked for, and impossible: said, not silent
         import warnings
