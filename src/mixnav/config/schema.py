@@ -745,9 +745,24 @@ class VbUnscentedOptions(VbOptions, UnscentedOptions):
     """``[methods.options]`` of ``estimator = "vb-aukf"``: :class:`VbOptions` and :class:`UnscentedOptions`."""
 
 
+class ParticleOptions(Strict):
+    """``[methods.options]`` of ``estimator = "pf"`` (mixnav.filters.particle, docs/particle.md):
+    the number of ``particles`` (>= 2), the effective-sample-size fraction below which
+    the particles are resampled (``resample_threshold`` in (0, 1]), the Liu-West kernel
+    jitter after a resampling (``roughening`` in [0, 1); 0: none) and the merged
+    sub-intervals the particles are mechanized over per step (``substeps``)."""
+
+    particles: int = Field(default=1000, ge=2)
+    resample_threshold: float = Field(default=0.5, gt=0, le=1)
+    roughening: float = Field(default=0.9, ge=0, lt=1)
+    substeps: int = Field(default=4, ge=0)
+    absurd_sigma: float = Field(default=1e4, gt=0)
+
+
 #: estimators whose ``[methods.options]`` table is validated against a schema at load time
 #: (the others' options are checked by the estimator when built)
-ESTIMATOR_OPTIONS = {"ukf": UnscentedOptions, "vb-aukf": VbUnscentedOptions, "vb-akf": VbOptions}
+ESTIMATOR_OPTIONS = {"ukf": UnscentedOptions, "vb-aukf": VbUnscentedOptions, "vb-akf": VbOptions,
+                     "pf": ParticleOptions}
 
 
 class MethodConfig(Strict):

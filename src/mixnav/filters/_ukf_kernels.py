@@ -97,6 +97,72 @@ def nav_difference(nav, ref, out):
 
 
 @njit(cache=True)
+def merge_block(dtheta, dvel, dt, substeps):
+    """The block's raw increments merged into at most ``substeps`` sub-intervals (0 or
+    ``substeps >= K``: as they are): ``(gth, gdv, gdt)``."""
+    K = dtheta.shape[0]
+    S = K if substeps <= 0 or substeps >= K else substeps
+    gth = np.zeros((S, 3))
+    gdv = np.zeros((S, 3))
+    gdt = np.zeros(S)
+    for k in range(K):
+        g = (k * S) // K
+        for i in range(3):
+            gth[g, i] += dtheta[k, i]
+            gdv[g, i] += dvel[k, i]
+        gdt[g] += dt[k]
+    return gth, gdv, gdt
+
+
+@njit(cache=True)
+def mechanize_members(navs, prevs, sensors, gth, gdv, gdt):
+    """Mechanize every row of ``navs`` (with its ``prevs``, ``sensors``) over the merged
+    increments ``gth``, ``gdv``, ``gdt`` (in place)."""
+    S = gdt.shape[0]
+    dth = np.empty(3)
+    dv = np.empty(3)
+    dvn = np.empty(3)
+    for j in range(navs.shape[0]):
+        nav, prev, sensor = navs[j], prevs[j], sensors[j]
+        for k in range(S):
+            h = gdt[k]
+            for i in range(3):
+                dth[i] = (gth[k, i] - sensor[i] * h) / (1.0 + sensor[6 + i])
+                dv[i] = (gdv[k, i] - sensor[3 + i] * h) / (1.0 + sensor[9 + i])
+            mechanize_step(nav, dth, dv, prev[0:3], prev[3:6], h, dvn)
+            for i in range(3):
+                prev[i] = dth[i]
+                prev[3 + i] = dv[i]
+
+
+@njit(cache=True)
+def difference_members(navs, ref, D, Dn, layout, tau, T):
+    """The propagated error states ``Dn[j]`` (j < len(D)) of the mechanized members
+    ``navs[j]`` against the mechanized reference ``ref``: attitude, velocity and
+    position by :func:`nav_difference`; sensor deviations ``D[j]`` decayed by their
+    Gauss-Markov model ``exp(-T / tau)``; the clock deviation ``+= drift T``;
+    auxiliary deviations kept."""
+    N, n = D.shape
+    i_bg, i_ba, i_sg, i_sa, i_clk = layout[L_BG], layout[L_BA], layout[L_SG], layout[L_SA], layout[L_CLK]
+    f = np.empty(4)
+    for b in range(4):
+        f[b] = math.exp(-T / tau[b]) if tau[b] > 0.0 and np.isfinite(tau[b]) else 1.0
+    for j in range(N):
+        for i in range(n):
+            Dn[j, i] = D[j, i]
+        nav_difference(navs[j], ref, Dn[j])
+        for i in range(3):
+            Dn[j, i_bg + i] = D[j, i_bg + i] * f[0]
+            Dn[j, i_ba + i] = D[j, i_ba + i] * f[1]
+            if i_sg >= 0:
+                Dn[j, i_sg + i] = D[j, i_sg + i] * f[2]
+            if i_sa >= 0:
+                Dn[j, i_sa + i] = D[j, i_sa + i] * f[3]
+        if i_clk >= 0:
+            Dn[j, i_clk] = D[j, i_clk] + D[j, i_clk + 1] * T
+
+
+@njit(cache=True)
 def ukf_predict(nav0, prev0, sensor0, x, P, Qd, c, wm, wc, dtheta, dvel, dt, substeps, layout, tau, T,
                 L, D, navs, prevs, sensors, Dn, x_out, P_out):
     """Propagate the sigma points of ``N(x, P)`` about ``nav0`` over one IMU block.
@@ -132,50 +198,9 @@ def ukf_predict(nav0, prev0, sensor0, x, P, Qd, c, wm, wc, dtheta, dvel, dt, sub
             sensors[j, i] = sensor0[i]
         if j < N:
             apply_feedback(navs[j], sensors[j], clock, D[j], layout)
-    # the block, merged into at most `substeps` sub-intervals (0: as it is)
-    K = dtheta.shape[0]
-    S = K if substeps <= 0 or substeps >= K else substeps
-    gth = np.zeros((S, 3))
-    gdv = np.zeros((S, 3))
-    gdt = np.zeros(S)
-    for k in range(K):
-        g = (k * S) // K
-        for i in range(3):
-            gth[g, i] += dtheta[k, i]
-            gdv[g, i] += dvel[k, i]
-        gdt[g] += dt[k]
-    dth = np.empty(3)
-    dv = np.empty(3)
-    dvn = np.empty(3)
-    for j in range(N + 1):
-        nav, prev, sensor = navs[j], prevs[j], sensors[j]
-        for k in range(S):
-            h = gdt[k]
-            for i in range(3):
-                dth[i] = (gth[k, i] - sensor[i] * h) / (1.0 + sensor[6 + i])
-                dv[i] = (gdv[k, i] - sensor[3 + i] * h) / (1.0 + sensor[9 + i])
-            mechanize_step(nav, dth, dv, prev[0:3], prev[3:6], h, dvn)
-            for i in range(3):
-                prev[i] = dth[i]
-                prev[3 + i] = dv[i]
-    ref = navs[N]
-    i_bg, i_ba, i_sg, i_sa, i_clk = layout[L_BG], layout[L_BA], layout[L_SG], layout[L_SA], layout[L_CLK]
-    f = np.empty(4)
-    for b in range(4):
-        f[b] = math.exp(-T / tau[b]) if tau[b] > 0.0 and np.isfinite(tau[b]) else 1.0
-    for j in range(N):
-        for i in range(n):
-            Dn[j, i] = D[j, i]
-        nav_difference(navs[j], ref, Dn[j])
-        for i in range(3):
-            Dn[j, i_bg + i] = D[j, i_bg + i] * f[0]
-            Dn[j, i_ba + i] = D[j, i_ba + i] * f[1]
-            if i_sg >= 0:
-                Dn[j, i_sg + i] = D[j, i_sg + i] * f[2]
-            if i_sa >= 0:
-                Dn[j, i_sa + i] = D[j, i_sa + i] * f[3]
-        if i_clk >= 0:
-            Dn[j, i_clk] = D[j, i_clk] + D[j, i_clk + 1] * T
+    gth, gdv, gdt = merge_block(dtheta, dvel, dt, substeps)
+    mechanize_members(navs, prevs, sensors, gth, gdv, gdt)
+    difference_members(navs, navs[N], D, Dn, layout, tau, T)
     weighted_moments(Dn, wm, wc, x_out, P_out)
     for a in range(n):
         for b in range(n):

@@ -38,6 +38,10 @@ ESTIMATORS = {
     "vb-akf": ("mixnav.filters.vb:VbAdaptiveEkf",
                "variational-Bayes adaptive EKF: the VB-AUKF's noise step on the EKF (options: rho, "
                "prior_shape, prior_scale, iterations, tolerance)"),
+    "pf": ("mixnav.filters.particle:ParticleFilter",
+           "SIR particle filter (issue 19): particles as full states mechanized over each IMU block, "
+           "Gaussian log-weights through predict_batch, systematic resampling (options: particles, "
+           "resample_threshold, roughening, substeps)"),
 }
 
 #: measurement types (``type = "..."``) -> one-line description

@@ -1,0 +1,342 @@
+"""The SIR (bootstrap) particle filter on the one navigation core (issue 19, first step).
+
+Like the UKF (:mod:`mixnav.filters.ukf`, docs/ukf.md) the particle filter is a
+*mean-carrying error-state estimator whose members are full states*: its
+belief is ``N`` weighted particles ``D[j]`` over the error state ``dx = x_true
+- x_est`` of the layout (attitude as a rotation vector about the nominal
+quaternion, velocity, NED position metres, sensor/clock/auxiliary errors).
+
+Per propagation step (:func:`_pf_kernels.pf_propagate`, one compiled call for
+the whole array): each particle becomes the full state ``nominal_before (+)
+D[j]``, is mechanized with its own sensor errors over the step's IMU block and
+differenced from the mechanized nominal (the UKF's helpers); process noise
+``w_j ~ N(0, Qd)`` (the transition's ``Qd``, through a symmetric square root
+``SQ``) is drawn per particle from the estimator's own random stream (the
+``rng`` the engine hands to :meth:`ParticleEstimator.init`).
+
+At a measurement epoch the particles are made full states about the current
+nominal, ``epoch.model.predict_batch`` gives ``(y, Y, R)``, and each log-weight
+gains the Gaussian log-likelihood ``-1/2 sum (y - Y_j)^2 / R`` (normalised in
+log space: subtract the maximum, exponentiate, divide by the sum). The
+effective sample size ``1 / sum w^2`` decides a systematic resampling (ESS <
+``resample_threshold`` N); roughening (Gordon, Salmond & Smith 1993) then adds
+``N(0, (K E_i N^(-1/n))^2)`` to state ``i`` (``E_i`` the particles' range,
+``K = roughening``; 0: none). The weighted mean deviation (computed before the
+resampling) is returned as the correction; the engine feeds it back and calls
+:meth:`recentre`, which shifts every particle. The recorded covariance is the
+weighted sample covariance.
+
+Degeneracy: when no particle can explain the measurement (every log-likelihood
+non-finite, or the best particle's squared normalised innovation beyond
+``absurd_sigma^2`` per row) the epoch is rejected (``ABSURD``, nothing fed
+back), the weights are reset to uniform and the particles' spread about their
+mean is doubled; ``counts["pf_degenerate"]`` counts it. Never a NaN.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..engine.protocols import Correction, Epoch, Transition
+from ..engine.status import ABSURD, OK
+from ..errors import ArgumentError
+from ._pf_kernels import add_log_likelihood, particle_navs, pf_propagate
+from ._ukf_kernels import weighted_moments
+from .ekf import ErrorStateEkf
+
+__all__ = ["ParticleEstimator", "ParticleFilter", "systematic_resample", "normalise_log_weights",
+           "check_particle_settings"]
+
+_WARM: set = set()
+
+#: the factor on the particles' spread about their mean after a degenerate epoch
+DEGENERATE_INFLATION = 2.0
+
+
+def check_particle_settings(particles, resample_threshold, roughening, substeps=4, absurd_sigma=1e4) -> None:
+    """ArgumentError naming the key of a setting out of range."""
+    if int(particles) != particles or particles < 2:
+        raise ArgumentError(f"must be an integer >= 2, got {particles}", argument="particles")
+    if not 0.0 < resample_threshold <= 1.0:
+        raise ArgumentError(f"must be in (0, 1], got {resample_threshold}", argument="resample_threshold")
+    if not 0.0 <= roughening < 1.0:
+        raise ArgumentError(f"must be in [0, 1), got {roughening}", argument="roughening")
+    if int(substeps) != substeps or substeps < 0:
+        raise ArgumentError(f"must be an integer >= 0, got {substeps}", argument="substeps")
+    if not absurd_sigma > 0:
+        raise ArgumentError(f"must be positive, got {absurd_sigma}", argument="absurd_sigma")
+
+
+def normalise_log_weights(logw: np.ndarray):
+    """``(w, ess)``: the normalised weights of the log-weights ``logw`` and the effective
+    sample size ``1 / sum w^2``; ``(None, 0.0)`` when no log-weight is finite."""
+    finite = np.isfinite(logw)
+    if not finite.any():
+        return None, 0.0
+    top = logw[finite].max()
+    w = np.where(finite, np.exp(np.where(finite, logw, top) - top), 0.0)
+    w /= w.sum()
+    return w, float(1.0 / np.dot(w, w))
+
+
+def systematic_resample(w: np.ndarray, u0: float) -> np.ndarray:
+    """Indices of the systematic resampling of the weights ``w`` (N,) with the offset
+    ``u0`` in [0, 1): particle ``i`` is drawn ``floor`` or ``ceil`` of ``N w_i`` times,
+    ``N w_i`` on average over ``u0`` (unbiased)."""
+    N = len(w)
+    c = np.cumsum(w)
+    c[-1] = 1.0   # round-off: the last bin closes at 1
+    return np.minimum(np.searchsorted(c, (u0 + np.arange(N)) / N, side="right"), N - 1)
+
+
+class ParticleEstimator:
+    """The SIR particle filter's belief: N weighted error-state particles (module docstring).
+
+    Parameters
+    ----------
+    particles : int
+        Number of particles (>= 2).
+    resample_threshold : float
+        Resample when the effective sample size falls below this fraction of N, in (0, 1].
+    roughening : float
+        Roughening constant K (>= 0; 0: none) applied after each resampling.
+    substeps : int
+        Merged sub-intervals the particles are mechanized over per step (as the UKF's).
+    absurd_sigma : float
+        An epoch whose best particle's innovation exceeds this many sigmas per row is
+        degenerate (counted, rejected).
+    """
+
+    needs_step_inputs = True
+    carry_mean = True
+
+    def __init__(self, particles: int = 1000, resample_threshold: float = 0.5, roughening: float = 0.9,
+                 substeps: int = 4, absurd_sigma: float = 1e4):
+        check_particle_settings(particles, resample_threshold, roughening, substeps, absurd_sigma)
+        self.N = int(particles)
+        self.resample_threshold = float(resample_threshold)
+        self.roughening = float(roughening)
+        self.substeps = int(substeps)
+        self.absurd_sigma = float(absurd_sigma)
+        self.counts = {"pf_degenerate": 0, "pf_resampled": 0, "covariance_repair": 0}
+        self.ess_history: list = []
+
+    # --- the estimator protocol --------------------------------------------------------------
+    def init(self, motion, P0, n_clone, rng) -> None:
+        if n_clone:
+            raise ArgumentError("the particle filter does not carry a stochastic clone (TDCP)", argument="estimator")
+        lay = motion.layout
+        n = lay.n
+        self.n = n
+        self.layout_array = lay.as_array()
+        self._clk = lay.clk
+        self.tau = np.asarray(motion.tau, dtype=float)
+        self.rng = rng
+        N = self.N
+        self.D = np.ascontiguousarray(self.rng.standard_normal((N, n)) @ _sqrt_psd(np.asarray(P0, float)).T)
+        self.logw = np.zeros(N)
+        self.w = np.full(N, 1.0 / N)
+        self._Dn = np.empty((N, n))
+        self._navs = np.empty((N + 1, 10))
+        self._prevs = np.empty((N + 1, 6))
+        self._sensors = np.empty((N + 1, 12))
+        self._scratch = np.zeros((n, n))
+        self._x = np.empty(n)
+        self._P = np.empty((n, n))
+        self._stale = True
+        self.counts = {"pf_degenerate": 0, "pf_resampled": 0, "covariance_repair": 0}
+        self.ess_history = []
+
+    @property
+    def kernel_covariance(self) -> np.ndarray:
+        return self._scratch
+
+    def predict(self, step: Transition) -> None:
+        """All particles mechanized over the step's block with process noise (one compiled call)."""
+        self._scratch[:, :] = 0.0
+        inp = step.inputs
+        if inp is None:
+            raise ArgumentError("the particle filter needs the engine's step inputs (needs_step_inputs)",
+                                argument="engine")
+        self.propagate_linear_noise(None, step.Qd, inp, step.T)
+
+    def propagate_linear_noise(self, F, Qd, inp=None, T=0.0) -> None:
+        """``D <- f(D) + w``, ``w ~ N(0, Qd)`` from the estimator's stream: ``f`` the
+        mechanization (``inp`` the step inputs) or, with ``F`` given, the linear map
+        ``D F^T`` (tests on linear-Gaussian models)."""
+        Z = self.rng.standard_normal(self.D.shape)
+        SQ = _sqrt_psd(np.asarray(Qd, dtype=float))
+        if F is not None:
+            self._Dn[:] = self.D @ np.asarray(F).T + Z @ SQ.T
+        else:
+            pf_propagate(inp.nav0, inp.prev0, inp.sensor, self.D, SQ, Z, inp.dtheta, inp.dvel, inp.dt,
+                         self.substeps, self.layout_array, self.tau, T, self._navs, self._prevs,
+                         self._sensors, self._Dn)
+        self.D, self._Dn = self._Dn, self.D
+        self._stale = True
+
+    def recentre(self, dx: np.ndarray) -> None:
+        """The nominal moved by ``dx``: every particle's deviation shifts by ``-dx``."""
+        self.D -= dx[:self.n]
+        self._stale = True
+
+    def update(self, epoch: Epoch) -> Correction | None:
+        model = epoch.model
+        predict_batch = getattr(model, "predict_batch", None)
+        if predict_batch is None:
+            raise ArgumentError(f"{type(model).__name__} has no predict_batch (h on a batch of states): the "
+                                "particle filter needs it", argument="measurements")
+        navs = self._navs[:self.N]
+        particle_navs(epoch.nav, self.D, self.layout_array, navs)
+        w_b = np.asarray(epoch.w_b, dtype=float) - self.D[:, 9:12]
+        if self._clk >= 0:
+            clocks = np.asarray(epoch.clock, dtype=float) + self.D[:, self._clk:self._clk + 2]
+            out = predict_batch(epoch.index, navs, w_b, clocks)
+        else:
+            out = predict_batch(epoch.index, navs, w_b)
+        if out is None:
+            return None
+        y, Y, r = out
+        return self.weigh(np.asarray(y, float), np.ascontiguousarray(Y, dtype=float), np.asarray(r, float))
+
+    def weigh(self, y: np.ndarray, Y: np.ndarray, r: np.ndarray) -> Correction:
+        """The update from the particles' predictions ``Y`` (N, m) of ``y`` (m,) with noise
+        variances ``r`` (m,): weights, degeneracy, mean, resampling (module docstring)."""
+        m = len(y)
+        # NIS with the prior weights: innovation of the weighted mean prediction, S = Cov_w(Y) + R
+        ym, Pyy = np.empty(m), np.empty((m, m))
+        weighted_moments(Y, self.w, self.w, ym, Pyy)
+        with np.errstate(all="ignore"):   # an absurd epoch gives inf here; it is rejected below
+            e = y - ym
+            try:
+                nis = float(e @ np.linalg.solve(Pyy + np.diag(r), e))
+            except np.linalg.LinAlgError:
+                nis = np.inf
+        logw = self.logw.copy()
+        best = add_log_likelihood(logw, y, Y, r)
+        with np.errstate(all="ignore"):
+            w, ess = normalise_log_weights(logw)
+        if w is None or not best <= m * self.absurd_sigma ** 2:
+            self._degenerate()
+            return Correction(np.zeros(self.n), np.inf, ABSURD, m)
+        self.logw, self.w = logw, w
+        self.ess_history.append(ess)
+        weighted_moments(self.D, w, w, self._x, self._P)
+        dx = self._x.copy()
+        self._stale = False
+        if ess < self.resample_threshold * self.N:
+            self._resample()
+        return Correction(dx, nis if np.isfinite(nis) else np.inf, OK, m)
+
+    def _resample(self) -> None:
+        """Systematic resampling; with ``roughening = h > 0`` the kernel jitter of
+        Liu & West (2001): ``D <- a D + (1 - a) x + h L z``, ``a = sqrt(1 - h^2)``, ``L L^T``
+        the weighted covariance before the resampling, ``x`` the weighted mean: the
+        particles are re-diversified in every direction while the mean and covariance
+        are kept in expectation."""
+        if self.roughening > 0.0:
+            x, P = self._x.copy(), self._P.copy()
+        idx = systematic_resample(self.w, float(self.rng.random()))
+        self.D = np.ascontiguousarray(self.D[idx])
+        self.logw = np.zeros(self.N)
+        self.w = np.full(self.N, 1.0 / self.N)
+        self.counts["pf_resampled"] += 1
+        if self.roughening > 0.0:
+            h = self.roughening
+            a = np.sqrt(1.0 - h * h)
+            L = _sqrt_psd(P)
+            self.D = np.ascontiguousarray(a * self.D + (1.0 - a) * x
+                                          + h * (self.rng.standard_normal(self.D.shape) @ L.T))
+        self._stale = True
+
+    def _degenerate(self) -> None:
+        """Reset to uniform weights and inflate the spread about the mean (counted)."""
+        self.counts["pf_degenerate"] += 1
+        bad = ~np.isfinite(self.D).all(axis=1)
+        if bad.all():   # pragma: no cover (the propagation keeps particles finite)
+            self.D[:] = 0.0
+        elif bad.any():  # pragma: no cover
+            self.D[bad] = self.D[~bad][0]
+        mean = self.D.mean(axis=0)
+        self.D = mean + DEGENERATE_INFLATION * (self.D - mean)
+        self.logw = np.zeros(self.N)
+        self.w = np.full(self.N, 1.0 / self.N)
+        self._stale = True
+
+    def mean(self) -> np.ndarray:
+        self._moments()
+        return self._x
+
+    def covariance(self) -> np.ndarray:
+        self._moments()
+        return self._P
+
+    def _moments(self) -> None:
+        if self._stale:
+            weighted_moments(self.D, self.w, self.w, self._x, self._P)
+            self._stale = False
+
+    def replace_clone(self, J) -> None:  # pragma: no cover (init refuses clones)
+        raise ArgumentError("the particle filter does not carry a stochastic clone", argument="estimator")
+
+    def repair(self) -> None:  # pragma: no cover (the update never asks for one)
+        self.counts["covariance_repair"] += 1
+
+    def diagnostics(self) -> dict:
+        return {}
+
+    def outputs(self) -> dict:
+        return {}
+
+    def warm_up(self) -> None:
+        """Compile (or load from numba's cache) the kernels once per process."""
+        if "pf" in _WARM:
+            return
+        from ..ins.error_model import LAYOUTS
+        lay = LAYOUTS[15]
+        n, N = lay.n, 3
+        nav = np.array([1.0, 0, 0, 0, 0, 0, 0, 0.5, 0.5, 0.0])
+        D = np.zeros((N, n))
+        one = np.zeros((2, 3))
+        pf_propagate(nav, np.zeros(6), np.zeros(12), D, np.eye(n), D.copy(), one, one, np.full(2, 0.01), 1,
+                     lay.as_array(), np.full(4, np.inf), 0.02, np.empty((N + 1, 10)), np.empty((N + 1, 6)),
+                     np.empty((N + 1, 12)), np.empty((N, n)))
+        particle_navs(nav, D, lay.as_array(), np.empty((N, 10)))
+        add_log_likelihood(np.zeros(N), np.zeros(3), np.zeros((N, 3)), np.ones(3))
+        w = np.full(N, 1.0 / N)
+        weighted_moments(D, w, w, np.empty(n), np.empty((n, n)))
+        weighted_moments(np.zeros((N, 3)), w, w, np.empty(3), np.empty((3, 3)))
+        _WARM.add("pf")
+
+
+def _sqrt_psd(Q: np.ndarray) -> np.ndarray:
+    """A symmetric square root ``S`` with ``S S^T = Q`` (negative eigenvalues floored at 0:
+    ``Qd`` can be singular)."""
+    lam, V = np.linalg.eigh(0.5 * (Q + Q.T))
+    return (V * np.sqrt(np.maximum(lam, 0.0))) @ V.T
+
+
+class ParticleFilter(ErrorStateEkf):
+    """The SIR particle filter on the strapdown INS: the engine, the motion model and a
+    :class:`ParticleEstimator`.
+
+    Parameters
+    ----------
+    layout, imu_model, covariance_interval, absurd_sigma, clock
+        As :class:`~mixnav.filters.ekf.ErrorStateEkf`.
+    particles, resample_threshold, roughening, substeps
+        As :class:`ParticleEstimator` (checked now, naming the key).
+    """
+
+    can_smooth = False
+
+    def __init__(self, layout, imu_model, particles: int = 1000, resample_threshold: float = 0.5,
+                 roughening: float = 0.9, substeps: int = 4, covariance_interval: float = 1.0,
+                 absurd_sigma: float = 1e4, clock=None):
+        super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
+        check_particle_settings(particles, resample_threshold, roughening, substeps, absurd_sigma)
+        self.pf = dict(particles=int(particles), resample_threshold=float(resample_threshold),
+                       roughening=float(roughening), substeps=int(substeps))
+
+    def make_estimator(self):
+        return ParticleEstimator(absurd_sigma=self.absurd_sigma, **self.pf)

@@ -1,0 +1,214 @@
+"""The SIR particle filter (issue 19, first step): oracles and seeded checks.
+
+- systematic resampling is unbiased (mean count of particle i is N w_i);
+- on a linear-Gaussian model the particle filter's mean and covariance converge to
+  the Kalman filter's at close to 1/sqrt(N);
+- a measurement no particle can explain is a counted degeneracy, never a NaN;
+- on loose-demo the PF's position error and NEES against the EKF's (measured bands);
+- the same seed gives the same run; bad settings name their key.
+"""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from mixnav.config import load_scenario
+from mixnav.engine.status import ABSURD, OK
+from mixnav.errors import ArgumentError, ConfigError
+from mixnav.experiment.run import solution_table
+from mixnav.filters.ekf import ErrorStateEkf
+from mixnav.filters.particle import ParticleEstimator, ParticleFilter, systematic_resample
+from mixnav.ins.error_model import get_layout
+from mixnav.measurements.loose import LooseGnss
+from mixnav.sim.scenario import simulate
+
+
+def test_systematic_resampling_is_unbiased():
+    """Over M = 20000 seeded offsets the mean count of particle i is N w_i. A systematic
+    count is floor(N w_i) or that + 1, so its standard deviation is at most 1/2 and the
+    standard error of the mean count at most 0.5 / sqrt(M) = 0.0035; tolerance 5 of
+    those (0.018). Each count is also checked to be floor or floor + 1."""
+    rng = np.random.default_rng(11)
+    N, M = 25, 20000
+    w = rng.dirichlet(np.full(N, 0.3))
+    counts = np.zeros((M, N))
+    for k in range(M):
+        counts[k] = np.bincount(systematic_resample(w, rng.random()), minlength=N)
+    se = 0.5 / np.sqrt(M)
+    np.testing.assert_allclose(counts.mean(axis=0), N * w, rtol=0, atol=5 * se)
+    lo = np.floor(N * w)
+    assert ((counts == lo) | (counts == lo + 1)).all()
+    assert (counts.sum(axis=1) == N).all()
+
+
+def _linear_estimator(N, P0, rng, threshold=0.5):
+    lay = SimpleNamespace(n=P0.shape[0], clk=-1, as_array=lambda: np.full(8, -1, dtype=np.int64))
+    est = ParticleEstimator(particles=N, resample_threshold=threshold, roughening=0.0)
+    est.init(SimpleNamespace(layout=lay, tau=np.full(4, np.inf)), P0, 0, rng)
+    return est
+
+
+def _linear_run(N, seed, data):
+    F, Q, H, r, P0, ys = data
+    est = _linear_estimator(N, P0, np.random.default_rng(seed))
+    for y in ys:
+        est.propagate_linear_noise(F, Q)
+        corr = est.weigh(y, np.ascontiguousarray(est.D @ H.T), r)
+        assert corr.status == OK
+    return est.mean().copy(), est.covariance().copy()
+
+
+def _kalman(data):
+    F, Q, H, r, P0, ys = data
+    x, P = np.zeros(len(P0)), P0.copy()
+    for y in ys:
+        x, P = F @ x, F @ P @ F.T + Q
+        S = H @ P @ H.T + np.diag(r)
+        K = np.linalg.solve(S, H @ P).T
+        x, P = x + K @ (y - H @ x), P - K @ S @ K.T
+    return x, P
+
+
+def test_on_a_linear_gaussian_model_the_pf_converges_to_the_kalman_filter():
+    """Constant velocity in 1-D (position measured, 8 epochs), the estimator's own
+    propagation noise, weights, resampling and moments. Error per run: the Mahalanobis
+    distance of the mean from the KF's plus the Frobenius norm of P_kf^-1/2 P P_kf^-1/2 - I;
+    its RMS over 24 seeds at N = 250, 1000, 4000. Monte Carlo error falls as 1/sqrt(N):
+    the fitted log-log slope must be in [-0.7, -0.3] and the error at 4000 below 0.1."""
+    rng = np.random.default_rng(5)
+    T = 1.0
+    F = np.array([[1.0, T], [0.0, 1.0]])
+    Q = np.array([[T ** 3 / 3, T ** 2 / 2], [T ** 2 / 2, T]]) * 0.05
+    H = np.array([[1.0, 0.0]])
+    r = np.array([0.5])
+    P0 = np.diag([4.0, 1.0])
+    truth = rng.multivariate_normal(np.zeros(2), P0)
+    ys = []
+    for _ in range(8):
+        truth = F @ truth + rng.multivariate_normal(np.zeros(2), Q)
+        ys.append(H @ truth + rng.standard_normal(1) * np.sqrt(r))
+    data = (F, Q, H, r, P0, ys)
+    xk, Pk = _kalman(data)
+    Li = np.linalg.inv(np.linalg.cholesky(Pk))
+    Ns = np.array([250, 1000, 4000])
+    err = []
+    for N in Ns:
+        e = []
+        for seed in range(24):
+            x, P = _linear_run(int(N), 100 + seed, data)
+            d = Li @ (x - xk)
+            e.append(d @ d + np.sum((Li @ P @ Li.T - np.eye(2)) ** 2))
+        err.append(np.sqrt(np.mean(e)))
+    slope = np.polyfit(np.log(Ns), np.log(err), 1)[0]
+    assert -0.7 <= slope <= -0.3, (slope, err)
+    assert err[-1] < 0.1, err
+
+
+def test_a_measurement_no_particle_can_explain_is_a_counted_degeneracy():
+    rng = np.random.default_rng(3)
+    est = _linear_estimator(200, np.eye(2), rng)
+    H = np.array([[1.0, 0.0]])
+    for y in (np.array([1e200]), np.array([1e6]), np.array([np.nan])):
+        corr = est.weigh(y, np.ascontiguousarray(est.D @ H.T), np.array([1.0]))
+        assert corr.status == ABSURD and not np.isfinite(corr.nis)
+        assert np.isfinite(corr.dx).all() and (corr.dx == 0).all()
+    assert est.counts["pf_degenerate"] == 3
+    assert np.isfinite(est.D).all() and np.allclose(est.w, 1 / 200)
+    assert np.isfinite(est.covariance()).all()
+    # spread doubled each time (about the mean): 8 x the initial 1-sigma
+    assert 5 < np.sqrt(est.covariance()[0, 0]) < 12
+    # and a sensible measurement afterwards is used again
+    corr = est.weigh(np.array([0.3]), np.ascontiguousarray(est.D @ H.T), np.array([1.0]))
+    assert corr.status == OK and np.isfinite(corr.dx).all()
+
+
+@pytest.fixture(scope="module")
+def demo():
+    sc, src, _ = load_scenario("loose-demo")
+    sim = simulate(sc, 3, src)
+    lever = np.asarray(sc.gnss.lever_arm, dtype=float)
+    return sim, lever
+
+
+def _run(filt, sim, lever, seed=0):
+    return filt.run(sim.imu, sim.init, [LooseGnss(sim.fixes, lever, filt.layout)], rng=seed)
+
+
+def _rms_pos(tab):
+    return float(np.sqrt((tab[["err_n_m", "err_e_m", "err_d_m"]].to_numpy() ** 2).sum(axis=1).mean()))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_pf_on_loose_demo_against_the_ekf(demo, seed):
+    """2000 particles, roughening 0.9 (the default), seeds 0-2. Measured (benchmarks/
+    results/pf.md): position RMS 1.20, 1.05, 0.95 x the EKF's 2.56 m; position NEES 7.5,
+    7.7, 12.4 (the EKF's 3.8): the particle cloud under-represents the attitude and
+    sensor-bias spread (the static-parameter collapse of a bootstrap filter in 15
+    states), so the PF is overconfident by a factor 2-3 in variance; the band records
+    that, it does not excuse it. Bands: RMS <= 1.5 x the EKF's, NEES in [1.5, 20].
+    Not met at 1000 particles (one seed in three at 6.7 x, docs/particle.md)."""
+    sim, lever = demo
+    lay = get_layout(15)
+    te = solution_table(_run(ErrorStateEkf(lay, sim.imu_model), sim, lever), sim.truth)
+    f = ParticleFilter(lay, sim.imu_model, particles=2000)
+    r = _run(f, sim, lever, seed)
+    tp = solution_table(r, sim.truth)
+    assert _rms_pos(tp) <= 1.5 * _rms_pos(te), (_rms_pos(tp), _rms_pos(te))
+    assert 1.5 < tp["nees_pos"].mean() < 20, tp["nees_pos"].mean()
+    assert np.isfinite(r.nav).all() and f.estimator.counts["pf_degenerate"] == 0
+    assert f.estimator.counts["pf_resampled"] > 0
+
+
+def test_the_same_seed_gives_the_same_run(demo):
+    """Serial kernels (no numba parallel): a seed fixes every draw."""
+    sim, lever = demo
+    lay = get_layout(15)
+    a = _run(ParticleFilter(lay, sim.imu_model, particles=300), sim, lever, seed=7)
+    b = _run(ParticleFilter(lay, sim.imu_model, particles=300), sim, lever, seed=7)
+    c = _run(ParticleFilter(lay, sim.imu_model, particles=300), sim, lever, seed=8)
+    np.testing.assert_array_equal(a.nav, b.nav)
+    np.testing.assert_array_equal(a.sigma, b.sigma)
+    assert not np.array_equal(a.nav, c.nav)
+
+
+@pytest.mark.parametrize("kw,key", [(dict(particles=1), "particles"), (dict(particles=0), "particles"),
+                                    (dict(resample_threshold=0.0), "resample_threshold"),
+                                    (dict(resample_threshold=1.5), "resample_threshold"),
+                                    (dict(roughening=1.0), "roughening"), (dict(roughening=-0.1), "roughening"),
+                                    (dict(substeps=-1), "substeps")])
+def test_bad_particle_settings_name_the_key(kw, key):
+    with pytest.raises(ArgumentError) as e:
+        ParticleFilter(get_layout(15), _imu(), **kw)
+    assert e.value.argument == key
+
+
+@pytest.mark.parametrize("line,key", [("particles = 1", "particles"), ("resample_threshold = 0.0", "resample_threshold"),
+                                      ("roughening = 1.5", "roughening"), ("particls = 10", "particls")])
+def test_pf_options_in_a_scenario_file_are_checked(tmp_path, line, key):
+    base = load_scenario("loose-demo")[2]
+    text = base[:base.index("[[methods]]")] + ('[[methods]]\nname = "m"\ntype = "loose-ekf"\nestimator = "pf"\n'
+                                               f'[methods.options]\n{line}\n')
+    p = tmp_path / "sc.toml"
+    p.write_text(text)
+    with pytest.raises(ConfigError) as e:
+        load_scenario(str(p))
+    assert key in str(e.value)
+
+
+def test_pf_from_a_scenario_file(tmp_path):
+    from mixnav.experiment import methods
+    base = load_scenario("loose-demo")[2]
+    text = base[:base.index("[[methods]]")] + ('[[methods]]\nname = "m"\ntype = "loose-ekf"\nestimator = "pf"\n'
+                                               '[methods.options]\nparticles = 64\nroughening = 0.5\n')
+    p = tmp_path / "sc.toml"
+    p.write_text(text)
+    sc, src, _ = load_scenario(str(p))
+    sim = simulate(sc, 1, src)
+    filt, _ = methods.build(sc.methods[0], sim.imu_model, sim.fixes, np.asarray(sc.gnss.lever_arm), src, 0)
+    assert type(filt) is ParticleFilter and filt.pf["particles"] == 64 and filt.pf["roughening"] == 0.5
+
+
+def _imu():
+    from mixnav.ins.imu_model import ImuErrorModel
+    return ImuErrorModel()
