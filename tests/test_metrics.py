@@ -99,12 +99,20 @@ def test_missing_column_is_named(col):
         compute_metrics(table().drop(columns=col))
 
 
-@pytest.mark.parametrize("col", ["err_n_m", "err_pitch_deg", "nees_pos"])
+@pytest.mark.parametrize("col", ["err_n_m", "err_pitch_deg"])
 def test_nan_column_is_named(col):
     df = table(nees_pos=3.0)
     df.loc[7, col] = np.nan
     with pytest.raises(ValueError, match=col):
         compute_metrics(df)
+
+
+def test_nan_nees_is_counted_not_raised():
+    """A NaN NEES means the filter's covariance was singular there (run.nees): counted in
+    nees_singular_epochs and left out of the mean, unlike a NaN error, which is a fault."""
+    df = table(n=4, nees_pos=[1.0, 2.0, np.nan, 6.0])
+    m = compute_metrics(df)
+    assert m["nees_singular_epochs"] == 1 and m["nees_pos_mean"] == pytest.approx(3.0)
 
 
 def test_nees_means_only_when_columns_exist():
@@ -157,3 +165,22 @@ def test_percentiles_of_a_uniform_ramp():
     assert m["pitch_p95_deg"] == pytest.approx(95.0)
     assert m["velocity_p95_mps"] == pytest.approx(95.0)
     assert m["roll_p95_deg"] == 0.0
+
+
+def test_a_singular_covariance_gives_a_counted_nan_nees_not_an_error():
+    """An epoch whose position covariance is singular (a collapsed particle cloud): its NEES
+    is NaN in the solution table, the means leave it out, and the metrics count it; the
+    other epochs' NEES equal a direct solve."""
+    from mixnav.config.loader import load_scenario
+    from mixnav.experiment.run import method_metrics, run_scenario, solution_table
+    sc, src, _ = load_scenario("loose-demo")
+    out = run_scenario(sc, src, seed=1)
+    res = out.results["ekf"]
+    res.pv_cov[5] = 0.0                                   # not positive definite
+    t = solution_table(res, out.sim.truth, out.sim.outages)
+    assert np.isnan(t.nees_pos[5]) and np.isnan(t.nees_vel[5]) and np.isnan(t.nees_pv[5])
+    e = t[["err_n_m", "err_e_m", "err_d_m"]].to_numpy()[6]
+    assert t.nees_pos[6] == pytest.approx(e @ np.linalg.solve(res.pv_cov[6, 3:, 3:], e), rel=1e-10)
+    m = method_metrics(res, t, out.sim.outages)
+    assert m["nees_singular_epochs"] == 1
+    assert m["nees_pos_mean"] == pytest.approx(np.nanmean(t.nees_pos), rel=1e-12)

@@ -99,6 +99,27 @@ def _training(sc: Scenario, seed: int, source):
     return out
 
 
+def nees(e: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """``e_k^T C_k^-1 e_k`` per epoch (``e`` (K, d), ``cov`` (K, d, d)); NaN at an epoch whose
+    covariance is not positive definite (a filter that claims certainty it cannot have, e.g.
+    a collapsed particle cloud): such epochs are counted in the metrics
+    (``nees_singular_epochs``), not raised."""
+    try:
+        L = np.linalg.cholesky(cov)
+    except np.linalg.LinAlgError:
+        out = np.full(len(e), np.nan)
+        for k in range(len(e)):
+            try:
+                Lk = np.linalg.cholesky(cov[k])
+            except np.linalg.LinAlgError:
+                continue
+            w = np.linalg.solve(Lk, e[k])
+            out[k] = w @ w
+        return out
+    w = np.linalg.solve(L, e[..., None])[..., 0]
+    return np.einsum("ki,ki->k", w, w)
+
+
 def truth_at(truth: Trajectory, times: np.ndarray) -> Trajectory:
     """The truth at ``times``: exact where they fall on its samples, else interpolated.
 
@@ -162,16 +183,15 @@ def solution_table(res: FilterResult, truth: Trajectory | None = None, outages=(
         for i, ax in enumerate("ned"):
             d[f"err_{ax}_m"] = e_pos[:, i]
         cov = res.pv_cov
-        d["nees_pos"] = np.einsum("ki,ki->k", e_pos, np.linalg.solve(cov[:, 3:, 3:], e_pos[..., None])[..., 0])
+        d["nees_pos"] = nees(e_pos, cov[:, 3:, 3:])
         if tt.v_n is not None:
             e_vel = vel - tt.v_n
             for i, ax in enumerate(("vn", "ve", "vd")):
                 d[f"err_{ax}_mps"] = e_vel[:, i]
             # NEES of the 3-D position and velocity errors, with the filter's own covariance.
             ev = np.concatenate([e_vel, e_pos], axis=1)
-            d["nees_vel"] = np.einsum("ki,ki->k", e_vel,
-                                      np.linalg.solve(cov[:, :3, :3], e_vel[..., None])[..., 0])
-            d["nees_pv"] = np.einsum("ki,ki->k", ev, np.linalg.solve(cov, ev[..., None])[..., 0])
+            d["nees_vel"] = nees(e_vel, cov[:, :3, :3])
+            d["nees_pv"] = nees(ev, cov)
         if tt.q_nb is not None:
             e_rpy = wrap_angle(rpy - tt.rpy)
             for i, ax in enumerate(("roll", "pitch", "yaw")):
