@@ -176,7 +176,7 @@ def test_a_singular_covariance_gives_a_counted_nan_nees_not_an_error():
     sc, src, _ = load_scenario("loose-demo")
     out = run_scenario(sc, src, seed=1)
     res = out.results["ekf"]
-    res.pv_cov[5] = 0.0                                   # not positive definite
+    res.pv_cov[5] = 0.0                                   # singular
     t = solution_table(res, out.sim.truth, out.sim.outages)
     assert np.isnan(t.nees_pos[5]) and np.isnan(t.nees_vel[5]) and np.isnan(t.nees_pv[5])
     e = t[["err_n_m", "err_e_m", "err_d_m"]].to_numpy()[6]

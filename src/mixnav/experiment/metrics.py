@@ -43,7 +43,7 @@ METRIC_KEYS_DOC: dict[str, str] = {
     "vertical_rmse_outside_outages_m": "RMS of the vertical error outside every outage window [m]",
     "nees_pos_mean": "mean NEES of the 3-D position error (3 for a consistent filter)",
     "nees_vel_mean": "mean NEES of the 3-D velocity error (3 for a consistent filter)",
-    "nees_singular_epochs": "epochs whose position or velocity covariance was not positive definite (their NEES "
+    "nees_singular_epochs": "epochs whose position or velocity covariance was singular (their NEES "
                             "is NaN in the solution table and left out of the means; e.g. a collapsed particle cloud)",
     "epoch_time_mean_us": "filter wall time per GNSS epoch, mechanization included [us]",
     "update_time_mean_us": "measurement model + correction + feedback per GNSS epoch [us]",
@@ -208,6 +208,6 @@ def compute_metrics(solution: pd.DataFrame,
             ok = np.isfinite(v)
             singular = max(singular, int((~ok).sum()))
             m[f"{k}_mean"] = float(np.mean(v[ok])) if ok.any() else float("nan")
-    if singular:   # the filter's covariance was not positive definite there (run.nees): said, not hidden
+    if singular:   # the filter's covariance was singular there (run.nees): said, not hidden
         m["nees_singular_epochs"] = singular
     return m

@@ -101,23 +101,19 @@ def _training(sc: Scenario, seed: int, source):
 
 def nees(e: np.ndarray, cov: np.ndarray) -> np.ndarray:
     """``e_k^T C_k^-1 e_k`` per epoch (``e`` (K, d), ``cov`` (K, d, d)); NaN at an epoch whose
-    covariance is not positive definite (a filter that claims certainty it cannot have, e.g.
-    a collapsed particle cloud): such epochs are counted in the metrics
-    (``nees_singular_epochs``), not raised."""
+    covariance is singular (a filter that claims certainty it cannot have, e.g. a collapsed
+    particle cloud): such epochs are counted in the metrics (``nees_singular_epochs``), not
+    raised."""
     try:
-        L = np.linalg.cholesky(cov)
-    except np.linalg.LinAlgError:
+        return np.einsum("ki,ki->k", e, np.linalg.solve(cov, e[..., None])[..., 0])
+    except np.linalg.LinAlgError:     # some epoch's covariance is singular: solve them one by one
         out = np.full(len(e), np.nan)
         for k in range(len(e)):
             try:
-                Lk = np.linalg.cholesky(cov[k])
+                out[k] = e[k] @ np.linalg.solve(cov[k], e[k])
             except np.linalg.LinAlgError:
-                continue
-            w = np.linalg.solve(Lk, e[k])
-            out[k] = w @ w
+                pass
         return out
-    w = np.linalg.solve(L, e[..., None])[..., 0]
-    return np.einsum("ki,ki->k", w, w)
 
 
 def truth_at(truth: Trajectory, times: np.ndarray) -> Trajectory:
