@@ -163,6 +163,31 @@ def difference_members(navs, ref, D, Dn, layout, tau, T):
 
 
 @njit(cache=True)
+def propagate_members(nav0, prev0, sensor0, D, dtheta, dvel, dt, substeps, layout, tau, T, navs, prevs, sensors,
+                      Dn):
+    """The members ``D`` (N, n) (sigma points, particles) as full states ``nav0 (+) D_j``
+    (``prev0`` their previous increments, ``sensor0`` corrected by their sensor
+    deviations), and a reference (row N: the nominal itself) mechanized over the block
+    merged into ``substeps`` sub-intervals (:func:`merge_block`); their propagated error
+    states against the reference into ``Dn`` (N, n) (:func:`difference_members`).
+    ``navs`` (N+1, 10), ``prevs`` (N+1, 6), ``sensors`` (N+1, 12) are scratch."""
+    N = D.shape[0]
+    clock = np.zeros(2)
+    for j in range(N + 1):
+        for i in range(10):
+            navs[j, i] = nav0[i]
+        for i in range(6):
+            prevs[j, i] = prev0[i]
+        for i in range(12):
+            sensors[j, i] = sensor0[i]
+        if j < N:
+            apply_feedback(navs[j], sensors[j], clock, D[j], layout)
+    gth, gdv, gdt = merge_block(dtheta, dvel, dt, substeps)
+    mechanize_members(navs, prevs, sensors, gth, gdv, gdt)
+    difference_members(navs, navs[N], D, Dn, layout, tau, T)
+
+
+@njit(cache=True)
 def ukf_predict(nav0, prev0, sensor0, x, P, Qd, c, wm, wc, dtheta, dvel, dt, substeps, layout, tau, T,
                 L, D, navs, prevs, sensors, Dn, x_out, P_out):
     """Propagate the sigma points of ``N(x, P)`` about ``nav0`` over one IMU block.
@@ -184,23 +209,11 @@ def ukf_predict(nav0, prev0, sensor0, x, P, Qd, c, wm, wc, dtheta, dvel, dt, sub
     when ``P`` is not positive definite.
     """
     n = x.shape[0]
-    N = 2 * n + 1
     if not cholesky_lower(P, L):
         return False
     sigma_deviations(x, L, c, D)
-    clock = np.zeros(2)
-    for j in range(N + 1):
-        for i in range(10):
-            navs[j, i] = nav0[i]
-        for i in range(6):
-            prevs[j, i] = prev0[i]
-        for i in range(12):
-            sensors[j, i] = sensor0[i]
-        if j < N:
-            apply_feedback(navs[j], sensors[j], clock, D[j], layout)
-    gth, gdv, gdt = merge_block(dtheta, dvel, dt, substeps)
-    mechanize_members(navs, prevs, sensors, gth, gdv, gdt)
-    difference_members(navs, navs[N], D, Dn, layout, tau, T)
+    propagate_members(nav0, prev0, sensor0, D, dtheta, dvel, dt, substeps, layout, tau, T, navs, prevs, sensors,
+                      Dn)
     weighted_moments(Dn, wm, wc, x_out, P_out)
     for a in range(n):
         for b in range(n):
@@ -213,17 +226,23 @@ def ukf_sigma_navs(nav, x, P, c, layout, L, D, navs):
     """The sigma points of ``N(x, P)`` about ``nav``: error states ``D`` (2n+1, n) and
     full navigation states ``navs`` (2n+1, 10) (``L`` scratch). False when ``P`` is
     not positive definite."""
-    n = x.shape[0]
     if not cholesky_lower(P, L):
         return False
     sigma_deviations(x, L, c, D)
+    member_navs(nav, D, layout, navs)
+    return True
+
+
+@njit(cache=True)
+def member_navs(nav, D, layout, navs):
+    """The members ``D`` (N, n) (sigma points, particles) about ``nav`` as full navigation
+    states ``navs`` (N, 10) (the engine's feedback map applied to a copy of ``nav``)."""
     sensor = np.zeros(12)
     clock = np.zeros(2)
-    for j in range(2 * n + 1):
+    for j in range(D.shape[0]):
         for i in range(10):
             navs[j, i] = nav[i]
         apply_feedback(navs[j], sensor, clock, D[j], layout)
-    return True
 
 
 @njit(cache=True)

@@ -40,9 +40,10 @@ import numpy as np
 from ..engine.protocols import Correction, Epoch, Transition
 from ..engine.status import ABSURD, OK
 from ..errors import ArgumentError
-from ._pf_kernels import add_log_likelihood, particle_navs, pf_propagate
-from ._ukf_kernels import weighted_moments
+from ._pf_kernels import add_log_likelihood, pf_propagate
+from ._ukf_kernels import member_navs, weighted_moments
 from .ekf import ErrorStateEkf
+from .ukf import predict_members
 
 __all__ = ["ParticleEstimator", "ParticleFilter", "systematic_resample", "normalise_log_weights",
            "check_particle_settings"]
@@ -181,19 +182,9 @@ class ParticleEstimator:
         self._stale = True
 
     def update(self, epoch: Epoch) -> Correction | None:
-        model = epoch.model
-        predict_batch = getattr(model, "predict_batch", None)
-        if predict_batch is None:
-            raise ArgumentError(f"{type(model).__name__} has no predict_batch (h on a batch of states): the "
-                                "particle filter needs it", argument="measurements")
         navs = self._navs[:self.N]
-        particle_navs(epoch.nav, self.D, self.layout_array, navs)
-        w_b = np.asarray(epoch.w_b, dtype=float) - self.D[:, 9:12]
-        if self._clk >= 0:
-            clocks = np.asarray(epoch.clock, dtype=float) + self.D[:, self._clk:self._clk + 2]
-            out = predict_batch(epoch.index, navs, w_b, clocks)
-        else:
-            out = predict_batch(epoch.index, navs, w_b)
+        member_navs(epoch.nav, self.D, self.layout_array, navs)
+        out = predict_members(epoch, self.D, navs, self._clk, "the particle filter needs")
         if out is None:
             return None
         y, Y, r = out
@@ -301,7 +292,7 @@ class ParticleEstimator:
         pf_propagate(nav, np.zeros(6), np.zeros(12), D, np.eye(n), D.copy(), one, one, np.full(2, 0.01), 1,
                      lay.as_array(), np.full(4, np.inf), 0.02, np.empty((N + 1, 10)), np.empty((N + 1, 6)),
                      np.empty((N + 1, 12)), np.empty((N, n)))
-        particle_navs(nav, D, lay.as_array(), np.empty((N, 10)))
+        member_navs(nav, D, lay.as_array(), np.empty((N, 10)))
         add_log_likelihood(np.zeros(N), np.zeros(3), np.zeros((N, 3)), np.ones(3))
         w = np.full(N, 1.0 / N)
         weighted_moments(D, w, w, np.empty(n), np.empty((n, n)))

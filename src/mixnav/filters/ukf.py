@@ -85,6 +85,23 @@ def ut_weights(n: int, alpha: float = 0.6, beta: float = 2.0, kappa: float = 0.0
     return wm, wc, float(np.sqrt(n + lam))
 
 
+def predict_members(epoch: Epoch, D: np.ndarray, navs: np.ndarray, clk: int, who: str):
+    """``epoch.model.predict_batch`` at the members (sigma points, particles) ``D`` (N, n) whose
+    full states are ``navs`` (N, 10): each member's gyro-bias deviation moves its body rate
+    and, with a clock block at ``clk >= 0`` (tight coupling), its clock deviation its
+    receiver clock. Returns ``(y, Y, R)`` or None (no data); ArgumentError when the model
+    has no ``predict_batch`` (``who``, the estimator, names itself in the message)."""
+    predict_batch = getattr(epoch.model, "predict_batch", None)
+    if predict_batch is None:
+        raise ArgumentError(f"{type(epoch.model).__name__} has no predict_batch (h on a batch of states): "
+                            f"{who} it", argument="measurements")
+    w_b = np.asarray(epoch.w_b, dtype=float) - D[:, 9:12]
+    if clk >= 0:
+        clocks = np.asarray(epoch.clock, dtype=float) + D[:, clk:clk + 2]
+        return predict_batch(epoch.index, navs, w_b, clocks)
+    return predict_batch(epoch.index, navs, w_b)
+
+
 class UnscentedEstimator:
     """The UKF's belief ``N(x, P)`` about the error state, propagated by sigma points (module docstring).
 
@@ -194,18 +211,8 @@ class UnscentedEstimator:
                              "repair")  # pragma: no cover
 
     def update(self, epoch: Epoch) -> Correction | None:
-        model = epoch.model
-        predict_batch = getattr(model, "predict_batch", None)
-        if predict_batch is None:
-            raise ArgumentError(f"{type(model).__name__} has no predict_batch (h on a batch of states): the "
-                                "unscented filters need it", argument="measurements")
         D, navs = self.sigma_points(epoch.nav)
-        w_b = np.asarray(epoch.w_b, dtype=float) - D[:, 9:12]   # each point's gyro bias moves its rate
-        if self._clk >= 0:   # each point's receiver clock (tight coupling)
-            clocks = np.asarray(epoch.clock, dtype=float) + D[:, self._clk:self._clk + 2]
-            out = predict_batch(epoch.index, navs, w_b, clocks)
-        else:
-            out = predict_batch(epoch.index, navs, w_b)
+        out = predict_members(epoch, D, navs, self._clk, "the unscented filters need")
         if out is None:
             return None
         y, Y, r = out
@@ -217,7 +224,7 @@ class UnscentedEstimator:
             x_post, P_post, nis, status, a, b, it = vb_correct(
                 self.x, self.P, Pxy, Pyy, Pyy, innov, r, r, r, False, 1, 0.0, self.absurd_sigma)
         else:
-            ch_fn = getattr(model, "row_channels", None)
+            ch_fn = getattr(epoch.model, "row_channels", None)
             channels = ch_fn(epoch.index, m) if ch_fn is not None else np.arange(m, dtype=np.int64)
             a0, b0 = nz.predicted(channels, r)
             G = linearized_pyy(self._L, Pxy)
