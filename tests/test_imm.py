@@ -313,14 +313,11 @@ def test_mode_probabilities_follow_a_simulated_switch():
     assert inside > 0.5 and inside > 3 * before and inside > 3 * after, (before, inside, after)
 
 
-def test_every_mode_scores_the_same_rows():
-    """One epoch by hand: mode 0 uses the model, mode 1 does not. Both are scored on the same
-    rows with their own predictive density (scipy's), the probabilities follow P4 eq. 14
-    with them, only mode 0 is updated, and the correction is the combined mean."""
+def _hand_epoch():
+    """One position fix of two rows, (0.8, -0.3) with variance 0.25 each on the position
+    states 6, 7, as a measurement model: ``(fix, H, z, epoch)``, the Epoch at t = 1 s."""
     from mixnav.engine.protocols import Epoch
-    from mixnav.ins.imu_model import ImuErrorModel
     from mixnav.measurements.base import MeasurementModel, Rows
-    lay = get_layout(15)
     H = np.zeros((2, 15))
     H[0, 6], H[1, 7] = 1.0, 1.0
     z = np.array([0.8, -0.3])
@@ -333,15 +330,28 @@ def test_every_mode_scores_the_same_rows():
             return Rows(z, H, np.array([0.25, 0.25]), np.array([0, 0]))
 
     fix = Fix()
+    nav = np.array([1.0, 0, 0, 0, 0, 0, 0, 0.7, 0.2, 100.0])
+    return fix, H, z, Epoch(1.0, 0, fix, nav, np.zeros(3), np.zeros(2), None)
+
+
+def _init_15(imm):
+    from mixnav.ins.imu_model import ImuErrorModel
+    imm.init(StrapdownMotion(get_layout(15), ImuErrorModel()), np.eye(15), 0, np.random.default_rng(0))
+
+
+def test_every_mode_scores_the_same_rows():
+    """One epoch by hand: mode 0 uses the model, mode 1 does not. Both are scored on the same
+    rows with their own predictive density (scipy's), the probabilities follow P4 eq. 14
+    with them, only mode 0 is updated, and the correction is the combined mean."""
+    fix, H, z, epoch = _hand_epoch()
     a, b = KalmanEstimator(carry_mean=True), KalmanEstimator(carry_mean=True)
     imm = ImmEstimator([a, b], [{fix}, {object()}], np.eye(2), initial_probabilities=[0.6, 0.4],
                        transition_interval=None)
-    imm.init(StrapdownMotion(lay, ImuErrorModel()), np.eye(15), 0, np.random.default_rng(0))
+    _init_15(imm)
     b.P = 4.0 * np.eye(15)                       # mode 1 is less sure
     b.x = np.zeros(15)
     b.x[6] = 0.5
-    nav = np.array([1.0, 0, 0, 0, 0, 0, 0, 0.7, 0.2, 100.0])
-    corr = imm.update(Epoch(1.0, 0, fix, nav, np.zeros(3), np.zeros(2), None))
+    corr = imm.update(epoch)
     xb = np.zeros(15)
     xb[6] = 0.5
     like = [multivariate_normal(H @ x, H @ P @ H.T + 0.25 * np.eye(2)).pdf(z)
@@ -430,31 +440,15 @@ def test_most_probable_output_feeds_back_the_likeliest_mode(cls):
     """output = "most-probable": the correction is the likeliest mode's posterior mean (not
     the combination), that mode ends at zero after re-centring, and the recorded covariance
     is its own; on both the compiled and the general path."""
-    from mixnav.engine.protocols import Epoch
-    from mixnav.ins.imu_model import ImuErrorModel
-    from mixnav.measurements.base import MeasurementModel, Rows
-    lay = get_layout(15)
-    H = np.zeros((2, 15))
-    H[0, 6], H[1, 7] = 1.0, 1.0
-    z = np.array([0.8, -0.3])
-
-    class Fix(MeasurementModel):
-        kinds = ("position",)
-        times = np.array([1.0])
-
-        def rows(self, i, nav, w_b, clock=None, memory=None, aux=None):
-            return Rows(z, H, np.array([0.25, 0.25]), np.array([0, 0]))
-
-    fix = Fix()
+    fix, H, z, epoch = _hand_epoch()
     a, b = cls(carry_mean=True), cls(carry_mean=True)
     imm = ImmEstimator([a, b], [{fix}, {object()}], np.eye(2), initial_probabilities=[0.3, 0.7],
                        transition_interval=None, output="most-probable")
-    imm.init(StrapdownMotion(lay, ImuErrorModel()), np.eye(15), 0, np.random.default_rng(0))
+    _init_15(imm)
     b.P = 4.0 * np.eye(15)
     b.x = np.zeros(15)
     b.x[6] = 3.0                                  # mode 1 far from the fix: mode 0 wins
-    nav = np.array([1.0, 0, 0, 0, 0, 0, 0, 0.7, 0.2, 100.0])
-    corr = imm.update(Epoch(1.0, 0, fix, nav, np.zeros(3), np.zeros(2), None))
+    corr = imm.update(epoch)
     assert imm.mu[0] > imm.mu[1]
     x0_post = np.zeros(15)
     x0_post[6], x0_post[7] = 0.8 / 1.25, -0.3 / 1.25
