@@ -16,7 +16,7 @@ SRC = Path(__file__).resolve().parents[1] / "src" / "mixnav"
 FLOORS = {
     "errors": 0, "units": 0, "linalg": 0, "_version": 0,
     "attitude": 1, "geodesy": 1, "data": 2,
-    "ins": 3, "gnss": 3, "noise": 3, "io": 3, "alignment": 4,
+    "ins": 3, "motion": 3, "gnss": 3, "noise": 3, "io": 3, "alignment": 4,
     "measurements": 4,
     "engine": 5,
     "filters": 6,

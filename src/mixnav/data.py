@@ -130,6 +130,19 @@ class ImuData:
 
 
 @dataclass(frozen=True)
+class OdometryIncrements(ImuData):
+    """Wheel-odometry increments in :class:`~mixnav.data.ImuData`'s arrays, so the engine
+    splits them at event times exactly as it splits IMU increments (both are
+    integrals over the interval).
+
+    ``dtheta[:, 2]`` is the heading increment [rad] (yaw rate x dt, about the
+    vehicle's down axis; the other two columns zero); ``dvel[:, 0]`` is the
+    **distance** travelled [m] (speed x dt; not a velocity increment; the other
+    two columns zero). Build it with :func:`mixnav.motion.odometry_increments`.
+    """
+
+
+@dataclass(frozen=True)
 class GnssFixes:
     """GNSS position (and optionally velocity) fixes of the antenna.
 

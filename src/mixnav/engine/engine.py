@@ -143,6 +143,9 @@ class Engine:
         if not isinstance(init, InitialState):
             raise ArgumentError(f"expected InitialState, got {type(init).__name__}", argument="init")
         motion, est, lay = self.motion, self.estimator, self.motion.layout
+        check = getattr(motion, "check_inputs", None)
+        if check is not None:   # the increments must be the ones this motion model is driven by
+            check(imu)
         motion.warm_up()
         est.warm_up()
         _warm_record()
@@ -209,6 +212,8 @@ class Engine:
         # the pre-step nominal for an estimator that mechanizes its own states (UKF)
         self._pre = (np.empty(10), np.empty(6), np.empty(2)) if getattr(est, "needs_step_inputs", False) else None
         self._has_clock = lay.clk >= 0
+        self._i_vel = lay.vel.start if lay.vel is not None else -1
+        self._i_pos = lay.pos.start
         self._n = lay.n
         self._start_k = k0
         self._ti = 0
@@ -344,7 +349,7 @@ class Engine:
         r, io = self._rec, self._io
         finite = record_epoch(io, self.estimator.covariance(), self.nav, self.sensor, self.clock, self.prev,
                               self._imu.dt[end - 1] if end > 0 else 0.0, r["nav"], r["sigma"], r["sensor"],
-                              r["clock"], r["pv"], r["w_b"])
+                              r["clock"], r["pv"], r["w_b"], self._i_vel, self._i_pos)
         r["used"][io] = used
         for name, v in self.aux.items():
             r["aux"][name][io] = v
@@ -366,9 +371,7 @@ class Engine:
                   "wall_time_s": self._wall, "measurement_epochs": self._n_updates}
         timing.update(self.estimator.diagnostics())
         sensor = r["sensor"][:io]
-        estimates = {"gyro_bias": sensor[:, 0:3], "accel_bias": sensor[:, 3:6]}
-        if lay.sg >= 0:
-            estimates.update(gyro_scale=sensor[:, 6:9], accel_scale=sensor[:, 9:12])
+        estimates = lay.sensor_estimates(sensor)
         if lay.clk >= 0:
             estimates["clock"] = r["clock"][:io]
         for name, v in r["aux"].items():
@@ -386,7 +389,7 @@ class Engine:
             sensor=sensor, pv_cov=r["pv"][:io], w_b=r["w_b"][:io], nis=np.array(self._nis),
             nis_dim=np.array(self._nis_dim, dtype=int), recoveries=self.counts, layout=lay,
             P=self.estimator.covariance(), timing=timing, estimates=estimates, nis_kind=nis_kind,
-            outputs=outputs, history=history)
+            outputs=outputs, history=history, motion=self.motion)
 
     def run(self, imu: ImuData, init: InitialState, output_times: np.ndarray | None = None) -> FilterResult:
         """Run over all the IMU data: :meth:`start`, :meth:`step` to the end, :meth:`result`."""

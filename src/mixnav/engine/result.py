@@ -52,6 +52,9 @@ class FilterResult:
         name -> array, documented by the estimator.
     history : History or None
         What a smoother needs, when the run was asked for it.
+    motion : MotionModel or None
+        The motion model of the run (its ``inject`` is what a smoother feeds a
+        smoothed error back with, for a layout that is not the INS's).
     """
 
     time: np.ndarray
@@ -71,6 +74,7 @@ class FilterResult:
     nis_kind: np.ndarray | None = None
     outputs: dict = field(default_factory=dict)
     history: "History | None" = None
+    motion: object = None
 
 
 @dataclass

@@ -304,17 +304,30 @@ def rts_smooth(result: FilterResult) -> FilterResult:
     sensor = np.array(result.sensor, dtype=float)
     clock = (np.array(result.estimates["clock"], dtype=float) if lay.clk >= 0
              else np.zeros((len(rows), 2)))
-    _inject_rows(nav, sensor, clock, d, lay.as_array())
+    aux_s = {name: np.asarray(result.estimates[name], dtype=float) + d[:, sl] for name, sl in lay.aux}
+    if lay.is_ins:
+        _inject_rows(nav, sensor, clock, d, lay.as_array())
+        pv = np.ascontiguousarray(P_s[:, 3:9, 3:9])
+    else:   # another motion model: its own feedback, row by row (auxiliary blocks done above)
+        if result.motion is None:
+            raise ArgumentError("a run of a non-INS motion model must carry its motion model to be smoothed",
+                                argument="result.motion")
+        scratch = {name: np.zeros(sl.stop - sl.start) for name, sl in lay.aux}
+        for i in range(len(rows)):
+            result.motion.inject(nav[i], sensor[i], clock[i], scratch, d[i])
+        pv = np.full((len(rows), 6, 6), np.nan)
+        ip = lay.pos.start
+        pv[:, 3:, 3:] = P_s[:, ip:ip + 3, ip:ip + 3]
+        if lay.vel is not None:
+            iv = lay.vel.start
+            idx = np.r_[iv:iv + 3, ip:ip + 3]
+            pv = np.ascontiguousarray(P_s[:, idx][:, :, idx])
     # round-off can leave a variance that should be ~0 slightly negative: floored, never NaN
     sigma = np.sqrt(np.maximum(np.diagonal(P_s, axis1=1, axis2=2), 0.0))
-    pv = np.ascontiguousarray(P_s[:, 3:9, 3:9])
-    estimates = {"gyro_bias": sensor[:, 0:3], "accel_bias": sensor[:, 3:6]}
-    if lay.sg >= 0:
-        estimates.update(gyro_scale=sensor[:, 6:9], accel_scale=sensor[:, 9:12])
+    estimates = lay.sensor_estimates(sensor)
     if lay.clk >= 0:
         estimates["clock"] = clock
-    for name, sl in lay.aux:
-        estimates[name] = np.asarray(result.estimates[name], dtype=float) + d[:, sl]
+    estimates.update(aux_s)
     timing = {"smoother_time_s": _time.perf_counter() - t0}
     recoveries = dict(result.recoveries)
     recoveries["smoother_not_pd"] = not_pd
@@ -323,4 +336,4 @@ def rts_smooth(result: FilterResult) -> FilterResult:
         sensor=sensor, nis=np.zeros(0), nis_dim=np.zeros(0, dtype=int), pv_cov=pv,
         w_b=np.array(result.w_b), recoveries=recoveries, timing=timing, layout=lay,
         P=None if result.P is None else np.array(result.P), estimates=estimates,
-        nis_kind=np.zeros(0, dtype=object), outputs={}, history=None)
+        nis_kind=np.zeros(0, dtype=object), outputs={}, history=None, motion=result.motion)

@@ -38,6 +38,10 @@ ESTIMATORS = {
     "vb-akf": ("mixnav.filters.vb:VbAdaptiveEkf",
                "variational-Bayes adaptive EKF: the VB-AUKF's noise step on the EKF (options: rho, "
                "prior_shape, prior_scale, iterations, tolerance)"),
+    "epoch-mixture": ("mixnav.filters.epoch_mixture:EpochMixtureEkf",
+                      "whole-epoch LOS/NLOS mixture update (issue 21): responsibilities of every pseudorange "
+                      "of an epoch against one state, the delay distribution learned online (options: "
+                      "los_weight, delay_mean, delay_sd, learn, learn_scale, forget, prior_rows, iterations)"),
     "pf": ("mixnav.filters.particle:ParticleFilter",
            "SIR particle filter (issue 19): particles as full states mechanized over each IMU block, "
            "Gaussian log-weights through predict_batch, systematic resampling (options: particles, "

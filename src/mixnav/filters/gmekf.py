@@ -170,8 +170,9 @@ class BankEstimator:
                                 "(different x, y, z values) are not supported here: give one value each",
                                 argument="imu_model")
         qc_white = np.zeros(n)  # the white IMU noise (ARW, VRW) the process mixture scales
-        qc_white[lay.att] = motion.qc[lay.att]
-        qc_white[lay.vel] = motion.qc[lay.vel]
+        if lay.is_ins:          # other motion models have no IMU white noise to scale
+            qc_white[lay.att] = motion.qc[lay.att]
+            qc_white[lay.vel] = motion.qc[lay.vel]
         mixtures = self.mixtures0
         nk = self._kept_states()
         if self.carry_mean and (nk or n_clone):

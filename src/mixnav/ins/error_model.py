@@ -31,7 +31,9 @@ class StateBlock:
     dynamics : str
         ``"ins"`` for the built-in blocks (their rows of F come from the
         error-state kernels, :mod:`mixnav.ins._error_kernels`); ``"random_walk"``
-        for an auxiliary block (F rows zero, noise density ``walk ** 2``).
+        for an auxiliary block (F rows zero, noise density ``walk ** 2``);
+        ``"model"`` for a block of a non-INS motion model's core (dead
+        reckoning, constant velocity: its own class gives F and Qd).
     feedback : str
         Where a correction of the block goes: ``"nav"`` (attitude, velocity,
         position of the nominal INS), ``"sensor"``, ``"clock"``, or ``"aux"``
@@ -81,12 +83,24 @@ class StateLayout:
     order given. Filters and measurement models address states by block
     (``layout.pos``, ``layout.slice("clock")``), never by bare numbers.
 
+    A motion model other than the strapdown INS (:mod:`mixnav.motion`) gives its
+    own ``core`` blocks instead: then ``att``, ``vel``, ``pos``, ``bg``, ``ba`` are
+    the slices of the core blocks so named, or None where the core has no such
+    block (measurement models address only the blocks that exist), and
+    ``sensor_slots`` names what its entries of the engine's 12-element sensor
+    vector hold (its recorded estimates).
+
     Parameters
     ----------
     name : str
     blocks : sequence of StateBlock or str
         The blocks after the core; a string names a built-in block
         (``"gyro_scale"``, ``"accel_scale"``, ``"clock"``).
+    core : "ins" or sequence of StateBlock
+        The INS core (default) or a motion model's own core blocks
+        (``dynamics = "model"``), which must include ``position``.
+    sensor_slots : dict, optional
+        Non-INS core only: estimate name -> slice of the sensor vector.
 
     Attributes
     ----------
@@ -105,9 +119,19 @@ class StateLayout:
     bg = slice(9, 12)
     ba = slice(12, 15)
 
-    def __init__(self, name: str, blocks=()):
+    def __init__(self, name: str, blocks=(), core="ins", sensor_slots=None):
         from ..errors import ArgumentError
-        full = [INS_BLOCKS[b] for b in _CORE]
+        self.is_ins = isinstance(core, str) and core == "ins"
+        if self.is_ins:
+            full = [INS_BLOCKS[b] for b in _CORE]
+        else:
+            full = list(core)
+            if not all(isinstance(b, StateBlock) and b.dynamics == "model" for b in full):
+                raise ArgumentError("a motion model's core blocks must be StateBlocks with dynamics 'model'",
+                                    argument="core")
+            if "position" not in [b.name for b in full]:
+                raise ArgumentError("a motion model's core must have a 'position' block (NED metres)",
+                                    argument="core")
         for b in blocks:
             if isinstance(b, str):
                 if b not in INS_BLOCKS:
@@ -117,6 +141,8 @@ class StateLayout:
             if b.dynamics == "ins" and b.name not in INS_BLOCKS:
                 raise ArgumentError(f"block '{b.name}' has INS dynamics but the kernels do not know it",
                                     argument="blocks")
+            if b.dynamics == "ins" and not self.is_ins and b.name != "clock":
+                raise ArgumentError(f"block '{b.name}' needs the INS core", argument="blocks")
             if b.dynamics not in ("ins", "random_walk") or b.feedback not in ("nav", "sensor", "clock", "aux"):
                 raise ArgumentError(f"block '{b.name}': dynamics must be 'ins' or 'random_walk' and "
                                     "feedback one of nav, sensor, clock, aux", argument="blocks")
@@ -143,8 +169,23 @@ class StateLayout:
             raise ArgumentError("gyro_scale and accel_scale go together (the kernels carry both)",
                                 argument="blocks")
         #: auxiliary blocks: (name, slice) of the states the engine keeps estimates of
-        self.aux = tuple((b.name, self.slice(b.name)) for b in full if b.feedback == "aux")
-        self._array = np.array([self.n, 9, 12, self.sg, self.sa, self.clk], dtype=np.int64)
+        self.aux = tuple((b.name, self.slice(b.name)) for b in full if b.feedback == "aux"
+                         and b.dynamics != "model")
+        if self.is_ins:
+            self._array = np.array([self.n, 9, 12, self.sg, self.sa, self.clk], dtype=np.int64)
+            self.sensor_slots = {"gyro_bias": slice(0, 3), "accel_bias": slice(3, 6)}
+            if self.sg >= 0:
+                self.sensor_slots.update(gyro_scale=slice(6, 9), accel_scale=slice(9, 12))
+        else:
+            self._array = None
+            for attr, block in (("att", "attitude"), ("vel", "velocity"), ("pos", "position"),
+                                ("bg", "gyro_bias"), ("ba", "accel_bias")):
+                setattr(self, attr, self.slice(block) if block in self.offsets else None)
+            self.sensor_slots = dict(sensor_slots or {})
+
+    def sensor_estimates(self, sensor: np.ndarray) -> dict:
+        """The named estimates held in the engine's sensor vectors ``sensor`` (K, 12)."""
+        return {name: sensor[:, sl] for name, sl in self.sensor_slots.items()}
 
     def slice(self, block: str) -> slice:
         """The states of a block."""
@@ -161,7 +202,11 @@ class StateLayout:
         return name in self.offsets
 
     def as_array(self) -> np.ndarray:
-        """``[n, i_bg, i_ba, i_sg, i_sa, i_clk]`` for the compiled kernels (a copy)."""
+        """``[n, i_bg, i_ba, i_sg, i_sa, i_clk]`` for the compiled INS kernels (a copy)."""
+        if self._array is None:
+            from ..errors import ArgumentError
+            raise ArgumentError(f"layout {self.name!r} is not an INS layout: this needs the strapdown INS "
+                                "(its kernels)", argument="layout")
         return self._array.copy()
 
     def labels(self) -> list[str]:
@@ -172,10 +217,10 @@ class StateLayout:
         return lab
 
     def __eq__(self, other):
-        return isinstance(other, StateLayout) and self.blocks == other.blocks
+        return isinstance(other, StateLayout) and self.blocks == other.blocks and self.is_ins == other.is_ins
 
     def __hash__(self):
-        return hash(self.blocks)
+        return hash((self.blocks, self.is_ins))
 
     def __repr__(self):
         return f"StateLayout({self.name!r}, n={self.n}, blocks={[b.name for b in self.blocks]})"

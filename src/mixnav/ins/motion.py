@@ -14,14 +14,14 @@ A motion model gives the engine three things (see :mod:`mixnav.engine`):
 The ensemble family (UKF, particle filters) uses ``propagate_batch``: the
 mechanization of a batch of full states over a block in one compiled call.
 A vehicle dead-reckoning or constant-velocity model is another class with the
-same methods.
+same methods (:mod:`mixnav.motion`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..data import InitialState
+from ..data import InitialState, OdometryIncrements
 from ._error_kernels import apply_feedback, mechanize_batch, propagate_block
 from .error_model import ClockModel, StateLayout, body_noise, process_noise
 from .imu_model import ImuErrorModel
@@ -61,6 +61,13 @@ class StrapdownMotion:
         self.qc, self.tau, self.sensor_sigma0 = process_noise(layout, imu_model, clock)
         self.qb = body_noise(imu_model)
         self.layout_array = layout.as_array()
+
+    def check_inputs(self, inputs) -> None:
+        """The strapdown INS is driven by IMU increments, not by odometry."""
+        if isinstance(inputs, OdometryIncrements):
+            from ..errors import ArgumentError
+            raise ArgumentError("the strapdown INS is driven by IMU increments, got OdometryIncrements "
+                                "(use mixnav.motion.DeadReckoningMotion)", argument="imu")
 
     def initial_covariance(self, init: InitialState) -> np.ndarray:
         """Diagonal P0 (n, n) from the initial sigmas and the sensor model."""

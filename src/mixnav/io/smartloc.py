@@ -11,7 +11,12 @@ the row type (see the data set's ``readme.txt``):
     system (1 GPS, 2 SBAS, 4 GLONASS, 8 Galileo, 16 QZSS, 32 BeiDou),
     elevation [deg], C/N0 [dB-Hz]. Several rows share an epoch time.
 ``odom3`` (``*_Input.txt``), 14 tokens
-    odometry; not read here (skipped).
+    time [s], velocity x, y, z [m/s], turn rate x, y, z [rad/s] (vehicle frame),
+    then the six variances; :func:`read_odometry` keeps the forward speed, the
+    yaw rate (turn rate about z) and their variances. A speed beyond
+    ``MAX_SPEED`` (100 m/s, or backwards beyond 10 m/s), a yaw rate beyond
+    ``MAX_YAW_RATE`` (3 rad/s: a car turns at most about 1 rad/s; this catches
+    deg/s) or a non-positive variance is an error naming the line.
 ``point3`` (``*_GT.txt``), 14 tokens
     time [s], ECEF x, y, z of the reference [m], a 3x3 covariance (zeros).
 
@@ -86,7 +91,7 @@ from .tables import check_times
 
 __all__ = [
     "SYSTEMS", "SmartlocPseudoranges", "SmartlocTruth", "SmartlocResiduals", "read_pseudoranges",
-    "read_ground_truth", "read_smartloc", "geometric_range", "clock_per_epoch", "pseudorange_residuals",
+    "read_ground_truth", "read_smartloc", "SmartlocOdometry", "read_odometry", "to_pseudorange_epochs", "geometric_range", "clock_per_epoch", "pseudorange_residuals",
 ]
 
 #: smartLoc system code -> one-letter RINEX system identifier
@@ -96,6 +101,8 @@ _NTOK = {"pseudorange3": 11, "odom3": 14, "point3": 14}
 _SAT_RADIUS = (1.0e7, 5.0e7)     # [m] GNSS orbits: 2.0e7 (GLONASS) .. 4.2e7 (GEO)
 _RX_RADIUS = (6.2e6, 6.5e6)      # [m] near the Earth's surface
 _HUBER_K = 1.345
+MAX_SPEED = 100.0                # [m/s] forward; backwards at most 10 m/s
+MAX_YAW_RATE = 3.0               # [rad/s]
 
 
 @dataclass(frozen=True)
@@ -198,6 +205,35 @@ class SmartlocTruth:
         return np.stack([np.interp(t, self.time, self.pos_ecef[:, k]) for k in range(3)], axis=-1)
 
 
+@dataclass(frozen=True)
+class SmartlocOdometry:
+    """The ``odom3`` rows of a smartLoc input file (forward speed and yaw rate).
+
+    Attributes
+    ----------
+    time : ndarray (k,)
+        [s], strictly increasing.
+    speed, yaw_rate : ndarray (k,)
+        Forward velocity [m/s] and turn rate about the vehicle's z axis [rad/s]
+        (positive to the left: smartLoc's z is up).
+    speed_var, yaw_rate_var : ndarray (k,)
+        Their variances [m^2/s^2], [rad^2/s^2].
+    line : ndarray of int (k,)
+    path : str
+    """
+
+    time: np.ndarray
+    speed: np.ndarray
+    yaw_rate: np.ndarray
+    speed_var: np.ndarray
+    yaw_rate_var: np.ndarray
+    line: np.ndarray
+    path: str = ""
+
+    def __len__(self) -> int:
+        return int(self.time.size)
+
+
 # ---------------------------------------------------------------------------
 # reading
 # ---------------------------------------------------------------------------
@@ -292,6 +328,37 @@ def read_pseudoranges(path) -> SmartlocPseudoranges:
     return SmartlocPseudoranges(time=t, pseudorange=a[:, 1], variance=a[:, 2],
                                 sat_ecef=np.ascontiguousarray(a[:, 3:6]), sat_id=sat_id, system=system,
                                 elevation=np.deg2rad(a[:, 8]), cn0=a[:, 9], line=lines, path=str(path))
+
+
+def read_odometry(path) -> SmartlocOdometry:
+    """Read the ``odom3`` rows of a smartLoc ``*_Input.txt`` file.
+
+    Raises
+    ------
+    DataError
+        Missing file, no ``odom3`` row, a malformed row, time not strictly
+        increasing, an absurd speed or yaw rate, a non-positive variance (file
+        and line named).
+    """
+    path = Path(path)
+    a, lines = _rows(path, "odom3", "input")
+    check_times(a[:, 0], lines, str(path), what="odometry")
+    _fail_at((a[:, 1] > MAX_SPEED) | (a[:, 1] < -10.0), lines, path,
+             f"forward speed (column 3) outside [-10, {MAX_SPEED:g}] m/s")
+    _fail_at(np.abs(a[:, 6]) > MAX_YAW_RATE, lines, path,
+             f"yaw rate (column 8) beyond {MAX_YAW_RATE:g} rad/s (degrees per second instead of radians?)")
+    _fail_at(~((a[:, 7] > 0) & (a[:, 12] > 0)), lines, path,
+             "the speed and yaw-rate variances (columns 9 and 14) must be positive")
+    return SmartlocOdometry(time=a[:, 0], speed=a[:, 1], yaw_rate=a[:, 6], speed_var=a[:, 7],
+                            yaw_rate_var=a[:, 12], line=lines, path=str(path))
+
+
+def to_pseudorange_epochs(pr: SmartlocPseudoranges):
+    """The pseudoranges as :class:`~mixnav.gnss.pseudoranges.PseudorangeEpochs` (rows grouped
+    by time, file order kept inside an epoch)."""
+    from ..gnss.pseudoranges import PseudorangeEpochs
+    return PseudorangeEpochs.from_rows(pr.time, pr.pseudorange, pr.variance, pr.sat_ecef, pr.sat_id, pr.system,
+                                       pr.elevation, pr.cn0, source=pr.path)
 
 
 def read_ground_truth(path) -> SmartlocTruth:

@@ -1,0 +1,283 @@
+"""Dead-reckoning alignment from pseudoranges: the initial position and heading of a
+vehicle that is already moving, from the first seconds of data only.
+
+1. Every epoch up to ``t_align`` is solved alone for position, receiver clock and
+   inter-system offsets by iteratively reweighted least squares with Huber
+   weights (k = 1.5 sigma, scale from the median absolute residual): the
+   non-line-of-sight delays of urban canyons are large and positive, so an
+   unweighted fix is pulled by tens of metres.
+2. The odometry is dead-reckoned over the same time with heading 0 from the
+   origin (:func:`dead_reckon`).
+3. The fixes are fitted by ``p(t) = p0 + R(psi0) d(t)`` (2-D rotation and
+   translation, Huber-weighted again): the heading ``psi0`` that turns the
+   odometry track onto the GNSS track, and the start ``p0``.
+4. ``refine = True``: every pseudorange of the window is fitted at once to the
+   dead-reckoned track, ``r(t) = r_ref + p0 + R(psi0) d(t)``, with a clock
+   ``b0 + d1 t`` and the inter-system offsets (7 unknowns for hundreds of
+   rows), by expectation-maximisation under a two-component noise: line of
+   sight ``N(0, var_j)`` and non-line-of-sight ``N(mu, s^2)``, with ``w``, ``mu``,
+   ``s`` re-estimated from the responsibilities. Each epoch's fix is pulled by
+   its delayed rows; the whole window shares one track, so the rows that agree
+   with it are found. EM is local: it starts from the Huber fit with the clock
+   moved by each of ``clock_starts`` metres (delays pull a fix's clock up) and
+   keeps the start of largest likelihood.
+
+Uses data up to ``t_align`` only: a filter started at ``t_align`` from the
+returned state is causal.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..data import InitialState
+from ..errors import ArgumentError
+from ..geodesy.frames import ecef_to_lla, lla_to_ned, ned_to_lla
+from ..gnss.geometry import C_LIGHT, earth_rotation_correction
+
+
+def _huber_weights(v: np.ndarray, k: float = 1.5) -> np.ndarray:
+    s = 1.4826 * np.median(np.abs(v)) + 1e-6
+    a = np.abs(v) / (k * s)
+    return np.where(a <= 1.0, 1.0, 1.0 / np.maximum(a, 1e-12))
+
+
+def robust_fix(sat_ecef, pseudorange, variance, system_index, n_systems, x0=None, iterations=10):
+    """One epoch's position [m] (ECEF) and clocks (reference clock [m], offsets [m]) by
+    Huber-reweighted least squares; None when it does not converge or has too few rows."""
+    m = len(pseudorange)
+    n_par = 3 + n_systems
+    if m < n_par + 1:
+        return None
+    x = np.zeros(3) if x0 is None else np.array(x0, dtype=float)
+    clk = np.zeros(n_systems)
+    w = 1.0 / np.asarray(variance, dtype=float)
+    hub = np.ones(m)
+    for it in range(iterations + 10):
+        tau = np.linalg.norm(sat_ecef - x, axis=1) / C_LIGHT
+        d = earth_rotation_correction(sat_ecef, tau) - x
+        rng = np.linalg.norm(d, axis=1)
+        v = pseudorange - rng - clk[system_index]
+        A = np.zeros((m, n_par))
+        A[:, :3] = -d / rng[:, None]
+        A[np.arange(m), 3 + system_index] = 1.0
+        if it >= 10:   # first converge from the Earth's centre unweighted, then reweight
+            hub = _huber_weights(v * np.sqrt(w))
+        ww = w * hub
+        N = A.T @ (A * ww[:, None])
+        try:
+            dp = np.linalg.solve(N, A.T @ (ww * v))
+        except np.linalg.LinAlgError:
+            return None
+        x += dp[:3]
+        clk += dp[3:]
+        if it >= 10 and np.linalg.norm(dp) < 1e-3:
+            break
+    r = np.linalg.norm(x)
+    if not (6.2e6 < r < 6.5e6):
+        return None
+    return x, clk
+
+
+def dead_reckon(inc, speed_scale: float = 0.0):
+    """Positions N, E [m] and heading [rad] at the end of each increment of
+    :class:`~mixnav.data.OdometryIncrements`, starting at the origin with heading 0."""
+    dpsi = inc.dtheta[:, 2]
+    psi = np.cumsum(dpsi)
+    mid = psi - 0.5 * dpsi
+    ds = (1.0 + speed_scale) * inc.dvel[:, 0]
+    return np.cumsum(ds * np.cos(mid)), np.cumsum(ds * np.sin(mid)), psi
+
+
+def _window_rows(epochs, t0, t_align, sysmap):
+    """Flat rows of the window: times, satellites, pseudoranges, variances, system index."""
+    keep = []
+    for e in range(len(epochs)):
+        if t0 < epochs.time[e] <= t_align:
+            sl = epochs.rows_of(e)
+            keep.append(np.arange(sl.start, sl.stop))
+    idx = np.concatenate(keep) if keep else np.zeros(0, dtype=int)
+    sidx = np.array([sysmap.get(int(s), -1) for s in epochs.system[idx]], dtype=int)
+    idx, sidx = idx[sidx >= 0], sidx[sidx >= 0]
+    t = np.repeat(epochs.time, np.diff(epochs.start))[idx]
+    return t, epochs.sat_ecef[idx], epochs.pseudorange[idx], epochs.variance[idx], sidx
+
+
+def _refine(theta0, lla_ref, tq, sat, rho, var, sidx, n_sys, track, iterations=30):
+    """EM fit of the window's pseudoranges to the dead-reckoned track (module docstring, step 4).
+
+    ``theta = [p0_n, p0_e, p0_d, psi0, b0, d1, offsets...]``; ``track(t)`` gives the
+    dead-reckoned north, east [m] at times ``t``. Returns ``(theta, log-likelihood, w, mu, s)``."""
+    from ..geodesy.frames import dcm_ecef_to_ned
+    C_en = dcm_ecef_to_ned(lla_ref[0], lla_ref[1]).T
+    r_ref = lla_to_ecef_point(lla_ref)
+    dn, de = track(tq)
+    t_ref = tq[0]
+    theta = np.array(theta0, dtype=float)
+    w, mu, s = 0.5, 20.0, 30.0
+    ll = -np.inf
+    for it in range(iterations):
+        c, sn = math.cos(theta[3]), math.sin(theta[3])
+        pn = theta[0] + c * dn - sn * de
+        pe = theta[1] + sn * dn + c * de
+        r = r_ref + np.stack([pn, pe, np.full_like(pn, theta[2])], axis=1) @ C_en.T
+        tau = np.linalg.norm(sat - r, axis=1) / C_LIGHT
+        d = earth_rotation_correction(sat, tau) - r
+        rng = np.linalg.norm(d, axis=1)
+        off = np.concatenate([[0.0], theta[6:]])
+        e = rho - (rng + theta[4] + theta[5] * (tq - t_ref) + off[sidx])
+        # E-step
+        a = np.log(w) - 0.5 * e * e / var - 0.5 * np.log(2 * np.pi * var)
+        b = np.log(1 - w) - 0.5 * (e - mu) ** 2 / s ** 2 - 0.5 * np.log(2 * np.pi * s * s)
+        mx = np.maximum(a, b)
+        lse = mx + np.log(np.exp(a - mx) + np.exp(b - mx))
+        ll_new = float(lse.sum())
+        g = np.exp(a - lse)
+        # M-step: mixture parameters, then one weighted Gauss-Newton step of theta
+        w = float(np.clip(g.mean(), 0.05, 0.95))
+        mu = float(((1 - g) * e).sum() / (1 - g).sum())
+        s = float(max(math.sqrt(((1 - g) * (e - mu) ** 2).sum() / (1 - g).sum()), 5.0))
+        u_n = (d / rng[:, None]) @ C_en        # line of sight in NED
+        A = np.zeros((len(e), len(theta)))
+        # d(range)/d(p) = -u; p depends on p0 and on psi0 through the rotated track
+        A[:, 0], A[:, 1], A[:, 2] = u_n[:, 0], u_n[:, 1], u_n[:, 2]
+        dpn, dpe = -sn * dn - c * de, c * dn - sn * de
+        A[:, 3] = u_n[:, 0] * dpn + u_n[:, 1] * dpe
+        A[:, 4] = -1.0
+        A[:, 5] = -(tq - t_ref)
+        for k in range(1, n_sys):
+            A[sidx == k, 5 + k] = -1.0
+        # residual e = rho - h; h grows along -u for p: de/dp = u; e target: minimise the
+        # weighted squares of (e - (1 - g) mu) with weights g / var + (1 - g) / s^2
+        wt = g / var + (1 - g) / s ** 2
+        tgt = (g * e / var + (1 - g) * (e - mu) / s ** 2) / wt
+        N = A.T @ (A * wt[:, None])
+        try:
+            step = np.linalg.solve(N + 1e-9 * np.eye(len(theta)), A.T @ (wt * tgt))
+        except np.linalg.LinAlgError:
+            break
+        theta = theta - step
+        if abs(ll_new - ll) < 1e-3 and np.abs(step).max() < 1e-3:
+            ll = ll_new
+            break
+        ll = ll_new
+    return theta, ll, w, mu, s
+
+
+def lla_to_ecef_point(lla):
+    from ..geodesy.frames import lla_to_ecef
+    return lla_to_ecef(np.asarray(lla, dtype=float))
+
+
+def align_track(epochs, inc, t_align: float, systems=(1, 4), refine: bool = True,
+                clock_starts=(0.0, -10.0, -20.0, -30.0, -40.0, -60.0)) -> tuple[InitialState, dict]:
+    """The initial state at ``t_align`` [s] (module docstring) and a report (fix count, fit
+    residual RMS [m], heading [deg]).
+
+    Parameters
+    ----------
+    epochs : PseudorangeEpochs
+    inc : OdometryIncrements
+    t_align : float
+        End of the alignment window [s] (after the first increment).
+    systems : sequence of int
+        System codes, the clock's reference first.
+    """
+    t0 = float(inc.time[0] - inc.dt[0])
+    if not (t0 < t_align <= inc.time[-1]):
+        raise ArgumentError(f"must be inside the odometry's span ({t0:g}, {inc.time[-1]:g}] s, got {t_align}",
+                            argument="t_align")
+    sysmap = {int(s): k for k, s in enumerate(systems)}
+    times, fixes, x = [], [], None
+    for e in range(len(epochs)):
+        t = epochs.time[e]
+        if t < t0 or t > t_align:
+            continue
+        sl = epochs.rows_of(e)
+        sidx = np.array([sysmap.get(int(s), -1) for s in epochs.system[sl]])
+        use = sidx >= 0
+        present = sorted(set(sidx[use]))
+        remap = {k: i for i, k in enumerate(present)}
+        sol = robust_fix(epochs.sat_ecef[sl][use], epochs.pseudorange[sl][use], epochs.variance[sl][use],
+                         np.array([remap[k] for k in sidx[use]], dtype=int), len(present), x0=x)
+        if sol is None:
+            continue
+        x = sol[0]
+        times.append(t)
+        fixes.append(x.copy())
+    if len(fixes) < 5:
+        raise ArgumentError(f"only {len(fixes)} epochs could be solved before t_align = {t_align:g} s",
+                            argument="t_align")
+    fixes = np.array(fixes)
+    times = np.array(times)
+    lla_ref = ecef_to_lla(np.median(fixes, axis=0))
+    p = lla_to_ned(ecef_to_lla(fixes), lla_ref)[:, :2]
+    dn, de, psi = dead_reckon(inc)
+    tt = np.concatenate([[t0], inc.time])
+    dn, de, psi = (np.concatenate([[0.0], a]) for a in (dn, de, psi))
+    d = np.stack([np.interp(times, tt, dn), np.interp(times, tt, de)], axis=1)
+    w = np.ones(len(times))
+    for _ in range(20):    # weighted 2-D Procrustes, Huber reweighting
+        mp = (w[:, None] * p).sum(0) / w.sum()
+        md = (w[:, None] * d).sum(0) / w.sum()
+        A = ((w[:, None] * (d - md)).T @ (p - mp))
+        ang = math.atan2(A[0, 1] - A[1, 0], A[0, 0] + A[1, 1])
+        R = np.array([[math.cos(ang), -math.sin(ang)], [math.sin(ang), math.cos(ang)]])
+        p0 = mp - R @ md
+        res = p - (p0 + d @ R.T)
+        w = _huber_weights(np.linalg.norm(res, axis=1))
+    ka = int(np.searchsorted(tt, t_align - 1e-9))
+    report = {"fixes": len(fixes)}
+    if refine:
+        tq, sat, rho, var, sidx = _window_rows(epochs, t0, t_align, sysmap)
+        present = sorted(set(sidx.tolist()))
+        remap = np.zeros(max(present) + 1, dtype=int)
+        remap[present] = np.arange(len(present))
+        sidx = remap[sidx]
+        n_sys = len(present)
+        track = lambda tq_: (np.interp(tq_, tt, dn), np.interp(tq_, tt, de))  # noqa: E731
+        # clock of the Huber fixes at the window's start, a straight line through them
+        r_fix = fixes
+        clk0 = []
+        for t_e, x_e in zip(times, r_fix):
+            sel = (tq == t_e) & (sidx == 0)
+            if sel.any():
+                tau = np.linalg.norm(sat[sel] - x_e, axis=1) / C_LIGHT
+                rr = np.linalg.norm(earth_rotation_correction(sat[sel], tau) - x_e, axis=1)
+                clk0.append((t_e, float(np.median(rho[sel] - rr))))
+        ct = np.array(clk0)
+        d1, b0 = np.polyfit(ct[:, 0] - tq[0], ct[:, 1], 1) if len(ct) > 1 else (0.0, ct[0, 1])
+        h_ref = float(np.median(ecef_to_lla(fixes)[:, 2]))
+        best = None
+        for dc in clock_starts:
+            th0 = np.concatenate([[p0[0], p0[1], 0.0, ang, b0 + dc, d1], np.zeros(n_sys - 1)])
+            lla_ref2 = np.array([lla_ref[0], lla_ref[1], h_ref])
+            th, ll, w_los, mu, s_n = _refine(th0, lla_ref2, tq, sat, rho, var, sidx, n_sys, track)
+            if best is None or ll > best[1]:
+                best = (th, ll, w_los, mu, s_n, dc)
+        th, ll, w_los, mu, s_n, dc = best
+        c, sn = math.cos(th[3]), math.sin(th[3])
+        pa = np.array([th[0] + c * dn[ka] - sn * de[ka], th[1] + sn * dn[ka] + c * de[ka]])
+        ang = th[3]
+        lla = ned_to_lla(np.array([[pa[0], pa[1], th[2]]]), np.array([lla_ref[0], lla_ref[1], h_ref]))[0]
+        report.update(los_share=w_los, nlos_mean_m=mu, nlos_sd_m=s_n, clock_start_m=dc, log_likelihood=ll)
+        rms = 5.0
+    else:
+        pa = p0 + R @ np.array([dn[ka], de[ka]])
+        h = float(np.median(ecef_to_lla(fixes)[:, 2]))
+        lla = ned_to_lla(np.array([[pa[0], pa[1], 0.0]]), lla_ref)[0]
+        lla[2] = h
+        rms = float(np.sqrt(np.mean(np.sum(res ** 2, axis=1))))
+    heading = ang + psi[ka]
+    nav = np.zeros(10)
+    nav[0], nav[3] = math.cos(0.5 * heading), math.sin(0.5 * heading)
+    nav[7:10] = lla
+    span = float(np.linalg.norm(d[-1] - d[0])) + 1.0
+    sig_psi = min(max(rms / span, math.radians(1.0)), math.radians(30.0))
+    init = InitialState(time=float(tt[ka]), nav=nav, sigma_att=np.array([0.0, 0.0, sig_psi]),
+                        sigma_vel=np.ones(3), sigma_pos=np.array([rms, rms, 2 * rms]),
+                        sigma_clock=np.array([1e4, 200.0]))
+    report.update(fit_rms_m=rms, heading_deg=math.degrees(heading) % 360.0, heading_sigma_deg=math.degrees(sig_psi))
+    return init, report

@@ -1,0 +1,229 @@
+"""Whole-epoch mixture update: each range is line of sight or delayed, decided from all rows
+of the epoch at once, with the delay distribution learned online (issue 21).
+
+Urban pseudoranges are either line of sight (LOS: the measurement model's noise) or
+non-line-of-sight (NLOS: the reflected path is longer, so the error is a *positive*
+delay of tens of metres). Per row ``j`` of an epoch (innovation ``z_j``, row ``H_j``,
+variance ``r_j``) the noise is the two-component mixture::
+
+    e_j ~ w N(0, s r_j) + (1 - w) N(mu, sd^2)        (delay mean mu > 0 expected)
+
+and the prior ``dx ~ N(0, P)``. The posterior of ``dx`` is a mixture over the
+``2^m`` assignments of the rows; instead of splitting a bank row by row (M3-M5,
+:mod:`mixnav.filters.gmekf`), the update finds the posterior mode by
+expectation-maximisation over the whole epoch, the responsibilities of every row
+computed against one common state (the receiver clock is shared, so the rows decide
+together which of them are delayed):
+
+- E-step: ``g_j = w N(e_j; 0, s r_j + h_j) / (w N(e_j; 0, s r_j + h_j) + (1 - w) N(e_j; mu,
+  sd^2 + h_j))`` with ``e_j = z_j - H_j x`` and ``h_j = H_j P_post H_j^T``;
+- M-step: the Kalman update from the prior with each row's expected information
+  ``1 / r'_j = g_j / (s r_j) + (1 - g_j) / sd^2`` and target ``z'_j = r'_j (g_j z_j / (s r_j)
+  + (1 - g_j) (z_j - mu) / sd^2)`` (Joseph form, :func:`mixnav.filters.kalman.kalman_correct`),
+
+until the state moves less than ``tolerance`` (at most ``iterations``; an epoch that
+hits the limit is counted, ``em_not_converged``). The posterior covariance is the last
+M-step's. Rows of kinds not in ``kinds`` are Gaussian (``g = 1``).
+
+Learning (``learn = True``): after each epoch ``w``, ``mu``, ``sd`` (and, with
+``learn_scale``, the LOS variance factor ``s``) are re-estimated from the epoch's
+responsibilities and posterior residuals, with exponential forgetting per row
+(``forget``) and the starting values worth ``prior_rows`` rows; nothing is trained on a
+truth. ``w`` stays in [0.05, 0.95], ``sd >= min_delay_sd``, ``s`` in [0.1, 10].
+With ``w = 1`` fixed (``learn = False``) the update is the Kalman filter's, exactly.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..engine.protocols import Correction, Epoch
+from ..engine.status import NEEDS_REPAIR, OK
+from ..errors import ArgumentError
+from ..measurements.kinds import kind_code
+from .ekf import ErrorStateEkf, KalmanEstimator
+from ._ekf_kernels import kalman_correct
+
+__all__ = ["EpochMixtureEstimator", "EpochMixtureEkf"]
+
+_LOG2PI = math.log(2.0 * math.pi)
+
+
+class EpochMixtureEstimator(KalmanEstimator):
+    """One Gaussian error state with the whole-epoch LOS/NLOS update (module docstring).
+
+    Parameters
+    ----------
+    los_weight : float
+        Starting ``w`` in (0, 1].
+    delay_mean, delay_sd : float
+        Starting ``mu`` [m] and ``sd`` [m] of the delayed component (``sd > 0``).
+    los_scale : float
+        Starting factor ``s`` on the model's variance (> 0).
+    learn, learn_scale : bool
+        Re-estimate ``w``, ``mu``, ``sd`` (and ``s``) online.
+    forget : float
+        Forgetting factor per row in (0, 1].
+    prior_rows : float
+        Weight of the starting values, in rows (>= 0).
+    min_delay_sd : float
+        Floor on ``sd`` [m] (> 0).
+    iterations : int
+        EM iterations per epoch (>= 1).
+    tolerance : float
+        Convergence: the largest change of the state estimate (> 0).
+    kinds : sequence of str
+        Observable kinds whose rows follow the mixture.
+    absurd_sigma : float
+        As :class:`~mixnav.filters.ekf.KalmanEstimator`.
+    """
+
+    def __init__(self, los_weight: float = 0.5, delay_mean: float = 10.0, delay_sd: float = 30.0,
+                 los_scale: float = 1.0, learn: bool = True, learn_scale: bool = False, forget: float = 0.999,
+                 prior_rows: float = 200.0, min_delay_sd: float = 5.0, iterations: int = 20,
+                 tolerance: float = 1e-3, kinds=("pseudorange",), absurd_sigma: float = 1e4):
+        super().__init__(absurd_sigma)
+        if not 0.0 < los_weight <= 1.0:
+            raise ArgumentError(f"must be in (0, 1], got {los_weight}", argument="los_weight")
+        for name, v in (("delay_sd", delay_sd), ("los_scale", los_scale), ("min_delay_sd", min_delay_sd),
+                        ("tolerance", tolerance)):
+            if not (math.isfinite(v) and v > 0):
+                raise ArgumentError(f"must be positive, got {v}", argument=name)
+        if not math.isfinite(delay_mean):
+            raise ArgumentError(f"must be finite, got {delay_mean}", argument="delay_mean")
+        if not 0.0 < forget <= 1.0:
+            raise ArgumentError(f"must be in (0, 1], got {forget}", argument="forget")
+        if not (math.isfinite(prior_rows) and prior_rows >= 0):
+            raise ArgumentError(f"must be >= 0, got {prior_rows}", argument="prior_rows")
+        if int(iterations) != iterations or iterations < 1:
+            raise ArgumentError(f"must be an integer >= 1, got {iterations}", argument="iterations")
+        self.start = dict(w=float(los_weight), mu=float(delay_mean), sd=float(delay_sd), s=float(los_scale))
+        self.learn, self.learn_scale = bool(learn), bool(learn_scale)
+        self.forget, self.prior_rows = float(forget), float(prior_rows)
+        self.min_delay_sd = float(min_delay_sd)
+        self.iterations, self.tolerance = int(iterations), float(tolerance)
+        self.kind_codes = np.array([kind_code(k, argument="kinds") for k in kinds], dtype=np.int64)
+
+    def init(self, motion, P0, n_clone, rng):
+        super().init(motion, P0, n_clone, rng)
+        if n_clone:
+            raise ArgumentError("the epoch-mixture update carries no stochastic clone", argument="measurements")
+        st = self.start
+        self.w, self.mu, self.sd, self.s = st["w"], st["mu"], st["sd"], st["s"]
+        n0 = self.prior_rows
+        # sufficient statistics (forgotten per row): rows, LOS responsibility, delayed first and
+        # second moments, LOS squared standardised residuals
+        self._N, self._G = n0, n0 * self.w
+        self._S1 = n0 * (1 - self.w) * self.mu
+        self._S2 = n0 * (1 - self.w) * (self.sd ** 2 + self.mu ** 2)
+        self._Q = n0 * self.w * self.s
+        self.counts["em_not_converged"] = 0
+        self._trace = []
+
+    def _responsibilities(self, e, r, h, mix):
+        """LOS responsibility of each row (``mix``: rows that follow the mixture)."""
+        vl = self.s * r + h
+        vn = self.sd ** 2 + h
+        a = math.log(self.w) - 0.5 * e * e / vl - 0.5 * np.log(vl) if self.w < 1.0 else np.zeros_like(e)
+        if self.w >= 1.0:
+            return np.ones_like(e)
+        b = math.log(1.0 - self.w) - 0.5 * (e - self.mu) ** 2 / vn - 0.5 * np.log(vn)
+        m = np.maximum(a, b)
+        g = np.exp(a - m) / (np.exp(a - m) + np.exp(b - m))
+        return np.where(mix, g, 1.0)
+
+    def update(self, epoch: Epoch) -> Correction | None:
+        rows = epoch.rows()
+        if rows is None:
+            return None
+        z, H, r = rows.z, rows.H, np.asarray(rows.R, dtype=float)
+        if r.ndim != 1:
+            raise ArgumentError("the epoch-mixture update needs independent rows (R as variances)",
+                                argument="R")
+        mix = np.isin(rows.kinds, self.kind_codes)
+        P0 = self.P
+        x = np.zeros(self.n)
+        h = np.einsum("ij,jk,ik->i", H, P0, H)
+        g = self._responsibilities(z, r, h, mix)
+        converged = False
+        for _ in range(self.iterations):
+            info = g / (self.s * r) + (1.0 - g) / self.sd ** 2
+            info = np.where(mix, info, 1.0 / r)
+            r_eff = 1.0 / info
+            z_eff = np.where(mix, r_eff * (g * z / (self.s * r) + (1.0 - g) * (z - self.mu) / self.sd ** 2), z)
+            P_new, dx, nis, status = kalman_correct(P0, z_eff, H, r_eff, self.absurd_sigma)
+            if status != OK and status != NEEDS_REPAIR:
+                return Correction(np.zeros(self.n), math.inf, status, len(z))
+            moved = float(np.abs(dx - x).max())
+            x = dx
+            e = z - H @ x
+            h = np.einsum("ij,jk,ik->i", H, P_new, H)
+            g = self._responsibilities(e, r, h, mix)
+            if moved < self.tolerance:
+                converged = True
+                break
+        if not converged:
+            self.counts["em_not_converged"] += 1
+        self.P = P_new
+        if self.learn:
+            self._learn(e[mix], r[mix], g[mix])
+        self._trace.append((epoch.time, float(g[mix].mean()) if mix.any() else 1.0, self.w, self.mu, self.sd,
+                            self.s))
+        return Correction(x, nis, status, len(z))
+
+    def _learn(self, e, r, g):
+        m = len(e)
+        if m == 0:
+            return
+        lam = self.forget ** m
+        self._N = lam * self._N + m
+        self._G = lam * self._G + g.sum()
+        self._S1 = lam * self._S1 + ((1 - g) * e).sum()
+        self._S2 = lam * self._S2 + ((1 - g) * e * e).sum()
+        self._Q = lam * self._Q + (g * e * e / r).sum()
+        self.w = float(np.clip(self._G / self._N, 0.05, 0.95))
+        nn = max(self._N - self._G, 1e-9)
+        self.mu = float(self._S1 / nn)
+        self.sd = float(max(math.sqrt(max(self._S2 / nn - self.mu ** 2, 0.0)), self.min_delay_sd))
+        if self.learn_scale:
+            self.s = float(np.clip(self._Q / max(self._G, 1e-9), 0.1, 10.0))
+
+    def outputs(self) -> dict:
+        """Per epoch: the mean LOS responsibility and the mixture then in use."""
+        if not self._trace:
+            return {}
+        t, g, w, mu, sd, s = map(np.array, zip(*self._trace))
+        return {"epoch_mixture_time": t, "los_share": g, "los_weight": w, "delay_mean_m": mu, "delay_sd_m": sd,
+                "los_scale": s}
+
+    def diagnostics(self) -> dict:
+        return {"los_weight_final": self.w, "delay_mean_m_final": self.mu, "delay_sd_m_final": self.sd}
+
+
+class EpochMixtureEkf(ErrorStateEkf):
+    """The closed-loop error-state filter on the strapdown INS with the whole-epoch mixture
+    update (tight coupling: pseudorange rows follow the mixture, range rates stay Gaussian).
+
+    Parameters
+    ----------
+    layout, imu_model, covariance_interval, absurd_sigma, clock
+        As :class:`~mixnav.filters.ekf.ErrorStateEkf`.
+    los_weight, delay_mean, delay_sd, los_scale, learn, learn_scale, forget, prior_rows, min_delay_sd,
+    iterations, tolerance
+        As :class:`EpochMixtureEstimator`.
+    """
+
+    def __init__(self, layout, imu_model, los_weight: float = 0.5, delay_mean: float = 10.0,
+                 delay_sd: float = 30.0, los_scale: float = 1.0, learn: bool = True, learn_scale: bool = False,
+                 forget: float = 0.999, prior_rows: float = 200.0, min_delay_sd: float = 5.0, iterations: int = 20,
+                 tolerance: float = 1e-3, covariance_interval: float = 1.0, absurd_sigma: float = 1e4, clock=None):
+        super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
+        self.settings = dict(los_weight=los_weight, delay_mean=delay_mean, delay_sd=delay_sd, los_scale=los_scale,
+                             learn=learn, learn_scale=learn_scale, forget=forget, prior_rows=prior_rows,
+                             min_delay_sd=min_delay_sd, iterations=iterations, tolerance=tolerance)
+        self.make_estimator()   # validate now, not at the first run
+
+    def make_estimator(self):
+        return EpochMixtureEstimator(**self.settings, absurd_sigma=self.absurd_sigma)

@@ -1,0 +1,104 @@
+"""Pseudorange epochs of any number of systems, held flat (one row per measurement).
+
+The raw-GNSS container the pseudorange measurement model
+(:class:`mixnav.measurements.pseudorange.PseudorangeGnss`) reads: what smartLoc
+gives (satellite clock and atmosphere removed; satellite position at the
+transmit time in the ECEF frame of that time), and what a receiver's
+observations become once the broadcast corrections are applied.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import ArgumentError
+
+#: system codes (smartLoc's, a bit per system) -> RINEX letter
+SYSTEM_LETTERS = {1: "G", 2: "S", 4: "R", 8: "E", 16: "J", 32: "C"}
+
+
+@dataclass(frozen=True)
+class PseudorangeEpochs:
+    """Pseudoranges of ``E`` epochs, ``M`` rows in all, rows of epoch ``e`` in
+    ``start[e]:start[e + 1]``.
+
+    Attributes
+    ----------
+    time : ndarray (E,)
+        Receive times [s], strictly increasing.
+    start : ndarray of int (E + 1,)
+    pseudorange : ndarray (M,)
+        [m], satellite clock (and atmosphere, where the source removed it) removed.
+    variance : ndarray (M,)
+        The source's variance [m^2] (> 0).
+    sat_ecef : ndarray (M, 3)
+        Satellite position at the transmit time, ECEF of that time [m] (the model
+        turns it into the reception-time frame).
+    sat_id : ndarray of int (M,)
+    system : ndarray of int (M,)
+        System code (:data:`SYSTEM_LETTERS`).
+    elevation : ndarray (M,)
+        [rad] (NaN where unknown).
+    cn0 : ndarray (M,)
+        [dB-Hz] (NaN where unknown).
+    source : str or None
+    """
+
+    time: np.ndarray
+    start: np.ndarray
+    pseudorange: np.ndarray
+    variance: np.ndarray
+    sat_ecef: np.ndarray
+    sat_id: np.ndarray
+    system: np.ndarray
+    elevation: np.ndarray
+    cn0: np.ndarray
+    source: str | None = None
+
+    def __post_init__(self):
+        M = len(self.pseudorange)
+        E = len(self.time)
+        where = self.source or "pseudoranges"
+        if self.start.shape != (E + 1,) or self.start[0] != 0 or self.start[-1] != M or (np.diff(self.start) < 0).any():
+            raise ArgumentError(f"{where}: start must run from 0 to {M} without decreasing", argument="start")
+        for name in ("variance", "sat_id", "system", "elevation", "cn0"):
+            if getattr(self, name).shape != (M,):
+                raise ArgumentError(f"{where}: {name} has shape {getattr(self, name).shape}, expected ({M},)",
+                                    argument=name)
+        if self.sat_ecef.shape != (M, 3):
+            raise ArgumentError(f"{where}: sat_ecef must be ({M}, 3)", argument="sat_ecef")
+        if E > 1 and (np.diff(self.time) <= 0).any():
+            raise ArgumentError(f"{where}: epoch times must increase strictly", argument="time")
+        if not (np.isfinite(self.pseudorange).all() and np.isfinite(self.sat_ecef).all()):
+            raise ArgumentError(f"{where}: non-finite pseudorange or satellite position", argument="pseudorange")
+        if not (self.variance > 0).all():
+            raise ArgumentError(f"{where}: variances must be positive", argument="variance")
+
+    @classmethod
+    def from_rows(cls, time, pseudorange, variance, sat_ecef, sat_id, system, elevation=None, cn0=None,
+                  source=None) -> "PseudorangeEpochs":
+        """Group rows sharing a time (rows need not be sorted; a stable sort keeps their order)."""
+        t = np.asarray(time, dtype=float)
+        order = np.argsort(t, kind="stable")
+        t = t[order]
+        times, first = np.unique(t, return_index=True)
+        start = np.append(first, len(t)).astype(np.int64)
+        nan = np.full(len(t), np.nan)
+        pick = lambda a: nan.copy() if a is None else np.asarray(a, dtype=float)[order]  # noqa: E731
+        return cls(time=times, start=start, pseudorange=np.asarray(pseudorange, dtype=float)[order],
+                   variance=np.asarray(variance, dtype=float)[order],
+                   sat_ecef=np.asarray(sat_ecef, dtype=float)[order],
+                   sat_id=np.asarray(sat_id, dtype=np.int64)[order], system=np.asarray(system, dtype=np.int64)[order],
+                   elevation=pick(elevation), cn0=pick(cn0), source=source)
+
+    def __len__(self) -> int:
+        return len(self.time)
+
+    def rows_of(self, e: int) -> slice:
+        return slice(int(self.start[e]), int(self.start[e + 1]))
+
+    def counts(self) -> np.ndarray:
+        """Rows per epoch (E,)."""
+        return np.diff(self.start)
