@@ -112,7 +112,6 @@ def test_urban_drive_mixture_beats_the_ekf_with_consistent_nees():
     (pooled mean; the EKF, told Gaussian noise, is far above)."""
     t, psi, lla = _straight_drive()
     clock = 200.0 - 3.0 * t
-    from mixnav.geodesy.frames import lla_to_ned
     out = {"ekf": [], "mix": []}
     nees = {"ekf": [], "mix": []}
     for seed in range(10):

@@ -8,12 +8,12 @@ import math
 import numpy as np
 import pytest
 
-from mixnav.data import ImuData, InitialState, OdometryIncrements
+from mixnav.data import ImuData, InitialState
 from mixnav.engine.engine import Engine
 from mixnav.engine.smoother import rts_smooth
 from mixnav.errors import ArgumentError, DataError
 from mixnav.filters.ekf import KalmanEstimator
-from mixnav.geodesy.frames import dcm_ecef_to_ned, ecef_to_lla, lla_to_ecef, lla_to_ned
+from mixnav.geodesy.frames import dcm_ecef_to_ned, lla_to_ecef, lla_to_ned
 from mixnav.gnss.geometry import C_LIGHT, earth_rotation_correction
 from mixnav.gnss.pseudoranges import PseudorangeEpochs
 from mixnav.ins.error_model import get_layout

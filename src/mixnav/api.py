@@ -67,6 +67,9 @@ class RunResult:
         from .experiment.run import write_run
         if hasattr(self._output, "sim"):  # a simulated run
             return write_run(Path(out_dir), self._output, self._config_text, overwrite=overwrite)
+        if getattr(getattr(self._output, "dataset", None), "odometry", None) is not None:   # odometry-gnss
+            from .experiment.vehicle_process import write_vehicle
+            return write_vehicle(Path(out_dir), self._output, self._config_text, overwrite=overwrite)
         return write_process(Path(out_dir), self._output, self._config_text, overwrite=overwrite)
 
 
@@ -119,12 +122,21 @@ def process_dataset(name_or_path: str, data: str | None = None) -> RunResult:
         Folder holding the data files (default: the config's ``data_dir``).
 
     A raw-GNSS dataset (``kind = "gnss-raw"``) gives one ``"spp"`` solution
-    (epoch-by-epoch single-point positions) and no filter results.
+    (epoch-by-epoch single-point positions) and no filter results; an odometry +
+    pseudorange dataset (``kind = "odometry-gnss"``, e.g. ``"smartloc-berlin"``) runs its
+    methods on the dead-reckoning model (:mod:`mixnav.experiment.vehicle_process`).
     """
     from .config import load_dataset
     from .experiment.process import process, process_tables, withheld_windows
     from .experiment.run import method_metrics
     ds, source, text = load_dataset(str(name_or_path))
+    if ds.dataset.kind == "odometry-gnss":   # dead reckoning + pseudoranges (smartLoc)
+        from .experiment.vehicle_process import process_vehicle, vehicle_tables
+        vo = process_vehicle(ds, source, data)
+        tables = vehicle_tables(vo)
+        metrics = {name: method_metrics(res, tables[name], []) for name, res in vo.results.items()}
+        truth = None if vo.reference is None else _frame(vo.reference.time, vo.reference.lla)
+        return RunResult(tables, _metrics_frame(metrics), vo.results, truth, vo, text)
     po = process(ds, source, data)
     if ds.dataset.kind == "gnss-raw":
         from .experiment.spp_process import solution_table as spp_table, spp_metrics

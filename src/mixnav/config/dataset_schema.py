@@ -20,14 +20,16 @@ MinSpeed = _quantity(u.VELOCITY, positive=True)
 
 
 class DatasetInfo(Strict):
-    """``kind``: ``ins-gnss`` (IMU + GNSS fixes, filtered by ``methods``) or
+    """``kind``: ``ins-gnss`` (IMU + GNSS fixes, filtered by ``methods``),
     ``gnss-raw`` (raw GNSS measurements, epoch-by-epoch single-point
-    positioning, sections ``raw_gnss`` and ``reference_point``)."""
+    positioning, sections ``raw_gnss`` and ``reference_point``) or
+    ``odometry-gnss`` (wheel speed and yaw rate + pseudoranges: the dead-reckoning
+    model, :mod:`mixnav.config.vehicle_schema`)."""
 
     name: str
     description: str = ""
     data_dir: str = "."
-    kind: Literal["ins-gnss", "gnss-raw"] = "ins-gnss"
+    kind: Literal["ins-gnss", "gnss-raw", "odometry-gnss"] = "ins-gnss"
 
 
 class ImuFile(Strict):

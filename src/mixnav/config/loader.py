@@ -346,6 +346,9 @@ def load_dataset(name_or_path: str):
     """
     from .dataset_schema import Dataset
     text, source = resolve(name_or_path, "datasets", "dataset")
+    if _declared_kind(text) == "odometry-gnss":   # its own schema (config/vehicle_schema.py)
+        from .vehicle_schema import VehicleDataset
+        return _validate(VehicleDataset, text, source), source, text
     ds = _validate(Dataset, text, source)
     _check_kind(ds, source)
     if ds.dataset.kind == "gnss-raw":
@@ -355,6 +358,16 @@ def load_dataset(name_or_path: str):
     for k in ("imu_position", "antenna_position"):
         check_lever(getattr(ds.installation, k), source, f"installation.{k}")
     return ds, source, text
+
+
+def _declared_kind(text: str):
+    """``dataset.kind`` as written (None when the text is not TOML or has none: the full
+    validation then reports it)."""
+    import tomllib
+    try:
+        return tomllib.loads(text).get("dataset", {}).get("kind")
+    except (tomllib.TOMLDecodeError, AttributeError):
+        return None
 
 
 def _check_kind(ds, source):

@@ -197,10 +197,14 @@ def solution_table(res: FilterResult, truth: Trajectory | None = None, outages=(
     s = res.sigma
     for i, ax in enumerate("ned"):
         d[f"sig_{ax}_m"] = s[:, lay.pos][:, i]
-    for i, ax in enumerate(("vn", "ve", "vd")):
-        d[f"sig_{ax}_mps"] = s[:, lay.vel][:, i]
-    for i, ax in enumerate(("roll", "pitch", "yaw")):
-        d[f"sig_{ax}_deg"] = np.degrees(s[:, lay.att][:, i])
+    if lay.vel is not None:     # a dead-reckoning layout has no velocity or attitude block
+        for i, ax in enumerate(("vn", "ve", "vd")):
+            d[f"sig_{ax}_mps"] = s[:, lay.vel][:, i]
+    if lay.att is not None:
+        for i, ax in enumerate(("roll", "pitch", "yaw")):
+            d[f"sig_{ax}_deg"] = np.degrees(s[:, lay.att][:, i])
+    elif lay.has("heading"):
+        d["sig_yaw_deg"] = np.degrees(s[:, lay.slice("heading")][:, 0])
     d["gnss_used"] = res.gnss_used
     d["in_outage"] = in_windows(res.time, outages)
     d.update(_mode_columns(res))

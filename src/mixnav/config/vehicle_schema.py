@@ -1,0 +1,151 @@
+"""The strict schema of odometry + raw-GNSS datasets (``kind = "odometry-gnss"``): a land
+vehicle dead-reckoned from wheel speed and yaw rate, corrected by pseudoranges of
+several systems (smartLoc). Same rules as every config: every key known, units
+written out, errors naming the file and the key.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import Field, field_validator
+
+from .. import units as u
+from .dataset_schema import DatasetInfo
+from .schema import MixtureConfig, RobustConfig, Strict, _quantity
+
+Speed = _quantity(u.VELOCITY, positive=True)
+SpeedNN = _quantity(u.VELOCITY, nonnegative=True)
+Rate = _quantity(u.ANGULAR_RATE, positive=True)
+RateNN = _quantity(u.ANGULAR_RATE, nonnegative=True)
+Length = _quantity(u.LENGTH, positive=True)
+LengthNN = _quantity(u.LENGTH, nonnegative=True)
+Angle = _quantity(u.ANGLE, nonnegative=True)
+Time = _quantity(u.TIME, positive=True)
+
+#: system letters -> the data set's system codes (smartLoc's)
+SYSTEM_CODES = {"G": 1, "S": 2, "R": 4, "E": 8, "J": 16, "C": 32}
+
+
+class OdometryFile(Strict):
+    """Wheel speed and yaw rate. ``yaw_rate_axis``: the axis the file's turn rate is about
+    (``"up"``: positive turning left, smartLoc's; ``"down"``: positive turning right).
+    ``speed_sigma`` / ``yaw_rate_sigma``: the filter's per-sample noise (default: the
+    median of the file's variances); ``sample_interval`` their sample interval (default:
+    the file's median)."""
+
+    format: Literal["smartloc"]
+    file: str
+    yaw_rate_axis: Literal["up", "down"] = "up"
+    speed_sigma: Speed | None = None  # type: ignore[valid-type]
+    yaw_rate_sigma: Rate | None = None  # type: ignore[valid-type]
+    sample_interval: Time | None = None  # type: ignore[valid-type]
+
+
+class Pseudoranges(Strict):
+    """Pseudoranges (satellite clock and atmosphere removed, as smartLoc gives them).
+    ``systems``: the systems used, the receiver clock's reference first (one
+    inter-system offset state per further system); ``variance``: ``"given"`` (the
+    file's, times ``scale``) or ``"elevation"`` (``scale (sigma_a^2 + sigma_b^2 /
+    sin^2 el)``)."""
+
+    format: Literal["smartloc"]
+    file: str
+    systems: list[Literal["G", "R", "E", "C", "J", "S"]] = Field(default_factory=lambda: ["G", "R"], min_length=1)
+    variance: Literal["given", "elevation"] = "given"
+    scale: float = Field(default=1.0, gt=0)
+    sigma_a: LengthNN = 3.0  # type: ignore[valid-type]
+    sigma_b: LengthNN = 3.0  # type: ignore[valid-type]
+    elevation_mask: Angle = 0.0  # type: ignore[valid-type]
+
+    @field_validator("systems")
+    @classmethod
+    def _distinct(cls, v):
+        if len(set(v)) != len(v):
+            raise ValueError(f"systems must be distinct, got {v}")
+        return v
+
+
+class VehicleReference(Strict):
+    format: Literal["smartloc"]
+    file: str
+
+
+class DeadReckoningConfig(Strict):
+    """The dead-reckoning model's noise beyond the odometry's (mixnav.motion.dead_reckoning)
+    and the receiver clock's (white frequency ``clock_q_bias`` [m^2/s], random-walk
+    frequency ``clock_q_drift`` [m^2/s^3], plain numbers)."""
+
+    model: Literal["dead-reckoning"] = "dead-reckoning"
+    lateral_sigma: SpeedNN = 0.1  # type: ignore[valid-type]
+    vertical_sigma: SpeedNN = 0.1  # type: ignore[valid-type]
+    scale_sigma0: float = Field(default=0.02, ge=0)
+    bias_sigma0: RateNN = 0.002  # type: ignore[valid-type]
+    scale_walk: float = Field(default=1e-4, ge=0)
+    bias_walk: float = Field(default=1e-5, ge=0)
+    clock_q_bias: float = Field(default=0.01, ge=0)
+    clock_q_drift: float = Field(default=1e-3, ge=0)
+    offset_sigma0: Length = 100.0  # type: ignore[valid-type]
+
+
+class VehicleAlignment(Strict):
+    """``mode = "track"``: position and heading from the first ``window`` of data
+    (:func:`mixnav.alignment.track.align_track`; the filter starts at its end: causal);
+    ``"reference"``: from the reference trajectory at its first epoch (an oracle start,
+    reported as such). ``position_sigma``, ``heading_sigma``: the initial 1-sigma."""
+
+    mode: Literal["track", "reference"] = "track"
+    window: Time = 10.0  # type: ignore[valid-type]
+    position_sigma: Length = 30.0  # type: ignore[valid-type]
+    heading_sigma: _quantity(u.ANGLE, positive=True) = 0.2  # type: ignore[valid-type]
+
+
+#: estimators usable with the dead-reckoning model (any motion model)
+VEHICLE_ESTIMATORS = ("ekf", "robust-adaptive", "gaussian-mixture", "epoch-mixture", "sage-husa", "vb-akf")
+
+
+class VehicleMethod(Strict):
+    name: str
+    estimator: str = "ekf"
+    robust: RobustConfig | None = None
+    mixture: MixtureConfig | None = None
+    options: dict[str, Any] = Field(default_factory=dict)
+    smooth: bool = False
+
+    @field_validator("name")
+    @classmethod
+    def _file_name(cls, v):
+        from ..errors import ArgumentError
+        from ..io.outdir import safe_name
+        try:
+            return safe_name(v, "method name")
+        except ArgumentError as exc:
+            raise ValueError(exc.message) from None
+
+    @field_validator("estimator")
+    @classmethod
+    def _known(cls, v):
+        if v not in VEHICLE_ESTIMATORS:
+            raise ValueError(f"estimator '{v}' does not run on the dead-reckoning model (these do: "
+                             f"{', '.join(VEHICLE_ESTIMATORS)}; the unscented and particle filters need the "
+                             "strapdown INS's batch mechanization)")
+        return v
+
+
+class VehicleDataset(Strict):
+    dataset: DatasetInfo
+    odometry: OdometryFile
+    pseudoranges: Pseudoranges
+    reference: VehicleReference | None = None
+    motion: DeadReckoningConfig = DeadReckoningConfig()
+    alignment: VehicleAlignment = VehicleAlignment()
+    methods: list[VehicleMethod] = Field(min_length=1)
+
+    @field_validator("methods")
+    @classmethod
+    def _unique(cls, v):
+        names = [m.name for m in v]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ValueError(f"method names must be unique: {', '.join(dup)} repeated")
+        return v

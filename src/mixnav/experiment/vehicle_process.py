@@ -1,0 +1,202 @@
+"""Odometry + raw-GNSS datasets (``kind = "odometry-gnss"``, smartLoc): dead reckoning
+corrected by pseudoranges, every method of the config, scored against the reference.
+
+The run: read the odometry (wheel speed, yaw rate) and the pseudoranges, align
+(:mod:`mixnav.alignment.track`: causal, from the first ``window`` seconds; or the
+reference's first epoch, reported as an oracle start), then one
+:class:`~mixnav.engine.Engine` per method with the dead-reckoning motion model
+(:class:`~mixnav.motion.DeadReckoningMotion`), the multi-system pseudorange model
+(:class:`~mixnav.measurements.pseudorange.PseudorangeGnss`) and the method's
+estimator; ``smooth = true`` adds the RTS smoother's ``<name>-smoothed``. The outputs
+(solution tables, metrics.json, figures with the map and the error over time,
+report.html) are those of ``mixnav run`` / ``mixnav process``
+(:func:`mixnav.experiment.run.write_outputs`).
+"""
+
+from __future__ import annotations
+
+import math
+import time as _time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..config.errors import config_keys
+from ..config.vehicle_schema import SYSTEM_CODES, VehicleDataset, VehicleMethod
+from ..data import InitialState, Trajectory
+from ..engine.engine import Engine
+from ..engine.result import FilterResult
+from ..engine.smoother import rts_smooth
+from ..errors import ConfigError
+from ..geodesy.frames import ecef_to_lla, lla_to_ned
+from ..ins.error_model import ClockModel
+from ..io.smartloc import read_ground_truth, read_odometry, read_pseudoranges, to_pseudorange_epochs
+from ..measurements.pseudorange import PseudorangeGnss
+from ..motion.dead_reckoning import (DeadReckoningMotion, DeadReckoningNoise, dead_reckoning_layout,
+                                     odometry_increments, set_heading)
+from .process import find_data_dir
+from .run import _lla_frame, solution_table, write_outputs
+
+__all__ = ["VehicleOutput", "process_vehicle", "vehicle_tables", "write_vehicle", "make_estimator"]
+
+
+@dataclass
+class VehicleOutput:
+    """What :func:`process_vehicle` produced (the solutions and what they came from)."""
+
+    dataset: VehicleDataset
+    source: str
+    data_dir: Path
+    init: InitialState
+    alignment: dict
+    results: dict
+    reference: Trajectory | None
+    read_time_s: float
+    filter_time_s: float
+    end_time: float
+    checks: dict = field(default_factory=dict)
+
+
+def make_estimator(method: VehicleMethod, source: str, index: int, seed: int = 0):
+    """The estimator of a method (any motion model): ekf, robust-adaptive, gaussian-mixture
+    (given mixtures, or learned online), epoch-mixture, sage-husa, vb-akf; options named in
+    errors by their file key."""
+    key = f"methods[{index}]"
+    name = method.estimator
+    opts = dict(method.options or {})
+    with config_keys(f"{key}.options", source):
+        if name == "ekf":
+            from ..filters.ekf import KalmanEstimator
+            return KalmanEstimator(**opts)
+        if name == "robust-adaptive":
+            from ..config.schema import RobustConfig
+            from ..filters.robust import RobustEstimator
+            rc = method.robust or RobustConfig()
+            return RobustEstimator(rc.k0, rc.k1, rc.c, **opts)
+        if name == "gaussian-mixture":
+            from ..config.schema import MixtureConfig
+            from ..filters.gmekf import BankEstimator
+            from .methods import _bank_parts
+            mc = method.mixture or MixtureConfig()
+            if mc.colored is not None:
+                raise ConfigError("the coloured-noise bank (M6) differences measurements of an INS layout; not "
+                                  "available on the dead-reckoning model", file=source, key=f"{key}.mixture.colored")
+            mixtures, online, _, _ = _bank_parts(mc, None, seed, method.name, source, f"{key}.mixture")
+            return BankEstimator(mixtures, max_components=mc.max_components, online=online, gate=mc.gate,
+                                 outlier_mean=mc.outlier_mean, divergence_window=mc.divergence_window,
+                                 divergence_nis=mc.divergence_nis)
+        if name == "epoch-mixture":
+            from ..filters.epoch_mixture import EpochMixtureEstimator
+            return EpochMixtureEstimator(**opts)
+        if name == "sage-husa":
+            from ..filters.sage_husa import SageHusaEstimator
+            return SageHusaEstimator(**opts)
+        if name == "vb-akf":
+            from ..filters.vb import ChannelNoise, VbKalmanEstimator
+            return VbKalmanEstimator(ChannelNoise(**opts))
+    raise KeyError(name)   # unreachable: the schema admits only these
+
+
+def _reference_init(truth: Trajectory, inc, sigma_pos: float, sigma_heading: float) -> InitialState:
+    """The oracle start: the reference's first two epochs give position and heading."""
+    i1 = min(5, len(truth.time) - 1)
+    d = lla_to_ned(truth.lla[i1][None], truth.lla[0])[0]
+    nav = np.zeros(10)
+    set_heading(nav, math.atan2(d[1], d[0]))
+    nav[7:10] = truth.lla[0]
+    t0 = max(float(truth.time[0]), float(inc.time[0] - inc.dt[0]))
+    return InitialState(time=t0, nav=nav, sigma_att=np.array([0.0, 0.0, sigma_heading]), sigma_vel=np.ones(3),
+                        sigma_pos=np.full(3, sigma_pos), sigma_clock=np.array([1e4, 200.0]))
+
+
+def process_vehicle(ds: VehicleDataset, source: str, data: str | None = None, seed: int = 0) -> VehicleOutput:
+    """Read, align and run every method of an ``odometry-gnss`` dataset (module docstring)."""
+    t_read = _time.perf_counter()
+    d = find_data_dir(ds, data, source)
+    oc, pc = ds.odometry, ds.pseudoranges
+    odo = read_odometry(d / oc.file)
+    prs = read_pseudoranges(d / pc.file)
+    epochs = to_pseudorange_epochs(prs)
+    truth = None
+    if ds.reference is not None:
+        gt = read_ground_truth(d / ds.reference.file)
+        truth = Trajectory(time=gt.time, lla=ecef_to_lla(gt.pos_ecef), v_n=None, q_nb=None)
+    sign = 1.0 if oc.yaw_rate_axis == "down" else -1.0      # the engine's heading turns about down
+    inc = odometry_increments(odo.time, odo.speed, sign * odo.yaw_rate, source=str(d / oc.file))
+    read_time = _time.perf_counter() - t_read
+
+    systems = [SYSTEM_CODES[s] for s in pc.systems]
+    mc = ds.motion
+    ts = float(oc.sample_interval) if oc.sample_interval is not None else float(np.median(inc.dt))
+    noise = DeadReckoningNoise(
+        speed_sigma=float(oc.speed_sigma) if oc.speed_sigma is not None else float(np.sqrt(np.median(odo.speed_var))),
+        yaw_rate_sigma=(float(oc.yaw_rate_sigma) if oc.yaw_rate_sigma is not None
+                        else float(np.sqrt(np.median(odo.yaw_rate_var)))),
+        sample_interval=ts, lateral_sigma=float(mc.lateral_sigma), vertical_sigma=float(mc.vertical_sigma),
+        scale_sigma0=mc.scale_sigma0, bias_sigma0=float(mc.bias_sigma0), scale_walk=mc.scale_walk,
+        bias_walk=mc.bias_walk)
+    lay = dead_reckoning_layout(clock=True, system_offsets=len(systems) - 1, offset_sigma0=float(mc.offset_sigma0))
+    clock = ClockModel(mc.clock_q_bias, mc.clock_q_drift)
+    with config_keys("pseudoranges", source):
+        model = PseudorangeGnss(epochs, lay, systems=systems, variance=pc.variance, scale=pc.scale,
+                                sigma_a=float(pc.sigma_a), sigma_b=float(pc.sigma_b),
+                                elevation_mask=float(pc.elevation_mask))
+    al = ds.alignment
+    t_align = _time.perf_counter()
+    if al.mode == "reference":
+        if truth is None:
+            raise ConfigError("alignment from the reference needs a [reference]", file=source, key="alignment.mode")
+        init = _reference_init(truth, inc, float(al.position_sigma), float(al.heading_sigma))
+        align = {"mode": "reference (oracle start)"}
+    else:
+        from ..alignment.track import align_track
+        with config_keys("alignment", source):
+            init0, align = align_track(epochs, inc, float(inc.time[0] - inc.dt[0] + al.window), systems=systems)
+        init = InitialState(time=init0.time, nav=init0.nav, sigma_att=np.array([0.0, 0.0, float(al.heading_sigma)]),
+                            sigma_vel=np.ones(3), sigma_pos=np.full(3, float(al.position_sigma)),
+                            sigma_clock=init0.sigma_clock)
+        align = {"mode": f"track ({float(al.window):g} s)", **align}
+    align["time_s"] = _time.perf_counter() - t_align
+    out_t = (truth.time if truth is not None else epochs.time)
+    out_t = out_t[(out_t > init.time) & (out_t <= inc.time[-1])]
+    results: dict[str, FilterResult] = {}
+    t_filter = _time.perf_counter()
+    for k, method in enumerate(ds.methods):
+        est = make_estimator(method, source, k, seed)
+        motion = DeadReckoningMotion(lay, noise, clock)
+        res = Engine(motion, est, [model], covariance_interval=1.0, rng=seed,
+                     history=method.smooth).run(inc, init, output_times=out_t)
+        results[method.name] = res
+        if method.smooth:
+            results[f"{method.name}-smoothed"] = rts_smooth(res)
+    filter_time = _time.perf_counter() - t_filter
+    checks = {"pseudorange_rows_skipped": model.skipped_rows, "odometry_rows": len(odo),
+              "pseudorange_epochs": len(epochs)}
+    return VehicleOutput(ds, source, d, init, align, results, truth, read_time, filter_time, float(inc.time[-1]),
+                         checks)
+
+
+def vehicle_tables(vo: VehicleOutput) -> dict[str, pd.DataFrame]:
+    """The solution table of every method (errors against the reference when there is one)."""
+    return {name: solution_table(res, vo.reference) for name, res in vo.results.items()}
+
+
+def write_vehicle(out_dir, vo: VehicleOutput, config_text: str | None = None, overwrite: bool = False) -> dict:
+    """Solutions, metrics, figures (map, error over time) and report of a processed
+    ``odometry-gnss`` dataset (the folder policy of :mod:`mixnav.io.outdir`)."""
+    tables = vehicle_tables(vo)
+    duration = vo.end_time - vo.init.time
+    header = {"dataset": vo.dataset.dataset.name, "source": vo.source, "data_dir": str(vo.data_dir),
+              "start_s": vo.init.time, "duration_s": duration, "read_time_s": vo.read_time_s,
+              "filter_time_s": vo.filter_time_s, "real_time_factor": duration / (vo.read_time_s + vo.filter_time_s),
+              "alignment": vo.alignment, **vo.checks}
+    notes = [f"Dead reckoning from wheel speed and yaw rate, corrected by pseudoranges "
+             f"({', '.join(vo.dataset.pseudoranges.systems)}); aligned: {vo.alignment['mode']}, the filters start "
+             f"at t = {vo.init.time:.2f} s.",
+             "Errors are estimate minus reference at the reference's epochs; horizontal = 2-D."]
+    ref = None if vo.reference is None else _lla_frame(vo.reference.time, vo.reference.lla)
+    return write_outputs(out_dir, f"mixnav process: {vo.dataset.dataset.name}", header, vo.results, tables, [],
+                         ref, None, notes, config_text, command="process", overwrite=overwrite,
+                         protect=[vo.source, vo.data_dir])

@@ -1,0 +1,107 @@
+"""Odometry + pseudorange datasets (kind = "odometry-gnss"): config, process, outputs."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from mixnav.config import load_dataset
+from mixnav.errors import ConfigError
+
+from .conftest import DATA_DIR, data_file
+
+SHIPPED = "smartloc-berlin"
+
+
+def _config(tmp_path, text):
+    p = tmp_path / "ds.toml"
+    p.write_text(text)
+    return str(p)
+
+
+BASE = """
+[dataset]
+name = "x"
+kind = "odometry-gnss"
+data_dir = "{data}"
+[odometry]
+format = "smartloc"
+file = "Berlin_Potsdamer_Platz_Input.txt"
+[pseudoranges]
+format = "smartloc"
+file = "Berlin_Potsdamer_Platz_Input.txt"
+"""
+
+
+@pytest.mark.parametrize("extra, key", [
+    ('[[methods]]\nname = "u"\nestimator = "ukf"\n', "methods"),
+    ('[[methods]]\nname = "e"\nestimator = "ekf"\n[[methods]]\nname = "e"\nestimator = "robust-adaptive"\n',
+     "methods"),
+    ('[alignment]\nwindow = "10 m"\n[[methods]]\nname = "e"\n', "alignment.window"),
+    ('[pseudoranges2]\nx = 1\n[[methods]]\nname = "e"\n', "pseudoranges2"),
+    ('[odometry2]\n[[methods]]\nname = "e"\n', "odometry2"),
+])
+def test_bad_configs_name_the_key(tmp_path, extra, key):
+    with pytest.raises(ConfigError) as exc:
+        load_dataset(_config(tmp_path, BASE.format(data=tmp_path) + extra))
+    assert exc.value.key.startswith(key), exc.value
+
+
+def test_bad_estimator_option_names_the_key(tmp_path):
+    data_file("smartloc-berlin", "Berlin_Potsdamer_Platz_Input.txt")
+    from mixnav.experiment.vehicle_process import process_vehicle
+    text = BASE.format(data=DATA_DIR / "smartloc-berlin") + ('[[methods]]\nname = "m"\nestimator = "epoch-mixture"\n'
+                                                            '[methods.options]\nlos_weight = 1.5\n')
+    ds, source, _ = load_dataset(_config(tmp_path, text))
+    with pytest.raises(ConfigError) as exc:
+        process_vehicle(ds, source)
+    assert exc.value.key == "methods[0].options.los_weight"
+
+
+@pytest.fixture(scope="module")
+def shipped(tmp_path_factory):
+    data_file("smartloc-berlin", "Berlin_Potsdamer_Platz_GT.txt")
+    from mixnav.experiment.vehicle_process import process_vehicle, write_vehicle
+    ds, source, text = load_dataset(SHIPPED)
+    vo = process_vehicle(ds, source)
+    out = tmp_path_factory.mktemp("sl") / "out"
+    metrics = write_vehicle(out, vo, config_text=text)
+    return vo, metrics, out
+
+
+def test_shipped_smartloc_runs_every_method_with_a_map(shipped):
+    vo, metrics, out = shipped
+    names = [m.name for m in vo.dataset.methods]
+    assert set(names) <= set(metrics["methods"])
+    for f in ("report.html", "trajectory.png", "horizontal_error.png", "metrics.json"):
+        assert (out / f).is_file()
+    assert json.loads((out / "metrics.json").read_text())["dataset"] == SHIPPED
+    # causal start: the filters begin at the end of the alignment window, not before
+    assert abs(metrics["start_s"] - 10.0) < 0.5
+    for name, m in metrics["methods"].items():
+        assert np.isfinite(m["horizontal_rmse_m"]) and m["n_epochs"] > 1000
+        if "wall_time_s" in m:
+            assert m["wall_time_s"] < 10.0          # issue 21: about 2 s per method on this machine class
+
+
+def test_the_mixture_filters_beat_the_ekf_on_smartloc(shipped):
+    """The whole-epoch mixture is better than the Gaussian EKF on the urban drive, and its
+    smoothed solution better still (numbers in benchmarks/results/smartloc.md)."""
+    _, metrics, _ = shipped
+    m = metrics["methods"]
+    assert m["epoch-mixture"]["horizontal_rmse_m"] < 0.85 * m["ekf"]["horizontal_rmse_m"]
+    assert m["epoch-mixture-smoothed"]["horizontal_rmse_m"] < m["epoch-mixture"]["horizontal_rmse_m"]
+    assert m["epoch-mixture-smoothed"]["horizontal_max_m"] < m["ekf"]["horizontal_max_m"]
+
+
+def test_api_process_dataset_smartloc(shipped, tmp_path):
+    from mixnav import api
+    r = api.process_dataset(SHIPPED)
+    written = r.write(tmp_path / "api")
+    assert (tmp_path / "api" / "trajectory.png").is_file() and set(written["methods"]) == set(r.solutions)
+    _, metrics, _ = shipped
+    assert set(r.solutions) == set(metrics["methods"])
+    got = float(r.metrics.loc["epoch-mixture", "horizontal_rmse_m"])
+    assert got == pytest.approx(metrics["methods"]["epoch-mixture"]["horizontal_rmse_m"], rel=1e-12)
