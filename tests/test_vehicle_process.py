@@ -79,7 +79,7 @@ def test_shipped_smartloc_runs_every_method_with_a_map(shipped):
         assert (out / f).is_file()
     assert json.loads((out / "metrics.json").read_text())["dataset"] == SHIPPED
     # causal start: the filters begin at the end of the alignment window, not before
-    assert abs(metrics["start_s"] - 10.0) < 0.5
+    assert abs(metrics["start_s"] - 20.0) < 0.5
     for name, m in metrics["methods"].items():
         assert np.isfinite(m["horizontal_rmse_m"]) and m["n_epochs"] > 1000
         if "wall_time_s" in m:

@@ -50,6 +50,11 @@ class InitialState:
     sensor0 : ndarray (12,) or None
         Initial sensor-error estimates ``[bg, ba, sg, sa]`` (e.g. a gyro bias
         measured at rest); zero when None.
+    clock0 : ndarray (2,) or None
+        Initial receiver clock bias [m] and drift [m/s] estimates; zero when None.
+    aux0 : dict or None
+        Initial estimates of auxiliary blocks (name -> array of the block's size,
+        e.g. ``{"system_offset": [12.0]}``); zero for a block not named.
     """
 
     time: float
@@ -59,9 +64,15 @@ class InitialState:
     sigma_pos: np.ndarray
     sigma_clock: np.ndarray = field(default_factory=lambda: np.array([10.0, 1.0]))
     sensor0: np.ndarray | None = None
+    clock0: np.ndarray | None = None
+    aux0: dict | None = None
 
     def __post_init__(self):
         nav = np.asarray(self.nav, dtype=float)
+        if self.clock0 is not None:
+            c = np.asarray(self.clock0, dtype=float)
+            _check(c.shape == (2,) and np.isfinite(c).all(), f"InitialState.clock0 must be 2 finite numbers "
+                   f"(bias [m], drift [m/s]), got {c.tolist()}", None)
         _check(nav.shape == (10,), f"InitialState.nav must be [q_nb(4), v_n(3), lat, lon, h], shape (10,), "
                f"got {nav.shape}", None)
         _finite("InitialState.nav", nav, None)

@@ -92,7 +92,7 @@ def dead_reckon(inc, speed_scale: float = 0.0):
 
 
 def _window_rows(epochs, t0, t_align, sysmap):
-    """Flat rows of the window: times, satellites, pseudoranges, variances, system index."""
+    """Flat rows of the window: times, satellites, pseudoranges, variances, system index, C/N0."""
     keep = []
     for e in range(len(epochs)):
         if t0 < epochs.time[e] <= t_align:
@@ -102,10 +102,10 @@ def _window_rows(epochs, t0, t_align, sysmap):
     sidx = np.array([sysmap.get(int(s), -1) for s in epochs.system[idx]], dtype=int)
     idx, sidx = idx[sidx >= 0], sidx[sidx >= 0]
     t = np.repeat(epochs.time, np.diff(epochs.start))[idx]
-    return t, epochs.sat_ecef[idx], epochs.pseudorange[idx], epochs.variance[idx], sidx
+    return t, epochs.sat_ecef[idx], epochs.pseudorange[idx], epochs.variance[idx], sidx, epochs.cn0[idx]
 
 
-def _refine(theta0, lla_ref, tq, sat, rho, var, sidx, n_sys, track, iterations=30):
+def _refine(theta0, lla_ref, tq, sat, rho, var, sidx, n_sys, track, iterations=30, band=None):
     """EM fit of the window's pseudoranges to the dead-reckoned track (module docstring, step 4).
 
     ``theta = [p0_n, p0_e, p0_d, psi0, b0, d1, offsets...]``; ``track(t)`` gives the
@@ -116,7 +116,10 @@ def _refine(theta0, lla_ref, tq, sat, rho, var, sidx, n_sys, track, iterations=3
     dn, de = track(tq)
     t_ref = tq[0]
     theta = np.array(theta0, dtype=float)
-    w, mu, s = 0.5, 20.0, 30.0
+    band = np.zeros(len(rho), dtype=np.int64) if band is None else band
+    nb = int(band.max()) + 1
+    w_b = np.full(nb, 0.5)
+    mu, s = 20.0, 30.0
     ll = -np.inf
     for it in range(iterations):
         c, sn = math.cos(theta[3]), math.sin(theta[3])
@@ -129,6 +132,7 @@ def _refine(theta0, lla_ref, tq, sat, rho, var, sidx, n_sys, track, iterations=3
         off = np.concatenate([[0.0], theta[6:]])
         e = rho - (rng + theta[4] + theta[5] * (tq - t_ref) + off[sidx])
         # E-step
+        w = w_b[band]
         a = np.log(w) - 0.5 * e * e / var - 0.5 * np.log(2 * np.pi * var)
         b = np.log(1 - w) - 0.5 * (e - mu) ** 2 / s ** 2 - 0.5 * np.log(2 * np.pi * s * s)
         mx = np.maximum(a, b)
@@ -136,7 +140,8 @@ def _refine(theta0, lla_ref, tq, sat, rho, var, sidx, n_sys, track, iterations=3
         ll_new = float(lse.sum())
         g = np.exp(a - lse)
         # M-step: mixture parameters, then one weighted Gauss-Newton step of theta
-        w = float(np.clip(g.mean(), 0.05, 0.95))
+        w_b = np.clip(np.bincount(band, weights=g, minlength=nb) / np.maximum(np.bincount(band, minlength=nb), 1),
+                      0.05, 0.95)
         mu = float(((1 - g) * e).sum() / (1 - g).sum())
         s = float(max(math.sqrt(((1 - g) * (e - mu) ** 2).sum() / (1 - g).sum()), 5.0))
         u_n = (d / rng[:, None]) @ C_en        # line of sight in NED
@@ -163,7 +168,7 @@ def _refine(theta0, lla_ref, tq, sat, rho, var, sidx, n_sys, track, iterations=3
             ll = ll_new
             break
         ll = ll_new
-    return theta, ll, w, mu, s
+    return theta, ll, float(np.mean(w_b[band])), mu, s
 
 
 def lla_to_ecef_point(lla):
@@ -172,7 +177,7 @@ def lla_to_ecef_point(lla):
 
 
 def align_track(epochs, inc, t_align: float, systems=(1, 4), refine: bool = True,
-                clock_starts=(0.0, -10.0, -20.0, -30.0, -40.0, -60.0)) -> tuple[InitialState, dict]:
+                clock_starts=(0.0, -10.0, -20.0, -30.0, -40.0, -60.0), cn0_edges=()) -> tuple[InitialState, dict]:
     """The initial state at ``t_align`` [s] (module docstring) and a report (fix count, fit
     residual RMS [m], heading [deg]).
 
@@ -231,10 +236,14 @@ def align_track(epochs, inc, t_align: float, systems=(1, 4), refine: bool = True
     ka = int(np.searchsorted(tt, t_align - 1e-9))
     report = {"fixes": len(fixes)}
     if refine:
-        tq, sat, rho, var, sidx = _window_rows(epochs, t0, t_align, sysmap)
+        tq, sat, rho, var, sidx, cn0 = _window_rows(epochs, t0, t_align, sysmap)
+        edges = np.asarray(cn0_edges, dtype=float)
+        band = np.where(np.isfinite(cn0), np.searchsorted(edges, np.nan_to_num(cn0), side="right"), len(edges) + 1) \
+            if edges.size else np.zeros(len(rho), dtype=np.int64)
         present = sorted(set(sidx.tolist()))
         remap = np.zeros(max(present) + 1, dtype=int)
         remap[present] = np.arange(len(present))
+        remap_back = {int(k): i for i, k in enumerate(present)}     # system index -> parameter slot
         sidx = remap[sidx]
         n_sys = len(present)
         track = lambda tq_: (np.interp(tq_, tt, dn), np.interp(tq_, tt, de))  # noqa: E731
@@ -254,7 +263,7 @@ def align_track(epochs, inc, t_align: float, systems=(1, 4), refine: bool = True
         for dc in clock_starts:
             th0 = np.concatenate([[p0[0], p0[1], 0.0, ang, b0 + dc, d1], np.zeros(n_sys - 1)])
             lla_ref2 = np.array([lla_ref[0], lla_ref[1], h_ref])
-            th, ll, w_los, mu, s_n = _refine(th0, lla_ref2, tq, sat, rho, var, sidx, n_sys, track)
+            th, ll, w_los, mu, s_n = _refine(th0, lla_ref2, tq, sat, rho, var, sidx, n_sys, track, band=band)
             if best is None or ll > best[1]:
                 best = (th, ll, w_los, mu, s_n, dc)
         th, ll, w_los, mu, s_n, dc = best
@@ -264,7 +273,14 @@ def align_track(epochs, inc, t_align: float, systems=(1, 4), refine: bool = True
         lla = ned_to_lla(np.array([[pa[0], pa[1], th[2]]]), np.array([lla_ref[0], lla_ref[1], h_ref]))[0]
         report.update(los_share=w_los, nlos_mean_m=mu, nlos_sd_m=s_n, clock_start_m=dc, log_likelihood=ll)
         rms = 5.0
+        # the clock line and the offsets at t_align, in the systems' order (absent systems: 0)
+        clock0 = np.array([th[4] + th[5] * (tt[ka] - tq[0]), th[5]])
+        offsets = np.zeros(len(systems) - 1)
+        for k_sys, i_present in remap_back.items():
+            if k_sys > 0 and i_present > 0:
+                offsets[k_sys - 1] = th[5 + i_present]
     else:
+        clock0, offsets = None, None
         pa = p0 + R @ np.array([dn[ka], de[ka]])
         h = float(np.median(ecef_to_lla(fixes)[:, 2]))
         lla = ned_to_lla(np.array([[pa[0], pa[1], 0.0]]), lla_ref)[0]
@@ -278,6 +294,8 @@ def align_track(epochs, inc, t_align: float, systems=(1, 4), refine: bool = True
     sig_psi = min(max(rms / span, math.radians(1.0)), math.radians(30.0))
     init = InitialState(time=float(tt[ka]), nav=nav, sigma_att=np.array([0.0, 0.0, sig_psi]),
                         sigma_vel=np.ones(3), sigma_pos=np.array([rms, rms, 2 * rms]),
-                        sigma_clock=np.array([1e4, 200.0]))
+                        sigma_clock=np.array([1e4, 200.0]) if clock0 is None else np.array([30.0, 2.0]),
+                        clock0=clock0, aux0=None if offsets is None or not len(offsets) else
+                        {"system_offset": offsets})
     report.update(fit_rms_m=rms, heading_deg=math.degrees(heading) % 360.0, heading_sigma_deg=math.degrees(sig_psi))
     return init, report

@@ -92,12 +92,22 @@ class VehicleAlignment(Strict):
     """``mode = "track"``: position and heading from the first ``window`` of data
     (:func:`mixnav.alignment.track.align_track`; the filter starts at its end: causal);
     ``"reference"``: from the reference trajectory at its first epoch (an oracle start,
-    reported as such). ``position_sigma``, ``heading_sigma``: the initial 1-sigma."""
+    reported as such). ``position_sigma``, ``heading_sigma``: the initial 1-sigma.
+    ``cn0_edges``: C/N0 band edges [dB-Hz, plain numbers] for a line-of-sight weight per
+    band in the window's fit (reflected signals arrive weaker)."""
 
     mode: Literal["track", "reference"] = "track"
-    window: Time = 10.0  # type: ignore[valid-type]
-    position_sigma: Length = 30.0  # type: ignore[valid-type]
-    heading_sigma: _quantity(u.ANGLE, positive=True) = 0.2  # type: ignore[valid-type]
+    window: Time = 20.0  # type: ignore[valid-type]
+    cn0_edges: list[float] = Field(default_factory=list)
+    position_sigma: Length = 10.0  # type: ignore[valid-type]
+    heading_sigma: _quantity(u.ANGLE, positive=True) = 0.1  # type: ignore[valid-type]
+
+    @field_validator("cn0_edges")
+    @classmethod
+    def _increasing(cls, v):
+        if any(b <= a for a, b in zip(v, v[1:])):
+            raise ValueError(f"must increase strictly, got {v}")
+        return v
 
 
 #: estimators usable with the dead-reckoning model (any motion model)

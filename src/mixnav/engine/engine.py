@@ -197,7 +197,16 @@ class Engine:
         self.nav = np.array(init.nav, dtype=float)
         self.prev = np.zeros(6)
         self.sensor = np.zeros(12) if init.sensor0 is None else np.array(init.sensor0, dtype=float)
-        self.clock = np.zeros(2)
+        self.clock = np.zeros(2) if init.clock0 is None else np.array(init.clock0, dtype=float)
+        for name, v in (init.aux0 or {}).items():
+            if name not in self.aux:
+                raise ArgumentError(f"the layout has no auxiliary block '{name}' (it has: "
+                                    f"{', '.join(self.aux) or 'none'})", argument="init.aux0")
+            v = np.asarray(v, dtype=float).reshape(-1)
+            if v.shape != self.aux[name].shape or not np.isfinite(v).all():
+                raise ArgumentError(f"block '{name}' needs {self.aux[name].size} finite values, got {v.tolist()}",
+                                    argument="init.aux0")
+            self.aux[name][:] = v
         self.memory = [None] * len(self.measurements)
         est.init(motion, motion.initial_covariance(init), self.n_clone, self.rng)
         self.counts = est.counts

@@ -153,10 +153,11 @@ def process_vehicle(ds: VehicleDataset, source: str, data: str | None = None, se
     else:
         from ..alignment.track import align_track
         with config_keys("alignment", source):
-            init0, align = align_track(epochs, inc, float(inc.time[0] - inc.dt[0] + al.window), systems=systems)
+            init0, align = align_track(epochs, inc, float(inc.time[0] - inc.dt[0] + al.window), systems=systems,
+                                       cn0_edges=tuple(al.cn0_edges))
         init = InitialState(time=init0.time, nav=init0.nav, sigma_att=np.array([0.0, 0.0, float(al.heading_sigma)]),
                             sigma_vel=np.ones(3), sigma_pos=np.full(3, float(al.position_sigma)),
-                            sigma_clock=init0.sigma_clock)
+                            sigma_clock=init0.sigma_clock, clock0=init0.clock0, aux0=init0.aux0)
         align = {"mode": f"track ({float(al.window):g} s)", **align}
     align["time_s"] = _time.perf_counter() - t_align
     out_t = (truth.time if truth is not None else epochs.time)

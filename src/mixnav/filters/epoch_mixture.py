@@ -31,6 +31,13 @@ responsibilities and posterior residuals, with exponential forgetting per row
 (``forget``) and the starting values worth ``prior_rows`` rows; nothing is trained on a
 truth. ``w`` stays in [0.05, 0.95], ``sd >= min_delay_sd``, ``s`` in [0.1, 10].
 With ``w = 1`` fixed (``learn = False``) the update is the Kalman filter's, exactly.
+
+Signal strength (``cn0_edges``): reflected signals arrive weaker, so the prior LOS
+weight is kept per carrier-to-noise-density band (edges in dB-Hz; rows whose model
+gives no C/N0, or a model without ``row_info``, use the band-free weight), each band's
+``w`` learned from its own rows' responsibilities as above. On smartLoc Berlin,
+measured against its reference: 13 % of the rows under 30 dB-Hz are within 10 m of
+the truth, 54 % of those over 45 dB-Hz.
 """
 
 from __future__ import annotations
@@ -76,6 +83,8 @@ class EpochMixtureEstimator(KalmanEstimator):
         Convergence: the largest change of the state estimate (> 0).
     kinds : sequence of str
         Observable kinds whose rows follow the mixture.
+    cn0_edges : sequence of float
+        C/N0 band edges [dB-Hz] for the per-band LOS weight (empty: one weight).
     absurd_sigma : float
         As :class:`~mixnav.filters.ekf.KalmanEstimator`.
     """
@@ -83,8 +92,12 @@ class EpochMixtureEstimator(KalmanEstimator):
     def __init__(self, los_weight: float = 0.5, delay_mean: float = 10.0, delay_sd: float = 30.0,
                  los_scale: float = 1.0, learn: bool = True, learn_scale: bool = False, forget: float = 0.999,
                  prior_rows: float = 200.0, min_delay_sd: float = 5.0, iterations: int = 20,
-                 tolerance: float = 1e-3, kinds=("pseudorange",), absurd_sigma: float = 1e4):
+                 tolerance: float = 1e-3, kinds=("pseudorange",), cn0_edges=(), absurd_sigma: float = 1e4):
         super().__init__(absurd_sigma)
+        edges = np.asarray(cn0_edges, dtype=float).reshape(-1)
+        if edges.size and (not np.isfinite(edges).all() or (np.diff(edges) <= 0).any()):
+            raise ArgumentError(f"must increase strictly, got {list(cn0_edges)}", argument="cn0_edges")
+        self.cn0_edges = edges
         if not 0.0 < los_weight <= 1.0:
             raise ArgumentError(f"must be in (0, 1], got {los_weight}", argument="los_weight")
         for name, v in (("delay_sd", delay_sd), ("los_scale", los_scale), ("min_delay_sd", min_delay_sd),
@@ -116,20 +129,59 @@ class EpochMixtureEstimator(KalmanEstimator):
         # sufficient statistics (forgotten per row): rows, LOS responsibility, delayed first and
         # second moments, LOS squared standardised residuals
         self._N, self._G = n0, n0 * self.w
+        nb = len(self.cn0_edges) + 2          # bands, then the band-free weight (last)
+        self.w_band = np.full(nb, self.w)
+        self._Nb = np.full(nb, n0)
+        self._Gb = np.full(nb, n0 * self.w)
         self._S1 = n0 * (1 - self.w) * self.mu
         self._S2 = n0 * (1 - self.w) * (self.sd ** 2 + self.mu ** 2)
         self._Q = n0 * self.w * self.s
         self.counts["em_not_converged"] = 0
         self._trace = []
+        #: running sum of the rows' predictive log densities (:meth:`_predictive_log_density`)
+        self.log_likelihood = 0.0
 
-    def _responsibilities(self, e, r, h, mix):
-        """LOS responsibility of each row (``mix``: rows that follow the mixture)."""
+    def _predictive_log_density(self, z, r, h, mix, w=None) -> float:
+        """Sum over the rows of the log predictive density of each innovation, alone (the
+        rows' correlation through the shared state is ignored): a score of the noise model
+        and settings that needs no reference (``outputs()["log_likelihood"]``)."""
+        w = np.full(len(z), self.w) if w is None else w
+        vl = self.s * r + h
+        a = np.log(w) - 0.5 * (z * z / vl + np.log(vl) + _LOG2PI)
+        if (w < 1.0).any():
+            vn = self.sd ** 2 + h
+            with np.errstate(divide="ignore"):
+                b = np.log1p(-w) - 0.5 * ((z - self.mu) ** 2 / vn + np.log(vn) + _LOG2PI)
+            m = np.maximum(a, b)
+            mixed = m + np.log(np.exp(a - m) + np.exp(b - m))
+        else:
+            mixed = a
+        gauss = -0.5 * (z * z / (r + h) + np.log(r + h) + _LOG2PI)
+        return float(np.where(mix, mixed, gauss).sum())
+
+    def _bands(self, epoch, m: int) -> np.ndarray:
+        """The C/N0 band of each row (the band-free index where unknown)."""
+        nb = len(self.cn0_edges) + 2
+        band = np.full(m, nb - 1, dtype=np.int64)
+        info = getattr(epoch.model, "row_info", None) if len(self.cn0_edges) else None
+        if info is not None:
+            cn0 = np.asarray(info(epoch.index)["cn0"], dtype=float)
+            if cn0.shape == (m,):
+                ok = np.isfinite(cn0)
+                band[ok] = np.searchsorted(self.cn0_edges, cn0[ok], side="right")
+        return band
+
+    def _responsibilities(self, e, r, h, mix, w=None):
+        """LOS responsibility of each row (``mix``: rows that follow the mixture; ``w``: the
+        prior LOS weight per row, default the global one)."""
+        w = np.full(len(e), self.w) if w is None else w
         vl = self.s * r + h
         vn = self.sd ** 2 + h
-        a = math.log(self.w) - 0.5 * e * e / vl - 0.5 * np.log(vl) if self.w < 1.0 else np.zeros_like(e)
-        if self.w >= 1.0:
+        if (w >= 1.0).all():
             return np.ones_like(e)
-        b = math.log(1.0 - self.w) - 0.5 * (e - self.mu) ** 2 / vn - 0.5 * np.log(vn)
+        with np.errstate(divide="ignore"):
+            a = np.log(w) - 0.5 * e * e / vl - 0.5 * np.log(vl)
+            b = np.log1p(-w) - 0.5 * (e - self.mu) ** 2 / vn - 0.5 * np.log(vn)
         m = np.maximum(a, b)
         g = np.exp(a - m) / (np.exp(a - m) + np.exp(b - m))
         return np.where(mix, g, 1.0)
@@ -146,7 +198,10 @@ class EpochMixtureEstimator(KalmanEstimator):
         P0 = self.P
         x = np.zeros(self.n)
         h = np.einsum("ij,jk,ik->i", H, P0, H)
-        g = self._responsibilities(z, r, h, mix)
+        band = self._bands(epoch, len(z))
+        w_row = self.w_band[band]
+        g = self._responsibilities(z, r, h, mix, w_row)
+        self.log_likelihood += self._predictive_log_density(z, r, h, mix, w_row)
         converged = False
         for _ in range(self.iterations):
             info = g / (self.s * r) + (1.0 - g) / self.sd ** 2
@@ -160,7 +215,7 @@ class EpochMixtureEstimator(KalmanEstimator):
             x = dx
             e = z - H @ x
             h = np.einsum("ij,jk,ik->i", H, P_new, H)
-            g = self._responsibilities(e, r, h, mix)
+            g = self._responsibilities(e, r, h, mix, w_row)
             if moved < self.tolerance:
                 converged = True
                 break
@@ -168,22 +223,27 @@ class EpochMixtureEstimator(KalmanEstimator):
             self.counts["em_not_converged"] += 1
         self.P = P_new
         if self.learn:
-            self._learn(e[mix], r[mix], g[mix])
+            self._learn(e[mix], r[mix], g[mix], band[mix])
         self._trace.append((epoch.time, float(g[mix].mean()) if mix.any() else 1.0, self.w, self.mu, self.sd,
                             self.s))
         return Correction(x, nis, status, len(z))
 
-    def _learn(self, e, r, g):
+    def _learn(self, e, r, g, band):
         m = len(e)
         if m == 0:
             return
         lam = self.forget ** m
+        nb = len(self.w_band)
+        self._Nb = lam * self._Nb + np.bincount(band, minlength=nb)
+        self._Gb = lam * self._Gb + np.bincount(band, weights=g, minlength=nb)
         self._N = lam * self._N + m
         self._G = lam * self._G + g.sum()
         self._S1 = lam * self._S1 + ((1 - g) * e).sum()
         self._S2 = lam * self._S2 + ((1 - g) * e * e).sum()
         self._Q = lam * self._Q + (g * e * e / r).sum()
         self.w = float(np.clip(self._G / self._N, 0.05, 0.95))
+        self.w_band = np.clip(self._Gb / self._Nb, 0.05, 0.95)
+        self.w_band[-1] = self.w
         nn = max(self._N - self._G, 1e-9)
         self.mu = float(self._S1 / nn)
         self.sd = float(max(math.sqrt(max(self._S2 / nn - self.mu ** 2, 0.0)), self.min_delay_sd))
@@ -199,7 +259,8 @@ class EpochMixtureEstimator(KalmanEstimator):
                 "los_scale": s}
 
     def diagnostics(self) -> dict:
-        return {"los_weight_final": self.w, "delay_mean_m_final": self.mu, "delay_sd_m_final": self.sd}
+        return {"los_weight_final": self.w, "delay_mean_m_final": self.mu, "delay_sd_m_final": self.sd,
+                "innovation_log_likelihood": self.log_likelihood}
 
 
 class EpochMixtureEkf(ErrorStateEkf):
@@ -211,18 +272,21 @@ class EpochMixtureEkf(ErrorStateEkf):
     layout, imu_model, covariance_interval, absurd_sigma, clock
         As :class:`~mixnav.filters.ekf.ErrorStateEkf`.
     los_weight, delay_mean, delay_sd, los_scale, learn, learn_scale, forget, prior_rows, min_delay_sd,
-    iterations, tolerance
-        As :class:`EpochMixtureEstimator`.
+    iterations, tolerance, cn0_edges
+        As :class:`EpochMixtureEstimator` (C/N0 bands need a model with ``row_info``; the
+        tight model has none yet: its rows use the band-free weight).
     """
 
     def __init__(self, layout, imu_model, los_weight: float = 0.5, delay_mean: float = 10.0,
                  delay_sd: float = 30.0, los_scale: float = 1.0, learn: bool = True, learn_scale: bool = False,
                  forget: float = 0.999, prior_rows: float = 200.0, min_delay_sd: float = 5.0, iterations: int = 20,
-                 tolerance: float = 1e-3, covariance_interval: float = 1.0, absurd_sigma: float = 1e4, clock=None):
+                 tolerance: float = 1e-3, cn0_edges=(), covariance_interval: float = 1.0, absurd_sigma: float = 1e4,
+                 clock=None):
         super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
         self.settings = dict(los_weight=los_weight, delay_mean=delay_mean, delay_sd=delay_sd, los_scale=los_scale,
                              learn=learn, learn_scale=learn_scale, forget=forget, prior_rows=prior_rows,
-                             min_delay_sd=min_delay_sd, iterations=iterations, tolerance=tolerance)
+                             min_delay_sd=min_delay_sd, iterations=iterations, tolerance=tolerance,
+                             cn0_edges=tuple(cn0_edges))
         self.make_estimator()   # validate now, not at the first run
 
     def make_estimator(self):
