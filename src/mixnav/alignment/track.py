@@ -20,7 +20,10 @@ vehicle that is already moving, from the first seconds of data only.
    its delayed rows; the whole window shares one track, so the rows that agree
    with it are found. EM is local: it starts from the Huber fit with the clock
    moved by each of ``clock_starts`` metres (delays pull a fix's clock up) and
-   keeps the start of largest likelihood.
+   keeps the start of largest likelihood. The mixture it learns (a LOS weight per
+   C/N0 band, ``mu``, ``s``) is reported, for a filter that starts here to go on
+   from (``los_weight_bands``, ``nlos_mean_m``, ``nlos_sd_m``), with the correlation
+   time of the line-of-sight residuals (:func:`los_correlation_time`).
 
 Uses data up to ``t_align`` only: a filter started at ``t_align`` from the
 returned state is causal.
@@ -92,7 +95,8 @@ def dead_reckon(inc, speed_scale: float = 0.0):
 
 
 def _window_rows(epochs, t0, t_align, sysmap):
-    """Flat rows of the window: times, satellites, pseudoranges, variances, system index, C/N0."""
+    """Flat rows of the window: times, satellites, pseudoranges, variances, system index, C/N0,
+    and a key per satellite (system and number)."""
     keep = []
     for e in range(len(epochs)):
         if t0 < epochs.time[e] <= t_align:
@@ -102,14 +106,42 @@ def _window_rows(epochs, t0, t_align, sysmap):
     sidx = np.array([sysmap.get(int(s), -1) for s in epochs.system[idx]], dtype=int)
     idx, sidx = idx[sidx >= 0], sidx[sidx >= 0]
     t = np.repeat(epochs.time, np.diff(epochs.start))[idx]
-    return t, epochs.sat_ecef[idx], epochs.pseudorange[idx], epochs.variance[idx], sidx, epochs.cn0[idx]
+    key = epochs.system[idx].astype(np.int64) * 1000 + epochs.sat_id[idx].astype(np.int64)
+    return t, epochs.sat_ecef[idx], epochs.pseudorange[idx], epochs.variance[idx], sidx, epochs.cn0[idx], key
+
+
+def los_correlation_time(t, key, e, var, g, max_time: float = 30.0) -> float:
+    """Correlation time [s] of the line-of-sight errors: the lag-one correlation ``rho`` of
+    the standardised residuals ``e / sqrt(var)`` of rows likelier LOS than not (``g > 0.5``),
+    paired satellite by satellite across consecutive epochs, turned into ``-dt / ln rho``
+    (``dt`` the median epoch interval). Multipath and near-LOS diffraction keep a
+    satellite's error for seconds, so a filter that takes each epoch's rows as
+    independent is overconfident (:class:`~mixnav.filters.epoch_mixture.EpochMixtureEstimator`,
+    ``correlation_time``). 0 when uncorrelated (or too few pairs); at most ``max_time``."""
+    ut = np.unique(t)
+    if len(ut) < 3:
+        return 0.0
+    dt = float(np.median(np.diff(ut)))
+    los = g > 0.5
+    o = np.lexsort((t, key))
+    k, tt, z, ok = key[o], t[o], (e / np.sqrt(var))[o], los[o]
+    pair = (k[1:] == k[:-1]) & (np.abs(tt[1:] - tt[:-1] - dt) < 0.5 * dt) & ok[1:] & ok[:-1]
+    if pair.sum() < 20:
+        return 0.0
+    a, b = z[:-1][pair], z[1:][pair]
+    rho = float((a * b).sum() / math.sqrt((a * a).sum() * (b * b).sum()))
+    if rho <= 0.0:
+        return 0.0
+    return float(min(-dt / math.log(min(rho, 1.0 - 1e-12)), max_time))
 
 
 def _refine(theta0, lla_ref, tq, sat, rho, var, sidx, n_sys, track, iterations=30, band=None):
     """EM fit of the window's pseudoranges to the dead-reckoned track (module docstring, step 4).
 
     ``theta = [p0_n, p0_e, p0_d, psi0, b0, d1, offsets...]``; ``track(t)`` gives the
-    dead-reckoned north, east [m] at times ``t``. Returns ``(theta, log-likelihood, w, mu, s)``."""
+    dead-reckoned north, east [m] at times ``t``. Returns ``(theta, log-likelihood, w, mu, s)``
+    with ``w`` the LOS weight of each band present (``band.max() + 1`` of them), then the last
+    iteration's residuals and LOS responsibilities."""
     from ..geodesy.frames import dcm_ecef_to_ned
     C_en = dcm_ecef_to_ned(lla_ref[0], lla_ref[1]).T
     r_ref = lla_to_ecef_point(lla_ref)
@@ -168,7 +200,7 @@ def _refine(theta0, lla_ref, tq, sat, rho, var, sidx, n_sys, track, iterations=3
             ll = ll_new
             break
         ll = ll_new
-    return theta, ll, float(np.mean(w_b[band])), mu, s
+    return theta, ll, w_b, mu, s, e, g
 
 
 def lla_to_ecef_point(lla):
@@ -236,7 +268,7 @@ def align_track(epochs, inc, t_align: float, systems=(1, 4), refine: bool = True
     ka = int(np.searchsorted(tt, t_align - 1e-9))
     report = {"fixes": len(fixes)}
     if refine:
-        tq, sat, rho, var, sidx, cn0 = _window_rows(epochs, t0, t_align, sysmap)
+        tq, sat, rho, var, sidx, cn0, sat_key = _window_rows(epochs, t0, t_align, sysmap)
         edges = np.asarray(cn0_edges, dtype=float)
         band = np.where(np.isfinite(cn0), np.searchsorted(edges, np.nan_to_num(cn0), side="right"), len(edges) + 1) \
             if edges.size else np.zeros(len(rho), dtype=np.int64)
@@ -263,15 +295,27 @@ def align_track(epochs, inc, t_align: float, systems=(1, 4), refine: bool = True
         for dc in clock_starts:
             th0 = np.concatenate([[p0[0], p0[1], 0.0, ang, b0 + dc, d1], np.zeros(n_sys - 1)])
             lla_ref2 = np.array([lla_ref[0], lla_ref[1], h_ref])
-            th, ll, w_los, mu, s_n = _refine(th0, lla_ref2, tq, sat, rho, var, sidx, n_sys, track, band=band)
+            th, ll, w_b, mu, s_n, e_fit, g_fit = _refine(th0, lla_ref2, tq, sat, rho, var, sidx, n_sys, track,
+                                                         band=band)
             if best is None or ll > best[1]:
-                best = (th, ll, w_los, mu, s_n, dc)
-        th, ll, w_los, mu, s_n, dc = best
+                best = (th, ll, w_b, mu, s_n, dc, e_fit, g_fit)
+        th, ll, w_b, mu, s_n, dc, e_fit, g_fit = best
+        w_los = float(np.mean(w_b[band]))
+        # the learned mixture, handed to a filter that starts here: one LOS weight per C/N0 band
+        # and the band-free one last (bands without rows in the window take the overall share)
+        n_bands = len(edges) + 2
+        w_bands = np.full(n_bands, w_los)
+        if edges.size:
+            seen = np.bincount(band, minlength=n_bands)[:n_bands] > 0
+            w_bands[:len(w_b)][seen[:len(w_b)]] = w_b[seen[:len(w_b)]]
+            w_bands[-1] = w_los
         c, sn = math.cos(th[3]), math.sin(th[3])
         pa = np.array([th[0] + c * dn[ka] - sn * de[ka], th[1] + sn * dn[ka] + c * de[ka]])
         ang = th[3]
         lla = ned_to_lla(np.array([[pa[0], pa[1], th[2]]]), np.array([lla_ref[0], lla_ref[1], h_ref]))[0]
-        report.update(los_share=w_los, nlos_mean_m=mu, nlos_sd_m=s_n, clock_start_m=dc, log_likelihood=ll)
+        report.update(los_share=w_los, nlos_mean_m=mu, nlos_sd_m=s_n, clock_start_m=dc, log_likelihood=ll,
+                      los_weight_bands=[float(v) for v in w_bands],
+                      los_correlation_time_s=los_correlation_time(tq, sat_key, e_fit, var, g_fit))
         rms = 5.0
         # the clock line and the offsets at t_align, in the systems' order (absent systems: 0)
         clock0 = np.array([th[4] + th[5] * (tt[ka] - tq[0]), th[5]])

@@ -94,13 +94,16 @@ class VehicleAlignment(Strict):
     ``"reference"``: from the reference trajectory at its first epoch (an oracle start,
     reported as such). ``position_sigma``, ``heading_sigma``: the initial 1-sigma.
     ``cn0_edges``: C/N0 band edges [dB-Hz, plain numbers] for a line-of-sight weight per
-    band in the window's fit (reflected signals arrive weaker)."""
+    band in the window's fit (reflected signals arrive weaker). ``hand_over_mixture``: the
+    epoch-mixture filters start from the LOS/NLOS mixture the window's fit learned (their
+    own options win)."""
 
     mode: Literal["track", "reference"] = "track"
     window: Time = 20.0  # type: ignore[valid-type]
     cn0_edges: list[float] = Field(default_factory=list)
     position_sigma: Length = 10.0  # type: ignore[valid-type]
     heading_sigma: _quantity(u.ANGLE, positive=True) = 0.1  # type: ignore[valid-type]
+    hand_over_mixture: bool = True
 
     @field_validator("cn0_edges")
     @classmethod

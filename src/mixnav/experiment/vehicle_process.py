@@ -59,10 +59,12 @@ class VehicleOutput:
     checks: dict = field(default_factory=dict)
 
 
-def make_estimator(method: VehicleMethod, source: str, index: int, seed: int = 0):
+def make_estimator(method: VehicleMethod, source: str, index: int, seed: int = 0, mixture_start: dict | None = None):
     """The estimator of a method (any motion model): ekf, robust-adaptive, gaussian-mixture
     (given mixtures, or learned online), epoch-mixture, sage-husa, vb-akf; options named in
-    errors by their file key."""
+    errors by their file key. ``mixture_start``: the LOS/NLOS mixture a track alignment
+    learned (:func:`mixture_handover`), the epoch mixture's starting values unless the
+    method's options set them."""
     key = f"methods[{index}]"
     name = method.estimator
     opts = dict(method.options or {})
@@ -89,7 +91,10 @@ def make_estimator(method: VehicleMethod, source: str, index: int, seed: int = 0
                                  divergence_nis=mc.divergence_nis)
         if name == "epoch-mixture":
             from ..filters.epoch_mixture import EpochMixtureEstimator
-            return EpochMixtureEstimator(**opts)
+            start = dict(mixture_start or {})
+            if list(opts.get("cn0_edges", [])) != start.pop("cn0_edges", None):
+                start.pop("los_weight_bands", None)      # learned on other bands
+            return EpochMixtureEstimator(**{**start, **opts})
         if name == "sage-husa":
             from ..filters.sage_husa import SageHusaEstimator
             return SageHusaEstimator(**opts)
@@ -109,6 +114,18 @@ def _reference_init(truth: Trajectory, inc, sigma_pos: float, sigma_heading: flo
     t0 = max(float(truth.time[0]), float(inc.time[0] - inc.dt[0]))
     return InitialState(time=t0, nav=nav, sigma_att=np.array([0.0, 0.0, sigma_heading]), sigma_vel=np.ones(3),
                         sigma_pos=np.full(3, sigma_pos), sigma_clock=np.array([1e4, 200.0]))
+
+
+def mixture_handover(align: dict, cn0_edges) -> dict | None:
+    """The epoch mixture's starting values from a track alignment's report: its LOS weight
+    (per C/N0 band of ``cn0_edges``), delay mean and spread and the LOS errors' correlation
+    time, learned on the window the filter starts after (causal). ``None`` when the report has no mixture."""
+    if "nlos_mean_m" not in align:
+        return None
+    return {"los_weight": float(align["los_share"]), "delay_mean": float(align["nlos_mean_m"]),
+            "delay_sd": float(align["nlos_sd_m"]), "los_weight_bands": list(align["los_weight_bands"]),
+            "correlation_time": float(align["los_correlation_time_s"]),
+            "cn0_edges": [float(v) for v in cn0_edges]}
 
 
 def process_vehicle(ds: VehicleDataset, source: str, data: str | None = None, seed: int = 0) -> VehicleOutput:
@@ -150,6 +167,7 @@ def process_vehicle(ds: VehicleDataset, source: str, data: str | None = None, se
             raise ConfigError("alignment from the reference needs a [reference]", file=source, key="alignment.mode")
         init = _reference_init(truth, inc, float(al.position_sigma), float(al.heading_sigma))
         align = {"mode": "reference (oracle start)"}
+        start = None
     else:
         from ..alignment.track import align_track
         with config_keys("alignment", source):
@@ -159,13 +177,14 @@ def process_vehicle(ds: VehicleDataset, source: str, data: str | None = None, se
                             sigma_vel=np.ones(3), sigma_pos=np.full(3, float(al.position_sigma)),
                             sigma_clock=init0.sigma_clock, clock0=init0.clock0, aux0=init0.aux0)
         align = {"mode": f"track ({float(al.window):g} s)", **align}
+        start = mixture_handover(align, al.cn0_edges) if al.hand_over_mixture else None
     align["time_s"] = _time.perf_counter() - t_align
     out_t = (truth.time if truth is not None else epochs.time)
     out_t = out_t[(out_t > init.time) & (out_t <= inc.time[-1])]
     results: dict[str, FilterResult] = {}
     t_filter = _time.perf_counter()
     for k, method in enumerate(ds.methods):
-        est = make_estimator(method, source, k, seed)
+        est = make_estimator(method, source, k, seed, mixture_start=start)
         motion = DeadReckoningMotion(lay, noise, clock)
         res = Engine(motion, est, [model], covariance_interval=1.0, rng=seed,
                      history=method.smooth).run(inc, init, output_times=out_t)
