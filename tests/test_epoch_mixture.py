@@ -47,6 +47,36 @@ def _problem(seed=0, m=8, n=5):
     return P, H, r, z
 
 
+def _scipy_responsibilities(e, r, h, w, s, mu, sd):
+    from scipy.stats import norm
+    a = w * norm.pdf(e, 0.0, np.sqrt(s * r + h))
+    b = (1 - w) * norm.pdf(e, mu, np.sqrt(sd ** 2 + h))
+    return a / (a + b)
+
+
+def test_compiled_responsibilities_match_scipy_densities():
+    """The kernel's log-space responsibilities equal the ratio of scipy's normal densities;
+    rows outside the mixture or with w = 1 are LOS."""
+    from mixnav.filters._epoch_mixture_kernels import responsibilities
+    rng = np.random.default_rng(4)
+    m = 40
+    e, r, h = rng.normal(10, 30, m), rng.uniform(4, 100, m), rng.uniform(0, 20, m)
+    w = rng.uniform(0.05, 0.95, m)
+    mix = np.ones(m, bool)
+    mix[:3] = False
+    w[3] = 1.0
+    g = responsibilities(e, r, h, mix, w, 1.3, 40.0, 25.0)
+    ref = _scipy_responsibilities(e, r, h, w, 1.3, 40.0, 25.0)
+    assert np.allclose(g[4:], ref[4:], rtol=1e-10, atol=1e-14) and (g[:4] == 1.0).all()
+    # the predictive log density: the mixture's for mixture rows, N(0, r + h) for the others
+    from scipy.stats import norm
+    from mixnav.filters._epoch_mixture_kernels import predictive_log_density
+    dens = np.where(mix, w * norm.pdf(e, 0, np.sqrt(1.3 * r + h)) + (1 - w) * norm.pdf(e, 40.0, np.sqrt(625.0 + h)),
+                    norm.pdf(e, 0, np.sqrt(r + h)))
+    got = predictive_log_density(e, r, h, mix, w, 1.3, 40.0, 25.0)
+    assert got == pytest.approx(np.log(dens).sum(), rel=1e-10)
+
+
 def test_all_line_of_sight_is_the_kalman_update():
     P, H, r, z = _problem()
     est = EpochMixtureEstimator(los_weight=1.0, learn=False)
@@ -67,7 +97,7 @@ def test_a_delayed_row_is_explained_by_the_delay_component():
                                 iterations=200)
     est.init(_Motion(5), P, 0, np.random.default_rng(0))
     c = est.update(_epoch(z, H, r))
-    g = est._responsibilities(z - H @ c.dx, r, np.einsum("ij,jk,ik->i", H, est.P, H), np.ones(len(z), bool))
+    g = _scipy_responsibilities(z - H @ c.dx, r, np.einsum("ij,jk,ik->i", H, est.P, H), 0.7, 1.0, mu, sd)
     assert g[3] < 1e-12 and (np.delete(g, 3) > 1 - 1e-6).all()
     z2, r2 = z.copy(), r.copy()
     z2[3] -= mu

@@ -62,11 +62,10 @@ from ..engine.status import NEEDS_REPAIR, OK
 from ..errors import ArgumentError
 from ..measurements.kinds import kind_code
 from .ekf import ErrorStateEkf, KalmanEstimator
-from ._ekf_kernels import kalman_correct
+from ._epoch_mixture_kernels import epoch_em, predictive_log_density
 
 __all__ = ["EpochMixtureEstimator", "EpochMixtureEkf"]
 
-_LOG2PI = math.log(2.0 * math.pi)
 
 
 class EpochMixtureEstimator(KalmanEstimator):
@@ -170,23 +169,11 @@ class EpochMixtureEstimator(KalmanEstimator):
         #: running sum of the rows' predictive log densities (:meth:`_predictive_log_density`)
         self.log_likelihood = 0.0
 
-    def _predictive_log_density(self, z, r, h, mix, w=None) -> float:
+    def _predictive_log_density(self, z, r, h, mix, w) -> float:
         """Sum over the rows of the log predictive density of each innovation, alone (the
         rows' correlation through the shared state is ignored): a score of the noise model
-        and settings that needs no reference (``outputs()["log_likelihood"]``)."""
-        w = np.full(len(z), self.w) if w is None else w
-        vl = self.s * r + h
-        a = np.log(w) - 0.5 * (z * z / vl + np.log(vl) + _LOG2PI)
-        if (w < 1.0).any():
-            vn = self.sd ** 2 + h
-            with np.errstate(divide="ignore"):
-                b = np.log1p(-w) - 0.5 * ((z - self.mu) ** 2 / vn + np.log(vn) + _LOG2PI)
-            m = np.maximum(a, b)
-            mixed = m + np.log(np.exp(a - m) + np.exp(b - m))
-        else:
-            mixed = a
-        gauss = -0.5 * (z * z / (r + h) + np.log(r + h) + _LOG2PI)
-        return float(np.where(mix, mixed, gauss).sum())
+        and settings that needs no reference (``diagnostics()["innovation_log_likelihood"]``)."""
+        return predictive_log_density(z, r, h, mix, w, self.s, self.mu, self.sd)
 
     def _bands(self, epoch, m: int) -> np.ndarray:
         """The C/N0 band of each row (the band-free index where unknown)."""
@@ -200,21 +187,6 @@ class EpochMixtureEstimator(KalmanEstimator):
                 band[ok] = np.searchsorted(self.cn0_edges, cn0[ok], side="right")
         return band
 
-    def _responsibilities(self, e, r, h, mix, w=None):
-        """LOS responsibility of each row (``mix``: rows that follow the mixture; ``w``: the
-        prior LOS weight per row, default the global one)."""
-        w = np.full(len(e), self.w) if w is None else w
-        vl = self.s * r + h
-        vn = self.sd ** 2 + h
-        if (w >= 1.0).all():
-            return np.ones_like(e)
-        with np.errstate(divide="ignore"):
-            a = np.log(w) - 0.5 * e * e / vl - 0.5 * np.log(vl)
-            b = np.log1p(-w) - 0.5 * (e - self.mu) ** 2 / vn - 0.5 * np.log(vn)
-        m = np.maximum(a, b)
-        g = np.exp(a - m) / (np.exp(a - m) + np.exp(b - m))
-        return np.where(mix, g, 1.0)
-
     def update(self, epoch: Epoch) -> Correction | None:
         rows = epoch.rows()
         if rows is None:
@@ -223,32 +195,19 @@ class EpochMixtureEstimator(KalmanEstimator):
         if r.ndim != 1:
             raise ArgumentError("the epoch-mixture update needs independent rows (R as variances)",
                                 argument="R")
-        mix = np.isin(rows.kinds, self.kind_codes)
+        mix = (rows.kinds[:, None] == self.kind_codes[None, :]).any(axis=1)
         P0 = self.P
-        x = np.zeros(self.n)
         h = np.einsum("ij,jk,ik->i", H, P0, H)
         band = self._bands(epoch, len(z))
         w_row = self.w_band[band]
-        g = self._responsibilities(z, r, h, mix, w_row)
         self.log_likelihood += self._predictive_log_density(z, r, h, mix, w_row)
         inflate = np.where(mix, self._correlation_factor(epoch.time), 1.0)
-        converged = False
-        for _ in range(self.iterations):
-            info = g / (self.s * r) + (1.0 - g) / self.sd ** 2
-            info = np.where(mix, info, 1.0 / r)
-            r_eff = 1.0 / info
-            z_eff = np.where(mix, r_eff * (g * z / (self.s * r) + (1.0 - g) * (z - self.mu) / self.sd ** 2), z)
-            P_new, dx, nis, status = kalman_correct(P0, z_eff, H, r_eff * inflate, self.absurd_sigma)
-            if status != OK and status != NEEDS_REPAIR:
-                return Correction(np.zeros(self.n), math.inf, status, len(z))
-            moved = float(np.abs(dx - x).max())
-            x = dx
-            e = z - H @ x
-            h = np.einsum("ij,jk,ik->i", H, P_new, H)
-            g = self._responsibilities(e, r, h, mix, w_row)
-            if moved < self.tolerance:
-                converged = True
-                break
+        P_new, x, nis, status, e, g, converged = epoch_em(
+            np.ascontiguousarray(P0), np.ascontiguousarray(z, dtype=float), np.ascontiguousarray(H, dtype=float),
+            np.ascontiguousarray(r), mix, w_row, self.s, self.mu, self.sd, inflate, self.iterations,
+            self.tolerance, self.absurd_sigma)
+        if status != OK and status != NEEDS_REPAIR:
+            return Correction(np.zeros(self.n), math.inf, status, len(z))
         if not converged:
             self.counts["em_not_converged"] += 1
         self.P = P_new
@@ -257,6 +216,14 @@ class EpochMixtureEstimator(KalmanEstimator):
         self._trace.append((epoch.time, float(g[mix].mean()) if mix.any() else 1.0, self.w, self.mu, self.sd,
                             self.s))
         return Correction(x, nis, status, len(z))
+
+    def warm_up(self) -> None:
+        """Compile (or load from numba's cache) the EM kernel outside the timed loop."""
+        super().warm_up()
+        H = np.eye(2)
+        mix, w = np.ones(2, np.bool_), np.full(2, 0.5)
+        epoch_em(np.eye(2), np.zeros(2), H, np.ones(2), mix, w, 1.0, 10.0, 30.0, np.ones(2), 2, 1e-3, 1e4)
+        predictive_log_density(np.zeros(2), np.ones(2), np.ones(2), mix, w, 1.0, 10.0, 30.0)
 
     def _correlation_factor(self, t: float) -> float:
         """``(1 + rho) / (1 - rho)``, ``rho = exp(-dt / tau)``, ``dt`` since the last epoch."""
