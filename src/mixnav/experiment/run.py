@@ -359,17 +359,23 @@ NIS_CAUSES = ("the IMU installation (imu_rotation, misalignment) or the lever ar
               "a unit is wrong (rates in rad/s declared as deg/s, g as m/s^2, degrees as radians)",
               "the IMU time offset or the GNSS velocity delay is wrong",
               "the GNSS or IMU noise (sigmas, grade) is set far too small for the data")
+#: the same for runs without an INS (dead reckoning, constant velocity)
+NIS_CAUSES_NO_INS = ("the odometry's yaw-rate axis (yaw_rate_axis) or a unit is wrong",
+                     "the pseudorange variances or the motion noise are far too small for the data",
+                     "the errors are not what the method's noise model says (non-line-of-sight delays are "
+                     "positive and time-correlated: a Gaussian or row-by-row model in an urban canyon)")
 
 
-def nis_warnings(methods: dict) -> list[str]:
-    """One warning per method whose median NIS per dof exceeds :data:`NIS_WARN_MEDIAN`."""
+def nis_warnings(methods: dict, causes=NIS_CAUSES) -> list[str]:
+    """One warning per method whose median NIS per dof exceeds :data:`NIS_WARN_MEDIAN`
+    (``causes``: the likely causes named, :data:`NIS_CAUSES` for INS runs)."""
     out = []
     for name, m in methods.items():
         v = m.get("nis_median_per_dof")
         if v is not None and v > NIS_WARN_MEDIAN:
             out.append(f"method '{name}': median NIS per degree of freedom is {v:.3g} (a consistent filter "
                        f"gives about 1; warned above {NIS_WARN_MEDIAN:g}): its measurements disagree with its "
-                       "model. Likely causes: " + "; ".join(NIS_CAUSES) + ".")
+                       "model. Likely causes: " + "; ".join(causes) + ".")
     return out
 
 
@@ -400,7 +406,8 @@ def _write_outputs(folder, title, header, results, tables, outages, reference, g
     metrics["mixnav_version"] = __version__
     metrics["outages_s"] = [list(map(float, o)) for o in outages]
     metrics["methods"] = {name: method_metrics(results[name], tables[name], outages, gnss_bias) for name in tables}
-    warned = nis_warnings(metrics["methods"])
+    ins = any(getattr(r.layout, "is_ins", True) for r in results.values())
+    warned = nis_warnings(metrics["methods"], NIS_CAUSES if ins else NIS_CAUSES_NO_INS)
     if warned:
         metrics["warnings"] = warned
         notes = [*notes, *("Warning: " + w for w in warned)]
