@@ -3,9 +3,18 @@ redesign (stored in tests/data/reference_metrics.json by tests/reference/make_re
 run on commit 15ef457).
 
 The redesign kept every operation of every filter in its order, so the numbers
-are compared bitwise where they are stored bitwise (floats go through JSON's
-shortest round-trip repr, which is exact): any change of an operation order
-shows here. Long cases (sweeps, second seeds) are marked slow.
+are compared to within ``REL`` relative plus ``ABS`` absolute (floats go through
+JSON's shortest round-trip repr, which is exact); counts, flags and keys exactly.
+Not bitwise: the numbers were stored on another machine, and the compiled kernels
+(LLVM, fastmath) and numpy's reductions round differently on another CPU or build.
+On an AMD EPYC with a fresh install the largest differences were 2e-7 relative
+(tdcp-demo's yaw p95 after 600 s of TDCP clones; the MCMC-learned P1 runs' final
+states) and 3e-9 absolute on final states near zero (tdcp-demo's final velocity of
+1e-4 m/s). Any
+intended change of a method moves its metrics by far more than 1e-6; an operation
+reordering that moves them by 1e-11 (the bank kernel's merged tail, stop 28) no
+longer shows here: tests/test_gmekf.py and the closed-form tests pin those kernels.
+Long cases (sweeps, second seeds) are marked slow.
 """
 
 import json
@@ -20,6 +29,9 @@ from cases import CASES, compute  # noqa: E402
 
 REF = json.loads((Path(__file__).resolve().parent / "data" / "reference_metrics.json").read_text())
 from .conftest import DATA_DIR as SHARED  # MIXNAV_DATA or ../shared/data
+
+#: allowed difference of a stored float: relative, and absolute (states near zero)
+REL, ABS = 1e-6, 1e-8
 
 
 def _diffs(stored, now, where=""):
@@ -40,7 +52,9 @@ def _diffs(stored, now, where=""):
             for i, (a, b) in enumerate(zip(stored, now)):
                 out += _diffs(a, b, f"{where}[{i}]")
     elif isinstance(stored, float) and isinstance(now, (int, float)):
-        if not (stored == now or (math.isnan(stored) and math.isnan(now))):
+        same = stored == now or (math.isnan(stored) and math.isnan(now)) or \
+            (math.isfinite(stored) and abs(now - stored) <= REL * abs(stored) + ABS)
+        if not same:
             out.append(f"{where}: stored {stored!r}, now {now!r} (diff {now - stored:.3g})")
     elif stored != now:
         out.append(f"{where}: stored {stored!r}, now {now!r}")
@@ -71,7 +85,7 @@ def test_the_comparison_catches_a_change():
     stored = REF["cases"]["loose-demo/1"]
     now = json.loads(json.dumps(stored))
     m = next(iter(now))
-    now[m]["horizontal_rmse_m"] *= 1 + 1e-15 if now[m]["horizontal_rmse_m"] > 1 else 1 + 1e-12
+    now[m]["horizontal_rmse_m"] *= 1 + 1e-5       # beyond REL
     now[m]["nis_count"] += 1
     del now[m]["final_sigma"]
     assert len(_diffs(stored, now)) == 3
