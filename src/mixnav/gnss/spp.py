@@ -434,3 +434,101 @@ def solve_epochs(ephemeris, week, tow_rx, epoch, prn, pseudorange, options: SppO
     out.status = out.status.astype(str)
     out.skipped_satellites = skipped
     return out
+
+
+def atmosphere_delay(lla, elevation, azimuth, tow: float, options: SppOptions = SppOptions(), iono_alpha=None,
+                     iono_beta=None) -> np.ndarray:
+    """Troposphere plus ionosphere delay [m] (n,) that SPP adds to its model, at the receiver
+    ``lla`` (rad, rad, m) for satellites at ``elevation``, ``azimuth`` (n,) [rad]: Saastamoinen
+    when ``options.troposphere``, Klobuchar when ``options.ionosphere`` and both coefficient
+    sets are given (as :func:`wls_position`)."""
+    el = np.asarray(elevation, float)
+    d = np.zeros(len(el))
+    if options.troposphere:
+        d = d + saastamoinen(lla[0], lla[2], np.maximum(el, 1e-3))
+    if options.ionosphere and iono_alpha is not None and iono_beta is not None:
+        d = d + klobuchar(lla[0], lla[1], el, azimuth, tow, iono_alpha, iono_beta)
+    return d
+
+
+def corrected_pseudoranges(ephemeris, week, tow_rx, epoch, prn, pseudorange, receiver_ecef,
+                           options: SppOptions = SppOptions(), cn0=None, source=None):
+    """The raw pseudoranges as a :class:`~mixnav.gnss.pseudoranges.PseudorangeEpochs` with the
+    broadcast corrections applied the way SPP applies them, for a filter that estimates
+    position and clock itself (:class:`mixnav.measurements.pseudorange.PseudorangeGnss`).
+
+    Per observation: the satellite at its transmit time (:func:`satellites_at_transmit`:
+    ECEF of that time, the model turns it), the satellite clock (relativistic term, T_GD)
+    added, and the troposphere and ionosphere (:func:`atmosphere_delay`) subtracted,
+    evaluated at ``receiver_ecef[j]``, a position near the receiver at epoch ``j`` (a
+    first fix: a 100 m error moves the delays by millimetres). Elevations are those
+    seen from it; the variance is SPP's ``sigma_a^2 + sigma_b^2 / sin^2 el``.
+
+    Parameters
+    ----------
+    ephemeris : BroadcastEphemeris
+    week, tow_rx : ndarray (k,)
+        Epoch reception times (GPS week, seconds of week [s]).
+    epoch, prn, pseudorange : ndarray (m,)
+        Epoch index, satellite and pseudorange [m] of each observation.
+    receiver_ecef : ndarray (k, 3)
+        [m]; epochs with a non-finite row are left out (counted: ``no position``).
+    options : SppOptions
+    cn0 : ndarray (m,) or None
+        [dB-Hz].
+
+    Returns
+    -------
+    epochs : PseudorangeEpochs
+        Times in seconds since the first epoch of ``week, tow_rx`` (as the SPP table's
+        ``time_s``), GPS (system code 1); an epoch without a usable satellite is absent.
+    skipped : dict
+        Observations left out per reason (ephemeris reasons, ``no position``).
+    """
+    from .pseudoranges import PseudorangeEpochs
+    week = np.asarray(week)
+    tow_rx = np.asarray(tow_rx, float)
+    epoch = np.asarray(epoch, int)
+    prn = np.asarray(prn, int)
+    rho = np.asarray(pseudorange, float)
+    cn = np.full(len(rho), np.nan) if cn0 is None else np.asarray(cn0, float)
+    t_abs = week * 604800.0 + tow_rx
+    t_rel = t_abs - t_abs[0]
+    order = np.argsort(epoch, kind="stable")
+    bounds = np.searchsorted(epoch[order], np.arange(len(tow_rx) + 1))
+    skipped: dict[str, int] = {}
+    out = {k: [] for k in ("t", "pr", "var", "sat", "id", "el", "cn0")}
+    for j in range(len(tow_rx)):
+        rows = order[bounds[j]:bounds[j + 1]]
+        if len(rows) == 0:
+            continue
+        x = np.asarray(receiver_ecef[j], float)
+        if not np.isfinite(x).all():
+            skipped["no position"] = skipped.get("no position", 0) + len(rows)
+            continue
+        sats, keep, skips = satellites_at_transmit(ephemeris, prn[rows], rho[rows], week[j], tow_rx[j])
+        for r, c in skips.counts().items():
+            skipped[r] = skipped.get(r, 0) + c
+        if len(sats) == 0:
+            continue
+        r_geo = np.linalg.norm(sats.pos_ecef - x, axis=1)
+        el, az = elevation_azimuth(x, earth_rotation_correction(sats.pos_ecef, r_geo / C_LIGHT))
+        lla = ecef_to_lla(x)
+        delay = atmosphere_delay(lla, el, az, tow_rx[j], options, ephemeris.iono_alpha, ephemeris.iono_beta)
+        s_el = np.sin(np.maximum(el, 1e-3))
+        n = len(sats)
+        out["t"].append(np.full(n, t_rel[j]))
+        out["pr"].append(rho[rows][keep] + C_LIGHT * sats.clock_bias - delay)
+        out["var"].append(options.sigma_a ** 2 + options.sigma_b ** 2 / s_el ** 2)
+        out["sat"].append(sats.pos_ecef)
+        out["id"].append(prn[rows][keep])
+        out["el"].append(el)
+        out["cn0"].append(cn[rows][keep])
+    if not out["t"]:
+        cat = {k: np.zeros((0, 3)) if k == "sat" else np.zeros(0) for k in out}
+    else:
+        cat = {k: np.vstack(v) if k == "sat" else np.concatenate(v) for k, v in out.items()}
+    ep = PseudorangeEpochs.from_rows(cat["t"], cat["pr"], cat["var"], cat["sat"], cat["id"],
+                                     np.ones(len(cat["pr"]), int), elevation=cat["el"], cn0=cat["cn0"],
+                                     source=source)
+    return ep, skipped
