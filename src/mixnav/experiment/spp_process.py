@@ -86,18 +86,25 @@ def process_raw(ds: RawGnssDataset, source: str, folder: Path, seed: int = 0) ->
         obs = android.read_gnsslogger(folder / c.file,
                                       max_sv_time_uncertainty_ns=c.max_sv_time_uncertainty * 1e9)
     eph = BroadcastEphemeris.from_rinex(folder / c.navigation)
+    return solve_raw(ds, source, folder, obs, eph, _time.perf_counter() - t0, seed)
+
+
+def solve_raw(ds: RawGnssDataset, source: str, folder: Path, obs, eph: BroadcastEphemeris, read_time_s: float = 0.0,
+              seed: int = 0) -> SppOutput:
+    """SPP of every epoch of ``obs`` (read observations) and the filter methods."""
+    c = ds.raw_gnss
     if c.ionosphere and eph.iono_alpha is None:   # asked for, and impossible: said, not silent
         import warnings
         from ..io.imu_checks import DataWarning
         warnings.warn(f"{folder / c.navigation}: the header has no ionosphere (Klobuchar) coefficients, so the "
                       "ionosphere correction is skipped and every pseudorange keeps its 2-10 m delay "
-                      "(metrics.json: ionosphere)", DataWarning, stacklevel=2)
+                      "(metrics.json: ionosphere)", DataWarning, stacklevel=3)
     t1 = _time.perf_counter()
     track = solve_epochs(eph, obs.week, obs.tow, obs.epoch, obs.prn, obs.pseudorange, options(ds))
     t2 = _time.perf_counter()
     rp = ds.reference_point
     ref = None if rp is None else np.array([rp.latitude, rp.longitude, rp.height])
-    po = SppOutput(ds, source, folder, obs, eph, track, ref, t1 - t0, t2 - t1)
+    po = SppOutput(ds, source, folder, obs, eph, track, ref, read_time_s, t2 - t1)
     filters = [(k, m) for k, m in enumerate(ds.run_methods()) if m.estimator != "wls"]
     if filters:
         run_filters(po, filters, seed)
