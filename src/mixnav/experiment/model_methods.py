@@ -27,6 +27,7 @@ def make_estimator(method, source: str, index: int, seed: int = 0, model_name: s
     key = f"methods[{index}]"
     name = method.estimator
     opts = dict(method.options or {})
+    _check_options(name, opts, source, f"{key}.options")
     with config_keys(f"{key}.options", source):
         if name == "ekf":
             from ..filters.ekf import KalmanEstimator
@@ -58,6 +59,46 @@ def make_estimator(method, source: str, index: int, seed: int = 0, model_name: s
             from ..filters.vb import ChannelNoise, VbKalmanEstimator
             return VbKalmanEstimator(ChannelNoise(**opts))
     raise KeyError(name)   # unreachable: the schemas admit only these
+
+
+def _option_target(name: str):
+    """The callable a method's ``options`` are keyword arguments of (None: no options taken)."""
+    if name == "ekf":
+        from ..filters.ekf import KalmanEstimator
+        return KalmanEstimator
+    if name == "robust-adaptive":
+        from ..filters.robust import RobustEstimator
+        return RobustEstimator
+    if name == "epoch-mixture":
+        from ..filters.epoch_mixture import EpochMixtureEstimator
+        return EpochMixtureEstimator
+    if name == "sage-husa":
+        from ..filters.sage_husa import SageHusaEstimator
+        return SageHusaEstimator
+    if name == "vb-akf":
+        from ..filters.vb import ChannelNoise
+        return ChannelNoise
+    return None
+
+
+def _check_options(name: str, opts: dict, source: str, key: str) -> None:
+    """An option the estimator does not take is a config error naming it (not a TypeError)."""
+    import inspect
+    if not opts:
+        return
+    target = _option_target(name)
+    params = {} if target is None else inspect.signature(target).parameters
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
+        return
+    fixed = {"k0", "k1", "c"} if name == "robust-adaptive" else set()   # from the [robust] table
+    known = [p for p, v in params.items() if p != "self" and p not in fixed
+             and v.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)]
+    tables = {"gaussian-mixture": "; its settings are the method's [mixture] table",
+              "robust-adaptive": "; k0, k1 and c are the method's [robust] table"}
+    for k in opts:
+        if k not in known:
+            raise ConfigError(f"unknown option of estimator '{name}' (it takes: {', '.join(known) or 'none'}"
+                              f"{tables.get(name, '')})", file=source, key=f"{key}.{k}")
 
 
 def run_methods(methods, make_motion, models, inputs, init, output_times, source: str, seed: int = 0,
