@@ -256,3 +256,56 @@ def test_rinex_route_gives_the_phone_logs_filter_solution(tmp_path):
              .to_numpy())
         assert np.abs(d).max() < 0.01, (name, np.abs(d).max())
         assert np.isnan(r["lat_deg"][0]) and re.match("not started", r["status"][0])
+
+
+def test_clock_jumps_closed_forms(tmp_path):
+    """A drifting clock (30 m/s) is no jump; a 1 ms step (299792.458 m) with noise is taken as
+    exactly 1 ms; a 5 km step that is no whole millisecond is taken as it is; an unsolved
+    epoch between counts before the jump."""
+    from mixnav.gnss.spp import MS_JUMP, clock_jumps
+    t = np.arange(10.0)
+    b = 100.0 + 30.0 * t + np.array([0, 3, -2, 1, 0, -3, 2, 0, 1, -1.0])
+    ok = np.ones(10, bool)
+    off, jumps = clock_jumps(t, b, ok)
+    assert jumps == [] and (off == 0).all()
+    b2 = b + MS_JUMP * (t >= 4) + 5000.0 * (t >= 7)
+    ok[4] = False
+    off, jumps = clock_jumps(t, b2, ok)
+    assert [j[0] for j in jumps] == [5.0, 7.0]
+    assert jumps[0][1] == MS_JUMP and abs(jumps[1][1] - 5000.0) < 20.0
+    assert (off[:5] == 0).all() and (off[5:7] == MS_JUMP).all() and off[9] == off[7] == MS_JUMP + jumps[1][1]
+    with pytest.raises(ConfigError, match="must be positive") as ei:
+        load_dataset(_cfg(tmp_path, SHIPPED.replace('step = "1 s"', 'step = "1 s"\nclock_jump = "0 m"')))
+    assert ei.value.key == "motion.clock_jump"
+
+
+def test_receiver_clock_millisecond_jump_is_repaired(tmp_path):
+    """The phone log as RINEX with the receiver's pseudoranges stepping by 1 ms of light travel
+    at epoch 100 (as receivers that steer their clock do): the jump is found (one, exactly
+    1 ms, at that epoch), taken off, and the EKF's positions equal the unjumped file's within
+    1 cm (the SPP used for the atmosphere and the jump moves by millimetres: its satellites
+    are computed at a transmit time 1 ms off)."""
+    from mixnav.experiment.spp_process import process_raw, raw_tables
+    from mixnav.gnss.spp import MS_JUMP
+    from .test_process_raw import _write_rinex3
+    folder = data_file("android-static", LOG).parent
+    text = _methods(SHIPPED, '[[methods]]\nname = "ekf"\nestimator = "ekf"\n').replace(
+        'format = "android-gnsslogger"', 'format = "rinex-obs"')
+    ds, _, _ = load_dataset(_cfg(tmp_path, text))
+    obs, _ = _phone(ds, folder)
+    shutil.copy(folder / ds.raw_gnss.navigation, tmp_path)
+    out = {}
+    for name, jump in (("clean", 0.0), ("jump", MS_JUMP)):
+        _write_rinex3(tmp_path / LOG, obs.week, obs.tow, obs.epoch, obs.prn,
+                      obs.pseudorange + jump * (obs.epoch >= 100))
+        d, s, _ = load_dataset(_cfg(tmp_path, text))
+        po = process_raw(d, s, tmp_path)
+        out[name] = (po, raw_tables(po)["ekf"])
+    assert out["clean"][0].checks["clock_jumps"] == []
+    (tj, size), = out["jump"][0].checks["clock_jumps"]
+    assert size == MS_JUMP and tj == pytest.approx(out["jump"][1]["time_s"][100])
+    a, b = out["clean"][1], out["jump"][1]
+    cols = ["err_n_m", "err_e_m", "err_d_m"]
+    assert np.abs(a[cols].to_numpy()[1:] - b[cols].to_numpy()[1:]).max() < 0.01
+    # the reported clock is the receiver's: the jump is in it
+    assert b["clock_bias_m"][150] - a["clock_bias_m"][150] == pytest.approx(MS_JUMP, abs=0.05)

@@ -76,7 +76,10 @@ class ConstantVelocityConfig(Strict):
     ``step``: the prediction interval (the model is propagated in steps of at most this
     long between epochs). ``velocity_sigma``, ``clock_drift_sigma``: 1-sigma of the
     initial velocity (zero) and clock drift (zero); position and clock bias start at the
-    first SPP fix with its covariance, inflated by ``position_sigma_factor``."""
+    first SPP fix with its covariance, inflated by ``position_sigma_factor``.
+    ``clock_jump``: a jump of the SPP clock bias beyond its drift by more than this is
+    taken off the pseudoranges the filters see (millisecond jumps exactly:
+    :func:`mixnav.gnss.spp.clock_jumps`), counted in metrics.json."""
 
     model: Literal["constant-velocity"] = "constant-velocity"
     accel_sigma: AccelDensity = 1.0  # type: ignore[valid-type]
@@ -87,6 +90,7 @@ class ConstantVelocityConfig(Strict):
     velocity_sigma: _quantity(u.VELOCITY, positive=True) = 5.0  # type: ignore[valid-type]
     clock_drift_sigma: _quantity(u.VELOCITY, positive=True) = 100.0  # type: ignore[valid-type]
     position_sigma_factor: float = Field(default=1.0, ge=1.0, le=100.0)
+    clock_jump: _quantity(u.LENGTH, positive=True) = 1000.0  # type: ignore[valid-type]
 
     @field_validator("accel_sigma", "vertical_accel_sigma")
     @classmethod

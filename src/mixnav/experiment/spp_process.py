@@ -66,6 +66,7 @@ class SppOutput:
     init: InitialState | None = None
     filter_time_s: float = 0.0
     checks: dict = field(default_factory=dict)
+    clock_offset: np.ndarray | None = None   # (k,) clock jumps taken off the filters' pseudoranges [m]
 
 
 def options(ds: RawGnssDataset) -> SppOptions:
@@ -142,7 +143,7 @@ def filter_start(po: SppOutput) -> InitialState:
 def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
     """Run the ``(index, method)`` filters on the constant-velocity model (module docstring);
     results into ``po``."""
-    from ..gnss.spp import corrected_pseudoranges
+    from ..gnss.spp import clock_jumps, corrected_pseudoranges
     from ..ins.error_model import ClockModel
     from ..measurements.pseudorange import PseudorangeGnss
     from ..motion.constant_velocity import (ConstantVelocityMotion, ConstantVelocityNoise, clock_ticks,
@@ -157,9 +158,13 @@ def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
     last = np.maximum.accumulate(np.where(tr.ok, np.arange(len(tr.tow)), -1))
     rx = np.where((last >= 0)[:, None], tr.pos_ecef[np.maximum(last, 0)], np.nan)
     opts = options(ds)
-    epochs, skipped = corrected_pseudoranges(po.ephemeris, obs.week, obs.tow, obs.epoch, obs.prn, obs.pseudorange,
-                                             rx, opts, cn0=getattr(obs, "cn0", None), source=obs.source)
     times = _epoch_times(tr)
+    # a receiver clock that jumps (millisecond steps) would throw every filter off: the
+    # jumps seen by the SPP come off the pseudoranges first (the first fix has none)
+    offset, jumps = clock_jumps(times, tr.clock_bias, tr.ok, float(mc.clock_jump))
+    rho = np.asarray(obs.pseudorange, float) - offset[np.asarray(obs.epoch, int)]
+    epochs, skipped = corrected_pseudoranges(po.ephemeris, obs.week, obs.tow, obs.epoch, obs.prn, rho,
+                                             rx, opts, cn0=getattr(obs, "cn0", None), source=obs.source)
     end = float(times[-1])
     if not end > init.time:
         raise DataError("the first SPP fix is at the last epoch: nothing left to filter", file=obs.source)
@@ -174,8 +179,9 @@ def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
     po.results = run_methods(methods, lambda: ConstantVelocityMotion(lay, noise, clock), [model], ticks, init, out_t,
                              po.source, seed, "the constant-velocity model")
     po.filter_time_s = prep + _time.perf_counter() - t_filter
-    po.epochs, po.init = epochs, init
-    po.checks = {"filter_start_s": init.time, "observations_not_filtered": skipped,
+    po.epochs, po.init, po.clock_offset = epochs, init, offset
+    po.checks = {"filter_start_s": init.time, "clock_jumps": [list(j) for j in jumps],
+                 "observations_not_filtered": skipped,
                  "pseudorange_rows_skipped": model.skipped_rows}
 
 
@@ -234,7 +240,8 @@ def filter_table(po: SppOutput, res) -> pd.DataFrame:
                        "height_m": col(lla[:, 2]),
                        "vn_mps": col(res.nav[:, 4]), "ve_mps": col(res.nav[:, 5]), "vd_mps": col(res.nav[:, 6])})
     clk = res.estimates.get("clock")
-    df["clock_bias_m"] = col(clk[:, 0]) if clk is not None else np.nan
+    jumps = po.clock_offset if po.clock_offset is not None else 0.0
+    df["clock_bias_m"] = col(clk[:, 0]) + jumps if clk is not None else np.nan   # the receiver's, jumps included
     df["clock_drift_mps"] = col(clk[:, 1]) if clk is not None else np.nan
     n_sat = np.zeros(k, int)
     if po.epochs is not None:

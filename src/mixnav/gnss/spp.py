@@ -532,3 +532,64 @@ def corrected_pseudoranges(ephemeris, week, tow_rx, epoch, prn, pseudorange, rec
                                      np.ones(len(cat["pr"]), int), elevation=cat["el"], cn0=cat["cn0"],
                                      source=source)
     return ep, skipped
+
+
+#: a millisecond of light travel [m]: the size of the clock jumps of receivers that steer
+#: their clock within +-0.5 ms (RINEX observation files of many receivers)
+MS_JUMP = C_LIGHT * 1e-3
+
+
+def clock_jumps(time, clock_bias, ok, threshold: float = 1000.0):
+    """Receiver clock jumps in an SPP track, as offsets to take off the pseudoranges.
+
+    Between consecutive solved epochs the clock bias is predicted from the previous
+    interval's rate (a drifting clock is no jump); a departure above ``threshold`` [m] is a
+    jump, taken as the nearest whole number of milliseconds of light travel when within
+    ``threshold / 2`` of one (receivers that steer their clock by millisecond steps:
+    exact), else as the departure itself (a phone re-acquiring its clock: within the SPP's
+    clock noise, which the filter's clock noise absorbs).
+
+    Parameters
+    ----------
+    time : ndarray (k,)
+        Epoch times [s].
+    clock_bias : ndarray (k,)
+        SPP clock bias [m] (any value where not ``ok``).
+    ok : ndarray of bool (k,)
+        Solved epochs.
+    threshold : float
+        [m], > 0.
+
+    Returns
+    -------
+    offset : ndarray (k,)
+        Sum of the jumps up to each epoch [m] (a jump between solved epochs ``i`` and ``j``
+        counts from ``j`` on): subtracting it from the pseudoranges of the epoch (and
+        from the SPP clock) leaves a continuous clock.
+    jumps : list of (float, float)
+        ``(time [s], size [m])`` of each jump.
+    """
+    t = np.asarray(time, float)
+    b = np.asarray(clock_bias, float)
+    idx = np.nonzero(np.asarray(ok, bool))[0]
+    offset = np.zeros(len(t))
+    jumps = []
+    rate = 0.0
+    cum = 0.0
+    for a, j in zip(idx[:-1], idx[1:]):
+        dt = t[j] - t[a]
+        prev = b[a] - offset[a]
+        before = cum
+        dev = (b[j] - cum) - (prev + rate * dt)
+        if abs(dev) > threshold:
+            n_ms = round(dev / MS_JUMP)
+            size = n_ms * MS_JUMP if n_ms != 0 and abs(dev - n_ms * MS_JUMP) < threshold / 2 else dev
+            cum += size
+            jumps.append((float(t[j]), float(size)))
+        else:
+            rate = ((b[j] - cum) - prev) / dt if dt > 0 else rate
+        offset[a + 1:j] = before
+        offset[j] = cum
+    if len(idx):
+        offset[idx[-1] + 1:] = cum
+    return offset, jumps
