@@ -159,6 +159,8 @@ def test_phone_filters_beat_spp_and_stay_still(shipped_run):
     for name in m["methods"]:
         assert (out / f"solution_{name}.csv").exists() and (out / f"solution_{name}.parquet").exists()
     assert m["filters"]["filter_start_s"] == 0.0
+    # the phone's clock moves ~30 m per epoch (a new clock segment each second): no jump
+    assert m["filters"]["clock_jumps"] == [] and m["filters"]["clock_spikes_ignored"] == 0
     doc = (DOCS / "outputs.md").read_text()
     for key in list(m) + list(m["filters"]) + [k for s in m["methods"].values() for k in s]:
         assert f"`{key}`" in doc, key
@@ -261,17 +263,21 @@ def test_rinex_route_gives_the_phone_logs_filter_solution(tmp_path):
 def test_clock_jumps_closed_forms(tmp_path):
     """A drifting clock (30 m/s) is no jump; a 1 ms step (299792.458 m) with noise is taken as
     exactly 1 ms; a 5 km step that is no whole millisecond is taken as it is; an unsolved
-    epoch between counts before the jump."""
+    epoch between counts before the jump; a 5 km departure at one epoch only (an outlier
+    pulling the SPP) is no jump."""
     from mixnav.gnss.spp import MS_JUMP, clock_jumps
     t = np.arange(10.0)
     b = 100.0 + 30.0 * t + np.array([0, 3, -2, 1, 0, -3, 2, 0, 1, -1.0])
     ok = np.ones(10, bool)
-    off, jumps = clock_jumps(t, b, ok)
-    assert jumps == [] and (off == 0).all()
+    off, jumps, spikes = clock_jumps(t, b, ok)
+    assert jumps == [] and (off == 0).all() and spikes == 0
+    spike = b + 5000.0 * (t == 6)
+    off, jumps, spikes = clock_jumps(t, spike, ok)
+    assert jumps == [] and (off == 0).all() and spikes == 1
     b2 = b + MS_JUMP * (t >= 4) + 5000.0 * (t >= 7)
     ok[4] = False
-    off, jumps = clock_jumps(t, b2, ok)
-    assert [j[0] for j in jumps] == [5.0, 7.0]
+    off, jumps, spikes = clock_jumps(t, b2, ok)
+    assert [j[0] for j in jumps] == [5.0, 7.0] and spikes == 0
     assert jumps[0][1] == MS_JUMP and abs(jumps[1][1] - 5000.0) < 20.0
     assert (off[:5] == 0).all() and (off[5:7] == MS_JUMP).all() and off[9] == off[7] == MS_JUMP + jumps[1][1]
     with pytest.raises(ConfigError, match="must be positive") as ei:

@@ -161,7 +161,7 @@ def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
     times = _epoch_times(tr)
     # a receiver clock that jumps (millisecond steps) would throw every filter off: the
     # jumps seen by the SPP come off the pseudoranges first (the first fix has none)
-    offset, jumps = clock_jumps(times, tr.clock_bias, tr.ok, float(mc.clock_jump))
+    offset, jumps, spikes = clock_jumps(times, tr.clock_bias, tr.ok, float(mc.clock_jump))
     rho = np.asarray(obs.pseudorange, float) - offset[np.asarray(obs.epoch, int)]
     epochs, skipped = corrected_pseudoranges(po.ephemeris, obs.week, obs.tow, obs.epoch, obs.prn, rho,
                                              rx, opts, cn0=getattr(obs, "cn0", None), source=obs.source)
@@ -181,6 +181,7 @@ def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
     po.filter_time_s = prep + _time.perf_counter() - t_filter
     po.epochs, po.init, po.clock_offset = epochs, init, offset
     po.checks = {"filter_start_s": init.time, "clock_jumps": [list(j) for j in jumps],
+                 "clock_spikes_ignored": spikes,
                  "observations_not_filtered": skipped,
                  "pseudorange_rows_skipped": model.skipped_rows}
 

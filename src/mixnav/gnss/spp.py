@@ -542,12 +542,14 @@ MS_JUMP = C_LIGHT * 1e-3
 def clock_jumps(time, clock_bias, ok, threshold: float = 1000.0):
     """Receiver clock jumps in an SPP track, as offsets to take off the pseudoranges.
 
-    Between consecutive solved epochs the clock bias is predicted from the previous
-    interval's rate (a drifting clock is no jump); a departure above ``threshold`` [m] is a
-    jump, taken as the nearest whole number of milliseconds of light travel when within
-    ``threshold / 2`` of one (receivers that steer their clock by millisecond steps:
-    exact), else as the departure itself (a phone re-acquiring its clock: within the SPP's
-    clock noise, which the filter's clock noise absorbs).
+    Each solved epoch's clock bias is predicted from the last accepted one and the rate
+    between the last two (a drifting clock is no jump); a departure above ``threshold``
+    [m] is a jump when it is within ``threshold / 2`` of a whole number of milliseconds of
+    light travel (receivers that steer their clock by millisecond steps: taken as exactly
+    that), or when the next solved epoch stays at the new level (a phone re-acquiring its
+    clock: taken as the departure, within the SPP's clock noise, which the filter's clock
+    noise absorbs; this looks one solved epoch ahead). A departure that does not persist
+    is a spike of the SPP (an outlier pulled its clock): ignored and counted.
 
     Parameters
     ----------
@@ -568,28 +570,44 @@ def clock_jumps(time, clock_bias, ok, threshold: float = 1000.0):
         from the SPP clock) leaves a continuous clock.
     jumps : list of (float, float)
         ``(time [s], size [m])`` of each jump.
+    spikes : int
+        Departures ignored.
     """
     t = np.asarray(time, float)
     b = np.asarray(clock_bias, float)
     idx = np.nonzero(np.asarray(ok, bool))[0]
     offset = np.zeros(len(t))
     jumps = []
-    rate = 0.0
-    cum = 0.0
-    for a, j in zip(idx[:-1], idx[1:]):
-        dt = t[j] - t[a]
-        prev = b[a] - offset[a]
+    spikes = 0
+    rate, cum = 0.0, 0.0
+    if len(idx) == 0:
+        return offset, jumps, spikes
+    ref = idx[0]                          # the last accepted epoch
+    for pos in range(1, len(idx)):
+        prev, j = idx[pos - 1], idx[pos]
         before = cum
-        dev = (b[j] - cum) - (prev + rate * dt)
-        if abs(dev) > threshold:
-            n_ms = round(dev / MS_JUMP)
-            size = n_ms * MS_JUMP if n_ms != 0 and abs(dev - n_ms * MS_JUMP) < threshold / 2 else dev
-            cum += size
-            jumps.append((float(t[j]), float(size)))
+        level = b[ref] - offset[ref]      # its clock without the jumps
+        dev = (b[j] - cum) - (level + rate * (t[j] - t[ref]))
+        if abs(dev) <= threshold:
+            if t[j] > t[ref]:
+                rate = ((b[j] - cum) - level) / (t[j] - t[ref])
+            ref = j
         else:
-            rate = ((b[j] - cum) - prev) / dt if dt > 0 else rate
-        offset[a + 1:j] = before
+            n_ms = round(dev / MS_JUMP)
+            size = None
+            if n_ms != 0 and abs(dev - n_ms * MS_JUMP) < threshold / 2:
+                size = n_ms * MS_JUMP
+            elif pos + 1 < len(idx):
+                n = idx[pos + 1]
+                if abs((b[n] - b[j]) - rate * (t[n] - t[j])) <= threshold:
+                    size = dev
+            if size is None:
+                spikes += 1
+            else:
+                cum += size
+                jumps.append((float(t[j]), float(size)))
+                ref = j
+        offset[prev + 1:j] = before
         offset[j] = cum
-    if len(idx):
-        offset[idx[-1] + 1:] = cum
-    return offset, jumps
+    offset[idx[-1] + 1:] = cum
+    return offset, jumps, spikes
