@@ -232,7 +232,6 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
         raise ValueError(f"{n} satellites: at least 4 are needed for position and clock")
     scale = np.ones(n) if sigma_scale is None else np.asarray(sigma_scale, float)
     x = np.zeros(4) if x0 is None else np.asarray(x0, float).copy()
-    use_iono = options.ionosphere and iono_alpha is not None and iono_beta is not None
     rho_corr = rho + C_LIGHT * sats.clock_bias                      # satellite clock removed
     converged = False
     it = 0
@@ -248,11 +247,8 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
         if near_surface:
             el, az = elevation_azimuth(x[:3], sat_rx)
             sel = el >= options.elevation_mask
-            lla = ecef_to_lla(x[:3])
-            if options.troposphere:
-                model = model + np.where(sel, saastamoinen(lla[0], lla[2], np.maximum(el, 1e-3)), 0.0)
-            if use_iono:
-                model = model + klobuchar(lla[0], lla[1], el, az, tow, iono_alpha, iono_beta)
+            # the rows below the mask are left out of the solution: what is added to them is moot
+            model = model + atmosphere_delay(ecef_to_lla(x[:3]), el, az, tow, options, iono_alpha, iono_beta)
         if sel.sum() < 4:
             raise ValueError(f"{int(sel.sum())} satellites above the elevation mask "
                              f"({np.rad2deg(options.elevation_mask):.1f} deg): at least 4 are needed")
@@ -274,11 +270,7 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
     u = (sat_rx - x[:3]) / rng[:, None]
     el, az = elevation_azimuth(x[:3], sat_rx)
     model = rng + x[3]
-    lla = ecef_to_lla(x[:3])
-    if options.troposphere:
-        model = model + np.where(sel, saastamoinen(lla[0], lla[2], np.maximum(el, 1e-3)), 0.0)
-    if use_iono:
-        model = model + klobuchar(lla[0], lla[1], el, az, tow, iono_alpha, iono_beta)
+    model = model + atmosphere_delay(ecef_to_lla(x[:3]), el, az, tow, options, iono_alpha, iono_beta)
     sigma = scale * np.sqrt(options.sigma_a**2 + options.sigma_b**2 / np.sin(np.maximum(el, 1e-3)) ** 2)
     H = np.column_stack([-u, np.ones(n)])[sel]
     N = H.T @ (H / sigma[sel, None] ** 2)
