@@ -35,7 +35,8 @@ def test_shipped_config_validates():
     assert ds.raw_gnss.elevation_mask == pytest.approx(np.deg2rad(10))
     assert ds.raw_gnss.max_sv_time_uncertainty == pytest.approx(5e-7)
     assert ds.reference_point.height == -28.0
-    assert ds.imu is None and ds.methods is None
+    assert not hasattr(ds, "imu") and ds.methods is None
+    assert [m.estimator for m in ds.run_methods()] == ["wls"]
 
 
 @pytest.mark.parametrize("edit, key, message", [

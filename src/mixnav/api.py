@@ -121,8 +121,9 @@ def process_dataset(name_or_path: str, data: str | None = None) -> RunResult:
     data : str, optional
         Folder holding the data files (default: the config's ``data_dir``).
 
-    A raw-GNSS dataset (``kind = "gnss-raw"``) gives one ``"spp"`` solution
-    (epoch-by-epoch single-point positions) and no filter results; an odometry +
+    A raw-GNSS dataset (``kind = "gnss-raw"``) gives the epoch-by-epoch single-point
+    solution (``"spp"`` when the config names no methods) and its constant-velocity
+    filters (:mod:`mixnav.experiment.spp_process`); an odometry +
     pseudorange dataset (``kind = "odometry-gnss"``, e.g. ``"smartloc-berlin"``) runs its
     methods on the dead-reckoning model (:mod:`mixnav.experiment.vehicle_process`).
     """
@@ -139,9 +140,10 @@ def process_dataset(name_or_path: str, data: str | None = None) -> RunResult:
         return RunResult(tables, _metrics_frame(metrics), vo.results, truth, vo, text)
     po = process(ds, source, data)
     if ds.dataset.kind == "gnss-raw":
-        from .experiment.spp_process import solution_table as spp_table, spp_metrics
-        t = spp_table(po)
-        return RunResult({"spp": t}, _metrics_frame({"spp": spp_metrics(t, po.solve_time_s)}), {}, None, po, text)
+        from .experiment.spp_process import method_metrics as raw_metrics, raw_tables
+        tables = raw_tables(po)
+        metrics = {name: raw_metrics(po, name, t) for name, t in tables.items()}
+        return RunResult(tables, _metrics_frame(metrics), po.results, None, po, text)
     withheld = withheld_windows(po)
     tables = process_tables(po)
     metrics = {name: method_metrics(res, tables[name], withheld, po.gnss_bias) for name, res in po.results.items()}

@@ -21,8 +21,10 @@ MinSpeed = _quantity(u.VELOCITY, positive=True)
 
 class DatasetInfo(Strict):
     """``kind``: ``ins-gnss`` (IMU + GNSS fixes, filtered by ``methods``),
-    ``gnss-raw`` (raw GNSS measurements, epoch-by-epoch single-point
-    positioning, sections ``raw_gnss`` and ``reference_point``) or
+    ``gnss-raw`` (raw GNSS measurements: epoch-by-epoch single-point
+    positioning and constant-velocity filters, sections ``raw_gnss``,
+    ``reference_point``, ``motion`` and ``methods``:
+    :mod:`mixnav.config.raw_gnss_schema`) or
     ``odometry-gnss`` (wheel speed and yaw rate + pseudoranges: the dead-reckoning
     model, :mod:`mixnav.config.vehicle_schema`)."""
 
@@ -194,8 +196,8 @@ class ReferencePoint(Strict):
 
 
 #: sections each kind needs, and those it must not have
-KIND_SECTIONS = {"ins-gnss": (("imu", "gnss", "alignment", "methods"), ("raw_gnss", "reference_point")),
-                 "gnss-raw": (("raw_gnss",), ("imu", "gnss", "alignment", "methods", "reference"))}
+#: (gnss-raw and odometry-gnss files have schemas of their own: config/raw_gnss_schema.py, vehicle_schema.py)
+KIND_SECTIONS = {"ins-gnss": (("imu", "gnss", "alignment", "methods"), ("raw_gnss", "reference_point"))}
 
 
 class Dataset(Strict):

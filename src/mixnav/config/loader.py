@@ -346,13 +346,21 @@ def load_dataset(name_or_path: str):
     """
     from .dataset_schema import Dataset
     text, source = resolve(name_or_path, "datasets", "dataset")
-    if _declared_kind(text) == "odometry-gnss":   # its own schema (config/vehicle_schema.py)
+    kind = _declared_kind(text)
+    if kind == "odometry-gnss":   # its own schema (config/vehicle_schema.py)
         from .vehicle_schema import VehicleDataset
         return _validate(VehicleDataset, text, source), source, text
+    if kind == "gnss-raw":   # its own schema (config/raw_gnss_schema.py)
+        from .raw_gnss_schema import FOREIGN_SECTIONS, RawGnssDataset
+        import tomllib
+        data = tomllib.loads(text)
+        for key in FOREIGN_SECTIONS:   # said as such, not as an unknown key: the kind is what is wrong
+            if key in data:
+                raise ConfigError(f"not used by dataset.kind = '{kind}' (remove it, or change the kind)",
+                                  file=source, key=key)
+        return _validate_data(RawGnssDataset, data, source), source, text
     ds = _validate(Dataset, text, source)
     _check_kind(ds, source)
-    if ds.dataset.kind == "gnss-raw":
-        return ds, source, text
     _check_imu_models(ds, source)
     corruption(ds, source)
     for k in ("imu_position", "antenna_position"):

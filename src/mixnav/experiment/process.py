@@ -213,7 +213,8 @@ def initial_state(ds: Dataset, imu: ImuData, fixes: GnssFixes, lever: np.ndarray
 def process(ds: Dataset, source: str, data: str | None = None):
     """Read, align and filter a dataset with every configured method.
 
-    A ``gnss-raw`` dataset is solved epoch by epoch instead
+    A ``gnss-raw`` dataset is solved epoch by epoch instead, and filtered on the
+    constant-velocity model when its methods say so
     (:func:`mixnav.experiment.spp_process.process_raw`, returning an ``SppOutput``).
     """
     folder = find_data_dir(ds, data, source)

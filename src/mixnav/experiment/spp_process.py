@@ -1,11 +1,23 @@
-"""``mixnav process`` for ``dataset.kind = "gnss-raw"``: epoch-by-epoch SPP of raw GNSS.
+"""``mixnav process`` for ``dataset.kind = "gnss-raw"``: epoch-by-epoch SPP of raw GNSS,
+and constant-velocity filters started from it.
 
-Steps: read the raw measurement log (:mod:`mixnav.io.android`) and the RINEX
-navigation file (:mod:`mixnav.gnss.ephemeris`), solve every epoch by WLS
-(:mod:`mixnav.gnss.spp`), and score the solutions against the surveyed
-static point of ``[reference_point]``: north, east, down errors, their RMS,
-maximum and 95th percentile, and the position NEES with the WLS covariance.
-Epochs without a solution are counted by status, never raised.
+Steps: read the raw measurement log (:mod:`mixnav.io.android`, or a RINEX observation
+file, :mod:`mixnav.io.rinex_obs`) and the RINEX navigation file
+(:mod:`mixnav.gnss.ephemeris`), solve every epoch by WLS (:mod:`mixnav.gnss.spp`), and
+score the solutions against the surveyed static point of ``[reference_point]``: north,
+east, down errors, their RMS, maximum and 95th percentile, and the position NEES with
+the WLS covariance. Epochs without a solution are counted by status, never raised.
+
+Filter methods (``[[methods]]`` with an estimator other than ``wls``): the observations
+with SPP's broadcast corrections applied (:func:`mixnav.gnss.spp.corrected_pseudoranges`:
+satellite clock, troposphere and ionosphere, at the latest SPP fix) feed the
+pseudorange model (:class:`mixnav.measurements.pseudorange.PseudorangeGnss`, SPP's
+elevation weights and mask) on the constant-velocity model
+(:class:`mixnav.motion.ConstantVelocityMotion`, ``[motion]``), started at the first SPP
+fix (its position, clock bias and their WLS covariance; velocity and clock drift zero)
+and run from the next epoch on, one engine per method
+(:func:`mixnav.experiment.model_methods.run_methods`, the code the odometry datasets
+run).
 
 Times in the solution table are seconds since the first epoch; the first
 epoch's GPS week and seconds of week are in metrics.json.
@@ -14,14 +26,15 @@ epoch's GPS week and seconds of week are in metrics.json.
 from __future__ import annotations
 
 import time as _time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from .. import __version__
-from ..config.dataset_schema import Dataset
+from ..config.raw_gnss_schema import RawGnssDataset
+from ..data import InitialState
 from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla, lla_to_ecef
 from ..errors import DataError
 from ..gnss.ephemeris import BroadcastEphemeris
@@ -36,7 +49,10 @@ METHOD = "spp"
 
 @dataclass
 class SppOutput:
-    dataset: Dataset
+    """What :func:`process_raw` produced: the SPP track and the filter methods' results
+    (``results``: name -> FilterResult, times in seconds since the first epoch)."""
+
+    dataset: RawGnssDataset
     source: str
     data_dir: Path
     observations: object               # android.AndroidPseudoranges or rinex_obs.RinexPseudoranges
@@ -45,16 +61,23 @@ class SppOutput:
     reference_lla: np.ndarray | None   # (3,) rad, rad, m
     read_time_s: float
     solve_time_s: float
+    results: dict = field(default_factory=dict)
+    epochs: object = None              # PseudorangeEpochs the filters read (None without filters)
+    init: InitialState | None = None
+    filter_time_s: float = 0.0
+    checks: dict = field(default_factory=dict)
+    clock_offset: np.ndarray | None = None   # (k,) clock jumps taken off the filters' pseudoranges [m]
 
 
-def options(ds: Dataset) -> SppOptions:
+def options(ds: RawGnssDataset) -> SppOptions:
     c = ds.raw_gnss
     return SppOptions(elevation_mask=c.elevation_mask, sigma_a=c.sigma_a, sigma_b=c.sigma_b,
                       troposphere=c.troposphere, ionosphere=c.ionosphere)
 
 
-def process_raw(ds: Dataset, source: str, folder: Path) -> SppOutput:
-    """Read the raw log and the navigation file, and solve every epoch."""
+def process_raw(ds: RawGnssDataset, source: str, folder: Path, seed: int = 0) -> SppOutput:
+    """Read the raw log and the navigation file, solve every epoch, and run the filter
+    methods (module docstring; ``seed``: the engine's random stream)."""
     c = ds.raw_gnss
     t0 = _time.perf_counter()
     if c.format == "rinex-obs":
@@ -64,18 +87,103 @@ def process_raw(ds: Dataset, source: str, folder: Path) -> SppOutput:
         obs = android.read_gnsslogger(folder / c.file,
                                       max_sv_time_uncertainty_ns=c.max_sv_time_uncertainty * 1e9)
     eph = BroadcastEphemeris.from_rinex(folder / c.navigation)
+    return solve_raw(ds, source, folder, obs, eph, _time.perf_counter() - t0, seed)
+
+
+def solve_raw(ds: RawGnssDataset, source: str, folder: Path, obs, eph: BroadcastEphemeris, read_time_s: float = 0.0,
+              seed: int = 0) -> SppOutput:
+    """SPP of every epoch of ``obs`` (read observations) and the filter methods."""
+    c = ds.raw_gnss
     if c.ionosphere and eph.iono_alpha is None:   # asked for, and impossible: said, not silent
         import warnings
         from ..io.imu_checks import DataWarning
         warnings.warn(f"{folder / c.navigation}: the header has no ionosphere (Klobuchar) coefficients, so the "
                       "ionosphere correction is skipped and every pseudorange keeps its 2-10 m delay "
-                      "(metrics.json: ionosphere)", DataWarning, stacklevel=2)
+                      "(metrics.json: ionosphere)", DataWarning, stacklevel=3)
     t1 = _time.perf_counter()
     track = solve_epochs(eph, obs.week, obs.tow, obs.epoch, obs.prn, obs.pseudorange, options(ds))
     t2 = _time.perf_counter()
     rp = ds.reference_point
     ref = None if rp is None else np.array([rp.latitude, rp.longitude, rp.height])
-    return SppOutput(ds, source, folder, obs, eph, track, ref, t1 - t0, t2 - t1)
+    po = SppOutput(ds, source, folder, obs, eph, track, ref, read_time_s, t2 - t1)
+    filters = [(k, m) for k, m in enumerate(ds.run_methods()) if m.estimator != "wls"]
+    if filters:
+        run_filters(po, filters, seed)
+    return po
+
+
+def _epoch_times(track: SppTrack) -> np.ndarray:
+    t_abs = track.week * 604800.0 + track.tow
+    return t_abs - t_abs[0]
+
+
+def filter_start(po: SppOutput) -> InitialState:
+    """The filters' start: the first SPP fix (position and clock bias with their WLS
+    covariance times ``motion.position_sigma_factor``; velocity and clock drift zero with
+    ``motion.velocity_sigma``, ``motion.clock_drift_sigma``)."""
+    tr, mc = po.track, po.dataset.motion
+    ok = np.nonzero(tr.ok)[0]
+    if len(ok) == 0:
+        raise DataError(f"no epoch could be solved (status counts: {tr.status_counts()}), so the filters have "
+                        "no first fix to start from", file=po.observations.source)
+    j = int(ok[0])
+    lla = ecef_to_lla(tr.pos_ecef[j])
+    C_ne = dcm_ecef_to_ned(lla[0], lla[1])
+    f = float(mc.position_sigma_factor)
+    sig_pos = f * np.sqrt(np.diag(C_ne @ tr.cov[j, :3, :3] @ C_ne.T))
+    nav = np.zeros(10)
+    nav[0] = 1.0
+    nav[7:10] = lla
+    return InitialState(time=float(_epoch_times(tr)[j]), nav=nav, sigma_att=np.zeros(3),
+                        sigma_vel=np.full(3, float(mc.velocity_sigma)), sigma_pos=sig_pos,
+                        sigma_clock=np.array([f * np.sqrt(tr.cov[j, 3, 3]), float(mc.clock_drift_sigma)]),
+                        clock0=np.array([tr.clock_bias[j], 0.0]))
+
+
+def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
+    """Run the ``(index, method)`` filters on the constant-velocity model (module docstring);
+    results into ``po``."""
+    from ..gnss.spp import clock_jumps, corrected_pseudoranges
+    from ..ins.error_model import ClockModel
+    from ..measurements.pseudorange import PseudorangeGnss
+    from ..motion.constant_velocity import (ConstantVelocityMotion, ConstantVelocityNoise, clock_ticks,
+                                            constant_velocity_layout)
+    from .model_methods import run_methods
+    ds, tr, obs = po.dataset, po.track, po.observations
+    mc = ds.motion
+    t_prep = _time.perf_counter()
+    init = filter_start(po)
+    # the atmosphere at the latest fix (causal): a first fix is metres to tens of metres off,
+    # which moves the delays by millimetres
+    last = np.maximum.accumulate(np.where(tr.ok, np.arange(len(tr.tow)), -1))
+    rx = np.where((last >= 0)[:, None], tr.pos_ecef[np.maximum(last, 0)], np.nan)
+    opts = options(ds)
+    times = _epoch_times(tr)
+    # a receiver clock that jumps (millisecond steps) would throw every filter off: the
+    # jumps seen by the SPP come off the pseudoranges first (the first fix has none)
+    offset, jumps, spikes = clock_jumps(times, tr.clock_bias, tr.ok, float(mc.clock_jump))
+    rho = np.asarray(obs.pseudorange, float) - offset[np.asarray(obs.epoch, int)]
+    epochs, skipped = corrected_pseudoranges(po.ephemeris, obs.week, obs.tow, obs.epoch, obs.prn, rho,
+                                             rx, opts, cn0=getattr(obs, "cn0", None), source=obs.source)
+    end = float(times[-1])
+    if not end > init.time:
+        raise DataError("the first SPP fix is at the last epoch: nothing left to filter", file=obs.source)
+    lay = constant_velocity_layout(clock=True)
+    model = PseudorangeGnss(epochs, lay, systems=(1,), variance="given", elevation_mask=opts.elevation_mask)
+    noise = ConstantVelocityNoise(float(mc.accel_sigma), float(mc.vertical_accel_sigma))
+    clock = ClockModel(float(mc.clock_q_bias), float(mc.clock_q_drift))
+    ticks = clock_ticks(init.time, end, float(mc.step))
+    out_t = times[times > init.time]
+    prep = _time.perf_counter() - t_prep
+    t_filter = _time.perf_counter()
+    po.results = run_methods(methods, lambda: ConstantVelocityMotion(lay, noise, clock), [model], ticks, init, out_t,
+                             po.source, seed, "the constant-velocity model")
+    po.filter_time_s = prep + _time.perf_counter() - t_filter
+    po.epochs, po.init, po.clock_offset = epochs, init, offset
+    po.checks = {"filter_start_s": init.time, "clock_jumps": [list(j) for j in jumps],
+                 "clock_spikes_ignored": spikes,
+                 "observations_not_filtered": skipped,
+                 "pseudorange_rows_skipped": model.skipped_rows}
 
 
 def ionosphere_applied(po: SppOutput) -> str:
@@ -114,14 +222,85 @@ def solution_table(po: SppOutput) -> pd.DataFrame:
     return df
 
 
+def filter_table(po: SppOutput, res) -> pd.DataFrame:
+    """The solution table of a filter method, one row per epoch as the SPP's (NaN and status
+    ``not started`` up to the first fix; columns in docs/outputs.md)."""
+    tr = po.track
+    times = _epoch_times(tr)
+    k = len(times)
+    idx = np.searchsorted(times, res.time)       # output times are epoch times
+    lay = res.layout
+
+    def col(values):
+        out = np.full(k, np.nan)
+        out[idx] = values
+        return out
+    lla = res.nav[:, 7:10]
+    df = pd.DataFrame({"time_s": times, "gps_week": tr.week, "gps_tow_s": tr.tow,
+                       "lat_deg": col(np.degrees(lla[:, 0])), "lon_deg": col(np.degrees(lla[:, 1])),
+                       "height_m": col(lla[:, 2]),
+                       "vn_mps": col(res.nav[:, 4]), "ve_mps": col(res.nav[:, 5]), "vd_mps": col(res.nav[:, 6])})
+    clk = res.estimates.get("clock")
+    jumps = po.clock_offset if po.clock_offset is not None else 0.0
+    df["clock_bias_m"] = col(clk[:, 0]) + jumps if clk is not None else np.nan   # the receiver's, jumps included
+    df["clock_drift_mps"] = col(clk[:, 1]) if clk is not None else np.nan
+    n_sat = np.zeros(k, int)
+    if po.epochs is not None:
+        model_rows = {float(t): len(rows) for t, rows in
+                      ((po.epochs.time[e], _used(po, e)) for e in range(len(po.epochs)))}
+        n_sat[idx] = [model_rows.get(float(t), 0) for t in res.time]
+    df["n_sat"] = n_sat
+    status = np.full(k, "not started", dtype=object)
+    status[idx] = "ok"
+    df["status"] = status.astype(str)
+    if po.reference_lla is not None:
+        ref = po.reference_lla
+        err = np.full((k, 3), np.nan)
+        # estimate minus reference in NED at the reference, as the SPP table's
+        err[idx] = (lla_to_ecef(lla) - lla_to_ecef(ref)) @ dcm_ecef_to_ned(ref[0], ref[1]).T
+        for j, ax in enumerate("ned"):
+            df[f"err_{ax}_m"] = err[:, j]
+    for j, ax in enumerate("ned"):
+        df[f"sig_{ax}_m"] = col(res.sigma[:, lay.pos][:, j])
+    for j, ax in enumerate(("vn", "ve", "vd")):
+        df[f"sig_{ax}_mps"] = col(res.sigma[:, lay.vel][:, j])
+    if po.reference_lla is not None:
+        from .run import nees
+        df["nees_pos"] = col(nees(err[idx], res.pv_cov[:, 3:, 3:]))
+    return df
+
+
+def _used(po: SppOutput, e: int) -> np.ndarray:
+    """The filters' model rows of epoch ``e`` (the satellites above the mask)."""
+    el = po.epochs.elevation[po.epochs.rows_of(e)]
+    return np.nonzero(~(el < po.dataset.raw_gnss.elevation_mask))[0]
+
+
+def raw_tables(po: SppOutput) -> dict[str, pd.DataFrame]:
+    """Every method's solution table, in the order of ``[[methods]]`` (a smoothed solution
+    after its filter)."""
+    tables = {}
+    for m in po.dataset.run_methods():
+        if m.estimator == "wls":
+            tables[m.name] = solution_table(po)
+            continue
+        for name in (m.name, f"{m.name}-smoothed"):
+            if name in po.results:
+                tables[name] = filter_table(po, po.results[name])
+    return tables
+
+
 def spp_metrics(table: pd.DataFrame, solve_time_s: float) -> dict:
-    """Accuracy of the solved epochs against the reference point (keys in docs/outputs.md)."""
+    """Accuracy of the solved epochs against the reference point (keys in docs/outputs.md);
+    a filter's table adds its speed (``horizontal_speed_rms_mps``, ``vertical_speed_rms_mps``:
+    the velocity error of a static receiver)."""
     ok = (table["status"] == "ok").to_numpy()
     m: dict = {"n_epochs": int(ok.sum()),
                "epoch_time_mean_us": 1e6 * solve_time_s / max(len(table), 1),
-               "n_sat_mean": float(table["n_sat"][ok].mean()) if ok.any() else float("nan"),
-               "pdop_median": float(table["pdop"][ok].median()) if ok.any() else float("nan"),
-               "residual_rms_median_m": float(table["rms_residual_m"][ok].median()) if ok.any() else float("nan")}
+               "n_sat_mean": float(table["n_sat"][ok].mean()) if ok.any() else float("nan")}
+    if "pdop" in table:
+        m["pdop_median"] = float(table["pdop"][ok].median()) if ok.any() else float("nan")
+        m["residual_rms_median_m"] = float(table["rms_residual_m"][ok].median()) if ok.any() else float("nan")
     if "err_n_m" in table and ok.any():
         e = table.loc[ok, ["err_n_m", "err_e_m", "err_d_m"]].to_numpy(dtype=float)
         h = np.hypot(e[:, 0], e[:, 1])
@@ -132,6 +311,22 @@ def spp_metrics(table: pd.DataFrame, solve_time_s: float) -> dict:
                   "vertical_p95_m": float(np.percentile(v, 95)),
                   "mean_error_ned_m": [float(x) for x in e.mean(0)],
                   "nees_pos_mean": float(table["nees_pos"][ok].mean())})
+    if "vn_mps" in table and ok.any():
+        v = table.loc[ok, ["vn_mps", "ve_mps", "vd_mps"]].to_numpy(dtype=float)
+        m["horizontal_speed_rms_mps"] = float(np.sqrt(np.mean(v[:, 0] ** 2 + v[:, 1] ** 2)))
+        m["vertical_speed_rms_mps"] = float(np.sqrt(np.mean(v[:, 2] ** 2)))
+    return m
+
+
+def method_metrics(po: SppOutput, name: str, table: pd.DataFrame) -> dict:
+    """:func:`spp_metrics` of a method, with a filter's NIS and counted recoveries."""
+    res = po.results.get(name)
+    if res is None:
+        return spp_metrics(table, po.solve_time_s)
+    m = spp_metrics(table, res.timing.get("wall_time_s", 0.0))
+    m["epoch_time_mean_us"] = float(res.timing.get("epoch_time_mean_us", m["epoch_time_mean_us"]))
+    m["nis_per_dof_mean"] = float(np.sum(res.nis) / max(np.sum(res.nis_dim), 1))
+    m["recoveries"] = {k: int(v) for k, v in res.recoveries.items() if v}
     return m
 
 
@@ -145,6 +340,7 @@ def write_raw(out_dir: Path, po: SppOutput, config_text: str | None = None, over
 
 def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None) -> dict:
     table = solution_table(po)
+    tables = raw_tables(po)
     tr = po.track
     counts = tr.status_counts()
     empty = int(getattr(po.observations, "epochs_all_rejected", 0))
@@ -155,12 +351,13 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None) -> dict:
         raise DataError(f"no epoch could be solved (status counts: {counts}); does the navigation file cover "
                         "the log's time and satellites?", file=po.observations.source)
     duration = float(table["time_s"].iloc[-1]) if len(table) else 0.0
+    work = po.solve_time_s + po.filter_time_s
     metrics: dict = {
         "dataset": po.dataset.dataset.name, "kind": po.dataset.dataset.kind, "source": po.source,
         "data_dir": str(po.data_dir), "mixnav_version": __version__,
         "gps_week_start": int(tr.week[0]), "gps_tow_start_s": float(tr.tow[0]),
-        "duration_s": duration, "read_time_s": po.read_time_s, "filter_time_s": po.solve_time_s,
-        "real_time_factor": duration / max(po.read_time_s + po.solve_time_s, 1e-9),
+        "duration_s": duration, "read_time_s": po.read_time_s, "filter_time_s": work,
+        "real_time_factor": duration / max(po.read_time_s + work, 1e-9),
         "epochs_total": len(table) + empty, "epochs_used": used, "epochs_skipped": len(table) + empty - used,
         "epoch_status": counts, "satellites_skipped": dict(tr.skipped_satellites),
         "measurements_rejected": dict(po.observations.rejected),
@@ -168,20 +365,22 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None) -> dict:
         {"lat_deg": float(np.degrees(po.reference_lla[0])), "lon_deg": float(np.degrees(po.reference_lla[1])),
          "height_m": float(po.reference_lla[2])},
         "ionosphere": ionosphere_applied(po),
-        "methods": {METHOD: spp_metrics(table, po.solve_time_s)},
+        **({"filters": po.checks} if po.results else {}),
+        "methods": {name: method_metrics(po, name, t) for name, t in tables.items()},
     }
-    atomic_write_dataframe(out_dir / f"solution_{METHOD}.csv", table)
-    atomic_write_dataframe(out_dir / f"solution_{METHOD}.parquet", table)
-    ok = table[table["status"] == "ok"]
+    for name, t in tables.items():
+        atomic_write_dataframe(out_dir / f"solution_{name}.csv", t)
+        atomic_write_dataframe(out_dir / f"solution_{name}.parquet", t)
+    oks = {name: t[t["status"] == "ok"] for name, t in tables.items()}
     figs = {}
     if "err_n_m" in table:
-        figs["horizontal_error"] = figures.horizontal_error_figure({METHOD: ok})
+        figs["horizontal_error"] = figures.horizontal_error_figure(oks)
     ref = None
     if po.reference_lla is not None:
         ref = pd.DataFrame({"time_s": [0.0], "lat_deg": [np.degrees(po.reference_lla[0])],
                             "lon_deg": [np.degrees(po.reference_lla[1])], "height_m": [po.reference_lla[2]]})
-    if len(ok):
-        figs["trajectory"] = figures.trajectory_figure({METHOD: ok}, ref)
+    if any(len(o) for o in oks.values()):
+        figs["trajectory"] = figures.trajectory_figure({n: o for n, o in oks.items() if len(o)}, ref)
     opts = options(po.dataset)
     iono = {"klobuchar": "Klobuchar (broadcast coefficients)", "off": "none (switched off)",
             "skipped": "none: the navigation header has no coefficients"}[ionosphere_applied(po)]
@@ -194,6 +393,13 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None) -> dict:
              f"the first epoch (GPS week {int(tr.week[0])}, {float(tr.tow[0]):.3f} s of week).",
              f"Measurements rejected by the reader: {po.observations.rejected or 'none'}; satellites "
              f"left out: {tr.skipped_satellites or 'none'}."]
+    if po.results:
+        mc = po.dataset.motion
+        notes.append(f"Filters ({', '.join(po.results)}): constant velocity (white acceleration "
+                     f"{mc.accel_sigma:g} m/s^2/sqrt(Hz) horizontal, {mc.vertical_accel_sigma:g} vertical; clock "
+                     f"q_bias {mc.clock_q_bias:g} m^2/s, q_drift {mc.clock_q_drift:g} m^2/s^3), the same "
+                     f"corrected pseudoranges and weights as the SPP, started at the first fix "
+                     f"(t = {po.init.time:.2f} s).")
     write_report(out_dir, f"mixnav process: {po.dataset.dataset.name}", metrics, figs, notes=notes,
                  config_text=config_text)
     atomic_write_json(out_dir / "metrics.json", metrics)       # last: marks a complete folder

@@ -24,11 +24,8 @@ import numpy as np
 import pandas as pd
 
 from ..config.errors import config_keys
-from ..config.vehicle_schema import SYSTEM_CODES, VehicleDataset, VehicleMethod
+from ..config.vehicle_schema import SYSTEM_CODES, VehicleDataset
 from ..data import InitialState, Trajectory
-from ..engine.engine import Engine
-from ..engine.result import FilterResult
-from ..engine.smoother import rts_smooth
 from ..errors import ConfigError
 from ..geodesy.frames import ecef_to_lla, lla_to_ned
 from ..ins.error_model import ClockModel
@@ -36,6 +33,7 @@ from ..io.smartloc import read_ground_truth, read_odometry, read_pseudoranges, t
 from ..measurements.pseudorange import PseudorangeGnss
 from ..motion.dead_reckoning import (DeadReckoningMotion, DeadReckoningNoise, dead_reckoning_layout,
                                      odometry_increments, set_heading)
+from .model_methods import make_estimator, run_methods
 from .process import find_data_dir
 from .run import _lla_frame, solution_table, write_outputs
 
@@ -57,51 +55,6 @@ class VehicleOutput:
     filter_time_s: float
     end_time: float
     checks: dict = field(default_factory=dict)
-
-
-def make_estimator(method: VehicleMethod, source: str, index: int, seed: int = 0, mixture_start: dict | None = None):
-    """The estimator of a method (any motion model): ekf, robust-adaptive, gaussian-mixture
-    (given mixtures, or learned online), epoch-mixture, sage-husa, vb-akf; options named in
-    errors by their file key. ``mixture_start``: the LOS/NLOS mixture a track alignment
-    learned (:func:`mixture_handover`), the epoch mixture's starting values unless the
-    method's options set them."""
-    key = f"methods[{index}]"
-    name = method.estimator
-    opts = dict(method.options or {})
-    with config_keys(f"{key}.options", source):
-        if name == "ekf":
-            from ..filters.ekf import KalmanEstimator
-            return KalmanEstimator(**opts)
-        if name == "robust-adaptive":
-            from ..config.schema import RobustConfig
-            from ..filters.robust import RobustEstimator
-            rc = method.robust or RobustConfig()
-            return RobustEstimator(rc.k0, rc.k1, rc.c, **opts)
-        if name == "gaussian-mixture":
-            from ..config.schema import MixtureConfig
-            from ..filters.gmekf import BankEstimator
-            from .methods import _bank_parts
-            mc = method.mixture or MixtureConfig()
-            if mc.colored is not None:
-                raise ConfigError("the coloured-noise bank (M6) differences measurements of an INS layout; not "
-                                  "available on the dead-reckoning model", file=source, key=f"{key}.mixture.colored")
-            mixtures, online, _, _ = _bank_parts(mc, None, seed, method.name, source, f"{key}.mixture")
-            return BankEstimator(mixtures, max_components=mc.max_components, online=online, gate=mc.gate,
-                                 outlier_mean=mc.outlier_mean, divergence_window=mc.divergence_window,
-                                 divergence_nis=mc.divergence_nis)
-        if name == "epoch-mixture":
-            from ..filters.epoch_mixture import EpochMixtureEstimator
-            start = dict(mixture_start or {})
-            if list(opts.get("cn0_edges", [])) != start.pop("cn0_edges", None):
-                start.pop("los_weight_bands", None)      # learned on other bands
-            return EpochMixtureEstimator(**{**start, **opts})
-        if name == "sage-husa":
-            from ..filters.sage_husa import SageHusaEstimator
-            return SageHusaEstimator(**opts)
-        if name == "vb-akf":
-            from ..filters.vb import ChannelNoise, VbKalmanEstimator
-            return VbKalmanEstimator(ChannelNoise(**opts))
-    raise KeyError(name)   # unreachable: the schema admits only these
 
 
 def _reference_init(truth: Trajectory, inc, sigma_pos: float, sigma_heading: float) -> InitialState:
@@ -181,16 +134,10 @@ def process_vehicle(ds: VehicleDataset, source: str, data: str | None = None, se
     align["time_s"] = _time.perf_counter() - t_align
     out_t = (truth.time if truth is not None else epochs.time)
     out_t = out_t[(out_t > init.time) & (out_t <= inc.time[-1])]
-    results: dict[str, FilterResult] = {}
     t_filter = _time.perf_counter()
-    for k, method in enumerate(ds.methods):
-        est = make_estimator(method, source, k, seed, mixture_start=start)
-        motion = DeadReckoningMotion(lay, noise, clock)
-        res = Engine(motion, est, [model], covariance_interval=1.0, rng=seed,
-                     history=method.smooth).run(inc, init, output_times=out_t)
-        results[method.name] = res
-        if method.smooth:
-            results[f"{method.name}-smoothed"] = rts_smooth(res)
+    results = run_methods(list(enumerate(ds.methods)), lambda: DeadReckoningMotion(lay, noise, clock), [model], inc,
+                          init, out_t, source, seed, "the dead-reckoning model",
+                          mixture_start=start)
     filter_time = _time.perf_counter() - t_filter
     checks = {"pseudorange_rows_skipped": model.skipped_rows, "odometry_rows": len(odo),
               "pseudorange_epochs": len(epochs)}

@@ -232,7 +232,6 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
         raise ValueError(f"{n} satellites: at least 4 are needed for position and clock")
     scale = np.ones(n) if sigma_scale is None else np.asarray(sigma_scale, float)
     x = np.zeros(4) if x0 is None else np.asarray(x0, float).copy()
-    use_iono = options.ionosphere and iono_alpha is not None and iono_beta is not None
     rho_corr = rho + C_LIGHT * sats.clock_bias                      # satellite clock removed
     converged = False
     it = 0
@@ -248,11 +247,8 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
         if near_surface:
             el, az = elevation_azimuth(x[:3], sat_rx)
             sel = el >= options.elevation_mask
-            lla = ecef_to_lla(x[:3])
-            if options.troposphere:
-                model = model + np.where(sel, saastamoinen(lla[0], lla[2], np.maximum(el, 1e-3)), 0.0)
-            if use_iono:
-                model = model + klobuchar(lla[0], lla[1], el, az, tow, iono_alpha, iono_beta)
+            # the rows below the mask are left out of the solution: what is added to them is moot
+            model = model + atmosphere_delay(ecef_to_lla(x[:3]), el, az, tow, options, iono_alpha, iono_beta)
         if sel.sum() < 4:
             raise ValueError(f"{int(sel.sum())} satellites above the elevation mask "
                              f"({np.rad2deg(options.elevation_mask):.1f} deg): at least 4 are needed")
@@ -274,11 +270,7 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
     u = (sat_rx - x[:3]) / rng[:, None]
     el, az = elevation_azimuth(x[:3], sat_rx)
     model = rng + x[3]
-    lla = ecef_to_lla(x[:3])
-    if options.troposphere:
-        model = model + np.where(sel, saastamoinen(lla[0], lla[2], np.maximum(el, 1e-3)), 0.0)
-    if use_iono:
-        model = model + klobuchar(lla[0], lla[1], el, az, tow, iono_alpha, iono_beta)
+    model = model + atmosphere_delay(ecef_to_lla(x[:3]), el, az, tow, options, iono_alpha, iono_beta)
     sigma = scale * np.sqrt(options.sigma_a**2 + options.sigma_b**2 / np.sin(np.maximum(el, 1e-3)) ** 2)
     H = np.column_stack([-u, np.ones(n)])[sel]
     N = H.T @ (H / sigma[sel, None] ** 2)
@@ -434,3 +426,180 @@ def solve_epochs(ephemeris, week, tow_rx, epoch, prn, pseudorange, options: SppO
     out.status = out.status.astype(str)
     out.skipped_satellites = skipped
     return out
+
+
+def atmosphere_delay(lla, elevation, azimuth, tow: float, options: SppOptions = SppOptions(), iono_alpha=None,
+                     iono_beta=None) -> np.ndarray:
+    """Troposphere plus ionosphere delay [m] (n,) that SPP adds to its model, at the receiver
+    ``lla`` (rad, rad, m) for satellites at ``elevation``, ``azimuth`` (n,) [rad]: Saastamoinen
+    when ``options.troposphere``, Klobuchar when ``options.ionosphere`` and both coefficient
+    sets are given (as :func:`wls_position`)."""
+    el = np.asarray(elevation, float)
+    d = np.zeros(len(el))
+    if options.troposphere:
+        d = d + saastamoinen(lla[0], lla[2], np.maximum(el, 1e-3))
+    if options.ionosphere and iono_alpha is not None and iono_beta is not None:
+        d = d + klobuchar(lla[0], lla[1], el, azimuth, tow, iono_alpha, iono_beta)
+    return d
+
+
+def corrected_pseudoranges(ephemeris, week, tow_rx, epoch, prn, pseudorange, receiver_ecef,
+                           options: SppOptions = SppOptions(), cn0=None, source=None):
+    """The raw pseudoranges as a :class:`~mixnav.gnss.pseudoranges.PseudorangeEpochs` with the
+    broadcast corrections applied the way SPP applies them, for a filter that estimates
+    position and clock itself (:class:`mixnav.measurements.pseudorange.PseudorangeGnss`).
+
+    Per observation: the satellite at its transmit time (:func:`satellites_at_transmit`:
+    ECEF of that time, the model turns it), the satellite clock (relativistic term, T_GD)
+    added, and the troposphere and ionosphere (:func:`atmosphere_delay`) subtracted,
+    evaluated at ``receiver_ecef[j]``, a position near the receiver at epoch ``j`` (a
+    first fix: a 100 m error moves the delays by millimetres). Elevations are those
+    seen from it; the variance is SPP's ``sigma_a^2 + sigma_b^2 / sin^2 el``.
+
+    Parameters
+    ----------
+    ephemeris : BroadcastEphemeris
+    week, tow_rx : ndarray (k,)
+        Epoch reception times (GPS week, seconds of week [s]).
+    epoch, prn, pseudorange : ndarray (m,)
+        Epoch index, satellite and pseudorange [m] of each observation.
+    receiver_ecef : ndarray (k, 3)
+        [m]; epochs with a non-finite row are left out (counted: ``no position``).
+    options : SppOptions
+    cn0 : ndarray (m,) or None
+        [dB-Hz].
+
+    Returns
+    -------
+    epochs : PseudorangeEpochs
+        Times in seconds since the first epoch of ``week, tow_rx`` (as the SPP table's
+        ``time_s``), GPS (system code 1); an epoch without a usable satellite is absent.
+    skipped : dict
+        Observations left out per reason (ephemeris reasons, ``no position``).
+    """
+    from .pseudoranges import PseudorangeEpochs
+    week = np.asarray(week)
+    tow_rx = np.asarray(tow_rx, float)
+    epoch = np.asarray(epoch, int)
+    prn = np.asarray(prn, int)
+    rho = np.asarray(pseudorange, float)
+    cn = np.full(len(rho), np.nan) if cn0 is None else np.asarray(cn0, float)
+    t_abs = week * 604800.0 + tow_rx
+    t_rel = t_abs - t_abs[0]
+    order = np.argsort(epoch, kind="stable")
+    bounds = np.searchsorted(epoch[order], np.arange(len(tow_rx) + 1))
+    skipped: dict[str, int] = {}
+    out = {k: [] for k in ("t", "pr", "var", "sat", "id", "el", "cn0")}
+    for j in range(len(tow_rx)):
+        rows = order[bounds[j]:bounds[j + 1]]
+        if len(rows) == 0:
+            continue
+        x = np.asarray(receiver_ecef[j], float)
+        if not np.isfinite(x).all():
+            skipped["no position"] = skipped.get("no position", 0) + len(rows)
+            continue
+        sats, keep, skips = satellites_at_transmit(ephemeris, prn[rows], rho[rows], week[j], tow_rx[j])
+        for r, c in skips.counts().items():
+            skipped[r] = skipped.get(r, 0) + c
+        if len(sats) == 0:
+            continue
+        r_geo = np.linalg.norm(sats.pos_ecef - x, axis=1)
+        el, az = elevation_azimuth(x, earth_rotation_correction(sats.pos_ecef, r_geo / C_LIGHT))
+        lla = ecef_to_lla(x)
+        delay = atmosphere_delay(lla, el, az, tow_rx[j], options, ephemeris.iono_alpha, ephemeris.iono_beta)
+        s_el = np.sin(np.maximum(el, 1e-3))
+        n = len(sats)
+        out["t"].append(np.full(n, t_rel[j]))
+        out["pr"].append(rho[rows][keep] + C_LIGHT * sats.clock_bias - delay)
+        out["var"].append(options.sigma_a ** 2 + options.sigma_b ** 2 / s_el ** 2)
+        out["sat"].append(sats.pos_ecef)
+        out["id"].append(prn[rows][keep])
+        out["el"].append(el)
+        out["cn0"].append(cn[rows][keep])
+    if not out["t"]:
+        cat = {k: np.zeros((0, 3)) if k == "sat" else np.zeros(0) for k in out}
+    else:
+        cat = {k: np.vstack(v) if k == "sat" else np.concatenate(v) for k, v in out.items()}
+    ep = PseudorangeEpochs.from_rows(cat["t"], cat["pr"], cat["var"], cat["sat"], cat["id"],
+                                     np.ones(len(cat["pr"]), int), elevation=cat["el"], cn0=cat["cn0"],
+                                     source=source)
+    return ep, skipped
+
+
+#: a millisecond of light travel [m]: the size of the clock jumps of receivers that steer
+#: their clock within +-0.5 ms (RINEX observation files of many receivers)
+MS_JUMP = C_LIGHT * 1e-3
+
+
+def clock_jumps(time, clock_bias, ok, threshold: float = 1000.0):
+    """Receiver clock jumps in an SPP track, as offsets to take off the pseudoranges.
+
+    Each solved epoch's clock bias is predicted from the last accepted one and the rate
+    between the last two (a drifting clock is no jump); a departure above ``threshold``
+    [m] is a jump when it is within ``threshold / 2`` of a whole number of milliseconds of
+    light travel (receivers that steer their clock by millisecond steps: taken as exactly
+    that), or when the next solved epoch stays at the new level (a phone re-acquiring its
+    clock: taken as the departure, within the SPP's clock noise, which the filter's clock
+    noise absorbs; this looks one solved epoch ahead). A departure that does not persist
+    is a spike of the SPP (an outlier pulled its clock): ignored and counted.
+
+    Parameters
+    ----------
+    time : ndarray (k,)
+        Epoch times [s].
+    clock_bias : ndarray (k,)
+        SPP clock bias [m] (any value where not ``ok``).
+    ok : ndarray of bool (k,)
+        Solved epochs.
+    threshold : float
+        [m], > 0.
+
+    Returns
+    -------
+    offset : ndarray (k,)
+        Sum of the jumps up to each epoch [m] (a jump between solved epochs ``i`` and ``j``
+        counts from ``j`` on): subtracting it from the pseudoranges of the epoch (and
+        from the SPP clock) leaves a continuous clock.
+    jumps : list of (float, float)
+        ``(time [s], size [m])`` of each jump.
+    spikes : int
+        Departures ignored.
+    """
+    t = np.asarray(time, float)
+    b = np.asarray(clock_bias, float)
+    idx = np.nonzero(np.asarray(ok, bool))[0]
+    offset = np.zeros(len(t))
+    jumps = []
+    spikes = 0
+    rate, cum = 0.0, 0.0
+    if len(idx) == 0:
+        return offset, jumps, spikes
+    ref = idx[0]                          # the last accepted epoch
+    for pos in range(1, len(idx)):
+        prev, j = idx[pos - 1], idx[pos]
+        before = cum
+        level = b[ref] - offset[ref]      # its clock without the jumps
+        dev = (b[j] - cum) - (level + rate * (t[j] - t[ref]))
+        if abs(dev) <= threshold:
+            if t[j] > t[ref]:
+                rate = ((b[j] - cum) - level) / (t[j] - t[ref])
+            ref = j
+        else:
+            n_ms = round(dev / MS_JUMP)
+            size = None
+            if n_ms != 0 and abs(dev - n_ms * MS_JUMP) < threshold / 2:
+                size = n_ms * MS_JUMP
+            elif pos + 1 < len(idx):
+                n = idx[pos + 1]
+                if abs((b[n] - b[j]) - rate * (t[n] - t[j])) <= threshold:
+                    size = dev
+            if size is None:
+                spikes += 1
+            else:
+                cum += size
+                jumps.append((float(t[j]), float(size)))
+                ref = j
+        offset[prev + 1:j] = before
+        offset[j] = cum
+    offset[idx[-1] + 1:] = cum
+    return offset, jumps, spikes

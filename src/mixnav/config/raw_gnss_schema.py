@@ -1,0 +1,133 @@
+"""The strict schema of raw-GNSS datasets (``kind = "gnss-raw"``: a phone log or a RINEX
+observation file with its navigation file).
+
+Every epoch is solved by weighted least squares (single-point positioning, SPP); the
+``[[methods]]`` may add filters on the GNSS-only constant-velocity model
+(:class:`mixnav.motion.ConstantVelocityMotion`) with any estimator that runs on a motion
+model other than the strapdown INS (``ekf``, ``robust-adaptive``, ``gaussian-mixture``,
+``epoch-mixture``, ``sage-husa``, ``vb-akf``), started from the first SPP fix
+(:mod:`mixnav.experiment.spp_process`). Same rules as every config: every key known,
+units written out, errors naming the file and the key.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, field_validator, model_validator
+
+from .. import units as u
+from .dataset_schema import DatasetInfo, RawGnss, ReferencePoint
+from .schema import Strict, _quantity
+from .vehicle_schema import VEHICLE_ESTIMATORS, VehicleMethod
+
+#: estimators a raw-GNSS dataset runs: ``wls`` is the epoch-by-epoch SPP, the others the
+#: constant-velocity filter
+RAW_ESTIMATORS = ("wls",) + VEHICLE_ESTIMATORS
+
+#: sections of an IMU dataset that a raw-GNSS one must not have (a config error naming them)
+FOREIGN_SECTIONS = ("imu", "gnss", "alignment", "reference", "installation", "aiding", "odometry",
+                    "pseudoranges")
+
+AccelDensity = _quantity(u.VELOCITY_RANDOM_WALK, nonnegative=True)
+
+
+class RawMethod(VehicleMethod):
+    """A method of a raw-GNSS dataset: ``estimator = "wls"`` (the epoch-by-epoch SPP) or an
+    estimator of the constant-velocity filter. ``robust``, ``mixture``, ``options``,
+    ``smooth`` as for the odometry datasets (:class:`mixnav.config.vehicle_schema.VehicleMethod`);
+    ``smooth`` adds the RTS-smoothed ``<name>-smoothed`` (filters only)."""
+
+    estimator: str = "wls"
+
+    @field_validator("estimator")
+    @classmethod
+    def _known(cls, v):
+        if v not in RAW_ESTIMATORS:
+            raise ValueError(f"estimator '{v}' does not run on raw GNSS (these do: {', '.join(RAW_ESTIMATORS)}; "
+                             "'wls' is the epoch-by-epoch single-point solution, the others filter on the "
+                             "constant-velocity model; the unscented and particle filters need the strapdown "
+                             "INS's batch mechanization)")
+        return v
+
+    @model_validator(mode="after")
+    def _wls_plain(self):
+        if self.estimator == "wls":
+            for key in ("robust", "mixture"):
+                if getattr(self, key) is not None:
+                    raise ValueError(f"{key}: the 'wls' method (epoch-by-epoch SPP) takes no {key} table")
+            if self.options:
+                raise ValueError("options: the 'wls' method (epoch-by-epoch SPP) takes no options")
+            if self.smooth:
+                raise ValueError("smooth: the 'wls' method (epoch-by-epoch SPP) has nothing to smooth")
+        return self
+
+
+class ConstantVelocityConfig(Strict):
+    """The GNSS-only constant-velocity model of the filters (:mod:`mixnav.motion.constant_velocity`).
+
+    ``accel_sigma``, ``vertical_accel_sigma``: white-acceleration densities (horizontal,
+    vertical; e.g. ``"1 m/s^2/sqrt(Hz)"``: a pedestrian or a car, ``"0.01 m/s^2/sqrt(Hz)"``: a
+    receiver known to be static); ``clock_q_bias`` [m^2/s], ``clock_q_drift`` [m^2/s^3]
+    (plain numbers): the receiver clock's white-frequency and random-walk-frequency
+    densities. The default ``clock_q_bias`` lets the bias move tens of metres per second:
+    phones (duty-cycled chips) re-estimate their clock at every epoch, the android-static
+    log by about 30 m; a receiver with a continuous clock can use a small value.
+    ``step``: the prediction interval (the model is propagated in steps of at most this
+    long between epochs). ``velocity_sigma``, ``clock_drift_sigma``: 1-sigma of the
+    initial velocity (zero) and clock drift (zero); position and clock bias start at the
+    first SPP fix with its covariance, inflated by ``position_sigma_factor``.
+    ``clock_jump``: a jump of the SPP clock bias beyond its drift by more than this is
+    taken off the pseudoranges the filters see (millisecond jumps exactly:
+    :func:`mixnav.gnss.spp.clock_jumps`), counted in metrics.json."""
+
+    model: Literal["constant-velocity"] = "constant-velocity"
+    accel_sigma: AccelDensity = 1.0  # type: ignore[valid-type]
+    vertical_accel_sigma: AccelDensity = 0.3  # type: ignore[valid-type]
+    clock_q_bias: float = Field(default=1000.0, ge=0, le=1e8)
+    clock_q_drift: float = Field(default=1.0, ge=0, le=1e6)
+    step: _quantity(u.TIME, positive=True) = 1.0  # type: ignore[valid-type]
+    velocity_sigma: _quantity(u.VELOCITY, positive=True) = 5.0  # type: ignore[valid-type]
+    clock_drift_sigma: _quantity(u.VELOCITY, positive=True) = 100.0  # type: ignore[valid-type]
+    position_sigma_factor: float = Field(default=1.0, ge=1.0, le=100.0)
+    clock_jump: _quantity(u.LENGTH, positive=True) = 1000.0  # type: ignore[valid-type]
+
+    @field_validator("accel_sigma", "vertical_accel_sigma")
+    @classmethod
+    def _plausible(cls, v):
+        # 100 m/s^2/sqrt(Hz) is 10 g of white acceleration each second: a unit slip, not a user
+        if v > 100.0:
+            raise ValueError(f"{v:g} m/s^2/sqrt(Hz) is beyond any vehicle (at most 100): check the unit")
+        return v
+
+    @field_validator("step")
+    @classmethod
+    def _short(cls, v):
+        if v > 60.0:
+            raise ValueError(f"a prediction step of {v:g} s is too long (at most 60 s)")
+        return v
+
+
+class RawGnssDataset(Strict):
+    """``kind = "gnss-raw"``: ``[raw_gnss]``, an optional ``[reference_point]``, the
+    ``[motion]`` of the filters and the ``[[methods]]`` (default: one ``wls`` method named
+    ``spp``)."""
+
+    dataset: DatasetInfo
+    raw_gnss: RawGnss
+    reference_point: ReferencePoint | None = None
+    motion: ConstantVelocityConfig = ConstantVelocityConfig()
+    methods: list[RawMethod] | None = Field(default=None, min_length=1)
+
+    @field_validator("methods")
+    @classmethod
+    def _unique(cls, v):
+        names = [m.name for m in v]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ValueError(f"method names must be unique: {', '.join(dup)} repeated")
+        return v
+
+    def run_methods(self) -> list[RawMethod]:
+        """The methods to run: ``[[methods]]``, or the SPP alone (named ``spp``)."""
+        return list(self.methods) if self.methods else [RawMethod(name="spp", estimator="wls")]
