@@ -149,27 +149,34 @@ def dd2_measure(x: np.ndarray, S: np.ndarray, Yp: np.ndarray, y, R, h: float) ->
            "nis": np.full(K, np.inf), "loglik": np.full(K, -np.inf), "ok": np.zeros(K, dtype=bool)}
     finite = np.isfinite(Pyy).all(axis=(1, 2)) & np.isfinite(e).all(axis=1)
     for k in np.flatnonzero(finite):
-        try:
-            Ly = np.linalg.cholesky(Pyy[k])
-        except np.linalg.LinAlgError:
-            continue
-        Pxy = S[k] @ Sy1[k].T                                   # (n, m)
-        # K = Pxy Pyy^-1 through the Cholesky factor (no inverse)
-        G = np.linalg.solve(Ly, Pxy.T)                           # Ly^-1 Pxy^T
-        Kg = np.linalg.solve(Ly.T, G).T                          # (n, m)
-        v = np.linalg.solve(Ly, e[k])
-        A = S[k] - Kg @ Sy1[k]
-        B = Kg @ Sy2[k]
-        C = Kg @ Rm
-        Pk = A @ A.T + B @ B.T + C @ Kg.T
-        out["x"][k] = x[k] + Kg @ e[k]
-        out["P"][k] = 0.5 * (Pk + Pk.T)
-        out["nis"][k] = float(v @ v)
-        out["loglik"][k] = -0.5 * (float(v @ v) + 2.0 * float(np.log(np.diag(Ly)).sum()) + m * _LOG2PI)
-        out["ok"][k] = bool(np.isfinite(out["x"][k]).all() and np.isfinite(Pk).all())
-        if not out["ok"][k]:   # pragma: no cover (finite inputs give finite outputs)
-            out["x"][k], out["P"][k], out["loglik"][k] = x[k], _outer(S[k:k + 1])[0], -np.inf
+        with np.errstate(over="ignore", invalid="ignore"):   # an absurd y: inf, flagged below
+            _measure_one(k, x, S, Sy1, Sy2, Pyy, e, Rm, m, out)
     return out
+
+
+def _measure_one(k, x, S, Sy1, Sy2, Pyy, e, Rm, m, out) -> None:
+    """One component of :func:`dd2_measure` (written into ``out``)."""
+    try:
+        Ly = np.linalg.cholesky(Pyy[k])
+    except np.linalg.LinAlgError:
+        return
+    Pxy = S[k] @ Sy1[k].T                                   # (n, m)
+    # K = Pxy Pyy^-1 through the Cholesky factor (no inverse)
+    G = np.linalg.solve(Ly, Pxy.T)                           # Ly^-1 Pxy^T
+    Kg = np.linalg.solve(Ly.T, G).T                          # (n, m)
+    v = np.linalg.solve(Ly, e[k])
+    A = S[k] - Kg @ Sy1[k]
+    B = Kg @ Sy2[k]
+    C = Kg @ Rm
+    Pk = A @ A.T + B @ B.T + C @ Kg.T
+    out["x"][k] = x[k] + Kg @ e[k]
+    out["P"][k] = 0.5 * (Pk + Pk.T)
+    out["nis"][k] = float(v @ v)
+    out["loglik"][k] = -0.5 * (float(v @ v) + 2.0 * float(np.log(np.diag(Ly)).sum()) + m * _LOG2PI)
+    out["ok"][k] = bool(np.isfinite(out["x"][k]).all() and np.isfinite(Pk).all()
+                        and np.isfinite(out["nis"][k]))
+    if not out["ok"][k]:
+        out["x"][k], out["P"][k], out["loglik"][k] = x[k], _outer(S[k:k + 1])[0], -np.inf
 
 
 def _batched(x, P):
