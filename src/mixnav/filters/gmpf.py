@@ -74,7 +74,6 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-from scipy.special import logsumexp
 
 from ..engine.protocols import Correction, Epoch, Transition
 from ..engine.status import ABSURD, OK
@@ -122,12 +121,21 @@ def _is_int(v) -> bool:
         isinstance(v, float) and float(v).is_integer())
 
 
+def logsumexp_rows(a: np.ndarray) -> np.ndarray:
+    """``log sum_k exp(a[:, k])`` (N,) of finite-or-minus-infinity log terms (N, K) (scipy's
+    ``logsumexp`` costs about 1 ms per call at N = 2000 here; this is the same formula)."""
+    top = a.max(axis=1)
+    safe = np.where(np.isfinite(top), top, 0.0)
+    with np.errstate(divide="ignore"):
+        return safe + np.log(np.exp(a - safe[:, None]).sum(axis=1))
+
+
 def mixture_logpdf(X: np.ndarray, weights: np.ndarray, means: np.ndarray, chol: np.ndarray) -> np.ndarray:
     """``log sum_g w_g N(x_n; mu_g, L_g L_g^T)`` for the rows of ``X`` (N, n), (N,);
     ``chol`` (K, n, n) lower Cholesky factors; zero weights are skipped."""
     keep = weights > 0
     lp = gaussian_logpdf(X, means[keep], chol[keep]) + np.log(weights[keep])[None, :]
-    return logsumexp(lp, axis=1)
+    return logsumexp_rows(lp)
 
 
 def fit_weighted_mixture(X: np.ndarray, w: np.ndarray, components: int, iterations: int, rng, scale=None,
@@ -302,15 +310,19 @@ class GmpfEstimator:
         # importance density q: the DD2 posteriors weighted by alpha_g N(y; y_hat_g, Pyy_g)
         with np.errstate(divide="ignore"):
             la = np.where(ok, np.log(self.alpha) + res["loglik"], -np.inf)
-        beta = np.exp(la - logsumexp(la))
+        beta = np.exp(la - la.max())   # some component is ok: the maximum is finite
+        beta /= beta.sum()
         keep = beta > 0
         beta, qmu, qP = beta[keep] / beta[keep].sum(), res["x"][keep], res["P"][keep]
         qL, rep = psd_cholesky(qP)
         self.counts["sigma_repair"] += rep
         # particles: component counts, then Gaussian draws (the estimator's stream only)
         counts, Z = self._draws(beta)
-        lab = np.repeat(np.arange(len(beta)), counts)
-        D = qmu[lab] + np.einsum("nij,nj->ni", qL[lab], Z)
+        D = np.empty((self.N, n))
+        start = 0
+        for c, cnt in enumerate(counts):   # the draws of a component are contiguous
+            D[start:start + cnt] = qmu[c] + Z[start:start + cnt] @ qL[c].T
+            start += cnt
         Yd = np.asarray(predict(D), dtype=float)
         # weights (P3 3.4.2): likelihood x predicted mixture / importance mixture, in log space,
         # with both mixtures in the same standardised coordinates (the Jacobian cancels)
@@ -321,7 +333,7 @@ class GmpfEstimator:
         with np.errstate(all="ignore"):
             loglik = -0.5 * (((y[None, :] - Yd) ** 2) / r[None, :]).sum(axis=1)
             lq = gaussian_logpdf(Ds, (qmu - qm) / s, qL / s[None, :, None]) + np.log(beta)[None, :]
-            logq = logsumexp(lq, axis=1)
+            logq = logsumexp_rows(lq)
             logw = loglik + mixture_logpdf(Ds, self.alpha, (self.mu - qm) / s, L / s[None, :, None]) - logq
         finite = np.isfinite(logw)
         if not finite.any():
