@@ -95,6 +95,8 @@ def main():
                ("PF 2000", lambda: ParticleFilter(lay, sim.imu_model, particles=2000)),
                ("GMPF 2000 K=3", lambda: GaussianMixtureParticleFilter(lay, sim.imu_model, particles=2000,
                                                                        components=3)),
+               ("GMPF 2000 K=3 em=3", lambda: GaussianMixtureParticleFilter(lay, sim.imu_model, particles=2000,
+                                                                            components=3, em_iterations=3)),
                ("GMPF 2000 K=1", lambda: GaussianMixtureParticleFilter(lay, sim.imu_model, particles=2000,
                                                                        components=1)),
                ("GMPF 2000 K=3 iid", lambda: GaussianMixtureParticleFilter(lay, sim.imu_model, particles=2000,

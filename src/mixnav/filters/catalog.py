@@ -53,7 +53,7 @@ ESTIMATORS = {
     "gmpf": ("mixnav.filters.gmpf:GaussianMixtureParticleFilter",
              "M8 Gaussian-mixture particle filter (paper P3): DD2 per mixture component builds the "
              "importance density from the newest measurement, weighted EM refit instead of resampling "
-             "(options: particles, components, em_iterations, dd2_step, substeps)"),
+             "(options: particles, components, em_iterations, dd2_step, sampling, substeps)"),
 }
 
 #: measurement types (``type = "..."``) -> one-line description

@@ -30,8 +30,10 @@ correction back and calls :meth:`GmpfEstimator.recentre`.
 - **Weighted EM instead of resampling** (P3 section 3.3, step 3): a K-component
   mixture is fitted to the weighted particles by the noise toolkit's learner
   (:class:`mixnav.noise.learn.em.EMGaussianMixture`, ``sample_weight`` = the
-  importance weights, k-means++ start from the estimator's stream, at most
-  ``em_iterations`` iterations). The fit runs on the particles standardised by
+  importance weights, at most ``em_iterations`` iterations, started from each
+  particle's responsibilities under ``q``: the components keep their identity from
+  epoch to epoch; k-means++ from the estimator's stream while ``q`` has fewer
+  than K components, i.e. at the first epoch). The fit runs on the particles standardised by
   the importance density's per-state spread (error states span 1e-6 rad/s to
   metres; the learner's ``reg_covar`` is absolute). Its M-step keeps the
   weighted mean and covariance of the particles exactly, so the new mixture
