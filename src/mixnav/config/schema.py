@@ -759,10 +759,40 @@ class ParticleOptions(Strict):
     absurd_sigma: float = Field(default=1e4, gt=0)
 
 
+class Dd2Options(Strict):
+    """``[methods.options]`` of ``estimator = "dd2"`` (mixnav.filters.dd2, docs/particle.md): the
+    divided-difference step ``dd2_step`` (> 1; sqrt(3) the Gaussian optimum) and the merged
+    sub-intervals the points are mechanized over per step (``substeps``)."""
+
+    dd2_step: float = Field(default=3 ** 0.5, gt=1)
+    substeps: int = Field(default=4, ge=0)
+    absurd_sigma: float = Field(default=1e4, gt=0)
+
+
+class GmpfOptions(Dd2Options):
+    """``[methods.options]`` of ``estimator = "gmpf"`` (mixnav.filters.gmpf, docs/particle.md):
+    ``particles`` drawn per epoch (>= 2), mixture ``components`` (1 to ``particles``), the
+    most ``em_iterations`` of the weighted-EM refit (>= 1), the DD2 settings and how the
+    particles are drawn (``sampling``: "iid" or "matched")."""
+
+    particles: int = Field(default=1000, ge=2)
+    components: int = Field(default=3, ge=1)
+    em_iterations: int = Field(default=10, ge=1)
+    sampling: Literal["iid", "matched"] = "matched"
+
+    @field_validator("components")
+    @classmethod
+    def _at_most_particles(cls, v, info):
+        n = info.data.get("particles")
+        if n is not None and v > n:
+            raise ValueError(f"must not exceed particles ({n}), got {v}")
+        return v
+
+
 #: estimators whose ``[methods.options]`` table is validated against a schema at load time
 #: (the others' options are checked by the estimator when built)
 ESTIMATOR_OPTIONS = {"ukf": UnscentedOptions, "vb-aukf": VbUnscentedOptions, "vb-akf": VbOptions,
-                     "pf": ParticleOptions}
+                     "pf": ParticleOptions, "dd2": Dd2Options, "gmpf": GmpfOptions}
 
 
 class MethodConfig(Strict):

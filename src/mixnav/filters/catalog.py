@@ -46,6 +46,14 @@ ESTIMATORS = {
            "SIR particle filter (issue 19): particles as full states mechanized over each IMU block, "
            "Gaussian log-weights through predict_batch, systematic resampling (options: particles, "
            "resample_threshold, roughening, substeps)"),
+    "dd2": ("mixnav.filters.dd2:Dd2Filter",
+            "second-order divided-difference filter (Norgaard et al. 2000; issue 19): 2n+1 points "
+            "mechanized as full states, loose or tight GNSS through predict_batch (options: dd2_step, "
+            "substeps)"),
+    "gmpf": ("mixnav.filters.gmpf:GaussianMixtureParticleFilter",
+             "M8 Gaussian-mixture particle filter (paper P3): DD2 per mixture component builds the "
+             "importance density from the newest measurement, weighted EM refit instead of resampling "
+             "(options: particles, components, em_iterations, dd2_step, sampling, substeps)"),
 }
 
 #: measurement types (``type = "..."``) -> one-line description
