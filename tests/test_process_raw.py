@@ -177,10 +177,14 @@ def test_missing_ionosphere_coefficients_are_warned_and_reported(tmp_path):
     assert ionosphere_applied(process_raw(ds, src, folder)) == "klobuchar"
 
 
-def _write_rinex3(path, week, tow, epoch, prn, pseudorange):
-    """A minimal RINEX 3.03 GPS observation file (C1C only) of these pseudoranges, written
-    here (the test's own file, not a vendored one)."""
+def _write_rinex3(path, week, tow, epoch, prn, pseudorange, extra=None):
+    """A minimal RINEX 3.03 observation file (C1C only) of these GPS pseudoranges, written
+    here (the test's own file, not a vendored one). ``extra``: epoch index -> list of
+    (satellite name, C1C value) of other systems (``R07``, ``E11``), written after the GPS
+    records of that epoch (the header then lists their systems, type M)."""
     gps0 = np.datetime64("1980-01-06T00:00:00", "ns")
+    extra = extra or {}
+    systems = sorted({name[0] for recs in extra.values() for name, _ in recs} - {"G"})
 
     def stamp(k):
         t = gps0 + np.timedelta64(int(round((week[k] * 604800 + tow[k]) * 1e9)), "ns")
@@ -189,16 +193,19 @@ def _write_rinex3(path, week, tow, epoch, prn, pseudorange):
         hh, mm, ss = clock.split(":")
         return y, mo, d, hh, mm, float(ss)
     y, mo, d, hh, mm, ss = stamp(0)
-    head = [("     3.03           OBSERVATION DATA    G (GPS)", "RINEX VERSION / TYPE"),
+    kind = "M (MIXED)" if systems else "G (GPS)"
+    head = [(f"     3.03           OBSERVATION DATA    {kind}", "RINEX VERSION / TYPE"),
             ("mixnav test", "PGM / RUN BY / DATE"), ("TEST", "MARKER NAME"), ("G    1 C1C", "SYS / # / OBS TYPES"),
+            *[(f"{s}    1 C1C", "SYS / # / OBS TYPES") for s in systems],
             (f"  {y:>4s}    {int(mo):2d}    {int(d):2d}    {int(hh):2d}    {int(mm):2d}   {ss:10.7f}     GPS",
              "TIME OF FIRST OBS"), ("", "END OF HEADER")]
     lines = [f"{a:<60s}{b:<20s}" for a, b in head]
     for k in range(len(tow)):
         sel = epoch == k
         y, mo, d, hh, mm, ss = stamp(k)
-        lines.append(f"> {y} {mo} {d} {hh} {mm}{ss:11.7f}  0{int(sel.sum()):3d}")
-        lines += [f"G{int(p):02d}{r:14.3f}  " for p, r in zip(prn[sel], pseudorange[sel])]
+        recs = [(f"G{int(p):02d}", r) for p, r in zip(prn[sel], pseudorange[sel])] + list(extra.get(k, []))
+        lines.append(f"> {y} {mo} {d} {hh} {mm}{ss:11.7f}  0{len(recs):3d}")
+        lines += [f"{name}{r:14.3f}  " for name, r in recs]
     path.write_text("\n".join(lines) + "\n")
 
 
