@@ -168,6 +168,15 @@ def _rinex_from_android(tmp):
     _write_rinex3(tmp / "o.rnx", a.week[:40], a.tow[:40], a.epoch[sel], a.prn[sel], a.pseudorange[sel])
 
 
+def _rinex2_from_android(tmp):
+    """A RINEX 2.11 observation file of the first 40 epochs of the android-static log with
+    GLONASS, Galileo and SBAS records mixed in (tests/test_rinex_obs.py's writer)."""
+    from mixnav.io import android
+    from .test_rinex_obs import _phone_records, _time, _write_rinex2
+    a = android.read_gnsslogger(DATA_DIR / "android-static" / "pseudoranges_log_2016_06_30_21_26_07.txt")
+    _write_rinex2(tmp / "o.16o", [_time(a.week[k], a.tow[k]) for k in range(40)], _phone_records(a, 40))
+
+
 def _readers():
     from mixnav.config.loader import load_dataset, load_scenario
     from mixnav.io import android, comma2k19, drive0708, generic_csv, psins, rinex_obs, rtklib, smartloc
@@ -186,6 +195,7 @@ def _readers():
             _head(DATA_DIR / "android-static" / "pseudoranges_log_2016_06_30_21_26_07.txt", 1500)),
          "a.txt", lambda p: android.read_gnsslogger(p), 40),
         ("rinex-obs", _rinex_from_android, "o.rnx", lambda p: rinex_obs.read_rinex_obs(p), 30),
+        ("rinex2-obs", _rinex2_from_android, "o.16o", lambda p: rinex_obs.read_rinex_obs(p), 30),
         ("smartloc-pr", lambda t: (t / "in.txt").write_bytes(
             _head(DATA_DIR / "smartloc-berlin" / "Berlin_Potsdamer_Platz_Input.txt", 1500)),
          "in.txt", smartloc.read_pseudoranges, 25),
