@@ -293,3 +293,82 @@ def test_rinex_unknown_systems_few_satellites_and_damage_are_counted_or_named(tm
     with pytest.raises(DataError, match="epoch record") as e:
         read_rinex_obs(tmp_path / "bad.16o")
     assert e.value.line == j + 1 and e.value.file.endswith("bad.16o")
+
+
+def _line_of(lines, start, after=0):
+    return next(i for i, ln in enumerate(lines) if ln.startswith(start) and i >= after)
+
+
+def _glo_time(lines):
+    j = next(i for i, ln in enumerate(lines) if "TIME OF FIRST OBS" in ln)
+    lines[j] = lines[j][:48] + "GLO" + lines[j][51:]
+    return j
+
+
+def _more_types(lines):
+    j = next(i for i, ln in enumerate(lines) if "# / TYPES OF OBSERV" in ln)
+    lines[j] = "     7" + lines[j][6:]
+    return j
+
+
+def _short_sat_list(lines):
+    j = _line_of(lines, " 16", 8)
+    lines[j] = lines[j][:41]
+    return j
+
+
+def _repeated_time(lines):
+    epochs = [i for i, ln in enumerate(lines) if ln.startswith(" 16")]
+    lines[epochs[3]] = lines[epochs[2]][:26] + lines[epochs[3]][26:]
+    return epochs[3]
+
+
+def _no_end(lines):
+    j = next(i for i, ln in enumerate(lines) if "END OF HEADER" in ln)
+    del lines[j]
+    return None
+
+
+def _blank_record(lines):
+    j = _line_of(lines, ">") + 2
+    lines[j] = ""
+    return j
+
+
+def _nav_type(lines):
+    lines[0] = lines[0][:20] + "N" + lines[0][21:]
+    return 0
+
+
+@pytest.mark.parametrize("version, damage, message", [
+    (2, _glo_time, "GLO time"), (2, _more_types, "declares 7 observation types but lists 6"),
+    (2, _short_sat_list, "satellite list"), (2, _repeated_time, "do not increase"),
+    (2, _no_end, "no END OF HEADER"), (3, _blank_record, "satellite record"),
+    (3, _repeated_time, "do not increase"), (3, _nav_type, "not a RINEX 2 or 3 observation file"),
+])
+def test_damaged_rinex_names_file_and_line(tmp_path, phone, version, damage, message):
+    """A damaged header or epoch record is a DataError naming the file and the line (1-based)
+    of the damage: times in GLONASS time (GPS time needs no leap seconds), a type count that
+    disagrees with the types listed, a satellite list shorter than its count, a repeated
+    epoch time, no END OF HEADER, a blank satellite record (RINEX 3), a navigation file."""
+    from mixnav.io.rinex_obs import read_rinex_obs
+    a = phone[0]
+    path = tmp_path / f"d.{version}o"
+    if version == 2:
+        _write_rinex2(path, _times(a, 6), _phone_records(a, 6))
+    else:
+        sel = a.epoch < 6
+        _write_rinex3(path, a.week[:6], a.tow[:6], a.epoch[sel], a.prn[sel], a.pseudorange[sel])
+    lines = path.read_text().splitlines()
+    if damage is _repeated_time and version == 3:
+        epochs = [i for i, ln in enumerate(lines) if ln.startswith(">")]
+        lines[epochs[3]] = lines[epochs[2]][:29] + lines[epochs[3]][29:]
+        j = epochs[3]
+    else:
+        j = damage(lines)
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(DataError, match=message) as e:
+        read_rinex_obs(path)
+    assert e.value.file == str(path)
+    if j is not None:
+        assert e.value.line == j + 1, str(e.value)

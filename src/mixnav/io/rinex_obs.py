@@ -115,6 +115,15 @@ def _epoch_time(ln: str, version: float, path: Path, lineno: int) -> np.datetime
                         line=lineno) from None
 
 
+def _names(ln: str, n: int, path: Path, lineno: int) -> list:
+    """System letters of the ``n`` satellites a RINEX 2 epoch line (or its continuation) lists."""
+    names = [ln[32 + 3 * i:35 + 3 * i] for i in range(n)]
+    if any(len(s) < 3 or not s[1:].strip().isdigit() for s in names):
+        raise DataError(f"the epoch record's satellite list does not hold {n} satellite names (letter and "
+                        "2 digits)", file=str(path), line=lineno)
+    return [s[0] for s in names]
+
+
 def _count(text: str, path: Path, lineno: int) -> int:
     n = _int(text, "number of satellites", path, lineno)
     if n < 0:
@@ -159,6 +168,10 @@ def _listing(path: Path) -> _Listing:
         k += 1
         if label == "END OF HEADER":
             break
+        if label == "TIME OF FIRST OBS" and body[48:51].strip() not in ("", "GPS", "GAL"):
+            # GAL is GPS time; GLO / UTC would need the leap seconds, BDT is 14 s off
+            raise DataError(f"epoch times in {body[48:51].strip()} time: only GPS (or GAL) time is read",
+                            file=str(path), line=k)
         if version < 3 and label == "# / TYPES OF OBSERV":
             if body[:6].strip():       # a continuation line leaves the count blank
                 sys = " "
@@ -187,7 +200,12 @@ def _listing(path: Path) -> _Listing:
         raise DataError(f"no L1 C/A pseudorange: the header's {label} lists {' '.join(types[key]) or 'nothing'} "
                         f"for {'every system' if version < 3 else 'GPS'} ({code} is needed)",
                         file=str(path), line=type_line.get(key))
-    per_sat = ceil(n_types[key] / 5)     # RINEX 2: lines per satellite record (5 values a line)
+    for sy, listed in types.items():
+        if n_types.get(sy) != len(listed):
+            raise DataError(f"the header's {label} line declares {n_types.get(sy, 'no number of')} observation "
+                            f"types{'' if version < 3 else ' for ' + sy} but lists {len(listed)}", file=str(path),
+                            line=type_line.get(sy))
+    per_sat = ceil(len(types[key]) / 5)  # RINEX 2: lines per satellite record (5 values a line)
     records: Counter = Counter()
     times, at = [], []
     while k < len(lines):
@@ -202,6 +220,10 @@ def _listing(path: Path) -> _Listing:
             flag = _int(ln[31:32] or "0", "epoch flag", path, k)
             n = _count(ln[32:35], path, k)
             sats = [s[:1] for s in lines[k:k + n]] if flag in (0, 1) else []
+            if " " in sats or "" in sats:
+                j = k + 1 + [s[:1].strip() for s in lines[k:k + n]].index("")
+                raise DataError("a satellite record (system letter and number) was expected", file=str(path),
+                                line=j)
             k += n
         else:
             if len(ln) < 32 or not ln[26:29].strip().isdigit():
@@ -210,12 +232,11 @@ def _listing(path: Path) -> _Listing:
             flag = _int(ln[28:29], "epoch flag", path, k)
             n = _count(ln[29:32], path, k)
             if flag in (0, 1, 6):        # satellite list (12 a line), then per_sat lines each
-                sats = [ln[32 + 3 * i:33 + 3 * i] for i in range(min(n, 12))]
+                sats = _names(ln, min(n, 12), path, k)
                 for _ in range(ceil(n / 12) - 1):
-                    if k < len(lines):
-                        cont = lines[k]
-                        sats += [cont[32 + 3 * i:33 + 3 * i] for i in range(min(n - len(sats), 12))]
+                    cont = lines[k] if k < len(lines) else ""
                     k += 1
+                    sats += _names(cont, min(n - len(sats), 12), path, k)
                 k += n * per_sat
                 if flag == 6:            # cycle-slip records: not observations
                     sats = []
@@ -228,7 +249,7 @@ def _listing(path: Path) -> _Listing:
             at.append(start)
             times.append(_epoch_time(lines[start - 1], version, path, start))
             # a blank system letter is GPS (RINEX 2)
-            records.update("G" if s in ("", " ") else s for s in sats)
+            records.update("G" if s == " " else s for s in sats)
     t = np.array(times, dtype="datetime64[ns]")
     if len(t) > 1 and np.any(np.diff(t) <= np.timedelta64(0, "ns")):
         j = int(np.nonzero(np.diff(t) <= np.timedelta64(0, "ns"))[0][0]) + 1
