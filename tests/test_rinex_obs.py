@@ -172,7 +172,7 @@ def _process(ds, src, folder):
 
 
 def _rinex_config(tmp_path, phone, name, file):
-    ds, src, folder = phone[1], phone[2], phone[3]
+    ds, folder = phone[1], phone[3]
     shutil.copy(folder / ds.raw_gnss.navigation, tmp_path)
     text = SHIPPED.replace('format = "android-gnsslogger"', 'format = "rinex-obs"').replace(
         f'file = "{LOG}"', f'file = "{file}"')
@@ -278,9 +278,9 @@ def test_rinex_unknown_systems_few_satellites_and_damage_are_counted_or_named(tm
     assert r.epochs_all_rejected == 1 and len(r) == n - 1
     assert len(r.pseudorange) == n_gps - n_gps_20 - 1 - sum(int((a.epoch == k).sum()) - 3 for k in (10, 11, 12))
     ds, src = _rinex_config(tmp_path, phone, "odd.toml", "odd.16o")
-    _, t = _process(ds, src, tmp_path)
-    from mixnav.experiment.spp_process import process_raw
-    m = write_raw(tmp_path / "out", process_raw(ds, src, tmp_path))
+    po, t = _process(ds, src, tmp_path)
+    m = write_raw(tmp_path / "out", po)
+    assert len(t) == n - 1 and (t.status == "too few satellites").sum() == 3
     assert m["epoch_status"]["too few satellites"] == 3
     assert m["epoch_status"]["all measurements rejected"] == 1
     assert m["epochs_total"] == n and m["epochs_used"] + m["epochs_skipped"] == n

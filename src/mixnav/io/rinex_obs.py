@@ -5,8 +5,9 @@ can then be processed by single-point positioning like a phone log
 (:mod:`mixnav.experiment.spp_process`, ``raw_gnss.format = "rinex-obs"``).
 
 The L1 C/A pseudorange is taken: ``C1C`` (RINEX 3) or ``C1`` (RINEX 2). Epoch times are
-those the file gives (GPS time for GPS observations) and become GPS week and seconds
-of week.
+those the epoch records give, to the ns (georinex truncates them to microseconds, and
+RINEX 2 to milliseconds when its file-size guess fails: 4 m of satellite motion), in GPS
+time (a header declaring another time system is refused), as GPS week and seconds of week.
 
 georinex reads the values. Before it, the file's header and epoch records are
 walked here (:func:`_listing`), for two reasons: georinex passes over what it does not
@@ -17,8 +18,9 @@ system letter; the ones that are not GPS are reported in ``rejected`` as
 ``"not GPS: <letter>"``, GPS records without a usable pseudorange as
 ``"no C1 pseudorange"`` (``"no C1C pseudorange"``), and epochs without any GPS
 pseudorange in ``epochs_all_rejected`` (the SPP's epoch status ``all measurements
-rejected``). A record that is not an epoch where one must be is a :class:`DataError`
-naming the file and line.
+rejected``). A damaged header or epoch record is a :class:`DataError` naming the file
+and line. Only GPS is used: GLONASS and the others need their own broadcast ephemerides
+and clocks (not built).
 """
 
 from __future__ import annotations
@@ -280,10 +282,11 @@ def read_rinex_obs(path) -> RinexPseudoranges:
     Raises
     ------
     DataError
-        A file that is not a RINEX observation file or georinex cannot read, one without
-        ``C1C``/``C1`` for GPS in its header (naming the header line) or without any GPS
-        pseudorange value, a damaged epoch record (naming the line), a satellite name that
-        is not a GPS PRN, or epoch times that do not increase (naming the file).
+        A file that is not a RINEX 2/3 observation file or georinex cannot read, one without
+        ``C1C``/``C1`` for GPS in its header (naming the header line), with epoch times not in
+        GPS time, or without any GPS pseudorange value, a damaged epoch record or times that
+        do not increase (naming the line), a satellite name that is not a GPS PRN (naming
+        the file).
     """
     import warnings
 
@@ -301,7 +304,7 @@ def read_rinex_obs(path) -> RinexPseudoranges:
     try:
         with warnings.catch_warnings():   # georinex's per-epoch xarray concat warns of a future default
             warnings.simplefilter("ignore", FutureWarning)
-            ds = gr.load(path, use={"G"}, fast=False)   # fast: a size-based guess that can fail
+            ds = gr.load(path, use={"G"}, fast=False)   # fast: a size guess that can fail
     except Exception as exc:  # noqa: BLE001 - georinex raises many kinds for a damaged file
         raise DataError(f"not a readable RINEX observation file ({type(exc).__name__}: {exc})",
                         file=str(path)) from None
