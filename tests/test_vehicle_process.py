@@ -84,7 +84,11 @@ def test_shipped_smartloc_runs_every_method_with_a_map(shipped):
     # causes of a run without an INS
     assert any("'mixture'" in w for w in metrics["warnings"])
     assert not any("IMU" in w or "lever arm" in w for w in metrics["warnings"]), metrics["warnings"]
+    from mixnav.experiment.metrics import METRIC_KEYS_DOC
     for name, m in metrics["methods"].items():
+        prefixes = tuple(k.split("<")[0] for k in METRIC_KEYS_DOC if "<" in k)    # templated keys
+        undocumented = {k for k in set(m) - {"outages"} - set(METRIC_KEYS_DOC) if not k.startswith(prefixes)}
+        assert not undocumented, (name, undocumented)
         assert np.isfinite(m["horizontal_rmse_m"]) and m["n_epochs"] > 1000
         if "wall_time_s" in m:
             assert m["wall_time_s"] < 10.0          # issue 21: about 2 s per method on this machine class

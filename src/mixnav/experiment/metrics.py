@@ -66,6 +66,11 @@ METRIC_KEYS_DOC: dict[str, str] = {
     "smoother_time_s": "smoothed methods (<name>-smoothed): time of the RTS smoother's backward pass and "
                        "injection [s]; they have none of the forward pass's timing keys",
     "measurement_epochs": "number of GNSS epochs processed",
+    "los_weight_final": "epoch mixture: the band-free line-of-sight weight at the end of the run",
+    "delay_mean_m_final": "epoch mixture: the learned mean of the non-line-of-sight delay at the end [m]",
+    "delay_sd_m_final": "epoch mixture: the learned spread of the non-line-of-sight delay at the end [m]",
+    "innovation_log_likelihood": "epoch mixture: sum over the rows of the log predictive density of each "
+                                 "innovation under the mixture (compares settings without a reference)",
     "recoveries": "counts of numerical recoveries (see mixnav.engine.engine); the robust adaptive EKF "
                   "adds its row and epoch counts (see mixnav.filters.robust); learned-mixture methods add "
                   "learner_not_converged (offline fits that stopped before converging); mixture banks add "
