@@ -232,14 +232,18 @@ def noise_sigma_figure(solutions: dict[str, pd.DataFrame], truth=None,
         for m, (name, cs) in enumerate(cols.items()):
             df = solutions[name]
             t = df["time_s"].to_numpy(dtype=float)
+            first = True
             for c in cs:
                 label = c.removeprefix("vb_sigma_")
                 if not label.startswith(kind + "_"):
                     continue
                 axis = label.rsplit("_", 1)[1]
                 k = "ned".find(axis) if axis in ("n", "e", "d") else cs.index(c)
+                # many channels (a pseudorange per satellite): one legend entry per method
+                text = f"{name} {axis}" if len(cs) <= 12 else (f"{name} (one line per channel)" if first else None)
+                first = False
                 ax.plot(t, df[c].to_numpy(dtype=float), color=f"C{k % 10}",
-                        ls=styles[m % len(styles)], lw=1.0, label=f"{name} {axis}" if len(cs) <= 12 else None)
+                        ls=styles[m % len(styles)], lw=1.0, label=text)
         if truth is not None:
             tt, sd = truth
             for axis in "ned":
