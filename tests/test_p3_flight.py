@@ -214,7 +214,7 @@ def test_make_p3_variants_and_gmpf_block():
 
 @pytest.mark.slow
 def test_make_p3_two_runs(tmp_path):
-    """The reproduction script end to end, two runs per variant (about 2 minutes on two
+    """The reproduction script end to end, two runs per variant (about 1 minute on two
     busy cores): it writes the tables and figure; started from the first fix the PF keeps
     the state (horizontal RMS within 1.5 x the EKF's; measured 1.1 x); with P3's 370 m
     initial position spread it loses it in both runs (measured: km after 1000 s), and
