@@ -45,7 +45,7 @@ ESTIMATORS = {
     "pf": ("mixnav.filters.particle:ParticleFilter",
            "SIR particle filter (issue 19): particles as full states mechanized over each IMU block, "
            "Gaussian log-weights through predict_batch, systematic resampling (options: particles, "
-           "resample_threshold, roughening, substeps)"),
+           "resample_threshold, roughening, substeps, parallel)"),
 }
 
 #: measurement types (``type = "..."``) -> one-line description

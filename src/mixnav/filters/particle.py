@@ -35,13 +35,14 @@ mean is doubled; ``counts["pf_degenerate"]`` counts it. Never a NaN.
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from ..engine.protocols import Correction, Epoch, Transition
 from ..engine.status import ABSURD, OK
 from ..errors import ArgumentError
-from ._pf_kernels import add_log_likelihood, pf_propagate
-from ._ukf_kernels import member_navs, weighted_moments
+from ._pf_kernels import CHUNKS, PARALLEL, SCRATCH, SERIAL, pf_log_weights
 from .ekf import ErrorStateEkf
 from .ukf import predict_members
 
@@ -106,14 +107,22 @@ class ParticleEstimator:
     absurd_sigma : float
         An epoch whose best particle's innovation exceeds this many sigmas per row is
         degenerate (counted, rejected).
+    parallel : bool
+        Run the per-particle kernels on numba's threads (``prange``; docs/particle.md,
+        "Speed"). The particles are bitwise the same either way and on any thread
+        count. Off by default: on a busy 2-core machine a parallel region waits for a
+        descheduled thread; only used from the main thread (numba's threading layers
+        do not all allow concurrent use).
     """
 
     needs_step_inputs = True
     carry_mean = True
 
     def __init__(self, particles: int = 1000, resample_threshold: float = 0.5, roughening: float = 0.9,
-                 substeps: int = 4, absurd_sigma: float = 1e4):
+                 substeps: int = 4, absurd_sigma: float = 1e4, parallel: bool = False):
         check_particle_settings(particles, resample_threshold, roughening, substeps, absurd_sigma)
+        self.parallel = bool(parallel)
+        self._k = SERIAL
         self.N = int(particles)
         self.resample_threshold = float(resample_threshold)
         self.roughening = float(roughening)
@@ -133,14 +142,23 @@ class ParticleEstimator:
         self._clk = lay.clk
         self.tau = np.asarray(motion.tau, dtype=float)
         self.rng = rng
+        self._k = PARALLEL if self.parallel and threading.current_thread() is threading.main_thread() else SERIAL
         N = self.N
         self.D = np.ascontiguousarray(self.rng.standard_normal((N, n)) @ _sqrt_psd(np.asarray(P0, float)).T)
         self.logw = np.zeros(N)
         self.w = np.full(N, 1.0 / N)
+        # every per-step array is allocated here once (O(N n)); steps swap buffers
         self._Dn = np.empty((N, n))
+        self._Z = np.empty((N, n))
+        self._logw_new = np.empty(N)
+        self._w_new = np.empty(N)
         self._navs = np.empty((N + 1, 10))
         self._prevs = np.empty((N + 1, 6))
         self._sensors = np.empty((N + 1, 12))
+        self._scr = np.empty((N + 1, SCRATCH))
+        self._g = np.empty((8, 7))        # merged sub-intervals: gth (0:3), gdv (3:6), gdt (6); grown on demand
+        self._fdec = np.empty(4)
+        self._part = np.empty((CHUNKS, n + n * n))
         self._scratch = np.zeros((n, n))
         self._x = np.empty(n)
         self._P = np.empty((n, n))
@@ -165,14 +183,19 @@ class ParticleEstimator:
         """``D <- f(D) + w``, ``w ~ N(0, Qd)`` from the estimator's stream: ``f`` the
         mechanization (``inp`` the step inputs) or, with ``F`` given, the linear map
         ``D F^T`` (tests on linear-Gaussian models)."""
-        Z = self.rng.standard_normal(self.D.shape)
-        SQ = _sqrt_psd(np.asarray(Qd, dtype=float))
+        Z = self.rng.standard_normal(out=self._Z)
+        SQT = np.ascontiguousarray(_sqrt_psd(np.asarray(Qd, dtype=float)).T)
         if F is not None:
-            self._Dn[:] = self.D @ np.asarray(F).T + Z @ SQ.T
+            self._k.linear_step(self.D, np.ascontiguousarray(np.asarray(F, dtype=float).T), SQT, Z, self._Dn)
         else:
-            pf_propagate(inp.nav0, inp.prev0, inp.sensor, self.D, SQ, Z, inp.dtheta, inp.dvel, inp.dt,
-                         self.substeps, self.layout_array, self.tau, T, self._navs, self._prevs,
-                         self._sensors, self._Dn)
+            K = len(inp.dt)
+            S = K if self.substeps <= 0 or self.substeps >= K else self.substeps
+            if S > len(self._g):
+                self._g = np.empty((2 * S, 7))
+            g = self._g
+            self._k.step(inp.nav0, inp.prev0, inp.sensor, self.D, SQT, Z, inp.dtheta, inp.dvel, inp.dt, self.substeps,
+                         self.layout_array, self.tau, T, self._navs, self._prevs, self._sensors, self._scr,
+                         g[:, 0:3], g[:, 3:6], g[:, 6], self._fdec, self._Dn)
         self.D, self._Dn = self._Dn, self.D
         self._stale = True
 
@@ -183,7 +206,7 @@ class ParticleEstimator:
 
     def update(self, epoch: Epoch) -> Correction | None:
         navs = self._navs[:self.N]
-        member_navs(epoch.nav, self.D, self.layout_array, navs)
+        self._k.member_navs(epoch.nav, self.D, self.layout_array, navs, self._sensors, self._scr)
         out = predict_members(epoch, self.D, navs, self._clk, "the particle filter needs")
         if out is None:
             return None
@@ -196,23 +219,22 @@ class ParticleEstimator:
         m = len(y)
         # NIS with the prior weights: innovation of the weighted mean prediction, S = Cov_w(Y) + R
         ym, Pyy = np.empty(m), np.empty((m, m))
-        weighted_moments(Y, self.w, self.w, ym, Pyy)
+        self._k.moments(Y, self.w, ym, Pyy, self._partial(m))
         with np.errstate(all="ignore"):   # an absurd epoch gives inf here; it is rejected below
             e = y - ym
             try:
                 nis = float(e @ np.linalg.solve(Pyy + np.diag(r), e))
             except np.linalg.LinAlgError:
                 nis = np.inf
-        logw = self.logw.copy()
-        best = add_log_likelihood(logw, y, Y, r)
-        with np.errstate(all="ignore"):
-            w, ess = normalise_log_weights(logw)
-        if w is None or not best <= m * self.absurd_sigma ** 2:
+        logw, w = self._logw_new, self._w_new
+        best, ess = pf_log_weights(self.logw, y, Y, r, logw, w)
+        if ess == 0.0 or not best <= m * self.absurd_sigma ** 2:
             self._degenerate()
             return Correction(np.zeros(self.n), np.inf, ABSURD, m)
+        self._logw_new, self._w_new = self.logw, self.w
         self.logw, self.w = logw, w
         self.ess_history.append(ess)
-        weighted_moments(self.D, w, w, self._x, self._P)
+        self._k.moments(self.D, w, self._x, self._P, self._part)
         dx = self._x.copy()
         self._stale = False
         if ess < self.resample_threshold * self.N:
@@ -225,19 +247,18 @@ class ParticleEstimator:
         the weighted covariance before the resampling, ``x`` the weighted mean: the
         particles are re-diversified in every direction while the mean and covariance
         are kept in expectation."""
-        if self.roughening > 0.0:
-            x, P = self._x.copy(), self._P.copy()
         idx = systematic_resample(self.w, float(self.rng.random()))
-        self.D = np.ascontiguousarray(self.D[idx])
-        self.logw = np.zeros(self.N)
-        self.w = np.full(self.N, 1.0 / self.N)
+        h = self.roughening
+        if h > 0.0:
+            LT = np.ascontiguousarray(_sqrt_psd(self._P).T)
+            Z = self.rng.standard_normal(out=self._Z)
+        else:
+            LT = Z = self._scratch
+        self._k.jitter(self.D, idx, float(np.sqrt(1.0 - h * h)), h, self._x, LT, Z, self._Dn)
+        self.D, self._Dn = self._Dn, self.D
+        self.logw[:] = 0.0
+        self.w[:] = 1.0 / self.N
         self.counts["pf_resampled"] += 1
-        if self.roughening > 0.0:
-            h = self.roughening
-            a = np.sqrt(1.0 - h * h)
-            L = _sqrt_psd(P)
-            self.D = np.ascontiguousarray(a * self.D + (1.0 - a) * x
-                                          + h * (self.rng.standard_normal(self.D.shape) @ L.T))
         self._stale = True
 
     def _degenerate(self) -> None:
@@ -264,8 +285,14 @@ class ParticleEstimator:
 
     def _moments(self) -> None:
         if self._stale:
-            weighted_moments(self.D, self.w, self.w, self._x, self._P)
+            self._k.moments(self.D, self.w, self._x, self._P, self._part)
             self._stale = False
+
+    def _partial(self, m: int) -> np.ndarray:
+        """The moments' partial-sum scratch for ``m`` columns (grown on demand)."""
+        if self._part.shape[1] < m + m * m:
+            self._part = np.empty((CHUNKS, m + m * m))
+        return self._part
 
     def replace_clone(self, J) -> None:  # pragma: no cover (init refuses clones)
         raise ArgumentError("the particle filter does not carry a stochastic clone", argument="estimator")
@@ -280,24 +307,32 @@ class ParticleEstimator:
         return {}
 
     def warm_up(self) -> None:
-        """Compile (or load from numba's cache) the kernels once per process."""
-        if "pf" in _WARM:
+        """Compile (or load from numba's cache) the kernels once per process (the serial
+        or the parallel set, as ``parallel`` asks)."""
+        key = "pf-parallel" if self.parallel else "pf"
+        if key in _WARM:
             return
+        k = PARALLEL if self.parallel else SERIAL
         from ..ins.error_model import LAYOUTS
         lay = LAYOUTS[15]
         n, N = lay.n, 3
         nav = np.array([1.0, 0, 0, 0, 0, 0, 0, 0.5, 0.5, 0.0])
         D = np.zeros((N, n))
         one = np.zeros((2, 3))
-        pf_propagate(nav, np.zeros(6), np.zeros(12), D, np.eye(n), D.copy(), one, one, np.full(2, 0.01), 1,
-                     lay.as_array(), np.full(4, np.inf), 0.02, np.empty((N + 1, 10)), np.empty((N + 1, 6)),
-                     np.empty((N + 1, 12)), np.empty((N, n)))
-        member_navs(nav, D, lay.as_array(), np.empty((N, 10)))
-        add_log_likelihood(np.zeros(N), np.zeros(3), np.zeros((N, 3)), np.ones(3))
+        g = np.empty((2, 7))
+        scr = np.empty((N + 1, SCRATCH))
+        navs, sensors = np.empty((N + 1, 10)), np.empty((N + 1, 12))
+        k.step(nav, np.zeros(6), np.zeros(12), D, np.eye(n), D.copy(), one, one, np.full(2, 0.01), 1,
+               lay.as_array(), np.full(4, np.inf), 0.02, navs, np.empty((N + 1, 6)), sensors, scr,
+               g[:, 0:3], g[:, 3:6], g[:, 6], np.empty(4), np.empty((N, n)))
+        k.member_navs(nav, D, lay.as_array(), navs, sensors, scr)
         w = np.full(N, 1.0 / N)
-        weighted_moments(D, w, w, np.empty(n), np.empty((n, n)))
-        weighted_moments(np.zeros((N, 3)), w, w, np.empty(3), np.empty((3, 3)))
-        _WARM.add("pf")
+        pf_log_weights(np.zeros(N), np.zeros(3), np.zeros((N, 3)), np.ones(3), np.empty(N), np.empty(N))
+        k.moments(D, w, np.empty(n), np.empty((n, n)), np.empty((CHUNKS, n + n * n)))
+        k.moments(np.zeros((N, 3)), w, np.empty(3), np.empty((3, 3)), np.empty((CHUNKS, n + n * n)))
+        k.jitter(D, np.zeros(N, dtype=np.int64), 0.5, 0.5, np.zeros(n), np.eye(n), D, np.empty((N, n)))
+        k.linear_step(D, np.eye(n), np.eye(n), D, np.empty((N, n)))
+        _WARM.add(key)
 
 
 def _sqrt_psd(Q: np.ndarray) -> np.ndarray:
@@ -315,7 +350,7 @@ class ParticleFilter(ErrorStateEkf):
     ----------
     layout, imu_model, covariance_interval, absurd_sigma, clock
         As :class:`~mixnav.filters.ekf.ErrorStateEkf`.
-    particles, resample_threshold, roughening, substeps
+    particles, resample_threshold, roughening, substeps, parallel
         As :class:`ParticleEstimator` (checked now, naming the key).
     """
 
@@ -323,11 +358,11 @@ class ParticleFilter(ErrorStateEkf):
 
     def __init__(self, layout, imu_model, particles: int = 1000, resample_threshold: float = 0.5,
                  roughening: float = 0.9, substeps: int = 4, covariance_interval: float = 1.0,
-                 absurd_sigma: float = 1e4, clock=None):
+                 absurd_sigma: float = 1e4, clock=None, parallel: bool = False):
         super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
         check_particle_settings(particles, resample_threshold, roughening, substeps, absurd_sigma)
         self.pf = dict(particles=int(particles), resample_threshold=float(resample_threshold),
-                       roughening=float(roughening), substeps=int(substeps))
+                       roughening=float(roughening), substeps=int(substeps), parallel=bool(parallel))
 
     def make_estimator(self):
         return ParticleEstimator(absurd_sigma=self.absurd_sigma, **self.pf)
