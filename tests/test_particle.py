@@ -5,11 +5,15 @@
   the Kalman filter's at close to 1/sqrt(N);
 - a measurement no particle can explain is a counted degeneracy, never a NaN;
 - on loose-demo the PF's position error and NEES against the EKF's (measured bands);
-- the same seed gives the same run; bad settings name their key.
+- the same seed gives the same run, on one or two numba threads, serial or parallel
+  kernels (bitwise); bad settings name their key;
+- the fused propagation kernel against the first, unfused one; the compiled weights and
+  moments against numpy.
 """
 
 from types import SimpleNamespace
 
+import numba
 import numpy as np
 import pytest
 
@@ -18,7 +22,9 @@ from mixnav.engine.status import ABSURD, OK
 from mixnav.errors import ArgumentError, ConfigError
 from mixnav.experiment.run import solution_table
 from mixnav.filters.ekf import ErrorStateEkf
-from mixnav.filters.particle import ParticleEstimator, ParticleFilter, systematic_resample
+from mixnav.filters import _pf_kernels as K
+from mixnav.filters.particle import (ParticleEstimator, ParticleFilter, _sqrt_psd, normalise_log_weights,
+                                     systematic_resample)
 from mixnav.ins.error_model import get_layout
 from mixnav.measurements.loose import LooseGnss
 from mixnav.sim.scenario import simulate
@@ -170,6 +176,100 @@ def test_the_same_seed_gives_the_same_run(demo):
     np.testing.assert_array_equal(a.nav, b.nav)
     np.testing.assert_array_equal(a.sigma, b.sigma)
     assert not np.array_equal(a.nav, c.nav)
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="needs two numba threads")
+def test_one_or_two_threads_give_the_same_particles(demo):
+    """parallel=True on 1 and on 2 numba threads, and the serial kernels: bitwise the same
+    run (the random numbers are drawn outside the kernels, each particle's arithmetic
+    reads only its own row, the sums over particles are in fixed chunks added in order).
+    The first 120 s of loose-demo, 400 particles (resamplings and jitter included)."""
+    sim, lever = demo
+    lay = get_layout(15)
+    old = numba.get_num_threads()
+    runs = []
+    try:
+        for parallel, threads in ((True, 1), (True, 2), (False, 2)):
+            numba.set_num_threads(threads)
+            f = ParticleFilter(lay, sim.imu_model, particles=400, parallel=parallel)
+            eng = f.engine([LooseGnss(sim.fixes, lever, lay)], rng=5)
+            eng.start(sim.imu, sim.init)
+            for _ in range(120):
+                eng.step()
+            runs.append((eng.nav.copy(), f.estimator.D.copy(), f.estimator.w.copy(),
+                         f.estimator.counts["pf_resampled"]))
+    finally:
+        numba.set_num_threads(old)
+    assert runs[0][3] > 0
+    for other in runs[1:]:
+        np.testing.assert_array_equal(runs[0][0], other[0])
+        np.testing.assert_array_equal(runs[0][1], other[1])
+        np.testing.assert_array_equal(runs[0][2], other[2])
+
+
+def _ins_particles(N, seed=1):
+    """Particles about a moving nominal over a 1 s, 100-increment block (17 states: clock)."""
+    lay = get_layout(17)
+    n = lay.n
+    rng = np.random.default_rng(seed)
+    nav0 = np.array([0.9, 0.1, 0.2, 0.3, 10.0, 2.0, -0.1, 0.6, 0.2, 100.0])
+    nav0[:4] /= np.linalg.norm(nav0[:4])
+    D = rng.standard_normal((N, n)) * np.r_[[1e-3] * 3, [0.1] * 3, [2.0] * 3, [1e-4] * 3, [1e-2] * 3, 5.0, 0.5]
+    A = rng.standard_normal((n, n)) * 0.01
+    SQ = _sqrt_psd(A @ A.T)
+    Z = rng.standard_normal((N, n))
+    dth = rng.standard_normal((100, 3)) * 1e-3
+    dv = rng.standard_normal((100, 3)) * 0.01 + np.array([0.0, 0.0, -0.098])
+    return (nav0, np.zeros(6), rng.standard_normal(12) * 1e-4, D, SQ, Z, dth, dv, np.full(100, 0.01),
+            lay.as_array(), np.array([3600.0, 1800.0, np.inf, np.inf]))
+
+
+@pytest.mark.parametrize("substeps", [0, 1, 4])
+def test_the_fused_propagation_equals_the_first_kernel(substeps):
+    """pf_step (fused per particle; serial and parallel) against pf_propagate (the UKF's
+    member propagation, then the noise as a second loop): the same maps in a different
+    loop order, so equal to round-off (the noise sum's order differs: 1e-12 relative to
+    the deviations' scale)."""
+    nav0, prev0, s0, D, SQ, Z, dth, dv, dt, la, tau = _ins_particles(257)
+    N, n = D.shape
+    ref = np.empty((N, n))
+    K.pf_propagate(nav0, prev0, s0, D, SQ, Z, dth, dv, dt, substeps, la, tau, 1.0, np.empty((N + 1, 10)),
+                   np.empty((N + 1, 6)), np.empty((N + 1, 12)), ref)
+    scale = np.abs(ref).max(axis=0)
+    for step in (K.pf_step, K.pf_step_serial):
+        g = np.empty((120, 7))
+        out = np.empty((N, n))
+        step(nav0, prev0, s0, D, np.ascontiguousarray(SQ.T), Z, dth, dv, dt, substeps, la, tau, 1.0,
+             np.empty((N + 1, 10)), np.empty((N + 1, 6)), np.empty((N + 1, 12)), np.empty((N + 1, K.SCRATCH)),
+             g[:, 0:3], g[:, 3:6], g[:, 6], np.empty(4), out)
+        assert (np.abs(out - ref) <= 1e-12 * scale).all(), np.abs(out - ref).max(axis=0) / scale
+
+
+def test_compiled_weights_and_moments_against_numpy():
+    """pf_log_weights against the log-likelihood and normalise_log_weights in numpy (with
+    a particle of -inf prior weight, which must weigh 0); pf_moments (both twins) against
+    numpy's weighted average and covariance. Round-off only: 1e-12."""
+    rng = np.random.default_rng(4)
+    N, m, n = 1001, 4, 6
+    Y = rng.standard_normal((N, m)) * 3
+    y, r = rng.standard_normal(m), rng.uniform(0.5, 2.0, m)
+    logw0 = rng.standard_normal(N)
+    logw0[7] = -np.inf
+    logw, w = np.empty(N), np.empty(N)
+    best, ess = K.pf_log_weights(logw0, y, Y, r, logw, w)
+    q = (((y - Y) ** 2) / r).sum(axis=1)
+    np.testing.assert_allclose(logw, logw0 - 0.5 * q, rtol=1e-12)
+    wn, essn = normalise_log_weights(logw0 - 0.5 * q)
+    np.testing.assert_allclose(w, wn, rtol=1e-12, atol=1e-300)
+    assert w[7] == 0.0 and best == q.min() and ess == pytest.approx(essn, rel=1e-12)
+    D = rng.standard_normal((N, n)) @ rng.standard_normal((n, n)) + 5.0
+    xm = np.average(D, axis=0, weights=w)
+    Pm = (w[:, None] * (D - xm)).T @ (D - xm)
+    for mom in (K.pf_moments, K.pf_moments_serial):
+        x, P = np.empty(n), np.empty((n, n))
+        mom(D, w, x, P, np.empty((K.CHUNKS, n + n * n)))
+        np.testing.assert_allclose(x, xm, rtol=1e-12)
+        np.testing.assert_allclose(P, Pm, rtol=1e-11)
 
 
 @pytest.mark.parametrize("kw,key", [(dict(particles=1), "particles"), (dict(particles=0), "particles"),
