@@ -11,8 +11,6 @@
   moments against numpy.
 """
 
-from types import SimpleNamespace
-
 import numba
 import numpy as np
 import pytest
@@ -23,8 +21,8 @@ from mixnav.errors import ArgumentError, ConfigError
 from mixnav.experiment.run import solution_table
 from mixnav.filters.ekf import ErrorStateEkf
 from mixnav.filters import _pf_kernels as K
-from mixnav.filters.particle import (ParticleEstimator, ParticleFilter, _sqrt_psd, normalise_log_weights,
-                                     systematic_resample)
+from mixnav.filters.particle import (ParticleFilter, _sqrt_psd, linear_gaussian_particles,
+                                     normalise_log_weights, systematic_resample)
 from mixnav.ins.error_model import get_layout
 from mixnav.measurements.loose import LooseGnss
 from mixnav.sim.scenario import simulate
@@ -48,11 +46,26 @@ def test_systematic_resampling_is_unbiased():
     assert (counts.sum(axis=1) == N).all()
 
 
+def test_the_systematic_merge_pass_equals_the_binary_search():
+    """pf_systematic (one merge pass) gives the indices of searchsorted on the cumulative
+    weights (last bin closed at 1), with zero weights, one dominant weight and offsets
+    at 0 and just below 1."""
+    rng = np.random.default_rng(2)
+    for N in (1, 2, 7, 1000):
+        for trial in range(20):
+            w = rng.dirichlet(np.full(N, 0.2))
+            if trial % 3 == 0:
+                w[rng.random(N) < 0.5] = 0.0
+                w = w / w.sum() if w.sum() > 0 else np.full(N, 1.0 / N)
+            for u0 in (0.0, rng.random(), 1.0 - 1e-12):
+                c = np.cumsum(w)
+                c[-1] = 1.0
+                ref = np.minimum(np.searchsorted(c, (u0 + np.arange(N)) / N, side="right"), N - 1)
+                np.testing.assert_array_equal(systematic_resample(w, u0), ref)
+
+
 def _linear_estimator(N, P0, rng, threshold=0.5):
-    lay = SimpleNamespace(n=P0.shape[0], clk=-1, as_array=lambda: np.full(8, -1, dtype=np.int64))
-    est = ParticleEstimator(particles=N, resample_threshold=threshold, roughening=0.0)
-    est.init(SimpleNamespace(layout=lay, tau=np.full(4, np.inf)), P0, 0, rng)
-    return est
+    return linear_gaussian_particles(P0, N, rng, resample_threshold=threshold)
 
 
 def _linear_run(N, seed, data):

@@ -60,7 +60,7 @@ def merge_block_into(dtheta, dvel, dt, substeps, gth, gdv, gdt):
     return S
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _mechanize_one(nav, prev, sensor, scr, gth, gdv, gdt, S):
     """One state over the first ``S`` merged sub-intervals (as ``mechanize_members``)."""
     dth, dv, dvn = scr[0:3], scr[3:6], scr[6:9]
@@ -75,7 +75,7 @@ def _mechanize_one(nav, prev, sensor, scr, gth, gdv, gdt, S):
             prev[3 + i] = dv[i]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _start_member(j, nav0, prev0, sensor0, D, layout, navs, prevs, sensors, scr):
     """Row ``j`` of the scratch: the nominal, corrected by ``D[j]`` when ``j < N``."""
     for i in range(10):
@@ -90,7 +90,7 @@ def _start_member(j, nav0, prev0, sensor0, D, layout, navs, prevs, sensors, scr)
         apply_feedback(navs[j], sensors[j], scr[j, 9:11], D[j], layout)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _finish_member(j, D, navs, layout, fdec, T, SQT, Z, Dn):
     """``Dn[j]``: the mechanized particle differenced from the mechanized nominal
     (row N), its sensor deviations decayed by ``fdec``, its clock moved by its drift,
@@ -113,7 +113,7 @@ def _finish_member(j, D, navs, layout, fdec, T, SQT, Z, Dn):
     for b in range(n):
         zb = Z[j, b]
         for a in range(n):
-            d[a] += SQT[b, a] * zb
+            Dn[j, a] += SQT[b, a] * zb
 
 
 @njit(cache=True)
@@ -197,7 +197,7 @@ def pf_propagate(nav0, prev0, sensor0, D, SQ, Z, dtheta, dvel, dt, substeps, lay
             Dn[j, a] += s
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _member_nav(j, nav, D, layout, navs, sensors, scr):
     for i in range(10):
         navs[j, i] = nav[i]
@@ -280,6 +280,24 @@ def pf_log_weights(logw0, y, Y, r, logw, w):
 
 
 @njit(cache=True)
+def pf_systematic(w, u0, idx):
+    """Systematic resampling of the weights ``w`` (N,) with the offset ``u0`` in [0, 1)
+    into ``idx`` (N,): ``idx_i`` the first ``k`` whose cumulative weight exceeds
+    ``(u0 + i) / N`` (the last bin closed at 1; at most N - 1). One merge pass (the
+    offsets are sorted) in place of a binary search per particle: the same indices as
+    ``searchsorted(cumsum(w), (u0 + arange(N)) / N, side="right")``."""
+    N = w.shape[0]
+    k = 0
+    c = w[0]
+    for i in range(N):
+        u = (u0 + i) / N
+        while k < N - 1 and c <= u:
+            k += 1
+            c = c + w[k] if k < N - 1 else 1.0
+        idx[i] = k
+
+
+@njit(cache=True, inline="always")
 def _mean_chunk(c, D, w, part):
     N, n = D.shape
     p = part[c]
@@ -291,7 +309,7 @@ def _mean_chunk(c, D, w, part):
             p[i] += wj * D[j, i]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _cov_chunk(c, D, w, x, part):
     N, n = D.shape
     p = part[c]
@@ -353,21 +371,20 @@ def pf_moments_serial(D, w, x, P, part):
     _sum_cov(part, P)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _jitter_one(j, D, idx, a, h, x, LT, Z, Dn):
     n = Dn.shape[1]
     k = idx[j]
-    d = Dn[j]
     if h == 0.0:
         for i in range(n):
-            d[i] = D[k, i]
+            Dn[j, i] = D[k, i]
     else:
         for i in range(n):
-            d[i] = a * D[k, i] + (1.0 - a) * x[i]
+            Dn[j, i] = a * D[k, i] + (1.0 - a) * x[i]
         for b in range(n):
             zb = h * Z[j, b]
             for i in range(n):
-                d[i] += LT[b, i] * zb
+                Dn[j, i] += LT[b, i] * zb
 
 
 @njit(cache=True, parallel=True)
@@ -386,17 +403,16 @@ def pf_jitter_serial(D, idx, a, h, x, LT, Z, Dn):
         _jitter_one(j, D, idx, a, h, x, LT, Z, Dn)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _linear_one(j, D, FT, SQT, Z, Dn):
     n = D.shape[1]
-    d = Dn[j]
     for i in range(n):
-        d[i] = 0.0
+        Dn[j, i] = 0.0
     for b in range(n):
         db = D[j, b]
         zb = Z[j, b]
         for i in range(n):
-            d[i] += FT[b, i] * db + SQT[b, i] * zb
+            Dn[j, i] += FT[b, i] * db + SQT[b, i] * zb
 
 
 @njit(cache=True, parallel=True)

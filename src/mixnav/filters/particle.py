@@ -42,12 +42,12 @@ import numpy as np
 from ..engine.protocols import Correction, Epoch, Transition
 from ..engine.status import ABSURD, OK
 from ..errors import ArgumentError
-from ._pf_kernels import CHUNKS, PARALLEL, SCRATCH, SERIAL, pf_log_weights
+from ._pf_kernels import CHUNKS, PARALLEL, SCRATCH, SERIAL, pf_log_weights, pf_systematic
 from .ekf import ErrorStateEkf
 from .ukf import predict_members
 
 __all__ = ["ParticleEstimator", "ParticleFilter", "systematic_resample", "normalise_log_weights",
-           "check_particle_settings"]
+           "check_particle_settings", "linear_gaussian_particles"]
 
 _WARM: set = set()
 
@@ -85,10 +85,9 @@ def systematic_resample(w: np.ndarray, u0: float) -> np.ndarray:
     """Indices of the systematic resampling of the weights ``w`` (N,) with the offset
     ``u0`` in [0, 1): particle ``i`` is drawn ``floor`` or ``ceil`` of ``N w_i`` times,
     ``N w_i`` on average over ``u0`` (unbiased)."""
-    N = len(w)
-    c = np.cumsum(w)
-    c[-1] = 1.0   # round-off: the last bin closes at 1
-    return np.minimum(np.searchsorted(c, (u0 + np.arange(N)) / N, side="right"), N - 1)
+    idx = np.empty(len(w), dtype=np.int64)
+    pf_systematic(np.ascontiguousarray(w, dtype=float), float(u0), idx)   # the last bin closes at 1
+    return idx
 
 
 class ParticleEstimator:
@@ -151,6 +150,7 @@ class ParticleEstimator:
         self._Dn = np.empty((N, n))
         self._Z = np.empty((N, n))
         self._logw_new = np.empty(N)
+        self._idx = np.empty(N, dtype=np.int64)
         self._w_new = np.empty(N)
         self._navs = np.empty((N + 1, 10))
         self._prevs = np.empty((N + 1, 6))
@@ -247,7 +247,8 @@ class ParticleEstimator:
         the weighted covariance before the resampling, ``x`` the weighted mean: the
         particles are re-diversified in every direction while the mean and covariance
         are kept in expectation."""
-        idx = systematic_resample(self.w, float(self.rng.random()))
+        idx = self._idx
+        pf_systematic(self.w, float(self.rng.random()), idx)
         h = self.roughening
         if h > 0.0:
             LT = np.ascontiguousarray(_sqrt_psd(self._P).T)
@@ -328,11 +329,58 @@ class ParticleEstimator:
         k.member_navs(nav, D, lay.as_array(), navs, sensors, scr)
         w = np.full(N, 1.0 / N)
         pf_log_weights(np.zeros(N), np.zeros(3), np.zeros((N, 3)), np.ones(3), np.empty(N), np.empty(N))
+        pf_systematic(w, 0.5, np.empty(N, dtype=np.int64))
         k.moments(D, w, np.empty(n), np.empty((n, n)), np.empty((CHUNKS, n + n * n)))
         k.moments(np.zeros((N, 3)), w, np.empty(3), np.empty((3, 3)), np.empty((CHUNKS, n + n * n)))
         k.jitter(D, np.zeros(N, dtype=np.int64), 0.5, 0.5, np.zeros(n), np.eye(n), D, np.empty((N, n)))
         k.linear_step(D, np.eye(n), np.eye(n), D, np.empty((N, n)))
         _WARM.add(key)
+
+
+def linear_gaussian_particles(P0, particles: int = 1000, rng=None, resample_threshold: float = 0.5,
+                              roughening: float = 0.0, parallel: bool = False) -> ParticleEstimator:
+    """The SIR particle filter on a linear-Gaussian model, without the engine.
+
+    ``x_k = F x_{k-1} + w``, ``w ~ N(0, Q)``; ``y_k = H x_k + v``, ``v ~ N(0, diag(r))``.
+    The estimator's particles ``D`` (N, n) are then the states themselves (the nominal
+    is zero and never moves), drawn from ``N(0, P0)`` (P0 (n, n)) with ``rng`` (a numpy
+    Generator or a seed). Per epoch::
+
+        est.propagate_linear_noise(F, Q)          # D <- D F^T + w, w from est's stream
+        corr = est.weigh(y, est.D @ H.T, r)       # weights, ESS, resampling, jitter
+        x_hat = corr.dx                           # the weighted mean (before resampling)
+
+    The same compiled weighting, resampling and propagation as on the strapdown INS
+    (:class:`ParticleEstimator`), used by tests/test_particle.py and by the comparison
+    with Stone Soup (benchmarks/bench_pf_stonesoup.py). ``roughening`` defaults to 0
+    here (plain SIR)."""
+    P0 = np.asarray(P0, dtype=float)
+    if P0.ndim != 2 or P0.shape[0] != P0.shape[1]:
+        raise ArgumentError(f"must be a square matrix, got shape {P0.shape}", argument="P0")
+    n = P0.shape[0]
+    layout = _LinearLayout(n)
+    est = ParticleEstimator(particles=particles, resample_threshold=resample_threshold, roughening=roughening,
+                            parallel=parallel)
+    est.init(_LinearMotion(layout), P0, 0, np.random.default_rng(rng))
+    return est
+
+
+class _LinearLayout:
+    """The minimal layout of a linear-Gaussian model: ``n`` states, no INS blocks."""
+
+    clk = -1
+
+    def __init__(self, n):
+        self.n = n
+
+    def as_array(self):
+        return np.full(8, -1, dtype=np.int64)
+
+
+class _LinearMotion:
+    def __init__(self, layout):
+        self.layout = layout
+        self.tau = np.full(4, np.inf)
 
 
 def _sqrt_psd(Q: np.ndarray) -> np.ndarray:
