@@ -107,17 +107,19 @@ def run_mixnav(ys, seed, parallel):
     F, Q, H, r = model()
     est = linear_gaussian_particles(P0, N, np.random.default_rng(seed), resample_threshold=0.5, roughening=0.0,
                                     parallel=parallel)
-    tp, tu, xs = [], [], []
+    tp, tu, tc, xs = [], [], [], []
     for y in ys:
+        c0 = time.process_time()
         t0 = time.perf_counter()
         est.propagate_linear_noise(F, Q)
         t1 = time.perf_counter()
         corr = est.weigh(y, est.D @ H.T, r)
         t2 = time.perf_counter()
+        tc.append(time.process_time() - c0)
         tp.append(t1 - t0)
         tu.append(t2 - t1)
         xs.append(corr.dx.copy())
-    return np.array(xs), np.array(tp), np.array(tu), est.counts["pf_resampled"]
+    return np.array(xs), np.array(tp), np.array(tu), np.array(tc), est.counts["pf_resampled"]
 
 
 def run_stonesoup(ys, seed):
@@ -131,10 +133,11 @@ def run_stonesoup(ys, seed):
     t = datetime.datetime(2026, 1, 1)
     samples = np.random.multivariate_normal(np.zeros(4), P0, size=N)
     state = ParticleState(StateVectors(samples.T), log_weight=np.full(N, np.log(1.0 / N)), timestamp=t)
-    tp, tu, xs = [], [], []
+    tp, tu, tc, xs = [], [], [], []
     resampled = 0
     for y in ys:
         t += datetime.timedelta(seconds=DT)
+        c0 = time.process_time()
         t0 = time.perf_counter()
         pred = predictor.predict(state, timestamp=t)
         t1 = time.perf_counter()
@@ -142,6 +145,7 @@ def run_stonesoup(ys, seed):
                                                                measurement_model=meas)))
         mean = np.asarray(post.mean, dtype=float).ravel()
         t2 = time.perf_counter()
+        tc.append(time.process_time() - c0)
         # the weighted mean before a resampling (as mixnav's correction); after one the
         # weights are uniform, and the mean of the resampled cloud is the same in expectation
         resampled += bool(np.all(post.log_weight == post.log_weight[0]))
@@ -149,7 +153,7 @@ def run_stonesoup(ys, seed):
         tu.append(t2 - t1)
         xs.append(mean)
         state = post
-    return np.array(xs), np.array(tp), np.array(tu), resampled
+    return np.array(xs), np.array(tp), np.array(tu), np.array(tc), resampled
 
 
 def pos_rmse(xs, truth):
@@ -164,28 +168,36 @@ def main():
     run_mixnav(ys[:3], 0, True)
     run_stonesoup(ys[:3], 0)
     acc = {"stonesoup": [], "mixnav": [], "mixnav_parallel": [], "kalman": []}
-    times = {k: {"predict": [], "update": []} for k in ("stonesoup", "mixnav", "mixnav_parallel")}
+    times = {k: {"predict": [], "update": [], "cpu": []} for k in ("stonesoup", "mixnav", "mixnav_parallel")}
     resampled = {k: 0 for k in times}
     load = []
-    for seed in SEEDS:
-        truth, ys = simulate(seed)
+    runs = [(seed, simulate(seed)) for seed in SEEDS]
+    for seed, (truth, ys) in runs:
         acc["kalman"].append(pos_rmse(kalman(ys), truth))
-        for name, fn in (("stonesoup", lambda: run_stonesoup(ys, seed)),
-                         ("mixnav", lambda: run_mixnav(ys, seed, False)),
-                         ("mixnav_parallel", lambda: run_mixnav(ys, seed, True))):
-            load.append(os.getloadavg()[0])
-            xs, tp, tu, nres = fn()
-            acc[name].append(pos_rmse(xs, truth))
-            times[name]["predict"].append(tp)
-            times[name]["update"].append(tu)
-            resampled[name] += nres
+    # the pairs first, alternating; the parallel runs after them, so that numba's worker
+    # threads (which may spin after a parallel region) cannot slow either side of a pair
+    order = [(name, seed, truth, ys) for seed, (truth, ys) in runs for name in ("stonesoup", "mixnav")]
+    order += [("mixnav_parallel", seed, truth, ys) for seed, (truth, ys) in runs]
+    for name, seed, truth, ys in order:
+        load.append(os.getloadavg()[0])
+        if name == "stonesoup":
+            xs, tp, tu, tc, nres = run_stonesoup(ys, seed)
+        else:
+            xs, tp, tu, tc, nres = run_mixnav(ys, seed, name == "mixnav_parallel")
+        acc[name].append(pos_rmse(xs, truth))
+        times[name]["predict"].append(tp)
+        times[name]["update"].append(tu)
+        times[name]["cpu"].append(tc)
+        resampled[name] += nres
     out = {"particles": N, "epochs_per_run": STEPS, "runs": len(SEEDS), "numba_threads": threads,
            "load_average_1min": [min(load), max(load)], "stonesoup_version": stonesoup.__version__}
     for name, tt in times.items():
         p = np.concatenate(tt["predict"]) * 1e6
         u = np.concatenate(tt["update"]) * 1e6
         s = p + u
+        c = np.concatenate(tt["cpu"]) * 1e6
         out[name] = {"predict_us_median": float(np.median(p)), "update_us_median": float(np.median(u)),
+                     "cpu_us_median": float(np.median(c)), "cpu_us_mean": float(np.mean(c)),
                      "step_us_median": float(np.median(s)), "step_us_mean": float(np.mean(s)),
                      "step_us_p10": float(np.percentile(s, 10)),
                      "pos_rmse_m": float(np.sqrt(np.mean(np.square(acc[name])))),
@@ -195,7 +207,7 @@ def main():
     for name in ("mixnav", "mixnav_parallel"):
         m = out[name]
         out[f"speedup_{name}"] = {k: ss[k] / m[k] for k in ("step_us_median", "step_us_mean", "predict_us_median",
-                                                          "update_us_median")}
+                                                          "update_us_median", "cpu_us_median", "cpu_us_mean")}
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "pf_stonesoup.json").write_text(json.dumps(out, indent=1))
     md = ["# Particle filter: mixnav against Stone Soup (bench_pf_stonesoup.py)", "",
@@ -203,27 +215,30 @@ def main():
           f"position fixes sigma {SIGMA} m per axis, prior N(0, diag(100, 4, 100, 4)); "
           f"**{N} particles** on both sides, {STEPS} epochs x {len(SEEDS)} runs (the same simulated runs), "
           "plain SIR on both: systematic resampling when ESS < N/2, no roughening/regulariser, weighted mean "
-          "as the estimate. One process, runs alternating (Stone Soup, mixnav serial, mixnav parallel per "
-          f"seed); numba threads {threads}; 1-min load average during the runs "
+          "as the estimate. One process, runs alternating (Stone Soup, mixnav serial per seed; the "
+          "numba-parallel runs after all pairs); wall time per step (perf_counter) and the process's CPU "
+          f"time (process_time: all its threads, not the time it waited for a core); numba threads {threads}; 1-min load average during the runs "
           f"{min(load):.1f}-{max(load):.1f} (a 2-core machine shared with other jobs).", "",
           "mixnav side: `linear_gaussian_particles` (the estimator's own compiled propagation, weights, "
           "resampling and moments, without the engine: the engine's particle filter mechanizes particles "
           "through the strapdown INS and its feedback map, which the constant-velocity layout does not have).",
           "", "Per epoch (predict + update incl. the weighted mean), microseconds:", "",
           "| filter | predict (median) | update (median) | step (median) | step (mean) | step (p10) | "
-          "pos RMSE [m] | resamplings |", "|---|---|---|---|---|---|---|---|"]
+          "CPU per step (median / mean) | pos RMSE [m] | resamplings |", "|---|---|---|---|---|---|---|---|---|"]
     for name in ("stonesoup", "mixnav", "mixnav_parallel"):
         r = out[name]
         md.append(f"| {name} | {r['predict_us_median']:.0f} | {r['update_us_median']:.0f} | "
                   f"{r['step_us_median']:.0f} | {r['step_us_mean']:.0f} | {r['step_us_p10']:.0f} | "
-                  f"{r['pos_rmse_m']:.3f} | {r['resampled']} |")
+                  f"{r['cpu_us_median']:.0f} / {r['cpu_us_mean']:.0f} | {r['pos_rmse_m']:.3f} | {r['resampled']} |")
     md += ["", f"Kalman filter (optimal here): position RMSE {out['kalman_pos_rmse_m']:.3f} m.", "",
            "Speed-up (Stone Soup time / mixnav time, same process):", "",
-           "| mixnav | step (median) | step (mean) | predict | update |", "|---|---|---|---|---|"]
+           "| mixnav | step (median) | step (mean) | predict | update | CPU (median) | CPU (mean) |",
+           "|---|---|---|---|---|---|---|"]
     for name in ("mixnav", "mixnav_parallel"):
         r = out[f"speedup_{name}"]
         md.append(f"| {name} | {r['step_us_median']:.1f} x | {r['step_us_mean']:.1f} x | "
-                  f"{r['predict_us_median']:.1f} x | {r['update_us_median']:.1f} x |")
+                  f"{r['predict_us_median']:.1f} x | {r['update_us_median']:.1f} x | {r['cpu_us_median']:.1f} x | "
+                  f"{r['cpu_us_mean']:.1f} x |")
     md += ["", "RMSE per run [m] (Stone Soup / mixnav / Kalman): " + "; ".join(
         f"{a:.2f} / {b:.2f} / {c:.2f}" for a, b, c in zip(acc["stonesoup"], acc["mixnav"], acc["kalman"])), "",
         f"Machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, "

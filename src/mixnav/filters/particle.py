@@ -160,6 +160,8 @@ class ParticleEstimator:
         self._fdec = np.empty(4)
         self._part = np.empty((CHUNKS, n + n * n))
         self._scratch = np.zeros((n, n))
+        self._Qd_last = None
+        self._SQT = None
         self._x = np.empty(n)
         self._P = np.empty((n, n))
         self._stale = True
@@ -184,7 +186,7 @@ class ParticleEstimator:
         mechanization (``inp`` the step inputs) or, with ``F`` given, the linear map
         ``D F^T`` (tests on linear-Gaussian models)."""
         Z = self.rng.standard_normal(out=self._Z)
-        SQT = np.ascontiguousarray(_sqrt_psd(np.asarray(Qd, dtype=float)).T)
+        SQT = self._noise_root(Qd)
         if F is not None:
             self._k.linear_step(self.D, np.ascontiguousarray(np.asarray(F, dtype=float).T), SQT, Z, self._Dn)
         else:
@@ -198,6 +200,15 @@ class ParticleEstimator:
                          g[:, 0:3], g[:, 3:6], g[:, 6], self._fdec, self._Dn)
         self.D, self._Dn = self._Dn, self.D
         self._stale = True
+
+    def _noise_root(self, Qd) -> np.ndarray:
+        """``SQ^T`` of ``Qd`` (symmetric square root), reused while ``Qd`` repeats exactly
+        (a constant step and noise model: no eigendecomposition per step)."""
+        Qd = np.asarray(Qd, dtype=float)
+        if self._Qd_last is None or self._Qd_last.shape != Qd.shape or not np.array_equal(self._Qd_last, Qd):
+            self._Qd_last = Qd.copy()
+            self._SQT = np.ascontiguousarray(_sqrt_psd(Qd).T)
+        return self._SQT
 
     def recentre(self, dx: np.ndarray) -> None:
         """The nominal moved by ``dx``: every particle's deviation shifts by ``-dx``."""
