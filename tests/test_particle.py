@@ -313,13 +313,13 @@ def test_pf_from_a_scenario_file(tmp_path):
     from mixnav.experiment import methods
     base = load_scenario("loose-demo")[2]
     text = base[:base.index("[[methods]]")] + ('[[methods]]\nname = "m"\ntype = "loose-ekf"\nestimator = "pf"\n'
-                                               '[methods.options]\nparticles = 64\nroughening = 0.5\n')
+                                               '[methods.options]\nparticles = 64\nroughening = 0.5\nparallel = true\n')
     p = tmp_path / "sc.toml"
     p.write_text(text)
     sc, src, _ = load_scenario(str(p))
     sim = simulate(sc, 1, src)
     filt, _ = methods.build(sc.methods[0], sim.imu_model, sim.fixes, np.asarray(sc.gnss.lever_arm), src, 0)
-    assert type(filt) is ParticleFilter and filt.pf["particles"] == 64 and filt.pf["roughening"] == 0.5
+    assert type(filt) is ParticleFilter and filt.pf["particles"] == 64 and filt.pf["roughening"] == 0.5 and filt.pf["parallel"]
 
 
 def _imu():

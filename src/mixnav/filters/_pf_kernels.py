@@ -319,7 +319,7 @@ def _cov_chunk(c, D, w, x, part):
         wj = w[j]
         for a in range(n):
             da = wj * (D[j, a] - x[a])
-            for b in range(n):   # the full square: a contiguous, vectorizable row
+            for b in range(a, n):   # the upper triangle, row by row (contiguous)
                 p[n + a * n + b] += da * (D[j, b] - x[b])
 
 
