@@ -10,7 +10,7 @@
 - :func:`pf_member_navs`: the particles of a measurement epoch as full states.
 - :func:`pf_log_weights`: the Gaussian log-likelihood of each particle's
   prediction added to its log-weight, normalised (weights, ESS) in one pass.
-- :func:`pf_moments`: the weighted mean and covariance of the particles.
+- :func:`pf_moments`: the weighted mean and covariance of the particles (one pass).
 - :func:`pf_jitter`: the resampled particles with the Liu-West kernel jitter.
 
 Threads (docs/particle.md, "Speed"): the per-particle loops run over ``prange``
@@ -298,77 +298,63 @@ def pf_systematic(w, u0, idx):
 
 
 @njit(cache=True, inline="always")
-def _mean_chunk(c, D, w, part):
+def _moment_chunk(c, D, w, part):
+    """Chunk ``c``'s ``sum w_j d_j`` and ``sum w_j d_j d_j^T`` (upper triangle) of the
+    deviations ``d_j = D_j - D_0`` from the first particle (one pass; the shift keeps the
+    sums at the cloud's own scale, so ``P = S2 - S1 S1^T`` loses no digits to a large mean)."""
     N, n = D.shape
     p = part[c]
-    for i in range(n):
-        p[i] = 0.0
-    for j in range(c * N // CHUNKS, (c + 1) * N // CHUNKS):
-        wj = w[j]
-        for i in range(n):
-            p[i] += wj * D[j, i]
-
-
-@njit(cache=True, inline="always")
-def _cov_chunk(c, D, w, x, part):
-    N, n = D.shape
-    p = part[c]
-    for k in range(n * n):
-        p[n + k] = 0.0
+    for k in range(n + n * n):
+        p[k] = 0.0
     for j in range(c * N // CHUNKS, (c + 1) * N // CHUNKS):
         wj = w[j]
         for a in range(n):
-            da = wj * (D[j, a] - x[a])
+            wa = wj * (D[j, a] - D[0, a])
+            p[a] += wa
             for b in range(a, n):   # the upper triangle, row by row (contiguous)
-                p[n + a * n + b] += da * (D[j, b] - x[b])
+                p[n + a * n + b] += wa * (D[j, b] - D[0, b])
 
 
 @njit(cache=True)
-def _sum_mean(part, x):
+def _sum_moments(D, part, x, P):
+    """The chunks' partial sums added in chunk order: ``x``, ``P`` (weights summing to 1)."""
     n = x.shape[0]
-    for i in range(n):
+    for a in range(n):
         s = 0.0
         for c in range(CHUNKS):
-            s += part[c, i]
-        x[i] = s
-
-
-@njit(cache=True)
-def _sum_cov(part, P):
-    n = P.shape[0]
+            s += part[c, a]
+        x[a] = s
     for a in range(n):
         for b in range(a, n):
             s = 0.0
             for c in range(CHUNKS):
                 s += part[c, n + a * n + b]
+            s -= x[a] * x[b]
             P[a, b] = s
             P[b, a] = s
+    for a in range(n):
+        x[a] += D[0, a]
 
 
 @njit(cache=True, parallel=True)
 def pf_moments(D, w, x, P, part):
-    """``x = sum_j w_j D_j``, ``P = sum_j w_j (D_j - x)(D_j - x)^T`` of ``D`` (N, n).
+    """``x = sum_j w_j D_j``, ``P = sum_j w_j (D_j - x)(D_j - x)^T`` of ``D`` (N, n) with
+    weights ``w`` summing to 1.
 
-    Two passes, each over :data:`CHUNKS` fixed chunks of particles in parallel
-    (partial sums in ``part`` (CHUNKS, >= n + n n), scratch) added in chunk order
-    serially: the result does not depend on the thread count."""
+    One pass over :data:`CHUNKS` fixed chunks of particles in parallel (partial sums
+    about the first particle in ``part`` (CHUNKS, >= n + n n), scratch), added in chunk
+    order serially: the result does not depend on the thread count."""
     for c in prange(CHUNKS):
-        _mean_chunk(c, D, w, part)
-    _sum_mean(part, x)
-    for c in prange(CHUNKS):
-        _cov_chunk(c, D, w, x, part)
-    _sum_cov(part, P)
+        _moment_chunk(c, D, w, part)
+    _sum_moments(D, part, x, P)
 
 
 @njit(cache=True)
 def pf_moments_serial(D, w, x, P, part):
     """:func:`pf_moments`, serial (the same chunks, the same sums: bitwise equal)."""
     for c in range(CHUNKS):
-        _mean_chunk(c, D, w, part)
-    _sum_mean(part, x)
-    for c in range(CHUNKS):
-        _cov_chunk(c, D, w, x, part)
-    _sum_cov(part, P)
+        _moment_chunk(c, D, w, part)
+    _sum_moments(D, part, x, P)
 
 
 @njit(cache=True, inline="always")
