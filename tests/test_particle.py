@@ -260,8 +260,10 @@ def test_the_fused_propagation_equals_the_first_kernel(substeps):
 
 def test_compiled_weights_and_moments_against_numpy():
     """pf_log_weights against the log-likelihood and normalise_log_weights in numpy (with
-    a particle of -inf prior weight, which must weigh 0); pf_moments (both twins) against
-    numpy's weighted average and covariance. Round-off only: 1e-12."""
+    a particle of -inf prior weight, which must weigh 0) and its one-pass prior-weighted
+    moments of the predictions (offset by 40: far from zero); pf_moments (both twins)
+    against numpy's weighted average and covariance. Round-off only: 1e-12 (1e-11 for
+    the covariances)."""
     rng = np.random.default_rng(4)
     N, m, n = 1001, 4, 6
     Y = rng.standard_normal((N, m)) * 3
@@ -269,7 +271,13 @@ def test_compiled_weights_and_moments_against_numpy():
     logw0 = rng.standard_normal(N)
     logw0[7] = -np.inf
     logw, w = np.empty(N), np.empty(N)
-    best, ess = K.pf_log_weights(logw0, y, Y, r, logw, w)
+    w0 = rng.dirichlet(np.ones(N))
+    ym, Pyy = np.empty(m), np.empty((m, m))
+    best, ess = K.pf_log_weights(logw0, w0, y, Y + 40.0, r, logw, w, ym, Pyy)
+    Y = Y + 40.0
+    ym_np = np.average(Y, axis=0, weights=w0)
+    np.testing.assert_allclose(ym, ym_np, rtol=1e-12)
+    np.testing.assert_allclose(Pyy, (w0[:, None] * (Y - ym_np)).T @ (Y - ym_np), rtol=1e-11)
     q = (((y - Y) ** 2) / r).sum(axis=1)
     np.testing.assert_allclose(logw, logw0 - 0.5 * q, rtol=1e-12)
     wn, essn = normalise_log_weights(logw0 - 0.5 * q)

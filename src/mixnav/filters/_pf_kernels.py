@@ -9,7 +9,8 @@
   the strapdown ``mechanize_step``), not copies.
 - :func:`pf_member_navs`: the particles of a measurement epoch as full states.
 - :func:`pf_log_weights`: the Gaussian log-likelihood of each particle's
-  prediction added to its log-weight, normalised (weights, ESS) in one pass.
+  prediction added to its log-weight, normalised (weights, ESS), and the predictions'
+  prior-weighted moments (for the NIS), in one pass.
 - :func:`pf_moments`: the weighted mean and covariance of the particles (one pass).
 - :func:`pf_jitter`: the resampled particles with the Liu-West kernel jitter.
 
@@ -243,27 +244,45 @@ def add_log_likelihood(logw, y, Y, r):
 
 
 @njit(cache=True)
-def pf_log_weights(logw0, y, Y, r, logw, w):
-    """The measurement's log-likelihood added to the prior log-weights ``logw0``
-    (into ``logw``), normalised into ``w`` (subtract the largest finite log-weight,
-    exponentiate, divide by the sum; non-finite log-weights weigh 0). Serial: the
+def pf_log_weights(logw0, w0, y, Y, r, logw, w, ym, Pyy):
+    """The measurement's log-likelihood added to the prior log-weights ``logw0`` (into
+    ``logw``), normalised into ``w`` (subtract the largest finite log-weight,
+    exponentiate, divide by the sum; non-finite log-weights weigh 0); in the same pass
+    over the predictions ``Y`` (N, m), their mean ``ym`` (m,) and covariance ``Pyy``
+    (m, m) under the prior weights ``w0`` (summing to 1; for the NIS). Serial: every
     sum's order is fixed. Returns ``(best, ess)``: the smallest squared normalised
     innovation over the particles (inf when none is finite) and the effective sample
     size ``1 / sum w^2`` (0 and ``w`` untouched when no log-weight is finite)."""
     N, m = Y.shape
     best = np.inf
     top = -np.inf
+    k0 = _heaviest(w0)
+    for i in range(m):
+        ym[i] = 0.0
+        for k in range(m):
+            Pyy[i, k] = 0.0
     for j in range(N):
         s = 0.0
+        wj = w0[j]
         for i in range(m):
             e = y[i] - Y[j, i]
             s += e * e / r[i]
+            wa = wj * (Y[j, i] - Y[k0, i])   # moments about the heaviest particle's (one pass)
+            ym[i] += wa
+            for k in range(i, m):
+                Pyy[i, k] += wa * (Y[j, k] - Y[k0, k])
         lw = logw0[j] - 0.5 * s
         logw[j] = lw
         if s < best:
             best = s
         if np.isfinite(lw) and lw > top:
             top = lw
+    for i in range(m):
+        for k in range(i, m):
+            Pyy[i, k] -= ym[i] * ym[k]
+            Pyy[k, i] = Pyy[i, k]
+    for i in range(m):
+        ym[i] += Y[k0, i]
     if not np.isfinite(top):
         return best, 0.0
     tot = 0.0
@@ -298,10 +317,11 @@ def pf_systematic(w, u0, idx):
 
 
 @njit(cache=True, inline="always")
-def _moment_chunk(c, D, w, part):
+def _moment_chunk(c, D, w, k0, part):
     """Chunk ``c``'s ``sum w_j d_j`` and ``sum w_j d_j d_j^T`` (upper triangle) of the
-    deviations ``d_j = D_j - D_0`` from the first particle (one pass; the shift keeps the
-    sums at the cloud's own scale, so ``P = S2 - S1 S1^T`` loses no digits to a large mean)."""
+    deviations ``d_j = D_j - D_k0`` from the heaviest particle ``k0`` (one pass; the shift
+    is within the weighted cloud, so ``P = S2 - S1 S1^T`` loses no digits to a large mean
+    or to weights concentrated far from an arbitrary particle)."""
     N, n = D.shape
     p = part[c]
     for k in range(n + n * n):
@@ -309,14 +329,24 @@ def _moment_chunk(c, D, w, part):
     for j in range(c * N // CHUNKS, (c + 1) * N // CHUNKS):
         wj = w[j]
         for a in range(n):
-            wa = wj * (D[j, a] - D[0, a])
+            wa = wj * (D[j, a] - D[k0, a])
             p[a] += wa
             for b in range(a, n):   # the upper triangle, row by row (contiguous)
-                p[n + a * n + b] += wa * (D[j, b] - D[0, b])
+                p[n + a * n + b] += wa * (D[j, b] - D[k0, b])
 
 
 @njit(cache=True)
-def _sum_moments(D, part, x, P):
+def _heaviest(w):
+    """The index of the largest weight (the first, if tied)."""
+    k0 = 0
+    for j in range(w.shape[0]):
+        if w[j] > w[k0]:
+            k0 = j
+    return k0
+
+
+@njit(cache=True)
+def _sum_moments(D, k0, part, x, P):
     """The chunks' partial sums added in chunk order: ``x``, ``P`` (weights summing to 1)."""
     n = x.shape[0]
     for a in range(n):
@@ -333,7 +363,7 @@ def _sum_moments(D, part, x, P):
             P[a, b] = s
             P[b, a] = s
     for a in range(n):
-        x[a] += D[0, a]
+        x[a] += D[k0, a]
 
 
 @njit(cache=True, parallel=True)
@@ -342,19 +372,21 @@ def pf_moments(D, w, x, P, part):
     weights ``w`` summing to 1.
 
     One pass over :data:`CHUNKS` fixed chunks of particles in parallel (partial sums
-    about the first particle in ``part`` (CHUNKS, >= n + n n), scratch), added in chunk
+    about the heaviest particle in ``part`` (CHUNKS, >= n + n n), scratch), added in chunk
     order serially: the result does not depend on the thread count."""
+    k0 = _heaviest(w)
     for c in prange(CHUNKS):
-        _moment_chunk(c, D, w, part)
-    _sum_moments(D, part, x, P)
+        _moment_chunk(c, D, w, k0, part)
+    _sum_moments(D, k0, part, x, P)
 
 
 @njit(cache=True)
 def pf_moments_serial(D, w, x, P, part):
     """:func:`pf_moments`, serial (the same chunks, the same sums: bitwise equal)."""
+    k0 = _heaviest(w)
     for c in range(CHUNKS):
-        _moment_chunk(c, D, w, part)
-    _sum_moments(D, part, x, P)
+        _moment_chunk(c, D, w, k0, part)
+    _sum_moments(D, k0, part, x, P)
 
 
 @njit(cache=True, inline="always")

@@ -228,17 +228,17 @@ class ParticleEstimator:
         """The update from the particles' predictions ``Y`` (N, m) of ``y`` (m,) with noise
         variances ``r`` (m,): weights, degeneracy, mean, resampling (module docstring)."""
         m = len(y)
-        # NIS with the prior weights: innovation of the weighted mean prediction, S = Cov_w(Y) + R
+        # one pass: log-weights, normalisation, and the prior-weighted moments of Y for the
+        # NIS (innovation of the weighted mean prediction, S = Cov_w(Y) + R)
         ym, Pyy = np.empty(m), np.empty((m, m))
-        self._k.moments(Y, self.w, ym, Pyy, self._partial(m))
+        logw, w = self._logw_new, self._w_new
+        best, ess = pf_log_weights(self.logw, self.w, y, Y, r, logw, w, ym, Pyy)
         with np.errstate(all="ignore"):   # an absurd epoch gives inf here; it is rejected below
             e = y - ym
             try:
                 nis = float(e @ np.linalg.solve(Pyy + np.diag(r), e))
             except np.linalg.LinAlgError:
                 nis = np.inf
-        logw, w = self._logw_new, self._w_new
-        best, ess = pf_log_weights(self.logw, y, Y, r, logw, w)
         if ess == 0.0 or not best <= m * self.absurd_sigma ** 2:
             self._degenerate()
             return Correction(np.zeros(self.n), np.inf, ABSURD, m)
@@ -300,12 +300,6 @@ class ParticleEstimator:
             self._k.moments(self.D, self.w, self._x, self._P, self._part)
             self._stale = False
 
-    def _partial(self, m: int) -> np.ndarray:
-        """The moments' partial-sum scratch for ``m`` columns (grown on demand)."""
-        if self._part.shape[1] < m + m * m:
-            self._part = np.empty((CHUNKS, m + m * m))
-        return self._part
-
     def replace_clone(self, J) -> None:  # pragma: no cover (init refuses clones)
         raise ArgumentError("the particle filter does not carry a stochastic clone", argument="estimator")
 
@@ -339,7 +333,8 @@ class ParticleEstimator:
                g[:, 0:3], g[:, 3:6], g[:, 6], np.empty(4), np.empty((N, n)))
         k.member_navs(nav, D, lay.as_array(), navs, sensors, scr)
         w = np.full(N, 1.0 / N)
-        pf_log_weights(np.zeros(N), np.zeros(3), np.zeros((N, 3)), np.ones(3), np.empty(N), np.empty(N))
+        pf_log_weights(np.zeros(N), w, np.zeros(3), np.zeros((N, 3)), np.ones(3), np.empty(N), np.empty(N),
+                       np.empty(3), np.empty((3, 3)))
         pf_systematic(w, 0.5, np.empty(N, dtype=np.int64))
         k.moments(D, w, np.empty(n), np.empty((n, n)), np.empty((CHUNKS, n + n * n)))
         k.moments(np.zeros((N, 3)), w, np.empty(3), np.empty((3, 3)), np.empty((CHUNKS, n + n * n)))
