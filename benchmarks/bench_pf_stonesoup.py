@@ -217,7 +217,8 @@ def main():
           "plain SIR on both: systematic resampling when ESS < N/2, no roughening/regulariser, weighted mean "
           "as the estimate. One process, runs alternating (Stone Soup, mixnav serial per seed; the "
           "numba-parallel runs after all pairs); wall time per step (perf_counter) and the process's CPU "
-          f"time (process_time: all its threads, not the time it waited for a core); numba threads {threads}; 1-min load average during the runs "
+          "time (process_time: all its threads, not the time it waited for a core); "
+          f"numba threads {threads}; 1-min load average during the runs "
           f"{min(load):.1f}-{max(load):.1f} (a 2-core machine shared with other jobs).", "",
           "mixnav side: `linear_gaussian_particles` (the estimator's own compiled propagation, weights, "
           "resampling and moments, without the engine: the engine's particle filter mechanizes particles "

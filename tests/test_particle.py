@@ -327,7 +327,8 @@ def test_pf_from_a_scenario_file(tmp_path):
     sc, src, _ = load_scenario(str(p))
     sim = simulate(sc, 1, src)
     filt, _ = methods.build(sc.methods[0], sim.imu_model, sim.fixes, np.asarray(sc.gnss.lever_arm), src, 0)
-    assert type(filt) is ParticleFilter and filt.pf["particles"] == 64 and filt.pf["roughening"] == 0.5 and filt.pf["parallel"]
+    assert type(filt) is ParticleFilter and filt.pf["particles"] == 64 and filt.pf["roughening"] == 0.5
+    assert filt.pf["parallel"] is True
 
 
 def _imu():

@@ -6,13 +6,17 @@ belief is ``N`` weighted particles ``D[j]`` over the error state ``dx = x_true
 - x_est`` of the layout (attitude as a rotation vector about the nominal
 quaternion, velocity, NED position metres, sensor/clock/auxiliary errors).
 
-Per propagation step (:func:`_pf_kernels.pf_propagate`, one compiled call for
-the whole array): each particle becomes the full state ``nominal_before (+)
-D[j]``, is mechanized with its own sensor errors over the step's IMU block and
-differenced from the mechanized nominal (the UKF's helpers); process noise
+Per propagation step (:func:`_pf_kernels.pf_step`, one compiled call for the
+whole array, fused per particle): each particle becomes the full state
+``nominal_before (+) D[j]``, is mechanized with its own sensor errors over the
+step's IMU block and differenced from the mechanized nominal (the engine's
+feedback map, the strapdown step, the UKF's difference map); process noise
 ``w_j ~ N(0, Qd)`` (the transition's ``Qd``, through a symmetric square root
 ``SQ``) is drawn per particle from the estimator's own random stream (the
-``rng`` the engine hands to :meth:`ParticleEstimator.init`).
+``rng`` the engine hands to :meth:`ParticleEstimator.init`), before the call.
+Every per-step array is allocated once in :meth:`ParticleEstimator.init`
+(O(N n)); with ``parallel=True`` the per-particle kernels run on numba's threads
+and give bitwise the same particles (docs/particle.md, "Speed").
 
 At a measurement epoch the particles are made full states about the current
 nominal, ``epoch.model.predict_batch`` gives ``(y, Y, R)``, and each log-weight
