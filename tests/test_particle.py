@@ -273,11 +273,14 @@ def test_compiled_weights_and_moments_against_numpy():
     logw, w = np.empty(N), np.empty(N)
     w0 = rng.dirichlet(np.ones(N))
     ym, Pyy = np.empty(m), np.empty((m, m))
-    best, ess = K.pf_log_weights(logw0, w0, y, Y + 40.0, r, logw, w, ym, Pyy)
+    best, ess, nis = K.pf_log_weights(logw0, w0, y, Y + 40.0, r, logw, w, ym, Pyy)
     Y = Y + 40.0
     ym_np = np.average(Y, axis=0, weights=w0)
     np.testing.assert_allclose(ym, ym_np, rtol=1e-12)
-    np.testing.assert_allclose(Pyy, (w0[:, None] * (Y - ym_np)).T @ (Y - ym_np), rtol=1e-11)
+    Pyy_np = (w0[:, None] * (Y - ym_np)).T @ (Y - ym_np)
+    np.testing.assert_allclose(Pyy, Pyy_np, rtol=1e-11)
+    e = y - ym_np
+    assert nis == pytest.approx(e @ np.linalg.solve(Pyy_np + np.diag(r), e), rel=1e-10)
     q = (((y - Y) ** 2) / r).sum(axis=1)
     np.testing.assert_allclose(logw, logw0 - 0.5 * q, rtol=1e-12)
     wn, essn = normalise_log_weights(logw0 - 0.5 * q)

@@ -10,7 +10,7 @@
 - :func:`pf_member_navs`: the particles of a measurement epoch as full states.
 - :func:`pf_log_weights`: the Gaussian log-likelihood of each particle's
   prediction added to its log-weight, normalised (weights, ESS), and the predictions'
-  prior-weighted moments (for the NIS), in one pass.
+  prior-weighted moments and the NIS, in one pass.
 - :func:`pf_moments`: the weighted mean and covariance of the particles (one pass).
 - :func:`pf_jitter`: the resampled particles with the Liu-West kernel jitter.
 
@@ -33,6 +33,7 @@ from numba import njit, prange
 from ..ins._error_kernels import L_BA, L_BG, L_CLK, L_SA, L_SG
 from ..ins._error_kernels import apply_feedback as _apply_feedback
 from ..ins._kernels import mechanize_step as _mechanize_step
+from ..linalg import cholesky_lower
 from ._ukf_kernels import nav_difference as _nav_difference
 from ._ukf_kernels import propagate_members
 
@@ -259,10 +260,12 @@ def pf_log_weights(logw0, w0, y, Y, r, logw, w, ym, Pyy):
     ``logw``), normalised into ``w`` (subtract the largest finite log-weight,
     exponentiate, divide by the sum; non-finite log-weights weigh 0); in the same pass
     over the predictions ``Y`` (N, m), their mean ``ym`` (m,) and covariance ``Pyy``
-    (m, m) under the prior weights ``w0`` (summing to 1; for the NIS). Serial: every
-    sum's order is fixed. Returns ``(best, ess)``: the smallest squared normalised
-    innovation over the particles (inf when none is finite) and the effective sample
-    size ``1 / sum w^2`` (0 and ``w`` untouched when no log-weight is finite)."""
+    (m, m) under the prior weights ``w0`` (summing to 1). Serial: every sum's order is
+    fixed. Returns ``(best, ess, nis)``: the smallest squared normalised innovation over
+    the particles (inf when none is finite), the effective sample size ``1 / sum w^2``
+    (0 and ``w`` untouched when no log-weight is finite) and the NIS of the weighted
+    mean prediction, ``e^T (Pyy + diag r)^-1 e``, ``e = y - ym`` (inf when not finite or
+    that matrix is not positive definite)."""
     N, m = Y.shape
     best = np.inf
     top = -np.inf
@@ -293,8 +296,9 @@ def pf_log_weights(logw0, w0, y, Y, r, logw, w, ym, Pyy):
             Pyy[k, i] = Pyy[i, k]
     for i in range(m):
         ym[i] += Y[k0, i]
+    nis = _nis(y, ym, Pyy, r)
     if not np.isfinite(top):
-        return best, 0.0
+        return best, 0.0, nis
     tot = 0.0
     for j in range(N):
         lw = logw[j]
@@ -305,7 +309,31 @@ def pf_log_weights(logw0, w0, y, Y, r, logw, w, ym, Pyy):
     for j in range(N):
         w[j] /= tot
         ss += w[j] * w[j]
-    return best, 1.0 / ss
+    return best, 1.0 / ss, nis
+
+
+@njit(cache=True)
+def _nis(y, ym, Pyy, r):
+    """``e^T (Pyy + diag r)^-1 e``, ``e = y - ym`` (Cholesky); inf when not finite or not
+    positive definite."""
+    m = y.shape[0]
+    S = np.empty((m, m))
+    L = np.empty((m, m))
+    for i in range(m):
+        for k in range(m):
+            S[i, k] = Pyy[i, k]
+        S[i, i] += r[i]
+    if not cholesky_lower(S, L):
+        return np.inf
+    nis = 0.0
+    u = np.empty(m)
+    for i in range(m):
+        s = y[i] - ym[i]
+        for k in range(i):
+            s -= L[i, k] * u[k]
+        u[i] = s / L[i, i]
+        nis += u[i] * u[i]
+    return nis if np.isfinite(nis) else np.inf
 
 
 @njit(cache=True)

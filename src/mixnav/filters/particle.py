@@ -236,13 +236,7 @@ class ParticleEstimator:
         # NIS (innovation of the weighted mean prediction, S = Cov_w(Y) + R)
         ym, Pyy = np.empty(m), np.empty((m, m))
         logw, w = self._logw_new, self._w_new
-        best, ess = pf_log_weights(self.logw, self.w, y, Y, r, logw, w, ym, Pyy)
-        with np.errstate(all="ignore"):   # an absurd epoch gives inf here; it is rejected below
-            e = y - ym
-            try:
-                nis = float(e @ np.linalg.solve(Pyy + np.diag(r), e))
-            except np.linalg.LinAlgError:
-                nis = np.inf
+        best, ess, nis = pf_log_weights(self.logw, self.w, y, Y, r, logw, w, ym, Pyy)
         if ess == 0.0 or not best <= m * self.absurd_sigma ** 2:
             self._degenerate()
             return Correction(np.zeros(self.n), np.inf, ABSURD, m)
@@ -254,7 +248,7 @@ class ParticleEstimator:
         self._stale = False
         if ess < self.resample_threshold * self.N:
             self._resample()
-        return Correction(dx, nis if np.isfinite(nis) else np.inf, OK, m)
+        return Correction(dx, nis, OK, m)
 
     def _resample(self) -> None:
         """Systematic resampling; with ``roughening = h > 0`` the kernel jitter of
