@@ -11,7 +11,7 @@
 - :func:`pf_log_weights`: the Gaussian log-likelihood of each particle's
   prediction added to its log-weight, normalised (weights, ESS), and the predictions'
   prior-weighted moments and the NIS, in one pass.
-- :func:`pf_moments`: the weighted mean and covariance of the particles (one pass).
+- :func:`pf_moments`: the weighted mean and covariance of the particles.
 - :func:`pf_jitter`: the resampled particles with the Liu-West kernel jitter.
 
 Threads (docs/particle.md, "Speed"): the per-particle loops run over ``prange``
@@ -255,6 +255,16 @@ def add_log_likelihood(logw, y, Y, r):
 
 
 @njit(cache=True)
+def _heaviest(w):
+    """The index of the largest weight (the first, if tied)."""
+    k0 = 0
+    for j in range(w.shape[0]):
+        if w[j] > w[k0]:
+            k0 = j
+    return k0
+
+
+@njit(cache=True)
 def pf_log_weights(logw0, w0, y, Y, r, logw, w, ym, Pyy):
     """The measurement's log-likelihood added to the prior log-weights ``logw0`` (into
     ``logw``), normalised into ``w`` (subtract the largest finite log-weight,
@@ -355,76 +365,82 @@ def pf_systematic(w, u0, idx):
 
 
 @njit(cache=True, inline="always")
-def _moment_chunk(c, D, w, k0, part):
-    """Chunk ``c``'s ``sum w_j d_j`` and ``sum w_j d_j d_j^T`` (upper triangle) of the
-    deviations ``d_j = D_j - D_k0`` from the heaviest particle ``k0`` (one pass; the shift
-    is within the weighted cloud, so ``P = S2 - S1 S1^T`` loses no digits to a large mean
-    or to weights concentrated far from an arbitrary particle)."""
+def _mean_chunk(c, D, w, part):
+    """Chunk ``c``'s ``sum w_j D_j`` into ``part[c, :n]``."""
     N, n = D.shape
     p = part[c]
-    for k in range(n + n * n):
-        p[k] = 0.0
+    for i in range(n):
+        p[i] = 0.0
+    for j in range(c * N // CHUNKS, (c + 1) * N // CHUNKS):
+        wj = w[j]
+        for i in range(n):
+            p[i] += wj * D[j, i]
+
+
+@njit(cache=True, inline="always")
+def _cov_chunk(c, D, w, x, part):
+    """Chunk ``c``'s ``sum w_j (D_j - x)(D_j - x)^T`` (upper triangle) into ``part[c, n:]``."""
+    N, n = D.shape
+    p = part[c]
+    for k in range(n * n):
+        p[n + k] = 0.0
     for j in range(c * N // CHUNKS, (c + 1) * N // CHUNKS):
         wj = w[j]
         for a in range(n):
-            wa = wj * (D[j, a] - D[k0, a])
-            p[a] += wa
+            da = wj * (D[j, a] - x[a])
             for b in range(a, n):   # the upper triangle, row by row (contiguous)
-                p[n + a * n + b] += wa * (D[j, b] - D[k0, b])
+                p[n + a * n + b] += da * (D[j, b] - x[b])
 
 
 @njit(cache=True)
-def _heaviest(w):
-    """The index of the largest weight (the first, if tied)."""
-    k0 = 0
-    for j in range(w.shape[0]):
-        if w[j] > w[k0]:
-            k0 = j
-    return k0
-
-
-@njit(cache=True)
-def _sum_moments(D, k0, part, x, P):
-    """The chunks' partial sums added in chunk order: ``x``, ``P`` (weights summing to 1)."""
+def _sum_mean(part, x):
     n = x.shape[0]
-    for a in range(n):
+    for i in range(n):
         s = 0.0
         for c in range(CHUNKS):
-            s += part[c, a]
-        x[a] = s
+            s += part[c, i]
+        x[i] = s
+
+
+@njit(cache=True)
+def _sum_cov(part, P):
+    n = P.shape[0]
     for a in range(n):
         for b in range(a, n):
             s = 0.0
             for c in range(CHUNKS):
                 s += part[c, n + a * n + b]
-            s -= x[a] * x[b]
             P[a, b] = s
             P[b, a] = s
-    for a in range(n):
-        x[a] += D[k0, a]
 
 
 @njit(cache=True, parallel=True)
 def pf_moments(D, w, x, P, part):
-    """``x = sum_j w_j D_j``, ``P = sum_j w_j (D_j - x)(D_j - x)^T`` of ``D`` (N, n) with
-    weights ``w`` summing to 1.
+    """``x = sum_j w_j D_j``, ``P = sum_j w_j (D_j - x)(D_j - x)^T`` of ``D`` (N, n).
 
-    One pass over :data:`CHUNKS` fixed chunks of particles in parallel (partial sums
-    about the heaviest particle in ``part`` (CHUNKS, >= n + n n), scratch), added in chunk
-    order serially: the result does not depend on the thread count."""
-    k0 = _heaviest(w)
+    Two passes (the mean, then the centred products: a sum of positive semidefinite
+    terms, so a collapsed or diverged cloud cannot give an indefinite covariance by
+    cancellation, as a one-pass ``S2 - S1 S1^T`` did on a diverging loose-demo run), each
+    over :data:`CHUNKS` fixed chunks of particles in parallel (partial sums in ``part``
+    (CHUNKS, >= n + n n), scratch) added in chunk order serially: the result does not
+    depend on the thread count."""
     for c in prange(CHUNKS):
-        _moment_chunk(c, D, w, k0, part)
-    _sum_moments(D, k0, part, x, P)
+        _mean_chunk(c, D, w, part)
+    _sum_mean(part, x)
+    for c in prange(CHUNKS):
+        _cov_chunk(c, D, w, x, part)
+    _sum_cov(part, P)
 
 
 @njit(cache=True)
 def pf_moments_serial(D, w, x, P, part):
     """:func:`pf_moments`, serial (the same chunks, the same sums: bitwise equal)."""
-    k0 = _heaviest(w)
     for c in range(CHUNKS):
-        _moment_chunk(c, D, w, k0, part)
-    _sum_moments(D, k0, part, x, P)
+        _mean_chunk(c, D, w, part)
+    _sum_mean(part, x)
+    for c in range(CHUNKS):
+        _cov_chunk(c, D, w, x, part)
+    _sum_cov(part, P)
 
 
 @njit(cache=True, inline="always")
