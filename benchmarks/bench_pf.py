@@ -1,5 +1,5 @@
 """The SIR particle filter against the EKF and the UKF on loose-demo: time per GNSS epoch
-and accuracy, in one run.
+and accuracy, in one run; the speed targets of issue 19 at 5000 particles.
 
     python benchmarks/bench_pf.py            # writes benchmarks/results/pf.{json,md}
 
@@ -8,18 +8,33 @@ update (position + velocity) and the feedback; 15 states; mean over the run's GN
 epochs, best of 2 runs, with the engine's step API (as bench_ukf.py). For the PF the
 propagation (all particles mechanized in one compiled call, 4 merged sub-intervals,
 process noise) and the update (particles as full states, predict_batch, weights,
-resampling, moments) are also timed apart.
+resampling, moments) are also timed apart, and the update split into epochs with and
+without a resampling.
+
+IMU step (5000 particles, 15 states, kernels called directly on particles spread as
+on loose-demo): (a) one mechanization sub-interval of the whole array (5000 particles
++ the reference, ``pf_mechanize``), (b) one whole propagation call over a block of one
+IMU increment (feedback, one mechanization, difference, noise, and the draw of the
+5000 x 15 normals): the cost per IMU increment if the filter stepped at every one.
+Serial kernels and numba-parallel ones on 1 and 2 threads; the parallel ones last
+(their worker threads must not slow the serial timings).
+
+Memory: the peak of Python-traced allocations (tracemalloc: numpy's arrays included)
+over a 5000-particle run of loose-demo's first 120 s, and the process's max RSS.
 
 Accuracy: position RMS over the run against the EKF's, mean position NEES, resamplings
-and degeneracies, for 500, 1000 and 2000 particles (roughening 0.9, threshold 0.5),
+and degeneracies, for 500, 1000, 2000 and 5000 particles (roughening 0.9, threshold 0.5),
 filter seeds 0-2 on the one simulated run (simulation seed 3, as tests/test_particle.py).
 """
 
 from __future__ import annotations
 
 import json
+import os
 import platform
+import resource
 import time
+import tracemalloc
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +43,9 @@ from mixnav import __version__
 from mixnav.config import load_scenario
 from mixnav.experiment.run import solution_table
 from mixnav.filters.ekf import ErrorStateEkf
+import numba
+
+from mixnav.filters import _pf_kernels as K
 from mixnav.filters.particle import ParticleEstimator, ParticleFilter
 from mixnav.filters.ukf import UnscentedKalmanFilter
 from mixnav.ins.error_model import get_layout
@@ -38,20 +56,27 @@ RESULTS = Path(__file__).resolve().parent / "results"
 
 
 def engine_epoch_us(filt, sim, lever, repeats=2):
+    """Mean wall time per GNSS epoch [us] (best of ``repeats`` runs) and, for the PF, its
+    predict / update means and the update's mean over epochs with / without a resampling."""
     best, parts = np.inf, None
     for _ in range(repeats):
         eng = filt.engine([LooseGnss(sim.fixes, lever, filt.layout)])
         eng.start(sim.imu, sim.init)
         est = eng.estimator if hasattr(eng, "estimator") else filt.estimator
-        split = {"predict": [], "update": []}
+        split = {"predict": [], "update": [], "resampled": [], "predict_cpu": [], "update_cpu": []}
         if isinstance(est, ParticleEstimator):
             for name in ("predict", "update"):
                 f = getattr(est, name)
 
                 def timed(*a, _f=f, _k=name):
+                    n0 = est.counts["pf_resampled"]
+                    c0 = time.process_time()
                     t0 = time.perf_counter()
                     out = _f(*a)
                     split[_k].append(time.perf_counter() - t0)
+                    split[_k + "_cpu"].append(time.process_time() - c0)
+                    if _k == "update":
+                        split["resampled"].append(est.counts["pf_resampled"] > n0)
                     return out
                 setattr(est, name, timed)
         times = []
@@ -65,8 +90,92 @@ def engine_epoch_us(filt, sim, lever, repeats=2):
         t = float(np.mean(times)) * 1e6
         if t < best:
             best = t
-            parts = {k: float(np.mean(v)) * 1e6 for k, v in split.items() if v}
+            parts = {k: float(np.mean(v)) * 1e6 for k, v in split.items() if v and k != "resampled"}
+            if split["update"]:
+                u, r = np.array(split["update"]), np.array(split["resampled"])
+                parts["update_resampled"] = float(u[r].mean()) * 1e6 if r.any() else float("nan")
+                parts["update_not_resampled"] = float(u[~r].mean()) * 1e6 if (~r).any() else float("nan")
+                parts["resampled_fraction"] = float(r.mean())
     return best, parts
+
+
+def imu_step_us(N=5000, repeats=40):
+    """Median and best wall time [us] of (a) one mechanization sub-interval of N particles +
+    the reference and (b) one propagation call over a one-increment block (with the draw of
+    the normals), for the serial kernels and the parallel ones on 1 and 2 threads."""
+    lay = get_layout(15)
+    n = lay.n
+    rng = np.random.default_rng(0)
+    nav0 = np.array([0.9, 0.1, 0.2, 0.3, 10.0, 2.0, -0.1, 0.6, 0.2, 100.0])
+    nav0[:4] /= np.linalg.norm(nav0[:4])
+    D = rng.standard_normal((N, n)) * np.r_[[1e-3] * 3, [0.1] * 3, [2.0] * 3, [1e-4] * 3, [1e-2] * 3]
+    SQT = np.eye(n) * 1e-3
+    dth = rng.standard_normal((1, 3)) * 1e-3
+    dv = np.array([[0.0, 0.0, -0.098]])
+    dt = np.full(1, 0.01)
+    la, tau = lay.as_array(), np.array([3600.0, 3600.0, np.inf, np.inf])
+    navs, prevs, sensors = np.empty((N + 1, 10)), np.empty((N + 1, 6)), np.empty((N + 1, 12))
+    scr, g, Z, Dn = np.empty((N + 1, K.SCRATCH)), np.empty((4, 7)), np.empty((N, n)), np.empty((N, n))
+    out = {}
+    old = numba.get_num_threads()
+    for label, mech, step, threads in (("serial", K.pf_mechanize_serial, K.pf_step_serial, old),
+                                       ("parallel_1_thread", K.pf_mechanize, K.pf_step, 1),
+                                       ("parallel_2_threads", K.pf_mechanize, K.pf_step, min(2, old))):
+        numba.set_num_threads(threads)
+        K.merge_block_into(dth, dv, dt, 1, g[:, 0:3], g[:, 3:6], g[:, 6])
+
+        def one_step():
+            rng.standard_normal(out=Z)
+            step(nav0, np.zeros(6), np.zeros(12), D, SQT, Z, dth, dv, dt, 1, la, tau, 0.01, navs, prevs, sensors,
+                 scr, g[:, 0:3], g[:, 3:6], g[:, 6], np.empty(4), Dn)
+
+        one_step()
+        tm, ts, cm, cs = [], [], [], []
+        for _ in range(repeats):
+            navs[:] = nav0
+            prevs[:] = 0.0
+            sensors[:] = 0.0
+            c0 = time.process_time()
+            t0 = time.perf_counter()
+            mech(navs, prevs, sensors, scr, g[:, 0:3], g[:, 3:6], g[:, 6], 1)
+            t1 = time.perf_counter()
+            c1 = time.process_time()
+            one_step()
+            t2 = time.perf_counter()
+            c2 = time.process_time()
+            tm.append(t1 - t0)
+            ts.append(t2 - t1)
+            cm.append(c1 - c0)
+            cs.append(c2 - c1)
+        out[label] = {"mechanize_substep_us_median": float(np.median(tm)) * 1e6,
+                      "mechanize_substep_us_best": float(np.min(tm)) * 1e6,
+                      "propagate_one_increment_us_median": float(np.median(ts)) * 1e6,
+                      "propagate_one_increment_us_best": float(np.min(ts)) * 1e6,
+                      "mechanize_substep_cpu_us_median": float(np.median(cm)) * 1e6,
+                      "propagate_one_increment_cpu_us_median": float(np.median(cs)) * 1e6}
+    numba.set_num_threads(old)
+    return out
+
+
+def peak_memory(sim, lever, N=5000, seconds=120.0):
+    """Peak traced allocation [MiB] over a run of the first ``seconds`` of loose-demo with
+    N particles (engine, estimator, result), the particle state's own size, max RSS."""
+    lay = get_layout(15)
+    f = ParticleFilter(lay, sim.imu_model, particles=N)
+    tracemalloc.start()
+    eng = f.engine([LooseGnss(sim.fixes, lever, lay)], rng=0)
+    eng.start(sim.imu, sim.init)
+    t_end = sim.init.time + seconds
+    while eng._ti < eng._n_events and eng._times[eng._ti] <= t_end:
+        eng.step()
+    cur, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    est = f.estimator
+    state = (est.D.nbytes + est.logw.nbytes + est.w.nbytes) / 2 ** 20
+    arrays = sum(a.nbytes for a in vars(est).values() if isinstance(a, np.ndarray)) / 2 ** 20
+    return {"particles": N, "states": lay.n, "traced_peak_mib": peak / 2 ** 20, "traced_current_mib": cur / 2 ** 20,
+            "particle_state_mib": state, "estimator_arrays_mib": arrays,
+            "max_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
 
 def main():
@@ -81,14 +190,29 @@ def main():
     ukf = UnscentedKalmanFilter(lay, sim.imu_model)
     ukf.run(sim.imu, sim.init, [LooseGnss(sim.fixes, lever, lay)])
     out["ukf_us_per_epoch"], _ = engine_epoch_us(ukf, sim, lever)
-    for N in (500, 2000):
+    out["load_average_1min_start"] = os.getloadavg()[0]
+    out["numba_threads"] = numba.get_num_threads()
+    for N in (500, 2000, 5000):
         pf = ParticleFilter(lay, sim.imu_model, particles=N)
         t, parts = engine_epoch_us(pf, sim, lever)
         out[f"pf{N}_us_per_epoch"] = t
-        out[f"pf{N}_predict_us"] = parts["predict"]
-        out[f"pf{N}_update_us"] = parts["update"]
+        for k, v in parts.items():
+            out[f"pf{N}_{k}" + ("" if k == "resampled_fraction" else "_us")] = v
         out[f"pf{N}_over_ekf"] = t / out["ekf_us_per_epoch"]
         out[f"pf{N}_over_ukf"] = t / out["ukf_us_per_epoch"]
+    out["memory"] = peak_memory(sim, lever)
+    # the parallel kernels last: their worker threads must not slow the serial timings
+    pf = ParticleFilter(lay, sim.imu_model, particles=5000, parallel=True)
+    pf.run(sim.imu, sim.init, [LooseGnss(sim.fixes, lever, lay)])     # compile / load
+    for threads in (1, 2):
+        numba.set_num_threads(threads)
+        t, parts = engine_epoch_us(pf, sim, lever)
+        out[f"pf5000_parallel_{threads}thr_us_per_epoch"] = t
+        out[f"pf5000_parallel_{threads}thr_predict_us"] = parts["predict"]
+        out[f"pf5000_parallel_{threads}thr_update_us"] = parts["update"]
+    numba.set_num_threads(out["numba_threads"])
+    out["imu_step_5000"] = imu_step_us()
+    out["load_average_1min_end"] = os.getloadavg()[0]
 
     def accuracy(filt, seed=0):
         r = filt.run(sim.imu, sim.init, [LooseGnss(sim.fixes, lever, lay)], rng=seed)
@@ -103,7 +227,7 @@ def main():
     e_rms, e_nees = accuracy(ErrorStateEkf(lay, sim.imu_model))
     out["ekf_pos_rms_m"], out["ekf_nees_pos"] = e_rms, e_nees
     rows = []
-    for N in (500, 1000, 2000):
+    for N in (500, 1000, 2000, 5000):
         for seed in (0, 1, 2):
             pf = ParticleFilter(lay, sim.imu_model, particles=N)
             rms, nees = accuracy(pf, seed)
@@ -116,10 +240,27 @@ def main():
     (RESULTS / "pf.json").write_text(json.dumps(out, indent=1))
     md = ["# Particle filter: time per GNSS epoch and accuracy (bench_pf.py)", "",
           "loose-demo, 15 states, one epoch = 100 IMU increments + 6 loose rows + feedback; mean over the "
-          "run's GNSS epochs, best of 2 runs; same process.", "", "| what | value |", "|---|---|"]
+          "run's GNSS epochs, best of 2 runs; same process. Serial kernels unless named parallel. "
+          f"1-min load average {out['load_average_1min_start']:.1f} at the start, "
+          f"{out['load_average_1min_end']:.1f} at the end (2 cores shared with other jobs: wall times "
+          "are inflated by the time spent waiting for a core).", "", "| what | value |", "|---|---|"]
     for k, v in out.items():
-        if k != "accuracy":
+        if not isinstance(v, (dict, list)):
             md.append(f"| {k} | {v:.4g} |")
+    md += ["", "IMU step, 5000 particles x 15 states (us; wall median / wall best of 40 / process CPU median, "
+           "the CPU time of all the process's threads):", "",
+           "| kernels | one mechanization sub-interval (5001 states) | propagation over one increment "
+           "(feedback, mechanization, difference, noise incl. drawing 75000 normals) |", "|---|---|---|"]
+    for label, r in out["imu_step_5000"].items():
+        md.append(f"| {label} | {r['mechanize_substep_us_median']:.0f} / {r['mechanize_substep_us_best']:.0f} / "
+                  f"{r['mechanize_substep_cpu_us_median']:.0f} | {r['propagate_one_increment_us_median']:.0f} / "
+                  f"{r['propagate_one_increment_us_best']:.0f} / {r['propagate_one_increment_cpu_us_median']:.0f} |")
+    mem = out["memory"]
+    md += ["", f"Memory, {mem['particles']} particles x {mem['states']} states, loose-demo first 120 s: particle "
+           f"state (D, log-weights, weights) {mem['particle_state_mib']:.2f} MiB, all the estimator's arrays "
+           f"{mem['estimator_arrays_mib']:.2f} MiB, peak of traced allocations during the run "
+           f"{mem['traced_peak_mib']:.1f} MiB (engine, estimator, recorded result), process max RSS "
+           f"{mem['max_rss_mib']:.0f} MiB (Python, numpy, numba/LLVM, the simulated data)."]
     md += ["", f"EKF: position RMS {e_rms:.3f} m, mean position NEES {e_nees:.2f}.", "",
            "| particles | seed | pos RMS [m] | / EKF | NEES pos | resampled (of 600) | degenerate | median ESS |",
            "|---|---|---|---|---|---|---|---|"]

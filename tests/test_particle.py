@@ -5,11 +5,13 @@
   the Kalman filter's at close to 1/sqrt(N);
 - a measurement no particle can explain is a counted degeneracy, never a NaN;
 - on loose-demo the PF's position error and NEES against the EKF's (measured bands);
-- the same seed gives the same run; bad settings name their key.
+- the same seed gives the same run, on one or two numba threads, serial or parallel
+  kernels (bitwise); bad settings name their key;
+- the fused propagation kernel against the first, unfused one; the compiled weights and
+  moments against numpy.
 """
 
-from types import SimpleNamespace
-
+import numba
 import numpy as np
 import pytest
 
@@ -18,7 +20,9 @@ from mixnav.engine.status import ABSURD, OK
 from mixnav.errors import ArgumentError, ConfigError
 from mixnav.experiment.run import solution_table
 from mixnav.filters.ekf import ErrorStateEkf
-from mixnav.filters.particle import ParticleEstimator, ParticleFilter, systematic_resample
+from mixnav.filters import _pf_kernels as K
+from mixnav.filters.particle import (ParticleFilter, _sqrt_psd, linear_gaussian_particles,
+                                     normalise_log_weights, systematic_resample)
 from mixnav.ins.error_model import get_layout
 from mixnav.measurements.loose import LooseGnss
 from mixnav.sim.scenario import simulate
@@ -42,11 +46,26 @@ def test_systematic_resampling_is_unbiased():
     assert (counts.sum(axis=1) == N).all()
 
 
+def test_the_systematic_merge_pass_equals_the_binary_search():
+    """pf_systematic (one merge pass) gives the indices of searchsorted on the cumulative
+    weights (last bin closed at 1), with zero weights, one dominant weight and offsets
+    at 0 and just below 1."""
+    rng = np.random.default_rng(2)
+    for N in (1, 2, 7, 1000):
+        for trial in range(20):
+            w = rng.dirichlet(np.full(N, 0.2))
+            if trial % 3 == 0:
+                w[rng.random(N) < 0.5] = 0.0
+                w = w / w.sum() if w.sum() > 0 else np.full(N, 1.0 / N)
+            for u0 in (0.0, rng.random(), 1.0 - 1e-12):
+                c = np.cumsum(w)
+                c[-1] = 1.0
+                ref = np.minimum(np.searchsorted(c, (u0 + np.arange(N)) / N, side="right"), N - 1)
+                np.testing.assert_array_equal(systematic_resample(w, u0), ref)
+
+
 def _linear_estimator(N, P0, rng, threshold=0.5):
-    lay = SimpleNamespace(n=P0.shape[0], clk=-1, as_array=lambda: np.full(8, -1, dtype=np.int64))
-    est = ParticleEstimator(particles=N, resample_threshold=threshold, roughening=0.0)
-    est.init(SimpleNamespace(layout=lay, tau=np.full(4, np.inf)), P0, 0, rng)
-    return est
+    return linear_gaussian_particles(P0, N, rng, resample_threshold=threshold)
 
 
 def _linear_run(N, seed, data):
@@ -172,6 +191,111 @@ def test_the_same_seed_gives_the_same_run(demo):
     assert not np.array_equal(a.nav, c.nav)
 
 
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="needs two numba threads")
+def test_one_or_two_threads_give_the_same_particles(demo):
+    """parallel=True on 1 and on 2 numba threads, and the serial kernels: bitwise the same
+    run (the random numbers are drawn outside the kernels, each particle's arithmetic
+    reads only its own row, the sums over particles are in fixed chunks added in order).
+    The first 120 s of loose-demo, 400 particles (resamplings and jitter included)."""
+    sim, lever = demo
+    lay = get_layout(15)
+    old = numba.get_num_threads()
+    runs = []
+    try:
+        for parallel, threads in ((True, 1), (True, 2), (False, 2)):
+            numba.set_num_threads(threads)
+            f = ParticleFilter(lay, sim.imu_model, particles=400, parallel=parallel)
+            eng = f.engine([LooseGnss(sim.fixes, lever, lay)], rng=5)
+            eng.start(sim.imu, sim.init)
+            for _ in range(120):
+                eng.step()
+            runs.append((eng.nav.copy(), f.estimator.D.copy(), f.estimator.w.copy(),
+                         f.estimator.counts["pf_resampled"]))
+    finally:
+        numba.set_num_threads(old)
+    assert runs[0][3] > 0
+    for other in runs[1:]:
+        np.testing.assert_array_equal(runs[0][0], other[0])
+        np.testing.assert_array_equal(runs[0][1], other[1])
+        np.testing.assert_array_equal(runs[0][2], other[2])
+
+
+def _ins_particles(N, seed=1):
+    """Particles about a moving nominal over a 1 s, 100-increment block (17 states: clock)."""
+    lay = get_layout(17)
+    n = lay.n
+    rng = np.random.default_rng(seed)
+    nav0 = np.array([0.9, 0.1, 0.2, 0.3, 10.0, 2.0, -0.1, 0.6, 0.2, 100.0])
+    nav0[:4] /= np.linalg.norm(nav0[:4])
+    D = rng.standard_normal((N, n)) * np.r_[[1e-3] * 3, [0.1] * 3, [2.0] * 3, [1e-4] * 3, [1e-2] * 3, 5.0, 0.5]
+    A = rng.standard_normal((n, n)) * 0.01
+    SQ = _sqrt_psd(A @ A.T)
+    Z = rng.standard_normal((N, n))
+    dth = rng.standard_normal((100, 3)) * 1e-3
+    dv = rng.standard_normal((100, 3)) * 0.01 + np.array([0.0, 0.0, -0.098])
+    return (nav0, np.zeros(6), rng.standard_normal(12) * 1e-4, D, SQ, Z, dth, dv, np.full(100, 0.01),
+            lay.as_array(), np.array([3600.0, 1800.0, np.inf, np.inf]))
+
+
+@pytest.mark.parametrize("substeps", [0, 1, 4])
+def test_the_fused_propagation_equals_the_first_kernel(substeps):
+    """pf_step (fused per particle; serial and parallel) against pf_propagate (the UKF's
+    member propagation, then the noise as a second loop): the same maps in a different
+    loop order, so equal to round-off (the noise sum's order differs: 1e-12 relative to
+    the deviations' scale)."""
+    nav0, prev0, s0, D, SQ, Z, dth, dv, dt, la, tau = _ins_particles(257)
+    N, n = D.shape
+    ref = np.empty((N, n))
+    K.pf_propagate(nav0, prev0, s0, D, SQ, Z, dth, dv, dt, substeps, la, tau, 1.0, np.empty((N + 1, 10)),
+                   np.empty((N + 1, 6)), np.empty((N + 1, 12)), ref)
+    scale = np.abs(ref).max(axis=0)
+    for step in (K.pf_step, K.pf_step_serial):
+        g = np.empty((120, 7))
+        out = np.empty((N, n))
+        step(nav0, prev0, s0, D, np.ascontiguousarray(SQ.T), Z, dth, dv, dt, substeps, la, tau, 1.0,
+             np.empty((N + 1, 10)), np.empty((N + 1, 6)), np.empty((N + 1, 12)), np.empty((N + 1, K.SCRATCH)),
+             g[:, 0:3], g[:, 3:6], g[:, 6], np.empty(4), out)
+        assert (np.abs(out - ref) <= 1e-12 * scale).all(), np.abs(out - ref).max(axis=0) / scale
+
+
+def test_compiled_weights_and_moments_against_numpy():
+    """pf_log_weights against the log-likelihood and normalise_log_weights in numpy (with
+    a particle of -inf prior weight, which must weigh 0) and its one-pass prior-weighted
+    moments of the predictions (offset by 40: far from zero); pf_moments (both twins)
+    against numpy's weighted average and covariance. Round-off only: 1e-12 (1e-11 for
+    the covariances)."""
+    rng = np.random.default_rng(4)
+    N, m, n = 1001, 4, 6
+    Y = rng.standard_normal((N, m)) * 3
+    y, r = rng.standard_normal(m), rng.uniform(0.5, 2.0, m)
+    logw0 = rng.standard_normal(N)
+    logw0[7] = -np.inf
+    logw, w = np.empty(N), np.empty(N)
+    w0 = rng.dirichlet(np.ones(N))
+    ym, Pyy = np.empty(m), np.empty((m, m))
+    best, ess, nis = K.pf_log_weights(logw0, w0, y, Y + 40.0, r, logw, w, ym, Pyy)
+    Y = Y + 40.0
+    ym_np = np.average(Y, axis=0, weights=w0)
+    np.testing.assert_allclose(ym, ym_np, rtol=1e-12)
+    Pyy_np = (w0[:, None] * (Y - ym_np)).T @ (Y - ym_np)
+    np.testing.assert_allclose(Pyy, Pyy_np, rtol=1e-11)
+    e = y - ym_np
+    assert nis == pytest.approx(e @ np.linalg.solve(Pyy_np + np.diag(r), e), rel=1e-10)
+    q = (((y - Y) ** 2) / r).sum(axis=1)
+    np.testing.assert_allclose(logw, logw0 - 0.5 * q, rtol=1e-12)
+    wn, essn = normalise_log_weights(logw0 - 0.5 * q)
+    np.testing.assert_allclose(w, wn, rtol=1e-12, atol=1e-300)
+    assert w[7] == 0.0 and best == q.min() and ess == pytest.approx(essn, rel=1e-12)
+    D = rng.standard_normal((N, n)) @ rng.standard_normal((n, n)) + 5.0
+    xm = np.average(D, axis=0, weights=w)
+    Pm = (w[:, None] * (D - xm)).T @ (D - xm)
+    for mom in (K.pf_moments, K.pf_moments_serial):
+        x, P = np.empty(n), np.empty((n, n))
+        mom(D, w, x, P, np.empty((K.CHUNKS, n + n * n)))
+        np.testing.assert_allclose(x, xm, rtol=1e-12)
+        np.testing.assert_allclose(P, Pm, rtol=1e-11)
+
+
 @pytest.mark.parametrize("kw,key", [(dict(particles=1), "particles"), (dict(particles=0), "particles"),
                                     (dict(resample_threshold=0.0), "resample_threshold"),
                                     (dict(resample_threshold=1.5), "resample_threshold"),
@@ -200,13 +324,14 @@ def test_pf_from_a_scenario_file(tmp_path):
     from mixnav.experiment import methods
     base = load_scenario("loose-demo")[2]
     text = base[:base.index("[[methods]]")] + ('[[methods]]\nname = "m"\ntype = "loose-ekf"\nestimator = "pf"\n'
-                                               '[methods.options]\nparticles = 64\nroughening = 0.5\n')
+                                               '[methods.options]\nparticles = 64\nroughening = 0.5\nparallel = true\n')
     p = tmp_path / "sc.toml"
     p.write_text(text)
     sc, src, _ = load_scenario(str(p))
     sim = simulate(sc, 1, src)
     filt, _ = methods.build(sc.methods[0], sim.imu_model, sim.fixes, np.asarray(sc.gnss.lever_arm), src, 0)
     assert type(filt) is ParticleFilter and filt.pf["particles"] == 64 and filt.pf["roughening"] == 0.5
+    assert filt.pf["parallel"] is True
 
 
 def _imu():

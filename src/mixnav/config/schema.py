@@ -750,13 +750,15 @@ class ParticleOptions(Strict):
     the number of ``particles`` (>= 2), the effective-sample-size fraction below which
     the particles are resampled (``resample_threshold`` in (0, 1]), the Liu-West kernel
     jitter after a resampling (``roughening`` in [0, 1); 0: none) and the merged
-    sub-intervals the particles are mechanized over per step (``substeps``)."""
+    sub-intervals the particles are mechanized over per step (``substeps``); ``parallel``
+    runs the per-particle kernels on numba's threads (the same particles; off by default)."""
 
     particles: int = Field(default=1000, ge=2)
     resample_threshold: float = Field(default=0.5, gt=0, le=1)
     roughening: float = Field(default=0.9, ge=0, lt=1)
     substeps: int = Field(default=4, ge=0)
     absurd_sigma: float = Field(default=1e4, gt=0)
+    parallel: bool = False
 
 
 class Dd2Options(Strict):

@@ -45,7 +45,7 @@ ESTIMATORS = {
     "pf": ("mixnav.filters.particle:ParticleFilter",
            "SIR particle filter (issue 19): particles as full states mechanized over each IMU block, "
            "Gaussian log-weights through predict_batch, systematic resampling (options: particles, "
-           "resample_threshold, roughening, substeps)"),
+           "resample_threshold, roughening, substeps, parallel)"),
     "dd2": ("mixnav.filters.dd2:Dd2Filter",
             "second-order divided-difference filter (Norgaard et al. 2000; issue 19): 2n+1 points "
             "mechanized as full states, loose or tight GNSS through predict_batch (options: dd2_step, "

@@ -6,13 +6,17 @@ belief is ``N`` weighted particles ``D[j]`` over the error state ``dx = x_true
 - x_est`` of the layout (attitude as a rotation vector about the nominal
 quaternion, velocity, NED position metres, sensor/clock/auxiliary errors).
 
-Per propagation step (:func:`_pf_kernels.pf_propagate`, one compiled call for
-the whole array): each particle becomes the full state ``nominal_before (+)
-D[j]``, is mechanized with its own sensor errors over the step's IMU block and
-differenced from the mechanized nominal (the UKF's helpers); process noise
+Per propagation step (:func:`_pf_kernels.pf_step`, one compiled call for the
+whole array, fused per particle): each particle becomes the full state
+``nominal_before (+) D[j]``, is mechanized with its own sensor errors over the
+step's IMU block and differenced from the mechanized nominal (the engine's
+feedback map, the strapdown step, the UKF's difference map); process noise
 ``w_j ~ N(0, Qd)`` (the transition's ``Qd``, through a symmetric square root
 ``SQ``) is drawn per particle from the estimator's own random stream (the
-``rng`` the engine hands to :meth:`ParticleEstimator.init`).
+``rng`` the engine hands to :meth:`ParticleEstimator.init`), before the call.
+Every per-step array is allocated once in :meth:`ParticleEstimator.init`
+(O(N n)); with ``parallel=True`` the per-particle kernels run on numba's threads
+and give bitwise the same particles (docs/particle.md, "Speed").
 
 At a measurement epoch the particles are made full states about the current
 nominal, ``epoch.model.predict_batch`` gives ``(y, Y, R)``, and each log-weight
@@ -35,18 +39,19 @@ mean is doubled; ``counts["pf_degenerate"]`` counts it. Never a NaN.
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from ..engine.protocols import Correction, Epoch, Transition
 from ..engine.status import ABSURD, OK
 from ..errors import ArgumentError
-from ._pf_kernels import add_log_likelihood, pf_propagate
-from ._ukf_kernels import member_navs, weighted_moments
+from ._pf_kernels import CHUNKS, PARALLEL, SCRATCH, SERIAL, pf_log_weights, pf_systematic
 from .ekf import ErrorStateEkf
 from .ukf import predict_members
 
 __all__ = ["ParticleEstimator", "ParticleFilter", "systematic_resample", "normalise_log_weights",
-           "check_particle_settings"]
+           "check_particle_settings", "linear_gaussian_particles"]
 
 _WARM: set = set()
 
@@ -84,10 +89,9 @@ def systematic_resample(w: np.ndarray, u0: float) -> np.ndarray:
     """Indices of the systematic resampling of the weights ``w`` (N,) with the offset
     ``u0`` in [0, 1): particle ``i`` is drawn ``floor`` or ``ceil`` of ``N w_i`` times,
     ``N w_i`` on average over ``u0`` (unbiased)."""
-    N = len(w)
-    c = np.cumsum(w)
-    c[-1] = 1.0   # round-off: the last bin closes at 1
-    return np.minimum(np.searchsorted(c, (u0 + np.arange(N)) / N, side="right"), N - 1)
+    idx = np.empty(len(w), dtype=np.int64)
+    pf_systematic(np.ascontiguousarray(w, dtype=float), float(u0), idx)   # the last bin closes at 1
+    return idx
 
 
 class ParticleEstimator:
@@ -106,14 +110,22 @@ class ParticleEstimator:
     absurd_sigma : float
         An epoch whose best particle's innovation exceeds this many sigmas per row is
         degenerate (counted, rejected).
+    parallel : bool
+        Run the per-particle kernels on numba's threads (``prange``; docs/particle.md,
+        "Speed"). The particles are bitwise the same either way and on any thread
+        count. Off by default: on a busy 2-core machine a parallel region waits for a
+        descheduled thread; only used from the main thread (numba's threading layers
+        do not all allow concurrent use).
     """
 
     needs_step_inputs = True
     carry_mean = True
 
     def __init__(self, particles: int = 1000, resample_threshold: float = 0.5, roughening: float = 0.9,
-                 substeps: int = 4, absurd_sigma: float = 1e4):
+                 substeps: int = 4, absurd_sigma: float = 1e4, parallel: bool = False):
         check_particle_settings(particles, resample_threshold, roughening, substeps, absurd_sigma)
+        self.parallel = bool(parallel)
+        self._k = SERIAL
         self.N = int(particles)
         self.resample_threshold = float(resample_threshold)
         self.roughening = float(roughening)
@@ -133,15 +145,27 @@ class ParticleEstimator:
         self._clk = lay.clk
         self.tau = np.asarray(motion.tau, dtype=float)
         self.rng = rng
+        self._k = PARALLEL if self.parallel and threading.current_thread() is threading.main_thread() else SERIAL
         N = self.N
         self.D = np.ascontiguousarray(self.rng.standard_normal((N, n)) @ _sqrt_psd(np.asarray(P0, float)).T)
         self.logw = np.zeros(N)
         self.w = np.full(N, 1.0 / N)
+        # every per-step array is allocated here once (O(N n)); steps swap buffers
         self._Dn = np.empty((N, n))
+        self._Z = np.empty((N, n))
+        self._logw_new = np.empty(N)
+        self._idx = np.empty(N, dtype=np.int64)
+        self._w_new = np.empty(N)
         self._navs = np.empty((N + 1, 10))
         self._prevs = np.empty((N + 1, 6))
         self._sensors = np.empty((N + 1, 12))
+        self._scr = np.empty((N + 1, SCRATCH))
+        self._g = np.empty((8, 7))        # merged sub-intervals: gth (0:3), gdv (3:6), gdt (6); grown on demand
+        self._fdec = np.empty(4)
+        self._part = np.empty((CHUNKS, n + n * n))
         self._scratch = np.zeros((n, n))
+        self._Qd_last = None
+        self._SQT = None
         self._x = np.empty(n)
         self._P = np.empty((n, n))
         self._stale = True
@@ -165,16 +189,30 @@ class ParticleEstimator:
         """``D <- f(D) + w``, ``w ~ N(0, Qd)`` from the estimator's stream: ``f`` the
         mechanization (``inp`` the step inputs) or, with ``F`` given, the linear map
         ``D F^T`` (tests on linear-Gaussian models)."""
-        Z = self.rng.standard_normal(self.D.shape)
-        SQ = _sqrt_psd(np.asarray(Qd, dtype=float))
+        Z = self.rng.standard_normal(out=self._Z)
+        SQT = self._noise_root(Qd)
         if F is not None:
-            self._Dn[:] = self.D @ np.asarray(F).T + Z @ SQ.T
+            self._k.linear_step(self.D, np.ascontiguousarray(np.asarray(F, dtype=float).T), SQT, Z, self._Dn)
         else:
-            pf_propagate(inp.nav0, inp.prev0, inp.sensor, self.D, SQ, Z, inp.dtheta, inp.dvel, inp.dt,
-                         self.substeps, self.layout_array, self.tau, T, self._navs, self._prevs,
-                         self._sensors, self._Dn)
+            K = len(inp.dt)
+            S = K if self.substeps <= 0 or self.substeps >= K else self.substeps
+            if S > len(self._g):
+                self._g = np.empty((2 * S, 7))
+            g = self._g
+            self._k.step(inp.nav0, inp.prev0, inp.sensor, self.D, SQT, Z, inp.dtheta, inp.dvel, inp.dt, self.substeps,
+                         self.layout_array, self.tau, T, self._navs, self._prevs, self._sensors, self._scr,
+                         g[:, 0:3], g[:, 3:6], g[:, 6], self._fdec, self._Dn)
         self.D, self._Dn = self._Dn, self.D
         self._stale = True
+
+    def _noise_root(self, Qd) -> np.ndarray:
+        """``SQ^T`` of ``Qd`` (symmetric square root), reused while ``Qd`` repeats exactly
+        (a constant step and noise model: no eigendecomposition per step)."""
+        Qd = np.asarray(Qd, dtype=float)
+        if self._Qd_last is None or self._Qd_last.shape != Qd.shape or not np.array_equal(self._Qd_last, Qd):
+            self._Qd_last = Qd.copy()
+            self._SQT = np.ascontiguousarray(_sqrt_psd(Qd).T)
+        return self._SQT
 
     def recentre(self, dx: np.ndarray) -> None:
         """The nominal moved by ``dx``: every particle's deviation shifts by ``-dx``."""
@@ -183,7 +221,7 @@ class ParticleEstimator:
 
     def update(self, epoch: Epoch) -> Correction | None:
         navs = self._navs[:self.N]
-        member_navs(epoch.nav, self.D, self.layout_array, navs)
+        self._k.member_navs(epoch.nav, self.D, self.layout_array, navs, self._sensors, self._scr)
         out = predict_members(epoch, self.D, navs, self._clk, "the particle filter needs")
         if out is None:
             return None
@@ -194,30 +232,23 @@ class ParticleEstimator:
         """The update from the particles' predictions ``Y`` (N, m) of ``y`` (m,) with noise
         variances ``r`` (m,): weights, degeneracy, mean, resampling (module docstring)."""
         m = len(y)
-        # NIS with the prior weights: innovation of the weighted mean prediction, S = Cov_w(Y) + R
+        # one pass: log-weights, normalisation, and the prior-weighted moments of Y for the
+        # NIS (innovation of the weighted mean prediction, S = Cov_w(Y) + R)
         ym, Pyy = np.empty(m), np.empty((m, m))
-        weighted_moments(Y, self.w, self.w, ym, Pyy)
-        with np.errstate(all="ignore"):   # an absurd epoch gives inf here; it is rejected below
-            e = y - ym
-            try:
-                nis = float(e @ np.linalg.solve(Pyy + np.diag(r), e))
-            except np.linalg.LinAlgError:
-                nis = np.inf
-        logw = self.logw.copy()
-        best = add_log_likelihood(logw, y, Y, r)
-        with np.errstate(all="ignore"):
-            w, ess = normalise_log_weights(logw)
-        if w is None or not best <= m * self.absurd_sigma ** 2:
+        logw, w = self._logw_new, self._w_new
+        best, ess, nis = pf_log_weights(self.logw, self.w, y, Y, r, logw, w, ym, Pyy)
+        if ess == 0.0 or not best <= m * self.absurd_sigma ** 2:
             self._degenerate()
             return Correction(np.zeros(self.n), np.inf, ABSURD, m)
+        self._logw_new, self._w_new = self.logw, self.w
         self.logw, self.w = logw, w
         self.ess_history.append(ess)
-        weighted_moments(self.D, w, w, self._x, self._P)
+        self._k.moments(self.D, w, self._x, self._P, self._part)
         dx = self._x.copy()
         self._stale = False
         if ess < self.resample_threshold * self.N:
             self._resample()
-        return Correction(dx, nis if np.isfinite(nis) else np.inf, OK, m)
+        return Correction(dx, nis, OK, m)
 
     def _resample(self) -> None:
         """Systematic resampling; with ``roughening = h > 0`` the kernel jitter of
@@ -225,19 +256,19 @@ class ParticleEstimator:
         the weighted covariance before the resampling, ``x`` the weighted mean: the
         particles are re-diversified in every direction while the mean and covariance
         are kept in expectation."""
-        if self.roughening > 0.0:
-            x, P = self._x.copy(), self._P.copy()
-        idx = systematic_resample(self.w, float(self.rng.random()))
-        self.D = np.ascontiguousarray(self.D[idx])
-        self.logw = np.zeros(self.N)
-        self.w = np.full(self.N, 1.0 / self.N)
+        idx = self._idx
+        pf_systematic(self.w, float(self.rng.random()), idx)
+        h = self.roughening
+        if h > 0.0:
+            LT = np.ascontiguousarray(_sqrt_psd(self._P).T)
+            Z = self.rng.standard_normal(out=self._Z)
+        else:
+            LT = Z = self._scratch
+        self._k.jitter(self.D, idx, float(np.sqrt(1.0 - h * h)), h, self._x, LT, Z, self._Dn)
+        self.D, self._Dn = self._Dn, self.D
+        self.logw[:] = 0.0
+        self.w[:] = 1.0 / self.N
         self.counts["pf_resampled"] += 1
-        if self.roughening > 0.0:
-            h = self.roughening
-            a = np.sqrt(1.0 - h * h)
-            L = _sqrt_psd(P)
-            self.D = np.ascontiguousarray(a * self.D + (1.0 - a) * x
-                                          + h * (self.rng.standard_normal(self.D.shape) @ L.T))
         self._stale = True
 
     def _degenerate(self) -> None:
@@ -264,7 +295,7 @@ class ParticleEstimator:
 
     def _moments(self) -> None:
         if self._stale:
-            weighted_moments(self.D, self.w, self.w, self._x, self._P)
+            self._k.moments(self.D, self.w, self._x, self._P, self._part)
             self._stale = False
 
     def replace_clone(self, J) -> None:  # pragma: no cover (init refuses clones)
@@ -280,24 +311,80 @@ class ParticleEstimator:
         return {}
 
     def warm_up(self) -> None:
-        """Compile (or load from numba's cache) the kernels once per process."""
-        if "pf" in _WARM:
+        """Compile (or load from numba's cache) the kernels once per process (the serial
+        or the parallel set, as ``parallel`` asks)."""
+        key = "pf-parallel" if self.parallel else "pf"
+        if key in _WARM:
             return
+        k = PARALLEL if self.parallel else SERIAL
         from ..ins.error_model import LAYOUTS
         lay = LAYOUTS[15]
         n, N = lay.n, 3
         nav = np.array([1.0, 0, 0, 0, 0, 0, 0, 0.5, 0.5, 0.0])
         D = np.zeros((N, n))
         one = np.zeros((2, 3))
-        pf_propagate(nav, np.zeros(6), np.zeros(12), D, np.eye(n), D.copy(), one, one, np.full(2, 0.01), 1,
-                     lay.as_array(), np.full(4, np.inf), 0.02, np.empty((N + 1, 10)), np.empty((N + 1, 6)),
-                     np.empty((N + 1, 12)), np.empty((N, n)))
-        member_navs(nav, D, lay.as_array(), np.empty((N, 10)))
-        add_log_likelihood(np.zeros(N), np.zeros(3), np.zeros((N, 3)), np.ones(3))
+        g = np.empty((2, 7))
+        scr = np.empty((N + 1, SCRATCH))
+        navs, sensors = np.empty((N + 1, 10)), np.empty((N + 1, 12))
+        k.step(nav, np.zeros(6), np.zeros(12), D, np.eye(n), D.copy(), one, one, np.full(2, 0.01), 1,
+               lay.as_array(), np.full(4, np.inf), 0.02, navs, np.empty((N + 1, 6)), sensors, scr,
+               g[:, 0:3], g[:, 3:6], g[:, 6], np.empty(4), np.empty((N, n)))
+        k.member_navs(nav, D, lay.as_array(), navs, sensors, scr)
         w = np.full(N, 1.0 / N)
-        weighted_moments(D, w, w, np.empty(n), np.empty((n, n)))
-        weighted_moments(np.zeros((N, 3)), w, w, np.empty(3), np.empty((3, 3)))
-        _WARM.add("pf")
+        pf_log_weights(np.zeros(N), w, np.zeros(3), np.zeros((N, 3)), np.ones(3), np.empty(N), np.empty(N),
+                       np.empty(3), np.empty((3, 3)))
+        pf_systematic(w, 0.5, np.empty(N, dtype=np.int64))
+        k.moments(D, w, np.empty(n), np.empty((n, n)), np.empty((CHUNKS, n + n * n)))
+        k.moments(np.zeros((N, 3)), w, np.empty(3), np.empty((3, 3)), np.empty((CHUNKS, n + n * n)))
+        k.jitter(D, np.zeros(N, dtype=np.int64), 0.5, 0.5, np.zeros(n), np.eye(n), D, np.empty((N, n)))
+        k.linear_step(D, np.eye(n), np.eye(n), D, np.empty((N, n)))
+        _WARM.add(key)
+
+
+def linear_gaussian_particles(P0, particles: int = 1000, rng=None, resample_threshold: float = 0.5,
+                              roughening: float = 0.0, parallel: bool = False) -> ParticleEstimator:
+    """The SIR particle filter on a linear-Gaussian model, without the engine.
+
+    ``x_k = F x_{k-1} + w``, ``w ~ N(0, Q)``; ``y_k = H x_k + v``, ``v ~ N(0, diag(r))``.
+    The estimator's particles ``D`` (N, n) are then the states themselves (the nominal
+    is zero and never moves), drawn from ``N(0, P0)`` (P0 (n, n)) with ``rng`` (a numpy
+    Generator or a seed). Per epoch::
+
+        est.propagate_linear_noise(F, Q)          # D <- D F^T + w, w from est's stream
+        corr = est.weigh(y, est.D @ H.T, r)       # weights, ESS, resampling, jitter
+        x_hat = corr.dx                           # the weighted mean (before resampling)
+
+    The same compiled weighting, resampling and propagation as on the strapdown INS
+    (:class:`ParticleEstimator`), used by tests/test_particle.py and by the comparison
+    with Stone Soup (benchmarks/bench_pf_stonesoup.py). ``roughening`` defaults to 0
+    here (plain SIR)."""
+    P0 = np.asarray(P0, dtype=float)
+    if P0.ndim != 2 or P0.shape[0] != P0.shape[1]:
+        raise ArgumentError(f"must be a square matrix, got shape {P0.shape}", argument="P0")
+    n = P0.shape[0]
+    layout = _LinearLayout(n)
+    est = ParticleEstimator(particles=particles, resample_threshold=resample_threshold, roughening=roughening,
+                            parallel=parallel)
+    est.init(_LinearMotion(layout), P0, 0, np.random.default_rng(rng))
+    return est
+
+
+class _LinearLayout:
+    """The minimal layout of a linear-Gaussian model: ``n`` states, no INS blocks."""
+
+    clk = -1
+
+    def __init__(self, n):
+        self.n = n
+
+    def as_array(self):
+        return np.full(8, -1, dtype=np.int64)
+
+
+class _LinearMotion:
+    def __init__(self, layout):
+        self.layout = layout
+        self.tau = np.full(4, np.inf)
 
 
 def _sqrt_psd(Q: np.ndarray) -> np.ndarray:
@@ -315,7 +402,7 @@ class ParticleFilter(ErrorStateEkf):
     ----------
     layout, imu_model, covariance_interval, absurd_sigma, clock
         As :class:`~mixnav.filters.ekf.ErrorStateEkf`.
-    particles, resample_threshold, roughening, substeps
+    particles, resample_threshold, roughening, substeps, parallel
         As :class:`ParticleEstimator` (checked now, naming the key).
     """
 
@@ -323,11 +410,11 @@ class ParticleFilter(ErrorStateEkf):
 
     def __init__(self, layout, imu_model, particles: int = 1000, resample_threshold: float = 0.5,
                  roughening: float = 0.9, substeps: int = 4, covariance_interval: float = 1.0,
-                 absurd_sigma: float = 1e4, clock=None):
+                 absurd_sigma: float = 1e4, clock=None, parallel: bool = False):
         super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
         check_particle_settings(particles, resample_threshold, roughening, substeps, absurd_sigma)
         self.pf = dict(particles=int(particles), resample_threshold=float(resample_threshold),
-                       roughening=float(roughening), substeps=int(substeps))
+                       roughening=float(roughening), substeps=int(substeps), parallel=bool(parallel))
 
     def make_estimator(self):
         return ParticleEstimator(absurd_sigma=self.absurd_sigma, **self.pf)
