@@ -19,7 +19,7 @@ from pydantic import Field, field_validator, model_validator
 from .. import units as u
 from .dataset_schema import DatasetInfo, RawGnss, ReferencePoint
 from .schema import Strict, _quantity
-from .vehicle_schema import VEHICLE_ESTIMATORS, VehicleMethod
+from .vehicle_schema import VEHICLE_ESTIMATORS, VehicleMethod, unique_method_names
 
 #: estimators a raw-GNSS dataset runs: ``wls`` is the epoch-by-epoch SPP, the others the
 #: constant-velocity filter
@@ -122,11 +122,7 @@ class RawGnssDataset(Strict):
     @field_validator("methods")
     @classmethod
     def _unique(cls, v):
-        names = [m.name for m in v]
-        dup = sorted({n for n in names if names.count(n) > 1})
-        if dup:
-            raise ValueError(f"method names must be unique: {', '.join(dup)} repeated")
-        return v
+        return unique_method_names(v)
 
     def run_methods(self) -> list[RawMethod]:
         """The methods to run: ``[[methods]]``, or the SPP alone (named ``spp``)."""

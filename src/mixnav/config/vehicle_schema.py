@@ -23,6 +23,17 @@ LengthNN = _quantity(u.LENGTH, nonnegative=True)
 Angle = _quantity(u.ANGLE, nonnegative=True)
 Time = _quantity(u.TIME, positive=True)
 
+def unique_method_names(methods):
+    """A ``[[methods]]`` list whose names are distinct (the solutions are filed by name)."""
+    if methods is None:
+        return methods
+    names = [m.name for m in methods]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise ValueError(f"method names must be unique: {', '.join(dup)} repeated")
+    return methods
+
+
 #: system letters -> the data set's system codes (smartLoc's)
 SYSTEM_CODES = {"G": 1, "S": 2, "R": 4, "E": 8, "J": 16, "C": 32}
 
@@ -157,8 +168,4 @@ class VehicleDataset(Strict):
     @field_validator("methods")
     @classmethod
     def _unique(cls, v):
-        names = [m.name for m in v]
-        dup = sorted({n for n in names if names.count(n) > 1})
-        if dup:
-            raise ValueError(f"method names must be unique: {', '.join(dup)} repeated")
-        return v
+        return unique_method_names(v)
