@@ -158,8 +158,8 @@ def _rms_pos(tab):
     return float(np.sqrt((tab[["err_n_m", "err_e_m", "err_d_m"]].to_numpy() ** 2).sum(axis=1).mean()))
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_pf_on_loose_demo_against_the_ekf(demo, seed):
+@pytest.mark.parametrize("seed", [0, pytest.param(1, marks=pytest.mark.slow), pytest.param(2, marks=pytest.mark.slow)])
+def test_pf_on_loose_demo_against_the_ekf(demo, seed):    # seeds 1-2 with -m slow (the suite's time)
     """2000 particles, roughening 0.9 (the default), seeds 0-2. Measured (benchmarks/
     results/pf.md): position RMS 1.20, 1.05, 0.95 x the EKF's 2.56 m; position NEES 7.5,
     7.7, 12.4 (the EKF's 3.8): the particle cloud under-represents the attitude and
