@@ -34,6 +34,7 @@ from ..ins._error_kernels import L_BA, L_BG, L_CLK, L_SA, L_SG
 from ..ins._error_kernels import apply_feedback as _apply_feedback
 from ..ins._kernels import mechanize_step as _mechanize_step
 from ..linalg import cholesky_lower
+from ._ukf_kernels import merge_block_into
 from ._ukf_kernels import nav_difference as _nav_difference
 from ._ukf_kernels import propagate_members
 
@@ -49,27 +50,6 @@ nav_difference = njit(inline="always")(_nav_difference.py_func)
 CHUNKS = 16
 #: per-particle scratch row: dth (0:3), dv (3:6), dvn (6:9), clock (9:11)
 SCRATCH = 11
-
-
-@njit(cache=True)
-def merge_block_into(dtheta, dvel, dt, substeps, gth, gdv, gdt):
-    """The block's increments merged into at most ``substeps`` sub-intervals (0 or
-    ``substeps >= K``: as they are), written into ``gth``, ``gdv`` (>= S, 3) and
-    ``gdt`` (>= S,); returns S. The UKF's ``merge_block`` without its allocation."""
-    K = dtheta.shape[0]
-    S = K if substeps <= 0 or substeps >= K else substeps
-    for g in range(S):
-        gdt[g] = 0.0
-        for i in range(3):
-            gth[g, i] = 0.0
-            gdv[g, i] = 0.0
-    for k in range(K):
-        g = (k * S) // K
-        for i in range(3):
-            gth[g, i] += dtheta[k, i]
-            gdv[g, i] += dvel[k, i]
-        gdt[g] += dt[k]
-    return S
 
 
 @njit(cache=True, inline="always")

@@ -97,20 +97,37 @@ def nav_difference(nav, ref, out):
 
 
 @njit(cache=True)
-def merge_block(dtheta, dvel, dt, substeps):
-    """The block's raw increments merged into at most ``substeps`` sub-intervals (0 or
-    ``substeps >= K``: as they are): ``(gth, gdv, gdt)``."""
+def merge_block_into(dtheta, dvel, dt, substeps, gth, gdv, gdt):
+    """The block's increments merged into at most ``substeps`` sub-intervals (0 or
+    ``substeps >= K``: as they are), written into ``gth``, ``gdv`` (>= S, 3) and
+    ``gdt`` (>= S,); returns S. :func:`merge_block` without its allocation
+    (the particle kernels' preallocated buffers)."""
     K = dtheta.shape[0]
     S = K if substeps <= 0 or substeps >= K else substeps
-    gth = np.zeros((S, 3))
-    gdv = np.zeros((S, 3))
-    gdt = np.zeros(S)
+    for g in range(S):
+        gdt[g] = 0.0
+        for i in range(3):
+            gth[g, i] = 0.0
+            gdv[g, i] = 0.0
     for k in range(K):
         g = (k * S) // K
         for i in range(3):
             gth[g, i] += dtheta[k, i]
             gdv[g, i] += dvel[k, i]
         gdt[g] += dt[k]
+    return S
+
+
+@njit(cache=True)
+def merge_block(dtheta, dvel, dt, substeps):
+    """The block's raw increments merged into at most ``substeps`` sub-intervals (0 or
+    ``substeps >= K``: as they are): ``(gth, gdv, gdt)``."""
+    K = dtheta.shape[0]
+    S = K if substeps <= 0 or substeps >= K else substeps
+    gth = np.empty((S, 3))
+    gdv = np.empty((S, 3))
+    gdt = np.empty(S)
+    merge_block_into(dtheta, dvel, dt, substeps, gth, gdv, gdt)
     return gth, gdv, gdt
 
 
