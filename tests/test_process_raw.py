@@ -242,3 +242,48 @@ def test_rinex_observation_file_gives_the_phone_logs_solution(tmp_path):
     with pytest.raises(DataError) as e:
         read_rinex_obs(tmp_path / "bad.rnx")
     assert "bad.rnx" in str(e.value)
+
+
+ROBUST_SPP = """
+[[methods]]
+name = "spp"
+estimator = "wls"
+
+[[methods]]
+name = "robust-spp"
+estimator = "wls"
+[methods.robust]
+k0 = 2.5
+k1 = 5.0
+"""
+
+
+def test_robust_spp_method_on_the_phone(tmp_path):
+    """``wls`` with a ``[methods.robust]`` table is the robust SPP, its own table and metrics
+    with the counts. On this phone (6 GPS satellites) an 80 m error on PRN 2 in 30 % of the
+    epochs cannot be told from the other rows (test_spp.py has the geometry where it can):
+    the robust SPP declines to guess at those epochs (``epochs_not_separable``) and is
+    exactly the plain SPP (recorded horizontal RMSE 43.2 m both) rather than worse; a
+    ``c`` (the filter's adaptive factor) or a mixture table on ``wls`` is a ConfigError
+    naming the key."""
+    import dataclasses
+    from mixnav.experiment.spp_process import method_metrics, raw_tables, solve_raw
+    from .test_raw_filters import _phone
+    folder = data_file("android-static", LOG).parent
+    ds, src, _ = load_dataset(_cfg(tmp_path, SHIPPED + ROBUST_SPP))
+    obs, eph = _phone(ds, folder)
+    hit = np.random.default_rng(0).random(len(obs.tow)) < 0.3
+    bad = dataclasses.replace(obs, pseudorange=obs.pseudorange + 80.0 * ((obs.prn == 2) & hit[obs.epoch]))
+    po = solve_raw(ds, src, folder, bad, eph)
+    tables = raw_tables(po)
+    m = {name: method_metrics(po, name, t) for name, t in tables.items()}
+    rb = m["robust-spp"]["robust"]
+    assert rb["epochs_not_separable"] >= hit.sum() * 0.8, rb
+    assert sum(v for k, v in rb.items() if k.startswith("epochs_")) == m["robust-spp"]["n_epochs"]
+    assert m["robust-spp"]["horizontal_rmse_m"] <= m["spp"]["horizontal_rmse_m"] + 1e-9
+    assert "robust" not in m["spp"]
+    for edit, key in (("k1 = 5.0\n", "k1 = 5.0\nc = 2.0\n"), ("[methods.robust]\nk0 = 2.5\nk1 = 5.0\n",
+                      "[methods.mixture.measurement.pseudorange]\nweights = [1.0]\nscales = [1.0]\n")):
+        with pytest.raises(ConfigError) as ei:
+            load_dataset(_cfg(tmp_path, SHIPPED + ROBUST_SPP.replace(edit, key), "bad.toml"))
+        assert ei.value.key.startswith("methods[1]"), ei.value.key

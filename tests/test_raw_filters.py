@@ -40,16 +40,17 @@ def _methods(text: str, block: str) -> str:
 def test_shipped_config_validates():
     ds, _, _ = load_dataset("android-static-filters")
     assert ds.dataset.kind == "gnss-raw"
-    assert [m.estimator for m in ds.run_methods()] == ["wls", "ekf", "robust-adaptive", "gaussian-mixture",
+    assert [m.estimator for m in ds.run_methods()] == ["wls", "wls", "ekf", "robust-adaptive", "gaussian-mixture",
                                                       "epoch-mixture", "vb-akf"]
+    assert ds.methods[1].robust.k0 == 2.5 and ds.methods[0].robust is None
     mc = ds.motion
     assert mc.accel_sigma == pytest.approx(0.1) and mc.step == 1.0 and mc.clock_q_bias == 1000.0
-    assert mc.velocity_sigma == 5.0 and ds.methods[1].smooth
+    assert mc.velocity_sigma == 5.0 and ds.methods[2].smooth
 
 
 @pytest.mark.parametrize("edit, key, message", [
-    (('estimator = "vb-akf"', 'estimator = "ukf"'), "methods[5].estimator", "does not run on raw GNSS"),
-    (('estimator = "ekf"', 'estimator = "kalman"'), "methods[1].estimator", "does not run on raw GNSS"),
+    (('estimator = "vb-akf"', 'estimator = "ukf"'), "methods[6].estimator", "does not run on raw GNSS"),
+    (('estimator = "ekf"', 'estimator = "kalman"'), "methods[2].estimator", "does not run on raw GNSS"),
     (('accel_sigma = "0.1 m/s^2/sqrt(Hz)"', 'accel_sigma = "-0.1 m/s^2/sqrt(Hz)"'), "motion.accel_sigma",
      "must not be negative"),
     (('accel_sigma = "0.1 m/s^2/sqrt(Hz)"', 'accel_sigma = "1000 m/s^2/sqrt(Hz)"'), "motion.accel_sigma",

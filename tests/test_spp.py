@@ -13,11 +13,12 @@ RX = lla_to_ecef(LLA)
 CLOCK = 1234.567  # receiver clock bias [m]
 
 
-def _constellation(n=8, seed=3):
-    """n satellites 20200 km above the receiver at elevations 15..80 deg, spread in azimuth."""
+def _constellation(n=8, seed=3, el_deg=None, az_deg=None):
+    """n satellites 20200 km above the receiver at elevations 15..80 deg, spread in azimuth
+    (or at the given elevations and azimuths)."""
     rng = np.random.default_rng(seed)
-    el = np.deg2rad(np.linspace(15, 80, n))
-    az = np.deg2rad(np.arange(n) * 360.0 / n + 10)
+    el = np.deg2rad(np.linspace(15, 80, n) if el_deg is None else np.asarray(el_deg, float))
+    az = np.deg2rad(np.arange(n) * 360.0 / n + 10 if az_deg is None else np.asarray(az_deg, float))
     lat, lon = LLA[0], LLA[1]
     # unit vectors in NED, then ECEF
     u_n = np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), -np.sin(el)])
@@ -174,3 +175,91 @@ def test_klobuchar_night_and_peak():
     assert peak == pytest.approx(C_LIGHT * f_zenith * (5e-9 + 1e-8), rel=1e-12)
     # a negative amplitude polynomial is clipped to zero: night value all day
     assert klobuchar(lat, lon, el, az, 50400.0, -alpha, beta)[0] == pytest.approx(night)
+
+
+# ---------------------------------------------------------------- robust solution
+def _noisy(n, seed, opts):
+    """n satellites, pseudoranges with the options' elevation-dependent noise (seeded)."""
+    sats, pos_rx, el = _constellation(n, seed)
+    sigma = np.sqrt(opts.sigma_a**2 + opts.sigma_b**2 / np.sin(el) ** 2)
+    rho = _exact_pseudoranges(sats, pos_rx) + np.random.default_rng(seed).normal(0.0, sigma)
+    return sats, rho
+
+
+ROBUST = SppOptions(troposphere=False, ionosphere=False, elevation_mask=0.0, sigma_a=1.0, sigma_b=1.0,
+                    robust=(2.5, 5.0))
+PLAIN = SppOptions(troposphere=False, ionosphere=False, elevation_mask=0.0, sigma_a=1.0, sigma_b=1.0)
+
+
+@pytest.mark.parametrize("bad", [0, 4, 9])
+def test_robust_solution_excludes_a_gross_error_exactly(bad):
+    """12 satellites, 80 m on one: the robust solution leaves that row out (weight zero) and
+    is then exactly the WLS solution of the other 11 (1e-6 m); plain WLS is metres off."""
+    sats, rho = _noisy(12, 7, PLAIN)
+    rho = rho.copy()
+    rho[bad] += 80.0
+    sol = wls_position(rho, sats, ROBUST)
+    assert sol.robust_status == "ok" and sol.n_excluded == 1 and sol.n_downweighted == 0
+    assert bad + 1 not in sol.prn
+    keep = np.arange(12) != bad
+    others = SatelliteStates(sats.prn[keep], sats.pos_ecef[keep], sats.vel_ecef[keep], sats.clock_bias[keep],
+                             sats.clock_drift[keep])
+    ref = wls_position(rho[keep], others, PLAIN)
+    np.testing.assert_allclose(sol.pos_ecef, ref.pos_ecef, atol=1e-6)
+    np.testing.assert_allclose(sol.cov, ref.cov, rtol=1e-9)
+    plain = wls_position(rho, sats, PLAIN)
+    assert np.linalg.norm(plain.pos_ecef - RX) > 3.0 * np.linalg.norm(sol.pos_ecef - RX)
+
+
+def test_robust_solution_is_plain_wls_without_outliers_and_when_untestable():
+    """No residual beyond k0: bitwise the WLS solution. Five satellites (one spare): a single
+    error cannot be located, so plain WLS, said by the status."""
+    sats, rho = _noisy(10, 11, PLAIN)
+    sol, plain = wls_position(rho, sats, ROBUST), wls_position(rho, sats, PLAIN)
+    assert sol.robust_status == "ok" and sol.n_excluded == sol.n_downweighted == 0
+    np.testing.assert_array_equal(sol.pos_ecef, plain.pos_ecef)
+    sats5, rho5 = _noisy(5, 11, PLAIN)
+    rho5 = rho5 + np.array([80.0, 0, 0, 0, 0])
+    sol5 = wls_position(rho5, sats5, ROBUST)
+    assert sol5.robust_status == "untestable"
+    np.testing.assert_array_equal(sol5.pos_ecef, wls_position(rho5, sats5, PLAIN).pos_ecef)
+
+
+def test_robust_solution_declines_rows_it_cannot_tell_apart():
+    """Seven satellites (exact ranges) where the residual of the one at 75 deg elevation
+    moves with those at 45 and 60 deg (correlations 0.97, -0.97): 80 m on it is not blamed on
+    any row (status ``not_separable``, the plain solution kept: bitwise), since the data
+    cannot say which of the three is wrong; 80 m on the satellite at 30 deg (largest
+    correlation 0.955, with the satellite at 15 deg) is found, and the solution is exact."""
+    el, az = [15, 30, 45, 60, 75, 40, 42], [0, 70, 140, 210, 280, 100, 100]
+    sats, pos_rx, _ = _constellation(7, 3, el, az)
+    exact = _exact_pseudoranges(sats, pos_rx)
+    rho = exact + 80.0 * (np.arange(7) == 4)
+    sol = wls_position(rho, sats, ROBUST)
+    assert sol.robust_status == "not_separable" and sol.n_excluded == 0
+    np.testing.assert_array_equal(sol.pos_ecef, wls_position(rho, sats, PLAIN).pos_ecef)
+    sol = wls_position(exact + 80.0 * (np.arange(7) == 1), sats, ROBUST)
+    assert sol.robust_status == "ok" and sol.n_excluded == 1 and 2 not in sol.prn
+    assert np.linalg.norm(sol.pos_ecef - RX) < 1e-3
+
+
+def test_robust_thresholds_are_checked():
+    with pytest.raises(ValueError, match="k0 < k1"):
+        SppOptions(robust=(5.0, 2.5))
+
+
+def test_robust_solution_over_many_geometries():
+    """200 seeded epochs, 9 satellites each (random geometry and noise): with 60 m on one
+    random satellite per epoch the robust 3-D RMSE is below 0.4 of plain WLS's (measured
+    0.21; 27 of the 200 errors fall on rows the geometry cannot separate, kept as plain WLS);
+    without it, the false alarms at k0 = 2.5 cost at most 5 % of RMSE (measured 1.000)."""
+    rng = np.random.default_rng(0)
+    err = {"plain": [], "robust": [], "plain_clean": [], "robust_clean": []}
+    for seed in range(200):
+        sats, rho = _noisy(9, 1000 + seed, PLAIN)
+        for tag, r in (("", rho + 60.0 * (np.arange(9) == rng.integers(9))), ("_clean", rho)):
+            err["plain" + tag].append(np.linalg.norm(wls_position(r, sats, PLAIN).pos_ecef - RX))
+            err["robust" + tag].append(np.linalg.norm(wls_position(r, sats, ROBUST).pos_ecef - RX))
+    rms = {k: float(np.sqrt(np.mean(np.square(v)))) for k, v in err.items()}
+    assert rms["robust"] < 0.4 * rms["plain"], rms
+    assert rms["robust_clean"] < 1.05 * rms["plain_clean"], rms

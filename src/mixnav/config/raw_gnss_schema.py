@@ -33,8 +33,9 @@ AccelDensity = _quantity(u.VELOCITY_RANDOM_WALK, nonnegative=True)
 
 
 class RawMethod(VehicleMethod):
-    """A method of a raw-GNSS dataset: ``estimator = "wls"`` (the epoch-by-epoch SPP) or an
-    estimator of the constant-velocity filter. ``robust``, ``mixture``, ``options``,
+    """A method of a raw-GNSS dataset: ``estimator = "wls"`` (the epoch-by-epoch SPP; with a
+    ``[methods.robust]`` table of ``k0``, ``k1`` the robust SPP, IGG-III on standardised
+    residuals, :mod:`mixnav.gnss.spp`) or an estimator of the constant-velocity filter. ``robust``, ``mixture``, ``options``,
     ``smooth`` as for the odometry datasets (:class:`mixnav.config.vehicle_schema.VehicleMethod`);
     ``smooth`` adds the RTS-smoothed ``<name>-smoothed`` (filters only)."""
 
@@ -53,9 +54,12 @@ class RawMethod(VehicleMethod):
     @model_validator(mode="after")
     def _wls_plain(self):
         if self.estimator == "wls":
-            for key in ("robust", "mixture"):
-                if getattr(self, key) is not None:
-                    raise ValueError(f"{key}: the 'wls' method (epoch-by-epoch SPP) takes no {key} table")
+            if self.mixture is not None:
+                raise ValueError("mixture: the 'wls' method (epoch-by-epoch SPP) takes no mixture table "
+                                 "(a [robust] table makes it the robust SPP)")
+            if self.robust is not None and "c" in self.robust.model_fields_set:
+                raise ValueError("robust.c: the robust SPP has no prediction to adapt (only k0, k1: "
+                                 "IGG-III thresholds on standardised residuals)")
             if self.options:
                 raise ValueError("options: the 'wls' method (epoch-by-epoch SPP) takes no options")
             if self.smooth:

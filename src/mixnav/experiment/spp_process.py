@@ -62,6 +62,8 @@ class SppOutput:
     read_time_s: float
     solve_time_s: float
     results: dict = field(default_factory=dict)
+    robust_tracks: dict = field(default_factory=dict)   # name -> SppTrack of a robust SPP method
+    robust_time_s: dict = field(default_factory=dict)   # name -> its solve time [s]
     epochs: object = None              # PseudorangeEpochs the filters read (None without filters)
     init: InitialState | None = None
     filter_time_s: float = 0.0
@@ -69,10 +71,13 @@ class SppOutput:
     clock_offset: np.ndarray | None = None   # (k,) clock jumps taken off the filters' pseudoranges [m]
 
 
-def options(ds: RawGnssDataset) -> SppOptions:
+def options(ds: RawGnssDataset, method=None) -> SppOptions:
+    """The SPP settings of ``[raw_gnss]``; with a ``wls`` method that has a ``[robust]``
+    table, its IGG-III thresholds too (the robust SPP)."""
     c = ds.raw_gnss
+    robust = None if method is None or method.robust is None else (method.robust.k0, method.robust.k1)
     return SppOptions(elevation_mask=c.elevation_mask, sigma_a=c.sigma_a, sigma_b=c.sigma_b,
-                      troposphere=c.troposphere, ionosphere=c.ionosphere)
+                      troposphere=c.troposphere, ionosphere=c.ionosphere, robust=robust)
 
 
 def process_raw(ds: RawGnssDataset, source: str, folder: Path, seed: int = 0) -> SppOutput:
@@ -106,6 +111,12 @@ def solve_raw(ds: RawGnssDataset, source: str, folder: Path, obs, eph: Broadcast
     rp = ds.reference_point
     ref = None if rp is None else np.array([rp.latitude, rp.longitude, rp.height])
     po = SppOutput(ds, source, folder, obs, eph, track, ref, read_time_s, t2 - t1)
+    for m in ds.run_methods():
+        if m.estimator == "wls" and m.robust is not None:
+            t3 = _time.perf_counter()
+            po.robust_tracks[m.name] = solve_epochs(eph, obs.week, obs.tow, obs.epoch, obs.prn, obs.pseudorange,
+                                                    options(ds, m))
+            po.robust_time_s[m.name] = _time.perf_counter() - t3
     filters = [(k, m) for k, m in enumerate(ds.run_methods()) if m.estimator != "wls"]
     if filters:
         run_filters(po, filters, seed)
@@ -194,9 +205,10 @@ def ionosphere_applied(po: SppOutput) -> str:
     return "klobuchar" if po.ephemeris.iono_alpha is not None else "skipped"
 
 
-def solution_table(po: SppOutput) -> pd.DataFrame:
-    """One row per epoch (NaN where the epoch has no solution)."""
-    tr = po.track
+def solution_table(po: SppOutput, track: SppTrack | None = None) -> pd.DataFrame:
+    """One row per epoch (NaN where the epoch has no solution) of the plain SPP, or of
+    ``track`` (a robust SPP method's)."""
+    tr = po.track if track is None else track
     lla = np.full((len(tr.tow), 3), np.nan)
     ok = tr.ok
     if ok.any():
@@ -282,7 +294,7 @@ def raw_tables(po: SppOutput) -> dict[str, pd.DataFrame]:
     tables = {}
     for m in po.dataset.run_methods():
         if m.estimator == "wls":
-            tables[m.name] = solution_table(po)
+            tables[m.name] = solution_table(po, po.robust_tracks.get(m.name))
             continue
         for name in (m.name, f"{m.name}-smoothed"):
             if name in po.results:
@@ -321,6 +333,8 @@ def spp_metrics(table: pd.DataFrame, solve_time_s: float) -> dict:
 def method_metrics(po: SppOutput, name: str, table: pd.DataFrame) -> dict:
     """:func:`spp_metrics` of a method, with a filter's NIS and counted recoveries."""
     res = po.results.get(name)
+    if name in po.robust_tracks:
+        return {**spp_metrics(table, po.robust_time_s[name]), "robust": dict(po.robust_tracks[name].robust)}
     if res is None:
         return spp_metrics(table, po.solve_time_s)
     m = spp_metrics(table, res.timing.get("wall_time_s", 0.0))
@@ -351,7 +365,7 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None) -> dict:
         raise DataError(f"no epoch could be solved (status counts: {counts}); does the navigation file cover "
                         "the log's time and satellites?", file=po.observations.source)
     duration = float(table["time_s"].iloc[-1]) if len(table) else 0.0
-    work = po.solve_time_s + po.filter_time_s
+    work = po.solve_time_s + sum(po.robust_time_s.values()) + po.filter_time_s
     metrics: dict = {
         "dataset": po.dataset.dataset.name, "kind": po.dataset.dataset.kind, "source": po.source,
         "data_dir": str(po.data_dir), "mixnav_version": __version__,

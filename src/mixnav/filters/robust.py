@@ -42,19 +42,10 @@ import numpy as np
 from ..errors import ArgumentError
 from ..ins.error_model import ClockModel, StateLayout
 from ..ins.imu_model import ImuErrorModel
+from ..noise.robust import igg3_factors
 from ._ekf_kernels import ABSURD, kalman_correct
 from .ekf import ErrorStateEkf, KalmanEstimator
 from .kalman import innovation_is_absurd
-
-
-def igg3_factors(t: np.ndarray, k0: float, k1: float) -> np.ndarray:
-    """IGG-III weight factors of standardised innovations ``t`` (>= 0)."""
-    t = np.abs(np.asarray(t, dtype=float))
-    g = np.ones_like(t)
-    mid = (t > k0) & (t <= k1)
-    g[mid] = (k0 / t[mid]) * ((k1 - t[mid]) / (k1 - k0)) ** 2
-    g[t > k1] = 0.0
-    return g
 
 
 def adaptive_factor(d: float, c: float) -> float:
