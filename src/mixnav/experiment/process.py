@@ -59,6 +59,7 @@ class ProcessOutput:
     odometer: OdometerData | None = None  # the [aiding.odometer] file's samples, when one is read
     gnss_bias: tuple | None = None  # (times, (M, 3) NED m): the systematic part of the injected corruption
     checks: dict = field(default_factory=dict)  # data_checks: GNSS gaps, gyro-vs-track turning
+    observations: object = None  # GnssObservations the tight methods read ([raw_gnss] datasets)
 
 
 def find_data_dir(ds: Dataset, data: str | None, source: str) -> Path:
@@ -221,6 +222,9 @@ def process(ds: Dataset, source: str, data: str | None = None):
     if ds.dataset.kind == "gnss-raw":
         from .spp_process import process_raw
         return process_raw(ds, source, folder)
+    if ds.raw_gnss is not None:
+        from .rinex_ins import process_rinex_ins
+        return process_rinex_ins(ds, source, folder)
     t_read = _time.perf_counter()
     imu = install(read_imu(ds, folder), ds)
     all_fixes = read_gnss(ds, folder)
@@ -283,6 +287,7 @@ def data_checks(ds: Dataset, source: str, imu: ImuData, fixes: GnssFixes) -> dic
     import warnings
     from ..io.imu_checks import DataWarning, check_turns
     out: dict = {}
+    g, gk = gnss_section(ds)
     if len(fixes) == 0:
         raise DataError("no GNSS fix of the chosen qualities", file=fixes.source)
     t0, t1 = float(fixes.time[0]), float(fixes.time[-1])
@@ -292,20 +297,20 @@ def data_checks(ds: Dataset, source: str, imu: ImuData, fixes: GnssFixes) -> dic
                         f"GNSS {t0:.3f}..{t1:.3f} s (after the first IMU sample): different time bases "
                         "(GPS time of week, Unix time, time since start)?", file=fixes.source)
     out["gnss_fixes_outside_imu"] = int((~inside).sum())
-    for i, (a, b) in enumerate(ds.gnss.withhold):
+    for i, (a, b) in enumerate(g.withhold):
         if a >= t1 or b <= t0:
             raise ConfigError(f"window [{a:g}, {b:g}] s lies outside the GNSS data ({t0:.1f}..{t1:.1f} s after the "
                               "first IMU sample): nothing would be withheld", file=source, key=f"gnss.withhold[{i}]")
     d = np.diff(fixes.time)
     mid = 0.5 * (fixes.time[1:] + fixes.time[:-1])
-    withheld = in_windows(mid, tuple(tuple(w) for w in ds.gnss.withhold))
-    holes = np.flatnonzero((d > ds.gnss.max_gap) & ~withheld)
+    withheld = in_windows(mid, tuple(tuple(w) for w in g.withhold))
+    holes = np.flatnonzero((d > g.max_gap) & ~withheld)
     out["gnss_gaps_s"] = [[float(fixes.time[k]), float(fixes.time[k + 1])] for k in holes]
     if holes.size:
         k = int(holes[np.argmax(d[holes])])
-        msg = (f"{holes.size} hole(s) longer than gnss.max_gap = {ds.gnss.max_gap:g} s between GNSS fixes; the longest "
+        msg = (f"{holes.size} hole(s) longer than {gk}.max_gap = {g.max_gap:g} s between GNSS fixes; the longest "
                f"{d[k]:.1f} s from t = {fixes.time[k]:.1f} s (listed in metrics.json: gnss_gaps_s)")
-        if ds.gnss.gap_action == "fail":
+        if g.gap_action == "fail":
             raise DataError(msg, file=fixes.source)
         warnings.warn(f"{fixes.source}: {msg}", DataWarning, stacklevel=2)
     turns = check_turns(imu, fixes.time, fixes.lla, fixes.vel_n, f"the unit of the {ds.imu.format} format")
@@ -316,7 +321,14 @@ def data_checks(ds: Dataset, source: str, imu: ImuData, fixes: GnssFixes) -> dic
 
 def withheld_windows(po: ProcessOutput) -> tuple:
     """The GNSS windows withheld from the filters, ``((start, end), ...)`` [s]."""
-    return tuple(tuple(w) for w in po.dataset.gnss.withhold)
+    return tuple(tuple(w) for w in gnss_section(po.dataset)[0].withhold)
+
+
+def gnss_section(ds: Dataset):
+    """The dataset's GNSS section and its key: ``([gnss], "gnss")`` (fixes) or
+    ``([raw_gnss], "raw_gnss")`` (RINEX observations); both have ``withhold``, ``max_gap``
+    and ``gap_action``."""
+    return (ds.gnss, "gnss") if ds.gnss is not None else (ds.raw_gnss, "raw_gnss")
 
 
 def process_tables(po: ProcessOutput) -> dict[str, pd.DataFrame]:
