@@ -154,9 +154,6 @@ def process_rinex_ins(ds: Dataset, source: str, folder):
         if m.type == "tight-ekf" and m.use_range_rate and obs.doppler is None:
             raise ConfigError(f"method '{m.name}' uses range rates, but {obs_file} has no Doppler (D1C/D1) column: "
                               "set use_range_rate = false", file=source, key=f"methods[{i}].use_range_rate")
-        if m.type == "tight-ekf" and m.states < 17:
-            raise ConfigError(f"method '{m.name}' is tightly coupled: it needs the receiver clock states "
-                              f"(states = 17 or more, not {m.states})", file=source, key=f"methods[{i}].states")
     checks = data_checks(ds, source, imu, all_fixes)
     inst = ds.installation
     lever = np.asarray(inst.antenna_position, float) - np.asarray(inst.imu_position, float)

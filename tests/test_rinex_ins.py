@@ -1,0 +1,328 @@
+"""IMU + RINEX datasets through the tight INS: RINEX writers, the simulator's export and the
+round trip back through ``mixnav process`` (experiment/rinex_ins.py, experiment/export.py)."""
+
+import re
+
+import numpy as np
+import pytest
+
+from mixnav.config.loader import load_dataset, load_scenario, resolve
+from mixnav.errors import ArgumentError, ConfigError, DataError
+from mixnav.experiment import methods
+from mixnav.experiment.export import export_dataset, gps_seconds
+from mixnav.experiment.process import process
+from mixnav.geodesy.frames import ned_displacement
+from mixnav.gnss.constellation import NominalConstellation
+from mixnav.gnss.ephemeris import BroadcastEphemeris
+from mixnav.gnss.geometry import SECONDS_PER_WEEK
+from mixnav.ins.error_model import ClockModel
+from mixnav.io.rinex_obs import read_rinex_obs
+from mixnav.io.rinex_write import write_rinex_nav, write_rinex_obs
+
+# ------------------------------------------------------------------ writers
+
+
+def test_nav_file_gives_the_constellation_positions():
+    """Satellites from the written navigation file (georinex + IS-GPS-200 orbit) equal the
+    nominal constellation's to < 1 cm (D19.12 keeps 13 digits: ~0.1 mm of a 26 560 km
+    orbit), over 3 h that cross a GPS week roll-over (records in both weeks), with the
+    Klobuchar coefficients read back from the header."""
+    const = NominalConstellation.gps(5)
+    t0 = 2305 * SECONDS_PER_WEEK - 5400.0 + 0.0      # 1.5 h before the week ends
+    toe = np.arange(np.floor(t0 / 7200.0), np.ceil((t0 + 3 * 3600.0) / 7200.0) + 1) * 7200.0
+    alpha, beta = [1.1e-8, 7.5e-9, -6.0e-8, -6.0e-8], [9.0e4, 4.9e4, -1.3e5, -2.6e5]
+    import tempfile
+    from pathlib import Path
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "nav.rnx"
+        write_rinex_nav(path, const.broadcast_records(t0, toe), iono_alpha=alpha, iono_beta=beta)
+        eph = BroadcastEphemeris.from_rinex(path)
+    assert len(eph) == len(toe) * 30
+    np.testing.assert_allclose(eph.iono_alpha, alpha, rtol=1e-4)
+    np.testing.assert_allclose(eph.iono_beta, beta, rtol=1e-4)
+    worst_p = worst_v = 0.0
+    for t in np.linspace(0.0, 3 * 3600.0, 13):
+        s = const.states(t)
+        week = np.floor((t0 + t) / SECONDS_PER_WEEK)
+        b = eph.states(week, (t0 - week * SECONDS_PER_WEEK) + t, s.prn)
+        assert len(b) == 30
+        worst_p = max(worst_p, np.abs(b.pos_ecef - s.pos_ecef).max())
+        worst_v = max(worst_v, np.abs(b.vel_ecef - s.vel_ecef).max())
+        assert np.all(b.clock_bias == 0.0)
+    assert worst_p < 0.01 and worst_v < 1e-3
+
+
+def test_obs_file_read_back_by_the_reader_and_georinex(tmp_path):
+    """Pseudoranges and Doppler written with sub-millimetre digits come back from our reader
+    and from georinex rounded to the file's 1 mm (1 mHz): |difference| <= 0.5 mm; epoch
+    times exact; a blank pseudorange is counted, not read."""
+    import georinex as gr
+    rng = np.random.default_rng(2)
+    k, per = 5, 6
+    week = np.full(k, 2305)
+    tow = 295200.0 + np.arange(k) * 0.5
+    epoch = np.repeat(np.arange(k), per)
+    prn = np.tile(np.arange(3, 3 + per), k)
+    rho = 2.0e7 + rng.uniform(0, 5e6, k * per)
+    dop = rng.uniform(-4000, 4000, k * per)
+    rho[7] = np.nan
+    write_rinex_obs(tmp_path / "o.rnx", week, tow, epoch, prn, rho, doppler=dop)
+    r = read_rinex_obs(tmp_path / "o.rnx")
+    np.testing.assert_array_equal(r.tow, tow)
+    np.testing.assert_array_equal(r.week, week)
+    ok = np.isfinite(rho)
+    assert r.rejected == {"no C1C pseudorange": 1}
+    np.testing.assert_array_equal(r.prn, prn[ok])
+    assert np.abs(r.pseudorange - rho[ok]).max() <= 0.5e-3 + 1e-8
+    assert np.abs(r.doppler - dop[ok]).max() <= 0.5e-3 + 1e-8
+    ds = gr.load(tmp_path / "o.rnx")
+    g = ds["C1C"].values
+    sv = [int(s[1:]) for s in ds.sv.values]
+    for i in np.nonzero(ok)[0]:
+        assert abs(g[epoch[i], sv.index(prn[i])] - rho[i]) <= 0.5e-3 + 1e-8
+    # without Doppler the reader says so
+    write_rinex_obs(tmp_path / "p.rnx", week, tow, epoch, prn, rho)
+    assert read_rinex_obs(tmp_path / "p.rnx").doppler is None
+
+
+def test_writers_refuse_what_the_format_cannot_hold(tmp_path):
+    with pytest.raises(ArgumentError) as exc:
+        write_rinex_obs(tmp_path / "o.rnx", [2305], [1.0], [0], [33], [2e7])
+    assert exc.value.argument == "prn"
+    with pytest.raises(ArgumentError) as exc:
+        write_rinex_obs(tmp_path / "o.rnx", [2305, 2305], [1.0, 1.0], [0, 1], [3, 3], [2e7, 2e7])
+    assert exc.value.argument == "tow"
+    rec = NominalConstellation.gps(4).broadcast_records(0.0, [7200.5])
+    with pytest.raises(ArgumentError, match="whole seconds"):
+        write_rinex_nav(tmp_path / "n.rnx", rec)
+    assert not (tmp_path / "n.rnx").exists() and not (tmp_path / "o.rnx").exists()
+    with pytest.raises(ArgumentError) as exc:
+        gps_seconds("2024-03-13T10:00:00.5")
+    assert exc.value.argument == "start"
+
+
+# ------------------------------------------------------------------ the round trip
+
+SHORT_SEGMENTS = """segments = [
+  { type = "static",     duration = "15 s" },
+  { type = "accelerate", duration = "10 s", acceleration = "1.5 m/s^2" },
+  { type = "uniform",    duration = "15 s" },
+  { type = "turn",       duration = "9 s",  angle = "90 deg" },
+  { type = "uniform",    duration = "15 s" },
+  { type = "turn",       duration = "10 s", angle = "-60 deg" },
+  { type = "uniform",    duration = "11 s" },
+]"""
+
+
+def short_scenario(folder):
+    """tight-demo cut to 85 s: 15 s at rest, then a drive with two turns; 3 satellites only
+    from 55 s to 65 s (the tight filter's case)."""
+    text, _ = resolve("tight-demo")
+    a = text.index("segments = [")
+    b = text.index("]", text.index('{ type = "static",     duration = "25 s" }')) + 1
+    text = text[:a] + SHORT_SEGMENTS + text[b:]
+    text = text.replace('window = ["300 s", "360 s"]', 'window = ["55 s", "65 s"]')
+    text = text.replace('name = "tight-demo"', 'name = "tight-short"')
+    p = folder / "tight-short.toml"
+    p.write_text(text)
+    return p
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    root = tmp_path_factory.mktemp("rinexins")
+    sc, source, _ = load_scenario(str(short_scenario(root)))
+    ex = export_dataset(sc, root / "data", source=source)
+    ds, dsrc, _ = load_dataset(str(ex.files["dataset"]))
+    with pytest.warns(Warning, match="hole"):     # the 10 s without a fix is said
+        po = process(ds, dsrc)
+    return sc, source, ex, po
+
+
+def test_export_writes_a_dataset_of_the_run(exported):
+    sc, _, ex, po = exported
+    assert set(ex.files) == {"imu", "observations", "navigation", "reference", "dataset"}
+    assert ex.methods == ["loose", "tight"] and not ex.skipped_methods
+    ds = po.dataset
+    assert ds.raw_gnss is not None and ds.gnss is None
+    np.testing.assert_allclose(ds.installation.antenna_position, sc.gnss.lever_arm)
+    # the IMU read back is the simulated one (17 digits) on the same time axis
+    sim = ex.sim
+    np.testing.assert_array_equal(po.imu.dtheta, sim.imu.dtheta)
+    np.testing.assert_array_equal(po.imu.dvel, sim.imu.dvel)
+    assert np.abs(po.imu.time - sim.imu.time).max() < 1e-9
+    c = po.checks["rinex"]
+    assert c["doppler"] and c["ionosphere"] == "off" and c["observations_not_filtered"].get("no ephemeris", 0) == 0
+    assert c["spp_status"]["too few satellites"] == 10      # the 10 epochs with 3 satellites
+
+
+def test_rinex_observables_equal_the_simulated_ones(exported):
+    """The tight filter's observables rebuilt from the RINEX files (corrections, Earth
+    rotation from the SPP position, Doppler) equal the simulator's: pseudoranges to the
+    file's 1 mm rounding (0.5 mm), range rates to 1 mHz (0.2 mm/s), satellite positions to
+    < 1 cm (the transmit time from the pseudorange carries the receiver clock, tens of
+    metres: 0.1 us of orbit, a few mm), velocities to 1 mm/s; the same satellites at the
+    same epochs."""
+    _, _, ex, po = exported
+    a, b = ex.sim.observations, po.observations
+    np.testing.assert_array_equal(a.time, b.time)
+    worst = np.zeros(4)
+    for k in range(len(a)):
+        pa, pb = a.prn[k][a.valid[k]], list(b.prn[k][b.valid[k]])
+        assert sorted(pa) == sorted(pb)
+        for j, p in enumerate(pa):
+            i = pb.index(p)
+            worst = np.maximum(worst, [abs(a.pseudorange[k, j] - b.pseudorange[k, i]),
+                                       abs(a.range_rate[k, j] - b.range_rate[k, i]),
+                                       np.linalg.norm(a.sat_pos[k, j] - b.sat_pos[k, i]),
+                                       np.linalg.norm(a.sat_vel[k, j] - b.sat_vel[k, i])])
+    assert worst[0] <= 0.5e-3 + 1e-7 and worst[1] <= 2e-4 and worst[2] < 0.01 and worst[3] < 1e-3
+
+
+def test_tight_ekf_on_rinex_equals_the_in_simulation_one(exported):
+    """Same start (the simulation's initial estimate), same IMU: the tight EKF on the RINEX
+    observables follows the in-simulation tight EKF to < 1 cm at every epoch (the
+    observables agree to millimetres, above)."""
+    sc, source, ex, po = exported
+    sim = ex.sim
+    m = next(x for x in sc.methods if x.type == "tight-ekf")
+    s = sc.gnss.satellites
+    clock = ClockModel(q_bias=s.clock_bias_noise ** 2, q_drift=s.clock_drift_noise ** 2)
+    lever = np.asarray(sc.gnss.lever_arm)
+    res = []
+    for obs in (sim.observations, po.observations):
+        f, meas = methods.build(m, sim.imu_model, sim.fixes, lever, source, 1, observations=obs, clock=clock)
+        res.append(f.run(sim.imu, sim.init, meas))
+    np.testing.assert_allclose(res[0].time, res[1].time, atol=1e-9)
+    d = ned_displacement(res[1].nav[:, 7:10], res[0].nav[:, 7:10])
+    assert np.abs(d).max() < 0.01
+
+
+def test_processed_dataset_scores_like_the_simulation(exported):
+    """``mixnav process`` of the export (SPP, level-then-gnss alignment at the first fix at
+    2 m/s, clock from the SPP and Doppler) against the in-simulation tight EKF on the same
+    draws (started at t = 0 from truth plus a draw): the two start differently, so they
+    differ by metres at the alignment; both then follow the same measurements and the
+    difference decays: below 0.5 m horizontally from 20 s after the alignment on (measured
+    0.06-0.22 m: what is left is the different error-state covariance the two starts give).
+    The processed tight filter is consistent: mean position NEES in (1, 6) (3 if exact; the
+    errors of 60 epochs are correlated in time)."""
+    sc, source, ex, po = exported
+    sim = ex.sim
+    m = next(x for x in sc.methods if x.type == "tight-ekf")
+    s = sc.gnss.satellites
+    clock = ClockModel(q_bias=s.clock_bias_noise ** 2, q_drift=s.clock_drift_noise ** 2)
+    f, meas = methods.build(m, sim.imu_model, sim.fixes, np.asarray(sc.gnss.lever_arm), source, 1,
+                            observations=sim.observations, clock=clock)
+    ref = f.run(sim.imu, sim.init, meas)
+    got = po.results["tight"]
+    assert po.init.time < 25.0
+    t = np.round(got.time, 6)
+    later = t >= po.init.time + 20.0
+    k = np.searchsorted(np.round(ref.time, 6), t[later])
+    d = ned_displacement(got.nav[later, 7:10], ref.nav[k, 7:10])
+    assert np.hypot(d[:, 0], d[:, 1]).max() < 0.5
+    from mixnav.experiment.process import process_tables
+    from mixnav.experiment.run import method_metrics
+    tables = process_tables(po)
+    mt = method_metrics(got, tables["tight"], ())
+    assert 1.0 < mt["nees_pos_mean"] < 6.0
+    assert mt["horizontal_rmse_m"] < 1.5
+
+
+# ------------------------------------------------------------------ bad input
+
+
+def _rewrite(src, dst, **subs):
+    text = src.read_text()
+    for old, new in subs.items():
+        assert old in text, old
+        text = text.replace(old, new)
+    dst.write_text(text)
+    return dst
+
+
+def test_time_axes_that_do_not_overlap_name_both_files(exported, tmp_path):
+    _, _, ex, _ = exported
+    p = _rewrite(ex.files["dataset"], tmp_path / "d.toml",
+                 **{'imu_time = "gps-week-seconds"': 'imu_time = "gps-seconds"'})
+    ds, src, _ = load_dataset(str(p))
+    with pytest.raises(DataError) as exc:
+        process(ds, src)
+    msg = str(exc.value)
+    assert "obs.rnx" in msg and "imu.csv" in msg and "do not overlap" in msg
+
+
+def test_missing_navigation_and_missing_ephemeris(exported, tmp_path):
+    """No navigation file: a DataError naming it. A navigation file without one observed
+    satellite: its observations are counted (SPP and the tight rows), not an error."""
+    _, _, ex, _ = exported
+    folder = ex.files["dataset"].parent
+    p = _rewrite(ex.files["dataset"], tmp_path / "d.toml", **{'navigation = "nav.rnx"': 'navigation = "none.rnx"'})
+    ds, src, _ = load_dataset(str(p))
+    with pytest.raises(DataError, match="none.rnx"):
+        process(ds, src)
+    # drop one satellite's records from the navigation file
+    obs = read_rinex_obs(folder / "obs.rnx")
+    prn = int(np.bincount(obs.prn).argmax())
+    lines = (folder / "nav.rnx").read_text().splitlines()
+    end = lines.index(next(ln for ln in lines if "END OF HEADER" in ln)) + 1
+    body = lines[end:]
+    kept = [ln for i, ln in enumerate(body) if not body[i - i % 8].startswith(f"G{prn:02d} ")]
+    nav = tmp_path / "nav-less.rnx"
+    nav.write_text("\n".join(lines[:end] + kept) + "\n")
+    p = _rewrite(ex.files["dataset"], tmp_path / "e.toml",
+                 **{'navigation = "nav.rnx"': f'navigation = "{nav}"'})
+    ds, src, _ = load_dataset(str(p))
+    with pytest.warns(Warning):
+        po = process(ds, src)
+    n = int((obs.prn == prn).sum())
+    c = po.checks["rinex"]
+    assert c["satellites_skipped_by_spp"]["no ephemeris"] == n
+    assert c["observations_not_filtered"]["no ephemeris"] == n
+    assert not (po.observations.prn == prn).any()
+
+
+def test_dataset_sections_and_methods_are_checked(exported, tmp_path):
+    _, _, ex, _ = exported
+    d = ex.files["dataset"]
+    cases = [
+        ({"[raw_gnss]": '[gnss]\nformat = "csv"\nfile = "x.csv"\n\n[raw_gnss]'}, "raw_gnss", "not both"),
+        ({'type = "tight-ekf"\nstates = 17': 'type = "tdcp-ekf"\nstates = 17'}, "methods[1].type", "carrier"),
+        ({'type = "tight-ekf"\nstates = 17': 'type = "tight-ekf"\nstates = 15'}, "methods[1].states", "clock"),
+        ({'format = "rinex-obs"': 'format = "android-gnsslogger"'}, "raw_gnss.format", None),
+    ]
+    text = d.read_text()
+    a, b = text.index("[raw_gnss]"), text.index("[reference]")
+    (tmp_path / "none.toml").write_text(text[:a] + text[b:])      # neither [gnss] nor [raw_gnss]
+    with pytest.raises(ConfigError) as exc:
+        load_dataset(str(tmp_path / "none.toml"))
+    assert exc.value.key == "gnss" and "raw_gnss" in str(exc.value)
+    for i, (subs, key, match) in enumerate(cases):
+        p = _rewrite(d, tmp_path / f"c{i}.toml", **subs)
+        with pytest.raises(ConfigError) as exc:
+            load_dataset(str(p))
+        if key is not None:
+            assert exc.value.key == key, (i, exc.value)
+        if match is not None:
+            assert re.search(match, str(exc.value)), (i, exc.value)
+
+
+def test_range_rates_without_doppler_are_refused(exported, tmp_path):
+    _, _, ex, _ = exported
+    folder = ex.files["dataset"].parent
+    obs = read_rinex_obs(folder / "obs.rnx")
+    write_rinex_obs(tmp_path / "nodop.rnx", obs.week, obs.tow, obs.epoch, obs.prn, obs.pseudorange)
+    p = _rewrite(ex.files["dataset"], tmp_path / "d.toml",
+                 **{'file = "obs.rnx"': f'file = "{tmp_path / "nodop.rnx"}"'})
+    ds, src, _ = load_dataset(str(p))
+    with pytest.raises(ConfigError) as exc:
+        process(ds, src)
+    assert exc.value.key == "methods[1].use_range_rate" and "Doppler" in str(exc.value)
+
+
+def test_export_needs_raw_satellites(tmp_path):
+    sc, src, _ = load_scenario("loose-demo")
+    with pytest.raises(ConfigError) as exc:
+        export_dataset(sc, tmp_path / "x", source=src)
+    assert exc.value.key == "gnss.satellites"
