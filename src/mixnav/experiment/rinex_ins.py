@@ -85,7 +85,7 @@ def epoch_axis(ds: Dataset, obs, imu_raw, imu_file: str) -> tuple[np.ndarray, fl
 def process_rinex_ins(ds: Dataset, source: str, folder):
     """Read, align and filter an ``ins-gnss`` dataset with ``[raw_gnss]`` (module docstring).
     Returns a :class:`mixnav.experiment.process.ProcessOutput`."""
-    from .process import ProcessOutput, _shift, data_checks, initial_state, install, read_imu, read_reference
+    from .ins_common import ProcessOutput, _shift, data_checks, initial_state, install, read_imu, read_reference
     c = ds.raw_gnss
     t_read = _time.perf_counter()
     imu = install(read_imu(ds, folder), ds)
