@@ -243,36 +243,50 @@ def _rewrite(src, dst, **subs):
 
 
 def test_time_axes_that_do_not_overlap_name_both_files(exported, tmp_path):
+    """IMU stamps read as GPS seconds since 1980 while they are seconds of week: a DataError
+    naming both files. (Asked for the ionosphere without coefficients in the header: warned.)"""
     _, _, ex, _ = exported
     p = _rewrite(ex.files["dataset"], tmp_path / "d.toml",
-                 **{'imu_time = "gps-week-seconds"': 'imu_time = "gps-seconds"'})
+                 **{'imu_time = "gps-week-seconds"': 'imu_time = "gps-seconds"',
+                    "ionosphere = false": "ionosphere = true"})
     ds, src, _ = load_dataset(str(p))
-    with pytest.raises(DataError) as exc:
+    with pytest.raises(DataError) as exc, pytest.warns(Warning, match="Klobuchar"):
         process(ds, src)
     msg = str(exc.value)
     assert "obs.rnx" in msg and "imu.csv" in msg and "do not overlap" in msg
 
 
-def test_missing_navigation_and_missing_ephemeris(exported, tmp_path):
+def test_missing_navigation_missing_ephemeris_and_klobuchar(exported, tmp_path):
     """No navigation file: a DataError naming it. A navigation file without one observed
-    satellite: its observations are counted (SPP and the tight rows), not an error."""
+    satellite: its observations are counted (SPP and the tight rows), not an error. With
+    the header's Klobuchar coefficients and ``ionosphere = true`` the correction function
+    takes the broadcast delay off every pseudorange: the tight observables are the
+    simulated ones minus the delay evaluated independently at the true antenna (to 5 mm:
+    the 1 mm file rounding plus the delay's change between the SPP fix and the truth)."""
+    from mixnav.gnss.spp import klobuchar
+    from mixnav.gnss.geometry import elevation_azimuth
+    from mixnav.geodesy.frames import ecef_to_lla, lla_to_ecef
+    from mixnav.measurements.loose import antenna_lla
     _, _, ex, _ = exported
     folder = ex.files["dataset"].parent
     p = _rewrite(ex.files["dataset"], tmp_path / "d.toml", **{'navigation = "nav.rnx"': 'navigation = "none.rnx"'})
     ds, src, _ = load_dataset(str(p))
     with pytest.raises(DataError, match="none.rnx"):
         process(ds, src)
-    # drop one satellite's records from the navigation file
+    # drop one satellite's records (8 lines each) from the navigation file, add iono coefficients
     obs = read_rinex_obs(folder / "obs.rnx")
     prn = int(np.bincount(obs.prn).argmax())
     lines = (folder / "nav.rnx").read_text().splitlines()
     end = lines.index(next(ln for ln in lines if "END OF HEADER" in ln)) + 1
     body = lines[end:]
     kept = [ln for i, ln in enumerate(body) if not body[i - i % 8].startswith(f"G{prn:02d} ")]
+    alpha, beta = [1.1176e-08, 7.4506e-09, -5.9605e-08, -5.9605e-08], [9.0112e+04, 4.9152e+04, -1.3107e+05, -2.6214e+05]
+    iono = ["GPSA " + "".join(f"{x:12.4E}" for x in alpha), "GPSB " + "".join(f"{x:12.4E}" for x in beta)]
+    iono = [f"{x:<60}IONOSPHERIC CORR" for x in iono]
     nav = tmp_path / "nav-less.rnx"
-    nav.write_text("\n".join(lines[:end] + kept) + "\n")
+    nav.write_text("\n".join(lines[:end - 1] + iono + lines[end - 1:end] + kept) + "\n")
     p = _rewrite(ex.files["dataset"], tmp_path / "e.toml",
-                 **{'navigation = "nav.rnx"': f'navigation = "{nav}"'})
+                 **{'navigation = "nav.rnx"': f'navigation = "{nav}"', "ionosphere = false": "ionosphere = true"})
     ds, src, _ = load_dataset(str(p))
     with pytest.warns(Warning):
         po = process(ds, src)
@@ -281,6 +295,26 @@ def test_missing_navigation_and_missing_ephemeris(exported, tmp_path):
     assert c["satellites_skipped_by_spp"]["no ephemeris"] == n
     assert c["observations_not_filtered"]["no ephemeris"] == n
     assert not (po.observations.prn == prn).any()
+    assert c["ionosphere"] == "klobuchar"
+    a, b, truth = ex.sim.observations, po.observations, ex.sim.truth
+    worst, seen = 0.0, 0
+    for k in range(0, len(a), 7):
+        kt = int(np.searchsorted(truth.time, a.time[k] - 1e-9))
+        nav_t = np.concatenate([truth.q_nb[kt], truth.v_n[kt], truth.lla[kt]])
+        r = lla_to_ecef(antenna_lla(nav_t, po.lever))
+        lla = ecef_to_lla(r)
+        pb = list(b.prn[k][b.valid[k]])
+        for j, p_ in enumerate(a.prn[k][a.valid[k]]):
+            if p_ not in pb:
+                continue
+            i = pb.index(p_)
+            el, az = elevation_azimuth(r, a.sat_pos[k, j][None])
+            tow = (ex.gps_start_s + a.time[k]) % SECONDS_PER_WEEK
+            d = klobuchar(lla[0], lla[1], el, az, tow, alpha, beta)[0]
+            assert d > 1.0                     # metres: the check has something to see
+            worst = max(worst, abs((a.pseudorange[k, j] - d) - b.pseudorange[k, i]))
+            seen += 1
+    assert seen > 50 and worst < 0.005
 
 
 def test_dataset_sections_and_methods_are_checked(exported, tmp_path):
@@ -326,3 +360,27 @@ def test_export_needs_raw_satellites(tmp_path):
     with pytest.raises(ConfigError) as exc:
         export_dataset(sc, tmp_path / "x", source=src)
     assert exc.value.key == "gnss.satellites"
+
+
+def test_export_from_python_and_the_command(tmp_path):
+    """``mixnav.export_rinex`` writes the files (and the folder is the export's own); the
+    command refuses a folder holding other files before simulating anything (exit 2)."""
+    import mixnav
+    from typer.testing import CliRunner
+
+    from mixnav.cli import app
+    from mixnav.io.outdir import read_marker
+    scen = short_scenario(tmp_path)
+    files = mixnav.export_rinex(str(scen), tmp_path / "out", seed=3)
+    assert sorted(files) == ["dataset", "imu", "navigation", "observations", "reference"]
+    assert all(p.is_file() for p in files.values())
+    assert read_marker(tmp_path / "out")["command"] == "export"
+    with pytest.raises(ArgumentError) as exc:
+        mixnav.export_rinex(str(scen), tmp_path / "out2", seed=-1)
+    assert exc.value.argument == "seed"
+    (tmp_path / "busy").mkdir()
+    (tmp_path / "busy" / "mine.txt").write_text("x")
+    r = CliRunner().invoke(app, ["export", str(scen), "--out", str(tmp_path / "busy")])
+    assert r.exit_code == 2 and "not empty" in r.output
+    r = CliRunner().invoke(app, ["export", str(scen), "--out", str(tmp_path / "c"), "--start", "yesterday"])
+    assert r.exit_code == 2 and "start" in r.output
