@@ -384,3 +384,48 @@ def test_export_from_python_and_the_command(tmp_path):
     assert r.exit_code == 2 and "not empty" in r.output
     r = CliRunner().invoke(app, ["export", str(scen), "--out", str(tmp_path / "c"), "--start", "yesterday"])
     assert r.exit_code == 2 and "start" in r.output
+
+
+def test_observation_and_navigation_files_in_parts(exported, tmp_path):
+    """The observation file cut in two (and a second, unrelated navigation file) gives the
+    same tight observables as the one file; parts out of time order: a DataError naming
+    the one that starts too early."""
+    _, _, ex, po = exported
+    folder = ex.files["dataset"].parent
+    obs = read_rinex_obs(folder / "obs.rnx")
+    half = len(obs.tow) // 2
+    for name, sel in (("a.rnx", obs.epoch < half), ("b.rnx", obs.epoch >= half)):
+        ep = obs.epoch[sel]
+        write_rinex_obs(tmp_path / name, obs.week[np.unique(ep)], obs.tow[np.unique(ep)], ep - ep.min(),
+                        obs.prn[sel], obs.pseudorange[sel], doppler=obs.doppler[sel])
+    other = NominalConstellation.gps(5).broadcast_records(gps_seconds("2020-01-01T00:00:00"), [1.2618e9])
+    write_rinex_nav(tmp_path / "old.rnx", other)
+    p = _rewrite(ex.files["dataset"], tmp_path / "d.toml",
+                 **{'file = "obs.rnx"': f'file = ["{tmp_path / "a.rnx"}", "{tmp_path / "b.rnx"}"]',
+                    'navigation = "nav.rnx"': f'navigation = ["nav.rnx", "{tmp_path / "old.rnx"}"]'})
+    ds, src, _ = load_dataset(str(p))
+    with pytest.warns(Warning, match="hole"):
+        got = process(ds, src)
+    a, b = po.observations, got.observations
+    for k in ("time", "valid", "prn", "pseudorange", "range_rate", "sat_pos"):
+        np.testing.assert_array_equal(getattr(a, k), getattr(b, k))
+    assert len(got.checks["rinex"]["observation_files"]) == 2
+    p = _rewrite(p, tmp_path / "e.toml", **{f'"{tmp_path / "a.rnx"}", "{tmp_path / "b.rnx"}"':
+                                            f'"{tmp_path / "b.rnx"}", "{tmp_path / "a.rnx"}"'})
+    ds, src, _ = load_dataset(str(p))
+    with pytest.raises(DataError) as exc:
+        process(ds, src)
+    assert exc.value.file.endswith("a.rnx") and "time order" in str(exc.value)
+
+
+def test_rinex2_doppler_is_read(tmp_path):
+    """RINEX 2's ``D1`` beside ``C1``, blank where the receiver gave none (NaN)."""
+    from .test_rinex_obs import _time, _write_rinex2
+    times = [_time(2305, 295200.0 + k) for k in range(3)]
+    recs = [[("G05", {"C1": 2.1e7 + k, "D1": -1500.25 + k}), ("G12", {"C1": 2.3e7 + k})] for k in range(3)]
+    _write_rinex2(tmp_path / "o.11o", times, recs, types=("C1", "D1"), kind="G (GPS)")
+    r = read_rinex_obs(tmp_path / "o.11o")
+    assert r.code == "C1"
+    np.testing.assert_array_equal(r.prn, [5, 12] * 3)
+    np.testing.assert_allclose(r.doppler[0::2], -1500.25 + np.arange(3))
+    assert np.isnan(r.doppler[1::2]).all()

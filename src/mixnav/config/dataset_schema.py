@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from .. import units as u
 from .schema import (AidingConfig, AngleVec, AngSigma, LengthVec, MethodConfig, PosSigma, Strict, VelSigma, Windows,
@@ -163,8 +163,9 @@ class InsRawGnss(RawGnss):
     observation file and its navigation file for the tightly coupled INS
     (:mod:`mixnav.experiment.rinex_ins`).
 
-    The keys of the raw-GNSS datasets (``format = "rinex-obs"``, ``file``, ``navigation``,
-    the SPP's ``elevation_mask``, ``sigma_a``, ``sigma_b``, ``troposphere``,
+    The keys of the raw-GNSS datasets (``format = "rinex-obs"``, ``file``, ``navigation``:
+    here each one file or a list of files, e.g. hourly observation files and the daily
+    navigation files they span, observation files in time order; the SPP's ``elevation_mask``, ``sigma_a``, ``sigma_b``, ``troposphere``,
     ``ionosphere``), plus: ``imu_time``: how the IMU file's time stamps (after
     ``installation.imu_time_offset``) are given, ``"gps-week-seconds"`` (GPS seconds of the
     week of the first RINEX epoch, as KF-GINS files; continuing past 604800 s across a week
@@ -177,6 +178,8 @@ class InsRawGnss(RawGnss):
     (a withheld epoch gives neither the SPP fix nor the tight rows)."""
 
     format: Literal["rinex-obs"] = "rinex-obs"
+    file: str | list[str]
+    navigation: str | list[str]
     imu_time: Literal["gps-week-seconds", "gps-seconds"] = "gps-week-seconds"
     pseudorange_sigma: _quantity(u.LENGTH, positive=True) = 3.0  # type: ignore[valid-type]
     range_rate_sigma: _quantity(u.VELOCITY, positive=True) = 0.1  # type: ignore[valid-type]
@@ -186,6 +189,18 @@ class InsRawGnss(RawGnss):
     withhold: Windows = Field(default_factory=list)
     max_gap: Gap = 5.0
     gap_action: Literal["warn", "fail"] = "warn"
+
+    @field_validator("file", "navigation")
+    @classmethod
+    def _some(cls, v):
+        if isinstance(v, list) and not v:
+            raise ValueError("give at least one file")
+        return v
+
+    def files(self, key: str) -> list[str]:
+        """``file`` or ``navigation`` as a list."""
+        v = getattr(self, key)
+        return [v] if isinstance(v, str) else list(v)
 
 
 class ReferencePoint(Strict):

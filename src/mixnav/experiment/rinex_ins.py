@@ -51,7 +51,7 @@ from ..gnss.raw_observations import doppler_velocity, tight_observations
 from ..gnss.spp import SppOptions, clock_jumps, corrected_pseudoranges, solve_epochs
 from ..ins.error_model import ClockModel
 from ..io.imu_checks import DataWarning
-from ..io.rinex_obs import read_rinex_obs
+from ..io.rinex_obs import RinexPseudoranges, read_rinex_obs
 from ..sim.gnss import in_windows
 from . import methods
 from .aiding import AidingInputs, installation_check
@@ -68,6 +68,51 @@ def _subset(obs, keep):
     f = {k: getattr(obs, k) for k in ("time", "valid", "prn", "sat_pos", "sat_vel", "pseudorange", "range_rate",
                                       "carrier", "elevation", "clock")}
     return replace(obs, **{k: v[keep] for k, v in f.items()})
+
+
+def read_observations(paths) -> RinexPseudoranges:
+    """The GPS pseudoranges (and Doppler) of one or more RINEX observation files, in time order
+    (:func:`mixnav.io.rinex_obs.read_rinex_obs` each): one record whose epochs run on from
+    file to file. A file that does not start after the previous one's last epoch is a
+    DataError naming it; Doppler missing from some of the files is NaN there (counted as
+    ``no Doppler`` by the tight observables)."""
+    parts = [read_rinex_obs(p) for p in paths]
+    if len(parts) == 1:
+        return parts[0]
+    for prev, (p, cur) in zip(parts, zip(paths[1:], parts[1:])):
+        last = prev.week[-1] * SECONDS_PER_WEEK - cur.week[0] * SECONDS_PER_WEEK + prev.tow[-1]
+        if not cur.tow[0] > last:
+            raise DataError(f"its first epoch (GPS week {cur.week[0]}, {cur.tow[0]:.3f} s) is not after the last "
+                            f"epoch of {prev.source}: give the observation files in time order, without overlap",
+                            file=str(p))
+    offsets = np.cumsum([0] + [len(x.tow) for x in parts[:-1]])
+    any_doppler = any(x.doppler is not None for x in parts)
+    rejected: dict = {}
+    for x in parts:
+        for key, n in x.rejected.items():
+            rejected[key] = rejected.get(key, 0) + n
+    cat = np.concatenate
+    return RinexPseudoranges(
+        week=cat([x.week for x in parts]), tow=cat([x.tow for x in parts]),
+        epoch=cat([x.epoch + o for x, o in zip(parts, offsets)]), prn=cat([x.prn for x in parts]),
+        pseudorange=cat([x.pseudorange for x in parts]), code="/".join(dict.fromkeys(x.code for x in parts)),
+        rejected=rejected, epochs_all_rejected=sum(x.epochs_all_rejected for x in parts),
+        version=parts[0].version, source=", ".join(x.source for x in parts),
+        doppler=cat([x.doppler if x.doppler is not None else np.full(len(x.prn), np.nan) for x in parts])
+        if any_doppler else None)
+
+
+def read_navigation(paths) -> BroadcastEphemeris:
+    """The GPS broadcast records of one or more RINEX navigation files, as one ephemeris (the
+    Klobuchar coefficients of the first header that has them)."""
+    parts = [BroadcastEphemeris.from_rinex(p) for p in paths]
+    if len(parts) == 1:
+        return parts[0]
+    rec = {k: np.concatenate([x.rec[k] for x in parts]) for k in parts[0].rec}
+    iono = next((x for x in parts if x.iono_alpha is not None), None)
+    return BroadcastEphemeris(rec, source=", ".join(x.source for x in parts),
+                              iono_alpha=None if iono is None else iono.iono_alpha,
+                              iono_beta=None if iono is None else iono.iono_beta)
 
 
 def epoch_axis(ds: Dataset, obs, imu_raw, imu_file: str) -> tuple[np.ndarray, float]:
@@ -89,13 +134,16 @@ def process_rinex_ins(ds: Dataset, source: str, folder):
     c = ds.raw_gnss
     t_read = _time.perf_counter()
     imu = install(read_imu(ds, folder), ds)
-    obs_file, nav_file = folder / c.file, folder / c.navigation
-    obs = read_rinex_obs(obs_file)
-    eph = BroadcastEphemeris.from_rinex(nav_file)
+    obs_files = [folder / f for f in c.files("file")]
+    nav_files = [folder / f for f in c.files("navigation")]
+    obs_file = obs_files[0]     # the file an error names (the message lists them all)
+    obs = read_observations(obs_files)
+    eph = read_navigation(nav_files)
     reference = read_reference(ds, folder)
     read_time = _time.perf_counter() - t_read
     if c.ionosphere and eph.iono_alpha is None:   # asked for, and impossible: said, not silent
-        warnings.warn(f"{nav_file}: the header has no ionosphere (Klobuchar) coefficients, so the ionosphere "
+        warnings.warn(f"{', '.join(map(str, nav_files))}: the header has no ionosphere (Klobuchar) coefficients, "
+                      "so the ionosphere "
                       "correction is skipped and every pseudorange keeps its delay (metrics.json: "
                       "rinex.ionosphere)", DataWarning, stacklevel=3)
     t_epoch, base = epoch_axis(ds, obs, imu, str(ds.imu.file))
@@ -106,7 +154,7 @@ def process_rinex_ins(ds: Dataset, source: str, folder):
     if not inside.any():
         raise DataError(f"the RINEX epochs (GPS {t_epoch[0] + base:.3f}..{t_epoch[-1] + base:.3f} s since 1980) and "
                         f"the IMU samples ({t0 + base:.3f}..{imu.time[-1] + base:.3f} s, raw_gnss.imu_time = "
-                        f"'{c.imu_time}') do not overlap: {obs_file} and {folder / ds.imu.file} are on different time "
+                        f"'{c.imu_time}') do not overlap: {obs.source} and {folder / ds.imu.file} are on different time "
                         "axes (IMU times in GPS seconds of week, since 1980, or since power-on? "
                         "installation.imu_time_offset?)", file=str(obs_file))
     imu = _shift(imu, t0)
@@ -152,7 +200,7 @@ def process_rinex_ins(ds: Dataset, source: str, folder):
 
     for i, m in enumerate(ds.methods):
         if m.type == "tight-ekf" and m.use_range_rate and obs.doppler is None:
-            raise ConfigError(f"method '{m.name}' uses range rates, but {obs_file} has no Doppler (D1C/D1) column: "
+            raise ConfigError(f"method '{m.name}' uses range rates, but {obs.source} has no Doppler (D1C/D1) column: "
                               "set use_range_rate = false", file=source, key=f"methods[{i}].use_range_rate")
     checks = data_checks(ds, source, imu, all_fixes)
     inst = ds.installation
@@ -178,7 +226,8 @@ def process_rinex_ins(ds: Dataset, source: str, folder):
     for key, n in skipped_rows.items():
         merged[key] = merged.get(key, 0) + n
     checks["rinex"] = {
-        "observation_file": str(obs_file), "navigation_file": str(nav_file), "epochs": int(len(obs.tow)),
+        "observation_files": [str(f) for f in obs_files], "navigation_files": [str(f) for f in nav_files],
+        "epochs": int(len(obs.tow)),
         "epochs_in_imu_span": int(inside.sum()), "doppler": obs.doppler is not None,
         "ionosphere": ("klobuchar" if eph.iono_alpha is not None else "skipped") if c.ionosphere else "off",
         "troposphere": bool(c.troposphere),
