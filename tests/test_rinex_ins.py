@@ -429,3 +429,47 @@ def test_rinex2_doppler_is_read(tmp_path):
     np.testing.assert_array_equal(r.prn, [5, 12] * 3)
     np.testing.assert_allclose(r.doppler[0::2], -1500.25 + np.arange(3))
     assert np.isnan(r.doppler[1::2]).all()
+
+
+def test_elevation_weights_reach_the_tight_rows(exported):
+    """``pseudorange_weights = "elevation"``: each pseudorange row's variance is SPP's
+    ``sigma_a^2 + sigma_b^2 / sin^2 el`` (3 m and 3 m) at the slot's elevation, in the
+    compiled rows, the numpy oracle and the batch prediction alike; innovations, Jacobians
+    and the range-rate variances are those of constant weights."""
+    from dataclasses import replace
+
+    from mixnav.gnss.raw_observations import tight_observations
+    from mixnav.gnss.spp import SppOptions, corrected_pseudoranges
+    from mixnav.ins.error_model import get_layout
+    from mixnav.measurements.tight import TightGnss
+    _, _, ex, po = exported
+    folder = ex.files["dataset"].parent
+    obs = read_rinex_obs(folder / "obs.rnx")
+    eph = BroadcastEphemeris.from_rinex(folder / "nav.rnx")
+    rx = np.tile(_ecef(ex), (len(obs.tow), 1))   # the start point: elevations to 1e-4 rad
+    ep, _ = corrected_pseudoranges(eph, obs.week, obs.tow, obs.epoch, obs.prn, obs.pseudorange, rx,
+                                   SppOptions(troposphere=False, ionosphere=False), doppler=obs.doppler)
+    const, _ = tight_observations(ep, rx, 3.0, 0.1)
+    elev, _ = tight_observations(ep, rx, 3.0, 0.1, weights="elevation")
+    assert const.pr_variance is None
+    v = elev.valid
+    np.testing.assert_allclose(elev.pr_variance[v], 9.0 + 9.0 / np.sin(elev.elevation[v]) ** 2, rtol=1e-12)
+    lay = get_layout(17)
+    nav = np.concatenate([ex.sim.truth.q_nb[0], ex.sim.truth.v_n[0], ex.sim.truth.lla[0]])
+    w, clock = np.array([0.01, 0.0, 0.02]), np.array([5.0, 0.1])
+    a, b = TightGnss(const, [0.5, 0.2, -1.0], lay), TightGnss(elev, [0.5, 0.2, -1.0], lay)
+    k = 3
+    ra, rb = a.rows(k, nav, w, clock), b.rows(k, nav, w, clock)
+    n = int(v[k].sum())
+    np.testing.assert_array_equal(ra.z, rb.z)
+    np.testing.assert_array_equal(ra.H, rb.H)
+    np.testing.assert_allclose(rb.R[:n], elev.pr_variance[k, v[k]])
+    np.testing.assert_array_equal(rb.R[n:], ra.R[n:])
+    np.testing.assert_allclose(b.measure_numpy(k, nav, w, clock)[2], rb.R)
+    np.testing.assert_allclose(b.predict_batch(k, nav[None], w)[2], rb.R)
+    assert replace(po.observations).pr_variance is None      # the export's dataset: constant weights
+
+
+def _ecef(ex):
+    from mixnav.geodesy.frames import lla_to_ecef
+    return lla_to_ecef(ex.sim.truth.lla[0])

@@ -170,7 +170,9 @@ class InsRawGnss(RawGnss):
     ``installation.imu_time_offset``) are given, ``"gps-week-seconds"`` (GPS seconds of the
     week of the first RINEX epoch, as KF-GINS files; continuing past 604800 s across a week
     roll-over) or ``"gps-seconds"`` (GPS seconds since 1980-01-06 00:00); ``pseudorange_sigma``,
-    ``range_rate_sigma``: what the tight filter is told (one sigma for every satellite);
+    ``range_rate_sigma``: what the tight filter is told (one sigma for every satellite), or
+    with ``pseudorange_weights = "elevation"`` the SPP's ``sqrt(sigma_a^2 + sigma_b^2 / sin^2 el)``
+    per pseudorange (the range rates keep ``range_rate_sigma``);
     ``clock_q_bias`` [m^2/s], ``clock_q_drift`` [m^2/s^3]: the receiver clock's noise
     densities in the filter; ``clock_jump``: SPP clock jumps beyond this come off the
     pseudoranges (millisecond steps of a steered clock; :func:`mixnav.gnss.spp.clock_jumps`);
@@ -182,6 +184,7 @@ class InsRawGnss(RawGnss):
     navigation: str | list[str]
     imu_time: Literal["gps-week-seconds", "gps-seconds"] = "gps-week-seconds"
     pseudorange_sigma: _quantity(u.LENGTH, positive=True) = 3.0  # type: ignore[valid-type]
+    pseudorange_weights: Literal["constant", "elevation"] = "constant"
     range_rate_sigma: _quantity(u.VELOCITY, positive=True) = 0.1  # type: ignore[valid-type]
     clock_q_bias: float = Field(default=0.1, ge=0, le=1e8)
     clock_q_drift: float = Field(default=0.01, ge=0, le=1e6)

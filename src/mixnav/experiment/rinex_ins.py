@@ -66,7 +66,7 @@ def spp_options(ds: Dataset) -> SppOptions:
 def _subset(obs, keep):
     """The epochs ``keep`` (bool (m,)) of GnssObservations."""
     f = {k: getattr(obs, k) for k in ("time", "valid", "prn", "sat_pos", "sat_vel", "pseudorange", "range_rate",
-                                      "carrier", "elevation", "clock")}
+                                      "carrier", "elevation", "clock", "pr_variance") if getattr(obs, k) is not None}
     return replace(obs, **{k: v[keep] for k, v in f.items()})
 
 
@@ -180,7 +180,7 @@ def process_rinex_ins(ds: Dataset, source: str, folder):
     # epochs.time counts from the first RINEX epoch; rows of epoch e came from RINEX epoch j
     j_of = np.searchsorted(t_rel - t_rel[0], epochs.time - 1e-6)
     tight, skipped_rows = tight_observations(epochs, rx[j_of], c.pseudorange_sigma, c.range_rate_sigma,
-                                             opts.elevation_mask)
+                                             opts.elevation_mask, weights=c.pseudorange_weights)
     tight = replace(tight, time=t_rel[j_of])   # the epochs' own times on the run's axis
     # receiver velocity and clock drift of each RINEX epoch from its Doppler (NaN without)
     vel_e = np.full((len(t_rel), 3), np.nan)

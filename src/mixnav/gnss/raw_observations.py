@@ -27,7 +27,7 @@ from .pseudoranges import PseudorangeEpochs
 
 
 def tight_observations(epochs: PseudorangeEpochs, receiver_ecef, sigma_pr: float, sigma_rr: float,
-                       elevation_mask: float = 0.0, time_offset: float = 0.0):
+                       elevation_mask: float = 0.0, time_offset: float = 0.0, weights: str = "constant"):
     """The tight filter's observables of corrected pseudorange epochs.
 
     Parameters
@@ -43,6 +43,10 @@ def tight_observations(epochs: PseudorangeEpochs, receiver_ecef, sigma_pr: float
         [rad]; rows below it are left out (counted).
     time_offset : float
         Added to the epoch times [s] (onto the filter's time axis).
+    weights : "constant" or "elevation"
+        Pseudorange variance ``sigma_pr^2`` for every row, or the epochs' own ``variance``
+        (``corrected_pseudoranges``: SPP's ``sigma_a^2 + sigma_b^2 / sin^2 el``) per row as
+        ``pr_variance``. Range rates keep ``sigma_rr``.
 
     Returns
     -------
@@ -60,6 +64,8 @@ def tight_observations(epochs: PseudorangeEpochs, receiver_ecef, sigma_pr: float
         raise ArgumentError(f"receiver_ecef must be ({E}, 3) and finite", argument="receiver_ecef")
     if not (sigma_pr > 0 and sigma_rr > 0):
         raise ArgumentError("sigmas must be positive", argument="sigma_pr")
+    if weights not in ("constant", "elevation"):
+        raise ArgumentError(f"must be 'constant' or 'elevation', got {weights!r}", argument="weights")
     has_rr = epochs.range_rate is not None
     el = epochs.elevation
     use = ~(np.isfinite(el) & (el < elevation_mask))
@@ -77,6 +83,7 @@ def tight_observations(epochs: PseudorangeEpochs, receiver_ecef, sigma_pr: float
     pr = np.full((E, K), np.nan)
     rr = np.full((E, K), np.nan)
     elev = np.full((E, K), np.nan)
+    var = np.full((E, K), np.nan) if weights == "elevation" else None
     for e in range(E):
         sl = epochs.rows_of(e)
         idx = np.arange(sl.start, sl.stop)[use[sl]]
@@ -90,13 +97,16 @@ def tight_observations(epochs: PseudorangeEpochs, receiver_ecef, sigma_pr: float
         sat_pos[e, :n] = earth_rotation_correction(s, tau)
         pr[e, :n] = epochs.pseudorange[idx]
         elev[e, :n] = el[idx]
+        if var is not None:
+            var[e, :n] = epochs.variance[idx]
         if has_rr:
             sat_vel[e, :n] = earth_rotation_correction(epochs.sat_vel[idx], tau)
             rr[e, :n] = epochs.range_rate[idx]
     obs = GnssObservations(time=np.asarray(epochs.time, float) + time_offset, valid=valid, prn=prn,
                            sat_pos=sat_pos, sat_vel=sat_vel, pseudorange=pr, range_rate=rr,
                            carrier=np.full((E, K), np.nan), elevation=elev, sigma_pr=float(sigma_pr),
-                           sigma_rr=float(sigma_rr), sigma_cp=float("nan"), clock=np.full((E, 2), np.nan))
+                           sigma_rr=float(sigma_rr), sigma_cp=float("nan"), clock=np.full((E, 2), np.nan),
+                           pr_variance=var)
     return obs, skipped
 
 
