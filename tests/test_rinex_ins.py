@@ -473,3 +473,19 @@ def test_elevation_weights_reach_the_tight_rows(exported):
 def _ecef(ex):
     from mixnav.geodesy.frames import lla_to_ecef
     return lla_to_ecef(ex.sim.truth.lla[0])
+
+
+def test_outputs_are_those_of_an_ins_dataset(exported, tmp_path):
+    """write_process: solution tables scored against the reference, metrics.json with the
+    RINEX counts, the report."""
+    import json
+
+    from mixnav.experiment.process import write_process
+    _, _, _, po = exported
+    write_process(tmp_path / "out", po)
+    m = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert set(m["methods"]) == {"loose", "tight"}
+    assert m["rinex"]["spp_status"] == po.checks["rinex"]["spp_status"]
+    assert m["methods"]["tight"]["horizontal_rmse_m"] < 1.5
+    assert (tmp_path / "out" / "report.html").is_file()
+    assert "of the week of the first RINEX epoch" in (tmp_path / "out" / "report.html").read_text()

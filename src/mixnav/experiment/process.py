@@ -199,7 +199,12 @@ def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = No
               **po.checks}
     if po.aiding:
         header["aiding"] = po.aiding
-    notes = [f"Times are seconds since the first IMU sample (GPS time {po.time_origin:.3f} s since 1970).",
+    origin = f"GPS time {po.time_origin:.3f} s since 1970"
+    if po.dataset.raw_gnss is not None:   # the IMU file's own GPS stamps (raw_gnss.imu_time)
+        origin = (f"GPS second {po.time_origin:.3f} of the week of the first RINEX epoch"
+                  if po.dataset.raw_gnss.imu_time == "gps-week-seconds" else
+                  f"GPS time {po.time_origin:.3f} s since 1980-01-06")
+    notes = [f"Times are seconds since the first IMU sample ({origin}).",
              f"Aligned at t = {po.init.time:.2f} s ({po.dataset.alignment.method}).",
              "Errors are estimate minus reference, at the reference's valid epochs, for the point the "
              "reference gives (antenna or IMU); windows are the GNSS epochs withheld from the filter."]
