@@ -86,6 +86,8 @@ def test_obs_file_read_back_by_the_reader_and_georinex(tmp_path):
 
 
 def test_writers_refuse_what_the_format_cannot_hold(tmp_path):
+    """PRN 33, repeated epoch times, a clock epoch off the second, a start off the second:
+    ArgumentErrors naming the argument, and no file left behind."""
     with pytest.raises(ArgumentError) as exc:
         write_rinex_obs(tmp_path / "o.rnx", [2305], [1.0], [0], [33], [2e7])
     assert exc.value.argument == "prn"
@@ -318,6 +320,9 @@ def test_missing_navigation_missing_ephemeris_and_klobuchar(exported, tmp_path):
 
 
 def test_dataset_sections_and_methods_are_checked(exported, tmp_path):
+    """Config errors naming the key: fixes and RINEX together, neither, TDCP (no carrier is
+    read), a tight method without the clock states, a phone log format, no navigation file
+    named, an empty file list."""
     _, _, ex, _ = exported
     d = ex.files["dataset"]
     cases = [
@@ -325,6 +330,8 @@ def test_dataset_sections_and_methods_are_checked(exported, tmp_path):
         ({'type = "tight-ekf"\nstates = 17': 'type = "tdcp-ekf"\nstates = 17'}, "methods[1].type", "carrier"),
         ({'type = "tight-ekf"\nstates = 17': 'type = "tight-ekf"\nstates = 15'}, "methods[1].states", "clock"),
         ({'format = "rinex-obs"': 'format = "android-gnsslogger"'}, "raw_gnss.format", None),
+        ({'navigation = "nav.rnx"': ''}, "raw_gnss.navigation", None),
+        ({'file = "obs.rnx"': 'file = []'}, "raw_gnss.file", "at least one"),
     ]
     text = d.read_text()
     a, b = text.index("[raw_gnss]"), text.index("[reference]")
@@ -343,6 +350,7 @@ def test_dataset_sections_and_methods_are_checked(exported, tmp_path):
 
 
 def test_range_rates_without_doppler_are_refused(exported, tmp_path):
+    """A tight method using range rates on a file without D1C: a config error naming its key."""
     _, _, ex, _ = exported
     folder = ex.files["dataset"].parent
     obs = read_rinex_obs(folder / "obs.rnx")
@@ -356,6 +364,7 @@ def test_range_rates_without_doppler_are_refused(exported, tmp_path):
 
 
 def test_export_needs_raw_satellites(tmp_path):
+    """A scenario with fixes only has nothing to write as RINEX."""
     sc, src, _ = load_scenario("loose-demo")
     with pytest.raises(ConfigError) as exc:
         export_dataset(sc, tmp_path / "x", source=src)
