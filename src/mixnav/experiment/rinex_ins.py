@@ -115,7 +115,7 @@ def read_navigation(paths) -> BroadcastEphemeris:
                               iono_beta=None if iono is None else iono.iono_beta)
 
 
-def epoch_axis(ds: Dataset, obs, imu_raw, imu_file: str) -> tuple[np.ndarray, float]:
+def epoch_axis(ds: Dataset, obs) -> tuple[np.ndarray, float]:
     """Seconds of each RINEX epoch on the IMU file's own time axis ((k,)), and the offset
     added to the IMU file's times to make them GPS seconds since 1980 ([s])."""
     if ds.raw_gnss.imu_time == "gps-week-seconds":
@@ -146,7 +146,7 @@ def process_rinex_ins(ds: Dataset, source: str, folder):
                       "so the ionosphere "
                       "correction is skipped and every pseudorange keeps its delay (metrics.json: "
                       "rinex.ionosphere)", DataWarning, stacklevel=3)
-    t_epoch, base = epoch_axis(ds, obs, imu, str(ds.imu.file))
+    t_epoch, base = epoch_axis(ds, obs)
     t0 = imu.start_time
     t_rel = t_epoch - t0
     span = float(imu.time[-1] - t0)
