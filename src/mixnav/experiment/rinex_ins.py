@@ -139,6 +139,10 @@ def process_rinex_ins(ds: Dataset, source: str, folder):
     obs_file = obs_files[0]     # the file an error names (the message lists them all)
     obs = read_observations(obs_files)
     eph = read_navigation(nav_files)
+    for i, m in enumerate(ds.methods):   # before any work
+        if m.type == "tight-ekf" and m.use_range_rate and obs.doppler is None:
+            raise ConfigError(f"method '{m.name}' uses range rates, but {obs.source} has no Doppler (D1C/D1) column: "
+                              "set use_range_rate = false", file=source, key=f"methods[{i}].use_range_rate")
     reference = read_reference(ds, folder)
     read_time = _time.perf_counter() - t_read
     if c.ionosphere and eph.iono_alpha is None:   # asked for, and impossible: said, not silent
@@ -198,10 +202,6 @@ def process_rinex_ins(ds: Dataset, source: str, folder):
     fixes = _select(all_fixes, ~in_windows(all_fixes.time, withhold))
     solve_time = _time.perf_counter() - t_spp
 
-    for i, m in enumerate(ds.methods):
-        if m.type == "tight-ekf" and m.use_range_rate and obs.doppler is None:
-            raise ConfigError(f"method '{m.name}' uses range rates, but {obs.source} has no Doppler (D1C/D1) column: "
-                              "set use_range_rate = false", file=source, key=f"methods[{i}].use_range_rate")
     checks = data_checks(ds, source, imu, all_fixes)
     inst = ds.installation
     lever = np.asarray(inst.antenna_position, float) - np.asarray(inst.imu_position, float)
