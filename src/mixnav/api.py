@@ -23,7 +23,8 @@ import numpy as np
 from .data import GnssFixes, ImuData, InitialState
 from .errors import ArgumentError
 
-__all__ = ["RunResult", "LooseResult", "run_scenario", "process_dataset", "filter_loose", "imu_grade"]
+__all__ = ["RunResult", "LooseResult", "run_scenario", "process_dataset", "filter_loose", "imu_grade",
+           "export_rinex"]
 
 
 @dataclass
@@ -149,6 +150,37 @@ def process_dataset(name_or_path: str, data: str | None = None) -> RunResult:
     metrics = {name: method_metrics(res, tables[name], withheld, po.gnss_bias) for name, res in po.results.items()}
     truth = None if po.reference is None else _frame(po.reference.time, po.reference.lla)
     return RunResult(tables, _metrics_frame(metrics), po.results, truth, po, text)
+
+
+def export_rinex(name_or_path: str, out_dir, seed: int | None = None, start: str = "2024-03-13T10:00:00",
+                 overwrite: bool = False) -> dict:
+    """Simulate one run of a scenario with raw satellites and write it as a dataset a user could
+    have recorded: IMU CSV, RINEX 3 observation and navigation files, reference trajectory and
+    ``dataset.toml`` (``mixnav export``; :mod:`mixnav.experiment.export`).
+
+    Parameters
+    ----------
+    name_or_path : str
+        A shipped scenario (with ``[gnss.satellites]``, e.g. ``"tight-demo"``) or a .toml file.
+    out_dir : path
+        The folder to write (the output-folder policy: docs/validation.md).
+    seed : int, optional
+        Seed of the run (default: the scenario's own).
+    start : str
+        GPS calendar time of the simulation's start, ``YYYY-MM-DDThh:mm:ss``.
+
+    Returns
+    -------
+    dict
+        Role (``imu``, ``observations``, ``navigation``, ``reference``, ``dataset``) -> path;
+        process the dataset with :func:`process_dataset` on ``["dataset"]``.
+    """
+    from .config import load_scenario
+    from .experiment.export import export_dataset
+    if seed is not None and (not isinstance(seed, (int, np.integer)) or seed < 0):
+        raise ArgumentError(f"must be a non-negative integer, got {seed!r}", argument="seed")
+    sc, source, _ = load_scenario(str(name_or_path))
+    return dict(export_dataset(sc, out_dir, seed=seed, start=start, source=source, overwrite=overwrite).files)
 
 
 def imu_grade(grade: str, **overrides: str):

@@ -253,6 +253,32 @@ def experiment(scenario: str = typer.Argument(..., help="Shipped scenario name o
 
 
 @app.command()
+def export(scenario: str = typer.Argument(..., help="Shipped scenario name or path of a .toml file "
+                                          "(with [gnss.satellites])."),
+           out_dir: Path = typer.Option(..., "--out", help="Folder for the IMU CSV, RINEX files, reference and "
+                                        "dataset.toml."),
+           seed: int = typer.Option(None, min=0, max=2**63 - 1, help="Seed of this run (default: the scenario's)."),
+           start: str = typer.Option("2024-03-13T10:00:00", "--start",
+                                     help="GPS time of the simulation's start (YYYY-MM-DDThh:mm:ss)."),
+           overwrite: bool = _OVERWRITE):
+    """Simulate one run and write it as a recorded dataset: IMU CSV + RINEX 3 obs/nav + reference + dataset.toml."""
+    from .config import load_scenario
+    from .experiment.export import export_dataset
+    from .io.outdir import check_out_dir
+
+    with _errors():
+        sc, source, _ = load_scenario(scenario)
+        check_out_dir(out_dir, "export", overwrite, [source])
+        with err.status(f"exporting {sc.scenario.name}"):
+            res = export_dataset(sc, out_dir, seed=seed, start=start, source=source, overwrite=overwrite)
+    for role, path in res.files.items():
+        out.print(f"{role}: {path}")
+    for name, why in res.skipped_methods.items():
+        out.print(f"method '{name}' not copied: {why}")
+    out.print(f"process it with: mixnav process {res.files['dataset']} --out <folder>")
+
+
+@app.command()
 def diagnose(file: Path = typer.Argument(..., help="CSV or Parquet file holding a residual series."),
              column: str = typer.Option(..., "--column", help="Name of the column to diagnose."),
              out_dir: Path = typer.Option(..., "--out", help="Folder for diagnostics.json and the figures."),

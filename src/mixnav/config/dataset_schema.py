@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from .. import units as u
 from .schema import (AidingConfig, AngleVec, AngSigma, LengthVec, MethodConfig, PosSigma, Strict, VelSigma, Windows,
@@ -20,7 +20,8 @@ MinSpeed = _quantity(u.VELOCITY, positive=True)
 
 
 class DatasetInfo(Strict):
-    """``kind``: ``ins-gnss`` (IMU + GNSS fixes, filtered by ``methods``),
+    """``kind``: ``ins-gnss`` (IMU + GNSS fixes, ``[gnss]``, or IMU + a RINEX observation
+    and navigation file, ``[raw_gnss]``, filtered by ``methods``),
     ``gnss-raw`` (raw GNSS measurements: epoch-by-epoch single-point
     positioning and constant-velocity filters, sections ``raw_gnss``,
     ``reference_point``, ``motion`` and ``methods``:
@@ -157,6 +158,54 @@ class RawGnss(Strict):
     max_sv_time_uncertainty: _quantity(u.TIME, positive=True) = 500e-9  # type: ignore[valid-type]
 
 
+class InsRawGnss(RawGnss):
+    """``[raw_gnss]`` of an ``ins-gnss`` dataset (instead of ``[gnss]`` fixes): a RINEX
+    observation file and its navigation file for the tightly coupled INS
+    (:mod:`mixnav.experiment.rinex_ins`).
+
+    The keys of the raw-GNSS datasets (``format = "rinex-obs"``, ``file``, ``navigation``:
+    here each one file or a list of files, e.g. hourly observation files and the daily
+    navigation files they span, observation files in time order; the SPP's ``elevation_mask``, ``sigma_a``, ``sigma_b``, ``troposphere``,
+    ``ionosphere``), plus: ``imu_time``: how the IMU file's time stamps (after
+    ``installation.imu_time_offset``) are given, ``"gps-week-seconds"`` (GPS seconds of the
+    week of the first RINEX epoch, as KF-GINS files; continuing past 604800 s across a week
+    roll-over) or ``"gps-seconds"`` (GPS seconds since 1980-01-06 00:00); ``pseudorange_sigma``,
+    ``range_rate_sigma``: what the tight filter is told (one sigma for every satellite), or
+    with ``pseudorange_weights = "elevation"`` the SPP's ``sqrt(sigma_a^2 + sigma_b^2 / sin^2 el)``
+    per pseudorange (the range rates keep ``range_rate_sigma``);
+    ``clock_q_bias`` [m^2/s], ``clock_q_drift`` [m^2/s^3]: the receiver clock's noise
+    densities in the filter; ``clock_jump``: SPP clock jumps beyond this come off the
+    pseudoranges (millisecond steps of a steered clock; :func:`mixnav.gnss.spp.clock_jumps`);
+    ``withhold``, ``max_gap``, ``gap_action``: as ``[gnss]``'s, on the observation epochs
+    (a withheld epoch gives neither the SPP fix nor the tight rows)."""
+
+    format: Literal["rinex-obs"] = "rinex-obs"
+    file: str | list[str]
+    navigation: str | list[str]
+    imu_time: Literal["gps-week-seconds", "gps-seconds"] = "gps-week-seconds"
+    pseudorange_sigma: _quantity(u.LENGTH, positive=True) = 3.0  # type: ignore[valid-type]
+    pseudorange_weights: Literal["constant", "elevation"] = "constant"
+    range_rate_sigma: _quantity(u.VELOCITY, positive=True) = 0.1  # type: ignore[valid-type]
+    clock_q_bias: float = Field(default=0.1, ge=0, le=1e8)
+    clock_q_drift: float = Field(default=0.01, ge=0, le=1e6)
+    clock_jump: _quantity(u.LENGTH, positive=True) = 1000.0  # type: ignore[valid-type]
+    withhold: Windows = Field(default_factory=list)
+    max_gap: Gap = 5.0
+    gap_action: Literal["warn", "fail"] = "warn"
+
+    @field_validator("file", "navigation")
+    @classmethod
+    def _some(cls, v):
+        if isinstance(v, list) and not v:
+            raise ValueError("give at least one file")
+        return v
+
+    def files(self, key: str) -> list[str]:
+        """``file`` or ``navigation`` as a list."""
+        v = getattr(self, key)
+        return [v] if isinstance(v, str) else list(v)
+
+
 class ReferencePoint(Strict):
     """A surveyed static point: WGS-84 geodetic (``latitude``, ``longitude``, ellipsoidal
     ``height``) or Earth-centred, Earth-fixed (``x``, ``y``, ``z`` [m], as RINEX headers and
@@ -197,7 +246,8 @@ class ReferencePoint(Strict):
 
 #: sections each kind needs, and those it must not have
 #: (gnss-raw and odometry-gnss files have schemas of their own: config/raw_gnss_schema.py, vehicle_schema.py)
-KIND_SECTIONS = {"ins-gnss": (("imu", "gnss", "alignment", "methods"), ("raw_gnss", "reference_point"))}
+#: (an ins-gnss dataset has its GNSS as fixes, [gnss], or raw, [raw_gnss]: exactly one, loader._check_kind)
+KIND_SECTIONS = {"ins-gnss": (("imu", "alignment", "methods"), ("reference_point",))}
 
 
 class Dataset(Strict):
@@ -209,5 +259,5 @@ class Dataset(Strict):
     alignment: Alignment | None = None
     methods: list[MethodConfig] | None = Field(default=None, min_length=1)
     aiding: AidingConfig | None = None
-    raw_gnss: RawGnss | None = None
+    raw_gnss: InsRawGnss | None = None
     reference_point: ReferencePoint | None = None

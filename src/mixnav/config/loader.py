@@ -390,12 +390,28 @@ def _check_kind(ds, source):
         if getattr(ds, key) is not None:
             raise ConfigError(f"not used by dataset.kind = '{kind}' (remove it, or change the kind)",
                               file=source, key=key)
+    if ds.gnss is None and ds.raw_gnss is None:
+        raise ConfigError("required key is missing: the GNSS as fixes ([gnss]) or as a RINEX observation and "
+                          "navigation file ([raw_gnss])", file=source, key="gnss")
+    if ds.gnss is not None and ds.raw_gnss is not None:
+        raise ConfigError("give the GNSS either as fixes ([gnss]) or as raw RINEX observations ([raw_gnss]), "
+                          "not both", file=source, key="raw_gnss")
+    if ds.raw_gnss is not None:
+        for i, m in enumerate(ds.methods or []):
+            if m.type == "tdcp-ekf":
+                raise ConfigError("TDCP needs carrier phases, which [raw_gnss] does not read (pseudoranges and "
+                                  "Doppler only): use type = \"tight-ekf\"", file=source, key=f"methods[{i}].type")
+            if m.type == "tight-ekf" and m.states in (15, 21):
+                raise ConfigError(f"method '{m.name}' is tightly coupled: it needs the receiver clock states "
+                                  "(states = 17, or 23 with the scale factors)", file=source, key=f"methods[{i}].states")
 
 
 def corruption(ds, source):
     """The noise process added to a dataset's recorded fixes (or None)."""
     from .. import units as u
     from .noise_spec import from_config
+    if ds.gnss is None:
+        return None
     c = ds.gnss.corrupt_position
     return None if c is None else from_config(c, u.LENGTH, "gnss.corrupt_position", source)
 

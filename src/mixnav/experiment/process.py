@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import os
 import time as _time
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -22,43 +22,18 @@ import pandas as pd
 
 import mixnav
 
-from ..alignment import align_from_gnss_velocity, align_level_then_gnss, coarse_align
-from ..attitude import euler_to_dcm
 from ..config.dataset_schema import Dataset
 from ..config.loader import corruption, imu_model
-from ..data import GnssFixes, ImuData, OdometerData, Trajectory
-from ..errors import ArgumentError, ConfigError, DataError
+from ..data import GnssFixes, OdometerData
+from ..errors import ConfigError, DataError
 from . import methods
 from .aiding import AidingInputs, installation_check
-from ..filters.ekf import FilterResult, InitialState
-from ..ins.mechanization import nav_vector
-from ..io import drive0708, generic_csv, kfgins, psins, rtklib
-from ..io.imu_checks import check_spikes
+from ..io import generic_csv, kfgins, rtklib
 from ..sim.gnss import in_windows
+from .ins_common import (ProcessOutput, _shift, data_checks, gnss_section, initial_state,  # noqa: F401
+                         install, read_imu, read_reference)
 from .run import _lla_frame, solution_table, write_outputs
 from ..geodesy.frames import displace
-
-
-@dataclass
-class ProcessOutput:
-    dataset: Dataset
-    source: str
-    data_dir: Path
-    time_origin: float
-    imu: ImuData
-    fixes: GnssFixes           # what the filters were given (withheld windows removed)
-    all_fixes: GnssFixes       # every fix read
-    reference: Trajectory | None
-    lever: np.ndarray
-    results: dict[str, FilterResult]
-    init: InitialState
-    read_time_s: float
-    filter_time_s: float
-    aiding: dict = field(default_factory=dict)   # AidingInputs.summary(): still intervals, thresholds
-    installation: dict = field(default_factory=dict)  # aiding.installation_check: level, rest, estimates
-    odometer: OdometerData | None = None  # the [aiding.odometer] file's samples, when one is read
-    gnss_bias: tuple | None = None  # (times, (M, 3) NED m): the systematic part of the injected corruption
-    checks: dict = field(default_factory=dict)  # data_checks: GNSS gaps, gyro-vs-track turning
 
 
 def find_data_dir(ds: Dataset, data: str | None, source: str) -> Path:
@@ -82,20 +57,6 @@ def find_data_dir(ds: Dataset, data: str | None, source: str) -> Path:
             return c
     raise DataError(f"data folder '{ds.dataset.data_dir}' not found (tried {', '.join(tried)}); "
                     "give it with --data DIR", file=source)
-
-
-def read_imu(ds: Dataset, folder: Path) -> ImuData:
-    c = ds.imu
-    f = folder / c.file
-    if c.format == "drive-0708":
-        return drive0708.read_drive_imu(f, folder / c.tag if c.tag else None, time_offset=0.0,
-                                        max_gap=c.max_gap, gap_action=c.gap_action, spike_action=c.spike_action)
-    if c.format == "kf-gins":
-        return kfgins.read_kfgins_imu(f, max_gap=c.max_gap, gap_action=c.gap_action, spike_action=c.spike_action)
-    if c.format == "psins":
-        imu = psins.read_psins_imu(f)[0]
-        return imu if c.spike_action == "fail" else check_spikes(imu, None, c.spike_action)
-    return generic_csv.read_imu_csv(f, max_gap=c.max_gap, gap_action=c.gap_action, spike_action=c.spike_action)
 
 
 def read_gnss(ds: Dataset, folder: Path) -> GnssFixes:
@@ -131,83 +92,11 @@ def read_odometer(ds: Dataset, folder: Path, t0: float) -> OdometerData | None:
     return _shift(odo, t0)
 
 
-def read_reference(ds: Dataset, folder: Path) -> Trajectory | None:
-    c = ds.reference
-    if c is None:
-        return None
-    f = folder / c.file
-    if c.velocity_delay and c.format != "rtklib-pos":
-        raise ConfigError(f"velocity_delay is supported for the rtklib-pos format only, not '{c.format}'",
-                          key="reference.velocity_delay")
-    if c.format == "rtklib-pos":
-        pos = rtklib.read_pos(f)
-        ref = pos.reference(qualities=c.qualities)
-        if c.velocity_delay and ref.v_n is not None:
-            # the reference velocity at its epochs, as the filter's GNSS velocity is
-            ref = replace(ref, v_n=pos.velocity_at_epochs(c.velocity_delay)[pos.select(c.qualities)])
-        return ref
-    if c.format == "kf-gins-nav":
-        return kfgins.read_kfgins_nav(f)
-    return generic_csv.read_reference_csv(f)
-
-
 def _corrupt(fixes: GnssFixes, process, rng) -> tuple[GnssFixes, np.ndarray]:
     """Add a noise process (NED metres) to recorded fixes; also the systematic part of what
     was added (M, 3) (:meth:`~mixnav.noise.processes.NoiseProcess.sample_detail`)."""
     dp, _, bias = process.sample_detail(fixes.time, 3, rng)
     return replace(fixes, lla=displace(fixes.lla, dp)), bias
-
-
-def _shift(obj, t0):
-    return replace(obj, time=obj.time - t0)
-
-
-def install(imu: ImuData, ds: Dataset) -> ImuData:
-    """IMU axes to body axes, and the IMU time offset."""
-    inst = ds.installation
-    c_bi = euler_to_dcm(np.asarray(inst.imu_misalignment)) @ euler_to_dcm(np.asarray(inst.imu_rotation))
-    return ImuData(time=imu.time + inst.imu_time_offset, dt=imu.dt, dtheta=imu.dtheta @ c_bi.T,
-                   dvel=imu.dvel @ c_bi.T, source=imu.source, gaps=imu.gaps, spikes=imu.spikes)
-
-
-def initial_state(ds: Dataset, imu: ImuData, fixes: GnssFixes, lever: np.ndarray) -> InitialState:
-    al = ds.alignment
-    sig = dict(sigma_att=np.asarray(al.attitude_sigma), sigma_vel=np.asarray(al.velocity_sigma),
-               sigma_pos=np.asarray(al.position_sigma))
-    if al.method == "level-then-gnss":
-        mounting = None if ds.aiding is None else ds.aiding.vehicle_mounting
-        forward = None if mounting is None else euler_to_dcm(mounting)[0]   # C_vb^T e_x: the row
-        keys = {"rest_duration": "alignment.static_duration", "min_speed": "alignment.min_speed",
-                "forward_b": "aiding.vehicle_mounting"}
-        try:
-            a = align_level_then_gnss(imu, fixes, lever, al.static_duration, al.min_speed, forward_b=forward)
-        except ArgumentError as exc:
-            raise ConfigError(exc.message, key=keys.get(exc.argument, "alignment")) from None
-        sensor0 = np.zeros(12)
-        sensor0[0:3] = a.gyro_bias
-        return InitialState(time=a.time, nav=nav_vector(a.q_nb, a.v_n, a.lla), sensor0=sensor0, **sig)
-    t_static = imu.start_time + al.static_duration
-    still = imu.time <= t_static
-    sensor0 = None
-    if al.gyro_bias_from_static or al.method == "static":
-        if still.sum() < 10:
-            raise ConfigError("static window holds fewer than 10 IMU samples", key="alignment.static_duration")
-        static = ImuData(imu.time[still], imu.dt[still], imu.dtheta[still], imu.dvel[still], imu.source)
-    if al.method == "static":
-        lat = fixes.lla[0, 0]
-        a = coarse_align(static, lat, fixes.lla[0, 2])
-        k = int(np.searchsorted(fixes.time, t_static))
-        if k >= len(fixes):
-            raise DataError("no GNSS fix after the static alignment window", file=fixes.source)
-        lla = displace(fixes.lla[k], -(euler_to_dcm(a.rpy) @ lever))
-        return InitialState(time=float(t_static), nav=nav_vector(a.q_nb, np.zeros(3), lla), **sig)
-    if al.gyro_bias_from_static:
-        # mean rate at rest; the unknown horizontal Earth rate (<= 15 deg/h)
-        # stays in it, far below a MEMS gyro's bias
-        sensor0 = np.zeros(12)
-        sensor0[0:3] = static.dtheta.sum(0) / static.dt.sum()
-    m = align_from_gnss_velocity(fixes, lever, al.min_speed, after=imu.start_time)
-    return InitialState(time=m.time, nav=nav_vector(m.q_nb, m.v_n, m.lla), sensor0=sensor0, **sig)
 
 
 def process(ds: Dataset, source: str, data: str | None = None):
@@ -221,6 +110,9 @@ def process(ds: Dataset, source: str, data: str | None = None):
     if ds.dataset.kind == "gnss-raw":
         from .spp_process import process_raw
         return process_raw(ds, source, folder)
+    if ds.raw_gnss is not None:
+        from .rinex_ins import process_rinex_ins
+        return process_rinex_ins(ds, source, folder)
     t_read = _time.perf_counter()
     imu = install(read_imu(ds, folder), ds)
     all_fixes = read_gnss(ds, folder)
@@ -270,53 +162,9 @@ def process(ds: Dataset, source: str, data: str | None = None):
                          odometer=aiding.odometer, gnss_bias=gnss_bias, checks=checks)
 
 
-def data_checks(ds: Dataset, source: str, imu: ImuData, fixes: GnssFixes) -> dict:
-    """Plausibility of the data read, on the processing time axis (docs/validation.md).
-
-    - some GNSS fix must fall within the IMU's time span (a different time base is an error);
-      the fixes outside it are counted (``gnss_fixes_outside_imu``);
-    - ``gnss.withhold`` windows must overlap the fixes (ConfigError naming the window);
-    - GNSS holes longer than ``gnss.max_gap`` outside the withheld windows are listed
-      (``gnss_gaps_s``, with a warning) or, with ``gnss.gap_action = "fail"``, an error;
-    - the gyros' turning must agree with the GNSS track's (:func:`mixnav.io.imu_checks.check_turns`).
-    """
-    import warnings
-    from ..io.imu_checks import DataWarning, check_turns
-    out: dict = {}
-    if len(fixes) == 0:
-        raise DataError("no GNSS fix of the chosen qualities", file=fixes.source)
-    t0, t1 = float(fixes.time[0]), float(fixes.time[-1])
-    inside = (fixes.time >= imu.start_time) & (fixes.time <= imu.time[-1])
-    if not inside.any():
-        raise DataError(f"no GNSS fix within the IMU's time span: IMU {imu.start_time:.3f}..{imu.time[-1]:.3f} s, "
-                        f"GNSS {t0:.3f}..{t1:.3f} s (after the first IMU sample): different time bases "
-                        "(GPS time of week, Unix time, time since start)?", file=fixes.source)
-    out["gnss_fixes_outside_imu"] = int((~inside).sum())
-    for i, (a, b) in enumerate(ds.gnss.withhold):
-        if a >= t1 or b <= t0:
-            raise ConfigError(f"window [{a:g}, {b:g}] s lies outside the GNSS data ({t0:.1f}..{t1:.1f} s after the "
-                              "first IMU sample): nothing would be withheld", file=source, key=f"gnss.withhold[{i}]")
-    d = np.diff(fixes.time)
-    mid = 0.5 * (fixes.time[1:] + fixes.time[:-1])
-    withheld = in_windows(mid, tuple(tuple(w) for w in ds.gnss.withhold))
-    holes = np.flatnonzero((d > ds.gnss.max_gap) & ~withheld)
-    out["gnss_gaps_s"] = [[float(fixes.time[k]), float(fixes.time[k + 1])] for k in holes]
-    if holes.size:
-        k = int(holes[np.argmax(d[holes])])
-        msg = (f"{holes.size} hole(s) longer than gnss.max_gap = {ds.gnss.max_gap:g} s between GNSS fixes; the longest "
-               f"{d[k]:.1f} s from t = {fixes.time[k]:.1f} s (listed in metrics.json: gnss_gaps_s)")
-        if ds.gnss.gap_action == "fail":
-            raise DataError(msg, file=fixes.source)
-        warnings.warn(f"{fixes.source}: {msg}", DataWarning, stacklevel=2)
-    turns = check_turns(imu, fixes.time, fixes.lla, fixes.vel_n, f"the unit of the {ds.imu.format} format")
-    if turns is not None:
-        out["gyro_turn_check"] = turns
-    return out
-
-
 def withheld_windows(po: ProcessOutput) -> tuple:
     """The GNSS windows withheld from the filters, ``((start, end), ...)`` [s]."""
-    return tuple(tuple(w) for w in po.dataset.gnss.withhold)
+    return tuple(tuple(w) for w in gnss_section(po.dataset)[0].withhold)
 
 
 def process_tables(po: ProcessOutput) -> dict[str, pd.DataFrame]:
@@ -351,7 +199,12 @@ def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = No
               **po.checks}
     if po.aiding:
         header["aiding"] = po.aiding
-    notes = [f"Times are seconds since the first IMU sample (GPS time {po.time_origin:.3f} s since 1970).",
+    origin = f"GPS time {po.time_origin:.3f} s since 1970"
+    if po.dataset.raw_gnss is not None:   # the IMU file's own GPS stamps (raw_gnss.imu_time)
+        origin = (f"GPS second {po.time_origin:.3f} of the week of the first RINEX epoch"
+                  if po.dataset.raw_gnss.imu_time == "gps-week-seconds" else
+                  f"GPS time {po.time_origin:.3f} s since 1980-01-06")
+    notes = [f"Times are seconds since the first IMU sample ({origin}).",
              f"Aligned at t = {po.init.time:.2f} s ({po.dataset.alignment.method}).",
              "Errors are estimate minus reference, at the reference's valid epochs, for the point the "
              "reference gives (antenna or IMU); windows are the GNSS epochs withheld from the filter."]

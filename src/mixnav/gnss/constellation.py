@@ -97,3 +97,48 @@ class NominalConstellation:
         return SatelliteStates(prn=self.prn.copy(), pos_ecef=np.stack([x, y, z], axis=-1),
                                vel_ecef=np.stack([dx, dy, dz], axis=-1),
                                clock_bias=np.zeros(m), clock_drift=np.zeros(m))
+
+    def broadcast_records(self, gps_t0: float, toe) -> dict:
+        """The constellation as GPS broadcast ephemeris records (the ``records`` of
+        :class:`mixnav.gnss.ephemeris.BroadcastEphemeris`, what a RINEX navigation file holds).
+
+        A circular two-body orbit is a broadcast orbit with ``e = 0``, argument of perigee
+        0 (the mean anomaly is then the argument of latitude), ``delta_n``, ``IDOT``,
+        ``OMEGA_DOT`` and the six harmonic corrections zero; clocks (``af0..af2``,
+        ``T_GD``) zero, as the constellation's (and the relativistic term is zero at
+        ``e = 0``). With ``t`` the time after this constellation's ``t = 0`` and
+        ``t_oe`` that of the record: ``M0 = arg_lat + n t_oe`` and, since the broadcast
+        node longitude is ``OMEGA0 - w_e (t_abs - week 604800)``, ``OMEGA0 = raan + w_e
+        (gps_t0 - week 604800)`` (the record's week).
+
+        Parameters
+        ----------
+        gps_t0 : float
+            GPS time of this constellation's ``t = 0``, seconds since 1980-01-06 00:00 [s].
+        toe : array_like (r,)
+            Reference times of the records, GPS seconds since 1980-01-06 [s]; one record
+            per satellite and time.
+
+        Returns
+        -------
+        dict of str -> ndarray (r * n,)
+            ``prn``, ``week``, ``toe``, ``toc_week``, ``toc`` and the Keplerian and clock
+            parameters (rad, rad/s, m^(1/2), s), records grouped by time.
+        """
+        toe = np.atleast_1d(np.asarray(toe, dtype=float))
+        n_sat = len(self.prn)
+        t_abs = np.repeat(toe, n_sat)
+        week = np.floor(t_abs / 604800.0)
+        tow = t_abs - week * 604800.0
+        t_sim = t_abs - gps_t0
+        wrap = lambda a: np.mod(a + np.pi, 2 * np.pi) - np.pi  # noqa: E731
+        raan = np.tile(self.raan, len(toe))
+        zeros = np.zeros(len(t_abs))
+        rec = {k: zeros.copy() for k in ("af0", "af1", "af2", "crs", "delta_n", "cuc", "e", "cus", "cic", "cis",
+                                         "crc", "omega", "omega_dot", "idot", "health", "tgd")}
+        rec.update(prn=np.tile(self.prn, len(toe)).astype(np.int64), week=week, toe=tow, toc_week=week.copy(),
+                   toc=tow.copy(), sqrt_a=np.full(len(t_abs), np.sqrt(self.semi_major_axis)),
+                   i0=np.full(len(t_abs), self.inclination),
+                   m0=wrap(np.tile(self.arg_lat, len(toe)) + self.mean_motion * t_sim),
+                   omega0=wrap(raan + OMEGA_E_GPS * (gps_t0 - week * 604800.0)))
+        return rec

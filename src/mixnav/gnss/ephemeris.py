@@ -166,7 +166,10 @@ class BroadcastEphemeris:
             raise DataError(f"not a GPS navigation file: RINEX file type {head[20:40].strip()!r} "
                             "(expected 'N', navigation data)", file=str(path), line=1)
         try:
-            nav = georinex.load(path, use="G")
+            import warnings
+            with warnings.catch_warnings():   # georinex's per-record xarray merge warns of future defaults
+                warnings.simplefilter("ignore", FutureWarning)
+                nav = georinex.load(path, use="G")
         except Exception as exc:  # georinex raises many types; report them at our boundary
             raise DataError(f"cannot parse as RINEX navigation ({type(exc).__name__}: {exc})",
                             file=str(path)) from exc

@@ -72,6 +72,9 @@ class GnssObservations:
         1-sigma the filters are told [m], [m/s], [m].
     clock : ndarray (m, 2)
         True receiver clock bias [m] and drift [m/s] (for scoring).
+    pr_variance : ndarray (m, K) or None
+        Per-slot pseudorange variance [m^2] the filters are told instead of ``sigma_pr^2``
+        (e.g. elevation-dependent, for recorded data); None: ``sigma_pr^2`` everywhere.
     """
 
     time: np.ndarray
@@ -87,6 +90,7 @@ class GnssObservations:
     sigma_rr: float
     sigma_cp: float
     clock: np.ndarray
+    pr_variance: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.time)

@@ -44,6 +44,11 @@ class PseudorangeEpochs:
     cn0 : ndarray (M,)
         [dB-Hz] (NaN where unknown).
     source : str or None
+    sat_vel : ndarray (M, 3) or None
+        Satellite velocity at the transmit time, ECEF of that time [m/s] (where Doppler is given).
+    range_rate : ndarray (M,) or None
+        Range rate from the Doppler [m/s], satellite clock drift removed (NaN where the
+        receiver gave none); None: no Doppler at all.
     """
 
     time: np.ndarray
@@ -56,6 +61,8 @@ class PseudorangeEpochs:
     elevation: np.ndarray
     cn0: np.ndarray
     source: str | None = None
+    sat_vel: np.ndarray | None = None
+    range_rate: np.ndarray | None = None
 
     def __post_init__(self):
         M = len(self.pseudorange)
@@ -67,6 +74,10 @@ class PseudorangeEpochs:
             if getattr(self, name).shape != (M,):
                 raise ArgumentError(f"{where}: {name} has shape {getattr(self, name).shape}, expected ({M},)",
                                     argument=name)
+        if (self.sat_vel is None) != (self.range_rate is None):
+            raise ArgumentError(f"{where}: sat_vel and range_rate go together", argument="range_rate")
+        if self.range_rate is not None and (self.range_rate.shape != (M,) or self.sat_vel.shape != (M, 3)):
+            raise ArgumentError(f"{where}: range_rate must be ({M},) and sat_vel ({M}, 3)", argument="range_rate")
         if self.sat_ecef.shape != (M, 3):
             raise ArgumentError(f"{where}: sat_ecef must be ({M}, 3)", argument="sat_ecef")
         if E > 1 and (np.diff(self.time) <= 0).any():
@@ -78,7 +89,7 @@ class PseudorangeEpochs:
 
     @classmethod
     def from_rows(cls, time, pseudorange, variance, sat_ecef, sat_id, system, elevation=None, cn0=None,
-                  source=None) -> "PseudorangeEpochs":
+                  source=None, sat_vel=None, range_rate=None) -> "PseudorangeEpochs":
         """Group rows sharing a time (rows need not be sorted; a stable sort keeps their order)."""
         t = np.asarray(time, dtype=float)
         order = np.argsort(t, kind="stable")
@@ -91,7 +102,9 @@ class PseudorangeEpochs:
                    variance=np.asarray(variance, dtype=float)[order],
                    sat_ecef=np.asarray(sat_ecef, dtype=float)[order],
                    sat_id=np.asarray(sat_id, dtype=np.int64)[order], system=np.asarray(system, dtype=np.int64)[order],
-                   elevation=pick(elevation), cn0=pick(cn0), source=source)
+                   elevation=pick(elevation), cn0=pick(cn0), source=source,
+                   sat_vel=None if sat_vel is None else np.asarray(sat_vel, dtype=float)[order],
+                   range_rate=None if range_rate is None else np.asarray(range_rate, dtype=float)[order])
 
     def __len__(self) -> int:
         return len(self.time)

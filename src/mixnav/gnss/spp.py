@@ -71,7 +71,7 @@ import numpy as np
 
 from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla
 from ..noise.robust import igg3_factors
-from .geometry import C_LIGHT, SatelliteStates, earth_rotation_correction, elevation_azimuth
+from .geometry import C_LIGHT, LAMBDA_L1, SatelliteStates, earth_rotation_correction, elevation_azimuth
 
 #: the robust solution blames a row only if its standardised residual exceeds every other
 #: row's by this many standard deviations of their difference (module docstring, "Robust
@@ -580,7 +580,7 @@ def atmosphere_delay(lla, elevation, azimuth, tow: float, options: SppOptions = 
 
 
 def corrected_pseudoranges(ephemeris, week, tow_rx, epoch, prn, pseudorange, receiver_ecef,
-                           options: SppOptions = SppOptions(), cn0=None, source=None):
+                           options: SppOptions = SppOptions(), cn0=None, source=None, doppler=None):
     """The raw pseudoranges as a :class:`~mixnav.gnss.pseudoranges.PseudorangeEpochs` with the
     broadcast corrections applied the way SPP applies them, for a filter that estimates
     position and clock itself (:class:`mixnav.measurements.pseudorange.PseudorangeGnss`).
@@ -604,6 +604,10 @@ def corrected_pseudoranges(ephemeris, week, tow_rx, epoch, prn, pseudorange, rec
     options : SppOptions
     cn0 : ndarray (m,) or None
         [dB-Hz].
+    doppler : ndarray (m,) or None
+        L1 Doppler [Hz] (NaN where absent): the epochs then also carry the range rate
+        ``-lambda_L1 D + c ddt_sv`` (the satellite clock drift, relativistic part included,
+        removed) and the satellite velocity at the transmit time (ECEF of that time).
 
     Returns
     -------
@@ -620,12 +624,13 @@ def corrected_pseudoranges(ephemeris, week, tow_rx, epoch, prn, pseudorange, rec
     prn = np.asarray(prn, int)
     rho = np.asarray(pseudorange, float)
     cn = np.full(len(rho), np.nan) if cn0 is None else np.asarray(cn0, float)
+    dop = None if doppler is None else np.asarray(doppler, float)
     t_abs = week * 604800.0 + tow_rx
     t_rel = t_abs - t_abs[0]
     order = np.argsort(epoch, kind="stable")
     bounds = np.searchsorted(epoch[order], np.arange(len(tow_rx) + 1))
     skipped: dict[str, int] = {}
-    out = {k: [] for k in ("t", "pr", "var", "sat", "id", "el", "cn0")}
+    out = {k: [] for k in ("t", "pr", "var", "sat", "id", "el", "cn0", "vel", "rr")}
     for j in range(len(tow_rx)):
         rows = order[bounds[j]:bounds[j + 1]]
         if len(rows) == 0:
@@ -652,13 +657,18 @@ def corrected_pseudoranges(ephemeris, week, tow_rx, epoch, prn, pseudorange, rec
         out["id"].append(prn[rows][keep])
         out["el"].append(el)
         out["cn0"].append(cn[rows][keep])
+        if dop is not None:
+            out["vel"].append(sats.vel_ecef)
+            out["rr"].append(-LAMBDA_L1 * dop[rows][keep] + C_LIGHT * sats.clock_drift)
+    vec = ("sat", "vel")
     if not out["t"]:
-        cat = {k: np.zeros((0, 3)) if k == "sat" else np.zeros(0) for k in out}
+        cat = {k: np.zeros((0, 3)) if k in vec else np.zeros(0) for k in out}
     else:
-        cat = {k: np.vstack(v) if k == "sat" else np.concatenate(v) for k, v in out.items()}
+        cat = {k: (np.vstack(v) if k in vec else np.concatenate(v)) if v else None for k, v in out.items()}
     ep = PseudorangeEpochs.from_rows(cat["t"], cat["pr"], cat["var"], cat["sat"], cat["id"],
                                      np.ones(len(cat["pr"]), int), elevation=cat["el"], cn0=cat["cn0"],
-                                     source=source)
+                                     source=source, sat_vel=cat["vel"] if dop is not None else None,
+                                     range_rate=cat["rr"] if dop is not None else None)
     return ep, skipped
 
 

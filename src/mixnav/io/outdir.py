@@ -1,7 +1,7 @@
 """Output folders a user can trust: never mixed, never half written, nothing outside.
 
 The policy (docs/outputs.md, "Output folders") every command that writes a
-folder follows (``run``, ``process``, ``diagnose``, ``experiment``):
+folder follows (``run``, ``process``, ``diagnose``, ``experiment``, ``export``):
 
 1. A folder is *owned* by the command that wrote it: each command leaves a
    marker ``.mixnav-output.json`` (``command``, ``complete``, ``files``).
@@ -12,7 +12,7 @@ folder follows (``run``, ``process``, ``diagnose``, ``experiment``):
    unless ``--overwrite``, which clears it first. ``--out`` that is a file,
    the current folder or one above it, the home folder, ``/``, or a folder
    holding the config or data files being read is refused even then.
-3. ``run``, ``process`` and ``diagnose`` write into a hidden temporary sibling
+3. ``run``, ``process``, ``diagnose`` and ``export`` write into a hidden temporary sibling
    (``.<name>.mixnav-*``) and swap it in at the end (two renames), so an
    interrupted rewrite leaves the old complete folder or the new complete one,
    never old and new files side by side; the sibling is removed on an error

@@ -4,7 +4,9 @@ Any receiver whose data RTKLIB's ``convbin`` (or the maker's tool) converts to R
 can then be processed by single-point positioning like a phone log
 (:mod:`mixnav.experiment.spp_process`, ``raw_gnss.format = "rinex-obs"``).
 
-The L1 C/A pseudorange is taken: ``C1C`` (RINEX 3) or ``C1`` (RINEX 2). Epoch times are
+The L1 C/A pseudorange is taken: ``C1C`` (RINEX 3) or ``C1`` (RINEX 2), with the L1
+Doppler of the same record when the file has it (``D1C`` / ``D1``: the range rate of the
+tightly coupled INS, :mod:`mixnav.experiment.rinex_ins`). Epoch times are
 those the epoch records give, to the ns (georinex truncates them to microseconds, and
 RINEX 2 to milliseconds when its file-size guess fails: 4 m of satellite motion), in GPS
 time (a header declaring another time system is refused), as GPS week and seconds of week.
@@ -59,6 +61,10 @@ class RinexPseudoranges:
     version : float
         The file's RINEX version.
     source : str
+    doppler : ndarray (m,) or None
+        L1 Doppler [Hz] of each pseudorange (``D1C``, RINEX 2 ``D1``; NaN where blank), None
+        when the file has no such column. Positive for an approaching satellite: the range
+        rate is ``-lambda_L1 * doppler``.
     """
 
     week: np.ndarray
@@ -71,6 +77,7 @@ class RinexPseudoranges:
     epochs_all_rejected: int = 0
     version: float = 0.0
     source: str = ""
+    doppler: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.tow)
@@ -336,7 +343,11 @@ def read_rinex_obs(path) -> RinexPseudoranges:
     keep = ok.any(axis=1)                       # epochs with at least one GPS pseudorange
     idx = np.cumsum(keep) - 1
     t_i, s_i = np.nonzero(ok)
+    dcode = "D1C" if listing.version >= 3 else "D1"
+    doppler = None
+    if dcode in ds.data_vars:
+        doppler = np.asarray(ds[dcode].values, dtype=float)[:, gps][t_i, s_i]
     return RinexPseudoranges(week=week[keep], tow=tow[keep], epoch=idx[t_i].astype(np.int64), prn=prns[s_i],
                              pseudorange=values[t_i, s_i], code=code, rejected=rejected,
                              epochs_all_rejected=max(listing.epochs - int(keep.sum()), 0),
-                             version=listing.version, source=str(path))
+                             version=listing.version, source=str(path), doppler=doppler)

@@ -42,6 +42,8 @@ class TightGnss(MeasurementModel):
     Parameters
     ----------
     obs : GnssObservations
+        Its ``sigma_pr`` / ``sigma_rr`` are the rows' sigmas, or per satellite its
+        ``pr_variance`` when given.
     lever_arm : ndarray (3,)
         Antenna in the body frame relative to the IMU [m].
     layout : StateLayout
@@ -111,6 +113,8 @@ class TightGnss(MeasurementModel):
                             o.sat_vel[i], o.pseudorange[i], o.range_rate[i], o.valid[i],
                             o.sigma_pr, o.sigma_rr, self.use_range_rate, lay.n, lay.bg.start, lay.clk)
         m = len(z)
+        if o.pr_variance is not None:     # per-satellite variances (recorded data), in slot order
+            r[:self._n_valid[i]] = o.pr_variance[i, o.valid[i]]
         return Rows(z, H, r, self._kinds_of(m), self.row_channels(i, m))
 
     def predict_batch(self, i: int, navs: np.ndarray, w_b: np.ndarray, clocks=None):
@@ -137,7 +141,7 @@ class TightGnss(MeasurementModel):
         y = np.empty(m)
         r = np.empty(m)
         y[:ns] = o.pseudorange[i, sel]
-        r[:ns] = o.sigma_pr ** 2
+        r[:ns] = o.sigma_pr ** 2 if o.pr_variance is None else o.pr_variance[i, sel]
         if self.use_range_rate:
             y[ns:] = o.range_rate[i, sel]
             r[ns:] = o.sigma_rr ** 2
@@ -180,7 +184,7 @@ class TightGnss(MeasurementModel):
         H[:n, lay.att] = u_n @ skew(l_n)
         H[:n, lay.pos] = -u_n
         H[:n, lay.clk] = 1.0
-        r[:n] = o.sigma_pr ** 2
+        r[:n] = o.sigma_pr ** 2 if o.pr_variance is None else o.pr_variance[i, sel]
         if use_rr:
             z[n:] = o.range_rate[i, sel] - rr
             H[n:, lay.att] = u_n @ skew(C_nb @ np.cross(w_b, self.lever))

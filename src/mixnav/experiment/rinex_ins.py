@@ -1,0 +1,292 @@
+"""``mixnav process`` for an ``ins-gnss`` dataset whose GNSS is a RINEX observation file
+(``[raw_gnss]``): the tightly coupled INS on pseudoranges and Doppler.
+
+Steps:
+
+1. Read the IMU (any IMU format, the installation applied as for fixes), the RINEX
+   observation file (:func:`mixnav.io.rinex_obs.read_rinex_obs`: GPS C1C and D1C when
+   present), the navigation file (:class:`mixnav.gnss.ephemeris.BroadcastEphemeris`) and
+   the reference.
+2. One time axis: RINEX epochs are GPS time; the IMU time stamps are GPS seconds of the
+   week of the first RINEX epoch or GPS seconds since 1980 (``raw_gnss.imu_time``), after
+   ``installation.imu_time_offset``. Times inside the run are seconds since the first IMU
+   sample (as every INS dataset); the reference's time stamps are read on the IMU's axis.
+   A RINEX file with no epoch inside the IMU's span is a DataError naming both files.
+3. SPP of every epoch (:func:`mixnav.gnss.spp.solve_epochs`); receiver clock jumps seen
+   by it come off the pseudoranges (:func:`mixnav.gnss.spp.clock_jumps`). The SPP fixes,
+   with the receiver velocity from the Doppler (:func:`mixnav.gnss.raw_observations.doppler_velocity`)
+   when the file has it, are what the alignment (``[alignment]``, as for recorded fixes)
+   and the loosely coupled methods use.
+4. The pseudoranges with the broadcast corrections (the one correction function,
+   :func:`mixnav.gnss.spp.corrected_pseudoranges`: satellite clock with the relativistic
+   term and T_GD, Saastamoinen troposphere, Klobuchar ionosphere when the navigation header
+   has its coefficients, else warned and reported as ``ionosphere: skipped``), evaluated at
+   the latest SPP fix (the first before it), and the Doppler range rates (satellite clock
+   drift removed) become the tight filter's observables
+   (:func:`mixnav.gnss.raw_observations.tight_observations`, the Earth's rotation during the
+   travel time applied): :class:`mixnav.measurements.tight.TightGnss` applies the antenna
+   lever arm to the range and to the range rate (its Jacobians cover attitude, and the
+   gyro bias through ``w x l``).
+5. The tight methods start from the alignment with the receiver clock bias and drift of
+   the SPP / Doppler solution at the alignment time (17-state layout, ``states = 17``).
+   Outputs, metrics and report as every INS dataset (:func:`mixnav.experiment.process.write_process`).
+"""
+
+from __future__ import annotations
+
+import time as _time
+import warnings
+from dataclasses import replace
+
+import numpy as np
+
+from ..config.dataset_schema import Dataset
+from ..config.loader import imu_model
+from ..data import GnssFixes
+from ..errors import ConfigError, DataError
+from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla
+from ..gnss.ephemeris import BroadcastEphemeris
+from ..gnss.geometry import SECONDS_PER_WEEK
+from ..gnss.raw_observations import doppler_velocity, tight_observations
+from ..gnss.spp import SppOptions, clock_jumps, corrected_pseudoranges, solve_epochs
+from ..ins.error_model import ClockModel
+from ..io.imu_checks import DataWarning
+from ..io.rinex_obs import RinexPseudoranges, read_rinex_obs
+from ..sim.gnss import in_windows
+from . import methods
+from .aiding import AidingInputs, installation_check
+
+
+def spp_options(ds: Dataset) -> SppOptions:
+    c = ds.raw_gnss
+    return SppOptions(elevation_mask=c.elevation_mask, sigma_a=c.sigma_a, sigma_b=c.sigma_b,
+                      troposphere=c.troposphere, ionosphere=c.ionosphere)
+
+
+def _subset(obs, keep):
+    """The epochs ``keep`` (bool (m,)) of GnssObservations."""
+    f = {k: getattr(obs, k) for k in ("time", "valid", "prn", "sat_pos", "sat_vel", "pseudorange", "range_rate",
+                                      "carrier", "elevation", "clock", "pr_variance") if getattr(obs, k) is not None}
+    return replace(obs, **{k: v[keep] for k, v in f.items()})
+
+
+def read_observations(paths) -> RinexPseudoranges:
+    """The GPS pseudoranges (and Doppler) of one or more RINEX observation files, in time order
+    (:func:`mixnav.io.rinex_obs.read_rinex_obs` each): one record whose epochs run on from
+    file to file. A file that does not start after the previous one's last epoch is a
+    DataError naming it; Doppler missing from some of the files is NaN there (counted as
+    ``no Doppler`` by the tight observables)."""
+    parts = [read_rinex_obs(p) for p in paths]
+    if len(parts) == 1:
+        return parts[0]
+    for prev, (p, cur) in zip(parts, zip(paths[1:], parts[1:])):
+        last = prev.week[-1] * SECONDS_PER_WEEK - cur.week[0] * SECONDS_PER_WEEK + prev.tow[-1]
+        if not cur.tow[0] > last:
+            raise DataError(f"its first epoch (GPS week {cur.week[0]}, {cur.tow[0]:.3f} s) is not after the last "
+                            f"epoch of {prev.source}: give the observation files in time order, without overlap",
+                            file=str(p))
+    offsets = np.cumsum([0] + [len(x.tow) for x in parts[:-1]])
+    any_doppler = any(x.doppler is not None for x in parts)
+    rejected: dict = {}
+    for x in parts:
+        for key, n in x.rejected.items():
+            rejected[key] = rejected.get(key, 0) + n
+    cat = np.concatenate
+    return RinexPseudoranges(
+        week=cat([x.week for x in parts]), tow=cat([x.tow for x in parts]),
+        epoch=cat([x.epoch + o for x, o in zip(parts, offsets)]), prn=cat([x.prn for x in parts]),
+        pseudorange=cat([x.pseudorange for x in parts]), code="/".join(dict.fromkeys(x.code for x in parts)),
+        rejected=rejected, epochs_all_rejected=sum(x.epochs_all_rejected for x in parts),
+        version=parts[0].version, source=", ".join(x.source for x in parts),
+        doppler=cat([x.doppler if x.doppler is not None else np.full(len(x.prn), np.nan) for x in parts])
+        if any_doppler else None)
+
+
+def read_navigation(paths) -> BroadcastEphemeris:
+    """The GPS broadcast records of one or more RINEX navigation files, as one ephemeris (the
+    Klobuchar coefficients of the first header that has them)."""
+    parts = [BroadcastEphemeris.from_rinex(p) for p in paths]
+    if len(parts) == 1:
+        return parts[0]
+    rec = {k: np.concatenate([x.rec[k] for x in parts]) for k in parts[0].rec}
+    iono = next((x for x in parts if x.iono_alpha is not None), None)
+    return BroadcastEphemeris(rec, source=", ".join(x.source for x in parts),
+                              iono_alpha=None if iono is None else iono.iono_alpha,
+                              iono_beta=None if iono is None else iono.iono_beta)
+
+
+def epoch_axis(ds: Dataset, obs) -> tuple[np.ndarray, float]:
+    """Seconds of each RINEX epoch on the IMU file's own time axis ((k,)), and the offset
+    added to the IMU file's times to make them GPS seconds since 1980 ([s])."""
+    if ds.raw_gnss.imu_time == "gps-week-seconds":
+        base = float(obs.week[0]) * SECONDS_PER_WEEK
+    else:
+        base = 0.0
+    # the week difference first: GPS seconds since 1980 as one float keep only 0.24 us
+    t = (np.asarray(obs.week, float) * SECONDS_PER_WEEK - base) + np.asarray(obs.tow, float)
+    return t, base
+
+
+def process_rinex_ins(ds: Dataset, source: str, folder):
+    """Read, align and filter an ``ins-gnss`` dataset with ``[raw_gnss]`` (module docstring).
+    Returns a :class:`mixnav.experiment.process.ProcessOutput`."""
+    from .ins_common import ProcessOutput, _shift, data_checks, initial_state, install, read_imu, read_reference
+    c = ds.raw_gnss
+    t_read = _time.perf_counter()
+    imu = install(read_imu(ds, folder), ds)
+    obs_files = [folder / f for f in c.files("file")]
+    nav_files = [folder / f for f in c.files("navigation")]
+    obs_file = obs_files[0]     # the file an error names (the message lists them all)
+    obs = read_observations(obs_files)
+    eph = read_navigation(nav_files)
+    for i, m in enumerate(ds.methods):   # before any work
+        if m.type == "tight-ekf" and m.use_range_rate and obs.doppler is None:
+            raise ConfigError(f"method '{m.name}' uses range rates, but {obs.source} has no Doppler (D1C/D1) column: "
+                              "set use_range_rate = false", file=source, key=f"methods[{i}].use_range_rate")
+    reference = read_reference(ds, folder)
+    read_time = _time.perf_counter() - t_read
+    if c.ionosphere and eph.iono_alpha is None:   # asked for, and impossible: said, not silent
+        warnings.warn(f"{', '.join(map(str, nav_files))}: the header has no ionosphere (Klobuchar) coefficients, "
+                      "so the ionosphere "
+                      "correction is skipped and every pseudorange keeps its delay (metrics.json: "
+                      "rinex.ionosphere)", DataWarning, stacklevel=3)
+    t_epoch, base = epoch_axis(ds, obs)
+    t0 = imu.start_time
+    t_rel = t_epoch - t0
+    span = float(imu.time[-1] - t0)
+    inside = (t_rel >= 0.0) & (t_rel <= span)
+    if not inside.any():
+        raise DataError(f"the RINEX epochs (GPS {t_epoch[0] + base:.3f}..{t_epoch[-1] + base:.3f} s since 1980) and "
+                        f"the IMU samples ({t0 + base:.3f}..{imu.time[-1] + base:.3f} s, raw_gnss.imu_time = "
+                        f"'{c.imu_time}') do not overlap: {obs.source} and {folder / ds.imu.file} are on different time "
+                        "axes (IMU times in GPS seconds of week, since 1980, or since power-on? "
+                        "installation.imu_time_offset?)", file=str(obs_file))
+    imu = _shift(imu, t0)
+    if reference is not None:
+        reference = _shift(reference, t0)
+
+    opts = spp_options(ds)
+    t_spp = _time.perf_counter()
+    track = solve_epochs(eph, obs.week, obs.tow, obs.epoch, obs.prn, obs.pseudorange, opts)
+    offset, jumps, spikes = clock_jumps(t_rel, track.clock_bias, track.ok, float(c.clock_jump))
+    ok = track.ok
+    if not ok.any():
+        raise DataError(f"no RINEX epoch could be solved by SPP (status counts: {track.status_counts()}; "
+                        f"satellites skipped: {track.skipped_satellites})", file=str(obs_file))
+    # the corrections at the latest fix (the first fix before it): metres off move them by millimetres
+    k = np.arange(len(t_rel))
+    last = np.maximum.accumulate(np.where(ok, k, -1))
+    last = np.where(last >= 0, last, int(np.nonzero(ok)[0][0]))
+    rx = track.pos_ecef[last]
+    rho = np.asarray(obs.pseudorange, float) - offset[np.asarray(obs.epoch, int)]
+    epochs, skipped = corrected_pseudoranges(eph, obs.week, obs.tow, obs.epoch, obs.prn, rho, rx, opts,
+                                             source=obs.source, doppler=obs.doppler)
+    # epochs.time counts from the first RINEX epoch; rows of epoch e came from RINEX epoch j
+    j_of = np.searchsorted(t_rel - t_rel[0], epochs.time - 1e-6)
+    tight, skipped_rows = tight_observations(epochs, rx[j_of], c.pseudorange_sigma, c.range_rate_sigma,
+                                             opts.elevation_mask, weights=c.pseudorange_weights)
+    tight = replace(tight, time=t_rel[j_of])   # the epochs' own times on the run's axis
+    # receiver velocity and clock drift of each RINEX epoch from its Doppler (NaN without)
+    vel_e = np.full((len(t_rel), 3), np.nan)
+    drift = np.full(len(t_rel), np.nan)
+    vcov = np.full((len(t_rel), 4, 4), np.nan)
+    if obs.doppler is not None:
+        vel_e[j_of], drift[j_of], vcov[j_of] = doppler_velocity(tight, rx[j_of])
+    # onto the IMU span, without the withheld windows
+    withhold = tuple(tuple(w) for w in c.withhold)
+    keep = (tight.time > 0.0) & (tight.time <= span) & ~in_windows(tight.time, withhold)
+    tight = _subset(tight, keep)
+    fixes_all, no_velocity = spp_fixes(track, t_rel, vel_e, vcov, obs.doppler is not None, obs.source)
+    fixes_in = (fixes_all.time > 0.0) & (fixes_all.time <= span)
+    all_fixes = _select(fixes_all, fixes_in)
+    fixes = _select(all_fixes, ~in_windows(all_fixes.time, withhold))
+    solve_time = _time.perf_counter() - t_spp
+
+    checks = data_checks(ds, source, imu, all_fixes)
+    inst = ds.installation
+    lever = np.asarray(inst.antenna_position, float) - np.asarray(inst.imu_position, float)
+    init = initial_state(ds, imu, fixes, lever)
+    init = replace(init, **clock_start(init.time, track, t_rel, offset, drift, vcov))
+    out_times = None
+    if reference is not None:
+        out_times = reference.time[(reference.time > init.time) & (reference.time <= imu.time[-1])]
+        if out_times.size == 0:
+            raise DataError("the reference does not overlap the processed time span", file=source)
+    results = {}
+    t_filt = _time.perf_counter()
+    model = imu_model(ds.imu.grade, ds.imu.errors, source, "imu.errors", "imu.grade")
+    clock = ClockModel(float(c.clock_q_bias), float(c.clock_q_drift))
+    aiding = AidingInputs(ds.aiding, imu, fixes, init.time, float(imu.time[-1]), odometer=None, source=source)
+    for i, m in enumerate(ds.methods):
+        filt, meas = methods.build(m, model, fixes, lever, source, i, observations=tight, clock=clock, aiding=aiding)
+        results.update(methods.run_method(m, filt, imu, init, meas, source, i, [x.name for x in ds.methods],
+                                          output_times=out_times))
+    filter_time = _time.perf_counter() - t_filt
+    merged = dict(skipped)
+    for key, n in skipped_rows.items():
+        merged[key] = merged.get(key, 0) + n
+    checks["rinex"] = {
+        "observation_files": [str(f) for f in obs_files], "navigation_files": [str(f) for f in nav_files],
+        "epochs": int(len(obs.tow)),
+        "epochs_in_imu_span": int(inside.sum()), "doppler": obs.doppler is not None,
+        "ionosphere": ("klobuchar" if eph.iono_alpha is not None else "skipped") if c.ionosphere else "off",
+        "troposphere": bool(c.troposphere),
+        "spp_status": track.status_counts(), "spp_time_s": solve_time,
+        "satellites_skipped_by_spp": track.skipped_satellites,
+        "observations_rejected": dict(obs.rejected), "epochs_without_gps": int(obs.epochs_all_rejected),
+        "observations_not_filtered": merged, "tight_epochs": int(len(tight)),
+        "fixes_without_velocity": int(no_velocity),
+        "clock_jumps": [list(j) for j in jumps], "clock_spikes_ignored": int(spikes),
+        "clock0": [float(v) for v in init.clock0]}
+    return ProcessOutput(ds, source, folder, t0, imu, fixes, all_fixes, reference, lever, results, init,
+                         read_time + solve_time, filter_time, aiding.summary(),
+                         installation_check(imu, ds.alignment.static_duration, results, aiding.stillness,
+                                            configured={"antenna_position": inst.antenna_position,
+                                                        "imu_time_offset": inst.imu_time_offset}),
+                         checks=checks, observations=tight)
+
+
+def _select(f: GnssFixes, keep) -> GnssFixes:
+    sel = lambda a: None if a is None else a[keep]  # noqa: E731
+    return GnssFixes(time=f.time[keep], lla=f.lla[keep], pos_sigma=f.pos_sigma[keep], vel_n=sel(f.vel_n),
+                     vel_sigma=sel(f.vel_sigma), source=f.source)
+
+
+def spp_fixes(track, t_rel, vel_e, vcov, doppler: bool, source) -> tuple[GnssFixes, int]:
+    """The SPP fixes (antenna) on the run's time axis, NED sigmas from the WLS covariance; with
+    Doppler, the least-squares velocity of the same epoch (fixes without one are dropped and
+    counted: an in-motion alignment needs every fix's velocity)."""
+    ok = np.nonzero(track.ok)[0]
+    lla = np.array([ecef_to_lla(p) for p in track.pos_ecef[ok]])
+    C = np.array([dcm_ecef_to_ned(a[0], a[1]) for a in lla])
+    cov_n = np.einsum("kij,kjl,kml->kim", C, track.cov[ok, :3, :3], C)
+    pos_sigma = np.sqrt(np.einsum("kii->ki", cov_n))
+    if not doppler:
+        return GnssFixes(time=t_rel[ok], lla=lla, pos_sigma=pos_sigma, source=source), 0
+    vel_n = np.einsum("kij,kj->ki", C, vel_e[ok])
+    vcov_n = np.einsum("kij,kjl,kml->kim", C, vcov[ok, :3, :3], C)
+    vel_sigma = np.sqrt(np.abs(np.einsum("kii->ki", vcov_n)))
+    good = np.isfinite(vel_n).all(axis=1)
+    return GnssFixes(time=t_rel[ok][good], lla=lla[good], pos_sigma=pos_sigma[good], vel_n=vel_n[good],
+                     vel_sigma=vel_sigma[good], source=source), int((~good).sum())
+
+
+def clock_start(t: float, track, t_rel, offset, drift, dcov) -> dict:
+    """``clock0`` and ``sigma_clock`` of the filter's start at time ``t``: the SPP clock bias
+    (jumps taken off) interpolated to ``t`` with its WLS sigma (at least 1 m), and the drift of
+    the Doppler solution ``drift`` (k,) [m/s] with its sigma from ``dcov`` (k, 4, 4) (at least
+    1 cm/s), else the SPP clock's slope with 1 m/s."""
+    ok = track.ok
+    tb, b = t_rel[ok], (track.clock_bias - offset)[ok]
+    j = int(np.argmin(np.abs(tb - t)))
+    bias = float(np.interp(t, tb, b))
+    s_bias = float(np.sqrt(track.cov[ok][j, 3, 3]))
+    good = np.isfinite(drift)
+    if good.any():
+        i = np.nonzero(good)[0]
+        d = float(np.interp(t, t_rel[i], drift[i]))
+        s_drift = float(np.sqrt(dcov[i[np.argmin(np.abs(t_rel[i] - t))], 3, 3]))
+    else:
+        d = float(np.gradient(b, tb)[j]) if len(tb) > 1 else 0.0
+        s_drift = 1.0
+    return {"clock0": np.array([bias, d]), "sigma_clock": np.array([max(s_bias, 1.0), max(s_drift, 0.01)])}
