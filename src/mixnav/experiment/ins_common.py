@@ -183,3 +183,31 @@ def gnss_section(ds: Dataset):
     ``([raw_gnss], "raw_gnss")`` (RINEX observations); both have ``withhold``, ``max_gap``
     and ``gap_action``."""
     return (ds.gnss, "gnss") if ds.gnss is not None else (ds.raw_gnss, "raw_gnss")
+
+
+def run_ins_methods(ds: Dataset, imu: ImuData, fixes: GnssFixes, init: InitialState, reference,
+                    lever: np.ndarray, source: str, make_aiding, **build) -> tuple[dict, object, float]:
+    """Every ``[[methods]]`` entry on the IMU from ``init``: ``(results, aiding,
+    filter_time_s)``. Solutions are output at the reference's times when there is a
+    reference (a DataError if it does not overlap the run); ``make_aiding()`` builds the
+    run's AidingInputs (inside the timed part, as the filters use it); ``build``: extra
+    keywords of :func:`mixnav.experiment.methods.build` (the tight observations, the clock
+    model)."""
+    import time as _time
+    from ..config.loader import imu_model
+    from . import methods
+    out_times = None
+    if reference is not None:
+        out_times = reference.time[(reference.time > init.time) & (reference.time <= imu.time[-1])]
+        if out_times.size == 0:
+            raise DataError("the reference does not overlap the processed time span", file=source)
+    t_filt = _time.perf_counter()
+    model = imu_model(ds.imu.grade, ds.imu.errors, source, "imu.errors", "imu.grade")
+    aiding = make_aiding()
+    names = [x.name for x in ds.methods]
+    results: dict = {}
+    for i, m in enumerate(ds.methods):
+        filt, meas = methods.build(m, model, fixes, lever, source, i, aiding=aiding, **build)
+        results.update(methods.run_method(m, filt, imu, init, meas, source, i, names, output_times=out_times))
+    return results, aiding, _time.perf_counter() - t_filt
+

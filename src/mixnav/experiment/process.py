@@ -23,15 +23,14 @@ import pandas as pd
 import mixnav
 
 from ..config.dataset_schema import Dataset
-from ..config.loader import corruption, imu_model
+from ..config.loader import corruption
 from ..data import GnssFixes, OdometerData
 from ..errors import ConfigError, DataError
-from . import methods
 from .aiding import AidingInputs, installation_check
 from ..io import generic_csv, kfgins, rtklib
 from ..sim.gnss import in_windows
 from .ins_common import (ProcessOutput, _shift, data_checks, gnss_section, initial_state,  # noqa: F401
-                         install, read_imu, read_reference)
+                         install, read_imu, read_reference, run_ins_methods)
 from .run import _lla_frame, solution_table, write_outputs
 from ..geodesy.frames import displace
 
@@ -139,21 +138,10 @@ def process(ds: Dataset, source: str, data: str | None = None):
     inst = ds.installation
     lever = np.asarray(inst.antenna_position, float) - np.asarray(inst.imu_position, float)
     init = initial_state(ds, imu, fixes, lever)
-    out_times = None
-    if reference is not None:
-        out_times = reference.time[(reference.time > init.time) & (reference.time <= imu.time[-1])]
-        if out_times.size == 0:
-            raise DataError("the reference does not overlap the processed time span", file=source)
-    results = {}
-    t_filt = _time.perf_counter()
-    model = imu_model(ds.imu.grade, ds.imu.errors, source, "imu.errors", "imu.grade")
-    aiding = AidingInputs(ds.aiding, imu, fixes, init.time, float(imu.time[-1]),
-                          odometer=read_odometer(ds, folder, t0), source=source)
-    for i, m in enumerate(ds.methods):
-        filt, meas = methods.build(m, model, fixes, lever, source, i, aiding=aiding)
-        results.update(methods.run_method(m, filt, imu, init, meas, source, i, [x.name for x in ds.methods],
-                                          output_times=out_times))
-    filter_time = _time.perf_counter() - t_filt
+    results, aiding, filter_time = run_ins_methods(
+        ds, imu, fixes, init, reference, lever, source,
+        lambda: AidingInputs(ds.aiding, imu, fixes, init.time, float(imu.time[-1]),
+                             odometer=read_odometer(ds, folder, t0), source=source))
     return ProcessOutput(ds, source, folder, t0, imu, fixes, all_fixes, reference, lever, results, init,
                          read_time, filter_time, aiding.summary(),
                          installation_check(imu, ds.alignment.static_duration, results, aiding.stillness,

@@ -41,7 +41,6 @@ from dataclasses import replace
 import numpy as np
 
 from ..config.dataset_schema import Dataset
-from ..config.loader import imu_model
 from ..data import GnssFixes
 from ..errors import ConfigError, DataError
 from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla
@@ -53,7 +52,6 @@ from ..ins.error_model import ClockModel
 from ..io.imu_checks import DataWarning
 from ..io.rinex_obs import RinexPseudoranges, read_rinex_obs
 from ..sim.gnss import in_windows
-from . import methods
 from .aiding import AidingInputs, installation_check
 
 
@@ -130,7 +128,8 @@ def epoch_axis(ds: Dataset, obs) -> tuple[np.ndarray, float]:
 def process_rinex_ins(ds: Dataset, source: str, folder):
     """Read, align and filter an ``ins-gnss`` dataset with ``[raw_gnss]`` (module docstring).
     Returns a :class:`mixnav.experiment.process.ProcessOutput`."""
-    from .ins_common import ProcessOutput, _shift, data_checks, initial_state, install, read_imu, read_reference
+    from .ins_common import (ProcessOutput, _shift, data_checks, initial_state, install, read_imu, read_reference,
+                             run_ins_methods)
     c = ds.raw_gnss
     t_read = _time.perf_counter()
     imu = install(read_imu(ds, folder), ds)
@@ -207,21 +206,11 @@ def process_rinex_ins(ds: Dataset, source: str, folder):
     lever = np.asarray(inst.antenna_position, float) - np.asarray(inst.imu_position, float)
     init = initial_state(ds, imu, fixes, lever)
     init = replace(init, **clock_start(init.time, track, t_rel, offset, drift, vcov))
-    out_times = None
-    if reference is not None:
-        out_times = reference.time[(reference.time > init.time) & (reference.time <= imu.time[-1])]
-        if out_times.size == 0:
-            raise DataError("the reference does not overlap the processed time span", file=source)
-    results = {}
-    t_filt = _time.perf_counter()
-    model = imu_model(ds.imu.grade, ds.imu.errors, source, "imu.errors", "imu.grade")
     clock = ClockModel(float(c.clock_q_bias), float(c.clock_q_drift))
-    aiding = AidingInputs(ds.aiding, imu, fixes, init.time, float(imu.time[-1]), odometer=None, source=source)
-    for i, m in enumerate(ds.methods):
-        filt, meas = methods.build(m, model, fixes, lever, source, i, observations=tight, clock=clock, aiding=aiding)
-        results.update(methods.run_method(m, filt, imu, init, meas, source, i, [x.name for x in ds.methods],
-                                          output_times=out_times))
-    filter_time = _time.perf_counter() - t_filt
+    results, aiding, filter_time = run_ins_methods(
+        ds, imu, fixes, init, reference, lever, source,
+        lambda: AidingInputs(ds.aiding, imu, fixes, init.time, float(imu.time[-1]), odometer=None, source=source),
+        observations=tight, clock=clock)
     merged = dict(skipped)
     for key, n in skipped_rows.items():
         merged[key] = merged.get(key, 0) + n
