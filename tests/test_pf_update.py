@@ -144,16 +144,18 @@ def _first_seconds(sim, lever, fused, parallel=False, particles=400, seconds=60.
 def test_a_seeded_run_is_the_same_with_the_fused_update(demo, roughening):
     """loose-demo's first 60 s (60 loose epochs), 400 particles, seed 3, with the fused
     update and with the generic path: the same resamplings and, round-off apart, the same
-    nominal, particles, weights and covariance (1e-9 relative to each one's scale:
-    round-off of 1e-15 per epoch, fed back 60 times through the nominal). With and
-    without the Liu-West jitter."""
+    nominal, particles, weights and covariance (1e-8 relative to each one's scale: the
+    round-off of 1e-15 per epoch is fed back 60 times through the nominal and the
+    weights' exponentials; 2.4e-9 measured with the jitter). With and without the
+    Liu-West jitter. A modelling difference fails it (the particle's attitude dropped
+    from the velocity lever term: 1e-4 m/s, tried)."""
     sim, lever = demo
     a = _first_seconds(sim, lever, True, roughening=roughening)
     b = _first_seconds(sim, lever, False, roughening=roughening)
     assert a[4] == b[4] and a[5] == b[5] == 60 and a[4]["pf_resampled"] > 5
     np.testing.assert_allclose(a[0], b[0], rtol=1e-12, atol=1e-9)
     for u, v in zip(a[1:4], b[1:4]):
-        assert np.abs(u - v).max() <= 1e-9 * np.abs(v).max()
+        assert np.abs(u - v).max() <= 1e-8 * np.abs(v).max()
 
 
 @pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="needs two numba threads")

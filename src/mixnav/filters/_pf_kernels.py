@@ -524,17 +524,33 @@ LOOSE_CONSTANTS = 16
 
 
 @njit(cache=True, inline="always")
+def _sincos_series(d, s0, c0):
+    """``sin(lat0 + d), cos(lat0 + d)`` from ``s0, c0 = sin(lat0), cos(lat0)``: the angle
+    sum with the series of ``d`` to ``d^5`` (sin) and ``d^6`` (cos); for ``|d| <
+    SMALL_DLAT``."""
+    d2 = d * d
+    sd = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0))
+    cd = 1.0 - 0.5 * d2 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0))
+    return s0 * cd + c0 * sd, c0 * cd - s0 * sd
+
+
+@njit(cache=True, inline="always")
 def _sincos_near(lat, lat0, s0, c0):
-    """``sin(lat), cos(lat)`` from ``s0, c0 = sin(lat0), cos(lat0)``: the angle sum with
-    the series of ``d = lat - lat0`` to ``d^5`` (sin) and ``d^6`` (cos) while
-    ``|d| < SMALL_DLAT``; the library functions beyond."""
+    """``sin(lat), cos(lat)``: :func:`_sincos_series` of ``lat - lat0`` while that is below
+    ``SMALL_DLAT``; the library functions beyond."""
     d = lat - lat0
     if abs(d) < SMALL_DLAT:
-        d2 = d * d
-        sd = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0))
-        cd = 1.0 - 0.5 * d2 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0))
-        return s0 * cd + c0 * sd, c0 * cd - s0 * sd
+        return _sincos_series(d, s0, c0)
     return math.sin(lat), math.cos(lat)
+
+
+@njit(cache=True, inline="always")
+def _rodrigues_series(a2):
+    """``sin a / a`` and ``(1 - cos a) / a^2`` by their series to ``a^8`` (``a2 = a^2 <
+    SMALL_ROT2``)."""
+    s = 1.0 - a2 / 6.0 * (1.0 - a2 / 20.0 * (1.0 - a2 / 42.0 * (1.0 - a2 / 72.0)))
+    c = 0.5 * (1.0 - a2 / 12.0 * (1.0 - a2 / 30.0 * (1.0 - a2 / 56.0 * (1.0 - a2 / 90.0))))
+    return s, c
 
 
 @njit(cache=True, inline="always")
@@ -543,9 +559,7 @@ def _rodrigues(px, py, pz):
     ``(1 - cos a) / a^2``, ``a = |p|`` (series to ``a^8`` while ``a^2 < SMALL_ROT2``)."""
     a2 = px * px + py * py + pz * pz
     if a2 < SMALL_ROT2:
-        s = 1.0 - a2 / 6.0 * (1.0 - a2 / 20.0 * (1.0 - a2 / 42.0 * (1.0 - a2 / 72.0)))
-        c = 0.5 * (1.0 - a2 / 12.0 * (1.0 - a2 / 30.0 * (1.0 - a2 / 56.0 * (1.0 - a2 / 90.0))))
-        return s, c
+        return _rodrigues_series(a2)
     a = math.sqrt(a2)
     t = math.sin(0.5 * a) / a
     return math.sin(a) / a, 2.0 * t * t
@@ -586,6 +600,22 @@ def _loose_constants(nav, w_b, lever, fix, g, C0, y, r):
 
 
 @njit(cache=True, inline="always")
+def _loose_velocity(d, i_bg, g, C0, lever, px, py, pz, s, c, yrow):
+    """The velocity rows of :func:`_loose_member`: ``v0 + d_v + C_j ((w_b - d_bg) x l)``."""
+    wx, wy, wz = g[13] - d[i_bg], g[14] - d[i_bg + 1], g[15] - d[i_bg + 2]
+    wl0 = wy * lever[2] - wz * lever[1]
+    wl1 = wz * lever[0] - wx * lever[2]
+    wl2 = wx * lever[1] - wy * lever[0]
+    ux = C0[0, 0] * wl0 + C0[0, 1] * wl1 + C0[0, 2] * wl2
+    uy = C0[1, 0] * wl0 + C0[1, 1] * wl1 + C0[1, 2] * wl2
+    uz = C0[2, 0] * wl0 + C0[2, 1] * wl1 + C0[2, 2] * wl2
+    cx, cy, cz = _rotate(px, py, pz, s, c, ux, uy, uz)
+    yrow[3] = (g[10] + d[3]) + cx
+    yrow[4] = (g[11] + d[4]) + cy
+    yrow[5] = (g[12] + d[5]) + cz
+
+
+@njit(cache=True, inline="always")
 def _loose_member(d, i_bg, g, C0, lever, fix, yrow):
     """The loose prediction of the particle ``d`` (an error-state row) into ``yrow``
     (3 or 6): what ``LooseGnss.predict_batch`` gives at the full state ``nominal (+) d``
@@ -602,16 +632,16 @@ def _loose_member(d, i_bg, g, C0, lever, fix, yrow):
     lon = g[1] + d[7] / g[4]
     h = g[2] - d[8]
     sl, cl = _sincos_near(lat, g[0], g[5], g[6])
-    wq = 1.0 - E2_WGS84 * (sl * sl)
-    rn = A_WGS84 / math.sqrt(wq)
-    rm = rn * (1.0 - E2_WGS84) / wq
+    iw = 1.0 / (1.0 - E2_WGS84 * (sl * sl))    # the radii with one division (round-off apart)
+    rn = A_WGS84 * math.sqrt(iw)
+    rm = rn * (1.0 - E2_WGS84) * iw
     a_lat = lat + clx / (rm + h)
     a_lon = lon + cly / ((rn + h) * cl)
     a_h = h - clz
     sa, ca = _sincos_near(a_lat, g[0], g[5], g[6])
-    wa = 1.0 - E2_WGS84 * (sa * sa)
-    rn_a = A_WGS84 / math.sqrt(wa)
-    rm_a = rn_a * (1.0 - E2_WGS84) / wa
+    iw = 1.0 / (1.0 - E2_WGS84 * (sa * sa))
+    rn_a = A_WGS84 * math.sqrt(iw)
+    rm_a = rn_a * (1.0 - E2_WGS84) * iw
     t = fix[1] - a_lon + math.pi
     if 0.0 <= t < 2.0 * math.pi:       # the wrap's own arithmetic, without the modulo
         dlon = t - math.pi
@@ -621,17 +651,59 @@ def _loose_member(d, i_bg, g, C0, lever, fix, yrow):
     yrow[1] = -dlon * (rn_a + a_h) * ca
     yrow[2] = fix[2] - a_h
     if yrow.shape[0] > 3:
-        wx, wy, wz = g[13] - d[i_bg], g[14] - d[i_bg + 1], g[15] - d[i_bg + 2]
-        wl0 = wy * lever[2] - wz * lever[1]
-        wl1 = wz * lever[0] - wx * lever[2]
-        wl2 = wx * lever[1] - wy * lever[0]
-        ux = C0[0, 0] * wl0 + C0[0, 1] * wl1 + C0[0, 2] * wl2
-        uy = C0[1, 0] * wl0 + C0[1, 1] * wl1 + C0[1, 2] * wl2
-        uz = C0[2, 0] * wl0 + C0[2, 1] * wl1 + C0[2, 2] * wl2
-        cx, cy, cz = _rotate(px, py, pz, s, c, ux, uy, uz)
-        yrow[3] = (g[10] + d[3]) + cx
-        yrow[4] = (g[11] + d[4]) + cy
-        yrow[5] = (g[12] + d[5]) + cz
+        _loose_velocity(d, i_bg, g, C0, lever, px, py, pz, s, c, yrow)
+
+
+@njit(cache=True, inline="always")
+def _loose_member_series(d, i_bg, g, C0, lever, fix, yrow):
+    """:func:`_loose_member` without a branch, every function by its series; returns False
+    when a series was used beyond its bound or the longitude needs its wrap (then
+    ``yrow`` is to be recomputed by :func:`_loose_member`). Where it returns True, bitwise
+    :func:`_loose_member`'s numbers (the same expressions): straight-line code the
+    processor overlaps from one particle to the next (~25 % faster than the branching
+    one, measured)."""
+    px, py, pz = d[0], d[1], d[2]
+    a2 = px * px + py * py + pz * pz
+    s, c = _rodrigues_series(a2)
+    clx, cly, clz = _rotate(px, py, pz, s, c, g[7], g[8], g[9])
+    lat = g[0] + d[6] / g[3]
+    lon = g[1] + d[7] / g[4]
+    h = g[2] - d[8]
+    dl = lat - g[0]
+    sl, cl = _sincos_series(dl, g[5], g[6])
+    iw = 1.0 / (1.0 - E2_WGS84 * (sl * sl))
+    rn = A_WGS84 * math.sqrt(iw)
+    rm = rn * (1.0 - E2_WGS84) * iw
+    a_lat = lat + clx / (rm + h)
+    a_lon = lon + cly / ((rn + h) * cl)
+    a_h = h - clz
+    da = a_lat - g[0]
+    sa, ca = _sincos_series(da, g[5], g[6])
+    iw = 1.0 / (1.0 - E2_WGS84 * (sa * sa))
+    rn_a = A_WGS84 * math.sqrt(iw)
+    rm_a = rn_a * (1.0 - E2_WGS84) * iw
+    t = fix[1] - a_lon + math.pi
+    dlon = t - math.pi
+    yrow[0] = -(fix[0] - a_lat) * (rm_a + a_h)
+    yrow[1] = -dlon * (rn_a + a_h) * ca
+    yrow[2] = fix[2] - a_h
+    if yrow.shape[0] > 3:
+        _loose_velocity(d, i_bg, g, C0, lever, px, py, pz, s, c, yrow)
+    return (a2 < SMALL_ROT2) & (abs(dl) < SMALL_DLAT) & (abs(da) < SMALL_DLAT) & (0.0 <= t) & (t < 2.0 * math.pi)
+
+
+@njit(cache=True, inline="always")
+def _loose_predict_rows(j0, j1, D, i_bg, g, C0, lever, fix, Y):
+    """``Y[j0:j1]`` by :func:`_loose_member_series`, then the rows it could not do by
+    :func:`_loose_member`, in a second loop (marked NaN in the first: a call or the
+    branching code in the first loop made it ~40 % slower, measured)."""
+    for j in range(j0, j1):
+        yj = Y[j]
+        ok = _loose_member_series(D[j], i_bg, g, C0, lever, fix, yj)
+        yj[0] = yj[0] if ok else np.nan
+    for j in range(j0, j1):
+        if not Y[j, 0] == Y[j, 0]:
+            _loose_member(D[j], i_bg, g, C0, lever, fix, Y[j])
 
 
 @njit(cache=True)
@@ -644,14 +716,13 @@ def pf_loose_predict(D, layout, nav, w_b, lever, fix, Y):
     C0 = np.empty((3, 3))
     m = Y.shape[1]
     _loose_constants(nav, w_b, lever, fix, g, C0, np.empty(m), np.empty(m))
-    for j in range(D.shape[0]):
-        _loose_member(D[j], layout[L_BG], g, C0, lever, fix, Y[j])
+    _loose_predict_rows(0, D.shape[0], D, layout[L_BG], g, C0, lever, fix, Y)
 
 
 @njit(cache=True, inline="always")
-def _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, r, logw0, w0, yk0, Y, logw, yp):
-    """Chunk ``c``: each particle's prediction (into ``Y``), log-likelihood and log-weight
-    (into ``logw``); ``yp[c]`` = [smallest squared normalised innovation, largest finite
+def _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, Y, logw, yp):
+    """Chunk ``c``: each particle's prediction (into ``Y``), log-likelihood (``ir`` the
+    inverse noise variances) and log-weight (into ``logw``); ``yp[c]`` = [smallest squared normalised innovation, largest finite
     log-weight, prior-weighted sums of ``Y_j - yk0`` (m) and of their products (m m,
     upper triangle)]."""
     N = D.shape[0]
@@ -661,14 +732,15 @@ def _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, r, logw0, w0, yk0, Y, logw, y
     p[1] = -np.inf
     for i in range(m + m * m):
         p[2 + i] = 0.0
-    for j in range(c * N // CHUNKS, (c + 1) * N // CHUNKS):
+    j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
+    _loose_predict_rows(j0, j1, D, i_bg, g, C0, lever, fix, Y)
+    for j in range(j0, j1):
         yj = Y[j]
-        _loose_member(D[j], i_bg, g, C0, lever, fix, yj)
         s = 0.0
         wj = w0[j]
         for i in range(m):
             e = y[i] - yj[i]
-            s += e * e / r[i]
+            s += e * e * ir[i]
             wa = wj * (yj[i] - yk0[i])
             p[2 + i] += wa
             for k in range(i, m):
@@ -775,8 +847,9 @@ def pf_loose_update(D, layout, nav, w_b, lever, fix, logw0, w0, thr, Y, logw, w,
     _loose_constants(nav, w_b, lever, fix, g, C0, y, r)
     k0 = _heaviest(w0)
     _loose_member(D[k0], i_bg, g, C0, lever, fix, yk0)
+    ir = 1.0 / r
     for c in prange(CHUNKS):
-        _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, r, logw0, w0, yk0, Y, logw, yp)
+        _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, Y, logw, yp)
     best, top = _sum_loose(yp, yk0, ym, Pyy)
     nis = _nis(y, ym, Pyy, r)
     if not np.isfinite(top) or not best <= thr:
@@ -803,8 +876,9 @@ def pf_loose_update_serial(D, layout, nav, w_b, lever, fix, logw0, w0, thr, Y, l
     _loose_constants(nav, w_b, lever, fix, g, C0, y, r)
     k0 = _heaviest(w0)
     _loose_member(D[k0], i_bg, g, C0, lever, fix, yk0)
+    ir = 1.0 / r
     for c in range(CHUNKS):
-        _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, r, logw0, w0, yk0, Y, logw, yp)
+        _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, Y, logw, yp)
     best, top = _sum_loose(yp, yk0, ym, Pyy)
     nis = _nis(y, ym, Pyy, r)
     if not np.isfinite(top) or not best <= thr:
