@@ -359,29 +359,30 @@ def _mean_chunk(c, D, w, part):
             p[i] += wj * D[j, i]
 
 
-@njit(cache=True, inline="always")
-def _dot4(u, v, k):
-    """``sum_t u[t] v[t]`` over the first ``k`` entries with four interleaved partial sums
-    (added as ``(s0 + s1) + (s2 + s3)``, then the tail): a fixed order, which the compiler
-    can evaluate four lanes at a time without reassociating (no fastmath)."""
-    s0 = s1 = s2 = s3 = 0.0
-    k4 = k - k % 4
-    for t in range(0, k4, 4):
-        s0 += u[t] * v[t]
-        s1 += u[t + 1] * v[t + 1]
-        s2 += u[t + 2] * v[t + 2]
-        s3 += u[t + 3] * v[t + 3]
-    s = (s0 + s1) + (s2 + s3)
-    for t in range(k4, k):
-        s += u[t] * v[t]
-    return s
+@njit(cache=True, fastmath={"reassoc"})
+def _chunk_dots(W, E, k, p):
+    """``p[n + a n + b] = sum_t W[a, t] E[b, t]`` over ``t < k`` for ``a <= b < n``.
+
+    Reassociation allowed (``fastmath={"reassoc"}``): the compiler sums each product in
+    vector lanes, ~2 x faster than a scalar chain (measured). The order is then the
+    compiler's, but fixed by this one compiled function, which both kernel twins call
+    (not inlined): the same sums on any thread count."""
+    n = W.shape[0]
+    for a in range(n):
+        wa = W[a]
+        for b in range(a, n):
+            eb = E[b]
+            s = 0.0
+            for t in range(k):
+                s += wa[t] * eb[t]
+            p[n + a * n + b] = s
 
 
 @njit(cache=True, inline="always")
 def _cov_chunk(c, D, w, x, part):
     """Chunk ``c``'s ``sum w_j (D_j - x)(D_j - x)^T`` (upper triangle) into ``part[c, n:]``:
     the chunk's centred deviations transposed (state-major, ``E``) and weighted (``W``),
-    then one fixed-order dot product per pair of states (:func:`_dot4`)."""
+    then one dot product per pair of states (:func:`_chunk_dots`)."""
     N, n = D.shape
     j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
     k = j1 - j0
@@ -393,10 +394,7 @@ def _cov_chunk(c, D, w, x, part):
             e = D[j0 + t, a] - x[a]
             E[a, t] = e
             W[a, t] = wj * e
-    p = part[c]
-    for a in range(n):
-        for b in range(a, n):
-            p[n + a * n + b] = _dot4(W[a], E[b], k)
+    _chunk_dots(W, E, k, part[c])
 
 
 @njit(cache=True)
