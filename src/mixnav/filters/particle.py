@@ -21,11 +21,17 @@ and give bitwise the same particles (docs/particle.md, "Speed").
 At a measurement epoch the particles are made full states about the current
 nominal, ``epoch.model.predict_batch`` gives ``(y, Y, R)``, and each log-weight
 gains the Gaussian log-likelihood ``-1/2 sum (y - Y_j)^2 / R`` (normalised in
-log space: subtract the maximum, exponentiate, divide by the sum). The
+log space: subtract the maximum, exponentiate, divide by the sum). On a loose GNSS
+epoch (:class:`~mixnav.measurements.loose.LooseGnss`) one fused kernel
+(``_pf_kernels.pf_loose_update``) does all of it from the particle array, with the
+weighted mean and covariance: the generic path's numbers to round-off (tested;
+``fused=False`` keeps the generic path). The
 effective sample size ``1 / sum w^2`` decides a systematic resampling (ESS <
-``resample_threshold`` N); roughening (Gordon, Salmond & Smith 1993) then adds
-``N(0, (K E_i N^(-1/n))^2)`` to state ``i`` (``E_i`` the particles' range,
-``K = roughening``; 0: none). The weighted mean deviation (computed before the
+``resample_threshold`` N); with ``roughening = h > 0`` (on by default, 0.9: plain SIR
+diverges on loose-demo, docs/particle.md) the Liu-West kernel jitter then
+re-diversifies the particles (:meth:`ParticleEstimator._resample`; the Cholesky factor
+of the weighted covariance, the normals drawn by numpy into a preallocated buffer).
+The weighted mean deviation (computed before the
 resampling) is returned as the correction; the engine feeds it back and calls
 :meth:`recentre`, which shifts every particle. The recorded covariance is the
 weighted sample covariance.
