@@ -9,7 +9,13 @@ epochs, best of 2 runs, with the engine's step API (as bench_ukf.py). For the PF
 propagation (all particles mechanized in one compiled call, 4 merged sub-intervals,
 process noise) and the update (particles as full states, predict_batch, weights,
 resampling, moments) are also timed apart, and the update split into epochs with and
-without a resampling.
+without a resampling; the 5000-particle run is repeated with the generic update path
+(full states + predict_batch, ``fused=False``) side by side.
+
+Update split (5000 particles, ``update_split``): the estimator's state captured before
+12 loose-demo epochs, restored before each timed update, so every variant (resampling
+forced or off, Liu-West jitter h = 0.9 or none, fused or generic) sees the same inputs;
+then each stage of the fused update timed alone on those epochs.
 
 IMU step (5000 particles, 15 states, kernels called directly on particles spread as
 on loose-demo): (a) one mechanization sub-interval of the whole array (5000 particles
