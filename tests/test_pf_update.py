@@ -101,6 +101,10 @@ def test_the_fused_loose_update_equals_the_generic_path(att_sigma, pos_sigma, le
     p = _fused(K.pf_loose_update, *case)
     for key in f:
         np.testing.assert_array_equal(np.asarray(p[key]), np.asarray(f[key]))
+    lay, D, nav, model, _, _, w_b = case
+    Y = np.empty_like(f["Y"])
+    K.pf_loose_predict(D, lay.as_array(), nav, w_b, *model.batch_fix(0)[::-1], Y)   # the predictions alone
+    np.testing.assert_array_equal(Y, f["Y"])
 
 
 def test_the_fused_update_detects_a_degenerate_epoch_like_the_generic_one():
