@@ -9,7 +9,13 @@ epochs, best of 2 runs, with the engine's step API (as bench_ukf.py). For the PF
 propagation (all particles mechanized in one compiled call, 4 merged sub-intervals,
 process noise) and the update (particles as full states, predict_batch, weights,
 resampling, moments) are also timed apart, and the update split into epochs with and
-without a resampling.
+without a resampling; the 5000-particle run is repeated with the generic update path
+(full states + predict_batch, ``fused=False``) side by side.
+
+Update split (5000 particles, ``update_split``): the estimator's state captured before
+12 loose-demo epochs, restored before each timed update, so every variant (resampling
+forced or off, Liu-West jitter h = 0.9 or none, fused or generic) sees the same inputs;
+then each stage of the fused update timed alone on those epochs.
 
 IMU step (5000 particles, 15 states, kernels called directly on particles spread as
 on loose-demo): (a) one mechanization sub-interval of the whole array (5000 particles
@@ -41,6 +47,7 @@ import numpy as np
 
 from mixnav import __version__
 from mixnav.config import load_scenario
+from mixnav.engine.protocols import Epoch
 from mixnav.experiment.run import solution_table
 from mixnav.filters.ekf import ErrorStateEkf
 import numba
@@ -55,14 +62,17 @@ from mixnav.sim.scenario import simulate
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
-def engine_epoch_us(filt, sim, lever, repeats=2):
+def engine_epoch_us(filt, sim, lever, repeats=2, fused=True):
     """Mean wall time per GNSS epoch [us] (best of ``repeats`` runs) and, for the PF, its
-    predict / update means and the update's mean over epochs with / without a resampling."""
+    predict / update means and the update's mean over epochs with / without a resampling
+    (``fused=False``: the PF's generic update path, for the side-by-side)."""
     best, parts = np.inf, None
     for _ in range(repeats):
         eng = filt.engine([LooseGnss(sim.fixes, lever, filt.layout)])
         eng.start(sim.imu, sim.init)
         est = eng.estimator if hasattr(eng, "estimator") else filt.estimator
+        if isinstance(est, ParticleEstimator):
+            est.fused = fused
         split = {"predict": [], "update": [], "resampled": [], "predict_cpu": [], "update_cpu": []}
         if isinstance(est, ParticleEstimator):
             for name in ("predict", "update"):
@@ -157,6 +167,92 @@ def imu_step_us(N=5000, repeats=40):
     return out
 
 
+def update_split(sim, lever, N=5000, n_epochs=12, seconds=360.0, repeats=15):
+    """One GNSS update of N particles on captured loose-demo epochs, with and without a
+    resampling and with and without the Liu-West jitter, fused and generic, on the same
+    inputs: the estimator's state (particles, weights) is captured before ``n_epochs``
+    epochs spread over the first ``seconds`` of a default run, restored before each timed
+    ``update`` call; the resampling is forced (threshold 1) or kept off (threshold
+    1e-9). Medians over epochs x ``repeats`` [us]: wall, wall best, process CPU. Then
+    the stages of the fused update timed alone on the same epochs (kernel, systematic
+    resampling, Cholesky, the normals, the jitter product, the moments the engine's
+    recording recomputes after a resampling)."""
+    from mixnav.linalg import cholesky_lower
+    lay = get_layout(15)
+    f = ParticleFilter(lay, sim.imu_model, particles=N)
+    eng = f.engine([LooseGnss(sim.fixes, lever, lay)], rng=0)
+    eng.start(sim.imu, sim.init)
+    est = f.estimator
+    every = seconds / n_epochs
+    caps, orig = [], est.update
+
+    def capture(epoch):
+        if epoch.time >= sim.init.time + every * (len(caps) + 1) and len(caps) < n_epochs:
+            frozen = Epoch(epoch.time, epoch.index, epoch.model, epoch.nav.copy(), np.array(epoch.w_b, dtype=float),
+                           np.array(epoch.clock, dtype=float), epoch.memory, epoch.aux)   # the engine's arrays move on
+            caps.append((frozen, est.D.copy(), est.logw.copy(), est.w.copy()))
+        return orig(epoch)
+    est.update = capture
+    while len(caps) < n_epochs and eng.step():
+        pass
+    est.update = orig
+
+    def restore(c):
+        est.D[:] = c[1]
+        est.logw[:] = c[2]
+        est.w[:] = c[3]
+
+    out = {}
+    for fused in (True, False):
+        for resample in (False, True):
+            for h in (0.9, 0.0):
+                est.fused, est.roughening = fused, h
+                est.resample_threshold = 1.0 if resample else 1e-9
+                wall, cpu = [], []
+                for c in caps:
+                    for _ in range(repeats):
+                        restore(c)
+                        c0, t0 = time.process_time(), time.perf_counter()
+                        orig(c[0])
+                        wall.append(time.perf_counter() - t0)
+                        cpu.append(time.process_time() - c0)
+                key = f"{'fused' if fused else 'generic'}_{'resampled' if resample else 'not_resampled'}_h{h:g}"
+                out[key] = {"wall_us_median": float(np.median(wall)) * 1e6, "wall_us_best": float(np.min(wall)) * 1e6,
+                            "cpu_us_median": float(np.median(cpu)) * 1e6}
+    est.fused, est.roughening, est.resample_threshold = True, 0.9, 0.5
+    n = lay.n
+    la = lay.as_array()
+    ym, Pyy, Y = np.empty(6), np.empty((6, 6)), np.empty((N, 6))
+    x, P, L, Z, Dn = np.empty(n), np.empty((n, n)), np.empty((n, n)), np.empty((N, n)), np.empty((N, n))
+    yp, pa, part = np.empty((K.CHUNKS, 44)), np.empty((K.CHUNKS, 2 + n)), np.empty((K.CHUNKS, n + n * n))
+    logw, w, idx = np.empty(N), np.empty(N), np.empty(N, dtype=np.int64)
+    rng = np.random.default_rng(0)
+    stages = {k: [] for k in ("kernel", "systematic", "cholesky", "normals", "jitter_product", "copy_without_jitter",
+                              "moments_after_resampling")}
+    for c in caps:
+        ep = c[0]
+        fix, lev = ep.model.batch_fix(ep.index)
+        wb = np.asarray(ep.w_b, dtype=float)
+        calls = {"kernel": lambda: K.pf_loose_update_serial(c[1], la, ep.nav, wb, lev, fix, c[2], c[3], 1e30, Y, logw,
+                                                             w, ym, Pyy, x, P, yp, pa, part),
+                 "systematic": lambda: K.pf_systematic(w, 0.5, idx),
+                 "cholesky": lambda: cholesky_lower(P, L),
+                 "normals": lambda: rng.standard_normal(out=Z),
+                 "jitter_product": lambda: K.pf_jitter_serial(c[1], idx, 0.43, 0.9, x, L, Z, Dn),
+                 "copy_without_jitter": lambda: K.pf_jitter_serial(c[1], idx, 1.0, 0.0, x, L, Z, Dn),
+                 "moments_after_resampling": lambda: K.pf_moments_serial(Dn, w, x, P, part)}
+        for k, fn in calls.items():
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                fn()
+                stages[k].append(time.perf_counter() - t0)
+    out["stages"] = {k: {"wall_us_median": float(np.median(v)) * 1e6, "wall_us_best": float(np.min(v)) * 1e6}
+                     for k, v in stages.items()}
+    out["epochs"] = len(caps)
+    out["median_ess_fraction"] = float(np.median([1.0 / np.dot(c[3], c[3]) for c in caps])) / N
+    return out
+
+
 def peak_memory(sim, lever, N=5000, seconds=120.0):
     """Peak traced allocation [MiB] over a run of the first ``seconds`` of loose-demo with
     N particles (engine, estimator, result), the particle state's own size, max RSS."""
@@ -200,6 +296,12 @@ def main():
             out[f"pf{N}_{k}" + ("" if k == "resampled_fraction" else "_us")] = v
         out[f"pf{N}_over_ekf"] = t / out["ekf_us_per_epoch"]
         out[f"pf{N}_over_ukf"] = t / out["ukf_us_per_epoch"]
+    pf = ParticleFilter(lay, sim.imu_model, particles=5000)
+    t, parts = engine_epoch_us(pf, sim, lever, fused=False)
+    out["pf5000_generic_us_per_epoch"] = t
+    for k, v in parts.items():
+        out["pf5000_generic_" + k + ("" if k == "resampled_fraction" else "_us")] = v
+    out["update_split_5000"] = update_split(sim, lever)
     out["memory"] = peak_memory(sim, lever)
     # the parallel kernels last: their worker threads must not slow the serial timings
     pf = ParticleFilter(lay, sim.imu_model, particles=5000, parallel=True)
@@ -255,6 +357,23 @@ def main():
         md.append(f"| {label} | {r['mechanize_substep_us_median']:.0f} / {r['mechanize_substep_us_best']:.0f} / "
                   f"{r['mechanize_substep_cpu_us_median']:.0f} | {r['propagate_one_increment_us_median']:.0f} / "
                   f"{r['propagate_one_increment_us_best']:.0f} / {r['propagate_one_increment_cpu_us_median']:.0f} |")
+    us = out["update_split_5000"]
+    md += ["", f"One GNSS update of 5000 particles x 15 states, the same inputs for every variant: the "
+           f"estimator's state captured before {us['epochs']} loose-demo epochs (6 rows; median ESS "
+           f"{us['median_ess_fraction']:.2f} N before them), restored before each call; resampling forced "
+           "(threshold 1) or off (threshold 1e-9); h the Liu-West jitter (0.9 the default, 0 none). Serial "
+           "kernels. us: wall median / wall best / process CPU median.", "",
+           "| epoch | h | fused (pf_loose_update) | generic (member states + predict_batch) |", "|---|---|---|---|"]
+    for res in ("not_resampled", "resampled"):
+        for h in ("0.9", "0"):
+            a, b = us[f"fused_{res}_h{h}"], us[f"generic_{res}_h{h}"]
+            md.append(f"| {res.replace('_', ' ')} | {h} | {a['wall_us_median']:.0f} / {a['wall_us_best']:.0f} / "
+                      f"{a['cpu_us_median']:.0f} | {b['wall_us_median']:.0f} / {b['wall_us_best']:.0f} / "
+                      f"{b['cpu_us_median']:.0f} |")
+    md += ["", "Stages of the fused update, each timed alone on the same epochs (us, wall median / best):", "",
+           "| stage | us |", "|---|---|"]
+    for k, v in us["stages"].items():
+        md.append(f"| {k} | {v['wall_us_median']:.0f} / {v['wall_us_best']:.0f} |")
     mem = out["memory"]
     md += ["", f"Memory, {mem['particles']} particles x {mem['states']} states, loose-demo first 120 s: particle "
            f"state (D, log-weights, weights) {mem['particle_state_mib']:.2f} MiB, all the estimator's arrays "

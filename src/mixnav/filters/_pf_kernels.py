@@ -30,9 +30,11 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from ..geodesy.earth import A_WGS84, E2_WGS84
 from ..ins._error_kernels import L_BA, L_BG, L_CLK, L_SA, L_SG
 from ..ins._error_kernels import apply_feedback as _apply_feedback
 from ..ins._kernels import mechanize_step as _mechanize_step
+from ..ins._kernels import quat_to_dcm_into, radii
 from ..linalg import cholesky_lower
 from ._ukf_kernels import merge_block_into
 from ._ukf_kernels import nav_difference as _nav_difference
@@ -357,19 +359,42 @@ def _mean_chunk(c, D, w, part):
             p[i] += wj * D[j, i]
 
 
+@njit(cache=True, fastmath={"reassoc"})
+def _chunk_dots(W, E, k, p):
+    """``p[n + a n + b] = sum_t W[a, t] E[b, t]`` over ``t < k`` for ``a <= b < n``.
+
+    Reassociation allowed (``fastmath={"reassoc"}``): the compiler sums each product in
+    vector lanes, ~2 x faster than a scalar chain (measured). The order is then the
+    compiler's, but fixed by this one compiled function, which both kernel twins call
+    (not inlined): the same sums on any thread count."""
+    n = W.shape[0]
+    for a in range(n):
+        wa = W[a]
+        for b in range(a, n):
+            eb = E[b]
+            s = 0.0
+            for t in range(k):
+                s += wa[t] * eb[t]
+            p[n + a * n + b] = s
+
+
 @njit(cache=True, inline="always")
 def _cov_chunk(c, D, w, x, part):
-    """Chunk ``c``'s ``sum w_j (D_j - x)(D_j - x)^T`` (upper triangle) into ``part[c, n:]``."""
+    """Chunk ``c``'s ``sum w_j (D_j - x)(D_j - x)^T`` (upper triangle) into ``part[c, n:]``:
+    the chunk's centred deviations transposed (state-major, ``E``) and weighted (``W``),
+    then one dot product per pair of states (:func:`_chunk_dots`)."""
     N, n = D.shape
-    p = part[c]
-    for k in range(n * n):
-        p[n + k] = 0.0
-    for j in range(c * N // CHUNKS, (c + 1) * N // CHUNKS):
-        wj = w[j]
+    j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
+    k = j1 - j0
+    E = np.empty((n, k))
+    W = np.empty((n, k))
+    for t in range(k):
+        wj = w[j0 + t]
         for a in range(n):
-            da = wj * (D[j, a] - x[a])
-            for b in range(a, n):   # the upper triangle, row by row (contiguous)
-                p[n + a * n + b] += da * (D[j, b] - x[b])
+            e = D[j0 + t, a] - x[a]
+            E[a, t] = e
+            W[a, t] = wj * e
+    _chunk_dots(W, E, k, part[c])
 
 
 @njit(cache=True)
@@ -424,35 +449,36 @@ def pf_moments_serial(D, w, x, P, part):
 
 
 @njit(cache=True, inline="always")
-def _jitter_one(j, D, idx, a, h, x, LT, Z, Dn):
+def _jitter_one(j, D, idx, a, h, x, hL, Z, Dn):
     n = Dn.shape[1]
     k = idx[j]
     if h == 0.0:
         for i in range(n):
             Dn[j, i] = D[k, i]
     else:
-        for i in range(n):
-            Dn[j, i] = a * D[k, i] + (1.0 - a) * x[i]
-        for b in range(n):
-            zb = h * Z[j, b]
-            for i in range(n):
-                Dn[j, i] += LT[b, i] * zb
+        for i in range(n):   # row i of h L (lower triangular) times z_j: one short dot each
+            s = a * D[k, i] + (1.0 - a) * x[i]
+            for b in range(i + 1):
+                s += hL[i, b] * Z[j, b]
+            Dn[j, i] = s
 
 
 @njit(cache=True, parallel=True)
-def pf_jitter(D, idx, a, h, x, LT, Z, Dn):
+def pf_jitter(D, idx, a, h, x, hL, Z, Dn):
     """The resampled particles ``D[idx]`` with the Liu-West jitter, into ``Dn``:
-    ``Dn[j] = a D[idx_j] + (1 - a) x + h L z_j`` (``LT = L^T``, ``Z`` (N, n) standard
-    normals drawn by the caller); ``h = 0``: the plain copy. Parallel over particles."""
+    ``Dn[j] = a D[idx_j] + (1 - a) x + (h L) z_j`` (``hL`` (n, n) the lower-triangular
+    ``h L``, ``L L^T`` the weighted covariance: only its lower triangle is read; ``Z``
+    (N, n) standard normals drawn by the caller); ``h = 0``: the plain copy. Parallel
+    over particles."""
     for j in prange(Dn.shape[0]):
-        _jitter_one(j, D, idx, a, h, x, LT, Z, Dn)
+        _jitter_one(j, D, idx, a, h, x, hL, Z, Dn)
 
 
 @njit(cache=True)
-def pf_jitter_serial(D, idx, a, h, x, LT, Z, Dn):
+def pf_jitter_serial(D, idx, a, h, x, hL, Z, Dn):
     """:func:`pf_jitter`, serial."""
     for j in range(Dn.shape[0]):
-        _jitter_one(j, D, idx, a, h, x, LT, Z, Dn)
+        _jitter_one(j, D, idx, a, h, x, hL, Z, Dn)
 
 
 @njit(cache=True, inline="always")
@@ -482,6 +508,388 @@ def pf_linear_step_serial(D, FT, SQT, Z, Dn):
         _linear_one(j, D, FT, SQT, Z, Dn)
 
 
+# --- the fused update for loose GNSS (position, and velocity when the fixes have one) ----------
+
+#: |latitude - nominal latitude| [rad] below which sin/cos of a particle's latitude come from
+#: the nominal's by the angle sum with series of the difference (truncation below 1e-22
+#: relative at the bound, 6 km); beyond it math.sin/cos
+SMALL_DLAT = 1e-3
+#: |rotation vector|^2 [rad^2] below which Rodrigues' coefficients come from their series
+#: (truncation below 3e-18 at the bound, 0.1 rad); beyond it math.sin
+SMALL_ROT2 = 1e-2
+#: entries of the per-epoch constants of :func:`_loose_constants`
+LOOSE_CONSTANTS = 16
+
+
+@njit(cache=True, inline="always")
+def _sincos_series(d, s0, c0):
+    """``sin(lat0 + d), cos(lat0 + d)`` from ``s0, c0 = sin(lat0), cos(lat0)``: the angle
+    sum with the series of ``d`` to ``d^5`` (sin) and ``d^6`` (cos); for ``|d| <
+    SMALL_DLAT``."""
+    d2 = d * d
+    sd = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0))
+    cd = 1.0 - 0.5 * d2 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0))
+    return s0 * cd + c0 * sd, c0 * cd - s0 * sd
+
+
+@njit(cache=True, inline="always")
+def _sincos_near(lat, lat0, s0, c0):
+    """``sin(lat), cos(lat)``: :func:`_sincos_series` of ``lat - lat0`` while that is below
+    ``SMALL_DLAT``; the library functions beyond."""
+    d = lat - lat0
+    if abs(d) < SMALL_DLAT:
+        return _sincos_series(d, s0, c0)
+    return math.sin(lat), math.cos(lat)
+
+
+@njit(cache=True, inline="always")
+def _rodrigues_series(a2):
+    """``sin a / a`` and ``(1 - cos a) / a^2`` by their series to ``a^8`` (``a2 = a^2 <
+    SMALL_ROT2``)."""
+    s = 1.0 - a2 / 6.0 * (1.0 - a2 / 20.0 * (1.0 - a2 / 42.0 * (1.0 - a2 / 72.0)))
+    c = 0.5 * (1.0 - a2 / 12.0 * (1.0 - a2 / 30.0 * (1.0 - a2 / 56.0 * (1.0 - a2 / 90.0))))
+    return s, c
+
+
+@njit(cache=True, inline="always")
+def _rodrigues(px, py, pz):
+    """``(s, c)`` with ``exp([p x]) = I + s [p x] + c [p x]^2``: ``sin a / a`` and
+    ``(1 - cos a) / a^2``, ``a = |p|`` (series to ``a^8`` while ``a^2 < SMALL_ROT2``)."""
+    a2 = px * px + py * py + pz * pz
+    if a2 < SMALL_ROT2:
+        return _rodrigues_series(a2)
+    a = math.sqrt(a2)
+    t = math.sin(0.5 * a) / a
+    return math.sin(a) / a, 2.0 * t * t
+
+
+@njit(cache=True, inline="always")
+def _rotate(px, py, pz, s, c, vx, vy, vz):
+    """``exp([p x]) v = v + s p x v + c p x (p x v)`` (``s, c`` from :func:`_rodrigues`)."""
+    tx, ty, tz = py * vz - pz * vy, pz * vx - px * vz, px * vy - py * vx
+    ux, uy, uz = py * tz - pz * ty, pz * tx - px * tz, px * ty - py * tx
+    return vx + s * tx + c * ux, vy + s * ty + c * uy, vz + s * tz + c * uz
+
+
+@njit(cache=True)
+def _loose_constants(nav, w_b, lever, fix, g, C0, y, r):
+    """The epoch's constants for :func:`_loose_member`: ``g`` = [lat0, lon0, h0,
+    rm0 + h0, (rn0 + h0) cos lat0, sin lat0, cos lat0, C0 l (3), v0 (3), w_b (3)], ``C0``
+    the nominal's ``C_nb``; the measurement ``y`` (zero position rows, the fix's velocity)
+    and its variances ``r`` (``len(y)`` rows: 3 or 6)."""
+    quat_to_dcm_into(nav[0:4], C0)
+    lat, h = nav[7], nav[9]
+    rm, rn = radii(lat)
+    g[0], g[1], g[2] = lat, nav[8], h
+    g[3] = rm + h                       # the feedback map's denominators (bitwise the same)
+    g[4] = (rn + h) * math.cos(lat)
+    g[5], g[6] = math.sin(lat), math.cos(lat)
+    for i in range(3):
+        g[7 + i] = C0[i, 0] * lever[0] + C0[i, 1] * lever[1] + C0[i, 2] * lever[2]
+        g[10 + i] = nav[4 + i]
+        g[13 + i] = w_b[i]
+    for i in range(y.shape[0]):
+        if i < 3:
+            y[i] = 0.0
+            r[i] = fix[3 + i] * fix[3 + i]
+        else:
+            y[i] = fix[3 + i]
+            r[i] = fix[6 + i] * fix[6 + i]
+
+
+@njit(cache=True, inline="always")
+def _loose_velocity(d, i_bg, g, C0, lever, px, py, pz, s, c, yrow):
+    """The velocity rows of :func:`_loose_member`: ``v0 + d_v + C_j ((w_b - d_bg) x l)``."""
+    wx, wy, wz = g[13] - d[i_bg], g[14] - d[i_bg + 1], g[15] - d[i_bg + 2]
+    wl0 = wy * lever[2] - wz * lever[1]
+    wl1 = wz * lever[0] - wx * lever[2]
+    wl2 = wx * lever[1] - wy * lever[0]
+    ux = C0[0, 0] * wl0 + C0[0, 1] * wl1 + C0[0, 2] * wl2
+    uy = C0[1, 0] * wl0 + C0[1, 1] * wl1 + C0[1, 2] * wl2
+    uz = C0[2, 0] * wl0 + C0[2, 1] * wl1 + C0[2, 2] * wl2
+    cx, cy, cz = _rotate(px, py, pz, s, c, ux, uy, uz)
+    yrow[3] = (g[10] + d[3]) + cx
+    yrow[4] = (g[11] + d[4]) + cy
+    yrow[5] = (g[12] + d[5]) + cz
+
+
+@njit(cache=True, inline="always")
+def _loose_member(d, i_bg, g, C0, lever, fix, yrow):
+    """The loose prediction of the particle ``d`` (an error-state row) into ``yrow``
+    (3 or 6): what ``LooseGnss.predict_batch`` gives at the full state ``nominal (+) d``
+    with the body rate ``w_b - d[bg]``, without building that state. The attitude enters
+    only through ``C_j = exp([phi x]) C0`` acting on the lever arm (Rodrigues on ``C0 l``
+    and ``C0 (w x l)``: the feedback map's quaternion product, then its DCM, in exact
+    arithmetic); the position is the feedback map's (the same expressions); sin and cos
+    of the particle's and its antenna's latitudes come from the nominal's
+    (:func:`_sincos_near`). Round-off apart, the generic path's numbers."""
+    px, py, pz = d[0], d[1], d[2]
+    s, c = _rodrigues(px, py, pz)
+    clx, cly, clz = _rotate(px, py, pz, s, c, g[7], g[8], g[9])
+    lat = g[0] + d[6] / g[3]
+    lon = g[1] + d[7] / g[4]
+    h = g[2] - d[8]
+    sl, cl = _sincos_near(lat, g[0], g[5], g[6])
+    iw = 1.0 / (1.0 - E2_WGS84 * (sl * sl))    # the radii with one division (round-off apart)
+    rn = A_WGS84 * math.sqrt(iw)
+    rm = rn * (1.0 - E2_WGS84) * iw
+    a_lat = lat + clx / (rm + h)
+    a_lon = lon + cly / ((rn + h) * cl)
+    a_h = h - clz
+    sa, ca = _sincos_near(a_lat, g[0], g[5], g[6])
+    iw = 1.0 / (1.0 - E2_WGS84 * (sa * sa))
+    rn_a = A_WGS84 * math.sqrt(iw)
+    rm_a = rn_a * (1.0 - E2_WGS84) * iw
+    t = fix[1] - a_lon + math.pi
+    if 0.0 <= t < 2.0 * math.pi:       # the wrap's own arithmetic, without the modulo
+        dlon = t - math.pi
+    else:
+        dlon = t % (2.0 * math.pi) - math.pi
+    yrow[0] = -(fix[0] - a_lat) * (rm_a + a_h)
+    yrow[1] = -dlon * (rn_a + a_h) * ca
+    yrow[2] = fix[2] - a_h
+    if yrow.shape[0] > 3:
+        _loose_velocity(d, i_bg, g, C0, lever, px, py, pz, s, c, yrow)
+
+
+@njit(cache=True, inline="always")
+def _loose_member_series(d, i_bg, g, C0, lever, fix, yrow):
+    """:func:`_loose_member` without a branch, every function by its series; returns False
+    when a series was used beyond its bound or the longitude needs its wrap (then
+    ``yrow`` is to be recomputed by :func:`_loose_member`). Where it returns True, bitwise
+    :func:`_loose_member`'s numbers (the same expressions): straight-line code the
+    processor overlaps from one particle to the next (~25 % faster than the branching
+    one, measured)."""
+    px, py, pz = d[0], d[1], d[2]
+    a2 = px * px + py * py + pz * pz
+    s, c = _rodrigues_series(a2)
+    clx, cly, clz = _rotate(px, py, pz, s, c, g[7], g[8], g[9])
+    lat = g[0] + d[6] / g[3]
+    lon = g[1] + d[7] / g[4]
+    h = g[2] - d[8]
+    dl = lat - g[0]
+    sl, cl = _sincos_series(dl, g[5], g[6])
+    iw = 1.0 / (1.0 - E2_WGS84 * (sl * sl))
+    rn = A_WGS84 * math.sqrt(iw)
+    rm = rn * (1.0 - E2_WGS84) * iw
+    a_lat = lat + clx / (rm + h)
+    a_lon = lon + cly / ((rn + h) * cl)
+    a_h = h - clz
+    da = a_lat - g[0]
+    sa, ca = _sincos_series(da, g[5], g[6])
+    iw = 1.0 / (1.0 - E2_WGS84 * (sa * sa))
+    rn_a = A_WGS84 * math.sqrt(iw)
+    rm_a = rn_a * (1.0 - E2_WGS84) * iw
+    t = fix[1] - a_lon + math.pi
+    dlon = t - math.pi
+    yrow[0] = -(fix[0] - a_lat) * (rm_a + a_h)
+    yrow[1] = -dlon * (rn_a + a_h) * ca
+    yrow[2] = fix[2] - a_h
+    if yrow.shape[0] > 3:
+        _loose_velocity(d, i_bg, g, C0, lever, px, py, pz, s, c, yrow)
+    return (a2 < SMALL_ROT2) & (abs(dl) < SMALL_DLAT) & (abs(da) < SMALL_DLAT) & (0.0 <= t) & (t < 2.0 * math.pi)
+
+
+@njit(cache=True, inline="always")
+def _loose_predict_rows(j0, j1, D, i_bg, g, C0, lever, fix, Y):
+    """``Y[j0:j1]`` by :func:`_loose_member_series`, then the rows it could not do by
+    :func:`_loose_member`, in a second loop (marked NaN in the first: a call or the
+    branching code in the first loop made it ~40 % slower, measured)."""
+    for j in range(j0, j1):
+        yj = Y[j]
+        ok = _loose_member_series(D[j], i_bg, g, C0, lever, fix, yj)
+        yj[0] = yj[0] if ok else np.nan
+    for j in range(j0, j1):
+        if not Y[j, 0] == Y[j, 0]:
+            _loose_member(D[j], i_bg, g, C0, lever, fix, Y[j])
+
+
+@njit(cache=True)
+def pf_loose_predict(D, layout, nav, w_b, lever, fix, Y):
+    """``Y`` (N, m; m = 3 or 6) the loose predictions of the particles ``D`` (N, n) about
+    ``nav`` (10,) with the body rate ``w_b`` (3,) [rad/s], the antenna ``lever`` (3,) [m]
+    and the fix row ``fix`` (12,) (:func:`_loose_member`; tested against the generic
+    path)."""
+    g = np.empty(LOOSE_CONSTANTS)
+    C0 = np.empty((3, 3))
+    m = Y.shape[1]
+    _loose_constants(nav, w_b, lever, fix, g, C0, np.empty(m), np.empty(m))
+    _loose_predict_rows(0, D.shape[0], D, layout[L_BG], g, C0, lever, fix, Y)
+
+
+@njit(cache=True, inline="always")
+def _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, Y, logw, yp):
+    """Chunk ``c``: each particle's prediction (into ``Y``), log-likelihood (``ir`` the
+    inverse noise variances) and log-weight (into ``logw``); ``yp[c]`` = [smallest squared normalised innovation, largest finite
+    log-weight, prior-weighted sums of ``Y_j - yk0`` (m) and of their products (m m,
+    upper triangle)]."""
+    N = D.shape[0]
+    m = y.shape[0]
+    p = yp[c]
+    p[0] = np.inf
+    p[1] = -np.inf
+    for i in range(m + m * m):
+        p[2 + i] = 0.0
+    j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
+    _loose_predict_rows(j0, j1, D, i_bg, g, C0, lever, fix, Y)
+    for j in range(j0, j1):
+        yj = Y[j]
+        s = 0.0
+        wj = w0[j]
+        for i in range(m):
+            e = y[i] - yj[i]
+            s += e * e * ir[i]
+            wa = wj * (yj[i] - yk0[i])
+            p[2 + i] += wa
+            for k in range(i, m):
+                p[2 + m + i * m + k] += wa * (yj[k] - yk0[k])
+        lw = logw0[j] - 0.5 * s
+        logw[j] = lw
+        if s < p[0]:
+            p[0] = s
+        if np.isfinite(lw) and lw > p[1]:
+            p[1] = lw
+
+
+@njit(cache=True)
+def _sum_loose(yp, yk0, ym, Pyy):
+    """The chunks' partial sums of :func:`_loose_chunk` added in chunk order: ``(best,
+    top)`` returned, ``ym`` and ``Pyy`` the prior-weighted mean and covariance of ``Y``."""
+    m = ym.shape[0]
+    best, top = np.inf, -np.inf
+    for c in range(CHUNKS):
+        if yp[c, 0] < best:
+            best = yp[c, 0]
+        if yp[c, 1] > top:
+            top = yp[c, 1]
+    for i in range(m):
+        s = 0.0
+        for c in range(CHUNKS):
+            s += yp[c, 2 + i]
+        ym[i] = s
+    for i in range(m):
+        for k in range(i, m):
+            s = 0.0
+            for c in range(CHUNKS):
+                s += yp[c, 2 + m + i * m + k]
+            Pyy[i, k] = s - ym[i] * ym[k]
+            Pyy[k, i] = Pyy[i, k]
+    for i in range(m):
+        ym[i] += yk0[i]
+    return best, top
+
+
+@njit(cache=True, inline="always")
+def _exp_chunk(c, D, logw, top, w, pa):
+    """Chunk ``c``: ``w_j = exp(logw_j - top)`` (0 when not finite); ``pa[c]`` = [sum w_j,
+    sum w_j^2, sum w_j D_j (n)]."""
+    N, n = D.shape
+    p = pa[c]
+    for i in range(2 + n):
+        p[i] = 0.0
+    for j in range(c * N // CHUNKS, (c + 1) * N // CHUNKS):
+        lw = logw[j]
+        e = math.exp(lw - top) if np.isfinite(lw) else 0.0
+        w[j] = e
+        p[0] += e
+        p[1] += e * e
+        for i in range(n):
+            p[2 + i] += e * D[j, i]
+
+
+@njit(cache=True)
+def _sum_exp(pa, x):
+    """``(tot, sum of squares)`` of :func:`_exp_chunk`'s chunks in order; ``x`` the mean."""
+    n = x.shape[0]
+    tot, sq = 0.0, 0.0
+    for c in range(CHUNKS):
+        tot += pa[c, 0]
+        sq += pa[c, 1]
+    for i in range(n):
+        s = 0.0
+        for c in range(CHUNKS):
+            s += pa[c, 2 + i]
+        x[i] = s / tot
+    return tot, sq
+
+
+@njit(cache=True, inline="always")
+def _normalise_cov_chunk(c, D, w, tot, x, part):
+    N = D.shape[0]
+    for j in range(c * N // CHUNKS, (c + 1) * N // CHUNKS):
+        w[j] = w[j] / tot
+    _cov_chunk(c, D, w, x, part)
+
+
+@njit(cache=True, parallel=True)
+def pf_loose_update(D, layout, nav, w_b, lever, fix, logw0, w0, thr, Y, logw, w, ym, Pyy, x, P, yp, pa, part):
+    """A loose GNSS update of the particles ``D`` (N, n), fused, parallel over the
+    :data:`CHUNKS` chunks: each particle's prediction (:func:`_loose_member`, into ``Y``
+    (N, m), m = 3 or 6), its log-likelihood added to the prior log-weight ``logw0`` (into
+    ``logw``), the prior-weighted (``w0``) moments of the predictions ``ym``, ``Pyy`` and
+    the NIS; then, unless degenerate (no finite log-weight, or the smallest squared
+    normalised innovation beyond ``thr``), the normalised weights ``w``, the effective
+    sample size and the weighted mean ``x`` (n,) and covariance ``P`` (n, n), in two more
+    passes. ``nav`` (10,) the nominal, ``w_b`` (3,) [rad/s], ``lever`` (3,) [m], ``fix`` the
+    fix's row (12,: lat, lon, h [rad, m], position sigmas [m], velocity, velocity sigmas
+    [m/s]). Scratch: ``yp`` (CHUNKS, >= 2 + m + m m), ``pa`` (CHUNKS, >= 2 + n), ``part``
+    (CHUNKS, >= n + n n). Every sum over particles is taken in fixed chunks added in order:
+    bitwise the serial twin's on any thread count. Returns ``(best, ess, nis)`` as
+    :func:`pf_log_weights` (``ess`` 0 when degenerate)."""
+    N = D.shape[0]
+    m = Y.shape[1]
+    i_bg = layout[L_BG]
+    g = np.empty(LOOSE_CONSTANTS)
+    C0 = np.empty((3, 3))
+    y, r, yk0 = np.empty(m), np.empty(m), np.empty(m)
+    _loose_constants(nav, w_b, lever, fix, g, C0, y, r)
+    k0 = _heaviest(w0)
+    _loose_member(D[k0], i_bg, g, C0, lever, fix, yk0)
+    ir = 1.0 / r
+    for c in prange(CHUNKS):
+        _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, Y, logw, yp)
+    best, top = _sum_loose(yp, yk0, ym, Pyy)
+    nis = _nis(y, ym, Pyy, r)
+    if not np.isfinite(top) or not best <= thr:
+        return best, 0.0, nis
+    for c in prange(CHUNKS):
+        _exp_chunk(c, D, logw, top, w, pa)
+    tot, sq = _sum_exp(pa, x)
+    for c in prange(CHUNKS):
+        _normalise_cov_chunk(c, D, w, tot, x, part)
+    _sum_cov(part, P)
+    return best, tot * tot / sq, nis
+
+
+@njit(cache=True)
+def pf_loose_update_serial(D, layout, nav, w_b, lever, fix, logw0, w0, thr, Y, logw, w, ym, Pyy, x, P, yp, pa,
+                           part):
+    """:func:`pf_loose_update`, serial (the same chunks, the same sums: bitwise equal)."""
+    N = D.shape[0]
+    m = Y.shape[1]
+    i_bg = layout[L_BG]
+    g = np.empty(LOOSE_CONSTANTS)
+    C0 = np.empty((3, 3))
+    y, r, yk0 = np.empty(m), np.empty(m), np.empty(m)
+    _loose_constants(nav, w_b, lever, fix, g, C0, y, r)
+    k0 = _heaviest(w0)
+    _loose_member(D[k0], i_bg, g, C0, lever, fix, yk0)
+    ir = 1.0 / r
+    for c in range(CHUNKS):
+        _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, Y, logw, yp)
+    best, top = _sum_loose(yp, yk0, ym, Pyy)
+    nis = _nis(y, ym, Pyy, r)
+    if not np.isfinite(top) or not best <= thr:
+        return best, 0.0, nis
+    for c in range(CHUNKS):
+        _exp_chunk(c, D, logw, top, w, pa)
+    tot, sq = _sum_exp(pa, x)
+    for c in range(CHUNKS):
+        _normalise_cov_chunk(c, D, w, tot, x, part)
+    _sum_cov(part, P)
+    return best, tot * tot / sq, nis
+
+
 class Kernels:
     """The kernels an estimator calls, serial or parallel (the same arithmetic)."""
 
@@ -489,7 +897,7 @@ class Kernels:
         self.parallel = bool(parallel)
         sfx = "" if parallel else "_serial"
         g = globals()
-        for name in ("pf_step", "pf_member_navs", "pf_moments", "pf_jitter", "pf_linear_step"):
+        for name in ("pf_step", "pf_member_navs", "pf_moments", "pf_jitter", "pf_linear_step", "pf_loose_update"):
             setattr(self, name[3:], g[name + sfx])
 
 

@@ -21,11 +21,17 @@ and give bitwise the same particles (docs/particle.md, "Speed").
 At a measurement epoch the particles are made full states about the current
 nominal, ``epoch.model.predict_batch`` gives ``(y, Y, R)``, and each log-weight
 gains the Gaussian log-likelihood ``-1/2 sum (y - Y_j)^2 / R`` (normalised in
-log space: subtract the maximum, exponentiate, divide by the sum). The
+log space: subtract the maximum, exponentiate, divide by the sum). On a loose GNSS
+epoch (:class:`~mixnav.measurements.loose.LooseGnss`) one fused kernel
+(``_pf_kernels.pf_loose_update``) does all of it from the particle array, with the
+weighted mean and covariance: the generic path's numbers to round-off (tested;
+``fused=False`` keeps the generic path). The
 effective sample size ``1 / sum w^2`` decides a systematic resampling (ESS <
-``resample_threshold`` N); roughening (Gordon, Salmond & Smith 1993) then adds
-``N(0, (K E_i N^(-1/n))^2)`` to state ``i`` (``E_i`` the particles' range,
-``K = roughening``; 0: none). The weighted mean deviation (computed before the
+``resample_threshold`` N); with ``roughening = h > 0`` (on by default, 0.9: plain SIR
+diverges on loose-demo, docs/particle.md) the Liu-West kernel jitter then
+re-diversifies the particles (:meth:`ParticleEstimator._resample`; the Cholesky factor
+of the weighted covariance, the normals drawn by numpy into a preallocated buffer).
+The weighted mean deviation (computed before the
 resampling) is returned as the correction; the engine feeds it back and calls
 :meth:`recentre`, which shifts every particle. The recorded covariance is the
 weighted sample covariance.
@@ -46,6 +52,9 @@ import numpy as np
 from ..engine.protocols import Correction, Epoch, Transition
 from ..engine.status import ABSURD, OK
 from ..errors import ArgumentError
+from ..linalg import cholesky_lower
+from ..measurements.loose import LooseGnss
+from ..ins._error_kernels import L_BG
 from ._pf_kernels import CHUNKS, PARALLEL, SCRATCH, SERIAL, pf_log_weights, pf_systematic
 from .ekf import ErrorStateEkf
 from .ukf import predict_members
@@ -116,22 +125,27 @@ class ParticleEstimator:
         count. Off by default: on a busy 2-core machine a parallel region waits for a
         descheduled thread; only used from the main thread (numba's threading layers
         do not all allow concurrent use).
+    fused : bool
+        Update on loose GNSS epochs with the fused kernel (``pf_loose_update``: no full
+        states, no ``predict_batch``; the generic path's numbers to round-off, tested).
+        False: every epoch through ``predict_batch`` (the reference, for tests and timing).
     """
 
     needs_step_inputs = True
     carry_mean = True
 
     def __init__(self, particles: int = 1000, resample_threshold: float = 0.5, roughening: float = 0.9,
-                 substeps: int = 4, absurd_sigma: float = 1e4, parallel: bool = False):
+                 substeps: int = 4, absurd_sigma: float = 1e4, parallel: bool = False, fused: bool = True):
         check_particle_settings(particles, resample_threshold, roughening, substeps, absurd_sigma)
         self.parallel = bool(parallel)
+        self.fused = bool(fused)
         self._k = SERIAL
         self.N = int(particles)
         self.resample_threshold = float(resample_threshold)
         self.roughening = float(roughening)
         self.substeps = int(substeps)
         self.absurd_sigma = float(absurd_sigma)
-        self.counts = {"pf_degenerate": 0, "pf_resampled": 0, "covariance_repair": 0}
+        self.counts = {"pf_degenerate": 0, "pf_resampled": 0, "covariance_repair": 0, "pf_jitter_root": 0}
         self.ess_history: list = []
 
     # --- the estimator protocol --------------------------------------------------------------
@@ -163,13 +177,17 @@ class ParticleEstimator:
         self._g = np.empty((8, 7))        # merged sub-intervals: gth (0:3), gdv (3:6), gdt (6); grown on demand
         self._fdec = np.empty(4)
         self._part = np.empty((CHUNKS, n + n * n))
+        self._pa = np.empty((CHUNKS, 2 + n))
+        self._yp = np.empty((CHUNKS, 2 + 6 + 36))     # loose: at most 6 rows
+        self._Yl = {}                                # the loose predictions and their moments, by m
+        self._L = np.zeros((n, n))
         self._scratch = np.zeros((n, n))
         self._Qd_last = None
         self._SQT = None
         self._x = np.empty(n)
         self._P = np.empty((n, n))
         self._stale = True
-        self.counts = {"pf_degenerate": 0, "pf_resampled": 0, "covariance_repair": 0}
+        self.counts = {"pf_degenerate": 0, "pf_resampled": 0, "covariance_repair": 0, "pf_jitter_root": 0}
         self.ess_history = []
 
     @property
@@ -215,11 +233,17 @@ class ParticleEstimator:
         return self._SQT
 
     def recentre(self, dx: np.ndarray) -> None:
-        """The nominal moved by ``dx``: every particle's deviation shifts by ``-dx``."""
+        """The nominal moved by ``dx``: every particle's deviation shifts by ``-dx``; so
+        does their mean (the covariance does not change: no recomputation)."""
         self.D -= dx[:self.n]
-        self._stale = True
+        if not self._stale:
+            self._x -= dx[:self.n]
 
     def update(self, epoch: Epoch) -> Correction | None:
+        if self.fused and type(epoch.model) is LooseGnss and self.layout_array[L_BG] >= 0:
+            fx = epoch.model.batch_fix(epoch.index)
+            if fx is not None:
+                return self._update_loose(epoch, *fx)
         navs = self._navs[:self.N]
         self._k.member_navs(epoch.nav, self.D, self.layout_array, navs, self._sensors, self._scr)
         out = predict_members(epoch, self.D, navs, self._clk, "the particle filter needs")
@@ -227,6 +251,21 @@ class ParticleEstimator:
             return None
         y, Y, r = out
         return self.weigh(np.asarray(y, float), np.ascontiguousarray(Y, dtype=float), np.asarray(r, float))
+
+    def _update_loose(self, epoch: Epoch, fix: np.ndarray, lever: np.ndarray) -> Correction:
+        """The loose GNSS update in one fused kernel (``pf_loose_update``): predictions,
+        log-weights, NIS, weights, ESS, mean and covariance from the particle array."""
+        m = 6 if epoch.model.use_velocity else 3
+        bufs = self._Yl.get(m)
+        if bufs is None:    # allocated once per row count (3 or 6)
+            bufs = self._Yl[m] = (np.empty((self.N, m)), np.empty(m), np.empty((m, m)))
+        Y, ym, Pyy = bufs
+        logw, w = self._logw_new, self._w_new
+        best, ess, nis = self._k.loose_update(self.D, self.layout_array, epoch.nav,
+                                              np.asarray(epoch.w_b, dtype=float), lever, fix, self.logw, self.w,
+                                              m * self.absurd_sigma ** 2, Y, logw, w, ym, Pyy, self._x, self._P,
+                                              self._yp, self._pa, self._part)
+        return self._weighed(best, ess, nis, m, logw, w, moments=False)
 
     def weigh(self, y: np.ndarray, Y: np.ndarray, r: np.ndarray) -> Correction:
         """The update from the particles' predictions ``Y`` (N, m) of ``y`` (m,) with noise
@@ -237,13 +276,20 @@ class ParticleEstimator:
         ym, Pyy = np.empty(m), np.empty((m, m))
         logw, w = self._logw_new, self._w_new
         best, ess, nis = pf_log_weights(self.logw, self.w, y, Y, r, logw, w, ym, Pyy)
+        return self._weighed(best, ess, nis, m, logw, w, moments=True)
+
+    def _weighed(self, best, ess, nis, m, logw, w, moments) -> Correction:
+        """The rest of an update once the new log-weights ``logw`` and weights ``w`` are
+        in the spare buffers: degeneracy, the buffers swapped, the moments (unless the
+        fused kernel gave them), the correction, resampling."""
         if ess == 0.0 or not best <= m * self.absurd_sigma ** 2:
             self._degenerate()
             return Correction(np.zeros(self.n), np.inf, ABSURD, m)
         self._logw_new, self._w_new = self.logw, self.w
         self.logw, self.w = logw, w
         self.ess_history.append(ess)
-        self._k.moments(self.D, w, self._x, self._P, self._part)
+        if moments:
+            self._k.moments(self.D, w, self._x, self._P, self._part)
         dx = self._x.copy()
         self._stale = False
         if ess < self.resample_threshold * self.N:
@@ -260,11 +306,17 @@ class ParticleEstimator:
         pf_systematic(self.w, float(self.rng.random()), idx)
         h = self.roughening
         if h > 0.0:
-            LT = np.ascontiguousarray(_sqrt_psd(self._P).T)
+            L = self._L
+            if not cholesky_lower(self._P, L):
+                # not numerically positive definite (a collapsed direction): a lower-
+                # triangular root of its PSD part, R^T of the QR of the symmetric root
+                self.counts["pf_jitter_root"] += 1
+                L[:, :] = np.linalg.qr(_sqrt_psd(self._P).T, mode="r").T
+            L *= h
             Z = self.rng.standard_normal(out=self._Z)
         else:
-            LT = Z = self._scratch
-        self._k.jitter(self.D, idx, float(np.sqrt(1.0 - h * h)), h, self._x, LT, Z, self._Dn)
+            L = Z = self._scratch
+        self._k.jitter(self.D, idx, float(np.sqrt(1.0 - h * h)), h, self._x, L, Z, self._Dn)
         self.D, self._Dn = self._Dn, self.D
         self.logw[:] = 0.0
         self.w[:] = 1.0 / self.N
@@ -338,6 +390,13 @@ class ParticleEstimator:
         k.moments(np.zeros((N, 3)), w, np.empty(3), np.empty((3, 3)), np.empty((CHUNKS, n + n * n)))
         k.jitter(D, np.zeros(N, dtype=np.int64), 0.5, 0.5, np.zeros(n), np.eye(n), D, np.empty((N, n)))
         k.linear_step(D, np.eye(n), np.eye(n), D, np.empty((N, n)))
+        fix = np.r_[nav[7:10], np.ones(3), np.zeros(3), np.ones(3)]
+        for m in (3, 6):
+            k.loose_update(D, lay.as_array(), nav, np.zeros(3), np.zeros(3), fix, np.zeros(N), w, 1e8,
+                           np.empty((N, m)), np.empty(N), np.empty(N), np.empty(m), np.empty((m, m)), np.empty(n),
+                           np.empty((n, n)), np.empty((CHUNKS, 2 + 6 + 36)), np.empty((CHUNKS, 2 + n)),
+                           np.empty((CHUNKS, n + n * n)))
+        cholesky_lower(np.eye(n), np.empty((n, n)))
         _WARM.add(key)
 
 

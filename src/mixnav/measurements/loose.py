@@ -215,6 +215,16 @@ class LooseGnss(MeasurementModel):
         if len(self.times) and self._lever_sl is None and self._dt_col < 0:
             self.predict_batch(0, np.array(nav, dtype=float)[None], np.zeros(3))
 
+    def batch_fix(self, i: int):
+        """``(fix, lever)`` for a fused ensemble update of fix ``i`` (the particle filter's,
+        ``_pf_kernels.pf_loose_update``): the fix's row (12,: lat, lon, h [rad, rad, m],
+        position sigmas N, E, D [m], velocity NED and its sigmas [m/s]; the velocity part
+        unused when ``use_velocity`` is off) and the lever arm (3,) [m]; None where
+        :meth:`predict_batch` refuses (an estimated lever arm or time offset)."""
+        if self._lever_sl is not None or self._dt_col >= 0:
+            return None
+        return self._rows[i], self.lever
+
     def predict_batch(self, i: int, navs: np.ndarray, w_b: np.ndarray, clocks=None):
         """``h`` at a batch of full states, for the ensemble estimators.
 
