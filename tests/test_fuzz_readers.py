@@ -72,7 +72,7 @@ def _finite(obj, where="result"):
     if isinstance(obj, np.ndarray):
         if obj.dtype.kind == "f":
             bad = ~np.isfinite(obj)
-            if where.endswith(("cn0", "vel_ned", "sd_vel")) and obj.dtype.kind == "f":
+            if where.endswith(("cn0", "vel_ned", "sd_vel", "doppler")) and obj.dtype.kind == "f":
                 return   # optional columns: NaN marks "not given" (documented)
             assert not bad.any(), f"{where} has {int(bad.sum())} non-finite values"
         return
