@@ -213,28 +213,6 @@ def test_pseudorange_jacobian_matches_finite_differences():
     assert np.abs(z).max() < 1e-3
 
 
-def test_pseudorange_without_earth_rotation_leaves_the_sagnac_term():
-    """``earth_rotation=False`` (libRSF's local-frame model): at the truth the innovation is
-    the Sagnac term that the default model removes, in closed form ``OMEGA_E (x_s y_r -
-    y_s x_r) / c`` (first order in the ~5e-6 rad turn: the rest is under 1 mm); rows are
-    tens of metres apart, so a model that still turned the satellites fails this."""
-    from mixnav.gnss.geometry import OMEGA_E_GPS
-    lay = constant_velocity_layout(clock=True, system_offsets=1)
-    ep = _simulate([LLA0], [1.0], [50.0], 30.0, 1e-9)
-    clock, aux = np.array([50.0, 0.0]), {"system_offset": np.array([30.0])}
-    on = PseudorangeGnss(ep, lay, systems=(1, 4)).rows(0, _nav(), np.zeros(3), clock, aux=aux)
-    off_model = PseudorangeGnss(ep, lay, systems=(1, 4), earth_rotation=False)
-    off = off_model.rows(0, _nav(), np.zeros(3), clock, aux=aux)
-    r = lla_to_ecef(LLA0)
-    s = ep.sat_ecef[off_model.used_rows(0)]
-    sagnac = OMEGA_E_GPS * (s[:, 0] * r[1] - s[:, 1] * r[0]) / C_LIGHT
-    assert np.abs(on.z).max() < 1e-3
-    assert np.abs(sagnac).max() > 10.0
-    assert np.abs(off.z - sagnac).max() < 1e-3
-    # the geometry (line of sight) barely changes: H within 1e-5
-    assert np.abs(off.H - on.H).max() < 1e-5
-
-
 def test_unknown_systems_are_counted_and_layout_checked():
     ep = _simulate([LLA0], [1.0], [0.0], 0.0, 1.0)
     lay1 = constant_velocity_layout(clock=True)

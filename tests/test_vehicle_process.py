@@ -42,7 +42,6 @@ file = "Berlin_Potsdamer_Platz_Input.txt"
     ('[alignment]\nwindow = "10 m"\n[[methods]]\nname = "e"\n', "alignment.window"),
     ('[pseudoranges2]\nx = 1\n[[methods]]\nname = "e"\n', "pseudoranges2"),
     ('[odometry2]\n[[methods]]\nname = "e"\n', "odometry2"),
-    ('earth_rotation = "perhaps"\n[[methods]]\nname = "e"\n', "pseudoranges.earth_rotation"),
 ])
 def test_bad_configs_name_the_key(tmp_path, extra, key):
     with pytest.raises(ConfigError) as exc:

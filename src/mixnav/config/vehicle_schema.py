@@ -58,10 +58,7 @@ class Pseudoranges(Strict):
     ``systems``: the systems used, the receiver clock's reference first (one
     inter-system offset state per further system); ``variance``: ``"given"`` (the
     file's, times ``scale``) or ``"elevation"`` (``scale (sigma_a^2 + sigma_b^2 /
-    sin^2 el)``); ``earth_rotation``: turn each satellite by the Earth's rotation during
-    the signal's travel (default; ``false`` drops it, as a model that works in a local
-    tangent frame does, e.g. libRSF's ``pseudorange3_bias``: tens of metres of range, for
-    comparisons only)."""
+    sin^2 el)``)."""
 
     format: Literal["smartloc"]
     file: str
@@ -71,7 +68,6 @@ class Pseudoranges(Strict):
     sigma_a: LengthNN = 3.0  # type: ignore[valid-type]
     sigma_b: LengthNN = 3.0  # type: ignore[valid-type]
     elevation_mask: Angle = 0.0  # type: ignore[valid-type]
-    earth_rotation: bool = True
 
     @field_validator("systems")
     @classmethod

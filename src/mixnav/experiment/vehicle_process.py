@@ -112,7 +112,7 @@ def process_vehicle(ds: VehicleDataset, source: str, data: str | None = None, se
     with config_keys("pseudoranges", source):
         model = PseudorangeGnss(epochs, lay, systems=systems, variance=pc.variance, scale=pc.scale,
                                 sigma_a=float(pc.sigma_a), sigma_b=float(pc.sigma_b),
-                                elevation_mask=float(pc.elevation_mask), earth_rotation=pc.earth_rotation)
+                                elevation_mask=float(pc.elevation_mask))
     al = ds.alignment
     t_align = _time.perf_counter()
     if al.mode == "reference":

@@ -16,10 +16,6 @@ block ``system_offset`` (one state per system after the first of
 ``systems``); rows of a system not in ``systems`` are dropped when the model
 is built and counted (``skipped_rows``).
 
-``earth_rotation = False`` drops the turn (``z_j = rho_j - (|s_j - r_a| + b + o_g)``):
-the model of an estimator that works in a local tangent frame without it (libRSF's
-``pseudorange3_bias``), for comparisons; on smartLoc it moves the solution by metres.
-
 Noise: ``variance = "given"`` uses the source's variance times ``scale``;
 ``"elevation"`` uses ``scale (sigma_a^2 + sigma_b^2 / sin^2 el)``.
 
@@ -62,15 +58,13 @@ class PseudorangeGnss(MeasurementModel):
         [rad]; rows below it are not used (rows with unknown elevation are).
     min_satellites : int
         Epochs with fewer used rows give no update.
-    earth_rotation : bool
-        Turn the satellites by the Earth's rotation during the travel time (default).
     """
 
     kinds = ("pseudorange",)
 
     def __init__(self, epochs: PseudorangeEpochs, layout, systems=(1, 4), variance: str = "given",
                  scale: float = 1.0, sigma_a: float = 3.0, sigma_b: float = 3.0, elevation_mask: float = 0.0,
-                 min_satellites: int = 1, earth_rotation: bool = True):
+                 min_satellites: int = 1):
         if not isinstance(epochs, PseudorangeEpochs):
             raise ArgumentError(f"expected PseudorangeEpochs, got {type(epochs).__name__}", argument="epochs")
         if layout.clk < 0:
@@ -91,7 +85,6 @@ class PseudorangeGnss(MeasurementModel):
         self.layout = layout
         self.systems = systems
         self.min_satellites = int(min_satellites)
-        self.earth_rotation = bool(earth_rotation)
         sys_index = np.full(len(epochs.system), -1, dtype=np.int64)
         for k, s in enumerate(systems):
             sys_index[epochs.system == s] = k
@@ -124,10 +117,8 @@ class PseudorangeGnss(MeasurementModel):
         idx = self.used_rows(i)
         r_a = lla_to_ecef(nav[7:10])
         s = self.epochs.sat_ecef[idx]
-        if self.earth_rotation:
-            tau = np.linalg.norm(s - r_a, axis=1) / C_LIGHT
-            s = earth_rotation_correction(s, tau)
-        d = s - r_a
+        tau = np.linalg.norm(s - r_a, axis=1) / C_LIGHT
+        d = earth_rotation_correction(s, tau) - r_a
         rng = np.linalg.norm(d, axis=1)
         u_n = (d / rng[:, None]) @ dcm_ecef_to_ned(nav[7], nav[8]).T
         pred = rng + clock[0]
