@@ -41,7 +41,7 @@ FACTS = [
     ("pseudorange geometry", "`pseudorange3_bias` = |p - s| + clock + inter-system bias - rho in a local "
      "tangent frame at the first fix; the conversion takes the Earth-rotation (Sagnac) term at that point off "
      "each pseudorange, so the rotation is modelled (within millimetres over this 1 km drive), as ours",
-     "include/factors/PseudorangeFactor.h:105-117, 44-48; src/GNSS.cpp:197-212; applications/AppPool_Init.cpp:331-340"),
+     "include/factors/PseudorangeFactor.h:105-117, 44-48; src/GNSS.cpp:197-214; applications/AppPool_Init.cpp:331-340"),
     ("GLONASS offset", "one constant inter-system-bias state per non-GPS system for the whole drive (timestamp "
      "+1e20, never marginalised), a zero-mean prior with sigma `isb_std_dev` = 0.5 m; GPS's is fixed at 0",
      "applications/AppPool_Sensors.cpp:611-622, 645-671; src/FactorGraphConfig.cpp:349-351; "
