@@ -688,20 +688,20 @@ def test_resume_recreates_a_deleted_series_and_a_truncated_record(box):
 
 def test_resume_keeps_valid_records_of_smoothed_methods(box):
     box.write("sc.toml", TINY.replace('covariance_interval = "1 s"', 'covariance_interval = "1 s"\nsmooth = true'))
-    assert _experiment(box)[0] == 0
+    assert _experiment(box, runs=1)[0] == 0
     rec = box.out / "runs" / "run_0.parquet"
     assert "ekf-smoothed" in set(pd.read_parquet(rec)["method"])
     t = rec.stat().st_mtime_ns
-    code, out = _experiment(box, "--resume")
+    code, out = _experiment(box, "--resume", runs=1)
     assert code == 0 and "redone" not in out, out
     assert rec.stat().st_mtime_ns == t
 
 
 @pytest.mark.parametrize("name", ["notes.txt", "run_99.parquet"])
 def test_resume_refuses_files_not_of_the_experiment(box, name):
-    assert _experiment(box)[0] == 0
+    assert _experiment(box, runs=1)[0] == 0
     (box.out / "runs" / name).write_text("x")
-    code, out = _experiment(box, "--resume")
+    code, out = _experiment(box, "--resume", runs=1)
     expect_error(code, out, name)
 
 
