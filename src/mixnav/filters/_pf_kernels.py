@@ -836,7 +836,6 @@ def pf_loose_update(D, layout, nav, w_b, lever, fix, logw0, w0, thr, Y, logw, w,
     (CHUNKS, >= n + n n). Every sum over particles is taken in fixed chunks added in order:
     bitwise the serial twin's on any thread count. Returns ``(best, ess, nis)`` as
     :func:`pf_log_weights` (``ess`` 0 when degenerate)."""
-    N = D.shape[0]
     m = Y.shape[1]
     i_bg = layout[L_BG]
     g = np.empty(LOOSE_CONSTANTS)
@@ -865,7 +864,6 @@ def pf_loose_update(D, layout, nav, w_b, lever, fix, logw0, w0, thr, Y, logw, w,
 def pf_loose_update_serial(D, layout, nav, w_b, lever, fix, logw0, w0, thr, Y, logw, w, ym, Pyy, x, P, yp, pa,
                            part):
     """:func:`pf_loose_update`, serial (the same chunks, the same sums: bitwise equal)."""
-    N = D.shape[0]
     m = Y.shape[1]
     i_bg = layout[L_BG]
     g = np.empty(LOOSE_CONSTANTS)

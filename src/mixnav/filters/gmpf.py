@@ -228,7 +228,7 @@ class GmpfEstimator:
         if n_clone:
             raise ArgumentError("the GMPF does not carry a stochastic clone (TDCP)", argument="estimator")
         lay = motion.layout
-        self.n = n = lay.n
+        self.n = lay.n
         self.layout_array = lay.as_array()
         self._clk = lay.clk
         self.tau = np.asarray(motion.tau, dtype=float)
