@@ -35,6 +35,7 @@ import numpy as np
 from ..engine.protocols import Correction, Epoch, Transition
 from ..engine.status import ABSURD, OK
 from ..errors import ArgumentError
+from ._no_clone import NoCloneEstimator
 from ._ukf_kernels import member_navs, propagate_members
 from .ekf import ErrorStateEkf
 from .ukf import predict_members
@@ -215,7 +216,7 @@ def dd2_update(x, P, g, y, R, h: float = DEFAULT_STEP) -> dict:
     return {k: v[0] for k, v in out.items()} if single else out
 
 
-class Dd2Estimator:
+class Dd2Estimator(NoCloneEstimator):
     """The DD2 filter's belief ``N(x, P)`` about the error state (module docstring).
 
     Parameters
@@ -232,6 +233,8 @@ class Dd2Estimator:
     needs_step_inputs = True
     carry_mean = True
 
+    label = "the DD2 filter"
+
     def __init__(self, dd2_step: float = DEFAULT_STEP, substeps: int = 4, absurd_sigma: float = 1e4):
         self.h = check_dd2_step(dd2_step)
         if int(substeps) != substeps or substeps < 0:
@@ -244,8 +247,7 @@ class Dd2Estimator:
 
     # --- the estimator protocol --------------------------------------------------------------
     def init(self, motion, P0, n_clone, rng) -> None:
-        if n_clone:
-            raise ArgumentError("the DD2 filter does not carry a stochastic clone (TDCP)", argument="estimator")
+        self.refuse_clone(n_clone)
         lay = motion.layout
         self.n = n = lay.n
         self.layout_array = lay.as_array()
@@ -302,18 +304,6 @@ class Dd2Estimator:
 
     def covariance(self) -> np.ndarray:
         return self.P
-
-    def replace_clone(self, J) -> None:  # pragma: no cover (init refuses clones)
-        raise ArgumentError("the DD2 filter does not carry a stochastic clone", argument="estimator")
-
-    def repair(self) -> None:  # pragma: no cover (the update is positive semi-definite by construction)
-        self.counts["covariance_repair"] += 1
-
-    def diagnostics(self) -> dict:
-        return {}
-
-    def outputs(self) -> dict:
-        return {}
 
     def warm_up(self) -> None:
         warm_member_kernels()

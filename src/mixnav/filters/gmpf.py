@@ -82,6 +82,7 @@ from ..engine.status import ABSURD, OK
 from ..errors import ArgumentError
 from ..noise.learn import ConvergenceWarning
 from ..noise.learn.em import EMGaussianMixture, gaussian_logpdf
+from ._no_clone import NoCloneEstimator
 from .dd2 import (DEFAULT_STEP, check_dd2_step, dd2_measure, dd2_points, dd2_time, mechanize_points,
                   predict_points, psd_cholesky, warm_member_kernels)
 from .ekf import ErrorStateEkf
@@ -179,7 +180,7 @@ def fit_weighted_mixture(X: np.ndarray, w: np.ndarray, components: int, iteratio
     return em.weights_ / em.weights_.sum(), means, 0.5 * (covs + np.swapaxes(covs, 1, 2)), status
 
 
-class GmpfEstimator:
+class GmpfEstimator(NoCloneEstimator):
     """The GMPF's belief: a Gaussian mixture over the error state (module docstring).
 
     Parameters
@@ -204,6 +205,8 @@ class GmpfEstimator:
     needs_step_inputs = True
     carry_mean = True
 
+    label = "the GMPF"
+
     def __init__(self, particles: int = 1000, components: int = 3, em_iterations: int = 10,
                  dd2_step: float = DEFAULT_STEP, substeps: int = 4, absurd_sigma: float = 1e4,
                  sampling: str = "matched"):
@@ -225,8 +228,7 @@ class GmpfEstimator:
 
     # --- the estimator protocol --------------------------------------------------------------
     def init(self, motion, P0, n_clone, rng) -> None:
-        if n_clone:
-            raise ArgumentError("the GMPF does not carry a stochastic clone (TDCP)", argument="estimator")
+        self.refuse_clone(n_clone)
         lay = motion.layout
         self.n = lay.n
         self.layout_array = lay.as_array()
@@ -402,18 +404,6 @@ class GmpfEstimator:
         m = self.alpha @ self.mu
         d = self.mu - m
         return np.einsum("k,kij->ij", self.alpha, self.P) + (d.T * self.alpha) @ d
-
-    def replace_clone(self, J) -> None:  # pragma: no cover (init refuses clones)
-        raise ArgumentError("the GMPF does not carry a stochastic clone", argument="estimator")
-
-    def repair(self) -> None:  # pragma: no cover (the update never asks for one)
-        self.counts["covariance_repair"] += 1
-
-    def diagnostics(self) -> dict:
-        return {}
-
-    def outputs(self) -> dict:
-        return {}
 
     def warm_up(self) -> None:
         warm_member_kernels()

@@ -55,6 +55,7 @@ from ..errors import ArgumentError
 from ..linalg import cholesky_lower
 from ..measurements.loose import LooseGnss
 from ..ins._error_kernels import L_BG
+from ._no_clone import NoCloneEstimator
 from ._pf_kernels import CHUNKS, PARALLEL, SCRATCH, SERIAL, pf_log_weights, pf_systematic
 from .ekf import ErrorStateEkf
 from .ukf import predict_members
@@ -103,7 +104,7 @@ def systematic_resample(w: np.ndarray, u0: float) -> np.ndarray:
     return idx
 
 
-class ParticleEstimator:
+class ParticleEstimator(NoCloneEstimator):
     """The SIR particle filter's belief: N weighted error-state particles (module docstring).
 
     Parameters
@@ -134,6 +135,8 @@ class ParticleEstimator:
     needs_step_inputs = True
     carry_mean = True
 
+    label = "the particle filter"
+
     def __init__(self, particles: int = 1000, resample_threshold: float = 0.5, roughening: float = 0.9,
                  substeps: int = 4, absurd_sigma: float = 1e4, parallel: bool = False, fused: bool = True):
         check_particle_settings(particles, resample_threshold, roughening, substeps, absurd_sigma)
@@ -150,8 +153,7 @@ class ParticleEstimator:
 
     # --- the estimator protocol --------------------------------------------------------------
     def init(self, motion, P0, n_clone, rng) -> None:
-        if n_clone:
-            raise ArgumentError("the particle filter does not carry a stochastic clone (TDCP)", argument="estimator")
+        self.refuse_clone(n_clone)
         lay = motion.layout
         n = lay.n
         self.n = n
@@ -349,18 +351,6 @@ class ParticleEstimator:
         if self._stale:
             self._k.moments(self.D, self.w, self._x, self._P, self._part)
             self._stale = False
-
-    def replace_clone(self, J) -> None:  # pragma: no cover (init refuses clones)
-        raise ArgumentError("the particle filter does not carry a stochastic clone", argument="estimator")
-
-    def repair(self) -> None:  # pragma: no cover (the update never asks for one)
-        self.counts["covariance_repair"] += 1
-
-    def diagnostics(self) -> dict:
-        return {}
-
-    def outputs(self) -> dict:
-        return {}
 
     def warm_up(self) -> None:
         """Compile (or load from numba's cache) the kernels once per process (the serial

@@ -50,6 +50,7 @@ import numpy as np
 from ..engine.protocols import Correction, Epoch, Transition
 from ..errors import ArgumentError, NumericalError
 from ..engine.status import NEEDS_REPAIR, OK
+from ._no_clone import NoCloneEstimator
 from ._ukf_kernels import linearized_pyy, measurement_moments, ukf_predict, ukf_sigma_navs, vb_correct
 from .ekf import ErrorStateEkf, repair_covariance
 from .vb import ChannelNoise, channel_label, check_vb_settings, warm_vb
@@ -102,7 +103,7 @@ def predict_members(epoch: Epoch, D: np.ndarray, navs: np.ndarray, clk: int, who
     return predict_batch(epoch.index, navs, w_b)
 
 
-class UnscentedEstimator:
+class UnscentedEstimator(NoCloneEstimator):
     """The UKF's belief ``N(x, P)`` about the error state, propagated by sigma points (module docstring).
 
     Parameters
@@ -125,6 +126,8 @@ class UnscentedEstimator:
     needs_step_inputs = True
     carry_mean = True
 
+    label = "the UKF"
+
     def __init__(self, alpha: float = 0.6, beta: float = 2.0, kappa: float = 0.0, substeps: int = 4,
                  absurd_sigma: float = 1e4, noise: ChannelNoise | None = None):
         if not absurd_sigma > 0:
@@ -140,8 +143,7 @@ class UnscentedEstimator:
 
     # --- the estimator protocol --------------------------------------------------------------
     def init(self, motion, P0, n_clone, rng) -> None:
-        if n_clone:
-            raise ArgumentError("the UKF does not carry a stochastic clone (TDCP)", argument="estimator")
+        self.refuse_clone(n_clone)
         lay = motion.layout
         n = lay.n
         self.n = n
@@ -236,9 +238,6 @@ class UnscentedEstimator:
             if nz is not None:
                 nz.store(epoch.time, channels, a, b, it)
         return Correction(self.x.copy(), nis, status, m)
-
-    def replace_clone(self, J) -> None:  # pragma: no cover (init refuses clones)
-        raise ArgumentError("the UKF does not carry a stochastic clone", argument="estimator")
 
     def repair(self) -> None:
         repair_covariance(self.P)
