@@ -47,18 +47,13 @@ from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla
 from ..gnss.ephemeris import BroadcastEphemeris
 from ..gnss.geometry import SECONDS_PER_WEEK
 from ..gnss.raw_observations import doppler_velocity, tight_observations
-from ..gnss.spp import SppOptions, clock_jumps, corrected_pseudoranges, solve_epochs
+from ..gnss.spp import clock_jumps, corrected_pseudoranges, solve_epochs
 from ..ins.error_model import ClockModel
 from ..io.imu_checks import DataWarning
 from ..io.rinex_obs import RinexPseudoranges, read_rinex_obs
 from ..sim.gnss import in_windows
 from .aiding import AidingInputs, installation_check
-
-
-def spp_options(ds: Dataset) -> SppOptions:
-    c = ds.raw_gnss
-    return SppOptions(elevation_mask=c.elevation_mask, sigma_a=c.sigma_a, sigma_b=c.sigma_b,
-                      troposphere=c.troposphere, ionosphere=c.ionosphere)
+from .spp_process import options as spp_options
 
 
 def _subset(obs, keep):

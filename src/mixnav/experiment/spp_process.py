@@ -71,9 +71,10 @@ class SppOutput:
     clock_offset: np.ndarray | None = None   # (k,) clock jumps taken off the filters' pseudoranges [m]
 
 
-def options(ds: RawGnssDataset, method=None) -> SppOptions:
-    """The SPP settings of ``[raw_gnss]``; with a ``wls`` method that has a ``[robust]``
-    table, its IGG-III thresholds too (the robust SPP)."""
+def options(ds, method=None) -> SppOptions:
+    """The SPP settings of a dataset's ``[raw_gnss]`` (a gnss-raw dataset, or an ins-gnss one
+    with RINEX); with a ``wls`` method that has a ``[robust]`` table, its IGG-III thresholds
+    too (the robust SPP)."""
     c = ds.raw_gnss
     robust = None if method is None or method.robust is None else (method.robust.k0, method.robust.k1)
     return SppOptions(elevation_mask=c.elevation_mask, sigma_a=c.sigma_a, sigma_b=c.sigma_b,

@@ -381,8 +381,8 @@ def _igg3_solution(rho_corr, sats, x_plain, scale, sel, atm):
         ok = (q > 0.05 * sigma**2) & ~touched[idx]
         if not ok.any():
             break
-        t = np.zeros(len(idx))
-        t[ok] = np.abs((rho_corr - model)[idx][ok]) / np.sqrt(q[ok])
+        t_all = np.abs((rho_corr - model)[idx]) / np.sqrt(np.maximum(q, 1e-300))
+        t = np.where(ok, t_all, 0.0)
         j = int(np.argmax(t))
         if t[j] <= k0:
             break
@@ -392,7 +392,7 @@ def _igg3_solution(rho_corr, sats, x_plain, scale, sel, atm):
         # move together: low redundancy for the geometry) and k is about as likely the culprit
         Q = np.diag(sigma**2) - Hs @ N_inv @ Hs.T
         r = np.abs(Q[j]) / np.sqrt(np.maximum(q[j] * q, 1e-300))
-        gap = (t[j] - np.abs((rho_corr - model)[idx]) / np.sqrt(np.maximum(q, 1e-300)))
+        gap = t[j] - t_all
         sd = np.sqrt(2.0 * np.maximum(1.0 - r, 0.0))
         others = np.arange(len(idx)) != j
         if np.any(others & ((r > 0.999) | (gap < SEPARATION_SIGMAS * sd))):
