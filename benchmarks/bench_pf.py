@@ -222,8 +222,8 @@ def update_split(sim, lever, N=5000, n_epochs=12, seconds=360.0, repeats=15):
     est.fused, est.roughening, est.resample_threshold = True, 0.9, 0.5
     n = lay.n
     la = lay.as_array()
-    ym, Pyy, Y = np.empty(6), np.empty((6, 6)), np.empty((N, 6))
-    x, P, L, Z, Dn = np.empty(n), np.empty((n, n)), np.empty((n, n)), np.empty((N, n)), np.empty((N, n))
+    ym, Pyy, YT, work = np.empty(6), np.empty((6, 6)), np.empty((6, N)), np.empty((3 * n + 1, N))
+    x, P, L, ZT, Dn = np.empty(n), np.empty((n, n)), np.empty((n, n)), np.empty((n, N)), np.empty((N, n))
     yp, pa, part = np.empty((K.CHUNKS, 44)), np.empty((K.CHUNKS, 2 + n)), np.empty((K.CHUNKS, n + n * n))
     logw, w, idx = np.empty(N), np.empty(N), np.empty(N, dtype=np.int64)
     rng = np.random.default_rng(0)
@@ -233,13 +233,13 @@ def update_split(sim, lever, N=5000, n_epochs=12, seconds=360.0, repeats=15):
         ep = c[0]
         fix, lev = ep.model.batch_fix(ep.index)
         wb = np.asarray(ep.w_b, dtype=float)
-        calls = {"kernel": lambda: K.pf_loose_update_serial(c[1], la, ep.nav, wb, lev, fix, c[2], c[3], 1e30, Y, logw,
-                                                             w, ym, Pyy, x, P, yp, pa, part),
+        calls = {"kernel": lambda: K.pf_loose_update_serial(c[1], la, ep.nav, wb, lev, fix, c[2], c[3], 1e30, YT, logw,
+                                                             w, ym, Pyy, x, P, yp, pa, part, work),
                  "systematic": lambda: K.pf_systematic(w, 0.5, idx),
                  "cholesky": lambda: cholesky_lower(P, L),
-                 "normals": lambda: rng.standard_normal(out=Z),
-                 "jitter_product": lambda: K.pf_jitter_serial(c[1], idx, 0.43, 0.9, x, L, Z, Dn),
-                 "copy_without_jitter": lambda: K.pf_jitter_serial(c[1], idx, 1.0, 0.0, x, L, Z, Dn),
+                 "normals": lambda: rng.standard_normal(out=ZT),
+                 "jitter_product": lambda: K.pf_jitter_serial(c[1], idx, 0.43, 0.9, x, L, ZT, Dn, work),
+                 "copy_without_jitter": lambda: K.pf_jitter_serial(c[1], idx, 1.0, 0.0, x, L, ZT, Dn, work),
                  "moments_after_resampling": lambda: K.pf_moments_serial(Dn, w, x, P, part)}
         for k, fn in calls.items():
             for _ in range(repeats):

@@ -159,21 +159,19 @@ def _rms_pos(tab):
 
 
 @pytest.mark.parametrize("particles,seed,rms_band,nees_band", [
-    (2000, 0, 1.5, 20.0),
+    (5000, 0, 1.3, 8.0),
     pytest.param(5000, 1, 1.3, 8.0, marks=pytest.mark.slow),
     pytest.param(5000, 2, 1.3, 8.0, marks=pytest.mark.slow)])
-def test_pf_on_loose_demo_against_the_ekf(demo, particles, seed, rms_band, nees_band):    # -m slow: 5000
-    """Roughening 0.9 (the default). 2000 particles, seed 0: position RMS 1.10 x the EKF's
-    2.56 m, position NEES 16.1 (the EKF's 3.8) (benchmarks/results/pf.md): the particle
-    cloud under-represents the attitude and sensor-bias spread (the static-parameter
-    collapse of a bootstrap filter in 15 states), so the PF is overconfident; the band
-    (RMS <= 1.5 x, NEES in [1.5, 20]) records that, it does not excuse it. At 2000
-    particles the run is seed-sensitive: over seeds 0-7 the RMS ratio spans 1.01-1.64 and
-    the NEES 4.8-171 (docs/particle.md; 0.95-1.95 and 5.3-9e7 with the jitter's former
-    symmetric root: the same jitter distribution, other draws), so the other seeds run
-    at 5000 particles (with -m slow), where the PF is consistent: RMS 1.01 and 1.17 x,
-    NEES 3.8 and 3.9 for seeds 1, 2; band RMS <= 1.3 x, NEES in [1.5, 8]. Not met at
-    1000 particles (docs/particle.md)."""
+def test_pf_on_loose_demo_against_the_ekf(demo, particles, seed, rms_band, nees_band):    # -m slow: seeds 1, 2
+    """Roughening 0.9 (the default), 5000 particles: position RMS 1.12, 1.09 and 0.96 x the
+    EKF's 2.56 m and position NEES 4.2, 4.2 and 4.7 (the EKF's 3.8) for seeds 0, 1, 2
+    (benchmarks/results/pf.md); band RMS <= 1.3 x, NEES in [1.5, 8]. The bands are a
+    regression check on these fixed seeds, not a claim for every seed: a bootstrap filter
+    in 15 states under-represents the attitude and sensor-bias spread (the static-parameter
+    collapse), and its runs are seed-sensitive. Measured with this stop's draws: seed 3 at
+    5000 particles gives 1.42 x and NEES 30; at 2000 particles seeds 0-7 span 0.88-2.51 x
+    and NEES 4.8 to 8e11 (one of eight collapsed), so 2000 particles are not tested here
+    (docs/particle.md)."""
     sim, lever = demo
     lay = get_layout(15)
     te = solution_table(_run(ErrorStateEkf(lay, sim.imu_model), sim, lever), sim.truth)

@@ -448,37 +448,53 @@ def pf_moments_serial(D, w, x, P, part):
     _sum_cov(part, P)
 
 
-@njit(cache=True, inline="always")
-def _jitter_one(j, D, idx, a, h, x, hL, Z, Dn):
-    n = Dn.shape[1]
-    k = idx[j]
+@njit(cache=True, error_model="numpy")
+def _jitter_chunk(c, D, idx, a, h, x, hL, ZT, Dn, B):
+    """Chunk ``c`` of :func:`pf_jitter`: state-major in the scratch ``B`` (n, N), each state
+    a row along the particles (``a D[idx] + (1 - a) x`` gathered, then one ``hL[i, b] z_b``
+    row after another: vector instructions, the same sum order as one particle at a
+    time), then written to the particles' rows ``Dn[j0:j1]``."""
+    N, n = Dn.shape
+    j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
     if h == 0.0:
+        for t in range(j0, j1):
+            k = idx[t]
+            for i in range(n):
+                Dn[t, i] = D[k, i]
+        return
+    k = j1 - j0         # zero-based loops over row slices (vectorised: _loose_predict_soa)
+    for t in range(j0, j1):     # the drawn rows, read whole, into columns
+        r = idx[t]
         for i in range(n):
-            Dn[j, i] = D[k, i]
-    else:
-        for i in range(n):   # row i of h L (lower triangular) times z_j: one short dot each
-            s = a * D[k, i] + (1.0 - a) * x[i]
-            for b in range(i + 1):
-                s += hL[i, b] * Z[j, b]
-            Dn[j, i] = s
+            B[i, t] = a * D[r, i] + (1.0 - a) * x[i]
+    for i in range(n):
+        Bi = B[i, j0:j1]
+        for b in range(i + 1):   # row i of h L (lower triangular)
+            hb = hL[i, b]
+            Zb = ZT[b, j0:j1]
+            for t in range(k):
+                Bi[t] += hb * Zb[t]
+    for t in range(j0, j1):
+        for i in range(n):
+            Dn[t, i] = B[i, t]
 
 
 @njit(cache=True, parallel=True)
-def pf_jitter(D, idx, a, h, x, hL, Z, Dn):
+def pf_jitter(D, idx, a, h, x, hL, ZT, Dn, B):
     """The resampled particles ``D[idx]`` with the Liu-West jitter, into ``Dn``:
     ``Dn[j] = a D[idx_j] + (1 - a) x + (h L) z_j`` (``hL`` (n, n) the lower-triangular
-    ``h L``, ``L L^T`` the weighted covariance: only its lower triangle is read; ``Z``
-    (N, n) standard normals drawn by the caller); ``h = 0``: the plain copy. Parallel
-    over particles."""
-    for j in prange(Dn.shape[0]):
-        _jitter_one(j, D, idx, a, h, x, hL, Z, Dn)
+    ``h L``, ``L L^T`` the weighted covariance: only its lower triangle is read; ``ZT``
+    (n, N) standard normals drawn by the caller, ``z_j`` its column ``j``; ``B`` (n, N)
+    scratch); ``h = 0``: the plain copy. Parallel over the :data:`CHUNKS` chunks."""
+    for c in prange(CHUNKS):
+        _jitter_chunk(c, D, idx, a, h, x, hL, ZT, Dn, B)
 
 
 @njit(cache=True)
-def pf_jitter_serial(D, idx, a, h, x, hL, Z, Dn):
+def pf_jitter_serial(D, idx, a, h, x, hL, ZT, Dn, B):
     """:func:`pf_jitter`, serial."""
-    for j in range(Dn.shape[0]):
-        _jitter_one(j, D, idx, a, h, x, hL, Z, Dn)
+    for c in range(CHUNKS):
+        _jitter_chunk(c, D, idx, a, h, x, hL, ZT, Dn, B)
 
 
 @njit(cache=True, inline="always")
@@ -598,22 +614,69 @@ def _loose_constants(nav, w_b, lever, fix, g, C0, y, r):
 
 
 @njit(cache=True, inline="always")
-def _loose_velocity(d, i_bg, g, C0, lever, px, py, pz, s, c, yrow):
-    """The velocity rows of :func:`_loose_member`: ``v0 + d_v + C_j ((w_b - d_bg) x l)``."""
-    wx, wy, wz = g[13] - d[i_bg], g[14] - d[i_bg + 1], g[15] - d[i_bg + 2]
+def _loose_velocity_values(px, py, pz, s, c, vx, vy, vz, bx, by, bz, g, C0, lever):
+    """The velocity rows of a loose prediction: ``v0 + d_v + C_j ((w_b - d_bg) x l)``, ``C_j =
+    exp([p x]) C0`` (``s, c`` from :func:`_rodrigues`); ``g``, ``C0``, ``lever`` tuples."""
+    wx, wy, wz = g[13] - bx, g[14] - by, g[15] - bz
     wl0 = wy * lever[2] - wz * lever[1]
     wl1 = wz * lever[0] - wx * lever[2]
     wl2 = wx * lever[1] - wy * lever[0]
-    ux = C0[0, 0] * wl0 + C0[0, 1] * wl1 + C0[0, 2] * wl2
-    uy = C0[1, 0] * wl0 + C0[1, 1] * wl1 + C0[1, 2] * wl2
-    uz = C0[2, 0] * wl0 + C0[2, 1] * wl1 + C0[2, 2] * wl2
+    ux = C0[0] * wl0 + C0[1] * wl1 + C0[2] * wl2
+    uy = C0[3] * wl0 + C0[4] * wl1 + C0[5] * wl2
+    uz = C0[6] * wl0 + C0[7] * wl1 + C0[8] * wl2
     cx, cy, cz = _rotate(px, py, pz, s, c, ux, uy, uz)
-    yrow[3] = (g[10] + d[3]) + cx
-    yrow[4] = (g[11] + d[4]) + cy
-    yrow[5] = (g[12] + d[5]) + cz
+    return (g[10] + vx) + cx, (g[11] + vy) + cy, (g[12] + vz) + cz
 
 
 @njit(cache=True, inline="always")
+def _loose_position_values(px, py, pz, s, c, dn, de, dd, g, fix, series):
+    """The position rows of a loose prediction and whether the series held: sin and cos of
+    the particle's and its antenna's latitudes by :func:`_sincos_series` when ``series``
+    (straight-line code; the flag then says whether both latitude differences were below
+    ``SMALL_DLAT`` and the longitude needed no wrap), else :func:`_sincos_near` and the
+    full wrap (the flag is then True)."""
+    clx, cly, clz = _rotate(px, py, pz, s, c, g[7], g[8], g[9])
+    lat = g[0] + dn / g[3]
+    lon = g[1] + de / g[4]
+    h = g[2] - dd
+    dl = lat - g[0]
+    if series:
+        sl, cl = _sincos_series(dl, g[5], g[6])
+    else:
+        sl, cl = _sincos_near(lat, g[0], g[5], g[6])
+    iw = 1.0 / (1.0 - E2_WGS84 * (sl * sl))    # the radii with one division (round-off apart)
+    rn = A_WGS84 * math.sqrt(iw)
+    rm = rn * (1.0 - E2_WGS84) * iw
+    a_lat = lat + clx / (rm + h)
+    a_lon = lon + cly / ((rn + h) * cl)
+    a_h = h - clz
+    da = a_lat - g[0]
+    if series:
+        sa, ca = _sincos_series(da, g[5], g[6])
+    else:
+        sa, ca = _sincos_near(a_lat, g[0], g[5], g[6])
+    iw = 1.0 / (1.0 - E2_WGS84 * (sa * sa))
+    rn_a = A_WGS84 * math.sqrt(iw)
+    rm_a = rn_a * (1.0 - E2_WGS84) * iw
+    t = fix[1] - a_lon + math.pi
+    inside = (0.0 <= t) & (t < 2.0 * math.pi)
+    if series or inside:                # the wrap's own arithmetic, without the modulo
+        dlon = t - math.pi
+    else:
+        dlon = t % (2.0 * math.pi) - math.pi
+    ok = (abs(dl) < SMALL_DLAT) & (abs(da) < SMALL_DLAT) & inside
+    return -(fix[0] - a_lat) * (rm_a + a_h), -dlon * (rn_a + a_h) * ca, fix[2] - a_h, ok
+
+
+@njit(cache=True, inline="always")
+def _loose_tuples(g, C0, lever, fix):
+    """The epoch's constants as tuples (registers in the loops, no aliasing with the stores)."""
+    G = (g[0], g[1], g[2], g[3], g[4], g[5], g[6], g[7], g[8], g[9], g[10], g[11], g[12], g[13], g[14], g[15])
+    C = (C0[0, 0], C0[0, 1], C0[0, 2], C0[1, 0], C0[1, 1], C0[1, 2], C0[2, 0], C0[2, 1], C0[2, 2])
+    return G, C, (lever[0], lever[1], lever[2]), (fix[0], fix[1], fix[2])
+
+
+@njit(cache=True)
 def _loose_member(d, i_bg, g, C0, lever, fix, yrow):
     """The loose prediction of the particle ``d`` (an error-state row) into ``yrow``
     (3 or 6): what ``LooseGnss.predict_batch`` gives at the full state ``nominal (+) d``
@@ -622,133 +685,204 @@ def _loose_member(d, i_bg, g, C0, lever, fix, yrow):
     and ``C0 (w x l)``: the feedback map's quaternion product, then its DCM, in exact
     arithmetic); the position is the feedback map's (the same expressions); sin and cos
     of the particle's and its antenna's latitudes come from the nominal's
-    (:func:`_sincos_near`). Round-off apart, the generic path's numbers."""
+    (:func:`_sincos_near`). Round-off apart, the generic path's numbers. With branches:
+    for the rows :func:`_loose_predict_soa`'s series could not do."""
+    G, C, L, F = _loose_tuples(g, C0, lever, fix)
     px, py, pz = d[0], d[1], d[2]
     s, c = _rodrigues(px, py, pz)
-    clx, cly, clz = _rotate(px, py, pz, s, c, g[7], g[8], g[9])
-    lat = g[0] + d[6] / g[3]
-    lon = g[1] + d[7] / g[4]
-    h = g[2] - d[8]
-    sl, cl = _sincos_near(lat, g[0], g[5], g[6])
-    iw = 1.0 / (1.0 - E2_WGS84 * (sl * sl))    # the radii with one division (round-off apart)
-    rn = A_WGS84 * math.sqrt(iw)
-    rm = rn * (1.0 - E2_WGS84) * iw
-    a_lat = lat + clx / (rm + h)
-    a_lon = lon + cly / ((rn + h) * cl)
-    a_h = h - clz
-    sa, ca = _sincos_near(a_lat, g[0], g[5], g[6])
-    iw = 1.0 / (1.0 - E2_WGS84 * (sa * sa))
-    rn_a = A_WGS84 * math.sqrt(iw)
-    rm_a = rn_a * (1.0 - E2_WGS84) * iw
-    t = fix[1] - a_lon + math.pi
-    if 0.0 <= t < 2.0 * math.pi:       # the wrap's own arithmetic, without the modulo
-        dlon = t - math.pi
-    else:
-        dlon = t % (2.0 * math.pi) - math.pi
-    yrow[0] = -(fix[0] - a_lat) * (rm_a + a_h)
-    yrow[1] = -dlon * (rn_a + a_h) * ca
-    yrow[2] = fix[2] - a_h
+    yrow[0], yrow[1], yrow[2], _ = _loose_position_values(px, py, pz, s, c, d[6], d[7], d[8], G, F, False)
     if yrow.shape[0] > 3:
-        _loose_velocity(d, i_bg, g, C0, lever, px, py, pz, s, c, yrow)
+        yrow[3], yrow[4], yrow[5] = _loose_velocity_values(px, py, pz, s, c, d[3], d[4], d[5], d[i_bg],
+                                                           d[i_bg + 1], d[i_bg + 2], G, C, L)
 
 
-@njit(cache=True, inline="always")
-def _loose_member_series(d, i_bg, g, C0, lever, fix, yrow):
-    """:func:`_loose_member` without a branch, every function by its series; returns False
-    when a series was used beyond its bound or the longitude needs its wrap (then
-    ``yrow`` is to be recomputed by :func:`_loose_member`). Where it returns True, bitwise
-    :func:`_loose_member`'s numbers (the same expressions): straight-line code the
-    processor overlaps from one particle to the next (~25 % faster than the branching
-    one, measured)."""
-    px, py, pz = d[0], d[1], d[2]
-    a2 = px * px + py * py + pz * pz
-    s, c = _rodrigues_series(a2)
-    clx, cly, clz = _rotate(px, py, pz, s, c, g[7], g[8], g[9])
-    lat = g[0] + d[6] / g[3]
-    lon = g[1] + d[7] / g[4]
-    h = g[2] - d[8]
-    dl = lat - g[0]
-    sl, cl = _sincos_series(dl, g[5], g[6])
-    iw = 1.0 / (1.0 - E2_WGS84 * (sl * sl))
-    rn = A_WGS84 * math.sqrt(iw)
-    rm = rn * (1.0 - E2_WGS84) * iw
-    a_lat = lat + clx / (rm + h)
-    a_lon = lon + cly / ((rn + h) * cl)
-    a_h = h - clz
-    da = a_lat - g[0]
-    sa, ca = _sincos_series(da, g[5], g[6])
-    iw = 1.0 / (1.0 - E2_WGS84 * (sa * sa))
-    rn_a = A_WGS84 * math.sqrt(iw)
-    rm_a = rn_a * (1.0 - E2_WGS84) * iw
-    t = fix[1] - a_lon + math.pi
-    dlon = t - math.pi
-    yrow[0] = -(fix[0] - a_lat) * (rm_a + a_h)
-    yrow[1] = -dlon * (rn_a + a_h) * ca
-    yrow[2] = fix[2] - a_h
-    if yrow.shape[0] > 3:
-        _loose_velocity(d, i_bg, g, C0, lever, px, py, pz, s, c, yrow)
-    return (a2 < SMALL_ROT2) & (abs(dl) < SMALL_DLAT) & (abs(da) < SMALL_DLAT) & (0.0 <= t) & (t < 2.0 * math.pi)
+@njit(cache=True, error_model="numpy")
+def _loose_predict_soa(j0, j1, DT, D, i_bg, g, C0, lever, fix, YT):
+    """``YT[:, j0:j1]`` (m = 3 or 6 rows, state-major) the loose predictions of the particles
+    ``j0..j1``, read from their transposed deviations ``DT`` (n, N): every function by its
+    series (:func:`_rodrigues_series`, :func:`_sincos_series`), no branch, so the compiler
+    runs four particles per vector instruction; the particles where a series was used
+    beyond its bound or the longitude needs its wrap are then redone by
+    :func:`_loose_member` (rare: marked NaN in the first loop). Where the series held,
+    bitwise :func:`_loose_member`'s numbers (the same expressions). ``error_model="numpy"``:
+    no zero-division check, which would keep the loop scalar."""
+    G, C, L, F = _loose_tuples(g, C0, lever, fix)
+    k = j1 - j0         # zero-based loops over row slices: provably non-negative indices, vectorised
+    dx, dy, dz, dn, de, dd = DT[0, j0:j1], DT[1, j0:j1], DT[2, j0:j1], DT[6, j0:j1], DT[7, j0:j1], DT[8, j0:j1]
+    y0, y1, y2 = YT[0, j0:j1], YT[1, j0:j1], YT[2, j0:j1]
+    for t in range(k):
+        px, py, pz = dx[t], dy[t], dz[t]
+        a2 = px * px + py * py + pz * pz
+        s, c = _rodrigues_series(a2)
+        u0, u1, u2, ok = _loose_position_values(px, py, pz, s, c, dn[t], de[t], dd[t], G, F, True)
+        y0[t] = u0 if ok & (a2 < SMALL_ROT2) else np.nan
+        y1[t] = u1
+        y2[t] = u2
+    if YT.shape[0] > 3:
+        vx, vy, vz = DT[3, j0:j1], DT[4, j0:j1], DT[5, j0:j1]
+        bx, by, bz = DT[i_bg, j0:j1], DT[i_bg + 1, j0:j1], DT[i_bg + 2, j0:j1]
+        y3, y4, y5 = YT[3, j0:j1], YT[4, j0:j1], YT[5, j0:j1]
+        for t in range(k):
+            px, py, pz = dx[t], dy[t], dz[t]
+            s, c = _rodrigues_series(px * px + py * py + pz * pz)
+            y3[t], y4[t], y5[t] = _loose_velocity_values(px, py, pz, s, c, vx[t], vy[t], vz[t], bx[t], by[t], bz[t],
+                                                         G, C, L)
+    row = np.empty(YT.shape[0])
+    for t in range(j0, j1):
+        if not YT[0, t] == YT[0, t]:
+            _loose_member(D[t], i_bg, g, C0, lever, fix, row)
+            for i in range(YT.shape[0]):
+                YT[i, t] = row[i]
 
 
-@njit(cache=True, inline="always")
-def _loose_predict_rows(j0, j1, D, i_bg, g, C0, lever, fix, Y):
-    """``Y[j0:j1]`` by :func:`_loose_member_series`, then the rows it could not do by
-    :func:`_loose_member`, in a second loop (marked NaN in the first: a call or the
-    branching code in the first loop made it ~40 % slower, measured)."""
+@njit(cache=True, error_model="numpy")
+def _transpose_into(D, j0, j1, DT):
+    """``DT[:, j0:j1] = D[j0:j1].T``."""
     for j in range(j0, j1):
-        yj = Y[j]
-        ok = _loose_member_series(D[j], i_bg, g, C0, lever, fix, yj)
-        yj[0] = yj[0] if ok else np.nan
-    for j in range(j0, j1):
-        if not Y[j, 0] == Y[j, 0]:
-            _loose_member(D[j], i_bg, g, C0, lever, fix, Y[j])
+        for a in range(D.shape[1]):
+            DT[a, j] = D[j, a]
 
 
 @njit(cache=True)
-def pf_loose_predict(D, layout, nav, w_b, lever, fix, Y):
-    """``Y`` (N, m; m = 3 or 6) the loose predictions of the particles ``D`` (N, n) about
+def pf_loose_predict(D, layout, nav, w_b, lever, fix, YT):
+    """``YT`` (m, N; m = 3 or 6) the loose predictions of the particles ``D`` (N, n) about
     ``nav`` (10,) with the body rate ``w_b`` (3,) [rad/s], the antenna ``lever`` (3,) [m]
-    and the fix row ``fix`` (12,) (:func:`_loose_member`; tested against the generic
-    path)."""
+    and the fix row ``fix`` (12,) (:func:`_loose_predict_soa`, as in the update; tested
+    against the generic path)."""
+    N, n = D.shape
     g = np.empty(LOOSE_CONSTANTS)
     C0 = np.empty((3, 3))
-    m = Y.shape[1]
+    m = YT.shape[0]
     _loose_constants(nav, w_b, lever, fix, g, C0, np.empty(m), np.empty(m))
-    _loose_predict_rows(0, D.shape[0], D, layout[L_BG], g, C0, lever, fix, Y)
+    DT = np.empty((n, N))
+    _transpose_into(D, 0, N, DT)
+    _loose_predict_soa(0, N, DT, D, layout[L_BG], g, C0, lever, fix, YT)
 
 
-@njit(cache=True, inline="always")
-def _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, Y, logw, yp):
-    """Chunk ``c``: each particle's prediction (into ``Y``), log-likelihood (``ir`` the
-    inverse noise variances) and log-weight (into ``logw``); ``yp[c]`` = [smallest squared normalised innovation, largest finite
-    log-weight, prior-weighted sums of ``Y_j - yk0`` (m) and of their products (m m,
-    upper triangle)]."""
-    N = D.shape[0]
-    m = y.shape[0]
-    p = yp[c]
-    p[0] = np.inf
-    p[1] = -np.inf
-    for i in range(m + m * m):
-        p[2 + i] = 0.0
-    j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
-    _loose_predict_rows(j0, j1, D, i_bg, g, C0, lever, fix, Y)
-    for j in range(j0, j1):
-        yj = Y[j]
+@njit(cache=True, error_model="numpy", fastmath={"reassoc"})
+def _chunk_sums(W, j0, j1, p):
+    """``p[a] = sum_t W[a, t]`` over ``j0 <= t < j1`` (summed in vector lanes: see
+    :func:`_chunk_dots`)."""
+    for a in range(W.shape[0]):
+        wa = W[a, j0:j1]
         s = 0.0
-        wj = w0[j]
-        for i in range(m):
-            e = y[i] - yj[i]
-            s += e * e * ir[i]
-            wa = wj * (yj[i] - yk0[i])
-            p[2 + i] += wa
-            for k in range(i, m):
-                p[2 + m + i * m + k] += wa * (yj[k] - yk0[k])
-        lw = logw0[j] - 0.5 * s
-        logw[j] = lw
-        if s < p[0]:
-            p[0] = s
-        if np.isfinite(lw) and lw > p[1]:
-            p[1] = lw
+        for t in range(j1 - j0):
+            s += wa[t]
+        p[a] = s
+
+
+@njit(cache=True, error_model="numpy", fastmath={"reassoc"})
+def _chunk_dots_cols(W, E, j0, j1, off, p):
+    """``p[off + a n + b] = sum_t W[a, t] E[b, t]`` over ``j0 <= t < j1`` for ``a <= b < n``
+    (``n`` the rows of ``W``): :func:`_chunk_dots` on the columns ``j0..j1`` of whole
+    state-major arrays."""
+    n = W.shape[0]
+    for a in range(n):
+        wa = W[a, j0:j1]
+        for b in range(a, n):
+            eb = E[b, j0:j1]
+            s = 0.0
+            for t in range(j1 - j0):
+                s += wa[t] * eb[t]
+            p[off + a * n + b] = s
+
+
+@njit(cache=True, error_model="numpy", fastmath={"reassoc"})
+def _weight_sums(w, DT, j0, j1, p):
+    """``p`` = [sum w_t, sum w_t^2, sum_t w_t DT[a, t] (n)] over ``j0 <= t < j1`` (in
+    vector lanes: see :func:`_chunk_dots`)."""
+    wc = w[j0:j1]
+    s0, s1 = 0.0, 0.0
+    for t in range(j1 - j0):
+        s0 += wc[t]
+        s1 += wc[t] * wc[t]
+    p[0], p[1] = s0, s1
+    for a in range(DT.shape[0]):
+        da = DT[a, j0:j1]
+        s = 0.0
+        for t in range(j1 - j0):
+            s += wc[t] * da[t]
+        p[2 + a] = s
+
+
+@njit(cache=True, error_model="numpy")
+def _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, YT, logw, yp, work):
+    """Chunk ``c`` (particles ``j0..j1``) of the fused update's first pass: the chunk's
+    deviations transposed into ``DT = work[0:n]`` (kept for the later passes), their
+    predictions (``YT``, :func:`_loose_predict_soa`), squared normalised innovations (``ir``
+    the inverse noise variances) and log-weights (into ``logw``); ``yp[c]`` = [smallest
+    squared normalised innovation, largest finite log-weight, prior-weighted sums of
+    ``Y_j - yk0`` (m) and of their products (m m, upper triangle)]. Every loop runs
+    along the particles on contiguous rows (vectorised); the same compiled function for
+    both kernel twins, so the same sums on any thread count."""
+    N, n = D.shape
+    m = y.shape[0]
+    j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
+    DT, C, W, S = work[0:n], work[n:2 * n], work[2 * n:3 * n], work[3 * n]
+    _transpose_into(D, j0, j1, DT)
+    _loose_predict_soa(j0, j1, DT, D, i_bg, g, C0, lever, fix, YT)
+    k = j1 - j0         # zero-based loops over row slices (vectorised: _loose_predict_soa)
+    Sc, w0c, lw0c, lwc = S[j0:j1], w0[j0:j1], logw0[j0:j1], logw[j0:j1]
+    for t in range(k):
+        Sc[t] = 0.0
+    for i in range(m):
+        yi, ri, ki = y[i], ir[i], yk0[i]
+        Yi, Ci, Wi = YT[i, j0:j1], C[i, j0:j1], W[i, j0:j1]
+        for t in range(k):
+            e = yi - Yi[t]
+            Sc[t] += e * e * ri
+            u = Yi[t] - ki            # moments about the heaviest particle's (one pass)
+            Ci[t] = u
+            Wi[t] = w0c[t] * u
+    best, top = np.inf, -np.inf
+    for t in range(k):
+        lw = lw0c[t] - 0.5 * Sc[t]
+        lwc[t] = lw
+        if Sc[t] < best:
+            best = Sc[t]
+        if np.isfinite(lw) and lw > top:
+            top = lw
+    p = yp[c]
+    p[0], p[1] = best, top
+    _chunk_sums(W[0:m], j0, j1, p[2:])
+    _chunk_dots_cols(W[0:m], C[0:m], j0, j1, 2 + m, p)
+
+
+@njit(cache=True, error_model="numpy")
+def _exp_chunk(c, logw, top, w, work, pa):
+    """Chunk ``c``: ``w_j = exp(logw_j - top)`` (0 when not finite); ``pa[c]`` = [sum w_j,
+    sum w_j^2, sum w_j D_j (n)], ``D`` from its transpose ``work[0:n]``."""
+    N = logw.shape[0]
+    n = pa.shape[1] - 2
+    j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
+    DT = work[0:n]
+    lwc, wc = logw[j0:j1], w[j0:j1]
+    for t in range(j1 - j0):
+        lw = lwc[t]
+        wc[t] = math.exp(lw - top) if np.isfinite(lw) else 0.0
+    _weight_sums(w, DT, j0, j1, pa[c])
+
+
+@njit(cache=True, error_model="numpy")
+def _normalise_cov_chunk(c, w, tot, x, work, part):
+    """Chunk ``c``: ``w_j /= tot``; ``part[c, n:]`` the upper triangle of
+    ``sum w_j (D_j - x)(D_j - x)^T`` from the transposed deviations ``work[0:n]``."""
+    N = w.shape[0]
+    n = x.shape[0]
+    j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
+    DT, E, W = work[0:n], work[n:2 * n], work[2 * n:3 * n]
+    k = j1 - j0         # zero-based loops over row slices (vectorised: _loose_predict_soa)
+    wc = w[j0:j1]
+    for t in range(k):
+        wc[t] = wc[t] / tot
+    for a in range(n):
+        xa = x[a]
+        Da, Ea, Wa = DT[a, j0:j1], E[a, j0:j1], W[a, j0:j1]
+        for t in range(k):
+            e = Da[t] - xa
+            Ea[t] = e
+            Wa[t] = wc[t] * e
+    _chunk_dots_cols(W, E, j0, j1, n, part[c])
 
 
 @njit(cache=True)
@@ -779,24 +913,6 @@ def _sum_loose(yp, yk0, ym, Pyy):
     return best, top
 
 
-@njit(cache=True, inline="always")
-def _exp_chunk(c, D, logw, top, w, pa):
-    """Chunk ``c``: ``w_j = exp(logw_j - top)`` (0 when not finite); ``pa[c]`` = [sum w_j,
-    sum w_j^2, sum w_j D_j (n)]."""
-    N, n = D.shape
-    p = pa[c]
-    for i in range(2 + n):
-        p[i] = 0.0
-    for j in range(c * N // CHUNKS, (c + 1) * N // CHUNKS):
-        lw = logw[j]
-        e = math.exp(lw - top) if np.isfinite(lw) else 0.0
-        w[j] = e
-        p[0] += e
-        p[1] += e * e
-        for i in range(n):
-            p[2 + i] += e * D[j, i]
-
-
 @njit(cache=True)
 def _sum_exp(pa, x):
     """``(tot, sum of squares)`` of :func:`_exp_chunk`'s chunks in order; ``x`` the mean."""
@@ -812,20 +928,12 @@ def _sum_exp(pa, x):
         x[i] = s / tot
     return tot, sq
 
-
-@njit(cache=True, inline="always")
-def _normalise_cov_chunk(c, D, w, tot, x, part):
-    N = D.shape[0]
-    for j in range(c * N // CHUNKS, (c + 1) * N // CHUNKS):
-        w[j] = w[j] / tot
-    _cov_chunk(c, D, w, x, part)
-
-
 @njit(cache=True, parallel=True)
-def pf_loose_update(D, layout, nav, w_b, lever, fix, logw0, w0, thr, Y, logw, w, ym, Pyy, x, P, yp, pa, part):
+def pf_loose_update(D, layout, nav, w_b, lever, fix, logw0, w0, thr, YT, logw, w, ym, Pyy, x, P, yp, pa, part,
+                    work):
     """A loose GNSS update of the particles ``D`` (N, n), fused, parallel over the
-    :data:`CHUNKS` chunks: each particle's prediction (:func:`_loose_member`, into ``Y``
-    (N, m), m = 3 or 6), its log-likelihood added to the prior log-weight ``logw0`` (into
+    :data:`CHUNKS` chunks: each particle's prediction (into ``YT`` (m, N), m = 3 or 6,
+    state-major), its log-likelihood added to the prior log-weight ``logw0`` (into
     ``logw``), the prior-weighted (``w0``) moments of the predictions ``ym``, ``Pyy`` and
     the NIS; then, unless degenerate (no finite log-weight, or the smallest squared
     normalised innovation beyond ``thr``), the normalised weights ``w``, the effective
@@ -833,10 +941,12 @@ def pf_loose_update(D, layout, nav, w_b, lever, fix, logw0, w0, thr, Y, logw, w,
     passes. ``nav`` (10,) the nominal, ``w_b`` (3,) [rad/s], ``lever`` (3,) [m], ``fix`` the
     fix's row (12,: lat, lon, h [rad, m], position sigmas [m], velocity, velocity sigmas
     [m/s]). Scratch: ``yp`` (CHUNKS, >= 2 + m + m m), ``pa`` (CHUNKS, >= 2 + n), ``part``
-    (CHUNKS, >= n + n n). Every sum over particles is taken in fixed chunks added in order:
-    bitwise the serial twin's on any thread count. Returns ``(best, ess, nis)`` as
-    :func:`pf_log_weights` (``ess`` 0 when degenerate)."""
-    m = Y.shape[1]
+    (CHUNKS, >= n + n n), ``work`` (3 n + 1, N): the particles transposed (state-major)
+    once, so that every later loop runs along contiguous rows, four particles per vector
+    instruction. Every sum over particles is taken in fixed chunks added in order, each
+    by the same compiled function: bitwise the serial twin's on any thread count.
+    Returns ``(best, ess, nis)`` as :func:`pf_log_weights` (``ess`` 0 when degenerate)."""
+    m = YT.shape[0]
     i_bg = layout[L_BG]
     g = np.empty(LOOSE_CONSTANTS)
     C0 = np.empty((3, 3))
@@ -846,25 +956,25 @@ def pf_loose_update(D, layout, nav, w_b, lever, fix, logw0, w0, thr, Y, logw, w,
     _loose_member(D[k0], i_bg, g, C0, lever, fix, yk0)
     ir = 1.0 / r
     for c in prange(CHUNKS):
-        _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, Y, logw, yp)
+        _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, YT, logw, yp, work)
     best, top = _sum_loose(yp, yk0, ym, Pyy)
     nis = _nis(y, ym, Pyy, r)
     if not np.isfinite(top) or not best <= thr:
         return best, 0.0, nis
     for c in prange(CHUNKS):
-        _exp_chunk(c, D, logw, top, w, pa)
+        _exp_chunk(c, logw, top, w, work, pa)
     tot, sq = _sum_exp(pa, x)
     for c in prange(CHUNKS):
-        _normalise_cov_chunk(c, D, w, tot, x, part)
+        _normalise_cov_chunk(c, w, tot, x, work, part)
     _sum_cov(part, P)
     return best, tot * tot / sq, nis
 
 
 @njit(cache=True)
-def pf_loose_update_serial(D, layout, nav, w_b, lever, fix, logw0, w0, thr, Y, logw, w, ym, Pyy, x, P, yp, pa,
-                           part):
+def pf_loose_update_serial(D, layout, nav, w_b, lever, fix, logw0, w0, thr, YT, logw, w, ym, Pyy, x, P, yp, pa,
+                           part, work):
     """:func:`pf_loose_update`, serial (the same chunks, the same sums: bitwise equal)."""
-    m = Y.shape[1]
+    m = YT.shape[0]
     i_bg = layout[L_BG]
     g = np.empty(LOOSE_CONSTANTS)
     C0 = np.empty((3, 3))
@@ -874,16 +984,16 @@ def pf_loose_update_serial(D, layout, nav, w_b, lever, fix, logw0, w0, thr, Y, l
     _loose_member(D[k0], i_bg, g, C0, lever, fix, yk0)
     ir = 1.0 / r
     for c in range(CHUNKS):
-        _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, Y, logw, yp)
+        _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, YT, logw, yp, work)
     best, top = _sum_loose(yp, yk0, ym, Pyy)
     nis = _nis(y, ym, Pyy, r)
     if not np.isfinite(top) or not best <= thr:
         return best, 0.0, nis
     for c in range(CHUNKS):
-        _exp_chunk(c, D, logw, top, w, pa)
+        _exp_chunk(c, logw, top, w, work, pa)
     tot, sq = _sum_exp(pa, x)
     for c in range(CHUNKS):
-        _normalise_cov_chunk(c, D, w, tot, x, part)
+        _normalise_cov_chunk(c, w, tot, x, work, part)
     _sum_cov(part, P)
     return best, tot * tot / sq, nis
 

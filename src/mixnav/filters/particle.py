@@ -33,8 +33,9 @@ re-diversifies the particles (:meth:`ParticleEstimator._resample`; the Cholesky 
 of the weighted covariance, the normals drawn by numpy into a preallocated buffer).
 The weighted mean deviation (computed before the
 resampling) is returned as the correction; the engine feeds it back and calls
-:meth:`recentre`, which shifts every particle. The recorded covariance is the
-weighted sample covariance.
+:meth:`recentre`, which shifts every particle. The recorded mean and covariance are
+the weighted sample moments before any resampling (the resampling and the jitter
+keep them in expectation and only add Monte Carlo noise).
 
 Degeneracy: when no particle can explain the measurement (every log-likelihood
 non-finite, or the best particle's squared normalised innovation beyond
@@ -182,6 +183,7 @@ class ParticleEstimator(NoCloneEstimator):
         self._pa = np.empty((CHUNKS, 2 + n))
         self._yp = np.empty((CHUNKS, 2 + 6 + 36))     # loose: at most 6 rows
         self._Yl = {}                                # the loose predictions and their moments, by m
+        self._work = np.empty((3 * n + 1, N))        # the fused update's and the jitter's state-major scratch
         self._L = np.zeros((n, n))
         self._scratch = np.zeros((n, n))
         self._Qd_last = None
@@ -260,13 +262,13 @@ class ParticleEstimator(NoCloneEstimator):
         m = 6 if epoch.model.use_velocity else 3
         bufs = self._Yl.get(m)
         if bufs is None:    # allocated once per row count (3 or 6)
-            bufs = self._Yl[m] = (np.empty((self.N, m)), np.empty(m), np.empty((m, m)))
-        Y, ym, Pyy = bufs
+            bufs = self._Yl[m] = (np.empty((m, self.N)), np.empty(m), np.empty((m, m)))
+        YT, ym, Pyy = bufs
         logw, w = self._logw_new, self._w_new
         best, ess, nis = self._k.loose_update(self.D, self.layout_array, epoch.nav,
                                               np.asarray(epoch.w_b, dtype=float), lever, fix, self.logw, self.w,
-                                              m * self.absurd_sigma ** 2, Y, logw, w, ym, Pyy, self._x, self._P,
-                                              self._yp, self._pa, self._part)
+                                              m * self.absurd_sigma ** 2, YT, logw, w, ym, Pyy, self._x, self._P,
+                                              self._yp, self._pa, self._part, self._work)
         return self._weighed(best, ess, nis, m, logw, w, moments=False)
 
     def weigh(self, y: np.ndarray, Y: np.ndarray, r: np.ndarray) -> Correction:
@@ -315,15 +317,18 @@ class ParticleEstimator(NoCloneEstimator):
                 self.counts["pf_jitter_root"] += 1
                 L[:, :] = np.linalg.qr(_sqrt_psd(self._P).T, mode="r").T
             L *= h
-            Z = self.rng.standard_normal(out=self._Z)
+            ZT = self.rng.standard_normal(out=self._Z).reshape((self.n, self.N))   # z_j: column j
         else:
-            L = Z = self._scratch
-        self._k.jitter(self.D, idx, float(np.sqrt(1.0 - h * h)), h, self._x, L, Z, self._Dn)
+            L = ZT = self._scratch
+        self._k.jitter(self.D, idx, float(np.sqrt(1.0 - h * h)), h, self._x, L, ZT, self._Dn, self._work)
         self.D, self._Dn = self._Dn, self.D
         self.logw[:] = 0.0
         self.w[:] = 1.0 / self.N
         self.counts["pf_resampled"] += 1
-        self._stale = True
+        # the estimate stays the weighted moments before the resampling (x, P): the
+        # resampling and the jitter keep them in expectation and only add Monte Carlo
+        # noise to the cloud's own (recomputing them would also cost a pass over it)
+        self._stale = False
 
     def _degenerate(self) -> None:
         """Reset to uniform weights and inflate the spread about the mean (counted)."""
@@ -378,14 +383,15 @@ class ParticleEstimator(NoCloneEstimator):
         pf_systematic(w, 0.5, np.empty(N, dtype=np.int64))
         k.moments(D, w, np.empty(n), np.empty((n, n)), np.empty((CHUNKS, n + n * n)))
         k.moments(np.zeros((N, 3)), w, np.empty(3), np.empty((3, 3)), np.empty((CHUNKS, n + n * n)))
-        k.jitter(D, np.zeros(N, dtype=np.int64), 0.5, 0.5, np.zeros(n), np.eye(n), D, np.empty((N, n)))
+        k.jitter(D, np.zeros(N, dtype=np.int64), 0.5, 0.5, np.zeros(n), np.eye(n), D.T.copy(), np.empty((N, n)),
+                 np.empty((n, N)))
         k.linear_step(D, np.eye(n), np.eye(n), D, np.empty((N, n)))
         fix = np.r_[nav[7:10], np.ones(3), np.zeros(3), np.ones(3)]
         for m in (3, 6):
             k.loose_update(D, lay.as_array(), nav, np.zeros(3), np.zeros(3), fix, np.zeros(N), w, 1e8,
-                           np.empty((N, m)), np.empty(N), np.empty(N), np.empty(m), np.empty((m, m)), np.empty(n),
+                           np.empty((m, N)), np.empty(N), np.empty(N), np.empty(m), np.empty((m, m)), np.empty(n),
                            np.empty((n, n)), np.empty((CHUNKS, 2 + 6 + 36)), np.empty((CHUNKS, 2 + n)),
-                           np.empty((CHUNKS, n + n * n)))
+                           np.empty((CHUNKS, n + n * n)), np.empty((3 * n + 1, N)))
         cholesky_lower(np.eye(n), np.empty((n, n)))
         _WARM.add(key)
 
