@@ -33,8 +33,9 @@ from numba import njit, prange
 from ..geodesy.earth import A_WGS84, E2_WGS84
 from ..ins._error_kernels import L_BA, L_BG, L_CLK, L_SA, L_SG
 from ..ins._error_kernels import apply_feedback as _apply_feedback
-from ..ins._kernels import mechanize_step as _mechanize_step
-from ..ins._kernels import quat_to_dcm_into, radii
+from ..ins._kernels import NEAR, RECORD, SMALL_DLAT, TRIG_POINTS, mechanize_core, quat_to_dcm_into, radii
+from ..ins._kernels import sincos_near as _sincos_near
+from ..ins._kernels import sincos_series as _sincos_series
 from ..linalg import cholesky_lower
 from ._ukf_kernels import merge_block_into
 from ._ukf_kernels import nav_difference as _nav_difference
@@ -43,8 +44,9 @@ from ._ukf_kernels import propagate_members
 # The shared maps, compiled again to be inlined into the per-particle loops (the same
 # source, so bitwise the same arithmetic; ~10 % faster than a call per particle, which
 # passes and reference-counts every array view). Not cached on their own: only the
-# kernels that inline them are (after editing the originals, clear __pycache__).
-mechanize_step = njit(inline="always")(_mechanize_step.py_func)
+# kernels that inline them are (after editing the originals, clear __pycache__). The
+# mechanization is the strapdown's ``mechanize_core`` (inlined by its own flag): the
+# nominal in RECORD mode, the particles in NEAR mode (ins/_kernels.py).
 apply_feedback = njit(inline="always")(_apply_feedback.py_func)
 nav_difference = njit(inline="always")(_nav_difference.py_func)
 
@@ -55,15 +57,17 @@ SCRATCH = 11
 
 
 @njit(cache=True, inline="always")
-def _mechanize_one(nav, prev, sensor, scr, gth, gdv, gdt, S):
-    """One state over the first ``S`` merged sub-intervals (as ``mechanize_members``)."""
+def _mechanize_one(nav, prev, sensor, scr, gth, gdv, gdt, S, trig, mode):
+    """One state over the first ``S`` merged sub-intervals (as ``mechanize_members``);
+    ``trig`` (>= S, TRIG_POINTS, 3) the reference's latitudes with their sin and cos per
+    sub-interval, written (``mode`` RECORD: the nominal) or read (NEAR: the particles)."""
     dth, dv, dvn = scr[0:3], scr[3:6], scr[6:9]
     for k in range(S):
         h = gdt[k]
         for i in range(3):
             dth[i] = (gth[k, i] - sensor[i] * h) / (1.0 + sensor[6 + i])
             dv[i] = (gdv[k, i] - sensor[3 + i] * h) / (1.0 + sensor[9 + i])
-        mechanize_step(nav, dth, dv, prev[0:3], prev[3:6], h, dvn)
+        mechanize_core(nav, dth, dv, prev[0:3], prev[3:6], h, dvn, trig[k], mode)
         for i in range(3):
             prev[i] = dth[i]
             prev[3 + i] = dv[i]
@@ -135,11 +139,12 @@ def pf_step(nav0, prev0, sensor0, D, SQT, Z, dtheta, dvel, dt, substeps, layout,
     N = D.shape[0]
     S = merge_block_into(dtheta, dvel, dt, substeps, gth, gdv, gdt)
     _decay(tau, T, fdec)
+    trig = np.empty((S, TRIG_POINTS, 3))
     _start_member(N, nav0, prev0, sensor0, D, layout, navs, prevs, sensors, scr)
-    _mechanize_one(navs[N], prevs[N], sensors[N], scr[N], gth, gdv, gdt, S)
+    _mechanize_one(navs[N], prevs[N], sensors[N], scr[N], gth, gdv, gdt, S, trig, RECORD)
     for j in prange(N):
         _start_member(j, nav0, prev0, sensor0, D, layout, navs, prevs, sensors, scr)
-        _mechanize_one(navs[j], prevs[j], sensors[j], scr[j], gth, gdv, gdt, S)
+        _mechanize_one(navs[j], prevs[j], sensors[j], scr[j], gth, gdv, gdt, S, trig, NEAR)
         _finish_member(j, D, navs, layout, fdec, T, SQT, Z, Dn)
 
 
@@ -151,27 +156,36 @@ def pf_step_serial(nav0, prev0, sensor0, D, SQT, Z, dtheta, dvel, dt, substeps, 
     N = D.shape[0]
     S = merge_block_into(dtheta, dvel, dt, substeps, gth, gdv, gdt)
     _decay(tau, T, fdec)
+    trig = np.empty((S, TRIG_POINTS, 3))
     _start_member(N, nav0, prev0, sensor0, D, layout, navs, prevs, sensors, scr)
-    _mechanize_one(navs[N], prevs[N], sensors[N], scr[N], gth, gdv, gdt, S)
+    _mechanize_one(navs[N], prevs[N], sensors[N], scr[N], gth, gdv, gdt, S, trig, RECORD)
     for j in range(N):
         _start_member(j, nav0, prev0, sensor0, D, layout, navs, prevs, sensors, scr)
-        _mechanize_one(navs[j], prevs[j], sensors[j], scr[j], gth, gdv, gdt, S)
+        _mechanize_one(navs[j], prevs[j], sensors[j], scr[j], gth, gdv, gdt, S, trig, NEAR)
         _finish_member(j, D, navs, layout, fdec, T, SQT, Z, Dn)
 
 
 @njit(cache=True, parallel=True)
 def pf_mechanize(navs, prevs, sensors, scr, gth, gdv, gdt, S):
-    """Every row of ``navs`` mechanized over ``S`` merged sub-intervals (in place,
-    parallel over rows): one "IMU step" of the array, timed in benchmarks/bench_pf.py."""
-    for j in prange(navs.shape[0]):
-        _mechanize_one(navs[j], prevs[j], sensors[j], scr[j], gth, gdv, gdt, S)
+    """Every row of ``navs`` mechanized over ``S`` merged sub-intervals (in place, parallel
+    over rows), the last row as the reference (RECORD, first) and the others as particles
+    about it (NEAR), as in :func:`pf_step`: one "IMU step" of the array, timed in
+    benchmarks/bench_pf.py."""
+    N = navs.shape[0] - 1
+    trig = np.empty((S, TRIG_POINTS, 3))
+    _mechanize_one(navs[N], prevs[N], sensors[N], scr[N], gth, gdv, gdt, S, trig, RECORD)
+    for j in prange(N):
+        _mechanize_one(navs[j], prevs[j], sensors[j], scr[j], gth, gdv, gdt, S, trig, NEAR)
 
 
 @njit(cache=True)
 def pf_mechanize_serial(navs, prevs, sensors, scr, gth, gdv, gdt, S):
     """:func:`pf_mechanize`, serial."""
-    for j in range(navs.shape[0]):
-        _mechanize_one(navs[j], prevs[j], sensors[j], scr[j], gth, gdv, gdt, S)
+    N = navs.shape[0] - 1
+    trig = np.empty((S, TRIG_POINTS, 3))
+    _mechanize_one(navs[N], prevs[N], sensors[N], scr[N], gth, gdv, gdt, S, trig, RECORD)
+    for j in range(N):
+        _mechanize_one(navs[j], prevs[j], sensors[j], scr[j], gth, gdv, gdt, S, trig, NEAR)
 
 
 @njit(cache=True)
@@ -526,10 +540,6 @@ def pf_linear_step_serial(D, FT, SQT, Z, Dn):
 
 # --- the fused update for loose GNSS (position, and velocity when the fixes have one) ----------
 
-#: |latitude - nominal latitude| [rad] below which sin/cos of a particle's latitude come from
-#: the nominal's by the angle sum with series of the difference (truncation below 1e-22
-#: relative at the bound, 6 km); beyond it math.sin/cos
-SMALL_DLAT = 1e-3
 #: |rotation vector|^2 [rad^2] below which Rodrigues' coefficients come from their series
 #: (truncation below 3e-18 at the bound, 0.1 rad); beyond it math.sin
 SMALL_ROT2 = 1e-2
@@ -538,32 +548,12 @@ LOOSE_CONSTANTS = 16
 
 
 @njit(cache=True, inline="always")
-def _sincos_series(d, s0, c0):
-    """``sin(lat0 + d), cos(lat0 + d)`` from ``s0, c0 = sin(lat0), cos(lat0)``: the angle
-    sum with the series of ``d`` to ``d^5`` (sin) and ``d^6`` (cos); for ``|d| <
-    SMALL_DLAT``."""
-    d2 = d * d
-    sd = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0))
-    cd = 1.0 - 0.5 * d2 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0))
-    return s0 * cd + c0 * sd, c0 * cd - s0 * sd
-
-
-@njit(cache=True, inline="always")
-def _sincos_near(lat, lat0, s0, c0):
-    """``sin(lat), cos(lat)``: :func:`_sincos_series` of ``lat - lat0`` while that is below
-    ``SMALL_DLAT``; the library functions beyond."""
-    d = lat - lat0
-    if abs(d) < SMALL_DLAT:
-        return _sincos_series(d, s0, c0)
-    return math.sin(lat), math.cos(lat)
-
-
-@njit(cache=True, inline="always")
 def _rodrigues_series(a2):
     """``sin a / a`` and ``(1 - cos a) / a^2`` by their series to ``a^8`` (``a2 = a^2 <
     SMALL_ROT2``)."""
-    s = 1.0 - a2 / 6.0 * (1.0 - a2 / 20.0 * (1.0 - a2 / 42.0 * (1.0 - a2 / 72.0)))
-    c = 0.5 * (1.0 - a2 / 12.0 * (1.0 - a2 / 30.0 * (1.0 - a2 / 56.0 * (1.0 - a2 / 90.0))))
+    s = 1.0 - a2 * (1.0 / 6.0) * (1.0 - a2 * (1.0 / 20.0) * (1.0 - a2 * (1.0 / 42.0) * (1.0 - a2 * (1.0 / 72.0))))
+    c = 0.5 * (1.0 - a2 * (1.0 / 12.0) * (1.0 - a2 * (1.0 / 30.0) * (1.0 - a2 * (1.0 / 56.0)
+                                                                      * (1.0 - a2 * (1.0 / 90.0)))))
     return s, c
 
 
