@@ -95,3 +95,64 @@ def test_schuler_magnitude_at_mid_latitude():
     assert np.abs(mag - expected).max() < 0.03 * expected.max()
     i_peak = np.argmax(mag)
     assert t[i_peak] == pytest.approx(np.pi / w_s, rel=5e-3)
+
+
+@pytest.mark.parametrize("dlat,rot", [
+    (2e-7, 1e-3),      # a particle metres from its reference, a small rotation: every series
+    (9e-4, 0.099),     # just inside both bounds (5.7 km, 0.099 rad): the series' higher terms matter
+    (2e-3, 0.3),       # beyond both bounds: the library functions
+])
+def test_near_mode_is_the_plain_mechanization_to_round_off(dlat, rot):
+    """mechanize_core in NEAR mode (a particle: sin and cos of its latitudes by the angle
+    sum with series about its reference's, recorded in RECORD mode; the rotation vectors'
+    sin and cos by series) against the plain mechanize_step on the same particle, 20
+    increments of 0.25 s: the same state to round-off (quaternion 1e-14, velocity 1e-12
+    m/s, latitude and longitude 1e-15 rad, height 1e-9 m). A wrong term of the rotation's
+    series shows here (its a^6 term is 1.5e-12 of the quaternion at 0.099 rad: tried);
+    the latitude's sines enter the state only through small terms, so their series are
+    checked directly (next test)."""
+    from mixnav.ins._kernels import NEAR, RECORD, TRIG_POINTS, mechanize_core, mechanize_step
+    rng = np.random.default_rng(11)
+    ref = np.array([0.9, 0.1, 0.2, 0.3, 80.0, 20.0, -1.0, 0.6, 1.9, 400.0])
+    ref[:4] /= np.linalg.norm(ref[:4])
+    part = ref.copy()
+    part[4:7] += [0.3, -0.2, 0.1]
+    part[7] += dlat
+    part[8] += 1e-6
+    part[9] += 5.0
+    plain = part.copy()
+    prev_r, prev_p = np.zeros(6), np.zeros(6)
+    trig, dvn = np.empty((TRIG_POINTS, 3)), np.empty(3)
+    for _ in range(20):
+        dth = rng.standard_normal(3)
+        dth *= rot / np.linalg.norm(dth)
+        dv = rng.standard_normal(3) * 0.5 + [0.0, 0.0, -2.45]
+        mechanize_core(ref, dth, dv, prev_r[0:3], prev_r[3:6], 0.25, dvn, trig, RECORD)
+        mechanize_core(part, dth, dv, prev_p[0:3], prev_p[3:6], 0.25, dvn, trig, NEAR)
+        mechanize_step(plain, dth, dv, prev_p[0:3], prev_p[3:6], 0.25, dvn)
+        prev_r[:3] = prev_p[:3] = dth
+        prev_r[3:] = prev_p[3:] = dv
+    d = np.abs(part - plain)
+    assert (d[0:4] <= 1e-14).all() and (d[4:7] <= 1e-12).all(), d
+    assert (d[7:9] <= 1e-15).all() and d[9] <= 1e-9, d
+    assert abs(part[7] - ref[7]) > 0.5 * dlat      # the particle stayed that far from its reference
+
+
+def test_the_series_trigonometry_is_the_library_s_to_round_off():
+    """The NEAR mode's pieces directly: sincos_near about a reference latitude and
+    _rv2q_near, against math.sin/cos and _rv2q, on both sides of their bounds (1e-3 rad,
+    |a|^2 = 1e-2): within 3e-16 (a wrong series coefficient is >= 1e-12 at the bounds;
+    the mechanization above would not see it, its latitudes' sines enter only through
+    small terms)."""
+    import math
+
+    from mixnav.ins._kernels import _rv2q, _rv2q_near, sincos_near
+    for lat0 in (-1.3, 0.0, 0.6, 1.5):
+        for d in (1e-9, -3e-5, 5e-4, -9.99e-4, 1.2e-3):
+            s, c = sincos_near(lat0 + d, lat0, math.sin(lat0), math.cos(lat0))
+            assert abs(s - math.sin(lat0 + d)) <= 3e-16 and abs(c - math.cos(lat0 + d)) <= 3e-16, (lat0, d)
+    rng = np.random.default_rng(2)
+    for a in (1e-9, 1e-3, 0.05, 0.0999, 0.1001, 0.5):
+        v = rng.standard_normal(3)
+        v *= a / np.linalg.norm(v)
+        np.testing.assert_allclose(_rv2q_near(*v), _rv2q(*v), rtol=0, atol=3e-16)
