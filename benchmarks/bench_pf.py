@@ -228,7 +228,7 @@ def update_split(sim, lever, N=5000, n_epochs=12, seconds=360.0, repeats=15):
     est.fused, est.roughening, est.resample_threshold = True, 0.9, 0.5
     n = lay.n
     la = lay.as_array()
-    ym, Pyy, YT, work = np.empty(6), np.empty((6, 6)), np.empty((6, N)), np.empty((3 * n + 1, N))
+    ym, Pyy, YT, work = np.empty(6), np.empty((6, 6)), np.empty((6, N)), np.empty((n + 1, N))
     x, P, L, ZT, Dn = np.empty(n), np.empty((n, n)), np.empty((n, n)), np.empty((n, N)), np.empty((N, n))
     yp, pa, part = np.empty((K.CHUNKS, 44)), np.empty((K.CHUNKS, 2 + n)), np.empty((K.CHUNKS, n + n * n))
     logw, w, idx = np.empty(N), np.empty(N), np.empty(N, dtype=np.int64)
@@ -244,8 +244,8 @@ def update_split(sim, lever, N=5000, n_epochs=12, seconds=360.0, repeats=15):
                  "systematic": lambda: K.pf_systematic(w, 0.5, idx),
                  "cholesky": lambda: cholesky_lower(P, L),
                  "normals": lambda: rng.standard_normal(out=ZT),
-                 "jitter_product": lambda: K.pf_jitter_serial(c[1], idx, 0.43, 0.9, x, L, ZT, Dn, work),
-                 "copy_without_jitter": lambda: K.pf_jitter_serial(c[1], idx, 1.0, 0.0, x, L, ZT, Dn, work),
+                 "jitter_product": lambda: K.pf_jitter_serial(c[1], idx, 0.43, 0.9, x, L, ZT, Dn),
+                 "copy_without_jitter": lambda: K.pf_jitter_serial(c[1], idx, 1.0, 0.0, x, L, ZT, Dn),
                  "cloud_moments_not_recomputed": lambda: K.pf_moments_serial(Dn, w, x, P, part)}
         for k, fn in calls.items():
             for _ in range(repeats):

@@ -66,7 +66,7 @@ def _fused(kernel, lay, D, nav, model, logw0, w0, w_b):
     out["best"], out["ess"], out["nis"] = kernel(
         D, lay.as_array(), nav, w_b, lever, fix, logw0, w0, 1e30, out["Y"], out["logw"], out["w"], np.empty(m),
         np.empty((m, m)), out["x"], out["P"], np.empty((K.CHUNKS, 44)), np.empty((K.CHUNKS, 2 + n)),
-        np.empty((K.CHUNKS, n + n * n)), np.empty((3 * n + 1, N)))
+        np.empty((K.CHUNKS, n + n * n)), np.empty((n + 1, N)))
     out["Y"] = out["Y"].T
     return out
 
@@ -121,7 +121,7 @@ def test_the_fused_update_detects_a_degenerate_epoch_like_the_generic_one():
     best, ess, nis = K.pf_loose_update_serial(
         D, lay.as_array(), nav, w_b, lever, fix, logw0, w0, 6 * 1e4 ** 2 / 1e3, np.empty((6, N)), np.empty(N), w,
         np.empty(6), np.empty((6, 6)), np.empty(n), np.empty((n, n)), np.empty((K.CHUNKS, 44)),
-        np.empty((K.CHUNKS, 2 + n)), np.empty((K.CHUNKS, n + n * n)), np.empty((3 * n + 1, N)))
+        np.empty((K.CHUNKS, 2 + n)), np.empty((K.CHUNKS, n + n * n)), np.empty((n + 1, N)))
     assert best == pytest.approx(g["best"], rel=1e-12) and best > 6 * 1e4 ** 2 / 1e3
     assert ess == 0.0 and (w == -1.0).all()
 
@@ -203,5 +203,5 @@ def test_the_jitter_with_a_singular_covariance_uses_a_triangular_root():
     ref = 0.6 * D[idx] + 0.4 * x + Z @ hL.T
     for jitter in (K.pf_jitter, K.pf_jitter_serial):
         out = np.empty((N, n))
-        jitter(D, idx, 0.6, 0.8, x, hL + np.triu(np.ones((n, n)), 1), Z.T.copy(), out, np.empty((n, N)))   # upper unread
+        jitter(D, idx, 0.6, 0.8, x, hL + np.triu(np.ones((n, n)), 1), Z.T.copy(), out)   # upper part unread
         np.testing.assert_allclose(out, ref, rtol=1e-12, atol=1e-12)

@@ -463,11 +463,12 @@ def pf_moments_serial(D, w, x, P, part):
 
 
 @njit(cache=True, error_model="numpy")
-def _jitter_chunk(c, D, idx, a, h, x, hL, ZT, Dn, B):
-    """Chunk ``c`` of :func:`pf_jitter`: state-major in the scratch ``B`` (n, N), each state
-    a row along the particles (``a D[idx] + (1 - a) x`` gathered, then one ``hL[i, b] z_b``
-    row after another: vector instructions, the same sum order as one particle at a
-    time), then written to the particles' rows ``Dn[j0:j1]``."""
+def _jitter_chunk(c, D, idx, a, h, x, hL, ZT, Dn):
+    """Chunk ``c`` of :func:`pf_jitter`: state-major in a scratch ``B`` (n, chunk) of its
+    own (it stays in cache), each state a row along the particles (``a D[idx] + (1 - a)
+    x`` gathered, then one ``hL[i, b] z_b`` row after another: vector instructions, the
+    same sum order as one particle at a time), then written to the particles' rows
+    ``Dn[j0:j1]``."""
     N, n = Dn.shape
     j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
     if h == 0.0:
@@ -477,38 +478,39 @@ def _jitter_chunk(c, D, idx, a, h, x, hL, ZT, Dn, B):
                 Dn[t, i] = D[k, i]
         return
     k = j1 - j0         # zero-based loops over row slices (vectorised: _loose_predict_soa)
-    for t in range(j0, j1):     # the drawn rows, read whole, into columns
-        r = idx[t]
+    B = np.empty((n, k))
+    for t in range(k):          # the drawn rows, read whole, into columns
+        r = idx[j0 + t]
         for i in range(n):
             B[i, t] = a * D[r, i] + (1.0 - a) * x[i]
     for i in range(n):
-        Bi = B[i, j0:j1]
+        Bi = B[i]
         for b in range(i + 1):   # row i of h L (lower triangular)
             hb = hL[i, b]
             Zb = ZT[b, j0:j1]
             for t in range(k):
                 Bi[t] += hb * Zb[t]
-    for t in range(j0, j1):
+    for t in range(k):
         for i in range(n):
-            Dn[t, i] = B[i, t]
+            Dn[j0 + t, i] = B[i, t]
 
 
 @njit(cache=True, parallel=True)
-def pf_jitter(D, idx, a, h, x, hL, ZT, Dn, B):
+def pf_jitter(D, idx, a, h, x, hL, ZT, Dn):
     """The resampled particles ``D[idx]`` with the Liu-West jitter, into ``Dn``:
     ``Dn[j] = a D[idx_j] + (1 - a) x + (h L) z_j`` (``hL`` (n, n) the lower-triangular
     ``h L``, ``L L^T`` the weighted covariance: only its lower triangle is read; ``ZT``
-    (n, N) standard normals drawn by the caller, ``z_j`` its column ``j``; ``B`` (n, N)
-    scratch); ``h = 0``: the plain copy. Parallel over the :data:`CHUNKS` chunks."""
+    (n, N) standard normals drawn by the caller, ``z_j`` its column ``j``); ``h = 0``:
+    the plain copy. Parallel over the :data:`CHUNKS` chunks."""
     for c in prange(CHUNKS):
-        _jitter_chunk(c, D, idx, a, h, x, hL, ZT, Dn, B)
+        _jitter_chunk(c, D, idx, a, h, x, hL, ZT, Dn)
 
 
 @njit(cache=True)
-def pf_jitter_serial(D, idx, a, h, x, hL, ZT, Dn, B):
+def pf_jitter_serial(D, idx, a, h, x, hL, ZT, Dn):
     """:func:`pf_jitter`, serial."""
     for c in range(CHUNKS):
-        _jitter_chunk(c, D, idx, a, h, x, hL, ZT, Dn, B)
+        _jitter_chunk(c, D, idx, a, h, x, hL, ZT, Dn)
 
 
 @njit(cache=True, inline="always")
@@ -808,16 +810,17 @@ def _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, YT, logw,
     N, n = D.shape
     m = y.shape[0]
     j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
-    DT, C, W, S = work[0:n], work[n:2 * n], work[2 * n:3 * n], work[3 * n]
+    DT, S = work[0:n], work[n]
     _transpose_into(D, j0, j1, DT)
     _loose_predict_soa(j0, j1, DT, D, i_bg, g, C0, lever, fix, YT)
     k = j1 - j0         # zero-based loops over row slices (vectorised: _loose_predict_soa)
+    C, W = np.empty((m, k)), np.empty((m, k))   # the chunk's own: stays in cache
     Sc, w0c, lw0c, lwc = S[j0:j1], w0[j0:j1], logw0[j0:j1], logw[j0:j1]
     for t in range(k):
         Sc[t] = 0.0
     for i in range(m):
         yi, ri, ki = y[i], ir[i], yk0[i]
-        Yi, Ci, Wi = YT[i, j0:j1], C[i, j0:j1], W[i, j0:j1]
+        Yi, Ci, Wi = YT[i, j0:j1], C[i], W[i]
         for t in range(k):
             e = yi - Yi[t]
             Sc[t] += e * e * ri
@@ -834,8 +837,8 @@ def _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, YT, logw,
             top = lw
     p = yp[c]
     p[0], p[1] = best, top
-    _chunk_sums(W[0:m], j0, j1, p[2:])
-    _chunk_dots_cols(W[0:m], C[0:m], j0, j1, 2 + m, p)
+    _chunk_sums(W, 0, k, p[2:])
+    _chunk_dots_cols(W, C, 0, k, 2 + m, p)
 
 
 @njit(cache=True, error_model="numpy")
@@ -860,19 +863,20 @@ def _normalise_cov_chunk(c, w, tot, x, work, part):
     N = w.shape[0]
     n = x.shape[0]
     j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
-    DT, E, W = work[0:n], work[n:2 * n], work[2 * n:3 * n]
+    DT = work[0:n]
     k = j1 - j0         # zero-based loops over row slices (vectorised: _loose_predict_soa)
+    E, W = np.empty((n, k)), np.empty((n, k))   # the chunk's own: stays in cache
     wc = w[j0:j1]
     for t in range(k):
         wc[t] = wc[t] / tot
     for a in range(n):
         xa = x[a]
-        Da, Ea, Wa = DT[a, j0:j1], E[a, j0:j1], W[a, j0:j1]
+        Da, Ea, Wa = DT[a, j0:j1], E[a], W[a]
         for t in range(k):
             e = Da[t] - xa
             Ea[t] = e
             Wa[t] = wc[t] * e
-    _chunk_dots_cols(W, E, j0, j1, n, part[c])
+    _chunk_dots_cols(W, E, 0, k, n, part[c])
 
 
 @njit(cache=True)
@@ -931,7 +935,7 @@ def pf_loose_update(D, layout, nav, w_b, lever, fix, logw0, w0, thr, YT, logw, w
     passes. ``nav`` (10,) the nominal, ``w_b`` (3,) [rad/s], ``lever`` (3,) [m], ``fix`` the
     fix's row (12,: lat, lon, h [rad, m], position sigmas [m], velocity, velocity sigmas
     [m/s]). Scratch: ``yp`` (CHUNKS, >= 2 + m + m m), ``pa`` (CHUNKS, >= 2 + n), ``part``
-    (CHUNKS, >= n + n n), ``work`` (3 n + 1, N): the particles transposed (state-major)
+    (CHUNKS, >= n + n n), ``work`` (n + 1, N): the particles transposed (state-major)
     once, so that every later loop runs along contiguous rows, four particles per vector
     instruction. Every sum over particles is taken in fixed chunks added in order, each
     by the same compiled function: bitwise the serial twin's on any thread count.

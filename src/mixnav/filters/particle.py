@@ -183,7 +183,7 @@ class ParticleEstimator(NoCloneEstimator):
         self._pa = np.empty((CHUNKS, 2 + n))
         self._yp = np.empty((CHUNKS, 2 + 6 + 36))     # loose: at most 6 rows
         self._Yl = {}                                # the loose predictions and their moments, by m
-        self._work = np.empty((3 * n + 1, N))        # the fused update's and the jitter's state-major scratch
+        self._work = np.empty((n + 1, N))        # the fused update's state-major scratch
         self._L = np.zeros((n, n))
         self._scratch = np.zeros((n, n))
         self._Qd_last = None
@@ -320,7 +320,7 @@ class ParticleEstimator(NoCloneEstimator):
             ZT = self.rng.standard_normal(out=self._Z).reshape((self.n, self.N))   # z_j: column j
         else:
             L = ZT = self._scratch
-        self._k.jitter(self.D, idx, float(np.sqrt(1.0 - h * h)), h, self._x, L, ZT, self._Dn, self._work)
+        self._k.jitter(self.D, idx, float(np.sqrt(1.0 - h * h)), h, self._x, L, ZT, self._Dn)
         self.D, self._Dn = self._Dn, self.D
         self.logw[:] = 0.0
         self.w[:] = 1.0 / self.N
@@ -383,15 +383,14 @@ class ParticleEstimator(NoCloneEstimator):
         pf_systematic(w, 0.5, np.empty(N, dtype=np.int64))
         k.moments(D, w, np.empty(n), np.empty((n, n)), np.empty((CHUNKS, n + n * n)))
         k.moments(np.zeros((N, 3)), w, np.empty(3), np.empty((3, 3)), np.empty((CHUNKS, n + n * n)))
-        k.jitter(D, np.zeros(N, dtype=np.int64), 0.5, 0.5, np.zeros(n), np.eye(n), D.T.copy(), np.empty((N, n)),
-                 np.empty((n, N)))
+        k.jitter(D, np.zeros(N, dtype=np.int64), 0.5, 0.5, np.zeros(n), np.eye(n), D.T.copy(), np.empty((N, n)))
         k.linear_step(D, np.eye(n), np.eye(n), D, np.empty((N, n)))
         fix = np.r_[nav[7:10], np.ones(3), np.zeros(3), np.ones(3)]
         for m in (3, 6):
             k.loose_update(D, lay.as_array(), nav, np.zeros(3), np.zeros(3), fix, np.zeros(N), w, 1e8,
                            np.empty((m, N)), np.empty(N), np.empty(N), np.empty(m), np.empty((m, m)), np.empty(n),
                            np.empty((n, n)), np.empty((CHUNKS, 2 + 6 + 36)), np.empty((CHUNKS, 2 + n)),
-                           np.empty((CHUNKS, n + n * n)), np.empty((3 * n + 1, N)))
+                           np.empty((CHUNKS, n + n * n)), np.empty((n + 1, N)))
         cholesky_lower(np.eye(n), np.empty((n, n)))
         _WARM.add(key)
 
