@@ -40,7 +40,12 @@ def radii(lat):
     rm, rn : float or ndarray
         Meridian (north-south) and prime-vertical (east-west) radii [m].
     """
-    s2 = np.sin(lat) ** 2
+    return radii_from_sin(np.sin(lat))
+
+
+def radii_from_sin(s):
+    """:func:`radii` from ``s = sin(lat)`` (for callers that already have the sine)."""
+    s2 = s ** 2
     w = 1.0 - E2_WGS84 * s2
     rn = A_WGS84 / np.sqrt(w)
     rm = rn * (1.0 - E2_WGS84) / w
@@ -53,7 +58,12 @@ def normal_gravity(lat, h):
     Somigliana's formula on the ellipsoid with a second-order free-air term in
     height; points down along the ellipsoid normal.
     """
-    s2 = np.sin(lat) ** 2
+    return normal_gravity_from_sin(np.sin(lat), h)
+
+
+def normal_gravity_from_sin(s, h):
+    """:func:`normal_gravity` from ``s = sin(lat)``."""
+    s2 = s ** 2
     g0 = _GAMMA_E * (1.0 + _K_SOMIGLIANA * s2) / np.sqrt(1.0 - E2_WGS84 * s2)
     return g0 - (_H1 - _H1_LAT * s2) * h + _H2 * h * h
 

@@ -30,11 +30,24 @@ OMEGA_EARTH = _earth.OMEGA_EARTH
 E2 = _earth.E2_WGS84
 A = _earth.A_WGS84
 
-radii = njit(cache=True)(_earth.radii)
-normal_gravity = njit(cache=True)(_earth.normal_gravity)
+# geodesy/earth.py's formulas compiled: from sin(lat) (inlined into the mechanization,
+# which takes each latitude's sine once for the radii, the rates and gravity) and, as
+# earth.radii / normal_gravity do in numpy, from the latitude
+_radii_s = njit(inline="always")(_earth.radii_from_sin)
+_gravity_s = njit(inline="always")(_earth.normal_gravity_from_sin)
 normal_gravity_dh = njit(cache=True)(_earth.normal_gravity_dh)
-_GAMMA_E, _K_SOMIGLIANA = _earth._GAMMA_E, _earth._K_SOMIGLIANA
-_H1, _H1_LAT, _H2 = _earth._H1, _earth._H1_LAT, _earth._H2
+
+
+@njit(cache=True)
+def radii(lat):
+    """:func:`mixnav.geodesy.earth.radii`, compiled (meridian, prime-vertical) [m]."""
+    return _radii_s(np.sin(lat))
+
+
+@njit(cache=True)
+def normal_gravity(lat, h):
+    """:func:`mixnav.geodesy.earth.normal_gravity`, compiled [m/s^2]."""
+    return _gravity_s(np.sin(lat), h)
 
 NAV_SIZE = 10
 
@@ -79,17 +92,6 @@ def quat_to_dcm_into(q, c):
     c[2, 0] = 2.0 * (x * z - w * y)
     c[2, 1] = 2.0 * (y * z + w * x)
     c[2, 2] = w * w - x * x - y * y + z * z
-
-
-@njit(cache=True, inline="always")
-def _omega_in(lat, h, vn, ve, rm, rn):
-    """Earth rate plus transport rate in NED, and their sum."""
-    sl, cl = math.sin(lat), math.cos(lat)
-    wie_n, wie_d = OMEGA_EARTH * cl, -OMEGA_EARTH * sl
-    wen_n = ve / (rn + h)
-    wen_e = -vn / (rm + h)
-    wen_d = -ve * sl / cl / (rn + h)
-    return wie_n, wie_d, wen_n, wen_e, wen_d
 
 
 #: modes of :func:`mechanize_core`, compile-time constants at each call site (the branches
@@ -158,27 +160,9 @@ def _lat_sincos(lat, trig, i, mode):
 
 
 @njit(cache=True, inline="always")
-def _radii_s(s):
-    """:func:`~mixnav.geodesy.earth.radii` from ``s = sin(lat)`` (the same expressions)."""
-    s2 = s ** 2
-    w = 1.0 - E2 * s2
-    rn = A / np.sqrt(w)
-    rm = rn * (1.0 - E2) / w
-    return rm, rn
-
-
-@njit(cache=True, inline="always")
-def _gravity_s(s, h):
-    """:func:`~mixnav.geodesy.earth.normal_gravity` from ``s = sin(lat)`` (the same
-    expressions)."""
-    s2 = s ** 2
-    g0 = _GAMMA_E * (1.0 + _K_SOMIGLIANA * s2) / np.sqrt(1.0 - E2 * s2)
-    return g0 - (_H1 - _H1_LAT * s2) * h + _H2 * h * h
-
-
-@njit(cache=True, inline="always")
 def _omega_sc(sl, cl, h, vn, ve, rm, rn):
-    """:func:`_omega_in` from ``sl, cl = sin(lat), cos(lat)``."""
+    """Earth rate plus transport rate in NED (the Earth rate's north and down, the
+    transport rate's north, east and down) from ``sl, cl = sin(lat), cos(lat)``."""
     wie_n, wie_d = OMEGA_EARTH * cl, -OMEGA_EARTH * sl
     wen_n = ve / (rn + h)
     wen_e = -vn / (rm + h)
