@@ -205,3 +205,26 @@ def test_the_jitter_with_a_singular_covariance_uses_a_triangular_root():
         out = np.empty((N, n))
         jitter(D, idx, 0.6, 0.8, x, hL + np.triu(np.ones((n, n)), 1), Z.T.copy(), out)   # upper part unread
         np.testing.assert_allclose(out, ref, rtol=1e-12, atol=1e-12)
+
+
+def test_a_non_finite_particle_weighs_nothing_and_leaves_the_moments_finite():
+    """A particle whose row is NaN (or inf) gets weight 0 and adds 0 to the weighted mean
+    and covariance (0 x NaN would be NaN): the fused update (both twins) and the generic
+    moments (pf_moments) against numpy's weighted moments of the finite rows (1e-12)."""
+    lay, D, nav, model, logw0, w0, w_b = _case(600, 1e-3, 2.0, np.array([0.5, 0.2, -1.0]), True)
+    D = D.copy()
+    D[7] = np.nan
+    D[300, 4] = np.inf
+    for kernel in (K.pf_loose_update_serial, K.pf_loose_update):
+        f = _fused(kernel, lay, D, nav, model, logw0, w0, w_b)
+        assert f["w"][7] == 0.0 and f["w"][300] == 0.0 and np.isfinite(f["w"]).all()
+        ok = np.isfinite(D).all(axis=1)
+        xm = np.average(D[ok], axis=0, weights=f["w"][ok])
+        Pm = np.cov(D[ok].T, aweights=f["w"][ok], bias=True)
+        np.testing.assert_allclose(f["x"], xm, rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(f["P"], Pm, rtol=1e-10, atol=1e-14 * np.abs(Pm).max())
+        x, P = np.empty(D.shape[1]), np.empty((D.shape[1],) * 2)
+        for moments in (K.pf_moments_serial, K.pf_moments):
+            moments(D, f["w"], x, P, np.empty((K.CHUNKS, D.shape[1] * (D.shape[1] + 1))))
+            np.testing.assert_allclose(x, xm, rtol=1e-12, atol=1e-15)
+            np.testing.assert_allclose(P, Pm, rtol=1e-10, atol=1e-14 * np.abs(Pm).max())

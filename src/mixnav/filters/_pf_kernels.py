@@ -6,7 +6,10 @@
   sensor errors over the step's merged IMU block, is differenced from the
   mechanized nominal, and gains its process noise ``SQ z_j``. The maps are the
   UKF's (:func:`~._ukf_kernels.nav_difference`, the engine's ``apply_feedback``,
-  the strapdown ``mechanize_step``), not copies.
+  the strapdown ``mechanize_core``: the nominal in RECORD mode, the particles in
+  NEAR mode, ins/_kernels.py), not copies.
+- :func:`pf_loose_update`: a loose GNSS update straight from the particle array,
+  state-major per chunk (vectorised).
 - :func:`pf_member_navs`: the particles of a measurement epoch as full states.
 - :func:`pf_log_weights`: the Gaussian log-likelihood of each particle's
   prediction added to its log-weight, normalised (weights, ESS), and the predictions'
@@ -16,7 +19,8 @@
 
 Threads (docs/particle.md, "Speed"): the per-particle loops run over ``prange``
 (numba ``parallel=True``); each particle's arithmetic depends on its own row
-only, and every random number is drawn by the caller from the estimator's numpy
+only (and on the nominal's recorded latitudes' sin and cos, written before the
+parallel loop), and every random number is drawn by the caller from the estimator's numpy
 Generator before the call, so a seed gives the same particles bit for bit on any
 thread count (tested). The sums over particles (moments) are split into a fixed
 number of chunks (:data:`CHUNKS`, independent of the thread count) whose partial
@@ -131,7 +135,8 @@ def pf_step(nav0, prev0, sensor0, D, SQT, Z, dtheta, dvel, dt, substeps, layout,
     ``substeps`` sub-intervals (0: every increment); ``layout`` the INS layout array;
     ``tau`` (4,) the sensor Gauss-Markov times [s]; ``T`` the step [s]. ``SQT`` (n, n)
     the transpose of a square root of ``Qd``; ``Z`` (N, n) standard normals drawn by the
-    caller. Scratch (no allocation here): ``navs`` (N+1, 10), ``prevs`` (N+1, 6),
+    caller. Scratch (allocated here only the (S, 4, 3) record of the nominal's latitudes'
+    sin and cos): ``navs`` (N+1, 10), ``prevs`` (N+1, 6),
     ``sensors`` (N+1, 12), ``scr`` (N+1, 11), ``gth``, ``gdv`` (>= S, 3), ``gdt``
     (>= S,), ``fdec`` (4,). Row N of the scratch is the reference (the nominal
     itself). ``Dn`` (N, n) receives the propagated deviations plus noise.
@@ -369,8 +374,9 @@ def _mean_chunk(c, D, w, part):
         p[i] = 0.0
     for j in range(c * N // CHUNKS, (c + 1) * N // CHUNKS):
         wj = w[j]
-        for i in range(n):
-            p[i] += wj * D[j, i]
+        if wj != 0.0:       # a weightless non-finite row adds 0, not NaN
+            for i in range(n):
+                p[i] += wj * D[j, i]
 
 
 @njit(cache=True, fastmath={"reassoc"})
@@ -405,7 +411,7 @@ def _cov_chunk(c, D, w, x, part):
     for t in range(k):
         wj = w[j0 + t]
         for a in range(n):
-            e = D[j0 + t, a] - x[a]
+            e = D[j0 + t, a] - x[a] if wj != 0.0 else 0.0   # a weightless non-finite row adds 0
             E[a, t] = e
             W[a, t] = wj * e
     _chunk_dots(W, E, k, part[c])
@@ -793,7 +799,7 @@ def _weight_sums(w, DT, j0, j1, p):
         da = DT[a, j0:j1]
         s = 0.0
         for t in range(j1 - j0):
-            s += wc[t] * da[t]
+            s += wc[t] * da[t] if wc[t] != 0.0 else 0.0    # a weightless non-finite row adds 0, not NaN
         p[2 + a] = s
 
 
@@ -873,7 +879,7 @@ def _normalise_cov_chunk(c, w, tot, x, work, part):
         xa = x[a]
         Da, Ea, Wa = DT[a, j0:j1], E[a], W[a]
         for t in range(k):
-            e = Da[t] - xa
+            e = Da[t] - xa if wc[t] != 0.0 else 0.0      # a weightless non-finite row adds 0, not NaN
             Ea[t] = e
             Wa[t] = wc[t] * e
     _chunk_dots_cols(W, E, 0, k, n, part[c])
