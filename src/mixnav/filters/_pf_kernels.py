@@ -804,19 +804,18 @@ def _weight_sums(w, DT, j0, j1, p):
 
 
 @njit(cache=True, error_model="numpy")
-def _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, YT, logw, yp, work):
+def _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, YT, logw, yp, DT, S):
     """Chunk ``c`` (particles ``j0..j1``) of the fused update's first pass: the chunk's
-    deviations transposed into ``DT = work[0:n]`` (kept for the later passes), their
+    deviations transposed into ``DT`` (n, N; kept for the later passes), their
     predictions (``YT``, :func:`_loose_predict_soa`), squared normalised innovations (``ir``
-    the inverse noise variances) and log-weights (into ``logw``); ``yp[c]`` = [smallest
+    the inverse noise variances; into ``S`` (N,)) and log-weights (into ``logw``); ``yp[c]`` = [smallest
     squared normalised innovation, largest finite log-weight, prior-weighted sums of
     ``Y_j - yk0`` (m) and of their products (m m, upper triangle)]. Every loop runs
     along the particles on contiguous rows (vectorised); the same compiled function for
     both kernel twins, so the same sums on any thread count."""
-    N, n = D.shape
+    N = D.shape[0]
     m = y.shape[0]
     j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
-    DT, S = work[0:n], work[n]
     _transpose_into(D, j0, j1, DT)
     _loose_predict_soa(j0, j1, DT, D, i_bg, g, C0, lever, fix, YT)
     k = j1 - j0         # zero-based loops over row slices (vectorised: _loose_predict_soa)
@@ -848,13 +847,11 @@ def _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, YT, logw,
 
 
 @njit(cache=True, error_model="numpy")
-def _exp_chunk(c, logw, top, w, work, pa):
+def _exp_chunk(c, logw, top, w, DT, pa):
     """Chunk ``c``: ``w_j = exp(logw_j - top)`` (0 when not finite); ``pa[c]`` = [sum w_j,
-    sum w_j^2, sum w_j D_j (n)], ``D`` from its transpose ``work[0:n]``."""
+    sum w_j^2, sum w_j D_j (n)], ``D`` from its transpose ``DT`` (n, N)."""
     N = logw.shape[0]
-    n = pa.shape[1] - 2
     j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
-    DT = work[0:n]
     lwc, wc = logw[j0:j1], w[j0:j1]
     for t in range(j1 - j0):
         lw = lwc[t]
@@ -863,13 +860,12 @@ def _exp_chunk(c, logw, top, w, work, pa):
 
 
 @njit(cache=True, error_model="numpy")
-def _normalise_cov_chunk(c, w, tot, x, work, part):
+def _normalise_cov_chunk(c, w, tot, x, DT, part):
     """Chunk ``c``: ``w_j /= tot``; ``part[c, n:]`` the upper triangle of
-    ``sum w_j (D_j - x)(D_j - x)^T`` from the transposed deviations ``work[0:n]``."""
+    ``sum w_j (D_j - x)(D_j - x)^T`` from the transposed deviations ``DT`` (n, N)."""
     N = w.shape[0]
     n = x.shape[0]
     j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
-    DT = work[0:n]
     k = j1 - j0         # zero-based loops over row slices (vectorised: _loose_predict_soa)
     E, W = np.empty((n, k)), np.empty((n, k))   # the chunk's own: stays in cache
     wc = w[j0:j1]
@@ -928,6 +924,24 @@ def _sum_exp(pa, x):
         x[i] = s / tot
     return tot, sq
 
+
+@njit(cache=True)
+def _loose_prologue(D, layout, nav, w_b, lever, fix, w0, m, work):
+    """What both twins of :func:`pf_loose_update` compute before their chunk loops: the
+    gyro-bias index, the epoch's constants (:func:`_loose_constants`), the measurement
+    ``y``, its variances ``r`` and their inverses, the heaviest particle's prediction (the
+    point the NIS moments are taken about), and the views of ``work``: the transposed
+    particles ``DT`` (n, N) and the squared innovations ``S`` (N,)."""
+    n = D.shape[1]
+    i_bg = layout[L_BG]
+    g = np.empty(LOOSE_CONSTANTS)
+    C0 = np.empty((3, 3))
+    y, r, yk0 = np.empty(m), np.empty(m), np.empty(m)
+    _loose_constants(nav, w_b, lever, fix, g, C0, y, r)
+    _loose_member(D[_heaviest(w0)], i_bg, g, C0, lever, fix, yk0)
+    return i_bg, g, C0, y, r, 1.0 / r, yk0, work[0:n], work[n]
+
+
 @njit(cache=True, parallel=True)
 def pf_loose_update(D, layout, nav, w_b, lever, fix, logw0, w0, thr, YT, logw, w, ym, Pyy, x, P, yp, pa, part,
                     work):
@@ -946,26 +960,18 @@ def pf_loose_update(D, layout, nav, w_b, lever, fix, logw0, w0, thr, YT, logw, w
     instruction. Every sum over particles is taken in fixed chunks added in order, each
     by the same compiled function: bitwise the serial twin's on any thread count.
     Returns ``(best, ess, nis)`` as :func:`pf_log_weights` (``ess`` 0 when degenerate)."""
-    m = YT.shape[0]
-    i_bg = layout[L_BG]
-    g = np.empty(LOOSE_CONSTANTS)
-    C0 = np.empty((3, 3))
-    y, r, yk0 = np.empty(m), np.empty(m), np.empty(m)
-    _loose_constants(nav, w_b, lever, fix, g, C0, y, r)
-    k0 = _heaviest(w0)
-    _loose_member(D[k0], i_bg, g, C0, lever, fix, yk0)
-    ir = 1.0 / r
+    i_bg, g, C0, y, r, ir, yk0, DT, S = _loose_prologue(D, layout, nav, w_b, lever, fix, w0, YT.shape[0], work)
     for c in prange(CHUNKS):
-        _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, YT, logw, yp, work)
+        _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, YT, logw, yp, DT, S)
     best, top = _sum_loose(yp, yk0, ym, Pyy)
     nis = _nis(y, ym, Pyy, r)
     if not np.isfinite(top) or not best <= thr:
         return best, 0.0, nis
     for c in prange(CHUNKS):
-        _exp_chunk(c, logw, top, w, work, pa)
+        _exp_chunk(c, logw, top, w, DT, pa)
     tot, sq = _sum_exp(pa, x)
     for c in prange(CHUNKS):
-        _normalise_cov_chunk(c, w, tot, x, work, part)
+        _normalise_cov_chunk(c, w, tot, x, DT, part)
     _sum_cov(part, P)
     return best, tot * tot / sq, nis
 
@@ -974,26 +980,18 @@ def pf_loose_update(D, layout, nav, w_b, lever, fix, logw0, w0, thr, YT, logw, w
 def pf_loose_update_serial(D, layout, nav, w_b, lever, fix, logw0, w0, thr, YT, logw, w, ym, Pyy, x, P, yp, pa,
                            part, work):
     """:func:`pf_loose_update`, serial (the same chunks, the same sums: bitwise equal)."""
-    m = YT.shape[0]
-    i_bg = layout[L_BG]
-    g = np.empty(LOOSE_CONSTANTS)
-    C0 = np.empty((3, 3))
-    y, r, yk0 = np.empty(m), np.empty(m), np.empty(m)
-    _loose_constants(nav, w_b, lever, fix, g, C0, y, r)
-    k0 = _heaviest(w0)
-    _loose_member(D[k0], i_bg, g, C0, lever, fix, yk0)
-    ir = 1.0 / r
+    i_bg, g, C0, y, r, ir, yk0, DT, S = _loose_prologue(D, layout, nav, w_b, lever, fix, w0, YT.shape[0], work)
     for c in range(CHUNKS):
-        _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, YT, logw, yp, work)
+        _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, YT, logw, yp, DT, S)
     best, top = _sum_loose(yp, yk0, ym, Pyy)
     nis = _nis(y, ym, Pyy, r)
     if not np.isfinite(top) or not best <= thr:
         return best, 0.0, nis
     for c in range(CHUNKS):
-        _exp_chunk(c, logw, top, w, work, pa)
+        _exp_chunk(c, logw, top, w, DT, pa)
     tot, sq = _sum_exp(pa, x)
     for c in range(CHUNKS):
-        _normalise_cov_chunk(c, w, tot, x, work, part)
+        _normalise_cov_chunk(c, w, tot, x, DT, part)
     _sum_cov(part, P)
     return best, tot * tot / sq, nis
 

@@ -149,6 +149,14 @@ def _rv2q_near(x, y, z):
 
 
 @njit(cache=True, inline="always")
+def _rv2q_mode(x, y, z, mode):
+    """:func:`_rv2q_near` in NEAR mode, :func:`_rv2q` otherwise."""
+    if mode == NEAR:
+        return _rv2q_near(x, y, z)
+    return _rv2q(x, y, z)
+
+
+@njit(cache=True, inline="always")
 def _lat_sincos(lat, trig, i, mode):
     """sin and cos of the latitude ``lat``, point ``i`` of an increment, as ``mode`` says."""
     if mode == NEAR:
@@ -239,16 +247,10 @@ def mechanize_core(nav, dth, dvb, dth_prev, dv_prev, dt, dvn_out, trig, mode):
 
     # --- attitude: q_nb(k) = q_nn * q_nb(k-1) * q_bb, rates at the mid-point
     cn = _cross(px, py, pz, ax, ay, az)
-    if mode == NEAR:
-        bq = _rv2q_near(ax + cn[0] / 12.0, ay + cn[1] / 12.0, az + cn[2] / 12.0)
-    else:
-        bq = _rv2q(ax + cn[0] / 12.0, ay + cn[1] / 12.0, az + cn[2] / 12.0)
+    bq = _rv2q_mode(ax + cn[0] / 12.0, ay + cn[1] / 12.0, az + cn[2] / 12.0, mode)
     rm, rn = _radii_s(sl)
     wie_n, wie_d, wen_n, wen_e, wen_d = _omega_sc(sl, cl, mh, 0.5 * (vn + nvn), 0.5 * (ve + nve), rm, rn)
-    if mode == NEAR:
-        nq = _rv2q_near(-(wie_n + wen_n) * dt, -wen_e * dt, -(wie_d + wen_d) * dt)
-    else:
-        nq = _rv2q(-(wie_n + wen_n) * dt, -wen_e * dt, -(wie_d + wen_d) * dt)
+    nq = _rv2q_mode(-(wie_n + wen_n) * dt, -wen_e * dt, -(wie_d + wen_d) * dt, mode)
     r = _qmul(q0, q1, q2, q3, bq[0], bq[1], bq[2], bq[3])
     r = _qmul(nq[0], nq[1], nq[2], nq[3], r[0], r[1], r[2], r[3])
     norm = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2] + r[3] * r[3])
