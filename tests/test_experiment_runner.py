@@ -198,3 +198,32 @@ def test_paired_comparison_bad_input():
         paired_comparison(df[df.seed <= 0], "err", "a", "b")
     with pytest.raises(ConfigError, match="more than once"):
         paired_comparison(pd.concat([df, df]), "err", "a", "b")
+
+
+def _no_init(scenario, sha):
+    pass
+
+
+def _killed_while_writing(scenario, sha, seed, out_dir, variant=None):
+    """A worker that dies in the middle of an atomic write: its temporary file stays."""
+    import os
+    from pathlib import Path
+    if seed == 1:
+        (Path(out_dir) / mc.RUNS_DIR / f".series_{seed}.parquet.x1y2z3.tmp").write_bytes(b"half")
+        os._exit(9)
+    import time
+    time.sleep(0.2)
+    return seed
+
+
+def test_a_killed_worker_leaves_no_temporary_file(tmp_path, monkeypatch):
+    # the CI failure of stop 31: a worker ended mid-write left runs/.series_3.parquet.*.tmp
+    # after the command had said "nothing half written was kept"
+    from concurrent.futures.process import BrokenProcessPool
+    monkeypatch.setattr(mc, "_worker_init", _no_init)
+    monkeypatch.setattr(mc, "_run_and_write", _killed_while_writing)
+    (tmp_path / mc.RUNS_DIR).mkdir()
+    with pytest.raises(BrokenProcessPool):
+        mc._run_pool(SCENARIO, "sha", [(0, None), (1, None), (2, None)], tmp_path, 2,
+                     mc._Progress(3, False))
+    assert not list((tmp_path / mc.RUNS_DIR).iterdir())

@@ -545,8 +545,7 @@ def _run_tasks(scenario, sc, sweep, source, sha, tasks, methods, old_seeds, out_
     atomic_write_json(out_dir / MANIFEST, manifest)
     runs_dir = out_dir / RUNS_DIR
     runs_dir.mkdir(parents=True, exist_ok=True)
-    for stray in runs_dir.glob(".*.tmp"):  # left by a killed worker
-        stray.unlink(missing_ok=True)
+    _remove_stray_temporaries(runs_dir)   # left by a worker killed in an earlier run
     todo = [t for t in tasks if not _record_path(out_dir, *t).exists()]
 
     bar = _Progress(len(todo), progress)
@@ -584,8 +583,17 @@ def _run_pool(scenario: str, sha: str, todo: list[tuple], out_dir: Path, workers
         # finished records stay on disk: the experiment can be resumed. The running
         # workers are ended now (a run can take minutes; no worker outlives the command)
         _terminate_pool(pool)
+        # a worker ended in the middle of an atomic write leaves its temporary file:
+        # the workers are gone now, so nothing can be writing one
+        _remove_stray_temporaries(out_dir / RUNS_DIR)
         raise
     pool.shutdown(wait=True)
+
+
+def _remove_stray_temporaries(runs_dir: Path) -> None:
+    """Remove the temporary files (``.<name>.*.tmp``) of writers that were killed."""
+    for stray in runs_dir.glob(".*.tmp"):
+        stray.unlink(missing_ok=True)
 
 
 def _terminate_pool(pool: ProcessPoolExecutor) -> None:
@@ -598,6 +606,7 @@ def _terminate_pool(pool: ProcessPoolExecutor) -> None:
         p.join(timeout=5.0)
         if p.is_alive():
             p.kill()
+            p.join(timeout=5.0)
 
 
 #: Seconds to wait for a Dask scheduler to answer.
