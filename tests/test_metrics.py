@@ -184,3 +184,31 @@ def test_a_singular_covariance_gives_a_counted_nan_nees_not_an_error():
     m = method_metrics(res, t, out.sim.outages)
     assert m["nees_singular_epochs"] == 1
     assert m["nees_pos_mean"] == pytest.approx(np.nanmean(t.nees_pos), rel=1e-12)
+
+
+def test_nees_is_undefined_where_the_covariance_is_singular_to_working_precision():
+    """run.nees: the closed form on well-conditioned covariances; NaN (counted, never a
+    negative or astronomic number) where the covariance is not numerically positive definite.
+    The near-singular case is a collapsed cloud's: rank one plus round-off, whose inverse is
+    round-off (P3's lost PF runs had a plain-solve NEES mean of -6e129)."""
+    from mixnav.experiment.run import nees
+    rng = np.random.default_rng(3)
+    K, d = 200, 6
+    A = rng.standard_normal((K, d, d))
+    C = A @ A.transpose(0, 2, 1) + 0.1 * np.eye(d)
+    e = rng.standard_normal((K, d))
+    ref = np.array([e[k] @ np.linalg.solve(C[k], e[k]) for k in range(K)])
+    np.testing.assert_allclose(nees(e, C), ref, rtol=1e-9)
+    v = rng.standard_normal(d)
+    bad = {3: np.zeros((d, d)),                                   # singular
+           4: np.diag([1.0, 1, 1, 1, 1, -1e-3]),                  # indefinite
+           5: 1e4 * np.outer(v, v) + 1e-12 * np.eye(d),           # rank one + round-off
+           6: np.full((d, d), np.nan)}                            # no covariance at all
+    for k, c in bad.items():
+        C[k] = c
+    out = nees(e, C)
+    assert np.isnan(out[list(bad)]).all()
+    keep = np.setdiff1d(np.arange(K), list(bad))
+    np.testing.assert_allclose(out[keep], ref[keep], rtol=1e-9)
+    assert (out[keep] >= 0).all()
+    assert nees(np.zeros((0, d)), np.zeros((0, d, d))).shape == (0,)

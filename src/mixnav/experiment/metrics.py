@@ -43,7 +43,8 @@ METRIC_KEYS_DOC: dict[str, str] = {
     "vertical_rmse_outside_outages_m": "RMS of the vertical error outside every outage window [m]",
     "nees_pos_mean": "mean NEES of the 3-D position error (3 for a consistent filter)",
     "nees_vel_mean": "mean NEES of the 3-D velocity error (3 for a consistent filter)",
-    "nees_singular_epochs": "epochs whose position or velocity covariance was singular (their NEES "
+    "nees_singular_epochs": "epochs whose position or velocity covariance was singular to working "
+                            "precision (run.nees; their NEES "
                             "is NaN in the solution table and left out of the means; e.g. a collapsed particle cloud)",
     "epoch_time_mean_us": "filter wall time per GNSS epoch, mechanization included [us]",
     "update_time_mean_us": "measurement model + correction + feedback per GNSS epoch [us]",

@@ -100,20 +100,35 @@ def _training(sc: Scenario, seed: int, source):
 
 
 def nees(e: np.ndarray, cov: np.ndarray) -> np.ndarray:
-    """``e_k^T C_k^-1 e_k`` per epoch (``e`` (K, d), ``cov`` (K, d, d)); NaN at an epoch whose
-    covariance is singular (a filter that claims certainty it cannot have, e.g. a collapsed
-    particle cloud): such epochs are counted in the metrics (``nees_singular_epochs``), not
-    raised."""
+    """``e_k^T C_k^-1 e_k`` per epoch (``e`` (K, d), ``cov`` (K, d, d)), as ``|L_k^-1 e_k|^2``
+    with ``C_k = L_k L_k^T`` (never negative).
+
+    NaN at an epoch whose covariance is singular to working precision (a filter that
+    claims a certainty it cannot have, e.g. a collapsed particle cloud): not positive
+    definite, or a Cholesky pivot ``L_ii^2`` (the variance of component i given the ones
+    before it) below ``d eps`` times the largest variance, where the inverse would be
+    round-off (a plain solve gave NEES of -6e129 there). Such epochs are counted in the
+    metrics (``nees_singular_epochs``), not raised.
+    """
+    e = np.asarray(e, dtype=float)
+    cov = np.asarray(cov, dtype=float)
+    out = np.full(len(e), np.nan)
+    tol = e.shape[1] * np.finfo(float).eps
+    ok = np.all(np.isfinite(cov), axis=(1, 2))
     try:
-        return np.einsum("ki,ki->k", e, np.linalg.solve(cov, e[..., None])[..., 0])
-    except np.linalg.LinAlgError:     # some epoch's covariance is singular: solve them one by one
-        out = np.full(len(e), np.nan)
-        for k in range(len(e)):
-            try:
-                out[k] = e[k] @ np.linalg.solve(cov[k], e[k])
-            except np.linalg.LinAlgError:
-                pass
-        return out
+        L = np.linalg.cholesky(cov[ok])
+    except np.linalg.LinAlgError:   # some epoch is not positive definite: keep the clearly definite
+        lam = np.linalg.eigvalsh(cov[ok])
+        ok[ok] = lam[:, 0] > tol * np.abs(lam[:, -1])
+        L = np.linalg.cholesky(cov[ok])
+    pivot = np.diagonal(L, axis1=1, axis2=2) ** 2
+    scale = np.max(np.diagonal(cov[ok], axis1=1, axis2=2), axis=1)
+    good = np.min(pivot, axis=1) > tol * scale
+    idx = np.flatnonzero(ok)[good]
+    if len(idx):
+        z = np.linalg.solve(L[good], e[idx][..., None])[..., 0]
+        out[idx] = np.einsum("ki,ki->k", z, z)
+    return out
 
 
 def truth_at(truth: Trajectory, times: np.ndarray) -> Trajectory:
