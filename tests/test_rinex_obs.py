@@ -380,3 +380,58 @@ def test_damaged_rinex_names_file_and_line(tmp_path, phone, version, damage, mes
     assert e.value.file == str(path)
     if j is not None:
         assert e.value.line == j + 1, str(e.value)
+
+
+def _with_events(lines, version):
+    """``lines`` of an observation file with, before its 20th epoch, an external-event record
+    (flag 5, one comment line) and a header-information record (flag 4), and after its 10th
+    epoch a cycle-slip record (flag 6) of its first two satellites at that epoch's time."""
+    def epoch_lines(v):
+        if v >= 3:
+            return [i for i, ln in enumerate(lines) if ln.startswith(">")]
+        return [i for i, ln in enumerate(lines) if len(ln) > 31 and ln[28:29] == "0" and ln[26:27] == " "
+                and ln[1:3].strip().isdigit() and ln[29:32].strip().isdigit() and ln[32:33].isalpha()]
+    at = epoch_lines(version)
+    out = list(lines)
+    i20, i10, i11 = at[20], at[10], at[11]
+    head = lines[i20]
+    comment = f"{'event written by the test':<60s}{'COMMENT':<20s}"
+    if version >= 3:
+        ev5, ev4 = head[:31] + "5  1", head[:31] + "4  1"
+        slip = [lines[i10][:31] + "6  2"] + lines[i10 + 1:i10 + 3]
+    else:
+        per_sat = (i11 - i10 - 1) // int(lines[i10][29:32])
+        ev5, ev4 = head[:28] + "5  1", head[:28] + "4  1"
+        slip = [lines[i10][:28] + "6  2" + lines[i10][32:38]] + lines[i10 + 1:i10 + 1 + 2 * per_sat]
+    out[i20:i20] = [ev5, comment, ev4, comment]
+    out[i11:i11] = slip
+    return out
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_event_and_cycle_slip_records_are_skipped_and_counted(tmp_path, phone, version):
+    """Epoch flags 2-5 (events) and 6 (cycle-slip records, laid out as observations at an
+    observation epoch's time) are not observations: the file with them reads exactly as the
+    file without them, and they are counted per flag. georinex alone reads the flag-6 record
+    as a second epoch at the same time and fails, and lost an observation epoch after a
+    flag-5 record, so it is given the file without them."""
+    from mixnav.io.rinex_obs import read_rinex_obs
+    a = phone[0]
+    n = 40
+    plain = tmp_path / f"plain.{version}o"
+    if version == 2:
+        _write_rinex2(plain, _times(a, n), _phone_records(a, n))
+    else:
+        sel = a.epoch < n
+        _write_rinex3(plain, a.week[:n], a.tow[:n], a.epoch[sel], a.prn[sel], a.pseudorange[sel],
+                      extra={k: _others(k) for k in range(n)})
+    lines = plain.read_text().splitlines()
+    events = tmp_path / f"events.{version}o"
+    events.write_text("\n".join(_with_events(lines, version)) + "\n")
+    assert len(events.read_text().splitlines()) == len(lines) + 4 + (5 if version == 2 else 3)
+    r0, r = read_rinex_obs(plain), read_rinex_obs(events)
+    assert len(r) == len(r0) == n
+    for name in ("week", "tow", "epoch", "prn", "pseudorange"):
+        np.testing.assert_array_equal(getattr(r, name), getattr(r0, name), err_msg=name)
+    assert r.rejected == r0.rejected and r.epochs_all_rejected == r0.epochs_all_rejected
+    assert r0.event_records == {} and r.event_records == {"flag 4": 1, "flag 5": 1, "flag 6": 1}

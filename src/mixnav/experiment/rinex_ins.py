@@ -81,16 +81,19 @@ def read_observations(paths) -> RinexPseudoranges:
     offsets = np.cumsum([0] + [len(x.tow) for x in parts[:-1]])
     any_doppler = any(x.doppler is not None for x in parts)
     rejected: dict = {}
+    events: dict = {}
     for x in parts:
         for key, n in x.rejected.items():
             rejected[key] = rejected.get(key, 0) + n
+        for key, n in x.event_records.items():
+            events[key] = events.get(key, 0) + n
     cat = np.concatenate
     return RinexPseudoranges(
         week=cat([x.week for x in parts]), tow=cat([x.tow for x in parts]),
         epoch=cat([x.epoch + o for x, o in zip(parts, offsets)]), prn=cat([x.prn for x in parts]),
         pseudorange=cat([x.pseudorange for x in parts]), code="/".join(dict.fromkeys(x.code for x in parts)),
         rejected=rejected, epochs_all_rejected=sum(x.epochs_all_rejected for x in parts),
-        version=parts[0].version, source=", ".join(x.source for x in parts),
+        version=parts[0].version, source=", ".join(x.source for x in parts), event_records=dict(sorted(events.items())),
         doppler=cat([x.doppler if x.doppler is not None else np.full(len(x.prn), np.nan) for x in parts])
         if any_doppler else None)
 
@@ -218,6 +221,7 @@ def process_rinex_ins(ds: Dataset, source: str, folder):
         "spp_status": track.status_counts(), "spp_time_s": solve_time,
         "satellites_skipped_by_spp": track.skipped_satellites,
         "observations_rejected": dict(obs.rejected), "epochs_without_gps": int(obs.epochs_all_rejected),
+        "event_records_skipped": dict(obs.event_records),
         "observations_not_filtered": merged, "tight_epochs": int(len(tight)),
         "fixes_without_velocity": int(no_velocity),
         "clock_jumps": [list(j) for j in jumps], "clock_spikes_ignored": int(spikes),

@@ -376,6 +376,7 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None) -> dict:
         "epochs_total": len(table) + empty, "epochs_used": used, "epochs_skipped": len(table) + empty - used,
         "epoch_status": counts, "satellites_skipped": dict(tr.skipped_satellites),
         "measurements_rejected": dict(po.observations.rejected),
+        "event_records_skipped": dict(getattr(po.observations, "event_records", {})),
         "reference_point": None if po.reference_lla is None else
         {"lat_deg": float(np.degrees(po.reference_lla[0])), "lon_deg": float(np.degrees(po.reference_lla[1])),
          "height_m": float(po.reference_lla[2])},

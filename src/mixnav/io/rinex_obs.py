@@ -27,6 +27,7 @@ and clocks (not built).
 
 from __future__ import annotations
 
+import io
 from collections import Counter
 from dataclasses import dataclass, field
 from math import ceil
@@ -65,6 +66,9 @@ class RinexPseudoranges:
         L1 Doppler [Hz] of each pseudorange (``D1C``, RINEX 2 ``D1``; NaN where blank), None
         when the file has no such column. Positive for an approaching satellite: the range
         rate is ``-lambda_L1 * doppler``.
+    event_records : dict
+        Records skipped because they are not observations, per epoch flag (``"flag 2"`` ..
+        ``"flag 5"`` events, ``"flag 6"`` cycle-slip records).
     """
 
     week: np.ndarray
@@ -78,6 +82,7 @@ class RinexPseudoranges:
     version: float = 0.0
     source: str = ""
     doppler: np.ndarray | None = None
+    event_records: dict = field(default_factory=dict)
 
     def __len__(self) -> int:
         return len(self.tow)
@@ -92,6 +97,8 @@ class _Listing:
     records: Counter           # satellite records of observation epochs, per system letter
     times: np.ndarray          # (epochs,) datetime64[ns]: observation epochs (flag 0 or 1), as written
     lines: np.ndarray          # (epochs,) their line numbers (1-based)
+    events: Counter            # records of other flags (events, cycle slips), per flag
+    observations_only: str | None = None   # the text without those records (None: there are none)
 
     @property
     def epochs(self) -> int:
@@ -216,6 +223,8 @@ def _listing(path: Path) -> _Listing:
                             line=type_line.get(sy))
     per_sat = ceil(len(types[key]) / 5)  # RINEX 2: lines per satellite record (5 values a line)
     records: Counter = Counter()
+    events: Counter = Counter()
+    drop = np.zeros(len(lines), dtype=bool)   # lines of records that are not observations
     times, at = [], []
     while k < len(lines):
         ln = lines[k]
@@ -259,11 +268,19 @@ def _listing(path: Path) -> _Listing:
             times.append(_epoch_time(lines[start - 1], version, path, start))
             # a blank system letter is GPS (RINEX 2)
             records.update("G" if s == " " else s for s in sats)
+        else:
+            events[f"flag {flag}"] += 1
+            drop[start - 1:k] = True
     t = np.array(times, dtype="datetime64[ns]")
     if len(t) > 1 and np.any(np.diff(t) <= np.timedelta64(0, "ns")):
         j = int(np.nonzero(np.diff(t) <= np.timedelta64(0, "ns"))[0][0]) + 1
         raise DataError(f"epoch times do not increase ({t[j]} after {t[j - 1]})", file=str(path), line=at[j])
-    return _Listing(version=version, code=code, records=records, times=t, lines=np.array(at, dtype=np.int64))
+    # georinex reads a cycle-slip record (flag 6, same layout as observations) as a second
+    # epoch at the same time and fails: it is given the file without the records that
+    # are not observations
+    kept = "\n".join(ln for ln, d in zip(lines, drop) if not d) + "\n" if events else None
+    return _Listing(version=version, code=code, records=records, times=t, lines=np.array(at, dtype=np.int64),
+                    events=events, observations_only=kept)
 
 
 def _full_times(truncated: np.ndarray, listing: _Listing, path: Path) -> np.ndarray:
@@ -311,7 +328,8 @@ def read_rinex_obs(path) -> RinexPseudoranges:
     try:
         with warnings.catch_warnings():   # georinex's per-epoch xarray concat warns of a future default
             warnings.simplefilter("ignore", FutureWarning)
-            ds = gr.load(path, use={"G"}, fast=False)   # fast: a size guess that can fail
+            source = path if listing.observations_only is None else io.StringIO(listing.observations_only)
+            ds = gr.load(source, use={"G"}, fast=False)   # fast: a size guess that can fail
     except Exception as exc:  # noqa: BLE001 - georinex raises many kinds for a damaged file
         raise DataError(f"not a readable RINEX observation file ({type(exc).__name__}: {exc})",
                         file=str(path)) from None
@@ -350,4 +368,5 @@ def read_rinex_obs(path) -> RinexPseudoranges:
     return RinexPseudoranges(week=week[keep], tow=tow[keep], epoch=idx[t_i].astype(np.int64), prn=prns[s_i],
                              pseudorange=values[t_i, s_i], code=code, rejected=rejected,
                              epochs_all_rejected=max(listing.epochs - int(keep.sum()), 0),
-                             version=listing.version, source=str(path), doppler=doppler)
+                             version=listing.version, source=str(path), doppler=doppler,
+                             event_records=dict(sorted(listing.events.items())))
