@@ -382,16 +382,19 @@ def test_damaged_rinex_names_file_and_line(tmp_path, phone, version, damage, mes
         assert e.value.line == j + 1, str(e.value)
 
 
+def _epoch_lines(lines, version):
+    """Indices of the observation epoch records (flag 0) of a file's ``lines`` written here."""
+    if version >= 3:
+        return [i for i, ln in enumerate(lines) if ln.startswith(">")]
+    return [i for i, ln in enumerate(lines) if len(ln) > 31 and ln[28:29] == "0" and ln[26:27] == " "
+            and ln[1:3].strip().isdigit() and ln[29:32].strip().isdigit() and ln[32:33].isalpha()]
+
+
 def _with_events(lines, version):
     """``lines`` of an observation file with, before its 20th epoch, an external-event record
     (flag 5, one comment line) and a header-information record (flag 4), and after its 10th
     epoch a cycle-slip record (flag 6) of its first two satellites at that epoch's time."""
-    def epoch_lines(v):
-        if v >= 3:
-            return [i for i, ln in enumerate(lines) if ln.startswith(">")]
-        return [i for i, ln in enumerate(lines) if len(ln) > 31 and ln[28:29] == "0" and ln[26:27] == " "
-                and ln[1:3].strip().isdigit() and ln[29:32].strip().isdigit() and ln[32:33].isalpha()]
-    at = epoch_lines(version)
+    at = _epoch_lines(lines, version)
     out = list(lines)
     i20, i10, i11 = at[20], at[10], at[11]
     head = lines[i20]
@@ -435,3 +438,30 @@ def test_event_and_cycle_slip_records_are_skipped_and_counted(tmp_path, phone, v
         np.testing.assert_array_equal(getattr(r, name), getattr(r0, name), err_msg=name)
     assert r.rejected == r0.rejected and r.epochs_all_rejected == r0.epochs_all_rejected
     assert r0.event_records == {} and r.event_records == {"flag 4": 1, "flag 5": 1, "flag 6": 1}
+
+
+def test_an_epoch_georinex_does_not_return_is_warned_of_and_counted(tmp_path, phone, monkeypatch):
+    """The guard for georinex losing an observation epoch (as it did after a flag-5 record):
+    the epoch's GPS records are counted as 'epoch not read', with a warning naming the
+    file and the epoch's line, and not as blank pseudoranges."""
+    import georinex
+    from mixnav.io.rinex_obs import read_rinex_obs
+    a = phone[0]
+    n = 30
+    path = tmp_path / "lost.16o"
+    _write_rinex2(path, _times(a, n), _phone_records(a, n))
+    r0 = read_rinex_obs(path)
+    real = georinex.load
+
+    def loses_epoch_12(*args, **kw):
+        ds = real(*args, **kw)
+        return ds.isel(time=[k for k in range(ds.sizes["time"]) if k != 12])
+
+    monkeypatch.setattr(georinex, "load", loses_epoch_12)
+    line = _epoch_lines(path.read_text().splitlines(), 2)[12]
+    with pytest.warns(UserWarning, match=rf"lost.16o: georinex did not read 1 observation epochs .*line {line + 1}\)"):
+        r = read_rinex_obs(path)
+    lost = int((a.epoch == 12).sum())
+    assert r.rejected == {**r0.rejected, "epoch not read": lost}
+    assert len(r) == n - 1 and r.epochs_all_rejected == 1
+    assert len(r.pseudorange) == len(r0.pseudorange) - lost

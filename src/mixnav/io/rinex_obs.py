@@ -56,7 +56,8 @@ class RinexPseudoranges:
         The observation code read (``C1C`` or ``C1``).
     rejected : dict
         Satellite records left out, per reason (``"not GPS: R"`` per system letter,
-        ``"no C1 pseudorange"``).
+        ``"no C1 pseudorange"``, ``"epoch not read"``: GPS records of an observation epoch
+        that georinex did not return, also warned of).
     epochs_all_rejected : int
         Observation epochs without any GPS pseudorange (absent from the arrays; counted by the SPP).
     version : float
@@ -97,6 +98,7 @@ class _Listing:
     records: Counter           # satellite records of observation epochs, per system letter
     times: np.ndarray          # (epochs,) datetime64[ns]: observation epochs (flag 0 or 1), as written
     lines: np.ndarray          # (epochs,) their line numbers (1-based)
+    gps: np.ndarray            # (epochs,) GPS satellite records of each observation epoch
     events: Counter            # records of other flags (events, cycle slips), per flag
     observations_only: str | None = None   # the text without those records (None: there are none)
 
@@ -225,7 +227,7 @@ def _listing(path: Path) -> _Listing:
     records: Counter = Counter()
     events: Counter = Counter()
     drop = np.zeros(len(lines), dtype=bool)   # lines of records that are not observations
-    times, at = [], []
+    times, at, gps = [], [], []
     while k < len(lines):
         ln = lines[k]
         k += 1
@@ -267,7 +269,9 @@ def _listing(path: Path) -> _Listing:
             at.append(start)
             times.append(_epoch_time(lines[start - 1], version, path, start))
             # a blank system letter is GPS (RINEX 2)
-            records.update("G" if s == " " else s for s in sats)
+            letters = ["G" if s == " " else s for s in sats]
+            records.update(letters)
+            gps.append(letters.count("G"))
         else:
             events[f"flag {flag}"] += 1
             drop[start - 1:k] = True
@@ -280,7 +284,7 @@ def _listing(path: Path) -> _Listing:
     # are not observations
     kept = "\n".join(ln for ln, d in zip(lines, drop) if not d) + "\n" if events else None
     return _Listing(version=version, code=code, records=records, times=t, lines=np.array(at, dtype=np.int64),
-                    events=events, observations_only=kept)
+                    gps=np.array(gps, dtype=np.int64), events=events, observations_only=kept)
 
 
 def _full_times(truncated: np.ndarray, listing: _Listing, path: Path) -> np.ndarray:
@@ -350,7 +354,17 @@ def read_rinex_obs(path) -> RinexPseudoranges:
         raise DataError(f"no GPS {code} pseudorange in the file: the {code} column is blank or not positive at "
                         f"all {n_gps} GPS satellite records", file=str(path))
     rejected = {f"not GPS: {s}": n for s, n in sorted(listing.records.items()) if s != "G"}
-    missing = n_gps - int(ok.sum())   # blank (or zero) C1: georinex's NaN, or a record it dropped
+    # an observation epoch with GPS records that georinex did not return (it silently lost
+    # the epoch after a flag-5 record before those were removed): said and counted, not lost
+    unread = (listing.gps > 0) & ~np.isin(listing.times, times)
+    lost = int(listing.gps[unread].sum())
+    if lost:
+        first = int(listing.lines[np.flatnonzero(unread)[0]])
+        warnings.warn(f"{path}: georinex did not read {int(unread.sum())} observation epochs with GPS records "
+                      f"(the first at line {first}); their {lost} GPS records are counted as 'epoch not read'",
+                      stacklevel=2)
+        rejected["epoch not read"] = lost
+    missing = n_gps - lost - int(ok.sum())   # blank (or zero) C1: georinex's NaN, or a record it dropped
     if missing > 0:
         rejected[f"no {code} pseudorange"] = missing
     # in integer ns: seconds since 1980 as a float would keep only 0.24 us
