@@ -89,6 +89,9 @@ def test_simulated_drive_through_files_is_scored_against_its_truth(simulated, tm
     assert m["start_s"] > 60.0  # in-motion alignment waits for 5 m/s; the drive starts at rest
     # position NEES against the truth: 3 for a consistent filter (one run: wide band)
     assert 1.0 < e["nees_pos_mean"] < 6.0
+    # the report states the time origin in the IMU format's own base (KF-GINS: GPS week seconds)
+    report = (tmp_path / "out" / "report.html").read_text()
+    assert f"GPS second {m['time_origin_s']:.3f} of the week" in report and "since 1970" not in report
 
 
 def test_odometer_gaps_are_reported_next_to_the_imu_gaps(simulated, tmp_path):

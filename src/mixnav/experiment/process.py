@@ -187,7 +187,10 @@ def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = No
               **po.checks}
     if po.aiding:
         header["aiding"] = po.aiding
-    origin = f"GPS time {po.time_origin:.3f} s since 1970"
+    # the IMU file's own time base: what its format stamps (docs/data_formats.md)
+    base = {"drive-0708": "GPS time {:.3f} s since 1970-01-01 (no leap seconds)",
+            "kf-gins": "GPS second {:.3f} of the week", "psins": "the file's start time {:.3f} s"}
+    origin = base.get(po.dataset.imu.format, "time {:.3f} s of the IMU file").format(po.time_origin)
     if po.dataset.raw_gnss is not None:   # the IMU file's own GPS stamps (raw_gnss.imu_time)
         origin = (f"GPS second {po.time_origin:.3f} of the week of the first RINEX epoch"
                   if po.dataset.raw_gnss.imu_time == "gps-week-seconds" else
