@@ -97,6 +97,17 @@ def _times(a, n=None):
     return [_time(a.week[k], a.tow[k]) for k in range(len(a.tow) if n is None else n)]
 
 
+def _write_phone(path, a, n, version, extra=_others):
+    """The first ``n`` epochs of the phone log ``a`` as a RINEX ``version`` (2 or 3) file, with
+    the other systems' records ``extra(k)`` at epoch k (RINEX 2: :func:`_others`' always)."""
+    if version == 2:
+        _write_rinex2(path, _times(a, n), _phone_records(a, n))
+    else:
+        sel = a.epoch < n
+        _write_rinex3(path, a.week[:n], a.tow[:n], a.epoch[sel], a.prn[sel], a.pseudorange[sel],
+                      extra={k: extra(k) for k in range(n)})
+
+
 def _georinex_gps(path, code):
     """{(epoch index, PRN): value} of every GPS satellite's ``code`` in georinex's own parse
     of the whole file (every system, default options), and georinex's dataset."""
@@ -137,12 +148,8 @@ def test_reader_matches_georinex_own_parse(tmp_path, phone, version):
     a = phone[0]
     n = 60
     path = tmp_path / f"mixed.{version}o"
-    if version == 2:
-        _write_rinex2(path, _times(a, n), _phone_records(a, n))
-    else:
-        sel = a.epoch < n
-        _write_rinex3(path, a.week[:n], a.tow[:n], a.epoch[sel], a.prn[sel], a.pseudorange[sel],
-                      extra={k: _others(k) + [("X05", 2.2e7)] for k in range(n)})
+    _write_phone(path, a, n, version, extra=lambda k: _others(k) + [("X05", 2.2e7)])
+    if version == 3:
         # X: a system letter the header does not list (georinex passes over its records)
         text = path.read_text()
         path.write_text(text.replace(f"{'X    1 C1C':<60s}SYS / # / OBS TYPES \n", ""))
@@ -422,12 +429,7 @@ def test_event_and_cycle_slip_records_are_skipped_and_counted(tmp_path, phone, v
     a = phone[0]
     n = 40
     plain = tmp_path / f"plain.{version}o"
-    if version == 2:
-        _write_rinex2(plain, _times(a, n), _phone_records(a, n))
-    else:
-        sel = a.epoch < n
-        _write_rinex3(plain, a.week[:n], a.tow[:n], a.epoch[sel], a.prn[sel], a.pseudorange[sel],
-                      extra={k: _others(k) for k in range(n)})
+    _write_phone(plain, a, n, version)
     lines = plain.read_text().splitlines()
     events = tmp_path / f"events.{version}o"
     events.write_text("\n".join(_with_events(lines, version)) + "\n")
