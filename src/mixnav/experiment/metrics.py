@@ -43,8 +43,8 @@ METRIC_KEYS_DOC: dict[str, str] = {
     "vertical_rmse_outside_outages_m": "RMS of the vertical error outside every outage window [m]",
     "nees_pos_mean": "mean NEES of the 3-D position error (3 for a consistent filter)",
     "nees_vel_mean": "mean NEES of the 3-D velocity error (3 for a consistent filter)",
-    "nees_singular_epochs": "epochs whose position or velocity covariance was singular to working "
-                            "precision (run.nees; their NEES "
+    "nees_singular_epochs": "epochs whose position or velocity covariance was singular or nearly so "
+                            "(run.nees; their NEES "
                             "is NaN in the solution table and left out of the means; e.g. a collapsed particle cloud)",
     "epoch_time_mean_us": "filter wall time per GNSS epoch, mechanization included [us]",
     "update_time_mean_us": "measurement model + correction + feedback per GNSS epoch [us]",
@@ -207,13 +207,14 @@ def compute_metrics(solution: pd.DataFrame,
             m["horizontal_rmse_outside_outages_m"] = _rms(hor[outside])
             m["vertical_rmse_outside_outages_m"] = _rms(ver[outside])
 
-    singular = 0
+    singular = np.zeros(len(solution), dtype=bool)
     for k in ("nees_pos", "nees_vel"):
         if k in solution.columns:
             v = np.asarray(solution[k], dtype=float)    # NaN allowed here: a singular covariance
             ok = np.isfinite(v)
-            singular = max(singular, int((~ok).sum()))
+            singular |= ~ok
             m[f"{k}_mean"] = float(np.mean(v[ok])) if ok.any() else float("nan")
+    singular = int(singular.sum())   # epochs where either block was declined
     if singular:   # the filter's covariance was singular there (run.nees): said, not hidden
         m["nees_singular_epochs"] = singular
     return m

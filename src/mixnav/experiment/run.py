@@ -99,35 +99,46 @@ def _training(sc: Scenario, seed: int, source):
     return out
 
 
+#: A covariance is taken as singular where its correlation matrix's condition number may
+#: exceed this (:func:`nees`): beyond it the inverse loses more than about 1e-6 to round-off.
+NEES_CONDITION_LIMIT = 1e10
+
+
 def nees(e: np.ndarray, cov: np.ndarray) -> np.ndarray:
     """``e_k^T C_k^-1 e_k`` per epoch (``e`` (K, d), ``cov`` (K, d, d)), as ``|L_k^-1 e_k|^2``
     with ``C_k = L_k L_k^T`` (never negative).
 
-    NaN at an epoch whose covariance is singular to working precision (a filter that
-    claims a certainty it cannot have, e.g. a collapsed particle cloud): not positive
-    definite, or a Cholesky pivot ``L_ii^2`` (the variance of component i given the ones
-    before it) below ``d eps`` times the largest variance, where the inverse would be
-    round-off (a plain solve gave NEES of -6e129 there). Such epochs are counted in the
-    metrics (``nees_singular_epochs``), not raised.
+    NaN at an epoch whose covariance is singular or nearly so (a filter that claims a
+    certainty it cannot have, e.g. a collapsed particle cloud): not finite, not positive
+    definite, or with a correlation matrix ``R`` whose condition number may exceed
+    ``NEES_CONDITION_LIMIT``, by the bound ``kappa(R) <= d |L_R^-1|_F^2`` (``L_R`` is R's
+    Cholesky factor, the rows of L divided by the standard deviations; ``lambda_max(R) <= d``).
+    The correlation matrix, so that axes in different units (metres, micro-radians) change
+    nothing. Each epoch is judged alone. Such epochs are counted in the metrics
+    (``nees_singular_epochs``), not raised; tests/test_metrics.py checks the kept values
+    against exact rational arithmetic.
     """
     e = np.asarray(e, dtype=float)
     cov = np.asarray(cov, dtype=float)
-    out = np.full(len(e), np.nan)
-    tol = e.shape[1] * np.finfo(float).eps
-    ok = np.all(np.isfinite(cov), axis=(1, 2))
+    K, d = e.shape
+    out = np.full(K, np.nan)
+    var = np.diagonal(cov, axis1=1, axis2=2)
+    ok = np.all(np.isfinite(cov), axis=(1, 2)) & np.all(var > 0, axis=1)
+    L = np.zeros_like(cov)
     try:
-        L = np.linalg.cholesky(cov[ok])
-    except np.linalg.LinAlgError:   # some epoch is not positive definite: keep the clearly definite
-        lam = np.linalg.eigvalsh(cov[ok])
-        ok[ok] = lam[:, 0] > tol * np.abs(lam[:, -1])
-        L = np.linalg.cholesky(cov[ok])
-    pivot = np.diagonal(L, axis1=1, axis2=2) ** 2
-    scale = np.max(np.diagonal(cov[ok], axis1=1, axis2=2), axis=1)
-    good = np.min(pivot, axis=1) > tol * scale
-    idx = np.flatnonzero(ok)[good]
-    if len(idx):
-        z = np.linalg.solve(L[good], e[idx][..., None])[..., 0]
-        out[idx] = np.einsum("ki,ki->k", z, z)
+        L[ok] = np.linalg.cholesky(cov[ok])
+    except np.linalg.LinAlgError:   # some epoch is not positive definite: each on its own
+        for k in np.flatnonzero(ok):
+            try:
+                L[k] = np.linalg.cholesky(cov[k])
+            except np.linalg.LinAlgError:
+                ok[k] = False
+    idx = np.flatnonzero(ok)
+    sd = np.sqrt(var[idx])
+    inv = np.linalg.inv(L[idx] / sd[:, :, None])       # L_R^-1 (triangular, nonsingular)
+    good = d * np.einsum("kij,kij->k", inv, inv) <= NEES_CONDITION_LIMIT
+    z = np.einsum("kij,kj->ki", inv[good], e[idx[good]] / sd[good])
+    out[idx[good]] = np.einsum("ki,ki->k", z, z)
     return out
 
 
