@@ -227,3 +227,46 @@ def test_a_killed_worker_leaves_no_temporary_file(tmp_path, monkeypatch):
         mc._run_pool(SCENARIO, "sha", [(0, None), (1, None), (2, None)], tmp_path, 2,
                      mc._Progress(3, False))
     assert not list((tmp_path / mc.RUNS_DIR).iterdir())
+
+
+def _die_init(scenario, sha):
+    mc._die_with_parent()
+
+
+def _fails_or_sleeps(scenario, sha, seed, out_dir, variant=None):
+    import time
+    if seed == 0:
+        time.sleep(0.5)      # the other worker is inside its long run by then
+        raise ValueError("run 0 fails")
+    time.sleep(60.0)
+    return seed
+
+
+def test_workers_end_at_the_first_sigterm(tmp_path, monkeypatch):
+    """A failed run ends the pool: the other worker, in the middle of a long run, ends at the
+    SIGTERM (exit code -15) instead of taking it as its task's exception and going on to the
+    next run until SIGKILLed (-9) -- a forked worker inherits the command's SIGTERM handler
+    (cli._terminate raises KeyboardInterrupt), which _die_with_parent resets."""
+    import signal
+    from mixnav import cli
+    monkeypatch.setattr(mc, "_worker_init", _die_init)
+    monkeypatch.setattr(mc, "_run_and_write", _fails_or_sleeps)
+    old = signal.signal(signal.SIGTERM, cli._terminate)    # as under the command line
+    codes = []
+    real = mc._terminate_pool
+
+    def recording(pool, timeout=5.0):
+        procs = list(pool._processes.values())
+        ended = real(pool, timeout)
+        codes.extend(p.exitcode for p in procs)
+        return ended
+
+    monkeypatch.setattr(mc, "_terminate_pool", recording)
+    (tmp_path / mc.RUNS_DIR).mkdir()
+    try:
+        with pytest.raises(ValueError, match="run 0 fails"):
+            mc._run_pool(SCENARIO, "sha", [(0, None), (1, None), (2, None)], tmp_path, 2,
+                         mc._Progress(3, False))
+    finally:
+        signal.signal(signal.SIGTERM, old)
+    assert codes and all(c == -signal.SIGTERM for c in codes), codes

@@ -222,13 +222,17 @@ def _die_with_parent() -> None:
     Linux: ``PR_SET_PDEATHSIG`` sends SIGKILL at the parent's death; elsewhere
     (and as a second line) a daemon thread checks the parent every second.
     Ctrl-C goes to the whole process group: the worker ignores it and leaves
-    the clean-up to the parent, which terminates its workers.
+    the clean-up to the parent, which terminates its workers. SIGTERM (the
+    parent's ``terminate``) ends the worker at once: a forked worker would
+    otherwise inherit the command's handler, turn it into an exception of its
+    task and go on to the next one until killed.
     """
     import signal
     import threading
     parent = os.getppid()
     try:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
     except ValueError:  # not the main thread
         pass
     if sys.platform.startswith("linux"):
@@ -545,7 +549,8 @@ def _run_tasks(scenario, sc, sweep, source, sha, tasks, methods, old_seeds, out_
     atomic_write_json(out_dir / MANIFEST, manifest)
     runs_dir = out_dir / RUNS_DIR
     runs_dir.mkdir(parents=True, exist_ok=True)
-    _remove_stray_temporaries(runs_dir)   # left by a worker killed in an earlier run
+    for folder in (out_dir, runs_dir):   # left by a writer killed in an earlier run
+        _remove_stray_temporaries(folder)
     todo = [t for t in tasks if not _record_path(out_dir, *t).exists()]
 
     bar = _Progress(len(todo), progress)
@@ -553,9 +558,14 @@ def _run_tasks(scenario, sc, sweep, source, sha, tasks, methods, old_seeds, out_
         if client is not None and todo:
             _run_dask(client, scenario, sha, todo, out_dir, bar)
         elif workers == 1 or len(todo) <= 1:
-            for s, v in todo:
-                _run_and_write(scenario, sha, s, str(out_dir), v)
-                bar.advance()
+            try:
+                for s, v in todo:
+                    _run_and_write(scenario, sha, s, str(out_dir), v)
+                    bar.advance()
+            except BaseException:
+                # the write here was cut off: an interrupt inside tempfile can leave its file
+                _remove_stray_temporaries(runs_dir)
+                raise
         elif todo:
             _run_pool(scenario, sha, todo, out_dir, min(workers, len(todo)), bar)
     finally:
@@ -582,31 +592,36 @@ def _run_pool(scenario: str, sha: str, todo: list[tuple], out_dir: Path, workers
     except BaseException:
         # finished records stay on disk: the experiment can be resumed. The running
         # workers are ended now (a run can take minutes; no worker outlives the command)
-        _terminate_pool(pool)
-        # a worker ended in the middle of an atomic write leaves its temporary file:
-        # the workers are gone now, so nothing can be writing one
-        _remove_stray_temporaries(out_dir / RUNS_DIR)
+        # a worker ended in the middle of an atomic write leaves its temporary file; once
+        # the workers are gone nothing can be writing one (one still alive: left to the next run)
+        if _terminate_pool(pool):
+            _remove_stray_temporaries(out_dir / RUNS_DIR)
         raise
     pool.shutdown(wait=True)
 
 
-def _remove_stray_temporaries(runs_dir: Path) -> None:
-    """Remove the temporary files (``.<name>.*.tmp``) of writers that were killed."""
-    for stray in runs_dir.glob(".*.tmp"):
+def _remove_stray_temporaries(folder: Path) -> None:
+    """Remove the temporary files (``.<name>.*.tmp``) of atomic writes that were cut off."""
+    for stray in folder.glob(".*.tmp"):
         stray.unlink(missing_ok=True)
 
 
-def _terminate_pool(pool: ProcessPoolExecutor) -> None:
+def _terminate_pool(pool: ProcessPoolExecutor, timeout: float = 5.0) -> bool:
+    """End the pool's workers now (SIGTERM, then SIGKILL after ``timeout`` s in all);
+    whether every one has ended."""
     procs = list((getattr(pool, "_processes", None) or {}).values())
     pool.shutdown(wait=False, cancel_futures=True)
     for p in procs:
         if p.is_alive():
             p.terminate()
+    deadline = time.monotonic() + timeout
     for p in procs:
-        p.join(timeout=5.0)
+        p.join(timeout=max(deadline - time.monotonic(), 0.0))
+    for p in procs:
         if p.is_alive():
             p.kill()
-            p.join(timeout=5.0)
+            p.join(timeout=timeout)
+    return not any(p.is_alive() for p in procs)
 
 
 #: Seconds to wait for a Dask scheduler to answer.
