@@ -6,7 +6,7 @@ offset, lever arm), withhold GNSS in the configured windows, align the INS,
 run every method, and score it against the reference where the reference is
 valid (its chosen quality flags), reporting the withheld windows separately.
 
-Times inside a run are seconds since the first IMU sample; the absolute time
+Times inside a run are seconds since the first IMU sample (the start of its first increment); the absolute time
 of that origin (as the files give it) is ``time_origin_s`` in metrics.json.
 """
 
@@ -195,7 +195,7 @@ def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = No
         origin = (f"GPS second {po.time_origin:.3f} of the week of the first RINEX epoch"
                   if po.dataset.raw_gnss.imu_time == "gps-week-seconds" else
                   f"GPS time {po.time_origin:.3f} s since 1980-01-06")
-    notes = [f"Times are seconds since the first IMU sample ({origin}).",
+    notes = [f"Times are seconds since the start of the first IMU increment ({origin}).",
              f"Aligned at t = {po.init.time:.2f} s ({po.dataset.alignment.method}).",
              "Errors are estimate minus reference, at the reference's valid epochs, for the point the "
              "reference gives (antenna or IMU); windows are the GNSS epochs withheld from the filter."]
