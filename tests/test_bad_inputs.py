@@ -1036,3 +1036,30 @@ def test_sibling_left_by_a_killed_run_is_removed_by_the_next(box):
     assert _run(box)[0] == 0
     assert not stale.exists() and alive.exists()
     alive.rmdir()
+
+
+def test_stale_temporary_files_go_a_live_writers_stay(tmp_path):
+    """io.atomic: a write's temporary file carries its writer's pid; the clean-up removes those
+    of ended processes, of this process and of names without a pid (an older mixnav's), and
+    keeps a file whose writer still runs (another command writing the same folder)."""
+    from mixnav.io.atomic import _atomic, remove_stale_temporaries
+    # the name a real write gives, seen from inside the write
+    with _atomic(tmp_path / "r.parquet") as fh:
+        name = Path(fh.name).name
+        assert name.startswith(f".r.parquet.{os.getpid()}.") and name.endswith(".tmp")
+        fh.write(b"x")
+    assert (tmp_path / "r.parquet").read_bytes() == b"x" and not list(tmp_path.glob(".*.tmp"))
+    live = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    try:
+        names = {"live": f".a.parquet.{live.pid}.k2j4h5g6.tmp", "dead": f".b.parquet.{dead.pid}.k2j4h5g6.tmp",
+                 "own": f".c.json.{os.getpid()}.abcdefgh.tmp", "old": ".d.csv.abcdefgh.tmp"}
+        for n in names.values():
+            (tmp_path / n).write_bytes(b"half")
+        assert remove_stale_temporaries(tmp_path) == 3
+        assert sorted(p.name for p in tmp_path.glob(".*.tmp")) == [names["live"]]
+    finally:
+        live.kill()
+        live.wait()
+    assert remove_stale_temporaries(tmp_path) == 1 and not list(tmp_path.glob(".*.tmp"))

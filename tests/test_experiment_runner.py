@@ -208,8 +208,8 @@ def _killed_while_writing(scenario, sha, seed, out_dir, variant=None):
     """A worker that dies in the middle of an atomic write: its temporary file stays."""
     import os
     from pathlib import Path
-    if seed == 1:
-        (Path(out_dir) / mc.RUNS_DIR / f".series_{seed}.parquet.x1y2z3.tmp").write_bytes(b"half")
+    if seed == 1:     # the name an atomic write of this process gives its temporary file
+        (Path(out_dir) / mc.RUNS_DIR / f".series_{seed}.parquet.{os.getpid()}.x1y2z3.tmp").write_bytes(b"half")
         os._exit(9)
     import time
     time.sleep(0.2)
@@ -257,9 +257,8 @@ def test_workers_end_at_the_first_sigterm(tmp_path, monkeypatch):
 
     def recording(pool, timeout=5.0):
         procs = list(pool._processes.values())
-        ended = real(pool, timeout)
+        real(pool, timeout)
         codes.extend(p.exitcode for p in procs)
-        return ended
 
     monkeypatch.setattr(mc, "_terminate_pool", recording)
     (tmp_path / mc.RUNS_DIR).mkdir()

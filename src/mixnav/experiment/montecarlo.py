@@ -51,7 +51,7 @@ import pandas as pd
 
 from .. import __version__
 from ..errors import ArgumentError, ConfigError
-from ..io.atomic import atomic_write_dataframe, atomic_write_json
+from ..io.atomic import atomic_write_dataframe, atomic_write_json, remove_stale_temporaries
 
 __all__ = ["run_experiment", "aggregate", "paired_comparison", "flatten_metrics", "series_files",
            "write_experiment_outputs",
@@ -549,8 +549,8 @@ def _run_tasks(scenario, sc, sweep, source, sha, tasks, methods, old_seeds, out_
     atomic_write_json(out_dir / MANIFEST, manifest)
     runs_dir = out_dir / RUNS_DIR
     runs_dir.mkdir(parents=True, exist_ok=True)
-    for folder in (out_dir, runs_dir):   # left by a writer killed in an earlier run
-        _remove_stray_temporaries(folder)
+    for folder in (out_dir, runs_dir):   # left by a writer killed earlier (never a live one's)
+        remove_stale_temporaries(folder)
     todo = [t for t in tasks if not _record_path(out_dir, *t).exists()]
 
     bar = _Progress(len(todo), progress)
@@ -564,7 +564,7 @@ def _run_tasks(scenario, sc, sweep, source, sha, tasks, methods, old_seeds, out_
                     bar.advance()
             except BaseException:
                 # the write here was cut off: an interrupt inside tempfile can leave its file
-                _remove_stray_temporaries(runs_dir)
+                remove_stale_temporaries(runs_dir)
                 raise
         elif todo:
             _run_pool(scenario, sha, todo, out_dir, min(workers, len(todo)), bar)
@@ -591,24 +591,16 @@ def _run_pool(scenario: str, sha: str, todo: list[tuple], out_dir: Path, workers
                 bar.advance()
     except BaseException:
         # finished records stay on disk: the experiment can be resumed. The running
-        # workers are ended now (a run can take minutes; no worker outlives the command)
-        # a worker ended in the middle of an atomic write leaves its temporary file; once
-        # the workers are gone nothing can be writing one (one still alive: left to the next run)
-        if _terminate_pool(pool):
-            _remove_stray_temporaries(out_dir / RUNS_DIR)
+        # workers are ended now (a run can take minutes; no worker outlives the command);
+        # one ended in the middle of an atomic write leaves its temporary file
+        _terminate_pool(pool)
+        remove_stale_temporaries(out_dir / RUNS_DIR)
         raise
     pool.shutdown(wait=True)
 
 
-def _remove_stray_temporaries(folder: Path) -> None:
-    """Remove the temporary files (``.<name>.*.tmp``) of atomic writes that were cut off."""
-    for stray in folder.glob(".*.tmp"):
-        stray.unlink(missing_ok=True)
-
-
-def _terminate_pool(pool: ProcessPoolExecutor, timeout: float = 5.0) -> bool:
-    """End the pool's workers now (SIGTERM, then SIGKILL after ``timeout`` s in all);
-    whether every one has ended."""
+def _terminate_pool(pool: ProcessPoolExecutor, timeout: float = 5.0) -> None:
+    """End the pool's workers now (SIGTERM, then SIGKILL after ``timeout`` s in all)."""
     procs = list((getattr(pool, "_processes", None) or {}).values())
     pool.shutdown(wait=False, cancel_futures=True)
     for p in procs:
@@ -621,7 +613,6 @@ def _terminate_pool(pool: ProcessPoolExecutor, timeout: float = 5.0) -> bool:
         if p.is_alive():
             p.kill()
             p.join(timeout=timeout)
-    return not any(p.is_alive() for p in procs)
 
 
 #: Seconds to wait for a Dask scheduler to answer.

@@ -4,7 +4,10 @@ Each writer writes a temporary file in the target's folder, flushes and
 fsyncs it, then renames it over the target (``os.replace`` is atomic on
 POSIX and Windows when both names are on the same file system, hence the
 same folder). On any error the temporary file is removed and the target is
-left as it was.
+left as it was. A process killed mid-write leaves its temporary file,
+``.<name>.<pid>.<random>.tmp``: the writer's pid in the name lets a clean-up
+remove it once that process has ended (:func:`remove_stale_temporaries`), and
+never the file of a writer still running.
 """
 
 from __future__ import annotations
@@ -21,6 +24,8 @@ import numpy as np
 
 __all__ = [
     "default_mode",
+    "process_alive",
+    "remove_stale_temporaries",
     "atomic_write_bytes",
     "atomic_write_text",
     "atomic_write_json",
@@ -44,13 +49,46 @@ def default_mode(base: int = 0o666) -> int:
     return base & ~_UMASK
 
 
+def process_alive(pid: int) -> bool:
+    """Whether process ``pid`` runs on this machine (another user's counts as running).
+
+    Windows: always True -- ``os.kill(pid, 0)`` there would terminate the process.
+    """
+    if os.name == "nt":
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:   # another user's process: alive
+        return True
+    return True
+
+
+def remove_stale_temporaries(folder: str | os.PathLike) -> int:
+    """Remove the temporary files (``.<name>.<pid>.<random>.tmp``) in ``folder`` whose writer
+    has ended: its pid no longer runs, or is this process (call it when this process has no
+    write in progress there), or the name has no pid (an older mixnav's). Returns how many."""
+    removed = 0
+    for stray in Path(folder).glob(".*.tmp"):
+        parts = stray.name.split(".")
+        pid = int(parts[-3]) if len(parts) >= 5 and parts[-3].isdigit() else None
+        if pid is None or pid == os.getpid() or not process_alive(pid):
+            try:
+                stray.unlink()
+                removed += 1
+            except FileNotFoundError:   # its writer finished meanwhile
+                pass
+    return removed
+
+
 @contextmanager
 def _atomic(path: str | os.PathLike) -> Iterator[BinaryIO]:
     """Yield a binary file that replaces ``path`` only if the block succeeds."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     # Same folder as the target: os.replace must not cross file systems.
-    tmp = tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp",
+    tmp = tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp",
                                       delete=False)
     try:
         # NamedTemporaryFile creates 0600; the result gets what open() would give under the umask

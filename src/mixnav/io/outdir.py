@@ -43,7 +43,7 @@ from pathlib import Path
 from typing import Iterable, Iterator
 
 from ..errors import ArgumentError
-from .atomic import atomic_write_json, default_mode
+from .atomic import atomic_write_json, default_mode, process_alive
 
 __all__ = ["MARKER", "OutputFolder", "safe_name", "check_out_dir", "staged_output", "read_marker",
            "write_marker", "clear_folder"]
@@ -219,16 +219,6 @@ def check_out_dir(out_dir, command: str, overwrite: bool = False, protect: Itera
                      "pass --overwrite to clear it first", p)
 
 
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except OSError:   # another user's process: alive
-        return True
-    return True
-
-
 def _remove_stale_siblings(p: Path) -> None:
     """Remove the temporary siblings of ``p`` left by a run that was killed (``kill -9``):
     ``.<name>.mixnav-<pid>-*`` and ``.<name>.old-<pid>-*`` whose process no longer runs."""
@@ -239,7 +229,7 @@ def _remove_stale_siblings(p: Path) -> None:
         return
     for n in names:
         m = pat.match(n)
-        if m and not _pid_alive(int(m.group(1))):
+        if m and not process_alive(int(m.group(1))):
             shutil.rmtree(p.parent / n, ignore_errors=True)
 
 
