@@ -1040,8 +1040,9 @@ def test_sibling_left_by_a_killed_run_is_removed_by_the_next(box):
 
 def test_stale_temporary_files_go_a_live_writers_stay(tmp_path):
     """io.atomic: a write's temporary file carries its writer's pid; the clean-up removes those
-    of ended processes, of this process and of names without a pid (an older mixnav's), and
-    keeps a file whose writer still runs (another command writing the same folder)."""
+    of ended processes, of this process, of processes it is told have ended and of names
+    without a pid (an older mixnav's), keeps a file whose writer still runs (another command
+    writing the same folder), and leaves what is not a file without raising."""
     from mixnav.io.atomic import _atomic, remove_stale_temporaries
     # the name a real write gives, seen from inside the write
     with _atomic(tmp_path / "r.parquet") as fh:
@@ -1057,9 +1058,13 @@ def test_stale_temporary_files_go_a_live_writers_stay(tmp_path):
                  "own": f".c.json.{os.getpid()}.abcdefgh.tmp", "old": ".d.csv.abcdefgh.tmp"}
         for n in names.values():
             (tmp_path / n).write_bytes(b"half")
-        assert remove_stale_temporaries(tmp_path) == 3
-        assert sorted(p.name for p in tmp_path.glob(".*.tmp")) == [names["live"]]
+        (tmp_path / ".cache.tmp").mkdir()                     # not a file: left, no error
+        (tmp_path / ".run.20261126123456.abcdefgh.tmp").write_bytes(b"")   # no pid: a date
+        assert remove_stale_temporaries(tmp_path) == 4
+        assert sorted(p.name for p in tmp_path.glob(".*.tmp")) == sorted([".cache.tmp", names["live"]])
+        # a writer known to have ended (a pool's worker; on Windows the only way to know)
+        assert remove_stale_temporaries(tmp_path, ended=[live.pid]) == 1
     finally:
         live.kill()
         live.wait()
-    assert remove_stale_temporaries(tmp_path) == 1 and not list(tmp_path.glob(".*.tmp"))
+    assert [p.name for p in tmp_path.glob(".*.tmp")] == [".cache.tmp"]

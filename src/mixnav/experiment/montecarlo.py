@@ -593,14 +593,15 @@ def _run_pool(scenario: str, sha: str, todo: list[tuple], out_dir: Path, workers
         # finished records stay on disk: the experiment can be resumed. The running
         # workers are ended now (a run can take minutes; no worker outlives the command);
         # one ended in the middle of an atomic write leaves its temporary file
-        _terminate_pool(pool)
-        remove_stale_temporaries(out_dir / RUNS_DIR)
+        ended = _terminate_pool(pool)
+        remove_stale_temporaries(out_dir / RUNS_DIR, ended)
         raise
     pool.shutdown(wait=True)
 
 
-def _terminate_pool(pool: ProcessPoolExecutor, timeout: float = 5.0) -> None:
-    """End the pool's workers now (SIGTERM, then SIGKILL after ``timeout`` s in all)."""
+def _terminate_pool(pool: ProcessPoolExecutor, timeout: float = 5.0) -> list[int]:
+    """End the pool's workers now (SIGTERM, then SIGKILL after ``timeout`` s in all); the
+    pids of those that have ended."""
     procs = list((getattr(pool, "_processes", None) or {}).values())
     pool.shutdown(wait=False, cancel_futures=True)
     for p in procs:
@@ -613,6 +614,7 @@ def _terminate_pool(pool: ProcessPoolExecutor, timeout: float = 5.0) -> None:
         if p.is_alive():
             p.kill()
             p.join(timeout=timeout)
+    return [p.pid for p in procs if not p.is_alive()]
 
 
 #: Seconds to wait for a Dask scheduler to answer.

@@ -105,18 +105,19 @@ NEES_CONDITION_LIMIT = 1e10
 
 
 def nees(e: np.ndarray, cov: np.ndarray) -> np.ndarray:
-    """``e_k^T C_k^-1 e_k`` per epoch (``e`` (K, d), ``cov`` (K, d, d)), as ``|L_k^-1 e_k|^2``
-    with ``C_k = L_k L_k^T`` (never negative).
+    """``e_k^T C_k^-1 e_k`` per epoch (``e`` (K, d), ``cov`` (K, d, d)), as ``|L_R^-1 (e_k / s_k)|^2``
+    with ``s_k`` the standard deviations and ``R_k = L_R L_R^T`` the correlation matrix (never
+    negative; factoring R, not C, keeps covariances of any scale, even subnormal, accurate).
 
     NaN at an epoch whose covariance is singular or nearly so (a filter that claims a
     certainty it cannot have, e.g. a collapsed particle cloud): not finite, not positive
-    definite, or with a correlation matrix ``R`` whose condition number may exceed
-    ``NEES_CONDITION_LIMIT``, by the bound ``kappa(R) <= d |L_R^-1|_F^2`` (``L_R`` is R's
-    Cholesky factor, the rows of L divided by the standard deviations; ``lambda_max(R) <= d``).
-    The correlation matrix, so that axes in different units (metres, micro-radians) change
-    nothing. Each epoch is judged alone. Such epochs are counted in the metrics
-    (``nees_singular_epochs``), not raised; tests/test_metrics.py checks the kept values
-    against exact rational arithmetic.
+    definite, or with a correlation matrix whose condition number may exceed
+    ``NEES_CONDITION_LIMIT``, by the bound ``kappa(R) <= d |L_R^-1|_F^2``
+    (``lambda_max(R) <= trace R = d``). The correlation matrix, so that axes in different
+    units (metres, micro-radians) change nothing. Each epoch is judged alone. Such epochs
+    are counted in the metrics (``nees_singular_epochs``), not raised; tests/test_metrics.py
+    checks the kept values against exact rational arithmetic. A NEES beyond the float range
+    is ``inf`` or NaN (counted the same way); so is one of a non-finite error.
     """
     e = np.asarray(e, dtype=float)
     cov = np.asarray(cov, dtype=float)
@@ -124,21 +125,24 @@ def nees(e: np.ndarray, cov: np.ndarray) -> np.ndarray:
     out = np.full(K, np.nan)
     var = np.diagonal(cov, axis1=1, axis2=2)
     ok = np.all(np.isfinite(cov), axis=(1, 2)) & np.all(var > 0, axis=1)
-    L = np.zeros_like(cov)
-    try:
-        L[ok] = np.linalg.cholesky(cov[ok])
-    except np.linalg.LinAlgError:   # some epoch is not positive definite: each on its own
-        for k in np.flatnonzero(ok):
-            try:
-                L[k] = np.linalg.cholesky(cov[k])
-            except np.linalg.LinAlgError:
-                ok[k] = False
-    idx = np.flatnonzero(ok)
-    sd = np.sqrt(var[idx])
-    inv = np.linalg.inv(L[idx] / sd[:, :, None])       # L_R^-1 (triangular, nonsingular)
-    good = d * np.einsum("kij,kij->k", inv, inv) <= NEES_CONDITION_LIMIT
-    z = np.einsum("kij,kj->ki", inv[good], e[idx[good]] / sd[good])
-    out[idx[good]] = np.einsum("ki,ki->k", z, z)
+    sd = np.sqrt(np.where(ok[:, None], var, 1.0))
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        # divided twice: the product of two small deviations could underflow
+        R = cov / sd[:, :, None] / sd[:, None, :]
+        L = np.zeros_like(cov)
+        try:
+            L[ok] = np.linalg.cholesky(R[ok])
+        except np.linalg.LinAlgError:   # some epoch is not positive definite: each on its own
+            for k in np.flatnonzero(ok):
+                try:
+                    L[k] = np.linalg.cholesky(R[k])
+                except np.linalg.LinAlgError:
+                    ok[k] = False
+        idx = np.flatnonzero(ok)
+        inv = np.linalg.inv(L[idx])                      # L_R^-1 (triangular, nonsingular)
+        good = d * np.einsum("kij,kij->k", inv, inv) <= NEES_CONDITION_LIMIT
+        z = np.einsum("kij,kj->ki", inv[good], e[idx[good]] / sd[idx[good]])
+        out[idx[good]] = np.einsum("ki,ki->k", z, z)
     return out
 
 

@@ -15,10 +15,11 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, BinaryIO, Iterator
+from typing import Any, BinaryIO, Iterable, Iterator
 
 import numpy as np
 
@@ -52,10 +53,11 @@ def default_mode(base: int = 0o666) -> int:
 def process_alive(pid: int) -> bool:
     """Whether process ``pid`` runs on this machine (another user's counts as running).
 
-    Windows: always True -- ``os.kill(pid, 0)`` there would terminate the process.
+    Windows: always True (nothing is taken for ended there): ``os.kill(pid, 0)`` would
+    send CTRL_C_EVENT, not probe.
     """
-    if os.name == "nt":
-        return True
+    if os.name == "nt" or not 0 < pid < 2**31:
+        return os.name == "nt"
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -65,20 +67,33 @@ def process_alive(pid: int) -> bool:
     return True
 
 
-def remove_stale_temporaries(folder: str | os.PathLike) -> int:
-    """Remove the temporary files (``.<name>.<pid>.<random>.tmp``) in ``folder`` whose writer
-    has ended: its pid no longer runs, or is this process (call it when this process has no
-    write in progress there), or the name has no pid (an older mixnav's). Returns how many."""
+#: an atomic write's temporary file: ``.<name>.<pid>.<tempfile's 8 characters>.tmp``
+_TEMPORARY = re.compile(r"^\.(?:.+)\.([0-9]{1,10})\.[a-z0-9_]{8}\.tmp$")
+
+
+def remove_stale_temporaries(folder: str | os.PathLike, ended: Iterable[int] = ()) -> int:
+    """Remove the temporary files of atomic writes in ``folder`` whose writer has ended.
+
+    A file ``.<name>.<pid>.<random>.tmp`` goes when no process ``pid`` runs on this machine,
+    or ``pid`` is this process (call it when this process has no write in progress there),
+    or is one of ``ended`` (processes known to have ended, e.g. the workers of a pool: on
+    Windows the only way one is known); a ``.<name>.<random>.tmp`` without a pid (an older
+    mixnav's) goes too. A writer on another host sharing the folder is not seen. What
+    cannot be removed (a folder of that name, no permission) is left. Returns how many went.
+    """
+    ended = {int(p) for p in ended} | {os.getpid()}
     removed = 0
     for stray in Path(folder).glob(".*.tmp"):
-        parts = stray.name.split(".")
-        pid = int(parts[-3]) if len(parts) >= 5 and parts[-3].isdigit() else None
-        if pid is None or pid == os.getpid() or not process_alive(pid):
-            try:
+        m = _TEMPORARY.match(stray.name)
+        pid = int(m.group(1)) if m else None
+        if pid is not None and pid not in ended and process_alive(pid):
+            continue
+        try:
+            if stray.is_file() and not stray.is_symlink():
                 stray.unlink()
                 removed += 1
-            except FileNotFoundError:   # its writer finished meanwhile
-                pass
+        except OSError:   # its writer finished meanwhile, or not ours to remove
+            pass
     return removed
 
 
