@@ -379,30 +379,11 @@ def _mean_chunk(c, D, w, part):
                 p[i] += wj * D[j, i]
 
 
-@njit(cache=True, fastmath={"reassoc"})
-def _chunk_dots(W, E, k, p):
-    """``p[n + a n + b] = sum_t W[a, t] E[b, t]`` over ``t < k`` for ``a <= b < n``.
-
-    Reassociation allowed (``fastmath={"reassoc"}``): the compiler sums each product in
-    vector lanes, ~2 x faster than a scalar chain (measured). The order is then the
-    compiler's, but fixed by this one compiled function, which both kernel twins call
-    (not inlined): the same sums on any thread count."""
-    n = W.shape[0]
-    for a in range(n):
-        wa = W[a]
-        for b in range(a, n):
-            eb = E[b]
-            s = 0.0
-            for t in range(k):
-                s += wa[t] * eb[t]
-            p[n + a * n + b] = s
-
-
 @njit(cache=True, inline="always")
 def _cov_chunk(c, D, w, x, part):
     """Chunk ``c``'s ``sum w_j (D_j - x)(D_j - x)^T`` (upper triangle) into ``part[c, n:]``:
     the chunk's centred deviations transposed (state-major, ``E``) and weighted (``W``),
-    then one dot product per pair of states (:func:`_chunk_dots`)."""
+    then one dot product per pair of states (:func:`_chunk_dots_cols`)."""
     N, n = D.shape
     j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
     k = j1 - j0
@@ -414,7 +395,7 @@ def _cov_chunk(c, D, w, x, part):
             e = D[j0 + t, a] - x[a] if wj != 0.0 else 0.0   # a weightless non-finite row adds 0
             E[a, t] = e
             W[a, t] = wj * e
-    _chunk_dots(W, E, k, part[c])
+    _chunk_dots_cols(W, E, 0, k, n, part[c])
 
 
 @njit(cache=True)
@@ -760,7 +741,7 @@ def pf_loose_predict(D, layout, nav, w_b, lever, fix, YT):
 @njit(cache=True, error_model="numpy", fastmath={"reassoc"})
 def _chunk_sums(W, j0, j1, p):
     """``p[a] = sum_t W[a, t]`` over ``j0 <= t < j1`` (summed in vector lanes: see
-    :func:`_chunk_dots`)."""
+    :func:`_chunk_dots_cols`)."""
     for a in range(W.shape[0]):
         wa = W[a, j0:j1]
         s = 0.0
@@ -772,8 +753,12 @@ def _chunk_sums(W, j0, j1, p):
 @njit(cache=True, error_model="numpy", fastmath={"reassoc"})
 def _chunk_dots_cols(W, E, j0, j1, off, p):
     """``p[off + a n + b] = sum_t W[a, t] E[b, t]`` over ``j0 <= t < j1`` for ``a <= b < n``
-    (``n`` the rows of ``W``): :func:`_chunk_dots` on the columns ``j0..j1`` of whole
-    state-major arrays."""
+    (``n`` the rows of ``W``, state-major arrays).
+
+    Reassociation allowed (``fastmath={"reassoc"}``): the compiler sums each product in
+    vector lanes, ~2 x faster than a scalar chain (measured). The order is then the
+    compiler's, but fixed by this one compiled function, which both kernel twins call
+    (not inlined): the same sums on any thread count."""
     n = W.shape[0]
     for a in range(n):
         wa = W[a, j0:j1]
@@ -788,7 +773,7 @@ def _chunk_dots_cols(W, E, j0, j1, off, p):
 @njit(cache=True, error_model="numpy", fastmath={"reassoc"})
 def _weight_sums(w, DT, j0, j1, p):
     """``p`` = [sum w_t, sum w_t^2, sum_t w_t DT[a, t] (n)] over ``j0 <= t < j1`` (in
-    vector lanes: see :func:`_chunk_dots`)."""
+    vector lanes: see :func:`_chunk_dots_cols`)."""
     wc = w[j0:j1]
     s0, s1 = 0.0, 0.0
     for t in range(j1 - j0):
