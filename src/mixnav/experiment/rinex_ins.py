@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import time as _time
 import warnings
+from collections import Counter
 from dataclasses import replace
 
 import numpy as np
@@ -80,19 +81,14 @@ def read_observations(paths) -> RinexPseudoranges:
                             file=str(p))
     offsets = np.cumsum([0] + [len(x.tow) for x in parts[:-1]])
     any_doppler = any(x.doppler is not None for x in parts)
-    rejected: dict = {}
-    events: dict = {}
-    for x in parts:
-        for key, n in x.rejected.items():
-            rejected[key] = rejected.get(key, 0) + n
-        for key, n in x.event_records.items():
-            events[key] = events.get(key, 0) + n
+    rejected = sum((Counter(x.rejected) for x in parts), Counter())
+    events = sum((Counter(x.event_records) for x in parts), Counter())
     cat = np.concatenate
     return RinexPseudoranges(
         week=cat([x.week for x in parts]), tow=cat([x.tow for x in parts]),
         epoch=cat([x.epoch + o for x, o in zip(parts, offsets)]), prn=cat([x.prn for x in parts]),
         pseudorange=cat([x.pseudorange for x in parts]), code="/".join(dict.fromkeys(x.code for x in parts)),
-        rejected=rejected, epochs_all_rejected=sum(x.epochs_all_rejected for x in parts),
+        rejected=dict(rejected), epochs_all_rejected=sum(x.epochs_all_rejected for x in parts),
         version=parts[0].version, source=", ".join(x.source for x in parts), event_records=dict(sorted(events.items())),
         doppler=cat([x.doppler if x.doppler is not None else np.full(len(x.prn), np.nan) for x in parts])
         if any_doppler else None)

@@ -56,8 +56,10 @@ def process_alive(pid: int) -> bool:
     Windows: always True (nothing is taken for ended there): ``os.kill(pid, 0)`` would
     send CTRL_C_EVENT, not probe.
     """
-    if os.name == "nt" or not 0 < pid < 2**31:
-        return os.name == "nt"
+    if os.name == "nt":
+        return True
+    if not 0 < pid < 2**31:     # no such process id (os.kill would overflow)
+        return False
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -68,7 +70,7 @@ def process_alive(pid: int) -> bool:
 
 
 #: an atomic write's temporary file: ``.<name>.<pid>.<tempfile's 8 characters>.tmp``
-_TEMPORARY = re.compile(r"^\.(?:.+)\.([0-9]{1,10})\.[a-z0-9_]{8}\.tmp$")
+_TEMPORARY = re.compile(r"^\..+\.([0-9]{1,10})\.[a-z0-9_]{8}\.tmp$")
 
 
 def remove_stale_temporaries(folder: str | os.PathLike, ended: Iterable[int] = ()) -> int:
