@@ -8,7 +8,6 @@ import warnings
 from contextlib import contextmanager
 from pathlib import Path
 
-import click
 import typer
 from rich.console import Console
 from rich.markup import escape
@@ -16,6 +15,11 @@ from rich.table import Table
 
 from . import __version__
 from .errors import MixnavError
+
+try:   # typer >= 0.2x carries its own click; its usage errors derive from TyperException
+    from typer.exceptions import TyperException as _UsageError
+except ImportError:   # older typer depends on click and raises click's
+    from click.exceptions import ClickException as _UsageError
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_show_locals=False,
                   help="GNSS/INS integrated navigation under non-Gaussian noise.")
@@ -64,7 +68,7 @@ def _errors():
         pass
     try:
         yield
-    except (typer.Exit, typer.Abort, click.exceptions.ClickException):
+    except (typer.Exit, typer.Abort, _UsageError):
         raise
     except KeyboardInterrupt:
         sig = _DEBUG.pop("signal", None)

@@ -1,13 +1,21 @@
 """The regression cases of tests/test_reference_metrics.py and how each is computed.
 
 Kept apart from the test so that ``make_reference.py`` can compute the stored
-numbers with any version of the library (it was run on the code before the
-engine redesign, commit 15ef457). The glue uses only entry points that a user
-of ``mixnav run`` / ``mixnav process`` would use.
+numbers with any version of the library. Every shipped scenario and dataset is a
+case; each is computed through the public API a user would call
+(:func:`mixnav.run_scenario`, :func:`mixnav.process_dataset`), so a redesign of
+the layers underneath cannot change what is compared.
+
+A case gives, per method, its metrics (timings dropped) and, per numeric column
+of its solution table, the column's sum (compared within a tolerance on any
+machine) and the SHA-256 of its float64 bytes (compared exactly with
+``MIXNAV_BITWISE=1`` on the machine that stored them: the bitwise check of a
+refactoring).
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
 
 import numpy as np
@@ -18,21 +26,30 @@ CASES = [
     ("loose-demo/2", "scenario", "loose-demo", 2, None, False),
     ("tight-demo/1", "scenario", "tight-demo", 1, None, False),
     ("tdcp-demo/1", "scenario", "tdcp-demo", 1, None, False),
-    ("tdcp-demo/2", "scenario", "tdcp-demo", 2, None, False),
+    ("tdcp-demo/2", "scenario", "tdcp-demo", 2, None, True),
+    ("vehicle-demo/1", "scenario", "vehicle-demo", 1, None, False),
     ("P1-sim1/1", "scenario", "P1-sim1", 1, None, False),
-    ("P1-sim1/2", "scenario", "P1-sim1", 2, None, False),
+    ("P1-sim1/2", "scenario", "P1-sim1", 2, None, True),
     ("P1-sim2/1", "scenario", "P1-sim2", 1, None, False),
-    ("P1-sim2/2", "scenario", "P1-sim2", 2, None, False),
+    ("P1-sim2/2", "scenario", "P1-sim2", 2, None, True),
     ("P2-s1/1", "scenario", "P2-s1", 1, None, False),
     ("P2-s2/1", "scenario", "P2-s2", 1, None, False),
-    ("P2-s2/2", "scenario", "P2-s2", 2, None, False),
+    ("P2-s2/2", "scenario", "P2-s2", 2, None, True),
     ("P2-s3/1@0", "scenario", "P2-s3", 1, 0, False),
     ("P2-s3/1@-1", "scenario", "P2-s3", 1, -1, False),
     ("P1-sweep/1@0", "scenario", "P1-sweep", 1, 0, False),
-    ("P1-sweep/1@-1", "scenario", "P1-sweep", 1, -1, False),
-    ("P1-sweep-sim2/1@-1", "scenario", "P1-sweep-sim2", 1, -1, False),
+    ("P1-sweep/1@-1", "scenario", "P1-sweep", 1, -1, True),
+    ("P1-sweep-sim2/1@-1", "scenario", "P1-sweep-sim2", 1, -1, True),
+    ("P3-flight/1", "scenario", "P3-flight", 1, None, True),
+    ("P4-vehicle/1", "scenario", "P4-vehicle", 1, None, True),
+    ("P5-aircraft/1", "scenario", "P5-aircraft", 1, None, True),
     ("drive-0708", "dataset", "drive-0708", None, None, False),
+    ("drive-0708-peer", "dataset", "drive-0708-peer", None, None, True),
+    ("drive-0708-aided", "dataset", "drive-0708-aided", None, None, True),
+    ("drive-0708-multipath", "dataset", "drive-0708-multipath", None, None, True),
     ("android-static", "dataset", "android-static", None, None, False),
+    ("android-static-filters", "dataset", "android-static-filters", None, None, False),
+    ("smartloc-berlin", "dataset", "smartloc-berlin", None, None, True),
 ]
 
 #: metric keys that measure compute time (not reproducible, not compared)
@@ -41,61 +58,64 @@ TIMING = {"epoch_time_mean_us", "update_time_mean_us", "wall_time_s", "learning_
           "real_time_factor", "smoother_time_s"}
 
 
+def _timing(key: str) -> bool:
+    key = key.rsplit(".", 1)[-1]
+    return key in TIMING or "time_mean" in key or key.endswith("_time_s")
+
+
 def _clean(d):
     """Plain JSON numbers, timing keys dropped, recursively."""
     if isinstance(d, dict):
-        return {k: _clean(v) for k, v in d.items() if k not in TIMING and "time_mean" not in k}
+        return {str(k): _clean(v) for k, v in d.items() if not _timing(str(k))}
     if isinstance(d, (list, tuple)):
         return [_clean(v) for v in d]
-    if isinstance(d, (np.floating, float)):
-        return None if not math.isfinite(float(d)) else float(d)
-    if isinstance(d, (np.integer, int)) and not isinstance(d, bool):
-        return int(d)
     if isinstance(d, np.ndarray):
         return _clean(d.tolist())
+    if isinstance(d, (bool, np.bool_)):
+        return bool(d)
+    if isinstance(d, (np.integer, int)):
+        return int(d)
+    if isinstance(d, (np.floating, float)):
+        return None if not math.isfinite(float(d)) else float(d)
     return d
 
 
-def _result_numbers(res, table, outages):
-    from mixnav.experiment.run import method_metrics
-    m = method_metrics(res, table, outages)
-    m["final_nav"] = res.nav[-1]
-    m["final_sigma"] = res.sigma[-1]
-    m["final_sensor"] = res.sensor[-1]
-    m["nis_sum"] = float(np.sum(res.nis))
-    m["nis_count"] = int(len(res.nis))
-    return _clean(m)
+def _table_numbers(table) -> dict:
+    """Per numeric column: its finite sum (tolerant comparison) and the digest of its bytes."""
+    out = {}
+    for col in table.columns:
+        values = table[col]
+        if values.dtype.kind not in "fiub":
+            continue
+        a = np.ascontiguousarray(values.to_numpy(dtype=float))
+        finite = np.isfinite(a)
+        out[str(col)] = {"sum": float(a[finite].sum()), "finite": int(finite.sum()),
+                         "sha256": hashlib.sha256(a.tobytes()).hexdigest()[:16]}
+    return out
+
+
+def _metrics_rows(frame) -> dict:
+    return {str(name): _clean({k: v for k, v in row.items()
+                               if not (isinstance(v, float) and math.isnan(v) and k.startswith("recoveries."))})
+            for name, row in frame.to_dict(orient="index").items()}
 
 
 def compute(case, data_dir=None) -> dict:
-    """``{method: {key: number}}`` of one case."""
+    """``{method: {"metrics": {...}, "table": {...}}}`` of one case."""
+    import mixnav
     cid, kind, name, seed, variant, _ = case
-    if kind == "scenario":
+    if kind == "scenario" and variant is not None:   # one value of a sweep, run as `mixnav run` runs it
         from mixnav.config import load_scenario
-        from mixnav.experiment.run import run_scenario, solution_table
+        from mixnav.config.loader import sweep_variants
+        from mixnav.experiment.run import method_metrics, run_scenario, run_tables
         sc, src, text = load_scenario(name)
-        if variant is not None:
-            from mixnav.config.loader import sweep_variants
-            sc = sweep_variants(sc, text, src)[variant][1]
-        run = run_scenario(sc, src, seed=seed)
-        out = {}
-        for mname, res in run.results.items():
-            table = solution_table(res, run.sim.truth, run.sim.outages)
-            out[mname] = _result_numbers(res, table, run.sim.outages)
-        return out
-    from mixnav.config import load_dataset
-    from mixnav.experiment.process import process
-    ds, src, _ = load_dataset(name)
-    po = process(ds, src, data_dir)
-    if ds.dataset.kind == "gnss-raw":
-        from mixnav.experiment.spp_process import solution_table as spp_table, spp_metrics
-        t = spp_table(po)
-        num = t.select_dtypes("number")
-        return {"spp": _clean({**spp_metrics(t, 0.0), "final_row": num.iloc[-1].to_numpy(dtype=float),
-                               "column_sums": num.sum().to_numpy(dtype=float)})}
-    from mixnav.experiment.run import solution_table
-    withheld = tuple(tuple(w) for w in ds.gnss.withhold)
-    ref = ds.reference
-    lever = po.lever if ref is not None and ref.point == "antenna" else None
-    return {mname: _result_numbers(res, solution_table(res, po.reference, withheld, lever=lever), withheld)
-            for mname, res in po.results.items()}
+        run = run_scenario(sweep_variants(sc, text, src)[variant][1], src, seed=seed)
+        tables = run_tables(run)
+        return {m: {"metrics": _clean(method_metrics(res, tables[m], run.sim.outages, run.sim.gnss_bias)),
+                    "table": _table_numbers(tables[m])} for m, res in run.results.items()}
+    if kind == "scenario":
+        res = mixnav.run_scenario(name, seed=seed)
+    else:
+        res = mixnav.process_dataset(name, data=data_dir)
+    rows = _metrics_rows(res.metrics)
+    return {m: {"metrics": rows.get(m, {}), "table": _table_numbers(t)} for m, t in res.solutions.items()}
