@@ -133,3 +133,20 @@ def test_experiment_command_writes_results_and_summary(tmp_path):
     assert (tmp_path / "x" / "boxplots.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     bad = runner.invoke(app, ["experiment", "loose-demo", "--runs", "0", "--out", str(tmp_path / "y")])
     assert bad.exit_code == 2 and "--runs" in bad.output
+
+
+def test_the_command_needs_no_click_of_its_own():
+    """The base install has no click: typer >= 0.2x carries its own, and the one
+    the test extra pulls in (through dask) hid a direct ``import click`` from CI.
+    With ``click`` made unimportable, the command still runs and a usage error
+    still ends in click's usage message and exit status 2, not a crash."""
+    import subprocess
+    import sys
+    code = ("import sys; sys.modules['click'] = None\n"
+            "from typer.testing import CliRunner\n"
+            "from mixnav.cli import app\n"
+            "r = CliRunner().invoke(app, ['run', 'loose-demo', '--bogus'])\n"
+            "print(r.exit_code)\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip().splitlines()[-1] == "2"
