@@ -7,7 +7,8 @@ import pandas as pd
 import pytest
 
 from mixnav.errors import DataError
-from mixnav.noise.diagnostics import diagnose, diagnose_file, figures
+from mixnav.experiment.diagnose import diagnose_file
+from mixnav.noise.diagnostics import diagnose, figures
 from mixnav.noise.processes import AR1, Mixture
 
 

@@ -15,7 +15,7 @@ from mixnav.cli import app
 from mixnav.config import load_dataset
 from mixnav.errors import ConfigError
 
-from .conftest import DATA_DIR, data_file
+from .conftest import data_file
 
 runner = CliRunner()
 DOCS = Path(__file__).resolve().parents[1] / "docs"

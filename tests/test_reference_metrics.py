@@ -14,8 +14,6 @@ every operation in its order. Long cases are marked slow.
 """
 
 import json
-import math
-import os
 import sys
 from pathlib import Path
 

@@ -6,7 +6,6 @@ Skips when chromium is not installed (``.ci/run`` installs it when it can).
 import shutil
 import subprocess
 
-import numpy as np
 import pytest
 from matplotlib.image import imread
 

@@ -5,7 +5,7 @@ stays cheap): :func:`run_scenario`, :func:`process_dataset`, :func:`filter_loose
 :func:`imu_grade`, :func:`export_rinex`. See docs/library.md.
 """
 
-__version__ = "0.1.0"
+from ._version import __version__  # noqa: F401  (mixnav.__version__)
 
 
 def _writable(path: str) -> bool:

@@ -13,7 +13,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from . import __version__
+from ._version import __version__
 from .errors import MixnavError
 
 try:   # typer >= 0.2x carries its own click; its usage errors derive from TyperException
@@ -293,7 +293,7 @@ def diagnose(file: Path = typer.Argument(..., help="CSV or Parquet file holding 
                                             help="Fit a Gaussian mixture with this many components."),
              overwrite: bool = _OVERWRITE):
     """Is a residual series non-Gaussian and coloured? Q-Q, ACF, normality test, kurtosis, AR(1), mixture."""
-    from .noise.diagnostics import diagnose_file
+    from .experiment.diagnose import diagnose_file
 
     with _errors():
         result = diagnose_file(file, column, out_dir, max_lag=max_lag, n_components=components,

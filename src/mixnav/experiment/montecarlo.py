@@ -49,7 +49,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .. import __version__
+from .._version import __version__
 from ..errors import ArgumentError, ConfigError
 from ..io.atomic import atomic_write_dataframe, atomic_write_json, remove_stale_temporaries
 

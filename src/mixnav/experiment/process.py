@@ -20,8 +20,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-import mixnav
-
 from ..config.dataset_schema import Dataset
 from ..config.loader import corruption
 from ..data import GnssFixes, OdometerData
@@ -33,6 +31,11 @@ from .ins_common import (ProcessOutput, _shift, data_checks, gnss_section, initi
                          install, read_imu, read_reference, run_ins_methods)
 from .run import _lla_frame, solution_table, write_outputs
 from ..geodesy.frames import displace
+
+
+#: the checkout this module is in (src/mixnav/experiment/process.py -> its root), where
+#: the shipped configs' data_dir (../shared/data) is relative to
+_REPOSITORY = Path(__file__).resolve().parents[3]
 
 
 def find_data_dir(ds: Dataset, data: str | None, source: str) -> Path:
@@ -47,7 +50,7 @@ def find_data_dir(ds: Dataset, data: str | None, source: str) -> Path:
     d = Path(ds.dataset.data_dir)
     tried = []
     candidates = [d] if d.is_absolute() else [Path.cwd() / d, Path(source).parent / d,
-                                               Path(mixnav.__file__).resolve().parents[2] / d]
+                                               _REPOSITORY / d]
     if "MIXNAV_DATA" in os.environ:
         candidates.append(Path(os.environ["MIXNAV_DATA"]) / d.name)
     for c in candidates:

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .. import __version__
+from .._version import __version__
 from ..attitude import attitude_error, quat_to_dcm, quat_to_euler, wrap_angle
 from ..config.schema import Scenario
 from ..data import Trajectory

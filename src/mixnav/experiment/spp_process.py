@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .. import __version__
+from .._version import __version__
 from ..config.raw_gnss_schema import RawGnssDataset
 from ..data import InitialState
 from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla, lla_to_ecef
