@@ -21,36 +21,36 @@ import os
 
 import numpy as np
 
-#: (case id, kind, name, seed, sweep variant index or None, slow)
+#: (case id, kind, name, seed, sweep variant index or None, slow: over a minute, run with -m slow)
 CASES = [
     ("loose-demo/1", "scenario", "loose-demo", 1, None, False),
     ("loose-demo/2", "scenario", "loose-demo", 2, None, False),
     ("tight-demo/1", "scenario", "tight-demo", 1, None, False),
     ("tdcp-demo/1", "scenario", "tdcp-demo", 1, None, False),
-    ("tdcp-demo/2", "scenario", "tdcp-demo", 2, None, True),
+    ("tdcp-demo/2", "scenario", "tdcp-demo", 2, None, False),
     ("vehicle-demo/1", "scenario", "vehicle-demo", 1, None, False),
     ("P1-sim1/1", "scenario", "P1-sim1", 1, None, False),
-    ("P1-sim1/2", "scenario", "P1-sim1", 2, None, True),
+    ("P1-sim1/2", "scenario", "P1-sim1", 2, None, False),
     ("P1-sim2/1", "scenario", "P1-sim2", 1, None, False),
-    ("P1-sim2/2", "scenario", "P1-sim2", 2, None, True),
+    ("P1-sim2/2", "scenario", "P1-sim2", 2, None, False),
     ("P2-s1/1", "scenario", "P2-s1", 1, None, False),
     ("P2-s2/1", "scenario", "P2-s2", 1, None, False),
-    ("P2-s2/2", "scenario", "P2-s2", 2, None, True),
+    ("P2-s2/2", "scenario", "P2-s2", 2, None, False),
     ("P2-s3/1@0", "scenario", "P2-s3", 1, 0, False),
     ("P2-s3/1@-1", "scenario", "P2-s3", 1, -1, False),
     ("P1-sweep/1@0", "scenario", "P1-sweep", 1, 0, False),
-    ("P1-sweep/1@-1", "scenario", "P1-sweep", 1, -1, True),
-    ("P1-sweep-sim2/1@-1", "scenario", "P1-sweep-sim2", 1, -1, True),
+    ("P1-sweep/1@-1", "scenario", "P1-sweep", 1, -1, False),
+    ("P1-sweep-sim2/1@-1", "scenario", "P1-sweep-sim2", 1, -1, False),
     ("P3-flight/1", "scenario", "P3-flight", 1, None, True),
     ("P4-vehicle/1", "scenario", "P4-vehicle", 1, None, True),
-    ("P5-aircraft/1", "scenario", "P5-aircraft", 1, None, True),
+    ("P5-aircraft/1", "scenario", "P5-aircraft", 1, None, False),
     ("drive-0708", "dataset", "drive-0708", None, None, False),
-    ("drive-0708-peer", "dataset", "drive-0708-peer", None, None, True),
-    ("drive-0708-aided", "dataset", "drive-0708-aided", None, None, True),
-    ("drive-0708-multipath", "dataset", "drive-0708-multipath", None, None, True),
+    ("drive-0708-peer", "dataset", "drive-0708-peer", None, None, False),
+    ("drive-0708-aided", "dataset", "drive-0708-aided", None, None, False),
+    ("drive-0708-multipath", "dataset", "drive-0708-multipath", None, None, False),
     ("android-static", "dataset", "android-static", None, None, False),
     ("android-static-filters", "dataset", "android-static-filters", None, None, False),
-    ("smartloc-berlin", "dataset", "smartloc-berlin", None, None, True),
+    ("smartloc-berlin", "dataset", "smartloc-berlin", None, None, False),
 ]
 
 #: metric keys that measure compute time (not reproducible, not compared)
