@@ -130,7 +130,7 @@ def process_dataset(name_or_path: str, data: str | None = None) -> RunResult:
     """
     from .config import load_dataset
     from .experiment.process import process, process_tables, withheld_windows
-    from .experiment.run import method_metrics
+    from .experiment.metrics import method_metrics
     ds, source, text = load_dataset(str(name_or_path))
     if ds.dataset.kind == "odometry-gnss":   # dead reckoning + pseudoranges (smartLoc)
         from .experiment.vehicle_process import process_vehicle, vehicle_tables
@@ -229,7 +229,7 @@ def filter_loose(imu: ImuData, fixes: GnssFixes, init: InitialState, *, imu_mode
     truth : Trajectory, optional
         When given, the table has error columns against it.
     """
-    from .experiment.run import solution_table
+    from .experiment.outputs import solution_table
     from .filters.catalog import filter_class
     from .ins.error_model import get_layout
     from .ins.imu_model import ImuErrorModel

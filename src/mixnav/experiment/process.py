@@ -31,7 +31,7 @@ from ..io import generic_csv, kfgins, rtklib
 from ..sim.gnss import in_windows
 from .ins_common import (ProcessOutput, _shift, data_checks, gnss_section, initial_state,  # noqa: F401
                          install, read_imu, read_reference, run_ins_methods)
-from .run import _lla_frame, solution_table, write_outputs
+from .outputs import lla_frame, solution_table, write_outputs
 from ..geodesy.frames import displace
 
 
@@ -207,7 +207,7 @@ def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = No
             said = [f"{k.removeprefix('suggested_')} = {v}" for k, v in est.items() if k.startswith("suggested_")]
             if said:
                 notes.append(f"Installation estimated by '{name}': " + ", ".join(said) + ".")
-    ref = None if po.reference is None else _lla_frame(po.reference.time, po.reference.lla)
+    ref = None if po.reference is None else lla_frame(po.reference.time, po.reference.lla)
     return write_outputs(out_dir, f"mixnav process: {po.dataset.dataset.name}", header, po.results, tables,
-                         withheld, ref, _lla_frame(po.fixes.time, po.fixes.lla), notes, config_text, po.gnss_bias,
+                         withheld, ref, lla_frame(po.fixes.time, po.fixes.lla), notes, config_text, po.gnss_bias,
                          command="process", overwrite=overwrite, protect=[po.source, po.data_dir])

@@ -278,7 +278,7 @@ def filter_table(po: SppOutput, res) -> pd.DataFrame:
     for j, ax in enumerate(("vn", "ve", "vd")):
         df[f"sig_{ax}_mps"] = col(res.sigma[:, lay.vel][:, j])
     if po.reference_lla is not None:
-        from .run import nees
+        from .metrics import nees
         df["nees_pos"] = col(nees(err[idx], res.pv_cov[:, 3:, 3:]))
     return df
 

@@ -10,7 +10,7 @@ reference's first epoch, reported as an oracle start), then one
 estimator; ``smooth = true`` adds the RTS smoother's ``<name>-smoothed``. The outputs
 (solution tables, metrics.json, figures with the map and the error over time,
 report.html) are those of ``mixnav run`` / ``mixnav process``
-(:func:`mixnav.experiment.run.write_outputs`).
+(:func:`mixnav.experiment.outputs.write_outputs`).
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from ..motion.dead_reckoning import (DeadReckoningMotion, DeadReckoningNoise, de
                                      odometry_increments, set_heading)
 from .model_methods import make_estimator, run_methods
 from .process import find_data_dir
-from .run import _lla_frame, solution_table, write_outputs
+from .outputs import lla_frame, solution_table, write_outputs
 
 __all__ = ["VehicleOutput", "process_vehicle", "vehicle_tables", "write_vehicle", "make_estimator"]
 
@@ -163,7 +163,7 @@ def write_vehicle(out_dir, vo: VehicleOutput, config_text: str | None = None, ov
              f"({', '.join(vo.dataset.pseudoranges.systems)}); aligned: {vo.alignment['mode']}, the filters start "
              f"at t = {vo.init.time:.2f} s.",
              "Errors are estimate minus reference at the reference's epochs; horizontal = 2-D."]
-    ref = None if vo.reference is None else _lla_frame(vo.reference.time, vo.reference.lla)
+    ref = None if vo.reference is None else lla_frame(vo.reference.time, vo.reference.lla)
     return write_outputs(out_dir, f"mixnav process: {vo.dataset.dataset.name}", header, vo.results, tables, [],
                          ref, None, notes, config_text, command="process", overwrite=overwrite,
                          protect=[vo.source, vo.data_dir])
