@@ -823,7 +823,7 @@ def test_interrupt_inside_the_writer_leaves_no_trace(box, monkeypatch):
     """A KeyboardInterrupt while the files are written: the old folder stays whole."""
     assert _run(box)[0] == 0
     old = {p.name: p.read_bytes() for p in box.out.iterdir()}
-    import mixnav.experiment.run as run_mod
+    import mixnav.experiment.outputs as run_mod
     real = run_mod.atomic_write_dataframe
     calls = []
 
@@ -858,7 +858,7 @@ def test_full_disk_is_one_line_and_keeps_the_old_folder(box, monkeypatch):
     import errno
     assert _run(box)[0] == 0
     old = {p.name: p.read_bytes() for p in box.out.iterdir()}
-    import mixnav.experiment.run as run_mod
+    import mixnav.experiment.outputs as run_mod
 
     def full(path, df):
         raise OSError(errno.ENOSPC, "No space left on device", str(path))
@@ -964,7 +964,7 @@ def test_parent_not_writable_rewrites_in_place_marker_first(box, monkeypatch):
     """No temporary sibling possible (a read-only parent): the folder is rewritten in place,
     its marker and metrics.json removed first, so an interrupted rewrite is never marked complete."""
     import tempfile as tf
-    import mixnav.experiment.run as run_mod
+    import mixnav.experiment.outputs as run_mod
     import mixnav.io.outdir as outdir
     assert _run(box)[0] == 0
 

@@ -64,14 +64,12 @@ class RunResult:
         figures, report.html) into ``out_dir``; returns the metrics dictionary. The folder
         policy of the commands applies (docs/validation.md): a non-empty folder that is not
         the same command's output is refused unless ``overwrite``."""
-        from .experiment.process import write_process
-        from .experiment.run import write_run
         if hasattr(self._output, "sim"):  # a simulated run
+            from .experiment.run import write_run
             return write_run(Path(out_dir), self._output, self._config_text, overwrite=overwrite)
-        if getattr(getattr(self._output, "dataset", None), "odometry", None) is not None:   # odometry-gnss
-            from .experiment.vehicle_process import write_vehicle
-            return write_vehicle(Path(out_dir), self._output, self._config_text, overwrite=overwrite)
-        return write_process(Path(out_dir), self._output, self._config_text, overwrite=overwrite)
+        from .experiment.pipelines import pipeline
+        return pipeline(self._output.dataset).write(Path(out_dir), self._output, self._config_text,
+                                                    overwrite=overwrite)
 
 
 def _metrics_frame(metrics: dict):
@@ -129,27 +127,12 @@ def process_dataset(name_or_path: str, data: str | None = None) -> RunResult:
     methods on the dead-reckoning model (:mod:`mixnav.experiment.vehicle_process`).
     """
     from .config import load_dataset
-    from .experiment.process import process, process_tables, withheld_windows
-    from .experiment.run import method_metrics
+    from .experiment.pipelines import pipeline, process
     ds, source, text = load_dataset(str(name_or_path))
-    if ds.dataset.kind == "odometry-gnss":   # dead reckoning + pseudoranges (smartLoc)
-        from .experiment.vehicle_process import process_vehicle, vehicle_tables
-        vo = process_vehicle(ds, source, data)
-        tables = vehicle_tables(vo)
-        metrics = {name: method_metrics(res, tables[name], []) for name, res in vo.results.items()}
-        truth = None if vo.reference is None else _frame(vo.reference.time, vo.reference.lla)
-        return RunResult(tables, _metrics_frame(metrics), vo.results, truth, vo, text)
-    po = process(ds, source, data)
-    if ds.dataset.kind == "gnss-raw":
-        from .experiment.spp_process import method_metrics as raw_metrics, raw_tables
-        tables = raw_tables(po)
-        metrics = {name: raw_metrics(po, name, t) for name, t in tables.items()}
-        return RunResult(tables, _metrics_frame(metrics), po.results, None, po, text)
-    withheld = withheld_windows(po)
-    tables = process_tables(po)
-    metrics = {name: method_metrics(res, tables[name], withheld, po.gnss_bias) for name, res in po.results.items()}
-    truth = None if po.reference is None else _frame(po.reference.time, po.reference.lla)
-    return RunResult(tables, _metrics_frame(metrics), po.results, truth, po, text)
+    p = pipeline(ds, source)
+    out = process(ds, source, data)
+    tables = p.tables(out)
+    return RunResult(tables, _metrics_frame(p.metrics(out, tables)), out.results, p.truth(out), out, text)
 
 
 def export_rinex(name_or_path: str, out_dir, seed: int | None = None, start: str = "2024-03-13T10:00:00",
@@ -229,7 +212,7 @@ def filter_loose(imu: ImuData, fixes: GnssFixes, init: InitialState, *, imu_mode
     truth : Trajectory, optional
         When given, the table has error columns against it.
     """
-    from .experiment.run import solution_table
+    from .experiment.outputs import solution_table
     from .filters.catalog import filter_class
     from .ins.error_model import get_layout
     from .ins.imu_model import ImuErrorModel

@@ -195,21 +195,15 @@ def process(dataset: str = typer.Argument(..., help="Shipped dataset config name
             overwrite: bool = _OVERWRITE):
     """Run the methods of a dataset config on real recorded data and score them."""
     from .config import load_dataset
-    from .experiment.process import process as run_process
-    from .experiment.process import write_process
+    from .experiment.pipelines import pipeline, process as run_pipeline
     from .io.outdir import check_out_dir
 
     with _errors():
         ds, source, text = load_dataset(dataset)
         check_out_dir(out_dir, "process", overwrite, [source, data])
         with err.status(f"processing {ds.dataset.name}"):
-            if ds.dataset.kind == "odometry-gnss":   # dead reckoning + pseudoranges (smartLoc)
-                from .experiment.vehicle_process import process_vehicle, write_vehicle
-                vo = process_vehicle(ds, source, None if data is None else str(data))
-                metrics = write_vehicle(out_dir, vo, config_text=text, overwrite=overwrite)
-            else:
-                po = run_process(ds, source, None if data is None else str(data))
-                metrics = write_process(out_dir, po, config_text=text, overwrite=overwrite)
+            processed = run_pipeline(ds, source, None if data is None else str(data))
+            metrics = pipeline(ds, source).write(out_dir, processed, config_text=text, overwrite=overwrite)
     smooth = _smoother_column(metrics["methods"])
     t = Table("method", "horiz. RMSE [m]", "horiz. max [m]", "outage max [m]", "time/epoch [us]", *smooth,
               title=f"{ds.dataset.name}: {metrics['duration_s']:.0f} s in "

@@ -305,3 +305,94 @@ class OdometerData:
 
     def __len__(self) -> int:
         return len(self.time)
+
+
+@dataclass(frozen=True, eq=False)
+class RawPseudoranges:
+    """Receiver pseudoranges grouped by epoch, the broadcast corrections (satellite clock,
+    atmosphere) still to apply: what every raw-GNSS reader returns (Android GnssLogger
+    logs, RINEX observation files), and what :func:`mixnav.gnss.spp.solve_epochs` reads.
+
+    Attributes
+    ----------
+    week : ndarray of int (k,)
+        GPS week of each epoch.
+    tow : ndarray (k,)
+        Receive time of each epoch, GPS seconds of week [s].
+    epoch : ndarray of int (m,)
+        Epoch index of each measurement.
+    prn : ndarray of int (m,)
+    pseudorange : ndarray (m,)
+        [m].
+    rejected : dict
+        Measurements left out by the reader, per reason.
+    epochs_all_rejected : int
+        Epochs whose every measurement was rejected (absent from the arrays; counted by the SPP).
+    source : str
+        File(s) read.
+    cn0 : ndarray (m,) or None
+        Carrier-to-noise density [dB-Hz], when the format gives it (Android).
+    doppler : ndarray (m,) or None
+        L1 Doppler [Hz] (NaN where blank), when the format gives it (RINEX ``D1C``/``D1``);
+        positive for an approaching satellite: the range rate is ``-lambda_L1 * doppler``.
+    sigma : ndarray (m,) or None
+        The receiver's own pseudorange sigma [m] (Android ``ReceivedSvTimeUncertaintyNanos``).
+    time_nanos : ndarray of int (k,) or None
+        The receiver's hardware clock of each epoch [ns] (Android ``TimeNanos``).
+    code : str
+        The observation code read (RINEX: ``C1C`` or ``C1``).
+    version : float
+        The file's format version (RINEX).
+    event_records : dict
+        Records skipped because they are not observations, per epoch flag (RINEX).
+    """
+
+    week: np.ndarray
+    tow: np.ndarray
+    epoch: np.ndarray
+    prn: np.ndarray
+    pseudorange: np.ndarray
+    rejected: dict = field(default_factory=dict)
+    epochs_all_rejected: int = 0
+    source: str = ""
+    cn0: np.ndarray | None = None
+    doppler: np.ndarray | None = None
+    sigma: np.ndarray | None = None
+    time_nanos: np.ndarray | None = None
+    code: str = ""
+    version: float = 0.0
+    event_records: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.tow)
+
+
+@dataclass(frozen=True)
+class WheelOdometry:
+    """Forward speed and yaw rate of a vehicle (what an odometry reader returns; the
+    dead-reckoning model's input, :func:`mixnav.motion.dead_reckoning.odometry_increments`).
+
+    Attributes
+    ----------
+    time : ndarray (k,)
+        [s], strictly increasing.
+    speed, yaw_rate : ndarray (k,)
+        Forward velocity [m/s] and turn rate about the vehicle's z axis [rad/s], with the
+        sign the file gives (the dataset's ``yaw_rate_axis`` says which way is positive).
+    speed_var, yaw_rate_var : ndarray (k,)
+        Their variances [m^2/s^2], [rad^2/s^2].
+    line : ndarray of int (k,)
+        1-based line of each sample in the file.
+    path : str
+    """
+
+    time: np.ndarray
+    speed: np.ndarray
+    yaw_rate: np.ndarray
+    speed_var: np.ndarray
+    yaw_rate_var: np.ndarray
+    line: np.ndarray
+    path: str = ""
+
+    def __len__(self) -> int:
+        return int(self.time.size)

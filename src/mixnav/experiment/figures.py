@@ -190,7 +190,7 @@ def trajectory_figure(solutions: dict[str, pd.DataFrame], reference: pd.DataFram
 def mode_probability_figure(solutions: dict[str, pd.DataFrame],
                             outages: Sequence[tuple[float, float]] = ()) -> Figure | None:
     """IMM mode probabilities against time: one panel per method that has ``p_mode_<name>``
-    columns (:func:`mixnav.experiment.run.solution_table`), one line per mode; None when
+    columns (:func:`mixnav.experiment.outputs.solution_table`), one line per mode; None when
     no method has them."""
     imms = {name: [c for c in df.columns if c.startswith("p_mode_")] for name, df in solutions.items()}
     imms = {k: v for k, v in imms.items() if v}

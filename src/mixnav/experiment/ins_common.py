@@ -18,8 +18,7 @@ from ..data import GnssFixes, ImuData, OdometerData, Trajectory
 from ..errors import ArgumentError, ConfigError, DataError
 from ..filters.ekf import FilterResult, InitialState
 from ..ins.mechanization import nav_vector
-from ..io import drive0708, generic_csv, kfgins, psins, rtklib
-from ..io.imu_checks import check_spikes
+from ..io.readers import read_table
 from ..sim.gnss import in_windows
 from ..geodesy.frames import displace
 
@@ -48,37 +47,19 @@ class ProcessOutput:
 
 
 def read_imu(ds: Dataset, folder: Path) -> ImuData:
-    c = ds.imu
-    f = folder / c.file
-    if c.format == "drive-0708":
-        return drive0708.read_drive_imu(f, folder / c.tag if c.tag else None, time_offset=0.0,
-                                        max_gap=c.max_gap, gap_action=c.gap_action, spike_action=c.spike_action)
-    if c.format == "kf-gins":
-        return kfgins.read_kfgins_imu(f, max_gap=c.max_gap, gap_action=c.gap_action, spike_action=c.spike_action)
-    if c.format == "psins":
-        imu = psins.read_psins_imu(f)[0]
-        return imu if c.spike_action == "fail" else check_spikes(imu, None, c.spike_action)
-    return generic_csv.read_imu_csv(f, max_gap=c.max_gap, gap_action=c.gap_action, spike_action=c.spike_action)
+    """The ``[imu]`` file, by the reader registered for its format."""
+    return read_table("imu", ds.imu, folder, "imu")
 
 
 def read_reference(ds: Dataset, folder: Path) -> Trajectory | None:
+    """The ``[reference]`` file (None without one), by the reader registered for its format."""
     c = ds.reference
     if c is None:
         return None
-    f = folder / c.file
     if c.velocity_delay and c.format != "rtklib-pos":
         raise ConfigError(f"velocity_delay is supported for the rtklib-pos format only, not '{c.format}'",
                           key="reference.velocity_delay")
-    if c.format == "rtklib-pos":
-        pos = rtklib.read_pos(f)
-        ref = pos.reference(qualities=c.qualities)
-        if c.velocity_delay and ref.v_n is not None:
-            # the reference velocity at its epochs, as the filter's GNSS velocity is
-            ref = replace(ref, v_n=pos.velocity_at_epochs(c.velocity_delay)[pos.select(c.qualities)])
-        return ref
-    if c.format == "kf-gins-nav":
-        return kfgins.read_kfgins_nav(f)
-    return generic_csv.read_reference_csv(f)
+    return read_table("reference", c, folder, "reference")
 
 
 def _shift(obj, t0):

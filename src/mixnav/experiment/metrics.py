@@ -1,4 +1,6 @@
-"""Accuracy metrics of a solution table (column names in docs/outputs.md).
+"""Accuracy metrics of a solution table (column names in docs/outputs.md), and the
+per-method metrics every pipeline reports (:func:`method_metrics`: accuracy, timing,
+recoveries, NIS; :func:`nees`; :func:`nis_warnings`).
 
 Errors in the table are estimate minus truth. Every metric is a plain Python
 number so the result can go straight into ``metrics.json``.
@@ -7,12 +9,16 @@ number so the result can go straight into ``metrics.json``.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
 
+if TYPE_CHECKING:
+    from ..filters.ekf import FilterResult
+
 #: Every key :func:`compute_metrics` returns, with its meaning and unit, plus the
-#: timing and consistency keys :mod:`mixnav.experiment.run` adds per method.
+#: timing and consistency keys :func:`method_metrics` adds per method.
 #: docs/outputs.md lists the same keys (checked by tests/test_cli.py).
 METRIC_KEYS_DOC: dict[str, str] = {
     "roll_rmse_deg": "RMS of the roll error [deg]",
@@ -44,7 +50,7 @@ METRIC_KEYS_DOC: dict[str, str] = {
     "nees_pos_mean": "mean NEES of the 3-D position error (3 for a consistent filter)",
     "nees_vel_mean": "mean NEES of the 3-D velocity error (3 for a consistent filter)",
     "nees_singular_epochs": "epochs whose position or velocity covariance was singular or nearly so "
-                            "(run.nees; their NEES "
+                            "(:func:`nees`; their NEES "
                             "is NaN in the solution table and left out of the means; e.g. a collapsed particle cloud)",
     "epoch_time_mean_us": "filter wall time per GNSS epoch, mechanization included [us]",
     "update_time_mean_us": "measurement model + correction + feedback per GNSS epoch [us]",
@@ -215,6 +221,138 @@ def compute_metrics(solution: pd.DataFrame,
             singular |= ~ok
             m[f"{k}_mean"] = float(np.mean(v[ok])) if ok.any() else float("nan")
     singular = int(singular.sum())   # epochs where either block was declined
-    if singular:   # the filter's covariance was singular there (run.nees): said, not hidden
+    if singular:   # the filter's covariance was singular there (:func:`nees`): said, not hidden
         m["nees_singular_epochs"] = singular
     return m
+
+
+#: A covariance is taken as singular where its correlation matrix's condition number may
+#: exceed this (:func:`nees`): beyond it the inverse loses more than about 1e-6 to round-off.
+NEES_CONDITION_LIMIT = 1e10
+
+
+def nees(e: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """``e_k^T C_k^-1 e_k`` per epoch (``e`` (K, d), ``cov`` (K, d, d)), as ``|L_R^-1 (e_k / s_k)|^2``
+    with ``s_k`` the standard deviations and ``R_k = L_R L_R^T`` the correlation matrix (never
+    negative; factoring R, not C, keeps covariances of any scale, even subnormal, accurate).
+
+    NaN at an epoch whose covariance is singular or nearly so (a filter that claims a
+    certainty it cannot have, e.g. a collapsed particle cloud): not finite, not positive
+    definite, or with a correlation matrix whose condition number may exceed
+    ``NEES_CONDITION_LIMIT``, by the bound ``kappa(R) <= d |L_R^-1|_F^2``
+    (``lambda_max(R) <= trace R = d``). The correlation matrix, so that axes in different
+    units (metres, micro-radians) change nothing. Each epoch is judged alone. Such epochs
+    are counted in the metrics (``nees_singular_epochs``), not raised; tests/test_metrics.py
+    checks the kept values against exact rational arithmetic. A NEES beyond the float range
+    is ``inf`` or NaN (counted the same way); so is one of a non-finite error.
+    """
+    e = np.asarray(e, dtype=float)
+    cov = np.asarray(cov, dtype=float)
+    K, d = e.shape
+    out = np.full(K, np.nan)
+    var = np.diagonal(cov, axis1=1, axis2=2)
+    ok = np.all(np.isfinite(cov), axis=(1, 2)) & np.all(var > 0, axis=1)
+    sd = np.sqrt(np.where(ok[:, None], var, 1.0))
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        # divided twice: the product of two small deviations could underflow
+        R = cov / sd[:, :, None] / sd[:, None, :]
+        L = np.zeros_like(cov)
+        try:
+            L[ok] = np.linalg.cholesky(R[ok])
+        except np.linalg.LinAlgError:   # some epoch is not positive definite: each on its own
+            for k in np.flatnonzero(ok):
+                try:
+                    L[k] = np.linalg.cholesky(R[k])
+                except np.linalg.LinAlgError:
+                    ok[k] = False
+        idx = np.flatnonzero(ok)
+        inv = np.linalg.inv(L[idx])                      # L_R^-1 (triangular, nonsingular)
+        good = d * np.einsum("kij,kij->k", inv, inv) <= NEES_CONDITION_LIMIT
+        z = np.einsum("kij,kj->ki", inv[good], e[idx[good]] / sd[idx[good]])
+        out[idx[good]] = np.einsum("ki,ki->k", z, z)
+    return out
+
+
+def bias_metrics(res: FilterResult, gnss_bias) -> dict:
+    """How well a method that removes a GNSS position bias (an EM-IMM: ``outputs["bias"]``
+    (K, 3) NED [m] at ``outputs["bias_times"]``) knew it, against ``gnss_bias = (times (M,),
+    bias (M, 3))``, the systematic part of each fix's error (the simulation's multipath
+    component means, :attr:`mixnav.sim.scenario.SimulatedRun.gnss_bias`). At the epochs it
+    removed a bias: ``bias_error_rms_m`` (3-D) and ``bias_error_horizontal_axis_rms_m`` (per
+    north/east axis, P4's measure); ``bias_detected_share`` of the truly biased epochs it
+    saw, ``bias_false_share`` of its removals on unbiased ones; the epoch counts. Empty
+    without either."""
+    out = res.outputs or {}
+    if gnss_bias is None or "bias" not in out or not len(out["bias_times"]):
+        return {}
+    tb, b_true = gnss_bias
+    bt, be = np.asarray(out["bias_times"], float), np.asarray(out["bias"], float)
+    k = np.clip(np.searchsorted(tb, bt - 1e-6), 0, len(tb) - 1)
+    same = np.abs(tb[k] - bt) < 1e-6
+    be, bk = be[same], b_true[k[same]]
+    removed = np.linalg.norm(be, axis=1) > 0
+    biased = np.linalg.norm(bk, axis=1) > 0
+    m = {"bias_epochs_removed": int(removed.sum()), "bias_epochs_biased": int(biased.sum())}
+    if removed.any():
+        e = be[removed] - bk[removed]
+        m["bias_error_rms_m"] = float(np.sqrt(np.mean(np.sum(e ** 2, axis=1))))
+        m["bias_error_horizontal_axis_rms_m"] = float(np.sqrt(np.mean(e[:, :2] ** 2)))
+        m["bias_false_share"] = float((removed & ~biased).sum() / removed.sum())
+    if biased.any():
+        m["bias_detected_share"] = float((removed & biased).sum() / biased.sum())
+    return m
+
+
+def method_metrics(res: FilterResult, table: pd.DataFrame, outages, gnss_bias=None) -> dict:
+    """Accuracy metrics plus timing, recoveries and NIS of one method; with ``gnss_bias``
+    (the fixes' systematic error, simulation or injected) the bias-estimate metrics
+    (:func:`bias_metrics`)."""
+    # without a reference there is nothing to score: timing and health only
+    m = compute_metrics(table, outages=list(outages)) if "err_n_m" in table else {}
+    m.update({k: float(v) for k, v in res.timing.items()})
+    if "wall_time_s" in m:  # a smoothed method has only its smoother_time_s (rts_smooth)
+        m["total_time_s"] = m["wall_time_s"] + m.get("learning_time_s", 0.0)
+    m["recoveries"] = dict(res.recoveries)
+    if len(res.nis):
+        m["nis_mean_per_dof"] = float(np.mean(res.nis / res.nis_dim))
+        m["nis_median_per_dof"] = float(np.median(res.nis / res.nis_dim))
+    tracked = [c for c in table.columns if c.startswith("vb_sigma_")]
+    if tracked:   # a VB-adaptive filter: the mean noise sigma it tracked per channel
+        m["vb_sigma_mean"] = {c.removeprefix("vb_sigma_"): float(np.nanmean(table[c])) for c in tracked}
+    modes = [c for c in table.columns if c.startswith("p_mode_")]
+    if modes:   # an IMM: mean probability of each mode, overall and inside the windows
+        m["mode_probability_mean"] = {c.removeprefix("p_mode_"): float(table[c].mean()) for c in modes}
+        inside = table["in_outage"].to_numpy(dtype=bool)
+        if inside.any():
+            m["mode_probability_mean_in_windows"] = {c.removeprefix("p_mode_"): float(table.loc[inside, c].mean())
+                                                     for c in modes}
+    m.update(bias_metrics(res, gnss_bias))
+    return m
+
+
+#: median NIS per degree of freedom above which a run is warned about (docs/validation.md): a
+#: consistent filter gives about 0.8-0.9 (the chi-square median per dof); the median, unlike the
+#: mean, is not moved by a few outliers of heavy-tailed noise
+NIS_WARN_MEDIAN = 5.0
+NIS_CAUSES = ("the IMU installation (imu_rotation, misalignment) or the lever arm is wrong",
+              "a unit is wrong (rates in rad/s declared as deg/s, g as m/s^2, degrees as radians)",
+              "the IMU time offset or the GNSS velocity delay is wrong",
+              "the GNSS or IMU noise (sigmas, grade) is set far too small for the data")
+#: the same for runs without an INS (dead reckoning, constant velocity)
+NIS_CAUSES_NO_INS = ("the odometry's yaw-rate axis (yaw_rate_axis) or a unit is wrong",
+                     "the pseudorange variances or the motion noise are far too small for the data",
+                     "the errors are not what the method's noise model says (non-line-of-sight delays are "
+                     "positive and time-correlated: a Gaussian or row-by-row model in an urban canyon)")
+
+
+def nis_warnings(methods: dict, causes=NIS_CAUSES) -> list[str]:
+    """One warning per method whose median NIS per dof exceeds :data:`NIS_WARN_MEDIAN`
+    (``causes``: the likely causes named, :data:`NIS_CAUSES` for INS runs)."""
+    out = []
+    for name, m in methods.items():
+        v = m.get("nis_median_per_dof")
+        if v is not None and v > NIS_WARN_MEDIAN:
+            out.append(f"method '{name}': median NIS per degree of freedom is {v:.3g} (a consistent filter "
+                       f"gives about 1; warned above {NIS_WARN_MEDIAN:g}): its measurements disagree with its "
+                       "model. Likely causes: " + "; ".join(causes) + ".")
+    return out

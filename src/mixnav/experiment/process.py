@@ -1,216 +1,39 @@
 """``mixnav process``: run the methods of a dataset config on real recorded data.
 
-Steps: read the IMU, GNSS and reference files (validated readers of
-:mod:`mixnav.io`), apply the installation (IMU axes to body axes, IMU time
-offset, lever arm), withhold GNSS in the configured windows, align the INS,
-run every method, and score it against the reference where the reference is
-valid (its chosen quality flags), reporting the withheld windows separately.
-
+The work is the dataset kind's pipeline's (:mod:`mixnav.experiment.pipelines`: one module
+per kind, one dispatch table); these are the entry points by their long-standing names.
 Times inside a run are seconds since the first IMU sample (the start of its first increment); the absolute time
 of that origin (as the files give it) is ``time_origin_s`` in metrics.json.
 """
 
 from __future__ import annotations
 
-import os
-import time as _time
-from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
-from ..config.dataset_schema import Dataset
-from ..config.loader import corruption
-from ..data import GnssFixes, OdometerData
-from ..errors import ConfigError, DataError
-from .aiding import AidingInputs, installation_check
-from ..io import generic_csv, kfgins, rtklib
-from ..sim.gnss import in_windows
-from .ins_common import (ProcessOutput, _shift, data_checks, gnss_section, initial_state,  # noqa: F401
-                         install, read_imu, read_reference, run_ins_methods)
-from .run import _lla_frame, solution_table, write_outputs
-from ..geodesy.frames import displace
+from .data_folder import find_data_dir  # noqa: F401
+from .ins_common import ProcessOutput, _shift, data_checks, gnss_section, initial_state, install  # noqa: F401
+from .ins_common import read_imu, read_reference, run_ins_methods  # noqa: F401
+from .pipelines import pipeline, process as _process
+from .pipelines.ins_fixes import _corrupt, read_gnss, read_odometer, withheld_windows  # noqa: F401
+from .pipelines.ins_fixes import tables as process_tables  # noqa: F401
 
 
-#: the checkout this module is in (src/mixnav/experiment/process.py -> its root), where
-#: the shipped configs' data_dir (../shared/data) is relative to
-_REPOSITORY = Path(__file__).resolve().parents[3]
+def process(ds, source: str, data: str | None = None):
+    """Read, align and filter a dataset with every configured method: the pipeline of its
+    kind (:func:`mixnav.experiment.pipelines.process`). An ``ins-gnss`` dataset gives a
+    ``ProcessOutput``; a ``gnss-raw`` one an ``SppOutput``
+    (:mod:`mixnav.experiment.spp_process`), an ``odometry-gnss`` one a ``VehicleOutput``."""
+    return _process(ds, source, data)
 
 
-def find_data_dir(ds: Dataset, data: str | None, source: str) -> Path:
-    """The data folder: ``--data``, else the config's ``data_dir`` relative to
-    the working directory, to the folder of the config file, or to the
-    repository (for the shipped configs); ``$MIXNAV_DATA/<name>`` last."""
-    if data is not None:
-        p = Path(data)
-        if not p.is_dir():
-            raise DataError(f"data folder given with --data does not exist: {p}")
-        return p
-    d = Path(ds.dataset.data_dir)
-    tried = []
-    candidates = [d] if d.is_absolute() else [Path.cwd() / d, Path(source).parent / d,
-                                               _REPOSITORY / d]
-    if "MIXNAV_DATA" in os.environ:
-        candidates.append(Path(os.environ["MIXNAV_DATA"]) / d.name)
-    for c in candidates:
-        tried.append(str(c))
-        if c.is_dir():
-            return c
-    raise DataError(f"data folder '{ds.dataset.data_dir}' not found (tried {', '.join(tried)}); "
-                    "give it with --data DIR", file=source)
+def write_process(out_dir: Path, po, config_text: str | None = None, overwrite: bool = False) -> dict:
+    """Solutions, metrics, figures and report of a processed dataset, by its pipeline (the
+    folder policy of :mod:`mixnav.io.outdir`)."""
+    return pipeline(po.dataset).write(Path(out_dir), po, config_text, overwrite=overwrite)
 
 
-def read_gnss(ds: Dataset, folder: Path) -> GnssFixes:
-    c = ds.gnss
-    f = folder / c.file
-    if c.velocity_delay and c.format != "rtklib-pos":
-        raise ConfigError(f"velocity_delay is supported for the rtklib-pos format only, not '{c.format}'",
-                          key="gnss.velocity_delay")
-    if c.format == "rtklib-pos":
-        fixes = rtklib.read_pos(f).fixes(qualities=c.qualities, min_sigma=c.min_sigma,
-                                         velocity_delay=c.velocity_delay)
-    elif c.format == "kf-gins":
-        fixes = kfgins.read_kfgins_gnss(f)
-    else:
-        fixes = generic_csv.read_gnss_csv(f)
-    if c.min_sigma > 0:
-        fixes = replace(fixes, pos_sigma=np.maximum(fixes.pos_sigma, c.min_sigma))
-    if not c.use_velocity and fixes.vel_n is not None:
-        fixes = replace(fixes, vel_n=None, vel_sigma=None)
-    return fixes
-
-
-def read_odometer(ds: Dataset, folder: Path, t0: float) -> OdometerData | None:
-    """The odometer samples of ``[aiding.odometer]`` on the processing time axis (``t0``: the
-    first IMU sample's time, subtracted like from the IMU and GNSS), or None."""
-    c = ds.aiding.odometer if ds.aiding is not None else None
-    if c is None or c.file is None:
-        return None
-    from ..io import odometer_csv
-    odo = odometer_csv.read_odometer_csv(folder / c.file, sigma=c.sigma,
-                                         max_gap=None if c.max_gap is None else float(c.max_gap),
-                                         gap_action=c.gap_action)
-    return _shift(odo, t0)
-
-
-def _corrupt(fixes: GnssFixes, process, rng) -> tuple[GnssFixes, np.ndarray]:
-    """Add a noise process (NED metres) to recorded fixes; also the systematic part of what
-    was added (M, 3) (:meth:`~mixnav.noise.processes.NoiseProcess.sample_detail`)."""
-    dp, _, bias = process.sample_detail(fixes.time, 3, rng)
-    return replace(fixes, lla=displace(fixes.lla, dp)), bias
-
-
-def process(ds: Dataset, source: str, data: str | None = None):
-    """Read, align and filter a dataset with every configured method.
-
-    A ``gnss-raw`` dataset is solved epoch by epoch instead, and filtered on the
-    constant-velocity model when its methods say so
-    (:func:`mixnav.experiment.spp_process.process_raw`, returning an ``SppOutput``).
-    """
-    folder = find_data_dir(ds, data, source)
-    if ds.dataset.kind == "gnss-raw":
-        from .spp_process import process_raw
-        return process_raw(ds, source, folder)
-    if ds.raw_gnss is not None:
-        from .rinex_ins import process_rinex_ins
-        return process_rinex_ins(ds, source, folder)
-    t_read = _time.perf_counter()
-    imu = install(read_imu(ds, folder), ds)
-    all_fixes = read_gnss(ds, folder)
-    reference = read_reference(ds, folder)
-    read_time = _time.perf_counter() - t_read
-    t0 = imu.start_time
-    imu = _shift(imu, t0)
-    all_fixes = _shift(all_fixes, t0)
-    if reference is not None:
-        reference = _shift(reference, t0)
-    checks = data_checks(ds, source, imu, all_fixes)
-    corrupt = corruption(ds, source)
-    if corrupt is not None:
-        all_fixes, bias = _corrupt(all_fixes, corrupt, np.random.default_rng(ds.gnss.corrupt_seed))
-        gnss_bias = (all_fixes.time.copy(), bias)
-    else:
-        gnss_bias = None
-    withheld = tuple(tuple(w) for w in ds.gnss.withhold)
-    keep = ~in_windows(all_fixes.time, withheld)
-    fixes = GnssFixes(time=all_fixes.time[keep], lla=all_fixes.lla[keep], pos_sigma=all_fixes.pos_sigma[keep],
-                      vel_n=None if all_fixes.vel_n is None else all_fixes.vel_n[keep],
-                      vel_sigma=None if all_fixes.vel_sigma is None else all_fixes.vel_sigma[keep],
-                      source=all_fixes.source)
-    inst = ds.installation
-    lever = np.asarray(inst.antenna_position, float) - np.asarray(inst.imu_position, float)
-    init = initial_state(ds, imu, fixes, lever)
-    results, aiding, filter_time = run_ins_methods(
-        ds, imu, fixes, init, reference, lever, source,
-        lambda: AidingInputs(ds.aiding, imu, fixes, init.time, float(imu.time[-1]),
-                             odometer=read_odometer(ds, folder, t0), source=source))
-    return ProcessOutput(ds, source, folder, t0, imu, fixes, all_fixes, reference, lever, results, init,
-                         read_time, filter_time, aiding.summary(),
-                         installation_check(imu, ds.alignment.static_duration, results, aiding.stillness,
-                                            configured={"antenna_position": inst.antenna_position,
-                                                        "imu_time_offset": inst.imu_time_offset}),
-                         odometer=aiding.odometer, gnss_bias=gnss_bias, checks=checks)
-
-
-def withheld_windows(po: ProcessOutput) -> tuple:
-    """The GNSS windows withheld from the filters, ``((start, end), ...)`` [s]."""
-    return tuple(tuple(w) for w in gnss_section(po.dataset)[0].withhold)
-
-
-def process_tables(po: ProcessOutput) -> dict[str, pd.DataFrame]:
-    """The solution table of every method, errors against the reference for the point it
-    gives (the antenna or the IMU)."""
-    ref = po.dataset.reference
-    lever = po.lever if ref is not None and ref.point == "antenna" else None
-    return {name: solution_table(res, po.reference, withheld_windows(po), lever=lever)
-            for name, res in po.results.items()}
-
-
-def write_process(out_dir: Path, po: ProcessOutput, config_text: str | None = None,
-                  overwrite: bool = False) -> dict:
-    """Solutions, metrics (against the reference), figures and report of a processed dataset
-    (the folder policy of :mod:`mixnav.io.outdir`)."""
-    if po.dataset.dataset.kind == "gnss-raw":
-        from .spp_process import write_raw
-        return write_raw(out_dir, po, config_text, overwrite=overwrite)
-    withheld = withheld_windows(po)
-    tables = process_tables(po)
-    for t in tables.values():
-        t.insert(1, "gps_time_s", t["time_s"] + po.time_origin)
-    duration = float(po.imu.time[-1] - po.init.time)
-    header = {"dataset": po.dataset.dataset.name, "source": po.source, "data_dir": str(po.data_dir),
-              "time_origin_s": po.time_origin, "start_s": po.init.time, "duration_s": duration,
-              "read_time_s": po.read_time_s, "filter_time_s": po.filter_time_s,
-              "real_time_factor": duration / (po.read_time_s + po.filter_time_s),
-              "gnss_withheld_s": [list(w) for w in withheld],
-              "imu_gaps_accepted": int(po.imu.gaps),
-              **({} if po.odometer is None else {"odometer_gaps_accepted": int(po.odometer.gaps)}),
-              **({"imu_spikes_rejected": int(po.imu.spikes)} if po.imu.spikes else {}),
-              **po.checks}
-    if po.aiding:
-        header["aiding"] = po.aiding
-    # the IMU file's own time base: what its format stamps (docs/data_formats.md)
-    base = {"drive-0708": "GPS time {:.3f} s since 1970-01-01 (no leap seconds)",
-            "kf-gins": "GPS second {:.3f} of the week", "psins": "the file's start time {:.3f} s"}
-    origin = base.get(po.dataset.imu.format, "time {:.3f} s of the IMU file").format(po.time_origin)
-    if po.dataset.raw_gnss is not None:   # the IMU file's own GPS stamps (raw_gnss.imu_time)
-        origin = (f"GPS second {po.time_origin:.3f} of the week of the first RINEX epoch"
-                  if po.dataset.raw_gnss.imu_time == "gps-week-seconds" else
-                  f"GPS time {po.time_origin:.3f} s since 1980-01-06")
-    notes = [f"Times are seconds since the start of the first IMU increment ({origin}).",
-             f"Aligned at t = {po.init.time:.2f} s ({po.dataset.alignment.method}).",
-             "Errors are estimate minus reference, at the reference's valid epochs, for the point the "
-             "reference gives (antenna or IMU); windows are the GNSS epochs withheld from the filter."]
-    if po.installation:
-        header["installation_check"] = po.installation
-        for w in po.installation.get("warnings", []):
-            notes.append("Installation check: " + w + ".")
-        for name, est in po.installation.get("estimated", {}).items():
-            said = [f"{k.removeprefix('suggested_')} = {v}" for k, v in est.items() if k.startswith("suggested_")]
-            if said:
-                notes.append(f"Installation estimated by '{name}': " + ", ".join(said) + ".")
-    ref = None if po.reference is None else _lla_frame(po.reference.time, po.reference.lla)
-    return write_outputs(out_dir, f"mixnav process: {po.dataset.dataset.name}", header, po.results, tables,
-                         withheld, ref, _lla_frame(po.fixes.time, po.fixes.lla), notes, config_text, po.gnss_bias,
-                         command="process", overwrite=overwrite, protect=[po.source, po.data_dir])
+def tables(po) -> dict[str, pd.DataFrame]:
+    """Every method's solution table of a processed dataset, by its pipeline."""
+    return pipeline(po.dataset).tables(po)

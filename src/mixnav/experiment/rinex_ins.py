@@ -4,7 +4,7 @@
 Steps:
 
 1. Read the IMU (any IMU format, the installation applied as for fixes), the RINEX
-   observation file (:func:`mixnav.io.rinex_obs.read_rinex_obs`: GPS C1C and D1C when
+   observation file (the raw-GNSS reader of ``raw_gnss.format``, :func:`mixnav.io.rinex_obs.read_rinex_obs`: GPS C1C and D1C when
    present), the navigation file (:class:`mixnav.gnss.ephemeris.BroadcastEphemeris`) and
    the reference.
 2. One time axis: RINEX epochs are GPS time; the IMU time stamps are GPS seconds of the
@@ -29,7 +29,7 @@ Steps:
    gyro bias through ``w x l``).
 5. The tight methods start from the alignment with the receiver clock bias and drift of
    the SPP / Doppler solution at the alignment time (17-state layout, ``states = 17``).
-   Outputs, metrics and report as every INS dataset (:func:`mixnav.experiment.process.write_process`).
+   Outputs, metrics and report as every INS dataset (:func:`mixnav.experiment.pipelines.ins_fixes.write`).
 """
 
 from __future__ import annotations
@@ -37,12 +37,12 @@ from __future__ import annotations
 import time as _time
 import warnings
 from collections import Counter
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..config.dataset_schema import Dataset
-from ..data import GnssFixes
+from ..data import GnssFixes, RawPseudoranges
 from ..errors import ConfigError, DataError
 from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla
 from ..gnss.ephemeris import BroadcastEphemeris
@@ -51,7 +51,7 @@ from ..gnss.raw_observations import doppler_velocity, tight_observations
 from ..gnss.spp import clock_jumps, corrected_pseudoranges, solve_epochs
 from ..ins.error_model import ClockModel
 from ..io.imu_checks import DataWarning
-from ..io.rinex_obs import RinexPseudoranges, read_rinex_obs
+from ..io.readers import get_reader
 from ..sim.gnss import in_windows
 from .aiding import AidingInputs, installation_check
 from .spp_process import options as spp_options
@@ -64,13 +64,15 @@ def _subset(obs, keep):
     return replace(obs, **{k: v[keep] for k, v in f.items()})
 
 
-def read_observations(paths) -> RinexPseudoranges:
+def read_observations(paths, read=None) -> RawPseudoranges:
     """The GPS pseudoranges (and Doppler) of one or more RINEX observation files, in time order
     (:func:`mixnav.io.rinex_obs.read_rinex_obs` each): one record whose epochs run on from
     file to file. A file that does not start after the previous one's last epoch is a
     DataError naming it; Doppler missing from some of the files is NaN there (counted as
-    ``no Doppler`` by the tight observables)."""
-    parts = [read_rinex_obs(p) for p in paths]
+    ``no Doppler`` by the tight observables). ``read``: the raw-GNSS reader (default: the
+    registered ``rinex-obs`` one)."""
+    read = get_reader("raw-gnss", "rinex-obs") if read is None else read
+    parts = [read(p) for p in paths]
     if len(parts) == 1:
         return parts[0]
     for prev, (p, cur) in zip(parts, zip(paths[1:], parts[1:])):
@@ -84,7 +86,7 @@ def read_observations(paths) -> RinexPseudoranges:
     rejected = sum((Counter(x.rejected) for x in parts), Counter())
     events = sum((Counter(x.event_records) for x in parts), Counter())
     cat = np.concatenate
-    return RinexPseudoranges(
+    return RawPseudoranges(
         week=cat([x.week for x in parts]), tow=cat([x.tow for x in parts]),
         epoch=cat([x.epoch + o for x, o in zip(parts, offsets)]), prn=cat([x.prn for x in parts]),
         pseudorange=cat([x.pseudorange for x in parts]), code="/".join(dict.fromkeys(x.code for x in parts)),
@@ -119,25 +121,51 @@ def epoch_axis(ds: Dataset, obs) -> tuple[np.ndarray, float]:
     return t, base
 
 
+@dataclass
+class RinexInputs:
+    """The files of an ins-gnss dataset with ``[raw_gnss]``, read (step 1 of the module docstring)."""
+
+    imu: object               # ImuData, installation applied, the file's own times
+    obs: RawPseudoranges
+    eph: BroadcastEphemeris
+    obs_files: list
+    nav_files: list
+    reference: object         # Trajectory or None
+    read_time_s: float
+
+
 def process_rinex_ins(ds: Dataset, source: str, folder):
     """Read, align and filter an ``ins-gnss`` dataset with ``[raw_gnss]`` (module docstring).
-    Returns a :class:`mixnav.experiment.process.ProcessOutput`."""
-    from .ins_common import (ProcessOutput, _shift, data_checks, initial_state, install, read_imu, read_reference,
-                             run_ins_methods)
+    Returns a :class:`mixnav.experiment.ins_common.ProcessOutput`."""
+    return run_rinex_ins(ds, source, folder, read_rinex_ins(ds, source, folder))
+
+
+def read_rinex_ins(ds: Dataset, source: str, folder) -> RinexInputs:
+    """Step 1: the IMU (installation applied), the observation and navigation files, the
+    reference; a tight method asking for range rates of a file without Doppler is refused here."""
+    from .ins_common import install, read_imu, read_reference
     c = ds.raw_gnss
     t_read = _time.perf_counter()
     imu = install(read_imu(ds, folder), ds)
     obs_files = [folder / f for f in c.files("file")]
     nav_files = [folder / f for f in c.files("navigation")]
-    obs_file = obs_files[0]     # the file an error names (the message lists them all)
-    obs = read_observations(obs_files)
+    obs = read_observations(obs_files, get_reader("raw-gnss", c.format, key="raw_gnss.format", file=source))
     eph = read_navigation(nav_files)
     for i, m in enumerate(ds.methods):   # before any work
         if m.type == "tight-ekf" and m.use_range_rate and obs.doppler is None:
             raise ConfigError(f"method '{m.name}' uses range rates, but {obs.source} has no Doppler (D1C/D1) column: "
                               "set use_range_rate = false", file=source, key=f"methods[{i}].use_range_rate")
     reference = read_reference(ds, folder)
-    read_time = _time.perf_counter() - t_read
+    return RinexInputs(imu, obs, eph, obs_files, nav_files, reference, _time.perf_counter() - t_read)
+
+
+def run_rinex_ins(ds: Dataset, source: str, folder, inputs: RinexInputs):
+    """Steps 2-5 on the files read (module docstring); a ProcessOutput."""
+    from .ins_common import ProcessOutput, _shift, data_checks, initial_state, run_ins_methods
+    c = ds.raw_gnss
+    imu, obs, eph, reference, read_time = inputs.imu, inputs.obs, inputs.eph, inputs.reference, inputs.read_time_s
+    obs_files, nav_files = inputs.obs_files, inputs.nav_files
+    obs_file = obs_files[0]     # the file an error names (the message lists them all)
     if c.ionosphere and eph.iono_alpha is None:   # asked for, and impossible: said, not silent
         warnings.warn(f"{', '.join(map(str, nav_files))}: the header has no ionosphere (Klobuchar) coefficients, "
                       "so the ionosphere "

@@ -1,8 +1,8 @@
 """``mixnav process`` for ``dataset.kind = "gnss-raw"``: epoch-by-epoch SPP of raw GNSS,
 and constant-velocity filters started from it.
 
-Steps: read the raw measurement log (:mod:`mixnav.io.android`, or a RINEX observation
-file, :mod:`mixnav.io.rinex_obs`) and the RINEX navigation file
+Steps: read the raw measurement log (the raw-GNSS reader of ``raw_gnss.format``,
+:mod:`mixnav.io.readers`: an Android log or a RINEX observation file) and the RINEX navigation file
 (:mod:`mixnav.gnss.ephemeris`), solve every epoch by WLS (:mod:`mixnav.gnss.spp`), and
 score the solutions against the surveyed static point of ``[reference_point]``: north,
 east, down errors, their RMS, maximum and 95th percentile, and the position NEES with
@@ -34,12 +34,12 @@ import pandas as pd
 
 from .._version import __version__
 from ..config.raw_gnss_schema import RawGnssDataset
-from ..data import InitialState
+from ..data import InitialState, RawPseudoranges
 from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla, lla_to_ecef
 from ..errors import DataError
 from ..gnss.ephemeris import BroadcastEphemeris
 from ..gnss.spp import SppOptions, SppTrack, solve_epochs
-from ..io import android
+from ..io.readers import read_table
 from ..io.atomic import atomic_write_dataframe, atomic_write_json
 from . import figures
 from .report import write_report
@@ -55,7 +55,7 @@ class SppOutput:
     dataset: RawGnssDataset
     source: str
     data_dir: Path
-    observations: object               # android.AndroidPseudoranges or rinex_obs.RinexPseudoranges
+    observations: RawPseudoranges      # what the raw-GNSS reader of the format gave
     ephemeris: BroadcastEphemeris
     track: SppTrack
     reference_lla: np.ndarray | None   # (3,) rad, rad, m
@@ -84,16 +84,17 @@ def options(ds, method=None) -> SppOptions:
 def process_raw(ds: RawGnssDataset, source: str, folder: Path, seed: int = 0) -> SppOutput:
     """Read the raw log and the navigation file, solve every epoch, and run the filter
     methods (module docstring; ``seed``: the engine's random stream)."""
+    return solve_raw(ds, source, folder, *read_raw(ds, source, folder), seed=seed)
+
+
+def read_raw(ds: RawGnssDataset, source: str, folder: Path) -> tuple[RawPseudoranges, BroadcastEphemeris, float]:
+    """The raw log (the raw-GNSS reader of ``raw_gnss.format``) and the navigation file, and
+    the time it took [s]."""
     c = ds.raw_gnss
     t0 = _time.perf_counter()
-    if c.format == "rinex-obs":
-        from ..io.rinex_obs import read_rinex_obs
-        obs = read_rinex_obs(folder / c.file)
-    else:
-        obs = android.read_gnsslogger(folder / c.file,
-                                      max_sv_time_uncertainty_ns=c.max_sv_time_uncertainty * 1e9)
+    obs = read_table("raw-gnss", c, folder, "raw_gnss", source)
     eph = BroadcastEphemeris.from_rinex(folder / c.navigation)
-    return solve_raw(ds, source, folder, obs, eph, _time.perf_counter() - t0, seed)
+    return obs, eph, _time.perf_counter() - t0
 
 
 def solve_raw(ds: RawGnssDataset, source: str, folder: Path, obs, eph: BroadcastEphemeris, read_time_s: float = 0.0,
@@ -278,7 +279,7 @@ def filter_table(po: SppOutput, res) -> pd.DataFrame:
     for j, ax in enumerate(("vn", "ve", "vd")):
         df[f"sig_{ax}_mps"] = col(res.sigma[:, lay.vel][:, j])
     if po.reference_lla is not None:
-        from .run import nees
+        from .metrics import nees
         df["nees_pos"] = col(nees(err[idx], res.pv_cov[:, 3:, 3:]))
     return df
 

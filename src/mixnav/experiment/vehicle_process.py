@@ -10,7 +10,7 @@ reference's first epoch, reported as an oracle start), then one
 estimator; ``smooth = true`` adds the RTS smoother's ``<name>-smoothed``. The outputs
 (solution tables, metrics.json, figures with the map and the error over time,
 report.html) are those of ``mixnav run`` / ``mixnav process``
-(:func:`mixnav.experiment.run.write_outputs`).
+(:func:`mixnav.experiment.outputs.write_outputs`).
 """
 
 from __future__ import annotations
@@ -27,15 +27,15 @@ from ..config.errors import config_keys
 from ..config.vehicle_schema import SYSTEM_CODES, VehicleDataset
 from ..data import InitialState, Trajectory
 from ..errors import ConfigError
-from ..geodesy.frames import ecef_to_lla, lla_to_ned
+from ..geodesy.frames import lla_to_ned
 from ..ins.error_model import ClockModel
-from ..io.smartloc import read_ground_truth, read_odometry, read_pseudoranges, to_pseudorange_epochs
+from ..io.readers import read_table
 from ..measurements.pseudorange import PseudorangeGnss
 from ..motion.dead_reckoning import (DeadReckoningMotion, DeadReckoningNoise, dead_reckoning_layout,
                                      odometry_increments, set_heading)
 from .model_methods import make_estimator, run_methods
-from .process import find_data_dir
-from .run import _lla_frame, solution_table, write_outputs
+from .data_folder import find_data_dir
+from .outputs import lla_frame, solution_table, write_outputs
 
 __all__ = ["VehicleOutput", "process_vehicle", "vehicle_tables", "write_vehicle", "make_estimator"]
 
@@ -81,21 +81,41 @@ def mixture_handover(align: dict, cn0_edges) -> dict | None:
             "cn0_edges": [float(v) for v in cn0_edges]}
 
 
+@dataclass
+class VehicleInputs:
+    """The files of an ``odometry-gnss`` dataset, read: the odometry, its increments on the
+    engine's axes (``inc``), the pseudorange epochs, the reference (or None)."""
+
+    odometry: object          # WheelOdometry
+    inc: object               # OdometryIncrements
+    epochs: object            # PseudorangeEpochs
+    reference: Trajectory | None
+    read_time_s: float
+
+
 def process_vehicle(ds: VehicleDataset, source: str, data: str | None = None, seed: int = 0) -> VehicleOutput:
     """Read, align and run every method of an ``odometry-gnss`` dataset (module docstring)."""
-    t_read = _time.perf_counter()
     d = find_data_dir(ds, data, source)
+    return run_vehicle(ds, source, d, read_vehicle(ds, source, d), seed)
+
+
+def read_vehicle(ds: VehicleDataset, source: str, d: Path) -> VehicleInputs:
+    """The odometry, pseudorange and reference files of data folder ``d`` (the readers
+    registered for their formats)."""
+    t_read = _time.perf_counter()
     oc, pc = ds.odometry, ds.pseudoranges
-    odo = read_odometry(d / oc.file)
-    prs = read_pseudoranges(d / pc.file)
-    epochs = to_pseudorange_epochs(prs)
-    truth = None
-    if ds.reference is not None:
-        gt = read_ground_truth(d / ds.reference.file)
-        truth = Trajectory(time=gt.time, lla=ecef_to_lla(gt.pos_ecef), v_n=None, q_nb=None)
+    odo = read_table("odometry", oc, d, "odometry", source)
+    epochs = read_table("corrected-pseudoranges", pc, d, "pseudoranges", source)
+    truth = None if ds.reference is None else read_table("reference", ds.reference, d, "reference", source)
     sign = 1.0 if oc.yaw_rate_axis == "down" else -1.0      # the engine's heading turns about down
     inc = odometry_increments(odo.time, odo.speed, sign * odo.yaw_rate, source=str(d / oc.file))
-    read_time = _time.perf_counter() - t_read
+    return VehicleInputs(odo, inc, epochs, truth, _time.perf_counter() - t_read)
+
+
+def run_vehicle(ds: VehicleDataset, source: str, d: Path, inputs: VehicleInputs, seed: int = 0) -> VehicleOutput:
+    """Alignment and every method on the files read (module docstring)."""
+    oc, pc = ds.odometry, ds.pseudoranges
+    odo, inc, epochs, truth, read_time = inputs.odometry, inputs.inc, inputs.epochs, inputs.reference, inputs.read_time_s
 
     systems = [SYSTEM_CODES[s] for s in pc.systems]
     mc = ds.motion
@@ -163,7 +183,7 @@ def write_vehicle(out_dir, vo: VehicleOutput, config_text: str | None = None, ov
              f"({', '.join(vo.dataset.pseudoranges.systems)}); aligned: {vo.alignment['mode']}, the filters start "
              f"at t = {vo.init.time:.2f} s.",
              "Errors are estimate minus reference at the reference's epochs; horizontal = 2-D."]
-    ref = None if vo.reference is None else _lla_frame(vo.reference.time, vo.reference.lla)
+    ref = None if vo.reference is None else lla_frame(vo.reference.time, vo.reference.lla)
     return write_outputs(out_dir, f"mixnav process: {vo.dataset.dataset.name}", header, vo.results, tables, [],
                          ref, None, notes, config_text, command="process", overwrite=overwrite,
                          protect=[vo.source, vo.data_dir])

@@ -52,13 +52,14 @@ header or a header without a required column raise
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from ..data import RawPseudoranges
 from ..errors import DataError
 from ..gnss.geometry import C_LIGHT
+from .registry import ReadOptions, register_reader
 
 NS_PER_WEEK = 604_800 * 1_000_000_000
 STATE_TOW_DECODED = 0x8
@@ -72,48 +73,8 @@ _REQUIRED = ("TimeNanos", "FullBiasNanos", "Svid", "State", "ReceivedSvTimeNanos
              "ReceivedSvTimeUncertaintyNanos", "ConstellationType")
 
 
-@dataclass(frozen=True)
-class AndroidPseudoranges:
-    """GPS pseudoranges of an Android log, grouped by epoch.
-
-    Attributes
-    ----------
-    week : ndarray of int (k,)
-        GPS week of each epoch.
-    tow : ndarray (k,)
-        Receive time of each epoch, GPS seconds of week [s] (the receiver's
-        clock, corrected by the first epoch's full bias of its segment).
-    time_nanos : ndarray of int (k,)
-        The receiver's hardware clock ``TimeNanos`` of each epoch [ns].
-    epoch : ndarray of int (m,)
-        Epoch index of each measurement.
-    prn : ndarray of int (m,)
-    pseudorange : ndarray (m,)
-        [m].
-    sigma : ndarray (m,)
-        [m], from ``ReceivedSvTimeUncertaintyNanos``.
-    cn0 : ndarray (m,)
-        Carrier-to-noise density [dB-Hz].
-    rejected : dict
-        Measurements dropped, per reason.
-    source : str
-    """
-
-    week: np.ndarray
-    tow: np.ndarray
-    time_nanos: np.ndarray
-    epoch: np.ndarray
-    prn: np.ndarray
-    pseudorange: np.ndarray
-    sigma: np.ndarray
-    cn0: np.ndarray
-    rejected: dict = field(default_factory=dict)
-    #: epochs whose every measurement was rejected (absent from the arrays; counted by the SPP)
-    epochs_all_rejected: int = 0
-    source: str = ""
-
-    def __len__(self) -> int:
-        return len(self.tow)
+#: the one raw-GNSS type (fields: mixnav.data.RawPseudoranges); Android gives cn0, sigma and time_nanos
+AndroidPseudoranges = RawPseudoranges
 
 
 def _parse_int(text: str, name: str, path, lineno: int) -> int:
@@ -285,3 +246,10 @@ def _pseudoranges(rows: list[dict], path: Path, max_unc_ns: float) -> AndroidPse
                                pseudorange=np.array(pr_l), sigma=np.array(sig_l), cn0=np.array(cn0_l),
                                rejected=rejected, source=str(path),
                                epochs_all_rejected=len(all_epochs - set(epochs_t)))
+
+
+@register_reader("raw-gnss", "android-gnsslogger")
+def _read(path: Path, options: ReadOptions) -> RawPseudoranges:
+    """The registered reader (``options``: ``max_sv_time_uncertainty`` [s] of ``[raw_gnss]``)."""
+    limit = options.get("max_sv_time_uncertainty")
+    return read_gnsslogger(path) if limit is None else read_gnsslogger(path, max_sv_time_uncertainty_ns=limit * 1e9)

@@ -24,6 +24,7 @@ from ..data import ImuData
 from ..errors import DataError
 from ..units import DEG
 from .imu_checks import G0, check_plausible, rates_to_increments
+from .registry import ReadOptions, register_reader
 from .tables import check_times, read_numeric
 
 _HEADER = 60
@@ -120,3 +121,13 @@ def _tick(line: str, fallback: float) -> float:
     except ValueError:
         return fallback
     return vals[6] if len(vals) == 7 else fallback
+
+
+@register_reader("imu", "drive-0708")
+def _read(path: Path, options: ReadOptions) -> ImuData:
+    """The registered reader (``options``: ``[imu]``'s ``tag``, a file of the data folder, ``max_gap``,
+    ``gap_action``, ``spike_action``); times as the tag gives them (no offset: the installation's)."""
+    tag = options.get("tag")
+    return read_drive_imu(path, options.folder / tag if tag else None, time_offset=0.0,
+                          max_gap=options.get("max_gap", 0.05), gap_action=options.get("gap_action", "warn"),
+                          spike_action=options.get("spike_action", "fail"))

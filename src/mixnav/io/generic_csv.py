@@ -33,6 +33,7 @@ from ..attitude import euler_to_quat
 from ..data import GnssFixes, ImuData, Trajectory
 from ..errors import DataError
 from .imu_checks import check_plausible, rates_to_increments
+from .registry import ReadOptions, register_reader
 from .tables import check_fix_values, check_times, header_fields, read_numeric
 
 _COL = re.compile(r"^\s*([A-Za-z_]+)\s*\[(.*)\]\s*$")
@@ -139,3 +140,22 @@ def read_reference_csv(path) -> Trajectory:
     return Trajectory(time=c["time"], lla=np.column_stack([c["lat"], c["lon"], c["height"]]),
                       v_n=np.column_stack([c[k] for k in vel]) if "vn" in c else None,
                       q_nb=euler_to_quat(np.column_stack([c[k] for k in att])) if "roll" in c else None)
+
+
+@register_reader("imu", "csv")
+def _read_imu(path: Path, options: ReadOptions) -> ImuData:
+    """The registered IMU reader (``options``: ``max_gap``, ``gap_action``, ``spike_action``)."""
+    return read_imu_csv(path, max_gap=options.get("max_gap"), gap_action=options.get("gap_action", "warn"),
+                        spike_action=options.get("spike_action", "fail"))
+
+
+@register_reader("gnss-fixes", "csv")
+def _read_gnss(path: Path, options: ReadOptions) -> GnssFixes:
+    """The registered GNSS reader (no options: ``[gnss]``'s ``max_gap`` is checked on the fixes used)."""
+    return read_gnss_csv(path)
+
+
+@register_reader("reference", "csv")
+def _read_reference(path: Path, options: ReadOptions) -> Trajectory:
+    """The registered reference reader (no options)."""
+    return read_reference_csv(path)

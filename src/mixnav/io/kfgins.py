@@ -12,12 +12,15 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from ..attitude import euler_to_quat
 from ..data import GnssFixes, ImuData, Trajectory
 from ..errors import DataError
 from .imu_checks import check_plausible
+from .registry import ReadOptions, register_reader
 from .tables import check_fix_values, check_times, read_numeric
 
 
@@ -59,3 +62,22 @@ def _check_sigma(sd, tab):
     bad = np.nonzero(~(sd > 0).all(1))[0]
     if bad.size:
         raise DataError("standard deviations must be positive", file=tab.path, line=int(tab.lines[bad[0]]))
+
+
+@register_reader("imu", "kf-gins")
+def _read_imu(path: Path, options: ReadOptions) -> ImuData:
+    """The registered IMU reader (``options``: ``max_gap``, ``gap_action``, ``spike_action``)."""
+    return read_kfgins_imu(path, max_gap=options.get("max_gap"), gap_action=options.get("gap_action", "warn"),
+                           spike_action=options.get("spike_action", "fail"))
+
+
+@register_reader("gnss-fixes", "kf-gins")
+def _read_gnss(path: Path, options: ReadOptions) -> GnssFixes:
+    """The registered GNSS reader (no options)."""
+    return read_kfgins_gnss(path)
+
+
+@register_reader("reference", "kf-gins-nav")
+def _read_reference(path: Path, options: ReadOptions) -> Trajectory:
+    """The registered reference reader (no options)."""
+    return read_kfgins_nav(path)

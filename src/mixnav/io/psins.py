@@ -27,6 +27,7 @@ from ..data import ImuData
 from ..errors import DataError
 from ..units import ARCSEC
 from .imu_checks import check_spikes
+from .registry import ReadOptions, register_reader
 from .tables import read_numeric
 
 #: Sensor (right, forward, up) to body (forward, right, down).
@@ -102,3 +103,11 @@ def read_psins_imu(path) -> tuple[ImuData, PsinsHeader]:
         t0=h2[3], dt=dt, g=g, gyro_scale=gyro_scale, accel_scale=accel_scale)
     imu = ImuData(time=time, dt=np.full(n, dt), dtheta=dth, dvel=dv, source=str(path))
     return check_spikes(imu, tab.lines), header
+
+
+@register_reader("imu", "psins")
+def _read(path: Path, options: ReadOptions) -> ImuData:
+    """The registered reader (``options``: ``spike_action``; the header is dropped)."""
+    imu = read_psins_imu(path)[0]
+    action = options.get("spike_action", "fail")
+    return imu if action == "fail" else check_spikes(imu, None, action)

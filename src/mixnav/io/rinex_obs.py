@@ -29,64 +29,24 @@ from __future__ import annotations
 
 import io
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from math import ceil
 from pathlib import Path
 
 import numpy as np
 
+from ..data import RawPseudoranges
 from ..errors import DataError
+from .registry import ReadOptions, register_reader
 
 #: GPS time origin (1980-01-06 00:00:00) as numpy datetime64
 _GPS_EPOCH = np.datetime64("1980-01-06T00:00:00", "ns")
 _WEEK = 604800.0
 
 
-@dataclass(frozen=True, eq=False)
-class RinexPseudoranges:
-    """GPS L1 C/A pseudoranges of a RINEX observation file, grouped by epoch (the fields
-    :func:`mixnav.gnss.spp.solve_epochs` reads, as :class:`mixnav.io.android.AndroidPseudoranges`).
-
-    Attributes
-    ----------
-    week : ndarray of int (k,); tow : ndarray (k,) [s]
-        Epoch times (GPS week, seconds of week) of the epochs with a GPS pseudorange.
-    epoch : ndarray of int (m,); prn : ndarray of int (m,); pseudorange : ndarray (m,) [m]
-    code : str
-        The observation code read (``C1C`` or ``C1``).
-    rejected : dict
-        Satellite records left out, per reason (``"not GPS: R"`` per system letter,
-        ``"no C1 pseudorange"``, ``"epoch not read"``: GPS records of an observation epoch
-        that georinex did not return, also warned of).
-    epochs_all_rejected : int
-        Observation epochs without any GPS pseudorange (absent from the arrays; counted by the SPP).
-    version : float
-        The file's RINEX version.
-    source : str
-    doppler : ndarray (m,) or None
-        L1 Doppler [Hz] of each pseudorange (``D1C``, RINEX 2 ``D1``; NaN where blank), None
-        when the file has no such column. Positive for an approaching satellite: the range
-        rate is ``-lambda_L1 * doppler``.
-    event_records : dict
-        Records skipped because they are not observations, per epoch flag (``"flag 2"`` ..
-        ``"flag 5"`` events, ``"flag 6"`` cycle-slip records).
-    """
-
-    week: np.ndarray
-    tow: np.ndarray
-    epoch: np.ndarray
-    prn: np.ndarray
-    pseudorange: np.ndarray
-    code: str
-    rejected: dict = field(default_factory=dict)
-    epochs_all_rejected: int = 0
-    version: float = 0.0
-    source: str = ""
-    doppler: np.ndarray | None = None
-    event_records: dict = field(default_factory=dict)
-
-    def __len__(self) -> int:
-        return len(self.tow)
+#: the one raw-GNSS type (fields: mixnav.data.RawPseudoranges); RINEX gives doppler, code, version
+#: and event_records
+RinexPseudoranges = RawPseudoranges
 
 
 @dataclass
@@ -384,3 +344,9 @@ def read_rinex_obs(path) -> RinexPseudoranges:
                              epochs_all_rejected=max(listing.epochs - int(keep.sum()), 0),
                              version=listing.version, source=str(path), doppler=doppler,
                              event_records=dict(sorted(listing.events.items())))
+
+
+@register_reader("raw-gnss", "rinex-obs")
+def _read(path: Path, options: ReadOptions) -> RawPseudoranges:
+    """The registered reader (no options)."""
+    return read_rinex_obs(path)

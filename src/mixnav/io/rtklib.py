@@ -19,6 +19,7 @@ import numpy as np
 from ..data import GnssFixes, Trajectory
 from ..errors import DataError
 from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla
+from .registry import ReadOptions, register_reader
 from .tables import check_fix_values, check_times, read_numeric
 
 GPS_EPOCH_UNIX = 315964800.0  # 1980-01-06 00:00:00 in Unix seconds
@@ -199,3 +200,23 @@ def read_pos(path, max_gap: float | None = None, gap_action: str = "warn") -> Po
     check_fix_values(lla, sd, tab.lines, str(path), vel)
     return PosSolution(time=v[:, 0], lla=lla, quality=v[:, 4].astype(int), n_sat=v[:, 5].astype(int),
                        sd_ned=sd, vel_ned=vel, sd_vel=sdv, source=str(path))
+
+
+@register_reader("gnss-fixes", "rtklib-pos")
+def _read_fixes(path: Path, options: ReadOptions) -> GnssFixes:
+    """The registered GNSS reader (``options``: ``qualities``, ``min_sigma``, ``velocity_delay``)."""
+    return read_pos(path).fixes(qualities=options.get("qualities", (1, 2, 5)), min_sigma=options.get("min_sigma", 0.0),
+                                velocity_delay=options.get("velocity_delay", 0.0))
+
+
+@register_reader("reference", "rtklib-pos")
+def _read_reference(path: Path, options: ReadOptions) -> Trajectory:
+    """The registered reference reader (``options``: ``qualities``; ``velocity_delay``: the velocity
+    at the epochs, as the filter's GNSS velocity is)."""
+    from dataclasses import replace
+    qualities, delay = options.get("qualities", (1,)), options.get("velocity_delay", 0.0)
+    pos = read_pos(path)
+    ref = pos.reference(qualities=qualities)
+    if delay and ref.v_n is not None:
+        ref = replace(ref, v_n=pos.velocity_at_epochs(delay)[pos.select(qualities)])
+    return ref

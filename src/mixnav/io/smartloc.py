@@ -85,8 +85,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..data import Trajectory, WheelOdometry
 from ..errors import DataError
 from ..gnss.geometry import C_LIGHT, earth_rotation_correction
+from .registry import ReadOptions, register_reader
 from .tables import check_times
 
 __all__ = [
@@ -205,33 +207,9 @@ class SmartlocTruth:
         return np.stack([np.interp(t, self.time, self.pos_ecef[:, k]) for k in range(3)], axis=-1)
 
 
-@dataclass(frozen=True)
-class SmartlocOdometry:
-    """The ``odom3`` rows of a smartLoc input file (forward speed and yaw rate).
-
-    Attributes
-    ----------
-    time : ndarray (k,)
-        [s], strictly increasing.
-    speed, yaw_rate : ndarray (k,)
-        Forward velocity [m/s] and turn rate about the vehicle's z axis [rad/s]
-        (positive to the left: smartLoc's z is up).
-    speed_var, yaw_rate_var : ndarray (k,)
-        Their variances [m^2/s^2], [rad^2/s^2].
-    line : ndarray of int (k,)
-    path : str
-    """
-
-    time: np.ndarray
-    speed: np.ndarray
-    yaw_rate: np.ndarray
-    speed_var: np.ndarray
-    yaw_rate_var: np.ndarray
-    line: np.ndarray
-    path: str = ""
-
-    def __len__(self) -> int:
-        return int(self.time.size)
+#: the ``odom3`` rows of a smartLoc input file: the one odometry type (mixnav.data.WheelOdometry;
+#: smartLoc's yaw rate is about z up, positive to the left)
+SmartlocOdometry = WheelOdometry
 
 
 # ---------------------------------------------------------------------------
@@ -650,3 +628,23 @@ def pseudorange_residuals(pr: SmartlocPseudoranges, truth: SmartlocTruth, *, ear
         variance=pr.variance, counts=counts,
         settings={"earth_rotation": bool(earth_rotation), "clock": clock, "min_satellites": int(min_satellites),
                   "leave_one_out": bool(leave_one_out)})
+
+
+@register_reader("corrected-pseudoranges", "smartloc")
+def _read_pseudoranges(path: Path, options: ReadOptions):
+    """The registered reader: the ``pseudorange3`` rows as PseudorangeEpochs (no options)."""
+    return to_pseudorange_epochs(read_pseudoranges(path))
+
+
+@register_reader("odometry", "smartloc")
+def _read_odometry(path: Path, options: ReadOptions) -> WheelOdometry:
+    """The registered reader: the ``odom3`` rows (no options)."""
+    return read_odometry(path)
+
+
+@register_reader("reference", "smartloc")
+def _read_reference(path: Path, options: ReadOptions) -> Trajectory:
+    """The registered reader: the ground truth's positions (no velocity or attitude)."""
+    from ..geodesy.frames import ecef_to_lla
+    gt = read_ground_truth(path)
+    return Trajectory(time=gt.time, lla=ecef_to_lla(gt.pos_ecef), v_n=None, q_nb=None)

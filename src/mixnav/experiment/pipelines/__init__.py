@@ -1,0 +1,61 @@
+"""One pipeline per dataset kind, behind one dispatch table (:data:`PIPELINES`).
+
+A pipeline is a module with
+
+- ``load(ds, source, folder) -> inputs``: read the dataset's files (the readers registered
+  for their formats, :mod:`mixnav.io.readers`), timed as ``read_time_s``;
+- ``run(ds, source, folder, inputs, seed=0) -> output``: align and run every method (the
+  output has ``dataset``, ``source``, ``results``);
+- ``tables(output)``: method name -> solution table (docs/outputs.md);
+- ``metrics(output, tables)``: method name -> its metrics;
+- ``truth(output)``: the reference trajectory as a table, or None;
+- ``write(out_dir, output, config_text=None, overwrite=False) -> metrics.json's dict``.
+
+The CLI (``mixnav process``), the API (:func:`mixnav.process_dataset`,
+``RunResult.write``) and :mod:`mixnav.experiment.process` find the pipeline here. A new
+dataset kind is its pipeline module plus one line in :data:`PIPELINES` (and its schema).
+"""
+
+from __future__ import annotations
+
+from types import ModuleType
+
+from ...errors import ConfigError
+from ..data_folder import find_data_dir
+from . import gnss_raw, ins_fixes, ins_rinex, odometry_gnss
+
+#: dataset kind (``ins-gnss`` split by its GNSS input: ``[gnss]`` fixes or ``[raw_gnss]``) -> pipeline
+PIPELINES: dict[str, ModuleType] = {
+    "ins-gnss": ins_fixes,
+    "ins-gnss+raw-gnss": ins_rinex,
+    "gnss-raw": gnss_raw,
+    "odometry-gnss": odometry_gnss,
+}
+
+
+def pipeline_key(ds) -> str:
+    """The :data:`PIPELINES` key of a dataset config: its ``dataset.kind``, with ``+raw-gnss``
+    for an ``ins-gnss`` dataset whose GNSS is a ``[raw_gnss]`` table (RINEX)."""
+    kind = ds.dataset.kind
+    if kind == "ins-gnss" and ds.raw_gnss is not None:
+        return "ins-gnss+raw-gnss"
+    return kind
+
+
+def pipeline(ds, source: str | None = None) -> ModuleType:
+    """The pipeline of a dataset config; a kind without one is a ConfigError naming
+    ``dataset.kind`` and the kinds that have one."""
+    key = pipeline_key(ds)
+    try:
+        return PIPELINES[key]
+    except KeyError:
+        raise ConfigError(f"no pipeline for dataset kind '{key}' (pipelines: {', '.join(PIPELINES)})",
+                          file=source, key="dataset.kind") from None
+
+
+def process(ds, source: str, data: str | None = None, seed: int = 0):
+    """Find the data folder (``data``, else the config's ``data_dir``), load and run the
+    dataset's pipeline; its output."""
+    p = pipeline(ds, source)
+    folder = find_data_dir(ds, data, source)
+    return p.run(ds, source, folder, p.load(ds, source, folder), seed)

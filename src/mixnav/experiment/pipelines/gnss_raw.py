@@ -1,0 +1,43 @@
+"""The ``gnss-raw`` pipeline: epoch-by-epoch SPP of raw GNSS (an Android log or a RINEX
+observation file) and the constant-velocity filters started from it
+(:mod:`mixnav.experiment.spp_process`, steps in its docstring)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from ...config.raw_gnss_schema import RawGnssDataset
+from ..spp_process import SppOutput, method_metrics, raw_tables, read_raw, solve_raw, write_raw
+
+__all__ = ["load", "run", "tables", "metrics", "truth", "write"]
+
+
+def load(ds: RawGnssDataset, source: str, folder: Path) -> tuple:
+    """``(observations, ephemeris, read time [s])``."""
+    return read_raw(ds, source, folder)
+
+
+def run(ds: RawGnssDataset, source: str, folder: Path, inputs: tuple, seed: int = 0) -> SppOutput:
+    """SPP of every epoch (plain, robust) and the filter methods (``seed``: the engine's stream)."""
+    obs, eph, read_time = inputs
+    return solve_raw(ds, source, folder, obs, eph, read_time, seed)
+
+
+def tables(po: SppOutput) -> dict[str, pd.DataFrame]:
+    """Every method's table, in the order of ``[[methods]]``."""
+    return raw_tables(po)
+
+
+def metrics(po: SppOutput, tables: dict[str, pd.DataFrame]) -> dict[str, dict]:
+    """Every method's metrics against the reference point."""
+    return {name: method_metrics(po, name, t) for name, t in tables.items()}
+
+
+def truth(po: SppOutput) -> None:
+    """None: the reference is one surveyed point, in the tables' error columns."""
+    return None
+
+
+write = write_raw

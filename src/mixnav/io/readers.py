@@ -1,0 +1,23 @@
+"""Every registered reader, and how a pipeline reads the file of a dataset table.
+
+Each reader module registers its readers (:func:`mixnav.io.registry.register_reader`);
+importing them here is what makes them known. A new reader is its module plus one name
+in the import line below.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from . import android, drive0708, generic_csv, kfgins, psins, rinex_obs, rtklib, smartloc  # noqa: F401 (they register)
+from .registry import KIND_TYPES, ReadOptions, Reader, formats, get_reader
+
+__all__ = ["KIND_TYPES", "ReadOptions", "Reader", "formats", "get_reader", "read_table"]
+
+
+def read_table(kind: str, table, folder: Path, key: str, source: str | None = None, path: Path | None = None):
+    """Read the file a dataset table names: ``table.format`` picks the reader of ``kind``
+    (an unknown one is a ConfigError naming ``<key>.format``), ``table.file`` relative to
+    the data ``folder`` (or ``path``), the table's other keys are the reader's options."""
+    reader = get_reader(kind, table.format, key=f"{key}.format", file=source)
+    return reader(folder / table.file if path is None else path, ReadOptions(table, folder))

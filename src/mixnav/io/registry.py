@@ -1,0 +1,93 @@
+"""The reader registry: which function reads a file of a given kind and format.
+
+A reader declares the kind of data it gives and the format name a dataset file uses
+(``format = "..."`` of its table) and has one signature::
+
+    @register_reader("imu", "psins")
+    def read(path: Path, options: ReadOptions) -> ImuData: ...
+
+It registers itself in its own module; :mod:`mixnav.io.readers` imports every reader
+module (one line each), and :func:`mixnav.io.readers.read` is how a pipeline reads a
+file. Each kind returns one data type (:data:`KIND_TYPES`), checked on return.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ..data import GnssFixes, ImuData, RawPseudoranges, Trajectory, WheelOdometry
+from ..errors import ConfigError
+from ..gnss.pseudoranges import PseudorangeEpochs
+
+#: kind -> the one type its readers return
+KIND_TYPES: dict[str, type] = {
+    "imu": ImuData,
+    "gnss-fixes": GnssFixes,
+    "raw-gnss": RawPseudoranges,                   # receiver pseudoranges: the broadcast corrections still to apply
+    "corrected-pseudoranges": PseudorangeEpochs,   # satellite clock and atmosphere already removed (smartLoc)
+    "odometry": WheelOdometry,
+    "reference": Trajectory,
+}
+
+
+@dataclass(frozen=True)
+class ReadOptions:
+    """What a reader may use beyond its file: ``table``, the dataset's table of this input
+    (``[imu]``, ``[gnss]``...; a reader reads the keys it knows, e.g. ``max_gap``,
+    ``qualities``), and ``folder``, the data folder (companion files the table names, such as
+    drive-0708's ``tag``). Without a table a reader uses its own defaults."""
+
+    table: Any = None
+    folder: Path | None = None
+
+    def get(self, key: str, default: Any = None) -> Any:
+        return default if self.table is None else getattr(self.table, key, default)
+
+
+@dataclass(frozen=True)
+class Reader:
+    kind: str
+    format: str
+    function: Callable[[Path, ReadOptions], Any]
+
+    def __call__(self, path: Path, options: ReadOptions | None = None):
+        out = self.function(Path(path), ReadOptions() if options is None else options)
+        if not isinstance(out, KIND_TYPES[self.kind]):   # a reader bug, not bad input
+            raise TypeError(f"reader {self.kind}/{self.format} returned {type(out).__name__}, "
+                            f"not {KIND_TYPES[self.kind].__name__}")
+        return out
+
+
+_READERS: dict[tuple[str, str], Reader] = {}
+
+
+def register_reader(kind: str, format: str):
+    """Decorator: register ``function(path, options)`` as the reader of ``kind`` files in
+    ``format``; a second reader for the same pair is an error."""
+    if kind not in KIND_TYPES:
+        raise ValueError(f"unknown data kind '{kind}' (kinds: {', '.join(KIND_TYPES)})")
+
+    def add(function):
+        if (kind, format) in _READERS:
+            raise ValueError(f"a {kind} reader for format '{format}' is registered already")
+        _READERS[(kind, format)] = Reader(kind, format, function)
+        return function
+    return add
+
+
+def formats(kind: str) -> tuple[str, ...]:
+    """The registered formats of ``kind``, in registration order."""
+    return tuple(f for k, f in _READERS if k == kind)
+
+
+def get_reader(kind: str, format: str, key: str | None = None, file: str | None = None) -> Reader:
+    """The reader of ``kind`` files in ``format``; an unknown format is a ConfigError naming
+    the config ``key`` (e.g. ``imu.format``) and the registered formats."""
+    try:
+        return _READERS[(kind, format)]
+    except KeyError:
+        raise ConfigError(f"unknown {kind} format '{format}' (registered: {', '.join(formats(kind)) or 'none'})",
+                          file=file, key=key) from None
