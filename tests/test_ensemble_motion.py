@@ -181,3 +181,20 @@ def test_ukf_and_dd2_equal_the_ekf_on_a_linear_model(kind, estimator):
     np.testing.assert_allclose(ens.sigma, ekf.sigma, rtol=1e-4, atol=1e-9)
     # not trivially equal: the filter moved the position off dead reckoning and shrank it
     assert ekf.sigma[-1, 0] < 0.5 * 5.0 and np.abs(ned_e[-1] - ned_e[0]).max() > 100.0
+
+
+@pytest.mark.parametrize("kind", ["cv", "dr"])
+def test_gmpf_tracks_the_kalman_filter_within_monte_carlo_error(kind):
+    """On the same linear setups the GMPF's importance density (the DD2 update) is the Kalman
+    posterior, so its particle mean is the EKF's mean up to Monte Carlo error: 2000 particles,
+    sigma / sqrt(N) ~ 0.02 sigma per epoch; 5 sigma / sqrt(N) with room for the mixture refit."""
+    from mixnav.filters.gmpf import GmpfEstimator
+    motion, model, inc, init, times = _setup(kind)
+    ekf = Engine(motion, KalmanEstimator(), [model]).run(inc, init, output_times=times)
+    N = 2000
+    gm = Engine(motion, GmpfEstimator(particles=N, components=2), [model]).run(inc, init, output_times=times)
+    origin = np.r_[np.zeros(7), LLA0]
+    d = position_difference(gm.nav, origin) - position_difference(ekf.nav, origin)
+    ratio = np.abs(d) / (ekf.sigma[:, 0:3] / math.sqrt(N))
+    assert ratio.max() < 5.0, ratio.max()
+    np.testing.assert_allclose(gm.sigma[-5:, 0:3], ekf.sigma[-5:, 0:3], rtol=0.05)
