@@ -135,8 +135,8 @@ def test_the_graph_reader_sees_imports(probe):
 
 #: the ensemble estimators reach the strapdown kernels only through the motion model's
 #: seam (engine/protocols.py MotionModel: member_states, propagate_members, ...), so they run
-#: on every motion model. The particle filter (particle.py, _pf_kernels.py) still fuses the
-#: strapdown kernels into its step and its loose update (issue 33: not yet moved).
+#: on every motion model. The particle filter (particle.py, _pf_kernels.py) runs on the seam
+#: too, but keeps its fused strapdown step and loose update on the INS (issue 33: not yet moved).
 ENSEMBLE_MODULES = ("mixnav.filters.ukf", "mixnav.filters.dd2", "mixnav.filters.gmpf",
                     "mixnav.filters._ukf_kernels")
 

@@ -198,3 +198,20 @@ def test_gmpf_tracks_the_kalman_filter_within_monte_carlo_error(kind):
     ratio = np.abs(d) / (ekf.sigma[:, 0:3] / math.sqrt(N))
     assert ratio.max() < 5.0, ratio.max()
     np.testing.assert_allclose(gm.sigma[-5:, 0:3], ekf.sigma[-5:, 0:3], rtol=0.05)
+
+
+@pytest.mark.parametrize("kind", ["cv", "dr"])
+def test_particle_filter_converges_to_the_kalman_filter(kind):
+    """The SIR filter on the other motion models (their seam, noise added after): with 5000
+    particles its mean is the EKF's to Monte Carlo error and its spread the EKF's sigma.
+    Bounds: an effective sample of >= 1000 gives sigma / sqrt(1000) ~ 0.03 sigma per epoch;
+    0.2 sigma leaves room for the resampling's and the jitter's own noise; sigma within 10 %."""
+    from mixnav.filters.particle import ParticleEstimator
+    motion, model, inc, init, times = _setup(kind)
+    ekf = Engine(motion, KalmanEstimator(), [model]).run(inc, init, output_times=times)
+    pf = Engine(motion, ParticleEstimator(particles=5000), [model]).run(inc, init, output_times=times)
+    origin = np.r_[np.zeros(7), LLA0]
+    d = position_difference(pf.nav, origin) - position_difference(ekf.nav, origin)
+    ratio = np.abs(d[5:, :2]) / ekf.sigma[5:, 0:2]
+    assert ratio.max() < 0.2, ratio.max()
+    np.testing.assert_allclose(pf.sigma[-10:, 0:2], ekf.sigma[-10:, 0:2], rtol=0.1)
