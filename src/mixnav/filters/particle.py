@@ -448,6 +448,7 @@ class _LinearLayout:
     """The minimal layout of a linear-Gaussian model: ``n`` states, no INS blocks."""
 
     clk = -1
+    is_ins = False   # propagated by the linear map the caller gives, never by a motion model
 
     def __init__(self, n):
         self.n = n
