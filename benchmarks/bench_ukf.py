@@ -36,7 +36,7 @@ import numpy as np
 
 from mixnav import __version__
 from mixnav.config import load_scenario
-from mixnav.filters._ukf_kernels import nav_difference
+from mixnav.ins._batch_kernels import nav_difference
 from mixnav.filters.ekf import ErrorStateEkf
 from mixnav.filters.ukf import UnscentedKalmanFilter, VbAdaptiveUkf
 from mixnav.ins._error_kernels import apply_feedback, mechanize_batch, propagate_block

@@ -15,8 +15,9 @@ import pytest
 from mixnav.config import load_scenario
 from mixnav.errors import ArgumentError
 from mixnav.experiment.run import solution_table
-from mixnav.filters._ukf_kernels import (measurement_moments, nav_difference, sigma_deviations, ukf_predict,
-                                         vb_correct, weighted_moments)
+from mixnav.filters._ukf_kernels import (measurement_moments, sigma_deviations, ukf_moments, ukf_sigma, vb_correct,
+                                         weighted_moments)
+from mixnav.ins._batch_kernels import nav_difference, propagate_members
 from mixnav.filters.ekf import ErrorStateEkf
 from mixnav.filters.ukf import UnscentedEstimator, UnscentedKalmanFilter, ut_weights
 from mixnav.ins._error_kernels import apply_feedback
@@ -127,10 +128,11 @@ def test_a_linear_propagation_of_the_sensor_block_through_the_kernel():
     dth, dv, dt = np.zeros((K, 3)), np.zeros((K, 3)), np.full(K, 0.01)
     dv[:, 2] = -9.8 * 0.01
     xo, Po = np.empty(n), np.empty((n, n))
-    ok = ukf_predict(nav, np.zeros(6), np.zeros(12), x, P, np.zeros((n, n)), c, wm, wc, dth, dv, dt, 0,
-                     lay.as_array(), tau, 0.1, np.empty((n, n)), np.empty((N, n)), np.empty((N + 1, 10)),
-                     np.empty((N + 1, 6)), np.empty((N + 1, 12)), np.empty((N, n)), xo, Po)
-    assert ok
+    D, Dn = np.empty((N, n)), np.empty((N, n))
+    assert ukf_sigma(x, P, c, np.empty((n, n)), D)
+    propagate_members(nav, np.zeros(6), np.zeros(12), D, dth, dv, dt, 0, lay.as_array(), tau, 0.1,
+                      np.empty((N + 1, 10)), np.empty((N + 1, 6)), np.empty((N + 1, 12)), Dn)
+    ukf_moments(Dn, wm, wc, np.zeros((n, n)), xo, Po)
     f = np.r_[np.full(3, np.exp(-0.1 / 100)), np.full(3, np.exp(-0.1 / 200))]
     np.testing.assert_allclose(xo[9:15], 1e-5 * f, rtol=1e-12)
     np.testing.assert_allclose(np.diag(Po)[9:15], 1e-8 * f ** 2, rtol=1e-9)

@@ -1,8 +1,10 @@
 """The small protocols between the engine and what it drives.
 
 - :class:`MotionModel`: the nominal-state propagation (the strapdown INS,
-  :class:`mixnav.ins.motion.StrapdownMotion`; a dead-reckoning or
-  constant-velocity model later).
+  :class:`mixnav.ins.motion.StrapdownMotion`; dead reckoning and constant
+  velocity, :mod:`mixnav.motion`), and the ensemble seam: members (sigma
+  points, particles) as error states about the nominal, turned into full
+  states, propagated and differenced back by the motion model.
 - :class:`Estimator`: what carries the belief about the error state (one
   Gaussian, a robust variant, a bank of Gaussians, an IMM of estimators). It
   never touches the nominal state: it returns a :class:`Correction` and the
@@ -116,6 +118,32 @@ class Epoch:
 
 @runtime_checkable
 class MotionModel(Protocol):
+    """The motion model (ARCHITECTURE.md, "Motion models").
+
+    Error-state family: ``propagate`` the nominal over a block of increments
+    (filling ``work = [F, Phi, Qd, scratch]`` and propagating ``P`` in place),
+    ``inject`` a correction into the nominal, ``initial_covariance``.
+
+    Ensemble family (UKF, DD2, GMPF): a *member* is an error state ``D_j`` (n,)
+    about a nominal; the motion model alone knows what that means as a full state.
+
+    - ``member_states(nav, sensor, D, navs)``: the members ``D`` (N, n) about
+      ``nav`` (10,) and the sensor estimates ``sensor`` (12,) as full navigation
+      states ``navs`` (N, 10) (``inject`` on copies), for ``h`` on a batch;
+    - ``member_rates(w_b, D) -> (N, 3)``: the body rate each member sees;
+    - ``propagate_members(inputs, D, substeps, T, Dn)``: members about the nominal
+      before a step (``inputs``: :class:`StepInputs`) propagated over its
+      increments together with a reference (the nominal, propagated the same way,
+      so a common discretisation error cancels), and differenced back: ``Dn``
+      (N, n) are their error states about the propagated reference (``T`` [s] the
+      step length; ``substeps`` how far the block may be merged, where the model
+      merges at all);
+    - ``difference_members(navs, ref, D, Dn)``: full states as error states about
+      ``ref``, the blocks without a full-state part copied from ``D``: the inverse
+      of ``member_states`` (``difference(member_states(nav, D), nav) == D``,
+      tests/test_ensemble_motion.py).
+    """
+
     layout: object
 
     def initial_covariance(self, init) -> np.ndarray: ...
@@ -123,6 +151,14 @@ class MotionModel(Protocol):
     def propagate(self, nav, prev, sensor, dtheta, dvel, dt, P, work) -> float: ...
 
     def inject(self, nav, sensor, clock, aux, dx) -> None: ...
+
+    def member_states(self, nav, sensor, D, navs) -> None: ...
+
+    def member_rates(self, w_b, D) -> np.ndarray: ...
+
+    def propagate_members(self, inputs, D, substeps, T, Dn) -> None: ...
+
+    def difference_members(self, navs, ref, D, Dn) -> None: ...
 
     def warm_up(self) -> None: ...
 

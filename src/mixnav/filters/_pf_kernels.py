@@ -5,7 +5,7 @@
   nominal) becomes a full state ``nav0 (+) D[j]``, is mechanized with its own
   sensor errors over the step's merged IMU block, is differenced from the
   mechanized nominal, and gains its process noise ``SQ z_j``. The maps are the
-  UKF's (:func:`~._ukf_kernels.nav_difference`, the engine's ``apply_feedback``,
+  strapdown member maps' (:func:`~mixnav.ins._batch_kernels.nav_difference`, the engine's ``apply_feedback``,
   the strapdown ``mechanize_core``: the nominal in RECORD mode, the particles in
   NEAR mode, ins/_kernels.py), not copies.
 - :func:`pf_loose_update`: a loose GNSS update straight from the particle array,
@@ -41,9 +41,9 @@ from ..ins._kernels import NEAR, RECORD, SMALL_DLAT, TRIG_POINTS, mechanize_core
 from ..ins._kernels import sincos_near as _sincos_near
 from ..ins._kernels import sincos_series as _sincos_series
 from ..linalg import cholesky_lower
-from ._ukf_kernels import merge_block_into
-from ._ukf_kernels import nav_difference as _nav_difference
-from ._ukf_kernels import propagate_members
+from ..ins._batch_kernels import merge_block_into
+from ..ins._batch_kernels import nav_difference as _nav_difference
+from ..ins._batch_kernels import propagate_members
 
 # The shared maps, compiled again to be inlined into the per-particle loops (the same
 # source, so bitwise the same arithmetic; ~10 % faster than a call per particle, which

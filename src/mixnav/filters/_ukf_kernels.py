@@ -1,35 +1,27 @@
 """Compiled kernels of the unscented filters (numba, ``cache=True``).
 
-- :func:`ukf_predict`: one propagation step of the sigma points in one call
-  (Cholesky, sigma points as full states ``nominal (+) deviation``, their
-  mechanization over the step's IMU block, the difference map back to error
-  states, the weighted mean and covariance);
-- :func:`ukf_sigma_navs`: the sigma points of a measurement epoch as full
-  navigation states (for ``model.predict_batch``);
+- :func:`ukf_sigma`: the sigma points of ``N(x, P)`` as error states (Cholesky
+  and the scaled deviations); the motion model turns them into full states,
+  propagates them and differences them back (``motion.propagate_members``,
+  ``motion.member_states``: the ensemble seam, :mod:`mixnav.engine.protocols`);
+- :func:`ukf_moments`: the weighted mean and covariance of the propagated
+  points plus ``Qd``;
 - :func:`measurement_moments`: predicted measurement mean, ``Pyy`` and ``Pxy``
   of the sigma points;
 - :func:`vb_correct`: the (variational-Bayes adaptive) Kalman correction from
   those moments, shared by the UKF, the VB-AUKF and the VB-AKF.
 
-Error-state convention (:mod:`mixnav.ins._error_kernels`): ``dx = x_true -
-x_est``, ``C_true = exp([phi x]) C_est``, position error in NED metres,
-sensor errors added to the sensor estimates. The *difference* map
-(:func:`nav_difference`) is the exact inverse of the feedback map
-(:func:`~mixnav.ins._error_kernels.apply_feedback`) for the attitude,
-velocity and position parts: ``difference(inject(nav, d), nav) == d`` to
-round-off (tested).
+Nothing here knows the motion model: the error state is whatever the run's
+layout says, and the maps between error states and full states are the motion
+model's (for the strapdown INS :mod:`mixnav.ins._batch_kernels`).
 """
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 from numba import njit
 
 from ..engine.status import ABSURD, NEEDS_REPAIR, NON_FINITE, OK, S_NOT_POSITIVE_DEFINITE
-from ..ins._error_kernels import L_BA, L_BG, L_CLK, L_SA, L_SG, apply_feedback
-from ..ins._kernels import mechanize_step, radii
 from ..linalg import cholesky_lower
 
 
@@ -67,199 +59,25 @@ def weighted_moments(D, wm, wc, x, P):
 
 
 @njit(cache=True)
-def nav_difference(nav, ref, out):
-    """``out[0:9]`` = ``nav (-) ref``: rotation vector ``log(C_nav C_ref^T)``, velocity
-    difference, NED metres of the position (radii at ``ref``, the inverse of
-    ``apply_feedback``)."""
-    # q_err = q_nav (x) conj(q_ref)
-    a0, a1, a2, a3 = nav[0], nav[1], nav[2], nav[3]
-    b0, b1, b2, b3 = ref[0], -ref[1], -ref[2], -ref[3]
-    w = a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3
-    x = a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2
-    y = a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1
-    z = a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0
-    if w < 0.0:
-        w, x, y, z = -w, -x, -y, -z
-    s = math.sqrt(x * x + y * y + z * z)
-    if s < 1e-12:
-        k = 2.0 / w  # small angle: 2 atan(s/w)/s -> 2/w (1 - s^2/(3 w^2))
-        k *= 1.0 - s * s / (3.0 * w * w)
-    else:
-        k = 2.0 * math.atan2(s, w) / s
-    out[0], out[1], out[2] = k * x, k * y, k * z
-    for i in range(3):
-        out[3 + i] = nav[4 + i] - ref[4 + i]
-    lat, h = ref[7], ref[9]
-    rm, rn = radii(lat)
-    out[6] = (nav[7] - lat) * (rm + h)
-    out[7] = (nav[8] - ref[8]) * ((rn + h) * math.cos(lat))
-    out[8] = h - nav[9]
-
-
-@njit(cache=True)
-def merge_block_into(dtheta, dvel, dt, substeps, gth, gdv, gdt):
-    """The block's increments merged into at most ``substeps`` sub-intervals (0 or
-    ``substeps >= K``: as they are), written into ``gth``, ``gdv`` (>= S, 3) and
-    ``gdt`` (>= S,); returns S. :func:`merge_block` without its allocation
-    (the particle kernels' preallocated buffers)."""
-    K = dtheta.shape[0]
-    S = K if substeps <= 0 or substeps >= K else substeps
-    for g in range(S):
-        gdt[g] = 0.0
-        for i in range(3):
-            gth[g, i] = 0.0
-            gdv[g, i] = 0.0
-    for k in range(K):
-        g = (k * S) // K
-        for i in range(3):
-            gth[g, i] += dtheta[k, i]
-            gdv[g, i] += dvel[k, i]
-        gdt[g] += dt[k]
-    return S
-
-
-@njit(cache=True)
-def merge_block(dtheta, dvel, dt, substeps):
-    """The block's raw increments merged into at most ``substeps`` sub-intervals (0 or
-    ``substeps >= K``: as they are): ``(gth, gdv, gdt)``."""
-    K = dtheta.shape[0]
-    S = K if substeps <= 0 or substeps >= K else substeps
-    gth = np.empty((S, 3))
-    gdv = np.empty((S, 3))
-    gdt = np.empty(S)
-    merge_block_into(dtheta, dvel, dt, substeps, gth, gdv, gdt)
-    return gth, gdv, gdt
-
-
-@njit(cache=True)
-def mechanize_members(navs, prevs, sensors, gth, gdv, gdt):
-    """Mechanize every row of ``navs`` (with its ``prevs``, ``sensors``) over the merged
-    increments ``gth``, ``gdv``, ``gdt`` (in place)."""
-    S = gdt.shape[0]
-    dth = np.empty(3)
-    dv = np.empty(3)
-    dvn = np.empty(3)
-    for j in range(navs.shape[0]):
-        nav, prev, sensor = navs[j], prevs[j], sensors[j]
-        for k in range(S):
-            h = gdt[k]
-            for i in range(3):
-                dth[i] = (gth[k, i] - sensor[i] * h) / (1.0 + sensor[6 + i])
-                dv[i] = (gdv[k, i] - sensor[3 + i] * h) / (1.0 + sensor[9 + i])
-            mechanize_step(nav, dth, dv, prev[0:3], prev[3:6], h, dvn)
-            for i in range(3):
-                prev[i] = dth[i]
-                prev[3 + i] = dv[i]
-
-
-@njit(cache=True)
-def difference_members(navs, ref, D, Dn, layout, tau, T):
-    """The propagated error states ``Dn[j]`` (j < len(D)) of the mechanized members
-    ``navs[j]`` against the mechanized reference ``ref``: attitude, velocity and
-    position by :func:`nav_difference`; sensor deviations ``D[j]`` decayed by their
-    Gauss-Markov model ``exp(-T / tau)``; the clock deviation ``+= drift T``;
-    auxiliary deviations kept."""
-    N, n = D.shape
-    i_bg, i_ba, i_sg, i_sa, i_clk = layout[L_BG], layout[L_BA], layout[L_SG], layout[L_SA], layout[L_CLK]
-    f = np.empty(4)
-    for b in range(4):
-        f[b] = math.exp(-T / tau[b]) if tau[b] > 0.0 and np.isfinite(tau[b]) else 1.0
-    for j in range(N):
-        for i in range(n):
-            Dn[j, i] = D[j, i]
-        nav_difference(navs[j], ref, Dn[j])
-        for i in range(3):
-            Dn[j, i_bg + i] = D[j, i_bg + i] * f[0]
-            Dn[j, i_ba + i] = D[j, i_ba + i] * f[1]
-            if i_sg >= 0:
-                Dn[j, i_sg + i] = D[j, i_sg + i] * f[2]
-            if i_sa >= 0:
-                Dn[j, i_sa + i] = D[j, i_sa + i] * f[3]
-        if i_clk >= 0:
-            Dn[j, i_clk] = D[j, i_clk] + D[j, i_clk + 1] * T
-
-
-@njit(cache=True)
-def propagate_members(nav0, prev0, sensor0, D, dtheta, dvel, dt, substeps, layout, tau, T, navs, prevs, sensors,
-                      Dn):
-    """The members ``D`` (N, n) (sigma points, particles) as full states ``nav0 (+) D_j``
-    (``prev0`` their previous increments, ``sensor0`` corrected by their sensor
-    deviations), and a reference (row N: the nominal itself) mechanized over the block
-    merged into ``substeps`` sub-intervals (:func:`merge_block`); their propagated error
-    states against the reference into ``Dn`` (N, n) (:func:`difference_members`).
-    ``navs`` (N+1, 10), ``prevs`` (N+1, 6), ``sensors`` (N+1, 12) are scratch."""
-    N = D.shape[0]
-    clock = np.zeros(2)
-    for j in range(N + 1):
-        for i in range(10):
-            navs[j, i] = nav0[i]
-        for i in range(6):
-            prevs[j, i] = prev0[i]
-        for i in range(12):
-            sensors[j, i] = sensor0[i]
-        if j < N:
-            apply_feedback(navs[j], sensors[j], clock, D[j], layout)
-    gth, gdv, gdt = merge_block(dtheta, dvel, dt, substeps)
-    mechanize_members(navs, prevs, sensors, gth, gdv, gdt)
-    difference_members(navs, navs[N], D, Dn, layout, tau, T)
-
-
-@njit(cache=True)
-def ukf_predict(nav0, prev0, sensor0, x, P, Qd, c, wm, wc, dtheta, dvel, dt, substeps, layout, tau, T,
-                L, D, navs, prevs, sensors, Dn, x_out, P_out):
-    """Propagate the sigma points of ``N(x, P)`` about ``nav0`` over one IMU block.
-
-    Each sigma point ``D_j`` (error state) becomes a full state ``nav0 (+) D_j``
-    (attitude, velocity, position, sensor errors; ``prev0`` its previous
-    increments) and is mechanized over the block; a reference point (``D = 0``:
-    the nominal) is mechanized the same way, and each propagated point is
-    differenced from the propagated reference. ``substeps > 0`` merges the
-    block's increments into at most that many sub-intervals before mechanizing
-    the points and the reference (their common merging error cancels in the
-    difference); 0 mechanizes every increment. Sensor deviations decay as their
-    Gauss-Markov model (``exp(-T / tau)``); the clock deviation moves as
-    ``d_bias += d_drift T``; auxiliary deviations stay.
-
-    Writes ``x_out``, ``P_out = sum wc (D - x)(D - x)^T + Qd``. ``L`` (n, n),
-    ``D`` (2n+1, n), ``navs`` (2n+2, 10), ``prevs`` (2n+2, 6), ``sensors``
-    (2n+2, 12), ``Dn`` (2n+1, n) are scratch. Returns False (nothing written)
-    when ``P`` is not positive definite.
-    """
-    n = x.shape[0]
+def ukf_sigma(x, P, c, L, D):
+    """The ``2n + 1`` sigma points of ``N(x, P)`` as error states into ``D`` (2n+1, n)
+    (``L`` (n, n) scratch: the Cholesky factor). False (nothing written to ``D``) when
+    ``P`` is not positive definite."""
     if not cholesky_lower(P, L):
         return False
     sigma_deviations(x, L, c, D)
-    propagate_members(nav0, prev0, sensor0, D, dtheta, dvel, dt, substeps, layout, tau, T, navs, prevs, sensors,
-                      Dn)
+    return True
+
+
+@njit(cache=True)
+def ukf_moments(Dn, wm, wc, Qd, x_out, P_out):
+    """The prediction from the propagated sigma points ``Dn`` (2n+1, n): ``x_out`` their
+    weighted mean, ``P_out = sum wc (Dn - x)(Dn - x)^T + Qd`` (additive process noise)."""
+    n = x_out.shape[0]
     weighted_moments(Dn, wm, wc, x_out, P_out)
     for a in range(n):
         for b in range(n):
             P_out[a, b] += Qd[a, b]
-    return True
-
-
-@njit(cache=True)
-def ukf_sigma_navs(nav, x, P, c, layout, L, D, navs):
-    """The sigma points of ``N(x, P)`` about ``nav``: error states ``D`` (2n+1, n) and
-    full navigation states ``navs`` (2n+1, 10) (``L`` scratch). False when ``P`` is
-    not positive definite."""
-    if not cholesky_lower(P, L):
-        return False
-    sigma_deviations(x, L, c, D)
-    member_navs(nav, D, layout, navs)
-    return True
-
-
-@njit(cache=True)
-def member_navs(nav, D, layout, navs):
-    """The members ``D`` (N, n) (sigma points, particles) about ``nav`` as full navigation
-    states ``navs`` (N, 10) (the engine's feedback map applied to a copy of ``nav``)."""
-    sensor = np.zeros(12)
-    clock = np.zeros(2)
-    for j in range(D.shape[0]):
-        for i in range(10):
-            navs[j, i] = nav[i]
-        apply_feedback(navs[j], sensor, clock, D[j], layout)
 
 
 @njit(cache=True)

@@ -23,9 +23,10 @@ Everything here is batched over ``K`` Gaussians (the components of a mixture:
 :mod:`mixnav.filters.gmpf`); ``f`` and ``g`` are vectorised over rows. On the
 navigation core :class:`Dd2Estimator` is a mean-carrying error-state estimator
 like the UKF's (docs/ukf.md): the points become full states ``nominal (+)
-D_j``, are mechanized over each step's IMU block in one compiled call (the
-UKF's :func:`~._ukf_kernels.propagate_members`) and predicted by the
-measurement model's ``predict_batch``.
+D_j``, are propagated over each step by the motion model in one call (its
+``propagate_members``: the strapdown INS mechanizes them, and the dead-reckoning and
+constant-velocity models run theirs) and predicted by the measurement model's
+``predict_batch``.
 """
 
 from __future__ import annotations
@@ -36,7 +37,6 @@ from ..engine.protocols import Correction, Epoch, Transition
 from ..engine.status import ABSURD, OK
 from ..errors import ArgumentError
 from ._no_clone import NoCloneEstimator
-from ._ukf_kernels import member_navs, propagate_members
 from .ekf import ErrorStateEkf
 from .ukf import predict_members
 
@@ -250,9 +250,9 @@ class Dd2Estimator(NoCloneEstimator):
         self.refuse_clone(n_clone)
         lay = motion.layout
         self.n = n = lay.n
-        self.layout_array = lay.as_array()
+        self.motion = motion
         self._clk = lay.clk
-        self.tau = np.asarray(motion.tau, dtype=float)
+        self._sensor = np.zeros(12)   # the engine's sensor estimates, once a step has shown them
         self.x = np.zeros(n)
         self.P = np.array(P0, dtype=float)
         self._scratch = np.zeros((n, n))
@@ -276,9 +276,9 @@ class Dd2Estimator(NoCloneEstimator):
         if inp is None:
             raise ArgumentError("the DD2 filter needs the engine's step inputs (needs_step_inputs)",
                                 argument="engine")
+        self._sensor = inp.sensor
         pts, _ = self._points()
-        x, P = dd2_time(mechanize_points(inp, pts, self.substeps, self.layout_array, self.tau, step.T),
-                        self.h, step.Qd)
+        x, P = dd2_time(mechanize_points(inp, pts, self.substeps, self.motion, step.T), self.h, step.Qd)
         self.x, self.P = x[0], P[0]
 
     def recentre(self, dx: np.ndarray) -> None:
@@ -287,7 +287,7 @@ class Dd2Estimator(NoCloneEstimator):
 
     def update(self, epoch: Epoch) -> Correction | None:
         pts, L = self._points()
-        out = predict_points(epoch, pts, self.layout_array, self._clk, "the DD2 filter needs")
+        out = predict_points(epoch, pts, self.motion, self._sensor, self._clk, "the DD2 filter needs")
         if out is None:
             return None
         y, Yp, r = out
@@ -306,53 +306,37 @@ class Dd2Estimator(NoCloneEstimator):
         return self.P
 
     def warm_up(self) -> None:
-        warm_member_kernels()
+        """Nothing of its own to compile: the members' kernels are the motion model's (numpy
+        moments here)."""
 
 
-def mechanize_points(inp, pts: np.ndarray, substeps: int, layout, tau, T: float) -> np.ndarray:
+def mechanize_points(inp, pts: np.ndarray, substeps: int, motion, T: float) -> np.ndarray:
     """The points ``pts`` (K, M, n) (error states about the nominal before the step,
-    :class:`~mixnav.engine.protocols.StepInputs` ``inp``) mechanized over the step's IMU
-    block in one compiled call; their error states about the mechanized nominal, (K, M, n)."""
+    :class:`~mixnav.engine.protocols.StepInputs` ``inp``) propagated over the step by
+    ``motion.propagate_members`` (for the INS one compiled call); their error states about
+    the propagated nominal, (K, M, n)."""
     K, M, n = pts.shape
     D = np.ascontiguousarray(pts.reshape(K * M, n))
-    N = K * M
-    Dn = np.empty((N, n))
-    propagate_members(inp.nav0, inp.prev0, inp.sensor, D, inp.dtheta, inp.dvel, inp.dt, substeps, layout, tau, T,
-                      np.empty((N + 1, 10)), np.empty((N + 1, 6)), np.empty((N + 1, 12)), Dn)
+    Dn = np.empty((K * M, n))
+    motion.propagate_members(inp, D, substeps, T, Dn)
     return Dn.reshape(K, M, n)
 
 
-def predict_points(epoch: Epoch, pts: np.ndarray, layout, clk: int, who: str):
+def predict_points(epoch: Epoch, pts: np.ndarray, motion, sensor, clk: int, who: str):
     """``(y (m,), Y (..., m), r (m,))``: the measurement model's predictions at the points
-    ``pts`` (..., n) (error states about ``epoch.nav``) by one ``predict_batch`` call; None
-    without data."""
+    ``pts`` (..., n) (error states about ``epoch.nav`` and the sensor estimates ``sensor``,
+    full states by ``motion.member_states``) by one ``predict_batch`` call; None without
+    data."""
     shape = pts.shape[:-1]
     D = np.ascontiguousarray(pts.reshape(-1, pts.shape[-1]))
     navs = np.empty((D.shape[0], 10))
-    member_navs(epoch.nav, D, layout, navs)
-    out = predict_members(epoch, D, navs, clk, who)
+    motion.member_states(epoch.nav, sensor, D, navs)
+    out = predict_members(epoch, D, navs, clk, who, motion)
     if out is None:
         return None
     y, Y, r = out
     y = np.asarray(y, dtype=float)
     return y, np.asarray(Y, dtype=float).reshape(*shape, len(y)), np.asarray(r, dtype=float)
-
-
-def warm_member_kernels() -> None:
-    """Compile (or load from numba's cache) the member kernels once per process."""
-    if "members" in _WARM:
-        return
-    from ..ins.error_model import LAYOUTS
-    lay = LAYOUTS[15]
-    n, N = lay.n, 3
-    nav = np.array([1.0, 0, 0, 0, 0, 0, 0, 0.5, 0.5, 0.0])
-    D = np.zeros((N, n))
-    one = np.zeros((2, 3))
-    propagate_members(nav, np.zeros(6), np.zeros(12), D, one, one, np.full(2, 0.01), 1, lay.as_array(),
-                      np.full(4, np.inf), 0.02, np.empty((N + 1, 10)), np.empty((N + 1, 6)),
-                      np.empty((N + 1, 12)), np.empty((N, n)))
-    member_navs(nav, D, lay.as_array(), np.empty((N, 10)))
-    _WARM.add("members")
 
 
 class Dd2Filter(ErrorStateEkf):

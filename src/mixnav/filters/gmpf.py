@@ -84,7 +84,7 @@ from ..noise.learn import ConvergenceWarning
 from ..noise.learn.em import EMGaussianMixture, gaussian_logpdf
 from ._no_clone import NoCloneEstimator
 from .dd2 import (DEFAULT_STEP, check_dd2_step, dd2_measure, dd2_points, dd2_time, mechanize_points,
-                  predict_points, psd_cholesky, warm_member_kernels)
+                  predict_points, psd_cholesky)
 from .ekf import ErrorStateEkf
 
 __all__ = ["GmpfEstimator", "GaussianMixtureParticleFilter", "check_gmpf_settings", "mixture_logpdf",
@@ -231,9 +231,9 @@ class GmpfEstimator(NoCloneEstimator):
         self.refuse_clone(n_clone)
         lay = motion.layout
         self.n = lay.n
-        self.layout_array = lay.as_array()
+        self.motion = motion
         self._clk = lay.clk
-        self.tau = np.asarray(motion.tau, dtype=float)
+        self._sensor = np.zeros(12)   # the engine's sensor estimates, once a step has shown them
         self.rng = rng
         self.start(np.array(P0, dtype=float))
 
@@ -267,9 +267,9 @@ class GmpfEstimator(NoCloneEstimator):
         inp = step.inputs
         if inp is None:
             raise ArgumentError("the GMPF needs the engine's step inputs (needs_step_inputs)", argument="engine")
+        self._sensor = inp.sensor
         pts, _ = self.points()
-        self.mu, self.P = dd2_time(mechanize_points(inp, pts, self.substeps, self.layout_array, self.tau, step.T),
-                                   self.h, step.Qd)
+        self.mu, self.P = dd2_time(mechanize_points(inp, pts, self.substeps, self.motion, step.T), self.h, step.Qd)
 
     def predict_linear(self, F: np.ndarray, Q: np.ndarray) -> None:
         """The time update through the linear map ``x -> F x`` with process noise ``Q`` (tests on
@@ -285,13 +285,13 @@ class GmpfEstimator(NoCloneEstimator):
     def update(self, epoch: Epoch) -> Correction | None:
         pts, L = self.points()
         who = "the GMPF needs"
-        out = predict_points(epoch, pts, self.layout_array, self._clk, who)
+        out = predict_points(epoch, pts, self.motion, self._sensor, self._clk, who)
         if out is None:
             return None
         y, Yp, r = out
 
         def predict(D):
-            return predict_points(epoch, D, self.layout_array, self._clk, who)[1]
+            return predict_points(epoch, D, self.motion, self._sensor, self._clk, who)[1]
         return self.weigh(y, r, pts, L, Yp, predict)
 
     def update_linear(self, y: np.ndarray, H: np.ndarray, r: np.ndarray) -> Correction:
@@ -406,7 +406,7 @@ class GmpfEstimator(NoCloneEstimator):
         return np.einsum("k,kij->ij", self.alpha, self.P) + (d.T * self.alpha) @ d
 
     def warm_up(self) -> None:
-        warm_member_kernels()
+        """Nothing of its own to compile: the members' kernels are the motion model's."""
 
 
 class GaussianMixtureParticleFilter(ErrorStateEkf):

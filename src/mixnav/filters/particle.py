@@ -37,6 +37,12 @@ resampling) is returned as the correction; the engine feeds it back and calls
 the weighted sample moments before any resampling (the resampling and the jitter
 keep them in expectation and only add Monte Carlo noise).
 
+On a motion model other than the strapdown INS (dead reckoning, constant velocity) the
+particles go through the model's ensemble seam (:class:`~mixnav.engine.protocols.MotionModel`:
+``propagate_members``, then the same noise step with ``F = I``; ``member_states`` and
+``member_rates`` at an epoch) and every update takes the generic path; the fused
+strapdown step and loose update are the INS's fast path.
+
 Degeneracy: when no particle can explain the measurement (every log-likelihood
 non-finite, or the best particle's squared normalised innovation beyond
 ``absurd_sigma^2`` per row) the epoch is rejected (``ABSURD``, nothing fed
@@ -158,9 +164,14 @@ class ParticleEstimator(NoCloneEstimator):
         lay = motion.layout
         n = lay.n
         self.n = n
-        self.layout_array = lay.as_array()
+        self.motion = motion
+        # the strapdown INS: the fused compiled step and loose update; any other motion
+        # model: its ensemble seam (propagate_members, member_states), the noise added after
+        self.layout_array = lay.as_array() if lay.is_ins else None
         self._clk = lay.clk
-        self.tau = np.asarray(motion.tau, dtype=float)
+        self.tau = np.asarray(motion.tau, dtype=float) if lay.is_ins else None
+        self._sensor = np.zeros(12)   # the engine's sensor estimates, once a step has shown them
+        self._eye = None if lay.is_ins else np.eye(n)
         self.rng = rng
         self._k = PARALLEL if self.parallel and threading.current_thread() is threading.main_thread() else SERIAL
         N = self.N
@@ -215,6 +226,12 @@ class ParticleEstimator(NoCloneEstimator):
         SQT = self._noise_root(Qd)
         if F is not None:
             self._k.linear_step(self.D, np.ascontiguousarray(np.asarray(F, dtype=float).T), SQT, Z, self._Dn)
+        elif self.layout_array is None:
+            # another motion model: its members' propagation, then the same noise step (F = I)
+            self._sensor = inp.sensor
+            self.motion.propagate_members(inp, self.D, self.substeps, T, self._Dn)
+            self._k.linear_step(self._Dn, self._eye, SQT, Z, self.D)
+            self.D, self._Dn = self._Dn, self.D
         else:
             K = len(inp.dt)
             S = K if self.substeps <= 0 or self.substeps >= K else self.substeps
@@ -244,13 +261,17 @@ class ParticleEstimator(NoCloneEstimator):
             self._x -= dx[:self.n]
 
     def update(self, epoch: Epoch) -> Correction | None:
-        if self.fused and type(epoch.model) is LooseGnss and self.layout_array[L_BG] >= 0:
-            fx = epoch.model.batch_fix(epoch.index)
-            if fx is not None:
-                return self._update_loose(epoch, *fx)
         navs = self._navs[:self.N]
-        self._k.member_navs(epoch.nav, self.D, self.layout_array, navs, self._sensors, self._scr)
-        out = predict_members(epoch, self.D, navs, self._clk, "the particle filter needs")
+        if self.layout_array is None:
+            self.motion.member_states(epoch.nav, self._sensor, self.D, navs)
+            out = predict_members(epoch, self.D, navs, self._clk, "the particle filter needs", self.motion)
+        else:
+            if self.fused and type(epoch.model) is LooseGnss and self.layout_array[L_BG] >= 0:
+                fx = epoch.model.batch_fix(epoch.index)
+                if fx is not None:
+                    return self._update_loose(epoch, *fx)
+            self._k.member_navs(epoch.nav, self.D, self.layout_array, navs, self._sensors, self._scr)
+            out = predict_members(epoch, self.D, navs, self._clk, "the particle filter needs")
         if out is None:
             return None
         y, Y, r = out
@@ -427,6 +448,7 @@ class _LinearLayout:
     """The minimal layout of a linear-Gaussian model: ``n`` states, no INS blocks."""
 
     clk = -1
+    is_ins = False   # propagated by the linear map the caller gives, never by a motion model
 
     def __init__(self, n):
         self.n = n

@@ -6,25 +6,31 @@ are full states*. Its belief is ``N(x, P)`` over the error state ``dx =
 x_true - x_est`` of the layout (attitude as a rotation vector about the
 nominal quaternion, ``C_true = exp([phi x]) C_est``: the minimal attitude
 parameterisation, the USQUE choice; velocity; NED position metres; sensor,
-clock and auxiliary errors). Per propagation step (:func:`_ukf_kernels.ukf_predict`,
-one compiled call):
+clock and auxiliary errors; or the layout of another motion model). Per propagation
+step (three compiled calls: the sigma points, the motion model's
+``propagate_members``, the moments):
 
 1. ``2n + 1`` scaled sigma points ``D_j = x +- c L e_k`` (``L L^T = P``,
    ``c = sqrt(n + lambda)``, ``lambda = alpha^2 (n + kappa) - n``);
-2. each becomes a full state ``nominal_before (+) D_j`` (the engine's feedback
-   map) and is mechanized with its own sensor errors over the step's IMU block
-   (the nonlinear model: no Jacobian), as is a reference point ``D = 0``;
-3. the difference map (rotation vector of ``C_j C_ref^T``, velocity and NED
-   position differences, sensor deviations through their Gauss-Markov decay)
-   gives the propagated error states; their weighted mean and covariance plus
+2. the motion model turns each into a full state ``nominal_before (+) D_j`` (its
+   feedback map), propagates it over the step's inputs (the nonlinear model: no
+   Jacobian; for the strapdown INS each point mechanized with its own sensor
+   errors), as it does a reference point ``D = 0``,
+3. and differences them back against the reference (for the INS: rotation vector
+   of ``C_j C_ref^T``, velocity and NED position differences, sensor deviations
+   through their Gauss-Markov decay): the propagated error states
+   (:meth:`~mixnav.engine.protocols.MotionModel.propagate_members`); their
+   weighted mean and covariance plus
    the transition's ``Qd`` (additive process noise) are the prediction. The
    mean stays non-zero between updates (``carry_mean``): the nonlinearity's
    bias is kept, not dropped.
 
 At a measurement epoch the sigma points are drawn again about the current
-nominal, ``h`` is evaluated on all of them by ``epoch.model.predict_batch``
-(the loose GNSS model, or the tight pseudorange/Doppler one with each point's
-receiver clock; the gyro-bias deviation of each point enters its body rate), and the unscented update gives the posterior mean, returned as the
+nominal (as full states by the motion model's ``member_states``), ``h`` is
+evaluated on all of them by ``epoch.model.predict_batch`` (the loose GNSS model,
+or the tight pseudorange/Doppler one with each point's receiver clock; the
+motion model's ``member_rates`` gives each point's body rate), and the unscented
+update gives the posterior mean, returned as the
 correction; the engine feeds it back and calls :meth:`recentre`.
 
 Scaled unscented transform (Julier 2002; Wan & van der Merwe 2000) weights::
@@ -51,7 +57,7 @@ from ..engine.protocols import Correction, Epoch, Transition
 from ..errors import ArgumentError, NumericalError
 from ..engine.status import NEEDS_REPAIR, OK
 from ._no_clone import NoCloneEstimator
-from ._ukf_kernels import linearized_pyy, measurement_moments, ukf_predict, ukf_sigma_navs, vb_correct
+from ._ukf_kernels import linearized_pyy, measurement_moments, ukf_moments, ukf_sigma, vb_correct
 from .ekf import ErrorStateEkf, repair_covariance
 from .vb import ChannelNoise, channel_label, check_vb_settings, warm_vb
 
@@ -86,17 +92,21 @@ def ut_weights(n: int, alpha: float = 0.6, beta: float = 2.0, kappa: float = 0.0
     return wm, wc, float(np.sqrt(n + lam))
 
 
-def predict_members(epoch: Epoch, D: np.ndarray, navs: np.ndarray, clk: int, who: str):
+def predict_members(epoch: Epoch, D: np.ndarray, navs: np.ndarray, clk: int, who: str, motion=None):
     """``epoch.model.predict_batch`` at the members (sigma points, particles) ``D`` (N, n) whose
-    full states are ``navs`` (N, 10): each member's gyro-bias deviation moves its body rate
-    and, with a clock block at ``clk >= 0`` (tight coupling), its clock deviation its
+    full states are ``navs`` (N, 10): each member's body rate from ``motion.member_rates``
+    (the strapdown INS: its gyro-bias deviation moves it; without ``motion`` that map) and,
+    with a clock block at ``clk >= 0`` (tight coupling), its clock deviation its
     receiver clock. Returns ``(y, Y, R)`` or None (no data); ArgumentError when the model
     has no ``predict_batch`` (``who``, the estimator, names itself in the message)."""
     predict_batch = getattr(epoch.model, "predict_batch", None)
     if predict_batch is None:
         raise ArgumentError(f"{type(epoch.model).__name__} has no predict_batch (h on a batch of states): "
                             f"{who} it", argument="measurements")
-    w_b = np.asarray(epoch.w_b, dtype=float) - D[:, 9:12]
+    if motion is None:
+        w_b = np.asarray(epoch.w_b, dtype=float) - D[:, 9:12]
+    else:
+        w_b = motion.member_rates(epoch.w_b, D)
     if clk >= 0:
         clocks = np.asarray(epoch.clock, dtype=float) + D[:, clk:clk + 2]
         return predict_batch(epoch.index, navs, w_b, clocks)
@@ -147,9 +157,9 @@ class UnscentedEstimator(NoCloneEstimator):
         lay = motion.layout
         n = lay.n
         self.n = n
-        self.layout_array = lay.as_array()
+        self.motion = motion
         self._clk = lay.clk
-        self.tau = np.asarray(motion.tau, dtype=float)
+        self._sensor = np.zeros(12)   # the engine's sensor estimates, once a step has shown them
         self.wm, self.wc, self.c = ut_weights(n, self.alpha, self.beta, self.kappa)
         N = 2 * n + 1
         self.P = np.array(P0, dtype=float)
@@ -158,9 +168,7 @@ class UnscentedEstimator(NoCloneEstimator):
         self._L = np.empty((n, n))
         self._D = np.empty((N, n))
         self._Dn = np.empty((N, n))
-        self._navs = np.empty((N + 1, 10))
-        self._prevs = np.empty((N + 1, 6))
-        self._sensors = np.empty((N + 1, 12))
+        self._navs = np.empty((N, 10))
         self._xo = np.empty(n)
         self._Po = np.empty((n, n))
         self.rng = rng
@@ -174,22 +182,21 @@ class UnscentedEstimator(NoCloneEstimator):
         return self._scratch
 
     def predict(self, step: Transition) -> None:
-        """Sigma points mechanized over the step's block (one compiled call)."""
+        """Sigma points propagated over the step by the motion model, their moments + Qd."""
         self._scratch[:, :] = 0.0   # what the engine's kernel propagated there is not used
         inp = step.inputs
         if inp is None:
             raise ArgumentError("the UKF needs the engine's step inputs (needs_step_inputs)", argument="engine")
+        self._sensor = inp.sensor
         for attempt in range(2):
-            ok = ukf_predict(inp.nav0, inp.prev0, inp.sensor, self.x, self.P, step.Qd, self.c, self.wm, self.wc,
-                             inp.dtheta, inp.dvel, inp.dt, self.substeps, self.layout_array, self.tau, step.T,
-                             self._L, self._D, self._navs, self._prevs, self._sensors, self._Dn, self._xo,
-                             self._Po)
-            if ok:
+            if ukf_sigma(self.x, self.P, self.c, self._L, self._D):
                 break
             self._repair_sigma()
         else:
             raise NumericalError("the UKF covariance stayed not positive definite after a "
                                  "repair")  # pragma: no cover (the repair makes it PD)
+        self.motion.propagate_members(inp, self._D, self.substeps, step.T, self._Dn)
+        ukf_moments(self._Dn, self.wm, self.wc, step.Qd, self._xo, self._Po)
         self.x, self._xo = self._xo, self.x
         self.P, self._Po = self._Po, self.P
 
@@ -206,15 +213,16 @@ class UnscentedEstimator(NoCloneEstimator):
         """``(D, navs)``: the sigma points of the current belief about ``nav`` as error states
         (2n+1, n) and as full navigation states (2n+1, 10) (views of scratch)."""
         for attempt in range(2):
-            if ukf_sigma_navs(nav, self.x, self.P, self.c, self.layout_array, self._L, self._D, self._navs):
-                return self._D, self._navs[:2 * self.n + 1]
+            if ukf_sigma(self.x, self.P, self.c, self._L, self._D):
+                self.motion.member_states(nav, self._sensor, self._D, self._navs)
+                return self._D, self._navs
             self._repair_sigma()
         raise NumericalError("the UKF covariance stayed not positive definite after a "
                              "repair")  # pragma: no cover
 
     def update(self, epoch: Epoch) -> Correction | None:
         D, navs = self.sigma_points(epoch.nav)
-        out = predict_members(epoch, D, navs, self._clk, "the unscented filters need")
+        out = predict_members(epoch, D, navs, self._clk, "the unscented filters need", self.motion)
         if out is None:
             return None
         y, Y, r = out
@@ -260,21 +268,14 @@ class UnscentedEstimator(NoCloneEstimator):
             warm_vb()
         if "ukf" in _WARM:
             return
-        from ..ins.error_model import LAYOUTS
-        lay = LAYOUTS[15]
-        n = lay.n
+        n = 15
         N = 2 * n + 1
         wm, wc, c = ut_weights(n)
-        nav = np.array([1.0, 0, 0, 0, 0, 0, 0, 0.5, 0.5, 0.0])
-        one = np.zeros((2, 3))
         P = np.eye(n) * 1e-4
         L = np.empty((n, n))
         D = np.empty((N, n))
-        navs = np.empty((N + 1, 10))
-        ukf_predict(nav, np.zeros(6), np.zeros(12), np.zeros(n), P, P, c, wm, wc, one, one, np.full(2, 0.01), 1,
-                    lay.as_array(), np.full(4, np.inf), 0.02, L, D, navs, np.empty((N + 1, 6)),
-                    np.empty((N + 1, 12)), np.empty((N, n)), np.empty(n), np.empty((n, n)))
-        ukf_sigma_navs(nav, np.zeros(n), P, c, lay.as_array(), L, D, navs)
+        ukf_sigma(np.zeros(n), P, c, L, D)
+        ukf_moments(D, wm, wc, P, np.empty(n), np.empty((n, n)))
         Y = np.ascontiguousarray(D[:, 6:9])
         innov, Pyy, Pxy = measurement_moments(D, Y, np.zeros(3), wm, wc)
         linearized_pyy(L, Pxy)

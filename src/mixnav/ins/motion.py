@@ -11,10 +11,14 @@ A motion model gives the engine three things (see :mod:`mixnav.engine`):
   sensor and clock estimates incremented, auxiliary blocks added);
 - ``initial_covariance``: P0 from an :class:`~mixnav.data.InitialState`.
 
-The ensemble family (UKF, particle filters) uses ``propagate_batch``: the
-mechanization of a batch of full states over a block in one compiled call.
-A vehicle dead-reckoning or constant-velocity model is another class with the
-same methods (:mod:`mixnav.motion`).
+The ensemble family (UKF, DD2, GMPF) uses the member seam
+(:class:`~mixnav.engine.protocols.MotionModel`): ``member_states`` (error states
+``D`` (N, n) about a nominal as full states), ``propagate_members`` (members
+about the nominal before a step, propagated over it and differenced back against
+the propagated nominal, one compiled call: :mod:`mixnav.ins._batch_kernels`),
+``difference_members`` and ``member_rates``. ``propagate_batch`` mechanizes raw
+full states. A vehicle dead-reckoning or constant-velocity model is another
+class with the same methods (:mod:`mixnav.motion`).
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..data import InitialState, OdometryIncrements
+from ._batch_kernels import difference_members, member_navs, propagate_members
 from ._error_kernels import apply_feedback, mechanize_batch, propagate_block
 from .error_model import ClockModel, StateLayout, body_noise, process_noise
 from .imu_model import ImuErrorModel
@@ -61,6 +66,8 @@ class StrapdownMotion:
         self.qc, self.tau, self.sensor_sigma0 = process_noise(layout, imu_model, clock)
         self.qb = body_noise(imu_model)
         self.layout_array = layout.as_array()
+        self._tau = np.asarray(self.tau, dtype=float)
+        self._scratch = {}   # member count -> (navs, prevs, sensors) of the batch kernel
 
     def check_inputs(self, inputs) -> None:
         """The strapdown INS is driven by IMU increments, not by odometry."""
@@ -108,6 +115,38 @@ class StrapdownMotion:
         """
         mechanize_batch(navs, prevs, sensors, dtheta, dvel, dt)
 
+    # --- the ensemble seam: members are error states D (N, n) about a nominal ----------------
+    def member_states(self, nav, sensor, D, navs) -> None:
+        """The members ``D`` (N, n) about ``nav`` as full navigation states ``navs`` (N, 10)
+        (the feedback map on copies of ``nav``; the sensor part of a member is its deviation,
+        which :meth:`member_rates` applies, so ``sensor`` is not needed here)."""
+        member_navs(nav, D, self.layout_array, navs)
+
+    def member_rates(self, w_b, D) -> np.ndarray:
+        """The body rate (N, 3) [rad/s] each member sees: ``w_b`` less its gyro-bias deviation."""
+        return np.asarray(w_b, dtype=float) - D[:, 9:12]
+
+    def propagate_members(self, inputs, D, substeps, T, Dn) -> None:
+        """Members ``D`` (N, n) about the nominal before a step (``inputs``, a
+        :class:`~mixnav.engine.protocols.StepInputs`) mechanized over its IMU block (merged
+        into at most ``substeps`` sub-intervals; 0: every increment) with a reference (the
+        nominal, mechanized the same way), and differenced back: ``Dn`` (N, n) are their
+        error states about the propagated reference (sensor deviations decayed by their
+        Gauss-Markov model over ``T`` [s], clock bias moved by drift ``T``). One compiled
+        call (:func:`~mixnav.ins._batch_kernels.propagate_members`)."""
+        N = D.shape[0]
+        scr = self._scratch.get(N)
+        if scr is None:
+            scr = self._scratch[N] = (np.empty((N + 1, 10)), np.empty((N + 1, 6)), np.empty((N + 1, 12)))
+        propagate_members(inputs.nav0, inputs.prev0, inputs.sensor, D, inputs.dtheta, inputs.dvel, inputs.dt,
+                          substeps, self.layout_array, self._tau, T, scr[0], scr[1], scr[2], Dn)
+
+    def difference_members(self, navs, ref, D, Dn) -> None:
+        """``Dn`` (N, n): the full states ``navs`` (N, 10) as error states about ``ref`` (10,)
+        (rotation vector, velocity, NED metres); the other blocks copied from ``D`` (N, n).
+        The inverse of :meth:`member_states`: ``difference(member_states(nav, D), nav) == D``."""
+        difference_members(navs, ref, D, Dn, self.layout_array, np.full(4, np.inf), 0.0)
+
     def warm_up(self) -> None:
         """Compile (or load from numba's cache) the kernels for this layout size once per
         process, so measured epoch times are steady-state costs, not compilation."""
@@ -120,3 +159,13 @@ class StrapdownMotion:
                         np.zeros(n), self.layout_array, np.full(4, np.inf), np.empty((4, n, n)), np.ones(6))
         apply_feedback(nav, np.zeros(12), np.zeros(2), np.zeros(n), self.layout_array)
         _WARM.add(n)
+        if "members" not in _WARM:   # the ensemble seam's kernels (any layout size)
+            N = 3
+            D = np.zeros((N, n))
+            navs = np.empty((N, 10))
+            propagate_members(nav, np.zeros(6), np.zeros(12), D, one, one, np.full(1, 0.01), 1, self.layout_array,
+                              np.full(4, np.inf), 0.01, np.empty((N + 1, 10)), np.empty((N + 1, 6)),
+                              np.empty((N + 1, 12)), np.empty((N, n)))
+            member_navs(nav, D, self.layout_array, navs)
+            difference_members(navs, nav, D, np.empty((N, n)), self.layout_array, np.full(4, np.inf), 0.0)
+            _WARM.add("members")

@@ -54,3 +54,36 @@ def propagate_covariance(P: np.ndarray, Phi: np.ndarray, Qd: np.ndarray) -> None
     """``P <- Phi P Phi^T + Qd`` in place, kept symmetric."""
     Pn = Phi @ P @ Phi.T + Qd
     P[:] = 0.5 * (Pn + Pn.T)
+
+
+# --- the ensemble seam's helpers, vectorised over members ------------------------------------
+def move_positions(navs: np.ndarray, d_n, d_e, d_d) -> None:
+    """:func:`move_position` on every row of ``navs`` (N, 10) (NED metres (N,) each)."""
+    lat, h = navs[:, 7].copy(), navs[:, 9].copy()
+    rm, rn = radii(lat)
+    navs[:, 7] = lat + d_n / (rm + h)
+    navs[:, 8] += d_e / ((rn + h) * np.cos(lat))
+    navs[:, 9] = h - d_d
+
+
+def position_difference(navs: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """NED metres (N, 3) of the positions of ``navs`` (N, 10) about ``ref`` (10,): the inverse
+    of :func:`move_position` from ``ref`` (radii and height at ``ref``)."""
+    lat, h = ref[7], ref[9]
+    rm, rn = radii(lat)
+    out = np.empty((navs.shape[0], 3))
+    out[:, 0] = (navs[:, 7] - lat) * (rm + h)
+    out[:, 1] = (navs[:, 8] - ref[8]) * ((rn + h) * math.cos(lat))
+    out[:, 2] = h - navs[:, 9]
+    return out
+
+
+def pass_clock_and_aux(layout, D: np.ndarray, Dn: np.ndarray, T: float) -> None:
+    """The additive blocks of members over a step of ``T`` [s]: the clock bias deviation moves
+    by its drift deviation times ``T``, the drift and the auxiliary deviations are kept."""
+    c = layout.clk
+    if c >= 0:
+        Dn[:, c] = D[:, c] + D[:, c + 1] * T
+        Dn[:, c + 1] = D[:, c + 1]
+    for _, sl in layout.aux:
+        Dn[:, sl] = D[:, sl]

@@ -12,6 +12,11 @@ blocks::
                                             q = accel_sigma^2 horizontally, vertical_accel_sigma^2 down)
 
 It is driven by :func:`clock_ticks` (increments that carry only time).
+
+The ensemble seam (:class:`~mixnav.engine.protocols.MotionModel`): a member ``D_j``
+is the nominal with its position moved by ``D_j``'s NED metres and ``D_j``'s velocity
+added; it moves as the nominal does, and its propagated error state is its position
+and velocity difference from the propagated nominal (numpy, vectorised over members).
 """
 
 from __future__ import annotations
@@ -24,7 +29,8 @@ import numpy as np
 from ..data import ImuData, InitialState
 from ..errors import ArgumentError
 from ..ins.error_model import ClockModel, StateBlock, StateLayout
-from ._common import clock_blocks, initial_diagonal, move_position, propagate_covariance
+from ._common import (clock_blocks, initial_diagonal, move_position, move_positions, pass_clock_and_aux,
+                      position_difference, propagate_covariance)
 
 CV_CORE = (
     StateBlock("position", 3, "model", "nav", labels=("dr_n", "dr_e", "dr_d")),
@@ -133,6 +139,40 @@ class ConstantVelocityMotion:
             clock[1] += dx[lay.clk + 1]
         for name, sl in lay.aux:
             aux[name] += dx[sl]
+
+    # --- the ensemble seam (module docstring) --------------------------------------------------
+    def member_states(self, nav, sensor, D, navs) -> None:
+        """The members ``D`` (N, n) about ``nav`` as full states ``navs`` (N, 10)."""
+        p, v = self.layout.pos.start, self.layout.vel.start
+        navs[:] = nav
+        move_positions(navs, D[:, p], D[:, p + 1], D[:, p + 2])
+        navs[:, 4:7] += D[:, v:v + 3]
+
+    def member_rates(self, w_b, D) -> np.ndarray:
+        """No body rates are modelled: every member sees ``w_b``."""
+        return np.ascontiguousarray(np.broadcast_to(np.asarray(w_b, dtype=float), (D.shape[0], 3)))
+
+    def propagate_members(self, inputs, D, substeps, T, Dn) -> None:
+        """Members about the nominal before the step moved by their velocities over ``T`` [s]
+        with the nominal (a reference, moved the same way), differenced back into ``Dn``.
+        ``substeps`` is not used (one move per step)."""
+        N = D.shape[0]
+        Dz = np.zeros((N + 1, D.shape[1]))
+        Dz[:N] = D
+        navs = np.empty((N + 1, 10))
+        self.member_states(inputs.nav0, inputs.sensor, Dz, navs)
+        if T > 0.0:
+            move_positions(navs, navs[:, 4] * T, navs[:, 5] * T, navs[:, 6] * T)
+        self.difference_members(navs[:N], navs[N], D, Dn)
+        pass_clock_and_aux(self.layout, D, Dn, T)
+
+    def difference_members(self, navs, ref, D, Dn) -> None:
+        """``Dn`` (N, n): the full states ``navs`` (N, 10) as error states about ``ref`` (position
+        in NED metres, velocity); the other blocks copied from ``D``."""
+        p, v = self.layout.pos.start, self.layout.vel.start
+        Dn[:] = D
+        Dn[:, p:p + 3] = position_difference(navs, ref)
+        Dn[:, v:v + 3] = navs[:, 4:7] - ref[4:7]
 
     def warm_up(self) -> None:
         """Nothing to compile (numpy)."""

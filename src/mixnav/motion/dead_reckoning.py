@@ -32,6 +32,14 @@ exactly for the frozen ``F``; ``Qd = G Qc G^T dt``. Feedback: position moved
 by NED metres (the INS convention), heading turned about down (``C_new =
 exp([phi x]) C`` with ``phi = [0, 0, dpsi]``), velocity rotated and rescaled,
 ``k``, ``b``, clock and auxiliary estimates incremented.
+
+The ensemble seam (:class:`~mixnav.engine.protocols.MotionModel`): a member ``D_j`` is
+the nominal with that feedback applied (``member_states``); over a step every member
+dead-reckons the block's increments with its own heading, scale and bias as the
+nominal does, and its propagated error state is its NED position and heading
+difference from the nominal dead-reckoned the same way, ``dk`` and ``db`` kept
+(random walks), the clock's bias moved by its drift (numpy, vectorised over members;
+every increment is integrated: ``substeps`` is not used).
 """
 
 from __future__ import annotations
@@ -44,7 +52,8 @@ import numpy as np
 from ..data import InitialState, OdometryIncrements
 from ..errors import ArgumentError
 from ..ins.error_model import ClockModel, StateBlock, StateLayout
-from ._common import clock_blocks, initial_diagonal, move_position, propagate_covariance
+from ._common import (clock_blocks, initial_diagonal, move_position, move_positions, pass_clock_and_aux,
+                      position_difference, propagate_covariance)
 
 #: the dead-reckoning core: position, heading, speed scale, yaw-rate bias
 DR_CORE = (
@@ -136,6 +145,11 @@ def heading_of(nav: np.ndarray) -> float:
 
 def set_heading(nav: np.ndarray, psi: float) -> None:
     nav[0], nav[1], nav[2], nav[3] = math.cos(0.5 * psi), 0.0, 0.0, math.sin(0.5 * psi)
+
+
+def _wrap(a):
+    """Angles [rad] into [-pi, pi)."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 class DeadReckoningMotion:
@@ -258,6 +272,58 @@ class DeadReckoningMotion:
             clock[1] += dx[lay.clk + 1]
         for name, sl in lay.aux:
             aux[name] += dx[sl]
+
+    # --- the ensemble seam (module docstring) --------------------------------------------------
+    def member_states(self, nav, sensor, D, navs) -> None:
+        """The members ``D`` (N, n) about ``nav`` (and the speed scale ``sensor[0]``) as full
+        states ``navs`` (N, 10): :meth:`inject` on copies of ``nav``, vectorised."""
+        navs[:] = nav
+        move_positions(navs, D[:, 0], D[:, 1], D[:, 2])
+        d_psi = D[:, 3]
+        psi = heading_of(nav) + d_psi
+        navs[:, 0], navs[:, 1], navs[:, 2], navs[:, 3] = np.cos(0.5 * psi), 0.0, 0.0, np.sin(0.5 * psi)
+        k = float(sensor[0])
+        r = (1.0 + k + D[:, 4]) / (1.0 + k) if 1.0 + k != 0.0 else np.ones(D.shape[0])
+        c, s = np.cos(d_psi), np.sin(d_psi)
+        vn, ve = nav[4], nav[5]
+        navs[:, 4], navs[:, 5] = r * (c * vn - s * ve), r * (s * vn + c * ve)
+
+    def member_rates(self, w_b, D) -> np.ndarray:
+        """``w_b`` with each member's yaw-rate bias deviation taken off its heading rate."""
+        w = np.array(np.broadcast_to(np.asarray(w_b, dtype=float), (D.shape[0], 3)))
+        w[:, 2] -= D[:, 5]
+        return w
+
+    def propagate_members(self, inputs, D, substeps, T, Dn) -> None:
+        """Members about the nominal before the step dead-reckoned over its increments with a
+        reference (the nominal, the same way), differenced back into ``Dn`` (module docstring)."""
+        N = D.shape[0]
+        Dz = np.zeros((N + 1, D.shape[1]))
+        Dz[:N] = D
+        navs = np.empty((N + 1, 10))
+        nav0, sensor = inputs.nav0, inputs.sensor
+        self.member_states(nav0, sensor, Dz, navs)
+        psi = heading_of(nav0) + Dz[:, 3]
+        g = 1.0 + sensor[0] + Dz[:, 4]
+        b = sensor[1] + Dz[:, 5]
+        for i in range(len(inputs.dt)):
+            h = float(inputs.dt[i])
+            ds = float(inputs.dvel[i, 0])
+            dpsi = float(inputs.dtheta[i, 2]) - b * h
+            pm = psi + 0.5 * dpsi
+            move_positions(navs, g * ds * np.cos(pm), g * ds * np.sin(pm), 0.0)
+            psi = psi + dpsi
+        Dn[:] = D
+        Dn[:, 0:3] = position_difference(navs[:N], navs[N])
+        Dn[:, 3] = _wrap(psi[:N] - psi[N])
+        pass_clock_and_aux(self.layout, D, Dn, T)
+
+    def difference_members(self, navs, ref, D, Dn) -> None:
+        """``Dn`` (N, n): the full states ``navs`` (N, 10) as error states about ``ref`` (NED
+        metres, heading); the other blocks (scale, bias, clock, auxiliary) copied from ``D``."""
+        Dn[:] = D
+        Dn[:, 0:3] = position_difference(navs, ref)
+        Dn[:, 3] = _wrap(2.0 * np.arctan2(navs[:, 3], navs[:, 0]) - heading_of(ref))
 
     def warm_up(self) -> None:
         """Nothing to compile (numpy)."""
