@@ -34,6 +34,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .._jit import serial_and_parallel
 from ..geodesy.earth import A_WGS84, E2_WGS84
 from ..ins._error_kernels import L_BA, L_BG, L_CLK, L_SA, L_SG
 from ..ins._error_kernels import apply_feedback as _apply_feedback
@@ -420,16 +421,15 @@ def _sum_cov(part, P):
             P[b, a] = s
 
 
-@njit(cache=True, parallel=True)
-def pf_moments(D, w, x, P, part):
+def _pf_moments(D, w, x, P, part):
     """``x = sum_j w_j D_j``, ``P = sum_j w_j (D_j - x)(D_j - x)^T`` of ``D`` (N, n).
 
     Two passes (the mean, then the centred products: a sum of positive semidefinite
     terms, so a collapsed or diverged cloud cannot give an indefinite covariance by
     cancellation, as a one-pass ``S2 - S1 S1^T`` did on a diverging loose-demo run), each
-    over :data:`CHUNKS` fixed chunks of particles in parallel (partial sums in ``part``
-    (CHUNKS, >= n + n n), scratch) added in chunk order serially: the result does not
-    depend on the thread count."""
+    over :data:`CHUNKS` fixed chunks of particles (in parallel in :func:`pf_moments`;
+    partial sums in ``part`` (CHUNKS, >= n + n n), scratch) added in chunk order serially:
+    the result does not depend on the thread count."""
     for c in prange(CHUNKS):
         _mean_chunk(c, D, w, part)
     _sum_mean(part, x)
@@ -438,15 +438,7 @@ def pf_moments(D, w, x, P, part):
     _sum_cov(part, P)
 
 
-@njit(cache=True)
-def pf_moments_serial(D, w, x, P, part):
-    """:func:`pf_moments`, serial (the same chunks, the same sums: bitwise equal)."""
-    for c in range(CHUNKS):
-        _mean_chunk(c, D, w, part)
-    _sum_mean(part, x)
-    for c in range(CHUNKS):
-        _cov_chunk(c, D, w, x, part)
-    _sum_cov(part, P)
+pf_moments_serial, pf_moments = serial_and_parallel(_pf_moments, "pf_moments")
 
 
 @njit(cache=True, error_model="numpy")
@@ -482,22 +474,17 @@ def _jitter_chunk(c, D, idx, a, h, x, hL, ZT, Dn):
             Dn[j0 + t, i] = B[i, t]
 
 
-@njit(cache=True, parallel=True)
-def pf_jitter(D, idx, a, h, x, hL, ZT, Dn):
+def _pf_jitter(D, idx, a, h, x, hL, ZT, Dn):
     """The resampled particles ``D[idx]`` with the Liu-West jitter, into ``Dn``:
     ``Dn[j] = a D[idx_j] + (1 - a) x + (h L) z_j`` (``hL`` (n, n) the lower-triangular
     ``h L``, ``L L^T`` the weighted covariance: only its lower triangle is read; ``ZT``
     (n, N) standard normals drawn by the caller, ``z_j`` its column ``j``); ``h = 0``:
-    the plain copy. Parallel over the :data:`CHUNKS` chunks."""
+    the plain copy. Over the :data:`CHUNKS` chunks (in parallel in :func:`pf_jitter`)."""
     for c in prange(CHUNKS):
         _jitter_chunk(c, D, idx, a, h, x, hL, ZT, Dn)
 
 
-@njit(cache=True)
-def pf_jitter_serial(D, idx, a, h, x, hL, ZT, Dn):
-    """:func:`pf_jitter`, serial."""
-    for c in range(CHUNKS):
-        _jitter_chunk(c, D, idx, a, h, x, hL, ZT, Dn)
+pf_jitter_serial, pf_jitter = serial_and_parallel(_pf_jitter, "pf_jitter")
 
 
 @njit(cache=True, inline="always")
@@ -512,19 +499,15 @@ def _linear_one(j, D, FT, SQT, Z, Dn):
             Dn[j, i] += FT[b, i] * db + SQT[b, i] * zb
 
 
-@njit(cache=True, parallel=True)
-def pf_linear_step(D, FT, SQT, Z, Dn):
+def _pf_linear_step(D, FT, SQT, Z, Dn):
     """``Dn[j] = F D[j] + SQ z_j`` (``FT = F^T``, ``SQT = SQ^T``, ``Z`` (N, n) standard
-    normals): the propagation of a linear-Gaussian model, parallel over particles."""
+    normals): the propagation of a linear-Gaussian model (over particles in parallel in
+    :func:`pf_linear_step`)."""
     for j in prange(D.shape[0]):
         _linear_one(j, D, FT, SQT, Z, Dn)
 
 
-@njit(cache=True)
-def pf_linear_step_serial(D, FT, SQT, Z, Dn):
-    """:func:`pf_linear_step`, serial."""
-    for j in range(D.shape[0]):
-        _linear_one(j, D, FT, SQT, Z, Dn)
+pf_linear_step_serial, pf_linear_step = serial_and_parallel(_pf_linear_step, "pf_linear_step")
 
 
 # --- the fused update for loose GNSS (position, and velocity when the fixes have one) ----------
@@ -986,10 +969,13 @@ class Kernels:
 
     def __init__(self, parallel: bool):
         self.parallel = bool(parallel)
-        sfx = "" if parallel else "_serial"
-        g = globals()
-        for name in ("pf_step", "pf_member_navs", "pf_moments", "pf_jitter", "pf_linear_step", "pf_loose_update"):
-            setattr(self, name[3:], g[name + sfx])
+        pick = 1 if self.parallel else 0
+        self.step = (pf_step_serial, pf_step)[pick]
+        self.member_navs = (pf_member_navs_serial, pf_member_navs)[pick]
+        self.loose_update = (pf_loose_update_serial, pf_loose_update)[pick]
+        self.moments = (pf_moments_serial, pf_moments)[pick]
+        self.jitter = (pf_jitter_serial, pf_jitter)[pick]
+        self.linear_step = (pf_linear_step_serial, pf_linear_step)[pick]
 
 
 SERIAL = Kernels(False)
