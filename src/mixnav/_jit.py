@@ -15,7 +15,8 @@ the parallel machine code from the cache, or the other way round
 from __future__ import annotations
 
 import types
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 from numba import njit
 

@@ -15,14 +15,19 @@
   prediction added to its log-weight, normalised (weights, ESS), and the predictions'
   prior-weighted moments and the NIS, in one pass.
 - :func:`pf_moments`: the weighted mean and covariance of the particles.
-- :func:`pf_jitter`: the resampled particles with the Liu-West kernel jitter.
+- :func:`pf_jitter`: the resampled particles with the Liu-West kernel jitter;
+  :func:`pf_jitter_drawn` the same with its normals drawn in the kernel (:mod:`._normals`).
+
+Each kernel with a parallel loop is one body (``prange``) compiled twice by
+:func:`mixnav._jit.serial_and_parallel`: ``name`` (parallel) and ``name_serial``.
 
 Threads (docs/particle.md, "Speed"): the per-particle loops run over ``prange``
 (numba ``parallel=True``); each particle's arithmetic depends on its own row
 only (and on the nominal's recorded latitudes' sin and cos, written before the
 parallel loop), and every random number is drawn by the caller from the estimator's numpy
-Generator before the call, so a seed gives the same particles bit for bit on any
-thread count (tested). The sums over particles (moments) are split into a fixed
+Generator before the call (the jitter's normals: from one stream per fixed chunk of
+particles, seeded by the caller from that Generator), so a seed gives the same particles
+bit for bit on any thread count (tested). The sums over particles (moments) are split into a fixed
 number of chunks (:data:`CHUNKS`, independent of the thread count) whose partial
 sums are added in order, serially: also thread-count independent.
 """
@@ -42,6 +47,7 @@ from ..ins._kernels import NEAR, RECORD, SMALL_DLAT, TRIG_POINTS, mechanize_core
 from ..ins._kernels import sincos_near as _sincos_near
 from ..ins._kernels import sincos_series as _sincos_series
 from ..linalg import cholesky_lower
+from ._normals import standard_normals_into
 from ._ukf_kernels import merge_block_into
 from ._ukf_kernels import nav_difference as _nav_difference
 from ._ukf_kernels import propagate_members
@@ -485,6 +491,33 @@ def _pf_jitter(D, idx, a, h, x, hL, ZT, Dn):
 
 
 pf_jitter_serial, pf_jitter = serial_and_parallel(_pf_jitter, "pf_jitter")
+
+
+@njit(cache=True, error_model="numpy")
+def _draw_chunk(c, seeds, ZT):
+    """Chunk ``c``'s columns of ``ZT`` (n, N) filled with standard normals from the
+    chunk's own stream, started at ``seeds[c]`` (state by state, particle by particle)."""
+    N = ZT.shape[1]
+    j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
+    spill = np.empty(1, dtype=np.uint64)
+    s = seeds[c]
+    for b in range(ZT.shape[0]):
+        s = standard_normals_into(s, ZT[b, j0:j1], spill)
+
+
+def _pf_jitter_drawn(D, idx, a, h, x, hL, seeds, ZT, Dn):
+    """:func:`pf_jitter` with its normals drawn here: chunk ``c`` fills its columns of
+    ``ZT`` (n, N) from the stream ``seeds[c]`` (:data:`CHUNKS` uint64 seeds from the
+    caller's Generator; :mod:`._normals`), then jitters its particles (while its normals
+    are in cache). ``h = 0``: the plain copy, no draws. The same particles on any
+    thread count (each chunk's stream is its own)."""
+    for c in prange(CHUNKS):
+        if h != 0.0:
+            _draw_chunk(c, seeds, ZT)
+        _jitter_chunk(c, D, idx, a, h, x, hL, ZT, Dn)
+
+
+pf_jitter_drawn_serial, pf_jitter_drawn = serial_and_parallel(_pf_jitter_drawn, "pf_jitter_drawn")
 
 
 @njit(cache=True, inline="always")
@@ -975,6 +1008,7 @@ class Kernels:
         self.loose_update = (pf_loose_update_serial, pf_loose_update)[pick]
         self.moments = (pf_moments_serial, pf_moments)[pick]
         self.jitter = (pf_jitter_serial, pf_jitter)[pick]
+        self.jitter_drawn = (pf_jitter_drawn_serial, pf_jitter_drawn)[pick]
         self.linear_step = (pf_linear_step_serial, pf_linear_step)[pick]
 
 

@@ -30,7 +30,8 @@ effective sample size ``1 / sum w^2`` decides a systematic resampling (ESS <
 ``resample_threshold`` N); with ``roughening = h > 0`` (on by default, 0.9: plain SIR
 diverges on loose-demo, docs/particle.md) the Liu-West kernel jitter then
 re-diversifies the particles (:meth:`ParticleEstimator._resample`; the Cholesky factor
-of the weighted covariance, the normals drawn by numpy into a preallocated buffer).
+of the weighted covariance, the normals drawn inside the jitter kernel: a ziggurat on
+per-chunk SplitMix64 streams seeded from the estimator's generator, ``_normals.py``).
 The weighted mean deviation (computed before the
 resampling) is returned as the correction; the engine feeds it back and calls
 :meth:`recentre`, which shifts every particle. The recorded mean and covariance are
@@ -170,6 +171,7 @@ class ParticleEstimator(NoCloneEstimator):
         # every per-step array is allocated here once (O(N n)); steps swap buffers
         self._Dn = np.empty((N, n))
         self._Z = np.empty((N, n))
+        self._no_seeds = np.zeros(CHUNKS, dtype=np.uint64)
         self._logw_new = np.empty(N)
         self._idx = np.empty(N, dtype=np.int64)
         self._w_new = np.empty(N)
@@ -317,10 +319,12 @@ class ParticleEstimator(NoCloneEstimator):
                 self.counts["pf_jitter_root"] += 1
                 L[:, :] = np.linalg.qr(_sqrt_psd(self._P).T, mode="r").T
             L *= h
-            ZT = self.rng.standard_normal(out=self._Z).reshape((self.n, self.N))   # z_j: column j
+            # the normals are drawn in the kernel, one stream per chunk seeded from ours
+            seeds = self.rng.integers(0, 2 ** 64, size=CHUNKS, dtype=np.uint64)
         else:
-            L = ZT = self._scratch
-        self._k.jitter(self.D, idx, float(np.sqrt(1.0 - h * h)), h, self._x, L, ZT, self._Dn)
+            L, seeds = self._scratch, self._no_seeds
+        ZT = self._Z.reshape((self.n, self.N))      # z_j: column j
+        self._k.jitter_drawn(self.D, idx, float(np.sqrt(1.0 - h * h)), h, self._x, L, seeds, ZT, self._Dn)
         self.D, self._Dn = self._Dn, self.D
         self.logw[:] = 0.0
         self.w[:] = 1.0 / self.N
@@ -383,7 +387,8 @@ class ParticleEstimator(NoCloneEstimator):
         pf_systematic(w, 0.5, np.empty(N, dtype=np.int64))
         k.moments(D, w, np.empty(n), np.empty((n, n)), np.empty((CHUNKS, n + n * n)))
         k.moments(np.zeros((N, 3)), w, np.empty(3), np.empty((3, 3)), np.empty((CHUNKS, n + n * n)))
-        k.jitter(D, np.zeros(N, dtype=np.int64), 0.5, 0.5, np.zeros(n), np.eye(n), D.T.copy(), np.empty((N, n)))
+        k.jitter_drawn(D, np.zeros(N, dtype=np.int64), 0.5, 0.5, np.zeros(n), np.eye(n), np.zeros(CHUNKS, np.uint64),
+                       D.T.copy(), np.empty((N, n)))
         k.linear_step(D, np.eye(n), np.eye(n), D, np.empty((N, n)))
         fix = np.r_[nav[7:10], np.ones(3), np.zeros(3), np.ones(3)]
         for m in (3, 6):
