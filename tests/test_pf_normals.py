@@ -119,3 +119,31 @@ def test_liu_west_jitter_keeps_mean_and_covariance():
     C = np.cov(Dn.T)
     corr_err = (C - Pw) / np.outer(sd, sd)
     assert np.max(np.abs(corr_err)) < 6 * math.sqrt(2.0 / N)
+
+
+def test_linear_step_drawn_is_the_linear_step_of_its_normals_on_any_thread_count():
+    import numba
+    rng = np.random.default_rng(5)
+    N, n = 1001, 4
+    D = rng.standard_normal((N, n))
+    FT = rng.standard_normal((n, n))
+    SQT = np.linalg.cholesky(np.eye(n) + 0.3).T
+    seeds = rng.integers(0, 2 ** 64, size=K.CHUNKS, dtype=np.uint64)
+    Z, Dn = np.empty((N, n)), np.empty((N, n))
+    K.pf_linear_step_drawn_serial(D, FT, SQT, seeds, Z, Dn)
+    ref = np.empty((N, n))
+    K.pf_linear_step_serial(D, FT, SQT, Z, ref)
+    assert np.array_equal(Dn, ref)
+    for c in range(K.CHUNKS):           # chunk c's rows are its own stream's, row by row
+        j0, j1 = c * N // K.CHUNKS, (c + 1) * N // K.CHUNKS
+        z = np.empty((j1 - j0, n))
+        fill_standard_normal(seeds[c], z)
+        assert np.array_equal(Z[j0:j1], z)
+    old = numba.get_num_threads()
+    numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+    try:
+        Dn2 = np.empty((N, n))
+        K.pf_linear_step_drawn(D, FT, SQT, seeds, np.empty((N, n)), Dn2)
+    finally:
+        numba.set_num_threads(old)
+    assert np.array_equal(Dn2, Dn)

@@ -543,6 +543,23 @@ def _pf_linear_step(D, FT, SQT, Z, Dn):
 pf_linear_step_serial, pf_linear_step = serial_and_parallel(_pf_linear_step, "pf_linear_step")
 
 
+def _pf_linear_step_drawn(D, FT, SQT, seeds, Z, Dn):
+    """:func:`pf_linear_step` with its normals drawn here: chunk ``c`` of the
+    :data:`CHUNKS` fills its rows of ``Z`` (N, n) from the stream ``seeds[c]`` (as
+    :func:`pf_jitter_drawn`), then propagates its particles. The same particles on any
+    thread count."""
+    N = D.shape[0]
+    for c in prange(CHUNKS):
+        j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
+        standard_normals_into(seeds[c], Z[j0:j1].reshape(-1), np.empty(1, dtype=np.uint64))
+        for j in range(j0, j1):
+            _linear_one(j, D, FT, SQT, Z, Dn)
+
+
+pf_linear_step_drawn_serial, pf_linear_step_drawn = serial_and_parallel(_pf_linear_step_drawn,
+                                                                        "pf_linear_step_drawn")
+
+
 # --- the fused update for loose GNSS (position, and velocity when the fixes have one) ----------
 
 #: |rotation vector|^2 [rad^2] below which Rodrigues' coefficients come from their series
@@ -1010,6 +1027,7 @@ class Kernels:
         self.jitter = (pf_jitter_serial, pf_jitter)[pick]
         self.jitter_drawn = (pf_jitter_drawn_serial, pf_jitter_drawn)[pick]
         self.linear_step = (pf_linear_step_serial, pf_linear_step)[pick]
+        self.linear_step_drawn = (pf_linear_step_drawn_serial, pf_linear_step_drawn)[pick]
 
 
 SERIAL = Kernels(False)

@@ -213,11 +213,13 @@ class ParticleEstimator(NoCloneEstimator):
         """``D <- f(D) + w``, ``w ~ N(0, Qd)`` from the estimator's stream: ``f`` the
         mechanization (``inp`` the step inputs) or, with ``F`` given, the linear map
         ``D F^T`` (tests on linear-Gaussian models)."""
-        Z = self.rng.standard_normal(out=self._Z)
         SQT = self._noise_root(Qd)
-        if F is not None:
-            self._k.linear_step(self.D, np.ascontiguousarray(np.asarray(F, dtype=float).T), SQT, Z, self._Dn)
+        if F is not None:       # the normals drawn in the kernel, one stream per chunk seeded from ours
+            seeds = self.rng.integers(0, 2 ** 64, size=CHUNKS, dtype=np.uint64)
+            self._k.linear_step_drawn(self.D, np.ascontiguousarray(np.asarray(F, dtype=float).T), SQT, seeds,
+                                      self._Z, self._Dn)
         else:
+            Z = self.rng.standard_normal(out=self._Z)
             K = len(inp.dt)
             S = K if self.substeps <= 0 or self.substeps >= K else self.substeps
             if S > len(self._g):
@@ -389,7 +391,7 @@ class ParticleEstimator(NoCloneEstimator):
         k.moments(np.zeros((N, 3)), w, np.empty(3), np.empty((3, 3)), np.empty((CHUNKS, n + n * n)))
         k.jitter_drawn(D, np.zeros(N, dtype=np.int64), 0.5, 0.5, np.zeros(n), np.eye(n), np.zeros(CHUNKS, np.uint64),
                        D.T.copy(), np.empty((N, n)))
-        k.linear_step(D, np.eye(n), np.eye(n), D, np.empty((N, n)))
+        k.linear_step_drawn(D, np.eye(n), np.eye(n), np.zeros(CHUNKS, np.uint64), np.empty((N, n)), np.empty((N, n)))
         fix = np.r_[nav[7:10], np.ones(3), np.zeros(3), np.ones(3)]
         for m in (3, 6):
             k.loose_update(D, lay.as_array(), nav, np.zeros(3), np.zeros(3), fix, np.zeros(N), w, 1e8,
