@@ -16,7 +16,9 @@
   prior-weighted moments and the NIS, in one pass.
 - :func:`pf_moments`: the weighted mean and covariance of the particles.
 - :func:`pf_jitter`: the resampled particles with the Liu-West kernel jitter;
-  :func:`pf_jitter_drawn` the same with its normals drawn in the kernel (:mod:`._normals`).
+  :func:`pf_jitter_drawn` the same with its normals drawn in the kernel (:mod:`._normals`),
+  the one the estimator calls (``pf_jitter``: the reference it is tested against);
+  likewise :func:`pf_linear_step_drawn` and :func:`pf_linear_step` (linear-Gaussian models).
 
 Each kernel with a parallel loop is one body (``prange``) compiled twice by
 :func:`mixnav._jit.serial_and_parallel`: ``name`` (parallel) and ``name_serial``.
@@ -1024,9 +1026,7 @@ class Kernels:
         self.member_navs = (pf_member_navs_serial, pf_member_navs)[pick]
         self.loose_update = (pf_loose_update_serial, pf_loose_update)[pick]
         self.moments = (pf_moments_serial, pf_moments)[pick]
-        self.jitter = (pf_jitter_serial, pf_jitter)[pick]
         self.jitter_drawn = (pf_jitter_drawn_serial, pf_jitter_drawn)[pick]
-        self.linear_step = (pf_linear_step_serial, pf_linear_step)[pick]
         self.linear_step_drawn = (pf_linear_step_drawn_serial, pf_linear_step_drawn)[pick]
 
 
