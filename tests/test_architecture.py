@@ -15,6 +15,7 @@ SRC = Path(__file__).resolve().parents[1] / "src" / "mixnav"
 #: floor of each top-level module or package of mixnav (ARCHITECTURE.md, "Floors")
 FLOORS = {
     "errors": 0, "units": 0, "linalg": 0, "_version": 0,
+    "_jit": 0,  # serial_and_parallel: the kernels' twin factory (numba only)
     "attitude": 1, "geodesy": 1, "data": 2,
     "ins": 3, "motion": 3, "gnss": 3, "noise": 3, "io": 3, "alignment": 4,
     "measurements": 4,

@@ -15,14 +15,21 @@
   prediction added to its log-weight, normalised (weights, ESS), and the predictions'
   prior-weighted moments and the NIS, in one pass.
 - :func:`pf_moments`: the weighted mean and covariance of the particles.
-- :func:`pf_jitter`: the resampled particles with the Liu-West kernel jitter.
+- :func:`pf_jitter`: the resampled particles with the Liu-West kernel jitter;
+  :func:`pf_jitter_drawn` the same with its normals drawn in the kernel (:mod:`._normals`),
+  the one the estimator calls (``pf_jitter``: the reference it is tested against);
+  likewise :func:`pf_linear_step_drawn` and :func:`pf_linear_step` (linear-Gaussian models).
+
+Each kernel with a parallel loop is one body (``prange``) compiled twice by
+:func:`mixnav._jit.serial_and_parallel`: ``name`` (parallel) and ``name_serial``.
 
 Threads (docs/particle.md, "Speed"): the per-particle loops run over ``prange``
 (numba ``parallel=True``); each particle's arithmetic depends on its own row
 only (and on the nominal's recorded latitudes' sin and cos, written before the
 parallel loop), and every random number is drawn by the caller from the estimator's numpy
-Generator before the call, so a seed gives the same particles bit for bit on any
-thread count (tested). The sums over particles (moments) are split into a fixed
+Generator before the call (the jitter's normals: from one stream per fixed chunk of
+particles, seeded by the caller from that Generator), so a seed gives the same particles
+bit for bit on any thread count (tested). The sums over particles (moments) are split into a fixed
 number of chunks (:data:`CHUNKS`, independent of the thread count) whose partial
 sums are added in order, serially: also thread-count independent.
 """
@@ -34,6 +41,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .._jit import serial_and_parallel
 from ..geodesy.earth import A_WGS84, E2_WGS84
 from ..ins._error_kernels import L_BA, L_BG, L_CLK, L_SA, L_SG
 from ..ins._error_kernels import apply_feedback as _apply_feedback
@@ -44,6 +52,7 @@ from ..linalg import cholesky_lower
 from ..ins._batch_kernels import merge_block_into
 from ..ins._batch_kernels import nav_difference as _nav_difference
 from ..ins._batch_kernels import propagate_members
+from ._normals import standard_normals_into
 
 # The shared maps, compiled again to be inlined into the per-particle loops (the same
 # source, so bitwise the same arithmetic; ~10 % faster than a call per particle, which
@@ -420,16 +429,15 @@ def _sum_cov(part, P):
             P[b, a] = s
 
 
-@njit(cache=True, parallel=True)
-def pf_moments(D, w, x, P, part):
+def _pf_moments(D, w, x, P, part):
     """``x = sum_j w_j D_j``, ``P = sum_j w_j (D_j - x)(D_j - x)^T`` of ``D`` (N, n).
 
     Two passes (the mean, then the centred products: a sum of positive semidefinite
     terms, so a collapsed or diverged cloud cannot give an indefinite covariance by
     cancellation, as a one-pass ``S2 - S1 S1^T`` did on a diverging loose-demo run), each
-    over :data:`CHUNKS` fixed chunks of particles in parallel (partial sums in ``part``
-    (CHUNKS, >= n + n n), scratch) added in chunk order serially: the result does not
-    depend on the thread count."""
+    over :data:`CHUNKS` fixed chunks of particles (in parallel in :func:`pf_moments`;
+    partial sums in ``part`` (CHUNKS, >= n + n n), scratch) added in chunk order serially:
+    the result does not depend on the thread count."""
     for c in prange(CHUNKS):
         _mean_chunk(c, D, w, part)
     _sum_mean(part, x)
@@ -438,15 +446,7 @@ def pf_moments(D, w, x, P, part):
     _sum_cov(part, P)
 
 
-@njit(cache=True)
-def pf_moments_serial(D, w, x, P, part):
-    """:func:`pf_moments`, serial (the same chunks, the same sums: bitwise equal)."""
-    for c in range(CHUNKS):
-        _mean_chunk(c, D, w, part)
-    _sum_mean(part, x)
-    for c in range(CHUNKS):
-        _cov_chunk(c, D, w, x, part)
-    _sum_cov(part, P)
+pf_moments_serial, pf_moments = serial_and_parallel(_pf_moments, "pf_moments")
 
 
 @njit(cache=True, error_model="numpy")
@@ -482,22 +482,44 @@ def _jitter_chunk(c, D, idx, a, h, x, hL, ZT, Dn):
             Dn[j0 + t, i] = B[i, t]
 
 
-@njit(cache=True, parallel=True)
-def pf_jitter(D, idx, a, h, x, hL, ZT, Dn):
+def _pf_jitter(D, idx, a, h, x, hL, ZT, Dn):
     """The resampled particles ``D[idx]`` with the Liu-West jitter, into ``Dn``:
     ``Dn[j] = a D[idx_j] + (1 - a) x + (h L) z_j`` (``hL`` (n, n) the lower-triangular
     ``h L``, ``L L^T`` the weighted covariance: only its lower triangle is read; ``ZT``
     (n, N) standard normals drawn by the caller, ``z_j`` its column ``j``); ``h = 0``:
-    the plain copy. Parallel over the :data:`CHUNKS` chunks."""
+    the plain copy. Over the :data:`CHUNKS` chunks (in parallel in :func:`pf_jitter`)."""
     for c in prange(CHUNKS):
         _jitter_chunk(c, D, idx, a, h, x, hL, ZT, Dn)
 
 
-@njit(cache=True)
-def pf_jitter_serial(D, idx, a, h, x, hL, ZT, Dn):
-    """:func:`pf_jitter`, serial."""
-    for c in range(CHUNKS):
+pf_jitter_serial, pf_jitter = serial_and_parallel(_pf_jitter, "pf_jitter")
+
+
+@njit(cache=True, error_model="numpy")
+def _draw_chunk(c, seeds, ZT):
+    """Chunk ``c``'s columns of ``ZT`` (n, N) filled with standard normals from the
+    chunk's own stream, started at ``seeds[c]`` (state by state, particle by particle)."""
+    N = ZT.shape[1]
+    j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
+    spill = np.empty(1, dtype=np.uint64)
+    s = seeds[c]
+    for b in range(ZT.shape[0]):
+        s = standard_normals_into(s, ZT[b, j0:j1], spill)
+
+
+def _pf_jitter_drawn(D, idx, a, h, x, hL, seeds, ZT, Dn):
+    """:func:`pf_jitter` with its normals drawn here: chunk ``c`` fills its columns of
+    ``ZT`` (n, N) from the stream ``seeds[c]`` (:data:`CHUNKS` uint64 seeds from the
+    caller's Generator; :mod:`._normals`), then jitters its particles (while its normals
+    are in cache). ``h = 0``: the plain copy, no draws. The same particles on any
+    thread count (each chunk's stream is its own)."""
+    for c in prange(CHUNKS):
+        if h != 0.0:
+            _draw_chunk(c, seeds, ZT)
         _jitter_chunk(c, D, idx, a, h, x, hL, ZT, Dn)
+
+
+pf_jitter_drawn_serial, pf_jitter_drawn = serial_and_parallel(_pf_jitter_drawn, "pf_jitter_drawn")
 
 
 @njit(cache=True, inline="always")
@@ -512,19 +534,32 @@ def _linear_one(j, D, FT, SQT, Z, Dn):
             Dn[j, i] += FT[b, i] * db + SQT[b, i] * zb
 
 
-@njit(cache=True, parallel=True)
-def pf_linear_step(D, FT, SQT, Z, Dn):
+def _pf_linear_step(D, FT, SQT, Z, Dn):
     """``Dn[j] = F D[j] + SQ z_j`` (``FT = F^T``, ``SQT = SQ^T``, ``Z`` (N, n) standard
-    normals): the propagation of a linear-Gaussian model, parallel over particles."""
+    normals): the propagation of a linear-Gaussian model (over particles in parallel in
+    :func:`pf_linear_step`)."""
     for j in prange(D.shape[0]):
         _linear_one(j, D, FT, SQT, Z, Dn)
 
 
-@njit(cache=True)
-def pf_linear_step_serial(D, FT, SQT, Z, Dn):
-    """:func:`pf_linear_step`, serial."""
-    for j in range(D.shape[0]):
-        _linear_one(j, D, FT, SQT, Z, Dn)
+pf_linear_step_serial, pf_linear_step = serial_and_parallel(_pf_linear_step, "pf_linear_step")
+
+
+def _pf_linear_step_drawn(D, FT, SQT, seeds, Z, Dn):
+    """:func:`pf_linear_step` with its normals drawn here: chunk ``c`` of the
+    :data:`CHUNKS` fills its rows of ``Z`` (N, n) from the stream ``seeds[c]`` (as
+    :func:`pf_jitter_drawn`), then propagates its particles. The same particles on any
+    thread count."""
+    N = D.shape[0]
+    for c in prange(CHUNKS):
+        j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
+        standard_normals_into(seeds[c], Z[j0:j1].reshape(-1), np.empty(1, dtype=np.uint64))
+        for j in range(j0, j1):
+            _linear_one(j, D, FT, SQT, Z, Dn)
+
+
+pf_linear_step_drawn_serial, pf_linear_step_drawn = serial_and_parallel(_pf_linear_step_drawn,
+                                                                        "pf_linear_step_drawn")
 
 
 # --- the fused update for loose GNSS (position, and velocity when the fixes have one) ----------
@@ -986,10 +1021,13 @@ class Kernels:
 
     def __init__(self, parallel: bool):
         self.parallel = bool(parallel)
-        sfx = "" if parallel else "_serial"
-        g = globals()
-        for name in ("pf_step", "pf_member_navs", "pf_moments", "pf_jitter", "pf_linear_step", "pf_loose_update"):
-            setattr(self, name[3:], g[name + sfx])
+        pick = 1 if self.parallel else 0
+        self.step = (pf_step_serial, pf_step)[pick]
+        self.member_navs = (pf_member_navs_serial, pf_member_navs)[pick]
+        self.loose_update = (pf_loose_update_serial, pf_loose_update)[pick]
+        self.moments = (pf_moments_serial, pf_moments)[pick]
+        self.jitter_drawn = (pf_jitter_drawn_serial, pf_jitter_drawn)[pick]
+        self.linear_step_drawn = (pf_linear_step_drawn_serial, pf_linear_step_drawn)[pick]
 
 
 SERIAL = Kernels(False)

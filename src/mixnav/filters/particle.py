@@ -30,7 +30,8 @@ effective sample size ``1 / sum w^2`` decides a systematic resampling (ESS <
 ``resample_threshold`` N); with ``roughening = h > 0`` (on by default, 0.9: plain SIR
 diverges on loose-demo, docs/particle.md) the Liu-West kernel jitter then
 re-diversifies the particles (:meth:`ParticleEstimator._resample`; the Cholesky factor
-of the weighted covariance, the normals drawn by numpy into a preallocated buffer).
+of the weighted covariance, the normals drawn inside the jitter kernel: a ziggurat on
+per-chunk SplitMix64 streams seeded from the estimator's generator, ``_normals.py``).
 The weighted mean deviation (computed before the
 resampling) is returned as the correction; the engine feeds it back and calls
 :meth:`recentre`, which shifts every particle. The recorded mean and covariance are
@@ -181,6 +182,7 @@ class ParticleEstimator(NoCloneEstimator):
         # every per-step array is allocated here once (O(N n)); steps swap buffers
         self._Dn = np.empty((N, n))
         self._Z = np.empty((N, n))
+        self._no_seeds = np.zeros(CHUNKS, dtype=np.uint64)
         self._logw_new = np.empty(N)
         self._idx = np.empty(N, dtype=np.int64)
         self._w_new = np.empty(N)
@@ -222,17 +224,20 @@ class ParticleEstimator(NoCloneEstimator):
         """``D <- f(D) + w``, ``w ~ N(0, Qd)`` from the estimator's stream: ``f`` the
         mechanization (``inp`` the step inputs) or, with ``F`` given, the linear map
         ``D F^T`` (tests on linear-Gaussian models)."""
-        Z = self.rng.standard_normal(out=self._Z)
         SQT = self._noise_root(Qd)
-        if F is not None:
-            self._k.linear_step(self.D, np.ascontiguousarray(np.asarray(F, dtype=float).T), SQT, Z, self._Dn)
-        elif self.layout_array is None:
-            # another motion model: its members' propagation, then the same noise step (F = I)
-            self._sensor = inp.sensor
-            self.motion.propagate_members(inp, self.D, self.substeps, T, self._Dn)
-            self._k.linear_step(self._Dn, self._eye, SQT, Z, self.D)
-            self.D, self._Dn = self._Dn, self.D
+        if F is not None or self.layout_array is None:
+            if F is None:   # another motion model: its members' propagation, then the noise step with F = I
+                self._sensor = inp.sensor
+                self.motion.propagate_members(inp, self.D, self.substeps, T, self._Dn)
+                self.D, self._Dn = self._Dn, self.D
+                FT = self._eye
+            else:
+                FT = np.ascontiguousarray(np.asarray(F, dtype=float).T)
+            # the normals drawn in the kernel, one stream per chunk seeded from ours
+            seeds = self.rng.integers(0, 2 ** 64, size=CHUNKS, dtype=np.uint64)
+            self._k.linear_step_drawn(self.D, FT, SQT, seeds, self._Z, self._Dn)
         else:
+            Z = self.rng.standard_normal(out=self._Z)
             K = len(inp.dt)
             S = K if self.substeps <= 0 or self.substeps >= K else self.substeps
             if S > len(self._g):
@@ -338,10 +343,12 @@ class ParticleEstimator(NoCloneEstimator):
                 self.counts["pf_jitter_root"] += 1
                 L[:, :] = np.linalg.qr(_sqrt_psd(self._P).T, mode="r").T
             L *= h
-            ZT = self.rng.standard_normal(out=self._Z).reshape((self.n, self.N))   # z_j: column j
+            # the normals are drawn in the kernel, one stream per chunk seeded from ours
+            seeds = self.rng.integers(0, 2 ** 64, size=CHUNKS, dtype=np.uint64)
         else:
-            L = ZT = self._scratch
-        self._k.jitter(self.D, idx, float(np.sqrt(1.0 - h * h)), h, self._x, L, ZT, self._Dn)
+            L, seeds = self._scratch, self._no_seeds
+        ZT = self._Z.reshape((self.n, self.N))      # z_j: column j
+        self._k.jitter_drawn(self.D, idx, float(np.sqrt(1.0 - h * h)), h, self._x, L, seeds, ZT, self._Dn)
         self.D, self._Dn = self._Dn, self.D
         self.logw[:] = 0.0
         self.w[:] = 1.0 / self.N
@@ -404,8 +411,9 @@ class ParticleEstimator(NoCloneEstimator):
         pf_systematic(w, 0.5, np.empty(N, dtype=np.int64))
         k.moments(D, w, np.empty(n), np.empty((n, n)), np.empty((CHUNKS, n + n * n)))
         k.moments(np.zeros((N, 3)), w, np.empty(3), np.empty((3, 3)), np.empty((CHUNKS, n + n * n)))
-        k.jitter(D, np.zeros(N, dtype=np.int64), 0.5, 0.5, np.zeros(n), np.eye(n), D.T.copy(), np.empty((N, n)))
-        k.linear_step(D, np.eye(n), np.eye(n), D, np.empty((N, n)))
+        k.jitter_drawn(D, np.zeros(N, dtype=np.int64), 0.5, 0.5, np.zeros(n), np.eye(n), np.zeros(CHUNKS, np.uint64),
+                       D.T.copy(), np.empty((N, n)))
+        k.linear_step_drawn(D, np.eye(n), np.eye(n), np.zeros(CHUNKS, np.uint64), np.empty((N, n)), np.empty((N, n)))
         fix = np.r_[nav[7:10], np.ones(3), np.zeros(3), np.ones(3)]
         for m in (3, 6):
             k.loose_update(D, lay.as_array(), nav, np.zeros(3), np.zeros(3), fix, np.zeros(N), w, 1e8,

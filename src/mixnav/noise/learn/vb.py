@@ -99,6 +99,7 @@ import numba
 import numpy as np
 from scipy.special import digamma, gammaln, logsumexp
 
+from mixnav._jit import serial_and_parallel
 from mixnav.noise.learn import ConvergenceWarning
 from mixnav.noise.learn.base import MixtureLearner
 from mixnav.noise.learn.em import (check_random_state, check_resp, kmeanspp_resp, validate_data,
@@ -553,18 +554,14 @@ def _e_chunk(c, XT, w, Li, b, const, hnu, m, acc_t, acc0, acc1, acc2):
     acc_t[c] = total
 
 
-@numba.njit(cache=True)
-def _e_pass_serial(XT, w, Li, b, const, hnu, m, acc_t, acc0, acc1, acc2):
-    for c in range(acc_t.shape[0]):
-        _e_chunk(c, XT, w, Li, b, const, hnu, m, acc_t, acc0, acc1, acc2)
-
-
-@numba.njit(cache=True, parallel=True)
-def _e_pass_parallel(XT, w, Li, b, const, hnu, m, acc_t, acc0, acc1, acc2):
+def _e_pass(XT, w, Li, b, const, hnu, m, acc_t, acc0, acc1, acc2):
     # chunks are independent and write their own slots; the caller sums the slots in chunk
     # order, so the result does not depend on the number of threads or their schedule
     for c in numba.prange(acc_t.shape[0]):
         _e_chunk(c, XT, w, Li, b, const, hnu, m, acc_t, acc0, acc1, acc2)
+
+
+_e_passes = serial_and_parallel(_e_pass, "_e_pass_parallel", serial_name="_e_pass_serial")
 
 
 @numba.njit(cache=True)
@@ -690,8 +687,7 @@ def _iter_status(alpha, prune_thr, bound, prev, tol_abs):
     return 0
 
 
-@numba.njit(cache=True)
-def _vb_loop_nd(XT, w, alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0, w0inv, tol_abs, max_iter, bounds,
+def _vb_loop(XT, w, alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0, w0inv, tol_abs, max_iter, bounds,
                 prune_thr):
     """Fused VB iteration; updates alpha, beta, nu (K,), m (K, d), winv (K, d, d) in place.
 
@@ -703,8 +699,9 @@ def _vb_loop_nd(XT, w, alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0, w0inv, 
     statistics (N_k, sum r (x - m_k), sum r (x - m_k)(x - m_k)^T, shifted by the current
     m_k for accuracy); then (:func:`_iter_finish`) the chunks' partial sums added in chunk
     order and the M-step (P1 eqs. 22-25).  ``XT`` is the data transposed, (d, n),
-    C-contiguous.  :func:`_vb_loop_nd_parallel` is the same with the chunks on numba's
-    threads (a separate kernel, compiled only when used): the same result bitwise.
+    C-contiguous.  Compiled twice (:func:`~mixnav._jit.serial_and_parallel`):
+    ``_vb_loop_nd`` calls the serial E-pass, ``_vb_loop_nd_parallel`` the one with the
+    chunks on numba's threads (compiled only when used): the same result bitwise.
 
     Returns (n_iter, status): status 0 (max_iter reached), 1 (converged), 2 (a component
     fell below ``prune_thr``) or 3 (a ``W_k^-1`` is not numerically positive definite;
@@ -726,7 +723,7 @@ def _vb_loop_nd(XT, w, alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0, w0inv, 
         ok, theta = _iter_prepare(alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0, L0, lnB0, L, Li, b, const, hnu)
         if not ok:
             return it, 3
-        _e_pass_serial(XT, w, Li, b, const, hnu, m, acc_t, acc0, acc1, acc2)
+        _e_pass(XT, w, Li, b, const, hnu, m, acc_t, acc0, acc1, acc2)
         bound = _iter_finish(acc_t, acc0, acc1, acc2, alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0,
                              w0inv) + theta                                          # P1 eq. (29)
         bounds[it - 1] = bound
@@ -737,34 +734,8 @@ def _vb_loop_nd(XT, w, alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0, w0inv, 
     return max_iter, 0
 
 
-@numba.njit(cache=True)
-def _vb_loop_nd_parallel(XT, w, alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0, w0inv, tol_abs, max_iter,
-                         bounds, prune_thr):
-    """:func:`_vb_loop_nd` with the E-step's chunks on numba's threads (:func:`_e_pass_parallel`)."""
-    d, n = XT.shape
-    K = alpha.shape[0]
-    const, hnu, L, Li, b = np.empty(K), np.empty(K), np.empty((d, d)), np.empty((K, d, d)), np.empty((K, d))
-    n_chunks = (n + _CHUNK - 1) // _CHUNK
-    acc_t, acc0 = np.empty(n_chunks), np.empty((n_chunks, K))
-    acc1, acc2 = np.empty((n_chunks, K, d)), np.empty((n_chunks, K, d, d))
-    L0 = np.empty((d, d))
-    ok, lnB0 = _prior_consts(w0inv, nu0, L0)
-    if not ok:
-        return 1, 3
-    prev = -np.inf
-    for it in range(1, max_iter + 1):
-        ok, theta = _iter_prepare(alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0, L0, lnB0, L, Li, b, const, hnu)
-        if not ok:
-            return it, 3
-        _e_pass_parallel(XT, w, Li, b, const, hnu, m, acc_t, acc0, acc1, acc2)
-        bound = _iter_finish(acc_t, acc0, acc1, acc2, alpha, beta, m, nu, winv, alpha0, beta0, m0, nu0,
-                             w0inv) + theta
-        bounds[it - 1] = bound
-        status = _iter_status(alpha, prune_thr, bound, prev, tol_abs)
-        if status != 0:
-            return it, status
-        prev = bound
-    return max_iter, 0
+_vb_loop_nd, _vb_loop_nd_parallel = serial_and_parallel(_vb_loop, "_vb_loop_nd_parallel", serial_name="_vb_loop_nd",
+                                                        calls={"_e_pass": _e_passes}, parallel=False)
 
 
 def _use_parallel(requested, n):
