@@ -16,7 +16,7 @@ import numpy as np
 
 from mixnav.ins.error_model import get_layout
 from mixnav.ins.imu_model import ImuErrorModel
-from mixnav.ins.motion import StrapdownMotion
+from mixnav.ins.strapdown import StrapdownMotion
 from mixnav.engine.protocols import StepInputs, Transition
 from mixnav.filters.ukf import UnscentedEstimator
 lay = get_layout(21)

@@ -29,7 +29,7 @@ from mixnav.engine import Engine
 from mixnav.filters.ekf import KalmanEstimator
 from mixnav.filters.imm import ImmEstimator
 from mixnav.ins.error_model import get_layout
-from mixnav.ins.motion import StrapdownMotion
+from mixnav.ins.strapdown import StrapdownMotion
 from mixnav.measurements.loose import LooseGnss
 from mixnav.measurements.vehicle import NonHolonomic, Odometer
 from mixnav.sim.scenario import simulate

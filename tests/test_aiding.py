@@ -240,7 +240,7 @@ def test_comma2k19_nhc_and_odometer_bridge_an_outage():
     GNSS-only filter's (measured: 4.2 m against 30.7 m), and the odometer's scale state
     finds the ~1 % low reading the readers' comparison with GNSS speed measured
     (k = -0.0095; the state ends within [-0.015, -0.003] after one minute)."""
-    from mixnav.alignment.motion import align_from_gnss_velocity
+    from mixnav.alignment.in_motion import align_from_gnss_velocity
     from mixnav.data import GnssFixes, InitialState
     from mixnav.experiment.run import solution_table
     from mixnav.filters.ekf import ErrorStateEkf

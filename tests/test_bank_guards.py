@@ -13,7 +13,7 @@ from mixnav.engine import Engine
 from mixnav.filters._bank_kernels import bank_epoch, bank_epoch_guarded
 from mixnav.filters.gmekf import BankEstimator, _padded
 from mixnav.ins.error_model import get_layout
-from mixnav.ins.motion import StrapdownMotion
+from mixnav.ins.strapdown import StrapdownMotion
 from mixnav.measurements.kinds import KINDS, kind_code
 from mixnav.measurements.loose import LooseGnss
 from mixnav.noise.mixture import BankMixtures, StandardMixture

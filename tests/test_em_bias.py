@@ -67,7 +67,7 @@ def test_filter_removes_the_bias_in_a_multipath_window():
     from mixnav.filters.ekf import KalmanEstimator
     from mixnav.geodesy.frames import displace
     from mixnav.ins.error_model import get_layout
-    from mixnav.ins.motion import StrapdownMotion
+    from mixnav.ins.strapdown import StrapdownMotion
     from mixnav.measurements.loose import LooseGnss
     from mixnav.sim.scenario import simulate
     from mixnav.data import GnssFixes

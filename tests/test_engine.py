@@ -9,7 +9,7 @@ from mixnav.engine import Engine
 from mixnav.errors import ArgumentError
 from mixnav.filters.ekf import ErrorStateEkf, KalmanEstimator
 from mixnav.ins.error_model import ClockModel, StateBlock, StateLayout, get_layout
-from mixnav.ins.motion import StrapdownMotion
+from mixnav.ins.strapdown import StrapdownMotion
 from mixnav.measurements.base import MeasurementModel, Rows
 from mixnav.measurements.kinds import kind_code, register_kind
 from mixnav.measurements.loose import LooseGnss

@@ -25,7 +25,7 @@ from mixnav.filters.ekf import KalmanEstimator
 from mixnav.filters.ukf import UnscentedEstimator
 from mixnav.ins.error_model import get_layout
 from mixnav.ins.imu_model import ImuErrorModel
-from mixnav.ins.motion import StrapdownMotion
+from mixnav.ins.strapdown import StrapdownMotion
 from mixnav.measurements.base import MeasurementModel, Rows
 from mixnav.measurements.kinds import POSITION
 from mixnav.motion import ConstantVelocityMotion, DeadReckoningMotion, clock_ticks, odometry_increments

@@ -12,7 +12,7 @@ from mixnav.errors import ArgumentError, ConfigError
 from mixnav.filters.ekf import KalmanEstimator
 from mixnav.filters.imm import ImmEstimator, check_transition, combine, log_likelihood, mix
 from mixnav.ins.error_model import get_layout
-from mixnav.ins.motion import StrapdownMotion
+from mixnav.ins.strapdown import StrapdownMotion
 from mixnav.measurements.loose import LooseGnss
 from mixnav.measurements.vehicle import NonHolonomic
 

@@ -17,7 +17,7 @@ from mixnav.geodesy.earth import radii
 from mixnav.filters.gmekf import BankEstimator, GaussianMixtureEkf
 from mixnav.filters.imm import ImmEstimator, log_likelihood
 from mixnav.ins.error_model import get_layout
-from mixnav.ins.motion import StrapdownMotion
+from mixnav.ins.strapdown import StrapdownMotion
 from mixnav.measurements.base import Rows
 from mixnav.measurements.kinds import kind_code
 from mixnav.measurements.loose import LooseGnss

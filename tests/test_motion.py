@@ -140,7 +140,7 @@ def test_engine_refuses_the_wrong_increments():
     with pytest.raises(ArgumentError, match="OdometryIncrements"):
         Engine(DeadReckoningMotion(lay), KalmanEstimator()).run(imu, init)
     from mixnav.ins.imu_model import ImuErrorModel
-    from mixnav.ins.motion import StrapdownMotion
+    from mixnav.ins.strapdown import StrapdownMotion
     odo = odometry_increments([0.0, 0.1, 0.2], [1.0, 1.0, 1.0], [0.0, 0.0, 0.0])
     with pytest.raises(ArgumentError, match="strapdown INS"):
         Engine(StrapdownMotion(get_layout(15), ImuErrorModel()), KalmanEstimator()).run(odo, init)

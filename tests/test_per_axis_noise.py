@@ -133,7 +133,7 @@ def test_simulated_pitch_noisy_imu_is_consistent_with_the_per_axis_model(tmp_pat
 def test_mixture_banks_refuse_per_axis_white_noise():
     from mixnav.errors import ArgumentError
     from mixnav.filters.gmekf import BankEstimator  # noqa: F401  (the class the check sits in)
-    from mixnav.ins.motion import StrapdownMotion
+    from mixnav.ins.strapdown import StrapdownMotion
     m = ImuErrorModel.from_datasheet({"arw": ["0.1 deg/s/sqrt(Hz)", "0.1 deg/s/sqrt(Hz)", "0.01 deg/s/sqrt(Hz)"]})
     motion = StrapdownMotion(LAYOUTS[15], m)
     assert motion.qb.any()

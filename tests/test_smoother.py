@@ -20,7 +20,7 @@ from mixnav.experiment.run import solution_table
 from mixnav.filters.ekf import ErrorStateEkf, KalmanEstimator
 from mixnav.filters.gmekf import BankMixtures, GaussianMixtureEkf, StandardMixture
 from mixnav.ins.error_model import StateBlock, StateLayout, get_layout
-from mixnav.ins.motion import StrapdownMotion
+from mixnav.ins.strapdown import StrapdownMotion
 from mixnav.measurements.loose import LooseGnss
 from mixnav.sim.scenario import simulate, truth_and_ideal_imu
 

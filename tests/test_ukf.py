@@ -229,7 +229,7 @@ def test_a_covariance_that_is_not_positive_definite_is_repaired_and_counted(demo
     sc, sim, lever = demo
     lay = get_layout(15)
     est = UnscentedEstimator()
-    from mixnav.ins.motion import StrapdownMotion
+    from mixnav.ins.strapdown import StrapdownMotion
     motion = StrapdownMotion(lay, sim.imu_model)
     P0 = motion.initial_covariance(sim.init)
     est.init(motion, P0, 0, np.random.default_rng(0))

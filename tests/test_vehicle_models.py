@@ -9,7 +9,7 @@ from mixnav.data import OdometerData
 from mixnav.errors import ArgumentError
 from mixnav.ins.error_model import StateLayout
 from mixnav.ins.imu_model import ImuErrorModel
-from mixnav.ins.motion import StrapdownMotion
+from mixnav.ins.strapdown import StrapdownMotion
 from mixnav.ins.mechanization import nav_vector
 from mixnav.measurements.vehicle import (MOUNTING, ODOMETER_SCALE, NonHolonomic, Odometer, ZeroAngularRate,
                                          ZeroVelocity, mounting_block, odometer_scale_block)

@@ -49,7 +49,7 @@ from ..errors import ArgumentError
 from ..geodesy import earth
 from ..geodesy.frames import displace
 from .coarse import coarse_align
-from .motion import fix_velocities
+from .in_motion import fix_velocities
 
 #: Largest fraction of the rest window's 1 s blocks allowed to fail the rest
 #: thresholds: a door closing or someone getting in is brief and averages out

@@ -100,7 +100,7 @@ class Engine:
     Parameters
     ----------
     motion : MotionModel
-        E.g. :class:`mixnav.ins.motion.StrapdownMotion`.
+        E.g. :class:`mixnav.ins.strapdown.StrapdownMotion`.
     estimator : Estimator
         E.g. :class:`mixnav.filters.ekf.KalmanEstimator`.
     measurements : sequence of MeasurementModel

@@ -1,7 +1,7 @@
 """The small protocols between the engine and what it drives.
 
 - :class:`MotionModel`: the nominal-state propagation (the strapdown INS,
-  :class:`mixnav.ins.motion.StrapdownMotion`; dead reckoning and constant
+  :class:`mixnav.ins.strapdown.StrapdownMotion`; dead reckoning and constant
   velocity, :mod:`mixnav.motion`), and the ensemble seam: members (sigma
   points, particles) as error states about the nominal, turned into full
   states, propagated and differenced back by the motion model.

@@ -9,7 +9,7 @@ feeds the returned correction back. Subclasses change only :meth:`correct`
 (the Gaussian-mixture bank, :mod:`mixnav.filters.gmekf`).
 
 :class:`ErrorStateEkf` is the filter a user runs: the strapdown motion model
-(:class:`mixnav.ins.motion.StrapdownMotion`), an estimator and the
+(:class:`mixnav.ins.strapdown.StrapdownMotion`), an estimator and the
 :class:`mixnav.engine.Engine`, behind ``run(imu, init, measurements)``.
 The recoveries the run counts are listed in :mod:`mixnav.engine.engine`.
 """
@@ -27,7 +27,7 @@ from ..errors import ArgumentError, NumericalError
 from ..ins.error_model import ClockModel, StateLayout
 from ..ins.imu_model import ImuErrorModel
 from ..ins._error_kernels import covariance_predict
-from ..ins.motion import StrapdownMotion
+from ..ins.strapdown import StrapdownMotion
 from ._ekf_kernels import NEEDS_REPAIR, OK, kalman_correct
 
 _WARM: set = set()

@@ -42,7 +42,7 @@ import numpy as np
 from ..errors import ArgumentError
 from ..ins.error_model import ClockModel, StateLayout
 from ..ins.imu_model import ImuErrorModel
-from ..noise.robust import igg3_factors
+from ..noise.igg3 import igg3_factors
 from ._ekf_kernels import ABSURD, kalman_correct
 from .ekf import ErrorStateEkf, KalmanEstimator
 from .kalman import innovation_is_absurd

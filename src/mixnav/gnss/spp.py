@@ -41,7 +41,7 @@ residual is standardised by its own variance in that solution, ``t_i = v_i /
 sqrt(sigma_i^2 - h_i N^-1 h_i^T)`` (one gross error spreads into the other
 rows' residuals through the geometry; the standardisation is what lets the bad
 row stand out). The row with the largest ``t`` beyond ``k0`` gets the IGG-III
-factor (:func:`mixnav.noise.robust.igg3_factors`: a down-weighting, or weight
+factor (:func:`mixnav.noise.igg3.igg3_factors`: a down-weighting, or weight
 zero beyond ``k1``), WLS is solved again, and the remaining untouched rows are
 tested the same way, until none is beyond ``k0``. It needs redundancy: with
 fewer than 6 rows (2 spare) a single error cannot be located (``robust_status
@@ -70,7 +70,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla
-from ..noise.robust import igg3_factors
+from ..noise.igg3 import igg3_factors
 from .geometry import C_LIGHT, LAMBDA_L1, SatelliteStates, earth_rotation_correction, elevation_azimuth
 
 #: the robust solution blames a row only if its standardised residual exceeds every other

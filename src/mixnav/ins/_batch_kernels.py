@@ -1,6 +1,6 @@
 """numba: the strapdown INS on a batch of member states (sigma points, particles).
 
-What :class:`~mixnav.ins.motion.StrapdownMotion` runs for the ensemble estimators
+What :class:`~mixnav.ins.strapdown.StrapdownMotion` runs for the ensemble estimators
 (``member_states``, ``propagate_members``, ``difference_members``): members are
 error states ``D_j`` about a nominal, turned into full states ``nominal (+) D_j`` by
 the engine's feedback map (:func:`~mixnav.ins._error_kernels.apply_feedback`),
