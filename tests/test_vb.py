@@ -16,7 +16,7 @@ from mixnav.filters.vb import ChannelNoise, VbAdaptiveEkf
 from mixnav.geodesy.frames import displace
 from mixnav.ins.error_model import get_layout
 from mixnav.ins.imu_model import ImuErrorModel
-from mixnav.measurements.kinds import POSITION
+from mixnav.measurements.kinds import POSITION, channel_id
 from mixnav.measurements.loose import LooseGnss
 from mixnav.sim.scenario import simulate
 
@@ -80,7 +80,7 @@ def demo():
 def _pos_sigma(res):
     o = res.outputs
     ch = o["vb_channel"][0]
-    cols = [list(ch).index(POSITION * 1000 + a) for a in range(3)]
+    cols = [list(ch).index(channel_id(POSITION, a)) for a in range(3)]
     return o["vb_time"], o["vb_sigma"][:, cols]
 
 
@@ -211,12 +211,27 @@ def test_per_satellite_channels_get_their_own_columns():
                    "vb_channel": np.array([[8005, 8007], [8007, 8009], [8009, -1]]),
                    "vb_sigma": np.array([[1.0, 2.0], [3.0, 4.0], [5.0, np.nan]])}
 
-    from mixnav.measurements.kinds import kind_code
+    from mixnav.measurements.kinds import channel_id, kind_code
     pr = kind_code("pseudorange")
     R.outputs["vb_channel"] = np.where(R.outputs["vb_channel"] >= 0,
-                                       R.outputs["vb_channel"] - 8000 + pr * 1000, -1)
+                                       channel_id(pr, R.outputs["vb_channel"] - 8000), -1)
     cols = _noise_columns(R)
     assert list(cols) == ["vb_sigma_pseudorange_5", "vb_sigma_pseudorange_7", "vb_sigma_pseudorange_9"]
     np.testing.assert_array_equal(cols["vb_sigma_pseudorange_5"], [np.nan, 1.0, 1.0, 1.0])
     np.testing.assert_array_equal(cols["vb_sigma_pseudorange_7"], [np.nan, 2.0, 3.0, 3.0])
     np.testing.assert_array_equal(cols["vb_sigma_pseudorange_9"], [np.nan, np.nan, 4.0, 5.0])
+
+
+def test_channel_ids_round_trip_and_label_every_scheme():
+    """One channel-id scheme for every model (measurements.kinds.channel_id): the parts
+    come back, ids sort by kind, then system, then satellite or axis, and the labels of
+    the noise columns name the observable and the satellite. The multi-system
+    pseudorange channels had their own scheme, which the label read as another kind
+    (smartLoc's GPS 12 pseudorange was labelled 'range_rate_12')."""
+    from mixnav.filters.vb import channel_label
+    from mixnav.measurements.kinds import channel_parts, kind_code
+    pr, vel = kind_code("pseudorange"), kind_code("velocity")
+    ids = channel_id(np.array([pr, pr, pr, vel]), np.array([12, 5, 12, 2]), np.array([1, 8, 0, 0]))
+    assert [channel_parts(c) for c in ids] == [(pr, 1, 12), (pr, 8, 5), (pr, 0, 12), (vel, 0, 2)]
+    assert sorted(ids.tolist()) == [ids[2], ids[0], ids[1], ids[3]]
+    assert [channel_label(c) for c in ids] == ["pseudorange_G12", "pseudorange_E05", "pseudorange_12", "velocity_d"]

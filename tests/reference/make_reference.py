@@ -51,7 +51,10 @@ for case in CASES:
     print(f"{case[0]}: {seconds[case[0]]:.1f} s", flush=True)
 commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                         cwd=path.parent).stdout.strip()
-path.write_text(json.dumps({"cases": out, "seconds": seconds, "commit": commit,
+# the commit each case was computed on (``--only`` re-pins some cases on a later one)
+commits = stored.get("commits") or {c: stored.get("commit", commit) for c in out}
+commits.update({c: commit for c in seconds if (only is None or c in only)})
+path.write_text(json.dumps({"cases": out, "seconds": seconds, "commits": commits,
                             "not_bitwise": sorted(not_bitwise),
                             "machine": f"{platform.machine()} {platform.processor()} {platform.node()}"},
                            indent=1, sort_keys=True))

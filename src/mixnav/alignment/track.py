@@ -39,6 +39,7 @@ from ..data import InitialState
 from ..errors import ArgumentError
 from ..geodesy.frames import ecef_to_lla, lla_to_ned, ned_to_lla
 from ..gnss.geometry import C_LIGHT, earth_rotation_correction
+from ..measurements.kinds import CHANNEL_SYSTEM
 
 
 def _huber_weights(v: np.ndarray, k: float = 1.5) -> np.ndarray:
@@ -106,7 +107,7 @@ def _window_rows(epochs, t0, t_align, sysmap):
     sidx = np.array([sysmap.get(int(s), -1) for s in epochs.system[idx]], dtype=int)
     idx, sidx = idx[sidx >= 0], sidx[sidx >= 0]
     t = np.repeat(epochs.time, np.diff(epochs.start))[idx]
-    key = epochs.system[idx].astype(np.int64) * 1000 + epochs.sat_id[idx].astype(np.int64)
+    key = epochs.system[idx].astype(np.int64) * CHANNEL_SYSTEM + epochs.sat_id[idx].astype(np.int64)   # a satellite
     return t, epochs.sat_ecef[idx], epochs.pseudorange[idx], epochs.variance[idx], sidx, epochs.cn0[idx], key
 
 

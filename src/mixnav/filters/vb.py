@@ -130,13 +130,19 @@ class ChannelNoise:
 
 
 def channel_label(ch: int) -> str:
-    """``position_n``-style label of a loose channel id (``kind * 1000 + axis``), else the id."""
-    from ..measurements.kinds import kind_name
-    kind, axis = divmod(int(ch), 1000)
+    """The label of a channel id (:func:`~mixnav.measurements.kinds.channel_id`):
+    ``position_n`` (an axis), ``pseudorange_12`` (a PRN), ``pseudorange_E05`` (a
+    satellite of a lettered system, :data:`~mixnav.gnss.pseudoranges.SYSTEM_LETTERS`);
+    a channel of no registered kind is labelled by its id."""
+    from ..gnss.pseudoranges import SYSTEM_LETTERS
+    from ..measurements.kinds import channel_parts, kind_name
+    kind, system, axis = channel_parts(ch)
     try:
         name = kind_name(kind)
     except Exception:
         return str(ch)
+    if system:
+        return f"{name}_{SYSTEM_LETTERS.get(system, f'S{system}:')}{axis:02d}"
     return f"{name}_{'ned'[axis]}" if axis < 3 and name in ("position", "velocity") else f"{name}_{axis}"
 
 

@@ -47,7 +47,7 @@ class Rows(NamedTuple):
         Registered kind code of each row (:mod:`mixnav.measurements.kinds`).
     channels : ndarray of int64 (m,) or None
         A channel id per row, the same for the same satellite/axis and
-        observable at every epoch (``kind * 1000 + prn`` or ``+ axis``).
+        observable at every epoch (:func:`~mixnav.measurements.kinds.channel_id`).
     """
 
     z: np.ndarray

@@ -42,7 +42,7 @@ import numpy as np
 from ..errors import ArgumentError, NumericalError
 from ..ins.error_model import StateLayout
 from .base import MeasurementModel, Rows
-from .kinds import MAX_KINDS, kind_code
+from .kinds import MAX_KINDS, channel_id, kind_code
 from .loose import LooseGnss
 from .tight import TightGnss
 
@@ -115,7 +115,7 @@ class DifferencedMeasurement(MeasurementModel):
             code = kind_code(name, argument=arg)
             if not (np.isfinite(v) and abs(v) < 1.0):
                 raise ArgumentError(f"AR(1) coefficient must satisfy |psi| < 1 (stationary), got {v}", argument=arg)
-            self.psi_channels[code * 1000 + int(cid)] = float(v)
+            self.psi_channels[channel_id(code, int(cid))] = float(v)
         self.cols = clone_columns(inner, layout)
         self.clone_size = len(self.cols)
         t = np.asarray(inner.times, dtype=float)

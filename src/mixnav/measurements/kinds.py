@@ -63,6 +63,27 @@ def kind_name(code: int) -> str:
     raise ArgumentError(f"no observable kind has code {code}", argument="code")
 
 
+#: A measurement channel (one observable of one satellite or axis, the same at every
+#: epoch) has one integer id, built by :func:`channel_id` only:
+#: ``kind * CHANNEL_KIND + system * CHANNEL_SYSTEM + index`` (``index`` a PRN, a
+#: satellite number within its system, or an axis; ``system`` 0 where there is one).
+CHANNEL_SYSTEM = 1000
+CHANNEL_KIND = 1000 * CHANNEL_SYSTEM
+
+
+def channel_id(kind, index, system=0):
+    """The channel id of observable ``kind`` (code, int or int array), satellite or axis
+    ``index`` and satellite system ``system`` (ints or int arrays, broadcast)."""
+    return kind * CHANNEL_KIND + system * CHANNEL_SYSTEM + index
+
+
+def channel_parts(ch: int) -> tuple[int, int, int]:
+    """``(kind, system, index)`` of a channel id (the inverse of :func:`channel_id`)."""
+    kind, rest = divmod(int(ch), CHANNEL_KIND)
+    system, index = divmod(rest, CHANNEL_SYSTEM)
+    return kind, system, index
+
+
 def stationary(code):
     """The code of the stationary twin of ``code`` (int or int array)."""
     return code + MAX_KINDS

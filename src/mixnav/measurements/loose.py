@@ -37,7 +37,7 @@ from ..errors import ArgumentError
 from ..ins.error_model import StateBlock, StateLayout
 from ._loose_kernel import loose_predict_batch, loose_zhr
 from .base import MeasurementModel, Rows
-from .kinds import POSITION, VELOCITY
+from .kinds import POSITION, VELOCITY, channel_id
 from ..geodesy.frames import displace
 
 
@@ -158,7 +158,7 @@ class LooseGnss(MeasurementModel):
         self._i_bg = layout.bg.start
         m = 6 if self.use_velocity else 3
         self._kinds = np.array([POSITION] * 3 + [VELOCITY] * (m - 3), dtype=np.int64)
-        self._channels = self._kinds * 1000 + np.arange(m) % 3
+        self._channels = channel_id(self._kinds, np.arange(m) % 3)
         self._lever_sl = layout.slice(GNSS_LEVER) if layout.has(GNSS_LEVER) else None
         self._dt_col = layout.slice(TIME_OFFSET).start if layout.has(TIME_OFFSET) else -1
         self._acc, self._acc_sigma = (fix_accelerations(fixes.time, fixes.vel_n, fixes.vel_sigma)
@@ -206,7 +206,7 @@ class LooseGnss(MeasurementModel):
         return self._kinds[:m]
 
     def row_channels(self, i: int, m: int) -> np.ndarray:
-        """A channel id per row, the same at every epoch: ``kind * 1000 + axis``."""
+        """A channel id per row, the same at every epoch (:func:`~mixnav.measurements.kinds.channel_id` of kind and axis)."""
         return self._channels[:m]
 
     def warm_up(self, nav: np.ndarray, aux: dict | None = None) -> None:

@@ -31,7 +31,7 @@ from ..geodesy.frames import dcm_ecef_to_ned, lla_to_ecef
 from ..gnss.observables import GnssObservations
 from ..ins.error_model import StateLayout
 from .base import MeasurementModel, Rows
-from .kinds import PSEUDORANGE, RANGE_RATE
+from .kinds import PSEUDORANGE, RANGE_RATE, channel_id
 from ._tight_kernel import tight_predict_batch, tight_zhr
 
 
@@ -160,11 +160,11 @@ class TightGnss(MeasurementModel):
 
     def row_channels(self, i: int, m: int) -> np.ndarray:
         """A channel id per row, the same for the same satellite and observable at
-        every epoch: ``kind * 1000 + prn`` (rows in the order of :meth:`row_kinds`)."""
+        every epoch: :func:`~mixnav.measurements.kinds.channel_id` of kind and PRN (rows in the order of :meth:`row_kinds`)."""
         ch = self._channels.get((i, m))
         if ch is None:
             prn = self.obs.prn[i, self.obs.valid[i]]
-            ch = self._channels[(i, m)] = self._kinds_of(m) * 1000 + np.concatenate([prn] * (m // len(prn)))
+            ch = self._channels[(i, m)] = channel_id(self._kinds_of(m), np.concatenate([prn] * (m // len(prn))))
         return ch
 
     def measure_numpy(self, i: int, nav: np.ndarray, w_b: np.ndarray, clock):

@@ -46,7 +46,7 @@ from ..geodesy.earth import earth_rate_ned
 from ..ins.error_model import StateBlock, StateLayout
 from ._vehicle_kernel import vehicle_velocity_jac
 from .base import MeasurementModel, Rows
-from .kinds import register_kind
+from .kinds import channel_id, register_kind
 
 NHC = register_kind("nhc")
 ODOMETER = register_kind("odometer")
@@ -154,7 +154,7 @@ class NonHolonomic(VehicleVelocity):
             raise ArgumentError(f"must be >= 0 m/s, got {min_speed!r}", argument="min_speed")
         self.min_speed = float(min_speed)
         self._kinds = np.array([NHC, NHC], dtype=np.int64)
-        self._channels = self._kinds * 1000 + np.array([1, 2])
+        self._channels = channel_id(self._kinds, np.array([1, 2]))
 
     @property
     def times(self) -> np.ndarray:
@@ -196,7 +196,7 @@ class Odometer(VehicleVelocity):
         self.scale = float(scale)
         self._k = layout.slice(ODOMETER_SCALE).start if layout.has(ODOMETER_SCALE) else -1
         self._kinds = np.array([ODOMETER], dtype=np.int64)
-        self._channels = self._kinds * 1000
+        self._channels = channel_id(self._kinds, 0)
 
     @property
     def times(self) -> np.ndarray:
@@ -224,7 +224,7 @@ class _AtRest(MeasurementModel):
         self.r = np.full(3, _sigma(sigma, "sigma") ** 2)
         self.max_speed2 = _sigma(max_speed, "max_speed") ** 2
         self._kinds = np.full(3, kind, dtype=np.int64)
-        self._channels = self._kinds * 1000 + np.arange(3)
+        self._channels = channel_id(self._kinds, np.arange(3))
 
     @property
     def times(self) -> np.ndarray:
