@@ -20,7 +20,7 @@ learned up to the previous epoch.
 
 This file is the whole estimator: it implements the engine's protocol
 (:mod:`mixnav.engine.protocols`) through :class:`~mixnav.filters.ekf.KalmanEstimator`
-and needs one registration line in the estimator catalogue.
+and registers itself (:mod:`mixnav.filters.registry`) with its options model.
 """
 
 from __future__ import annotations
