@@ -65,9 +65,10 @@ def test_each_builtin_registers_itself_in_its_own_module(name):
 
 
 def test_options_models_forbid_unknown_keys_and_keep_the_defaults_of_the_estimators():
+    import inspect
+
     from mixnav.filters.particle import ParticleEstimator
     from mixnav.filters.ukf import UnscentedEstimator
-    import inspect
     for name, cls in (("pf", ParticleEstimator), ("ukf", UnscentedEstimator)):
         model = registry.estimator_spec(name).options
         for field, info in model.model_fields.items():

@@ -45,14 +45,15 @@ def _options(method) -> dict:
 
 
 def estimator_for(method, source, index: int, seed: int = 0, motion: str | None = None, training=None,
-                  mixture_start: dict | None = None):
+                  mixture_start: dict | None = None, motion_model=None):
     """The estimator of ``method`` (any entry with ``name``, ``estimator``, ``robust``,
     ``mixture``, ``options``) for a run on the named ``motion`` model, built by the registry;
-    errors under the method's keys. The strapdown INS's filters come from :func:`build`."""
+    errors under the method's keys; ``motion_model``: the run's motion model object. The
+    strapdown INS's filters come from :func:`build`."""
     key = f"methods[{index}]"
     with config_keys(key, source):
         spec = check_motion(method.estimator, motion) if motion else check_motion(method.estimator, "strapdown")
-    context = BuildContext(method=method, training=training, seed=seed, source=source, index=index,
+    context = BuildContext(motion=motion_model, method=method, training=training, seed=seed, source=source, index=index,
                            extra={"mixture_start": mixture_start})
     if spec.table == "mixture":
         mc = method.mixture or MixtureConfig()

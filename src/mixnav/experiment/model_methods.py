@@ -27,16 +27,17 @@ def _check_smooth(method, source, index):
 
 
 def make_estimator(method, source: str, index: int, seed: int = 0, model_name: str = "this motion model",
-                   mixture_start: dict | None = None):
+                   mixture_start: dict | None = None, motion_model=None):
     """The estimator of a method on any motion model, as the registry builds it
     (:func:`mixnav.experiment.methods.estimator_for`); errors named by their file key
     (``methods[index]...``). ``model_name`` (``"the dead-reckoning model"``) names the motion
     model; ``mixture_start``: the LOS/NLOS mixture a track alignment learned
     (:func:`mixnav.experiment.vehicle_process.mixture_handover`), the epoch mixture's starting
-    values unless the method's options set them."""
+    values unless the method's options set them. ``motion_model``: the run's motion model
+    object (for an estimator whose build needs it)."""
     from .methods import estimator_for
     motion = model_name.removeprefix("the ").removesuffix(" model")
-    return estimator_for(method, source, index, seed, motion, mixture_start=mixture_start)
+    return estimator_for(method, source, index, seed, motion, mixture_start=mixture_start, motion_model=motion_model)
 
 
 def run_methods(methods, make_motion, models, inputs, init, output_times, source: str, seed: int = 0,
@@ -48,10 +49,11 @@ def run_methods(methods, make_motion, models, inputs, init, output_times, source
     from their own). ``mixture_start``: as :func:`make_estimator`."""
     results: dict[str, FilterResult] = {}
     for k, method in methods:
-        est = make_estimator(method, source, k, seed, model_name, mixture_start)
+        motion = make_motion()
+        est = make_estimator(method, source, k, seed, model_name, mixture_start, motion)
         if method.smooth:
             _check_smooth(method, source, k)
-        res = Engine(make_motion(), est, list(models), covariance_interval=1.0, rng=seed,
+        res = Engine(motion, est, list(models), covariance_interval=1.0, rng=seed,
                      history=method.smooth).run(inputs, init, output_times=output_times)
         results[method.name] = res
         if method.smooth:

@@ -40,7 +40,7 @@ from ._ukf_kernels import member_navs, propagate_members
 from pydantic import Field
 
 from .facade import facade
-from .registry import GateOptions, register_estimator
+from .registry import MOTIONS, GateOptions, register_estimator
 from .ukf import predict_members
 
 __all__ = ["DEFAULT_STEP", "check_dd2_step", "dd2_points", "dd2_moments", "dd2_time", "dd2_measure",
@@ -367,8 +367,8 @@ class Dd2Options(GateOptions):
                           "per step (0: every IMU increment)")
 
 
-#: The strapdown batch mechanization is the only one its points run on (for now).
-register_estimator("dd2", options=Dd2Options, motions=("strapdown",), can_smooth=False,
+#: MOTIONS[:1]: the strapdown INS only, until the ensemble runs on the motion seam (then: MOTIONS).
+register_estimator("dd2", options=Dd2Options, motions=MOTIONS[:1], can_smooth=False,
                    build=lambda o, absurd_sigma, context: Dd2Estimator(o.dd2_step, o.substeps, absurd_sigma),
                    description="second-order divided-difference filter (Norgaard et al. 2000; issue 19): 2n+1 "
                    "points mechanized as full states (options: dd2_step, substeps)")(Dd2Estimator)

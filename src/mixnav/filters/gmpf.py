@@ -88,7 +88,7 @@ from ._no_clone import NoCloneEstimator
 from .dd2 import (DEFAULT_STEP, Dd2Options, check_dd2_step, dd2_measure, dd2_points, dd2_time, mechanize_points,
                   predict_points, psd_cholesky, warm_member_kernels)
 from .facade import facade
-from .registry import register_estimator
+from .registry import MOTIONS, register_estimator
 
 __all__ = ["GmpfEstimator", "GaussianMixtureParticleFilter", "check_gmpf_settings", "mixture_logpdf",
            "fit_weighted_mixture"]
@@ -434,8 +434,8 @@ def _build_gmpf(o: GmpfOptions, absurd_sigma: float, context):
                          dd2_step=o.dd2_step, substeps=o.substeps, sampling=o.sampling, absurd_sigma=absurd_sigma)
 
 
-#: The strapdown batch mechanization is the only one its particles run on (for now).
-register_estimator("gmpf", options=GmpfOptions, motions=("strapdown",), can_smooth=False, build=_build_gmpf,
+#: MOTIONS[:1]: the strapdown INS only, until the ensemble runs on the motion seam (then: MOTIONS).
+register_estimator("gmpf", options=GmpfOptions, motions=MOTIONS[:1], can_smooth=False, build=_build_gmpf,
                    description="M8 Gaussian-mixture particle filter (paper P3): DD2 per mixture component builds "
                    "the importance density, weighted EM refit instead of resampling (options: particles, "
                    "components, em_iterations, dd2_step, substeps, sampling)")(GmpfEstimator)

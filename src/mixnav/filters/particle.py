@@ -61,7 +61,7 @@ from ._pf_kernels import CHUNKS, PARALLEL, SCRATCH, SERIAL, pf_log_weights, pf_s
 from pydantic import Field
 
 from .facade import facade
-from .registry import GateOptions, register_estimator
+from .registry import MOTIONS, GateOptions, register_estimator
 from .ukf import predict_members
 
 __all__ = ["ParticleEstimator", "ParticleFilter", "systematic_resample", "normalise_log_weights",
@@ -471,8 +471,8 @@ def _build_pf(o: ParticleOptions, absurd_sigma: float, context):
                              absurd_sigma=absurd_sigma)
 
 
-#: The strapdown batch mechanization is the only one its particles run on (for now).
-register_estimator("pf", options=ParticleOptions, motions=("strapdown",), can_smooth=False, build=_build_pf,
+#: MOTIONS[:1]: the strapdown INS only, until the ensemble runs on the motion seam (then: MOTIONS).
+register_estimator("pf", options=ParticleOptions, motions=MOTIONS[:1], can_smooth=False, build=_build_pf,
                    description="SIR particle filter (issue 19): particles as full states mechanized over each "
                    "IMU block, Gaussian log-weights, systematic resampling (options: particles, "
                    "resample_threshold, roughening, substeps, parallel)")(ParticleEstimator)

@@ -56,7 +56,7 @@ from pydantic import Field
 
 from .ekf import repair_covariance
 from .facade import facade
-from .registry import GateOptions, register_estimator
+from .registry import MOTIONS, GateOptions, register_estimator
 from .vb import ChannelNoise, VbOptions, channel_label, warm_vb
 
 __all__ = ["ut_weights", "UnscentedEstimator", "UnscentedKalmanFilter", "VbAdaptiveUkf"]
@@ -312,11 +312,11 @@ def _build_ukf(options: UnscentedOptions, absurd_sigma: float, context):
     return UnscentedEstimator(absurd_sigma=absurd_sigma, noise=noise, **ut)
 
 
-#: The strapdown batch mechanization is the only one its sigma points run on (for now).
-register_estimator("ukf", options=UnscentedOptions, motions=("strapdown",), can_smooth=False, build=_build_ukf,
+#: MOTIONS[:1]: the strapdown INS only, until the ensemble runs on the motion seam (then: MOTIONS).
+register_estimator("ukf", options=UnscentedOptions, motions=MOTIONS[:1], can_smooth=False, build=_build_ukf,
                    description="M7 unscented Kalman filter: sigma points mechanized as full states, loose or "
                    "tight GNSS through predict_batch (options: alpha, beta, kappa, substeps)")(UnscentedEstimator)
-register_estimator("vb-aukf", options=VbUnscentedOptions, motions=("strapdown",), can_smooth=False,
+register_estimator("vb-aukf", options=VbUnscentedOptions, motions=MOTIONS[:1], can_smooth=False,
                    build=_build_ukf,
                    description="M7 variational-Bayes adaptive UKF (paper P5): an inverse-Gamma noise variance per "
                    "measurement channel with forgetting (options: rho, prior_shape, prior_scale, iterations, "
