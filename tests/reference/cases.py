@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import os
 
 import numpy as np
 
@@ -119,3 +120,42 @@ def compute(case, data_dir=None) -> dict:
         res = mixnav.process_dataset(name, data=data_dir)
     rows = _metrics_rows(res.metrics)
     return {m: {"metrics": rows.get(m, {}), "table": _table_numbers(t)} for m, t in res.solutions.items()}
+
+
+#: allowed difference of a stored float: relative, and absolute (states near zero)
+REL, ABS = 1e-6, 1e-8
+#: compare the solution tables' bytes too (only on the machine that stored them)
+BITWISE = os.environ.get("MIXNAV_BITWISE") == "1"
+
+
+def _without_digests(d):
+    if isinstance(d, dict):
+        return {k: _without_digests(v) for k, v in d.items() if k != "sha256"}
+    return d
+
+
+def _diffs(stored, now, where=""):
+    """Every difference between two nested results, as readable lines."""
+    out = []
+    if isinstance(stored, dict):
+        for k in sorted(set(stored) | set(now or {})):
+            if k not in (now or {}):
+                out.append(f"{where}.{k}: missing now")
+            elif k not in stored:
+                continue  # a new output (e.g. a key the redesign adds) is not a regression
+            else:
+                out += _diffs(stored[k], now[k], f"{where}.{k}")
+    elif isinstance(stored, list):
+        if not isinstance(now, list) or len(now) != len(stored):
+            out.append(f"{where}: length {len(stored)} stored, {None if now is None else len(now)} now")
+        else:
+            for i, (a, b) in enumerate(zip(stored, now)):
+                out += _diffs(a, b, f"{where}[{i}]")
+    elif isinstance(stored, float) and isinstance(now, (int, float)):
+        same = stored == now or (math.isnan(stored) and math.isnan(now)) or \
+            (math.isfinite(stored) and abs(now - stored) <= REL * abs(stored) + ABS)
+        if not same:
+            out.append(f"{where}: stored {stored!r}, now {now!r} (diff {now - stored:.3g})")
+    elif stored != now:
+        out.append(f"{where}: stored {stored!r}, now {now!r}")
+    return out
