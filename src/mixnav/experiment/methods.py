@@ -218,8 +218,12 @@ def _imm(method, layout, model, gnss, aids, source, index, common, training=None
                 mixtures, mc.max_components, online=online, carry_mean=True, gate=mc.gate,
                 outlier_mean=mc.outlier_mean, divergence_window=mc.divergence_window,
                 divergence_nis=mc.divergence_nis))
-        else:
+        elif mode.estimator == "ekf":
             makers.append(lambda: KalmanEstimator(carry_mean=True))
+        else:   # registered as a mode, but its mean-carrying child is not built here yet
+            raise ConfigError(f"estimator '{mode.estimator}' cannot yet be built as an IMM mode (these can: "
+                              "ekf, robust-adaptive, em-bias, gaussian-mixture)", file=source,
+                              key=f"methods[{index}].imm.modes[{k}].estimator")
     interval = None if ic.transition_interval == "epoch" else float(ic.transition_interval)
     with config_keys(f"methods[{index}].imm", source):
         return ImmEkf(layout, model, sets, ic.transition, ic.initial_probabilities, interval,

@@ -49,9 +49,10 @@ class Filter(ErrorStateEkf):
 
 
 def facade(name: str, public_name: str):
-    """``public_name(layout, imu_model, covariance_interval=1.0, absurd_sigma=1e4, clock=None,
-    **options)``: the :class:`Filter` of estimator ``name``."""
-    def make(layout, imu_model, covariance_interval: float = 1.0, absurd_sigma: float = 1e4, clock=None,
+    """``public_name(layout, imu_model, *, covariance_interval=1.0, absurd_sigma=1e4, clock=None,
+    **options)``: the :class:`Filter` of estimator ``name`` (keywords only: the old classes'
+    positional order differed per estimator)."""
+    def make(layout, imu_model, *, covariance_interval: float = 1.0, absurd_sigma: float = 1e4, clock=None,
              **options) -> Filter:
         return Filter(name, layout, imu_model, options, covariance_interval, absurd_sigma, clock)
     make.__name__ = make.__qualname__ = public_name
