@@ -55,7 +55,7 @@ def test_the_comparison_catches_a_change():
     now = json.loads(json.dumps(stored))
     m = next(iter(now))
     now[m]["metrics"]["horizontal_rmse_m"] *= 1 + 1e-5       # beyond REL
-    now[m]["metrics"]["nis_count"] += 1
+    now[m]["metrics"]["measurement_epochs"] += 1
     del now[m]["metrics"]["horizontal_max_m"]
     assert len(_diffs(stored, now)) == 3
     col = next(iter(now[m]["table"]))
