@@ -337,13 +337,14 @@ def test_options_in_a_scenario_file_are_checked(tmp_path, est, line, key):
 
 def test_gmpf_and_dd2_from_a_scenario_file(tmp_path):
     from mixnav.experiment import methods
+    from mixnav.filters.dd2 import Dd2Estimator
     for est, lines, cls in (("gmpf", "particles = 64\ncomponents = 2\nem_iterations = 4\ndd2_step = 2.0",
-                             GaussianMixtureParticleFilter), ("dd2", "dd2_step = 2.0", Dd2Filter)):
+                             GmpfEstimator), ("dd2", "dd2_step = 2.0", Dd2Estimator)):
         sc, src, _ = load_scenario(_scenario_with(tmp_path, est, lines))
         sim = simulate(sc, 1, src)
         filt, _ = methods.build(sc.methods[0], sim.imu_model, sim.fixes, np.asarray(sc.gnss.lever_arm), src, 0)
-        assert type(filt) is cls
-        assert (filt.gmpf if est == "gmpf" else filt.dd2)["dd2_step"] == 2.0
+        assert filt.name == est and type(filt.make_estimator()) is cls
+        assert filt.options.dd2_step == 2.0
     assert filt.make_estimator().h == 2.0
 
 

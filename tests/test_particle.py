@@ -335,8 +335,8 @@ def test_pf_from_a_scenario_file(tmp_path):
     sc, src, _ = load_scenario(str(p))
     sim = simulate(sc, 1, src)
     filt, _ = methods.build(sc.methods[0], sim.imu_model, sim.fixes, np.asarray(sc.gnss.lever_arm), src, 0)
-    assert type(filt) is ParticleFilter and filt.pf["particles"] == 64 and filt.pf["roughening"] == 0.5
-    assert filt.pf["parallel"] is True
+    assert filt.name == "pf" and filt.options.particles == 64 and filt.options.roughening == 0.5
+    assert filt.options.parallel is True and filt.make_estimator().N == 64
 
 
 def _imu():

@@ -49,8 +49,10 @@ def test_shipped_config_validates():
 
 
 @pytest.mark.parametrize("edit, key, message", [
-    (('estimator = "vb-akf"', 'estimator = "ukf"'), "methods[6].estimator", "does not run on raw GNSS"),
-    (('estimator = "ekf"', 'estimator = "kalman"'), "methods[2].estimator", "does not run on raw GNSS"),
+    (('estimator = "vb-akf"', 'estimator = "ukf"'), "methods[6].estimator",
+     "'ukf' does not run on the constant-velocity motion model"),
+    (('estimator = "ekf"', 'estimator = "kalman"'), "methods[2].estimator",
+     "unknown estimator 'kalman' \\(known: ekf, .*epoch-mixture"),
     (('accel_sigma = "0.1 m/s^2/sqrt(Hz)"', 'accel_sigma = "-0.1 m/s^2/sqrt(Hz)"'), "motion.accel_sigma",
      "must not be negative"),
     (('accel_sigma = "0.1 m/s^2/sqrt(Hz)"', 'accel_sigma = "1000 m/s^2/sqrt(Hz)"'), "motion.accel_sigma",
@@ -77,20 +79,21 @@ def test_config_errors_name_file_and_key(tmp_path, edit, key, message):
 
 
 def test_estimator_options_and_coloured_bank_are_refused_by_key(tmp_path):
-    """What only the estimator can judge (its keyword options, the coloured bank that needs an
-    INS layout) is refused when the method is built, under the method's own key."""
+    """An option the estimator's registered model does not have is refused when the file is
+    loaded; what only the builder can judge (the coloured bank that needs an INS layout) when
+    the method is built; both under the method's own key."""
     from mixnav.experiment.model_methods import make_estimator
-    ds, src, _ = load_dataset(_cfg(tmp_path, _methods(SHIPPED, '[[methods]]\nname = "a"\nestimator = "wls"\n\n'
+    with pytest.raises(ConfigError, match="estimator 'epoch-mixture' has no option 'los_wieght'.*los_weight") as ei:
+        load_dataset(_cfg(tmp_path, _methods(SHIPPED, '[[methods]]\nname = "a"\nestimator = "wls"\n\n'
                                                       '[[methods]]\nname = "em"\nestimator = "epoch-mixture"\n'
-                                                      '[methods.options]\nlos_wieght = 0.5\n\n'
+                                                      '[methods.options]\nlos_wieght = 0.5\n')))
+    assert ei.value.key == "methods[1].options.los_wieght"
+    ds, src, _ = load_dataset(_cfg(tmp_path, _methods(SHIPPED, '[[methods]]\nname = "a"\nestimator = "wls"\n\n'
                                                       '[[methods]]\nname = "gm"\nestimator = "gaussian-mixture"\n'
                                                       '[methods.mixture.colored]\nprocess = 0.5\n')))
-    with pytest.raises(ConfigError, match="unknown option of estimator 'epoch-mixture'.*los_weight") as ei:
-        make_estimator(ds.methods[1], src, 1)
-    assert ei.value.key == "methods[1].options.los_wieght"
     with pytest.raises(ConfigError, match="constant-velocity") as ei:
-        make_estimator(ds.methods[2], src, 2, model_name="the constant-velocity model")
-    assert ei.value.key == "methods[2].mixture.colored"
+        make_estimator(ds.methods[1], src, 1, model_name="the constant-velocity model")
+    assert ei.value.key == "methods[1].mixture.colored"
 
 
 def test_corrections_are_the_spp_model():

@@ -162,12 +162,14 @@ def _scenario(tmp_path, method_lines):
 @pytest.mark.parametrize("est,line,where", [
     ("vb-aukf", "rho = 1.5", "options.rho"), ("vb-akf", "rho = 0", "options.rho"),
     ("vb-akf", "prior_shape = -1", "options.prior_shape"), ("vb-aukf", "iterations = 0", "options.iterations"),
-    ("ukf", "alpha = \"big\"", "options.alpha"), ("ukf", "rho = 0.9", "options.rho: unknown option"),
+    ("ukf", "alpha = \"big\"", "options.alpha"), ("ukf", "rho = 0.9", "options.rho"),
     ("vb-aukf", "prior_scale = 0", "options.prior_scale")])
 def test_bad_values_in_a_scenario_file_are_config_errors_naming_the_key(tmp_path, est, line, where):
-    with pytest.raises(ConfigError, match=where) as e:
+    with pytest.raises(ConfigError) as e:
         _scenario(tmp_path, f'estimator = "{est}"\n[methods.options]\n{line}\n')
-    assert e.value.key == "methods[0].options"
+    assert e.value.key == f"methods[0].{where}"
+    if est == "ukf" and where == "options.rho":
+        assert "has no option 'rho'" in str(e.value)
 
 
 def test_a_centre_weight_that_breaks_positivity_is_refused_when_built(tmp_path):

@@ -203,7 +203,7 @@ def filter_loose(imu: ImuData, fixes: GnssFixes, init: InitialState, *, imu_mode
     lever_arm : array_like (3,)
         Antenna position relative to the IMU in the body frame [m].
     estimator : str
-        A name of :data:`mixnav.filters.catalog.ESTIMATORS` (``"ekf"``, ``"robust-adaptive"``,
+        A registered estimator (:func:`mixnav.filters.registry.estimator_names`: ``"ekf"``, ``"robust-adaptive"``,
         ``"sage-husa"``...); ``options`` are its keyword arguments.
     states : int
         Error-state layout: 15, or 21 with scale factors.
@@ -213,7 +213,7 @@ def filter_loose(imu: ImuData, fixes: GnssFixes, init: InitialState, *, imu_mode
         When given, the table has error columns against it.
     """
     from .experiment.outputs import solution_table
-    from .filters.catalog import filter_class
+    from .filters.facade import Filter
     from .ins.error_model import get_layout
     from .ins.imu_model import ImuErrorModel
     from .measurements.loose import LooseGnss
@@ -238,9 +238,9 @@ def filter_loose(imu: ImuData, fixes: GnssFixes, init: InitialState, *, imu_mode
     if not inside.any():
         raise ArgumentError(f"no fix falls inside the IMU data after the initial time ({init.time}, {t1}] s",
                             argument="fixes")
-    cls = filter_class(estimator)
     layout = get_layout(states)
-    filt = cls(layout, imu_model, **options)
+    interval = options.pop("covariance_interval", 1.0)
+    filt = Filter(estimator, layout, imu_model, options, interval)
     res = filt.run(imu, init, [LooseGnss(fixes, lever, layout)],
                    output_times=None if output_times is None else np.asarray(output_times, dtype=float))
     return LooseResult(solution_table(res, truth), res)

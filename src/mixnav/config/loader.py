@@ -335,6 +335,9 @@ def _validate_data(model, data: dict, source: str):
                "missing": "required key is missing"}.get(err["type"], err["msg"])
         if msg.startswith("Value error, "):
             msg = msg[len("Value error, "):]
+        sub = re.match(r"options\.([\w.]+): ", msg)
+        if sub and key.endswith("options"):     # an option the estimator's model refused: its own key
+            key, msg = f"{key}.{sub.group(1)}", msg[sub.end():]
         more = f" (and {len(exc.errors()) - 1} more problem(s))" if len(exc.errors()) > 1 else ""
         raise ConfigError(msg + more, file=source, key=key) from None
 

@@ -4,26 +4,23 @@ observation file with its navigation file).
 Every epoch is solved by weighted least squares (single-point positioning, SPP); the
 ``[[methods]]`` may add filters on the GNSS-only constant-velocity model
 (:class:`mixnav.motion.ConstantVelocityMotion`) with any estimator that runs on a motion
-model other than the strapdown INS (``ekf``, ``robust-adaptive``, ``gaussian-mixture``,
-``epoch-mixture``, ``sage-husa``, ``vb-akf``), started from the first SPP fix
+model other than the strapdown INS (every registered estimator whose registration lists
+``"constant-velocity"``: :mod:`mixnav.filters.registry`), started from the first SPP fix
 (:mod:`mixnav.experiment.spp_process`). Same rules as every config: every key known,
 units written out, errors naming the file and the key.
 """
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import ClassVar, Literal
 
 from pydantic import Field, field_validator, model_validator
 
 from .. import units as u
 from .dataset_schema import DatasetInfo, RawGnss, ReferencePoint
 from .schema import Strict, _quantity
-from .vehicle_schema import VEHICLE_ESTIMATORS, VehicleMethod, unique_method_names
-
-#: estimators a raw-GNSS dataset runs: ``wls`` is the epoch-by-epoch SPP, the others the
-#: constant-velocity filter
-RAW_ESTIMATORS = ("wls",) + VEHICLE_ESTIMATORS
+from .schema import registered_estimator
+from .vehicle_schema import VehicleMethod, unique_method_names
 
 #: sections of an IMU dataset that a raw-GNSS one must not have (a config error naming them)
 FOREIGN_SECTIONS = ("imu", "gnss", "alignment", "reference", "installation", "aiding", "odometry",
@@ -39,17 +36,16 @@ class RawMethod(VehicleMethod):
     ``smooth`` as for the odometry datasets (:class:`mixnav.config.vehicle_schema.VehicleMethod`);
     ``smooth`` adds the RTS-smoothed ``<name>-smoothed`` (filters only)."""
 
+    motion_model: ClassVar[str] = "constant-velocity"
+
     estimator: str = "wls"
 
     @field_validator("estimator")
     @classmethod
     def _known(cls, v):
-        if v not in RAW_ESTIMATORS:
-            raise ValueError(f"estimator '{v}' does not run on raw GNSS (these do: {', '.join(RAW_ESTIMATORS)}; "
-                             "'wls' is the epoch-by-epoch single-point solution, the others filter on the "
-                             "constant-velocity model; the unscented and particle filters need the strapdown "
-                             "INS's batch mechanization)")
-        return v
+        if v == "wls":          # the epoch-by-epoch single-point solution, not a filter
+            return v
+        return registered_estimator(v, cls.motion_model)
 
     @model_validator(mode="after")
     def _wls_plain(self):

@@ -646,10 +646,25 @@ class ImmModeConfig(Strict):
     name: str = Field(min_length=1)
     measurements: list[Literal["gnss", "nhc", "odometer", "zupt", "zaru"]] = Field(
         min_length=1, description="a mode with no measurements is pure inertial navigation, never told apart")
-    estimator: Literal["ekf", "robust-adaptive", "em-bias", "gaussian-mixture"] = "ekf"
+    #: a registered estimator that can be a mode (``imm_mode`` in mixnav.filters.registry)
+    estimator: str = "ekf"
     robust: RobustConfig | None = None
     em: EmBiasConfig | None = None
     mixture: MixtureConfig | None = None
+
+    @field_validator("estimator")
+    @classmethod
+    def _mode_estimator(cls, v):
+        from ..errors import ArgumentError
+        from ..filters.registry import estimator_names, estimator_spec
+        try:
+            ok = estimator_spec(v).imm_mode
+        except ArgumentError:
+            ok = False
+        if not ok:
+            modes = [n for n in estimator_names(standalone_only=False) if estimator_spec(n).imm_mode]
+            raise ValueError(f"estimator '{v}' cannot be a mode of an IMM (these can: {', '.join(modes)})")
+        return v
 
     @model_validator(mode="after")
     def _unique(self):
@@ -712,101 +727,50 @@ class ImmConfig(Strict):
         return self
 
 
-class UnscentedOptions(Strict):
-    """``[methods.options]`` of ``estimator = "ukf"`` (mixnav.filters.ukf, docs/ukf.md):
-    the scaled unscented transform's ``alpha`` (> 0), ``beta``, ``kappa`` and the
-    number of merged sub-intervals the sigma points are mechanized over per step
-    (``substeps``, 0: every IMU increment). The centre point's covariance weight
-    must not be negative for the method's number of states (checked when built,
-    naming the key)."""
-
-    alpha: float = Field(default=0.6, gt=0)
-    beta: float = 2.0
-    kappa: float = 0.0
-    substeps: int = Field(default=4, ge=0)
-    absurd_sigma: float = Field(default=1e4, gt=0)
+def registered_estimator(name: str, motion: str) -> str:
+    """``name`` if the estimator registry (:mod:`mixnav.filters.registry`) knows it and it runs
+    on ``motion``; otherwise a ValueError saying which are registered or where it runs."""
+    from ..errors import ArgumentError
+    from ..filters.registry import check_motion
+    try:
+        check_motion(name, motion)
+    except ArgumentError as exc:
+        raise ValueError(exc.message) from None
+    return name
 
 
-class VbOptions(Strict):
-    """The variational-Bayes noise settings (mixnav.filters.vb): forgetting factor
-    ``rho`` in (0, 1], the inverse-Gamma prior of a new channel (``prior_shape`` > 0,
-    ``prior_scale`` > 0: its variance relative to the model's), fixed-point
-    ``iterations`` (>= 1) and ``tolerance`` (relative variance change, >= 0)."""
-
-    rho: float = Field(default=0.95, gt=0, le=1)
-    prior_shape: float = Field(default=1.0, gt=0)
-    prior_scale: float = Field(default=1.0, gt=0)
-    iterations: int = Field(default=3, ge=1)
-    tolerance: float = Field(default=1e-4, ge=0)
-    absurd_sigma: float = Field(default=1e4, gt=0)
-
-
-class VbUnscentedOptions(VbOptions, UnscentedOptions):
-    """``[methods.options]`` of ``estimator = "vb-aukf"``: :class:`VbOptions` and :class:`UnscentedOptions`."""
-
-
-class ParticleOptions(Strict):
-    """``[methods.options]`` of ``estimator = "pf"`` (mixnav.filters.particle, docs/particle.md):
-    the number of ``particles`` (>= 2), the effective-sample-size fraction below which
-    the particles are resampled (``resample_threshold`` in (0, 1]), the Liu-West kernel
-    jitter after a resampling (``roughening`` in [0, 1); 0: none) and the merged
-    sub-intervals the particles are mechanized over per step (``substeps``); ``parallel``
-    runs the per-particle kernels on numba's threads (the same particles; off by default)."""
-
-    particles: int = Field(default=1000, ge=2)
-    resample_threshold: float = Field(default=0.5, gt=0, le=1)
-    roughening: float = Field(default=0.9, ge=0, lt=1)
-    substeps: int = Field(default=4, ge=0)
-    absurd_sigma: float = Field(default=1e4, gt=0)
-    parallel: bool = False
-
-
-class Dd2Options(Strict):
-    """``[methods.options]`` of ``estimator = "dd2"`` (mixnav.filters.dd2, docs/particle.md): the
-    divided-difference step ``dd2_step`` (> 1; sqrt(3) the Gaussian optimum) and the merged
-    sub-intervals the points are mechanized over per step (``substeps``)."""
-
-    dd2_step: float = Field(default=3 ** 0.5, gt=1)
-    substeps: int = Field(default=4, ge=0)
-    absurd_sigma: float = Field(default=1e4, gt=0)
-
-
-class GmpfOptions(Dd2Options):
-    """``[methods.options]`` of ``estimator = "gmpf"`` (mixnav.filters.gmpf, docs/particle.md):
-    ``particles`` drawn per epoch (>= 2), mixture ``components`` (1 to ``particles``), the
-    most ``em_iterations`` of the weighted-EM refit (>= 1), the DD2 settings and how the
-    particles are drawn (``sampling``: "iid" or "matched")."""
-
-    particles: int = Field(default=1000, ge=2)
-    components: int = Field(default=3, ge=1)
-    em_iterations: int = Field(default=10, ge=1)
-    sampling: Literal["iid", "matched"] = "matched"
-
-    @field_validator("components")
-    @classmethod
-    def _at_most_particles(cls, v, info):
-        n = info.data.get("particles")
-        if n is not None and v > n:
-            raise ValueError(f"must not exceed particles ({n}), got {v}")
-        return v
-
-
-#: estimators whose ``[methods.options]`` table is validated against a schema at load time
-#: (the others' options are checked by the estimator when built)
-ESTIMATOR_OPTIONS = {"ukf": UnscentedOptions, "vb-aukf": VbUnscentedOptions, "vb-akf": VbOptions,
-                     "pf": ParticleOptions, "dd2": Dd2Options, "gmpf": GmpfOptions}
+def registered_options(name: str | None, options: dict) -> dict:
+    """A method's ``[methods.options]`` checked against the options model the estimator
+    registered: the same keys, validated values. The message starts with the option's key
+    (``options.<key>: ...``), which the loader makes the error's key."""
+    from ..errors import ArgumentError
+    from ..filters.registry import estimator_spec
+    if name is None or not options:
+        return options
+    try:
+        spec = estimator_spec(name)
+    except ArgumentError:
+        return options          # the estimator's own check says it
+    if spec.table is not None:
+        raise ValueError(f"estimator \"{name}\" takes its settings from its own table ([{spec.table}]), "
+                         "not [options]")
+    try:
+        checked = spec.parse_options(options)
+    except ArgumentError as exc:
+        raise ValueError(f"options.{exc.argument}: {exc.message}") from None
+    return {k: getattr(checked, k) for k in options}
 
 
 class MethodConfig(Strict):
     name: str
     type: Literal["loose-ekf", "tight-ekf", "tdcp-ekf"]
-    #: a name of mixnav.filters.catalog.ESTIMATORS: "ekf" (M1), "robust-adaptive" (M2),
-    #: "gaussian-mixture" (M3; M4/M5 with mixture.learn), "sage-husa", ...
+    #: a registered estimator (mixnav.filters.registry) that runs on the strapdown INS: "ekf" (M1),
+    #: "robust-adaptive" (M2), "gaussian-mixture" (M3; M4/M5 with mixture.learn), "sage-husa", ...
     estimator: str = "ekf"
     robust: RobustConfig | None = None
     mixture: MixtureConfig | None = None
     imm: ImmConfig | None = None
-    #: keyword arguments of an estimator without a table of its own (e.g. sage-husa's fading)
+    #: the settings of an estimator without a table of its own (its registered options model)
     options: dict[str, Any] = Field(default_factory=dict)
     states: Literal[15, 17, 21, 23] = 15
     covariance_interval: Duration = 1.0
@@ -839,32 +803,18 @@ class MethodConfig(Strict):
     @field_validator("estimator")
     @classmethod
     def _known_estimator(cls, v):
-        from ..filters.catalog import ESTIMATORS
-        if v not in ESTIMATORS:
-            raise ValueError(f"unknown estimator '{v}' (known: {', '.join(ESTIMATORS)})")
-        return v
+        return registered_estimator(v, "strapdown")
 
     @field_validator("options")
     @classmethod
     def _typed_options(cls, v, info):
-        schema = ESTIMATOR_OPTIONS.get(info.data.get("estimator"))
-        if schema is None or not v:
-            return v
-        from pydantic import ValidationError
-        try:
-            checked = schema.model_validate(v)
-        except ValidationError as exc:
-            err = exc.errors()[0]
-            what = "unknown option" if err["type"] == "extra_forbidden" else err["msg"]
-            raise ValueError(f"options.{'.'.join(map(str, err['loc']))}: {what} (options of "
-                             f"\"{info.data.get('estimator')}\": {', '.join(schema.model_fields)})") from None
-        return {k: getattr(checked, k) for k in v}
+        return registered_options(info.data.get("estimator"), v)
 
     @model_validator(mode="after")
     def _estimator_tables(self):
-        if self.options and self.estimator in ("robust-adaptive", "gaussian-mixture"):
-            raise ValueError(f"estimator \"{self.estimator}\" takes its settings from its own table "
-                             f"([{'robust' if self.estimator == 'robust-adaptive' else 'mixture'}]), not [options]")
+        if self.options and self.estimator == "robust-adaptive":
+            raise ValueError("estimator \"robust-adaptive\" takes its settings from its own table ([robust]), "
+                             "not [options]")
         if self.robust is not None and self.estimator != "robust-adaptive":
             raise ValueError("a [robust] table needs estimator = \"robust-adaptive\"")
         if self.mixture is not None and self.estimator != "gaussian-mixture":

@@ -6,13 +6,13 @@ written out, errors naming the file and the key.
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 from pydantic import Field, field_validator
 
 from .. import units as u
 from .dataset_schema import DatasetInfo
-from .schema import MixtureConfig, RobustConfig, Strict, _quantity
+from .schema import MixtureConfig, RobustConfig, Strict, _quantity, registered_estimator, registered_options
 
 Speed = _quantity(u.VELOCITY, positive=True)
 SpeedNN = _quantity(u.VELOCITY, nonnegative=True)
@@ -124,11 +124,14 @@ class VehicleAlignment(Strict):
         return v
 
 
-#: estimators usable with the dead-reckoning model (any motion model)
-VEHICLE_ESTIMATORS = ("ekf", "robust-adaptive", "gaussian-mixture", "epoch-mixture", "sage-husa", "vb-akf")
-
-
 class VehicleMethod(Strict):
+    """A method of an odometry + pseudorange dataset: a registered estimator that runs on the
+    dead-reckoning model (:mod:`mixnav.filters.registry`), its ``[robust]`` or ``[mixture]``
+    table or its ``options``, and ``smooth``."""
+
+    #: the motion model the methods of this kind of dataset run on
+    motion_model: ClassVar[str] = "dead-reckoning"
+
     name: str
     estimator: str = "ekf"
     robust: RobustConfig | None = None
@@ -149,11 +152,12 @@ class VehicleMethod(Strict):
     @field_validator("estimator")
     @classmethod
     def _known(cls, v):
-        if v not in VEHICLE_ESTIMATORS:
-            raise ValueError(f"estimator '{v}' does not run on the dead-reckoning model (these do: "
-                             f"{', '.join(VEHICLE_ESTIMATORS)}; the unscented and particle filters need the "
-                             "strapdown INS's batch mechanization)")
-        return v
+        return registered_estimator(v, cls.motion_model)
+
+    @field_validator("options")
+    @classmethod
+    def _typed_options(cls, v, info):
+        return registered_options(info.data.get("estimator"), v)
 
 
 class VehicleDataset(Strict):

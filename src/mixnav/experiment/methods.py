@@ -4,14 +4,14 @@ The configuration stops here: below this module every object takes plain,
 validated Python arguments and names the *argument* that is wrong
 (:class:`mixnav.errors.ArgumentError`); :func:`build` maps those to the
 config file's keys (:func:`mixnav.config.errors.config_keys`). Estimators are
-found by name in :mod:`mixnav.filters.catalog`; one without a dedicated table
-(``robust``, ``mixture``) gets the method's ``[methods.options]`` as its
-keyword arguments.
+found by name in the registry (:mod:`mixnav.filters.registry`), which builds them from
+their options: the method's ``[methods.options]``, or its own table (``[robust]``;
+the ``[mixture]`` and ``[imm]`` tables are turned into objects here). One builder
+serves every motion model: :func:`build` (the strapdown INS: a filter) and
+:func:`estimator_for` (any other: an estimator for the engine).
 """
 
 from __future__ import annotations
-
-import inspect
 
 import numpy as np
 
@@ -19,8 +19,7 @@ from ..config.errors import config_keys
 from ..config.loader import imu_model
 from ..config.schema import EmBiasConfig, MethodConfig, MixtureConfig, RobustConfig
 from ..errors import ConfigError
-from ..filters.catalog import ESTIMATORS as _CATALOG
-from ..filters.catalog import METHOD_TYPES, filter_class
+from ..filters.registry import METHOD_TYPES, BuildContext, check_motion
 from ..ins.error_model import ClockModel
 from ..ins.imu_model import ImuErrorModel
 from ..measurements.loose import LooseGnss
@@ -28,8 +27,45 @@ from ..measurements.loose import LooseGnss
 #: Method type -> one-line description (listed by ``mixnav scenarios``).
 METHODS = {k: "M1 closed-loop error-state EKF, " + v for k, v in METHOD_TYPES.items()}
 
-#: Estimators (``estimator = ...`` of a method) -> description; each runs on every method type.
-ESTIMATORS = {k: v[1] for k, v in _CATALOG.items()}
+
+
+def __getattr__(name):
+    # ESTIMATORS (registered name -> description) imports every estimator: built when asked
+    if name == "ESTIMATORS":
+        from ..filters.registry import estimator_names, estimator_spec
+        return {n: estimator_spec(n).description for n in estimator_names()}
+    raise AttributeError(name)
+
+
+def _options(method) -> dict:
+    """The settings the registry builds the method's estimator from: its ``[robust]`` table
+    (robust-adaptive) under its ``[methods.options]``."""
+    table = method.robust.model_dump() if getattr(method, "robust", None) is not None else {}
+    return {**table, **dict(method.options or {})}
+
+
+def estimator_for(method, source, index: int, seed: int = 0, motion: str | None = None, training=None,
+                  mixture_start: dict | None = None, motion_model=None):
+    """The estimator of ``method`` (any entry with ``name``, ``estimator``, ``robust``,
+    ``mixture``, ``options``) for a run on the named ``motion`` model, built by the registry;
+    errors under the method's keys; ``motion_model``: the run's motion model object. The
+    strapdown INS's filters come from :func:`build`."""
+    key = f"methods[{index}]"
+    with config_keys(key, source):
+        spec = check_motion(method.estimator, motion) if motion else check_motion(method.estimator, "strapdown")
+    context = BuildContext(motion=motion_model, method=method, training=training, seed=seed, source=source, index=index,
+                           extra={"mixture_start": mixture_start})
+    if spec.table == "mixture":
+        mc = method.mixture or MixtureConfig()
+        if mc.colored is not None:
+            raise ConfigError("the coloured-noise bank (M6) differences measurements of an INS layout; not "
+                              f"available on the {motion} model", file=source, key=f"{key}.mixture.colored")
+        mixtures, online, _, _ = _bank_parts(mc, training, seed, method.name, source, f"{key}.mixture")
+        context.extra["bank"] = dict(mixtures=mixtures, max_components=mc.max_components, online=online,
+                                     gate=mc.gate, outlier_mean=mc.outlier_mean,
+                                     divergence_window=mc.divergence_window, divergence_nis=mc.divergence_nis)
+    with config_keys(f"{key}.options", source):
+        return spec.make(_options(method), context=context)
 
 #: Arguments of the built-in estimators -> the method's keys where they differ.
 _RENAME = {"k0": "robust.k0", "k1": "robust.k1", "c": "robust.c", "max_components": "mixture.max_components",
@@ -115,9 +151,6 @@ def _build(method, default_imu, fixes, lever_arm, source, index, observations, c
     common = dict(covariance_interval=method.covariance_interval, clock=clock)
     if method.estimator == "imm":
         return _imm(method, layout, model, meas[0], aids, source, index, common, training, seed), meas
-    if method.estimator == "robust-adaptive":
-        rc = method.robust or RobustConfig()
-        return filter_class("robust-adaptive")(layout, model, k0=rc.k0, k1=rc.k1, c=rc.c, **common), meas
     if method.estimator == "gaussian-mixture":
         from ..filters.gmekf import GaussianMixtureEkf
         mc = method.mixture or MixtureConfig()
@@ -129,18 +162,11 @@ def _build(method, default_imu, fixes, lever_arm, source, index, observations, c
                                   learning_time_s=learning_time, online=online, learner_not_converged=failed,
                                   gate=mc.gate, outlier_mean=mc.outlier_mean, divergence_window=mc.divergence_window,
                                   divergence_nis=mc.divergence_nis, **common), meas
-    cls = filter_class(method.estimator)
-    options = dict(method.options or {})
-    params = inspect.signature(cls).parameters
-    named = {k for k, p in params.items() if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
-    reserved = {"layout", "imu_model", "covariance_interval", "clock"}
-    for k in options:
-        if k not in named or k in reserved:
-            known = sorted(named - reserved)
-            raise ConfigError(f"estimator '{method.estimator}' has no option '{k}' (its options: "
-                              f"{', '.join(known) or 'none'})", file=source, key=f"methods[{index}].options.{k}")
+    from ..filters.facade import Filter
     with config_keys(f"methods[{index}].options", source):
-        return cls(layout, model, **common, **options), meas
+        return Filter(method.estimator, layout, model, _options(method), **common,
+                      context=BuildContext(method=method, training=training, seed=seed, source=source,
+                                           index=index)), meas
 
 
 def _bank_parts(mc: MixtureConfig, training, seed: int, name: str, source, key: str):
@@ -192,8 +218,12 @@ def _imm(method, layout, model, gnss, aids, source, index, common, training=None
                 mixtures, mc.max_components, online=online, carry_mean=True, gate=mc.gate,
                 outlier_mean=mc.outlier_mean, divergence_window=mc.divergence_window,
                 divergence_nis=mc.divergence_nis))
-        else:
+        elif mode.estimator == "ekf":
             makers.append(lambda: KalmanEstimator(carry_mean=True))
+        else:   # registered as a mode, but its mean-carrying child is not built here yet
+            raise ConfigError(f"estimator '{mode.estimator}' cannot yet be built as an IMM mode (these can: "
+                              "ekf, robust-adaptive, em-bias, gaussian-mixture)", file=source,
+                              key=f"methods[{index}].imm.modes[{k}].estimator")
     interval = None if ic.transition_interval == "epoch" else float(ic.transition_interval)
     with config_keys(f"methods[{index}].imm", source):
         return ImmEkf(layout, model, sets, ic.transition, ic.initial_probabilities, interval,

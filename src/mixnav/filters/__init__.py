@@ -7,5 +7,7 @@
 ``colored``      M6: the bank with AR(1) process-noise states and differencing
 ``online``       M4 online re-learning of the measurement mixtures
 ``sage_husa``    Sage-Husa adaptive EKF (a variance scale per observable kind)
-``catalog``      estimator names usable in scenario files (one line each, imported lazily)
+``registry``     the estimator registry (each estimator registers itself; plug-ins by entry point)
+``facade``       ``Filter``: the strapdown INS + any registered estimator + the engine
+``catalog``      the old catalogue: a view of the registry
 """

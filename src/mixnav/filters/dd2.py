@@ -37,7 +37,10 @@ from ..engine.protocols import Correction, Epoch, Transition
 from ..engine.status import ABSURD, OK
 from ..errors import ArgumentError
 from ._no_clone import NoCloneEstimator
-from .ekf import ErrorStateEkf
+from pydantic import Field
+
+from .facade import facade
+from .registry import MOTIONS, GateOptions, register_estimator
 from .ukf import predict_members
 
 __all__ = ["DEFAULT_STEP", "check_dd2_step", "dd2_points", "dd2_moments", "dd2_time", "dd2_measure",
@@ -339,25 +342,20 @@ def predict_points(epoch: Epoch, pts: np.ndarray, motion, sensor, clk: int, who:
     return y, np.asarray(Y, dtype=float).reshape(*shape, len(y)), np.asarray(r, dtype=float)
 
 
-class Dd2Filter(ErrorStateEkf):
-    """The DD2 filter on the strapdown INS: the engine, the motion model and a
-    :class:`Dd2Estimator`.
+class Dd2Options(GateOptions):
+    """``[methods.options]`` of ``estimator = "dd2"`` (docs/particle.md)."""
 
-    Parameters
-    ----------
-    layout, imu_model, covariance_interval, absurd_sigma, clock
-        As :class:`~mixnav.filters.ekf.ErrorStateEkf`.
-    dd2_step, substeps
-        As :class:`Dd2Estimator` (checked now, naming the key).
-    """
+    dd2_step: float = Field(default=DEFAULT_STEP, gt=1, description="divided-difference step (> 1; sqrt(3) "
+                            "the Gaussian optimum)")
+    substeps: int = Field(default=4, ge=0, description="merged sub-intervals the points are mechanized over "
+                          "per step (0: every IMU increment)")
 
-    can_smooth = False
 
-    def __init__(self, layout, imu_model, dd2_step: float = DEFAULT_STEP, substeps: int = 4,
-                 covariance_interval: float = 1.0, absurd_sigma: float = 1e4, clock=None):
-        super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
-        Dd2Estimator(dd2_step, substeps, absurd_sigma)
-        self.dd2 = dict(dd2_step=float(dd2_step), substeps=int(substeps))
+#: MOTIONS[:1]: the strapdown INS only, until the ensemble runs on the motion seam (then: MOTIONS).
+register_estimator("dd2", options=Dd2Options, motions=MOTIONS[:1], can_smooth=False,
+                   build=lambda o, absurd_sigma, context: Dd2Estimator(o.dd2_step, o.substeps, absurd_sigma),
+                   description="second-order divided-difference filter (Norgaard et al. 2000; issue 19): 2n+1 "
+                   "points mechanized as full states (options: dd2_step, substeps)")(Dd2Estimator)
 
-    def make_estimator(self):
-        return Dd2Estimator(absurd_sigma=self.absurd_sigma, **self.dd2)
+#: The DD2 filter on the strapdown INS: ``Dd2Filter(layout, imu_model, dd2_step=sqrt(3), substeps=4, ...)``.
+Dd2Filter = facade("dd2", "Dd2Filter")

@@ -29,6 +29,7 @@ from ..ins.imu_model import ImuErrorModel
 from ..ins._error_kernels import covariance_predict
 from ..ins.strapdown import StrapdownMotion
 from ._ekf_kernels import NEEDS_REPAIR, OK, kalman_correct
+from .registry import GateOptions, register_estimator
 
 _WARM: set = set()
 
@@ -41,6 +42,12 @@ def repair_covariance(P: np.ndarray) -> None:
     P[:, :] = (v * w) @ v.T
 
 
+class EkfOptions(GateOptions):
+    """``[methods.options]`` of ``estimator = "ekf"``: the blunder gate only."""
+
+
+@register_estimator("ekf", options=EkfOptions, description="M1 extended Kalman filter (the default)",
+                    imm_mode=True, build=lambda options, absurd_sigma, context: KalmanEstimator(absurd_sigma))
 class KalmanEstimator:
     """One Gaussian about the nominal state: ``P``, and the stochastic-clone blocks.
 

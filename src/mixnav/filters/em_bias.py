@@ -62,6 +62,7 @@ from ..errors import ArgumentError
 from ..measurements.base import Rows
 from ..measurements.kinds import POSITION
 from .ekf import KalmanEstimator
+from .registry import NoOptions, from_context, register_estimator
 
 
 @lru_cache(maxsize=64)
@@ -170,6 +171,10 @@ def fit_bias(Y: np.ndarray, settings: EmBiasSettings, rng: np.random.Generator, 
                    bool(em.converged_))
 
 
+@register_estimator("em-bias", options=NoOptions, table="em", motions=("strapdown",), imm_mode=True,
+                    standalone=False, build=from_context("em", lambda **kw: EmBiasKalman(**kw), "em"),
+                    description="the EM-IMM's GNSS mode: the EKF with the EM multipath-bias removal on its "
+                    "GNSS rows (a mode of an IMM only)")
 class EmBiasKalman(KalmanEstimator):
     """A Kalman estimator that removes an EM-estimated multipath bias from the position rows of
     the models in ``models`` (module docstring); the GNSS mode of the EM-IMM.

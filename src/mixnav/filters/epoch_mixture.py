@@ -61,13 +61,51 @@ from ..engine.protocols import Correction, Epoch
 from ..engine.status import NEEDS_REPAIR, OK
 from ..errors import ArgumentError
 from ..measurements.kinds import kind_code
-from .ekf import ErrorStateEkf, KalmanEstimator
+from pydantic import Field
+
+from .ekf import KalmanEstimator
+from .facade import facade
+from .registry import GateOptions, register_estimator
 from ._epoch_mixture_kernels import epoch_em, predictive_log_density
 
 __all__ = ["EpochMixtureEstimator", "EpochMixtureEkf"]
 
 
 
+class EpochMixtureOptions(GateOptions):
+    """``[methods.options]`` of ``estimator = "epoch-mixture"`` (as :class:`EpochMixtureEstimator`,
+    which checks each value and names it)."""
+
+    los_weight: float = Field(default=0.5, description="starting line-of-sight weight in (0, 1]")
+    delay_mean: float = Field(default=10.0, description="starting mean of the delayed component [m]")
+    delay_sd: float = Field(default=30.0, description="starting sd of the delayed component [m]")
+    los_scale: float = Field(default=1.0, description="starting factor on the model's variance")
+    learn: bool = True
+    learn_scale: bool = False
+    forget: float = Field(default=0.999, description="forgetting factor per row in (0, 1]")
+    prior_rows: float = Field(default=200.0, description="weight of the starting values [rows]")
+    min_delay_sd: float = Field(default=5.0, description="floor on the delay sd [m]")
+    iterations: int = Field(default=20, description="EM iterations per epoch")
+    tolerance: float = Field(default=1e-3, description="largest change of the state estimate that stops EM")
+    kinds: list[str] = Field(default=["pseudorange"], description="observable kinds following the mixture")
+    cn0_edges: list[float] = Field(default=[], description="C/N0 band edges [dB-Hz]")
+    los_weight_bands: list[float] | None = Field(default=None, description="starting LOS weight per band")
+    correlation_time: float = Field(default=0.0, description="correlation time of the LOS errors [s]")
+
+
+def _build_epoch_mixture(options: EpochMixtureOptions, absurd_sigma: float, context):
+    """The options the file sets, over the mixture a track alignment handed over
+    (``context.extra["mixture_start"]``; its band weights only on the same bands)."""
+    given = options.model_dump(exclude_unset=True, exclude={"absurd_sigma"})
+    start = dict(context.extra.get("mixture_start") or {})
+    if list(given.get("cn0_edges", [])) != start.pop("cn0_edges", None):
+        start.pop("los_weight_bands", None)      # learned on other bands
+    return EpochMixtureEstimator(**{**start, **given}, absurd_sigma=absurd_sigma)
+
+
+@register_estimator("epoch-mixture", options=EpochMixtureOptions, build=_build_epoch_mixture,
+                    description="whole-epoch LOS/NLOS mixture update (issue 21): responsibilities of every "
+                    "pseudorange of an epoch against one state, the delay distribution learned online")
 class EpochMixtureEstimator(KalmanEstimator):
     """One Gaussian error state with the whole-epoch LOS/NLOS update (module docstring).
 
@@ -269,31 +307,6 @@ class EpochMixtureEstimator(KalmanEstimator):
                 "innovation_log_likelihood": self.log_likelihood}
 
 
-class EpochMixtureEkf(ErrorStateEkf):
-    """The closed-loop error-state filter on the strapdown INS with the whole-epoch mixture
-    update (tight coupling: pseudorange rows follow the mixture, range rates stay Gaussian).
-
-    Parameters
-    ----------
-    layout, imu_model, covariance_interval, absurd_sigma, clock
-        As :class:`~mixnav.filters.ekf.ErrorStateEkf`.
-    los_weight, delay_mean, delay_sd, los_scale, learn, learn_scale, forget, prior_rows, min_delay_sd,
-    iterations, tolerance, cn0_edges
-        As :class:`EpochMixtureEstimator` (C/N0 bands need a model with ``row_info``; the
-        tight model has none yet: its rows use the band-free weight).
-    """
-
-    def __init__(self, layout, imu_model, los_weight: float = 0.5, delay_mean: float = 10.0,
-                 delay_sd: float = 30.0, los_scale: float = 1.0, learn: bool = True, learn_scale: bool = False,
-                 forget: float = 0.999, prior_rows: float = 200.0, min_delay_sd: float = 5.0, iterations: int = 20,
-                 tolerance: float = 1e-3, cn0_edges=(), covariance_interval: float = 1.0, absurd_sigma: float = 1e4,
-                 clock=None):
-        super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
-        self.settings = dict(los_weight=los_weight, delay_mean=delay_mean, delay_sd=delay_sd, los_scale=los_scale,
-                             learn=learn, learn_scale=learn_scale, forget=forget, prior_rows=prior_rows,
-                             min_delay_sd=min_delay_sd, iterations=iterations, tolerance=tolerance,
-                             cn0_edges=tuple(cn0_edges))
-        self.make_estimator()   # validate now, not at the first run
-
-    def make_estimator(self):
-        return EpochMixtureEstimator(**self.settings, absurd_sigma=self.absurd_sigma)
+#: The whole-epoch mixture filter on the strapdown INS: ``EpochMixtureEkf(layout, imu_model, los_weight=...)``
+#: (C/N0 bands need a model with ``row_info``; the tight model has none: the band-free weight).
+EpochMixtureEkf = facade("epoch-mixture", "EpochMixtureEkf")

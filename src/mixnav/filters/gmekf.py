@@ -60,6 +60,7 @@ from ._bank_kernels import (bank_epoch, bank_epoch_collect, bank_epoch_guarded, 
                             bank_propagate, bank_reduce, bank_split, bank_update, predicted_nis)
 from ._ekf_kernels import NEEDS_REPAIR, OK
 from .ekf import ErrorStateEkf, repair_covariance
+from .registry import NoOptions, from_context, register_estimator
 
 
 def independent_rows(z, r) -> tuple[np.ndarray, np.ndarray]:
@@ -88,6 +89,11 @@ def _padded(tables):
 _BANK_WARM = []
 
 
+@register_estimator("gaussian-mixture", options=NoOptions, table="mixture", imm_mode=True,
+                    build=from_context("bank", lambda **kw: BankEstimator(**kw), "mixture"),
+                    description="M3 Gaussian-mixture EKF (bank of components); M4/M5 when [mixture.learn] uses "
+                    "vb/gibbs; M4 re-learned online with mixture.learn.online; M6 (coloured noise, paper P2, "
+                    "strapdown only) with [mixture.colored]")
 class BankEstimator:
     """The bank of Gaussian components about the one nominal INS state (method M3;
     the engine's estimator protocol, :mod:`mixnav.engine.protocols`).

@@ -74,8 +74,10 @@ Randomness: only the ``rng`` the engine hands to :meth:`GmpfEstimator.init`.
 from __future__ import annotations
 
 import warnings
+from typing import Literal
 
 import numpy as np
+from pydantic import Field, field_validator
 
 from ..engine.protocols import Correction, Epoch, Transition
 from ..engine.status import ABSURD, OK
@@ -83,9 +85,10 @@ from ..errors import ArgumentError
 from ..noise.learn import ConvergenceWarning
 from ..noise.learn.em import EMGaussianMixture, gaussian_logpdf
 from ._no_clone import NoCloneEstimator
-from .dd2 import (DEFAULT_STEP, check_dd2_step, dd2_measure, dd2_points, dd2_time, mechanize_points,
+from .dd2 import (DEFAULT_STEP, Dd2Options, check_dd2_step, dd2_measure, dd2_points, dd2_time, mechanize_points,
                   predict_points, psd_cholesky)
-from .ekf import ErrorStateEkf
+from .facade import facade
+from .registry import MOTIONS, register_estimator
 
 __all__ = ["GmpfEstimator", "GaussianMixtureParticleFilter", "check_gmpf_settings", "mixture_logpdf",
            "fit_weighted_mixture"]
@@ -409,27 +412,33 @@ class GmpfEstimator(NoCloneEstimator):
         """Nothing of its own to compile: the members' kernels are the motion model's."""
 
 
-class GaussianMixtureParticleFilter(ErrorStateEkf):
-    """The GMPF on the strapdown INS (M8, paper P3): the engine, the motion model and a
-    :class:`GmpfEstimator`.
+class GmpfOptions(Dd2Options):
+    """``[methods.options]`` of ``estimator = "gmpf"`` (docs/particle.md): the DD2 settings and these."""
 
-    Parameters
-    ----------
-    layout, imu_model, covariance_interval, absurd_sigma, clock
-        As :class:`~mixnav.filters.ekf.ErrorStateEkf`.
-    particles, components, em_iterations, dd2_step, substeps, sampling
-        As :class:`GmpfEstimator` (checked now, naming the key).
-    """
+    particles: int = Field(default=1000, ge=2, description="particles drawn per epoch")
+    components: int = Field(default=3, ge=1, description="mixture components (1 to particles)")
+    em_iterations: int = Field(default=10, ge=1, description="most iterations of the weighted-EM refit")
+    sampling: Literal["iid", "matched"] = Field(default="matched", description="how the particles are drawn")
 
-    can_smooth = False
+    @field_validator("components")
+    @classmethod
+    def _at_most_particles(cls, v, info):
+        n = info.data.get("particles")
+        if n is not None and v > n:
+            raise ValueError(f"must not exceed particles ({n}), got {v}")
+        return v
 
-    def __init__(self, layout, imu_model, particles: int = 1000, components: int = 3, em_iterations: int = 10,
-                 dd2_step: float = DEFAULT_STEP, substeps: int = 4, sampling: str = "matched",
-                 covariance_interval: float = 1.0, absurd_sigma: float = 1e4, clock=None):
-        super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
-        check_gmpf_settings(particles, components, em_iterations, dd2_step, substeps, absurd_sigma, sampling)
-        self.gmpf = dict(particles=int(particles), components=int(components), em_iterations=int(em_iterations),
-                         dd2_step=float(dd2_step), substeps=int(substeps), sampling=sampling)
 
-    def make_estimator(self):
-        return GmpfEstimator(absurd_sigma=self.absurd_sigma, **self.gmpf)
+def _build_gmpf(o: GmpfOptions, absurd_sigma: float, context):
+    return GmpfEstimator(particles=o.particles, components=o.components, em_iterations=o.em_iterations,
+                         dd2_step=o.dd2_step, substeps=o.substeps, sampling=o.sampling, absurd_sigma=absurd_sigma)
+
+
+#: MOTIONS[:1]: the strapdown INS only, until the ensemble runs on the motion seam (then: MOTIONS).
+register_estimator("gmpf", options=GmpfOptions, motions=MOTIONS[:1], can_smooth=False, build=_build_gmpf,
+                   description="M8 Gaussian-mixture particle filter (paper P3): DD2 per mixture component builds "
+                   "the importance density, weighted EM refit instead of resampling (options: particles, "
+                   "components, em_iterations, dd2_step, substeps, sampling)")(GmpfEstimator)
+
+#: The GMPF on the strapdown INS (M8, paper P3): ``GaussianMixtureParticleFilter(layout, imu_model, ...)``.
+GaussianMixtureParticleFilter = facade("gmpf", "GaussianMixtureParticleFilter")

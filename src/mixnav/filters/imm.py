@@ -55,6 +55,7 @@ from ..errors import ArgumentError
 from ..ins.error_model import ClockModel, StateLayout
 from ..ins.imu_model import ImuErrorModel
 from .ekf import ErrorStateEkf, KalmanEstimator
+from .registry import NoOptions, from_context, register_estimator
 from ..engine.status import ABSURD, NEEDS_REPAIR, NON_FINITE, OK
 
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -162,6 +163,10 @@ def log_likelihood(x: np.ndarray, P: np.ndarray, z: np.ndarray, H: np.ndarray, R
     return float(-0.5 * (w @ w + 2.0 * np.log(np.diag(L)).sum() + len(z) * _LOG_2PI))
 
 
+@register_estimator("imm", options=NoOptions, table="imm", motions=("strapdown",), can_smooth=False,
+                    build=from_context("imm", lambda absurd_sigma, **kw: ImmEstimator(**kw), "imm"),
+                    description="M9 interacting multiple models (paper P4): EKF or robust modes with their own "
+                    "measurement sets ([methods.imm])")
 class ImmEstimator:
     """Interacting multiple models of mode-conditioned error-state estimators (module docstring).
 

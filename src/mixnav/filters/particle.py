@@ -65,7 +65,10 @@ from ..measurements.loose import LooseGnss
 from ..ins._error_kernels import L_BG
 from ._no_clone import NoCloneEstimator
 from ._pf_kernels import CHUNKS, PARALLEL, SCRATCH, SERIAL, pf_log_weights, pf_systematic
-from .ekf import ErrorStateEkf
+from pydantic import Field
+
+from .facade import facade
+from .registry import MOTIONS, GateOptions, register_estimator
 from .ukf import predict_members
 
 __all__ = ["ParticleEstimator", "ParticleFilter", "systematic_resample", "normalise_log_weights",
@@ -478,27 +481,31 @@ def _sqrt_psd(Q: np.ndarray) -> np.ndarray:
     return (V * np.sqrt(np.maximum(lam, 0.0))) @ V.T
 
 
-class ParticleFilter(ErrorStateEkf):
-    """The SIR particle filter on the strapdown INS: the engine, the motion model and a
-    :class:`ParticleEstimator`.
+class ParticleOptions(GateOptions):
+    """``[methods.options]`` of ``estimator = "pf"`` (docs/particle.md)."""
 
-    Parameters
-    ----------
-    layout, imu_model, covariance_interval, absurd_sigma, clock
-        As :class:`~mixnav.filters.ekf.ErrorStateEkf`.
-    particles, resample_threshold, roughening, substeps, parallel
-        As :class:`ParticleEstimator` (checked now, naming the key).
-    """
+    particles: int = Field(default=1000, ge=2, description="number of particles")
+    resample_threshold: float = Field(default=0.5, gt=0, le=1, description="effective-sample-size fraction "
+                                      "below which the particles are resampled")
+    roughening: float = Field(default=0.9, ge=0, lt=1, description="Liu-West jitter after a resampling "
+                              "(0: none)")
+    substeps: int = Field(default=4, ge=0, description="merged sub-intervals the particles are mechanized "
+                          "over per step (0: every IMU increment)")
+    parallel: bool = Field(default=False, description="per-particle kernels on numba's threads (the same "
+                           "particles)")
 
-    can_smooth = False
 
-    def __init__(self, layout, imu_model, particles: int = 1000, resample_threshold: float = 0.5,
-                 roughening: float = 0.9, substeps: int = 4, covariance_interval: float = 1.0,
-                 absurd_sigma: float = 1e4, clock=None, parallel: bool = False):
-        super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
-        check_particle_settings(particles, resample_threshold, roughening, substeps, absurd_sigma)
-        self.pf = dict(particles=int(particles), resample_threshold=float(resample_threshold),
-                       roughening=float(roughening), substeps=int(substeps), parallel=bool(parallel))
+def _build_pf(o: ParticleOptions, absurd_sigma: float, context):
+    return ParticleEstimator(particles=o.particles, resample_threshold=o.resample_threshold,
+                             roughening=o.roughening, substeps=o.substeps, parallel=o.parallel,
+                             absurd_sigma=absurd_sigma)
 
-    def make_estimator(self):
-        return ParticleEstimator(absurd_sigma=self.absurd_sigma, **self.pf)
+
+#: MOTIONS[:1]: the strapdown INS only, until the ensemble runs on the motion seam (then: MOTIONS).
+register_estimator("pf", options=ParticleOptions, motions=MOTIONS[:1], can_smooth=False, build=_build_pf,
+                   description="SIR particle filter (issue 19): particles as full states mechanized over each "
+                   "IMU block, Gaussian log-weights, systematic resampling (options: particles, "
+                   "resample_threshold, roughening, substeps, parallel)")(ParticleEstimator)
+
+#: The SIR particle filter on the strapdown INS: ``ParticleFilter(layout, imu_model, particles=1000, ...)``.
+ParticleFilter = facade("pf", "ParticleFilter")

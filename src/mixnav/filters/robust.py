@@ -40,11 +40,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ArgumentError
-from ..ins.error_model import ClockModel, StateLayout
-from ..ins.imu_model import ImuErrorModel
 from ..noise.igg3 import igg3_factors
 from ._ekf_kernels import ABSURD, kalman_correct
-from .ekf import ErrorStateEkf, KalmanEstimator
+from pydantic import Field, model_validator
+
+from .ekf import KalmanEstimator
+from .facade import facade
+from .registry import GateOptions, register_estimator
 from .kalman import innovation_is_absurd
 
 
@@ -53,6 +55,25 @@ def adaptive_factor(d: float, c: float) -> float:
     return 1.0 if d <= c else c / d
 
 
+class RobustOptions(GateOptions):
+    """Settings of ``estimator = "robust-adaptive"`` (a file gives k0, k1, c in the method's
+    ``[robust]`` table): IGG-III thresholds ``k0 < k1`` on standardised innovations
+    (dimensionless, in predicted standard deviations) and the adaptive-factor threshold ``c``."""
+
+    k0: float = Field(default=2.5, gt=0, description="IGG-III: full weight below (standardised)")
+    k1: float = Field(default=5.0, gt=0, description="IGG-III: rejected above (standardised)")
+    c: float = Field(default=1.5, gt=0, description="adaptive factor threshold (standardised)")
+
+    @model_validator(mode="after")
+    def _order(self):
+        if not self.k0 < self.k1:
+            raise ValueError(f"need k0 < k1, got k0 = {self.k0}, k1 = {self.k1}")
+        return self
+
+
+@register_estimator("robust-adaptive", options=RobustOptions, table="robust", imm_mode=True,
+                    description="M2 robust adaptive EKF: IGG-III equivalent weights + Yang's adaptive factor",
+                    build=lambda o, absurd_sigma, context: RobustEstimator(o.k0, o.k1, o.c, absurd_sigma))
 class RobustEstimator(KalmanEstimator):
     """The EKF's Gaussian with the robust, adaptive correction (module docstring).
 
@@ -110,25 +131,5 @@ class RobustEstimator(KalmanEstimator):
 RobustBelief = RobustEstimator
 
 
-class RobustAdaptiveEkf(ErrorStateEkf):
-    """Adaptively robust closed-loop error-state EKF (method M2).
-
-    Parameters
-    ----------
-    layout, imu_model, covariance_interval, absurd_sigma, clock
-        As :class:`~mixnav.filters.ekf.ErrorStateEkf`.
-    k0, k1 : float
-        IGG-III thresholds on standardised innovations (module docstring).
-    c : float
-        Threshold of the adaptive factor.
-    """
-
-    def __init__(self, layout: StateLayout, imu_model: ImuErrorModel, k0: float = 2.5, k1: float = 5.0,
-                 c: float = 1.5, covariance_interval: float = 1.0, absurd_sigma: float = 1e4,
-                 clock: ClockModel | None = None):
-        super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
-        RobustEstimator(k0, k1, c, absurd_sigma)  # validate now, not at the first run
-        self.k0, self.k1, self.c = float(k0), float(k1), float(c)
-
-    def make_estimator(self):
-        return RobustEstimator(self.k0, self.k1, self.c, self.absurd_sigma)
+#: The filter of M2: ``RobustAdaptiveEkf(layout, imu_model, k0=2.5, k1=5.0, c=1.5, ...)``.
+RobustAdaptiveEkf = facade("robust-adaptive", "RobustAdaptiveEkf")

@@ -20,7 +20,7 @@ learned up to the previous epoch.
 
 This file is the whole estimator: it implements the engine's protocol
 (:mod:`mixnav.engine.protocols`) through :class:`~mixnav.filters.ekf.KalmanEstimator`
-and needs one registration line in the estimator catalogue.
+and registers itself (:mod:`mixnav.filters.registry`) with its options model.
 """
 
 from __future__ import annotations
@@ -30,11 +30,27 @@ import numpy as np
 from ..engine.protocols import Correction, Epoch
 from ..engine.status import NEEDS_REPAIR, OK
 from ..errors import ArgumentError
-from .ekf import ErrorStateEkf, KalmanEstimator
+from pydantic import Field
+
+from .ekf import KalmanEstimator
+from .facade import facade
+from .registry import GateOptions, register_estimator
 
 __all__ = ["SageHusaEstimator", "SageHusaEkf"]
 
 
+class SageHusaOptions(GateOptions):
+    """``[methods.options]`` of ``estimator = "sage-husa"``."""
+
+    fading: float = Field(default=0.98, gt=0, lt=1, description="fading factor b in (0, 1): a memory of "
+                          "about 1 / (1 - b) epochs")
+    scale0: float = Field(default=1.0, gt=0, description="initial variance scale of every kind (dimensionless)")
+
+
+@register_estimator("sage-husa", options=SageHusaOptions,
+                    description="Sage-Husa adaptive EKF: a measurement-noise variance scale per observable kind, "
+                    "learned online with a fading memory (options: fading, scale0)",
+                    build=lambda o, absurd_sigma, context: SageHusaEstimator(o.fading, o.scale0, absurd_sigma))
 class SageHusaEstimator(KalmanEstimator):
     """The EKF's Gaussian with a Sage-Husa variance scale per observable kind.
 
@@ -118,22 +134,5 @@ class _Scaled:
         return self._rows
 
 
-class SageHusaEkf(ErrorStateEkf):
-    """Closed-loop error-state EKF with Sage-Husa measurement-noise scales.
-
-    Parameters
-    ----------
-    layout, imu_model, covariance_interval, absurd_sigma, clock
-        As :class:`~mixnav.filters.ekf.ErrorStateEkf`.
-    fading, scale0
-        As :class:`SageHusaEstimator`.
-    """
-
-    def __init__(self, layout, imu_model, fading: float = 0.98, scale0: float = 1.0,
-                 covariance_interval: float = 1.0, absurd_sigma: float = 1e4, clock=None):
-        super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
-        SageHusaEstimator(fading, scale0, absurd_sigma)  # validate now, not at the first run
-        self.fading, self.scale0 = float(fading), float(scale0)
-
-    def make_estimator(self):
-        return SageHusaEstimator(self.fading, self.scale0, self.absurd_sigma)
+#: The Sage-Husa filter: ``SageHusaEkf(layout, imu_model, fading=0.98, scale0=1.0, ...)``.
+SageHusaEkf = facade("sage-husa", "SageHusaEkf")

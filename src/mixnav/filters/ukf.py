@@ -58,8 +58,12 @@ from ..errors import ArgumentError, NumericalError
 from ..engine.status import NEEDS_REPAIR, OK
 from ._no_clone import NoCloneEstimator
 from ._ukf_kernels import linearized_pyy, measurement_moments, ukf_moments, ukf_sigma, vb_correct
-from .ekf import ErrorStateEkf, repair_covariance
-from .vb import ChannelNoise, channel_label, check_vb_settings, warm_vb
+from pydantic import Field
+
+from .ekf import repair_covariance
+from .facade import facade
+from .registry import MOTIONS, GateOptions, register_estimator
+from .vb import ChannelNoise, VbOptions, channel_label, warm_vb
 
 __all__ = ["ut_weights", "UnscentedEstimator", "UnscentedKalmanFilter", "VbAdaptiveUkf"]
 
@@ -284,50 +288,42 @@ class UnscentedEstimator(NoCloneEstimator):
         _WARM.add("ukf")
 
 
-class UnscentedKalmanFilter(ErrorStateEkf):
-    """The UKF on the strapdown INS (M7): the engine, the motion model and an
-    :class:`UnscentedEstimator`.
+class UnscentedOptions(GateOptions):
+    """``[methods.options]`` of ``estimator = "ukf"`` (docs/ukf.md): the scaled unscented
+    transform's ``alpha``, ``beta``, ``kappa``; the centre point's covariance weight must not
+    be negative for the method's number of states (checked when built, naming the key)."""
 
-    Parameters
-    ----------
-    layout, imu_model, covariance_interval, absurd_sigma, clock
-        As :class:`~mixnav.filters.ekf.ErrorStateEkf`.
-    alpha, beta, kappa, substeps
-        As :class:`UnscentedEstimator` (checked against ``layout.n`` now).
-    """
-
-    can_smooth = False
-
-    def __init__(self, layout, imu_model, alpha: float = 0.6, beta: float = 2.0, kappa: float = 0.0,
-                 substeps: int = 4, covariance_interval: float = 1.0, absurd_sigma: float = 1e4, clock=None):
-        super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
-        ut_weights(layout.n, alpha, beta, kappa)
-        UnscentedEstimator(alpha, beta, kappa, substeps, absurd_sigma)
-        self.ut = dict(alpha=float(alpha), beta=float(beta), kappa=float(kappa), substeps=int(substeps))
-
-    def make_estimator(self):
-        return UnscentedEstimator(absurd_sigma=self.absurd_sigma, **self.ut)
+    alpha: float = Field(default=0.6, gt=0, description="spread of the sigma points (> 0)")
+    beta: float = Field(default=2.0, description="prior-distribution weight (2: Gaussian)")
+    kappa: float = Field(default=0.0, description="secondary scaling")
+    substeps: int = Field(default=4, ge=0, description="merged sub-intervals the sigma points are mechanized "
+                          "over per step (0: every IMU increment)")
 
 
-class VbAdaptiveUkf(UnscentedKalmanFilter):
-    """The variational-Bayes adaptive UKF (VB-AUKF, paper P5 / SPEC M7).
+class VbUnscentedOptions(VbOptions, UnscentedOptions):
+    """``[methods.options]`` of ``estimator = "vb-aukf"``: :class:`~mixnav.filters.vb.VbOptions`
+    and :class:`UnscentedOptions`."""
 
-    Parameters
-    ----------
-    layout, imu_model, alpha, beta, kappa, substeps, covariance_interval, absurd_sigma, clock
-        As :class:`UnscentedKalmanFilter`.
-    rho, prior_shape, prior_scale, iterations, tolerance
-        As :class:`~mixnav.filters.vb.ChannelNoise`.
-    """
 
-    def __init__(self, layout, imu_model, rho: float = 0.95, prior_shape: float = 1.0, prior_scale: float = 1.0,
-                 iterations: int = 3, tolerance: float = 1e-4, alpha: float = 0.6, beta: float = 2.0,
-                 kappa: float = 0.0, substeps: int = 4, covariance_interval: float = 1.0,
-                 absurd_sigma: float = 1e4, clock=None):
-        super().__init__(layout, imu_model, alpha, beta, kappa, substeps, covariance_interval, absurd_sigma, clock)
-        check_vb_settings(rho, prior_shape, prior_scale, iterations, tolerance)
-        self.vb = dict(rho=rho, prior_shape=prior_shape, prior_scale=prior_scale, iterations=iterations,
-                       tolerance=tolerance)
+def _build_ukf(options: UnscentedOptions, absurd_sigma: float, context):
+    ut = dict(alpha=options.alpha, beta=options.beta, kappa=options.kappa, substeps=options.substeps)
+    if context.motion is not None:
+        ut_weights(context.motion.layout.n, options.alpha, options.beta, options.kappa)
+    noise = options.channel_noise() if isinstance(options, VbOptions) else None
+    return UnscentedEstimator(absurd_sigma=absurd_sigma, noise=noise, **ut)
 
-    def make_estimator(self):
-        return UnscentedEstimator(absurd_sigma=self.absurd_sigma, noise=ChannelNoise(**self.vb), **self.ut)
+
+#: MOTIONS[:1]: the strapdown INS only, until the ensemble runs on the motion seam (then: MOTIONS).
+register_estimator("ukf", options=UnscentedOptions, motions=MOTIONS[:1], can_smooth=False, build=_build_ukf,
+                   description="M7 unscented Kalman filter: sigma points mechanized as full states, loose or "
+                   "tight GNSS through predict_batch (options: alpha, beta, kappa, substeps)")(UnscentedEstimator)
+register_estimator("vb-aukf", options=VbUnscentedOptions, motions=MOTIONS[:1], can_smooth=False,
+                   build=_build_ukf,
+                   description="M7 variational-Bayes adaptive UKF (paper P5): an inverse-Gamma noise variance per "
+                   "measurement channel with forgetting (options: rho, prior_shape, prior_scale, iterations, "
+                   "tolerance and the UKF's)")(UnscentedEstimator)
+
+#: The UKF on the strapdown INS (M7): ``UnscentedKalmanFilter(layout, imu_model, alpha=0.6, ...)``.
+UnscentedKalmanFilter = facade("ukf", "UnscentedKalmanFilter")
+#: The VB-AUKF (paper P5): ``VbAdaptiveUkf(layout, imu_model, rho=0.95, ..., alpha=0.6, ...)``.
+VbAdaptiveUkf = facade("vb-aukf", "VbAdaptiveUkf")

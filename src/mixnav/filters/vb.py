@@ -34,10 +34,14 @@ import numpy as np
 from ..engine.protocols import Correction, Epoch
 from ..errors import ArgumentError
 from ._ukf_kernels import vb_correct
-from .ekf import ErrorStateEkf, KalmanEstimator
+from pydantic import Field
+
+from .ekf import KalmanEstimator
+from .facade import facade
+from .registry import GateOptions, register_estimator
 from ..engine.status import NEEDS_REPAIR, OK
 
-__all__ = ["ChannelNoise", "VbKalmanEstimator", "VbAdaptiveEkf", "check_vb_settings"]
+__all__ = ["ChannelNoise", "VbKalmanEstimator", "VbAdaptiveEkf", "VbOptions", "check_vb_settings"]
 
 
 def check_vb_settings(rho, prior_shape, prior_scale, iterations, tolerance) -> None:
@@ -146,6 +150,26 @@ def channel_label(ch: int) -> str:
     return f"{name}_{'ned'[axis]}" if axis < 3 and name in ("position", "velocity") else f"{name}_{axis}"
 
 
+class VbOptions(GateOptions):
+    """The variational-Bayes noise settings (``[methods.options]`` of ``estimator = "vb-akf"``,
+    and of ``"vb-aukf"`` with the UKF's)."""
+
+    rho: float = Field(default=0.95, gt=0, le=1, description="forgetting factor in (0, 1]")
+    prior_shape: float = Field(default=1.0, gt=0, description="inverse-Gamma shape of a new channel")
+    prior_scale: float = Field(default=1.0, gt=0, description="a new channel's variance relative to the "
+                               "model's (dimensionless)")
+    iterations: int = Field(default=3, ge=1, description="fixed-point iterations per epoch")
+    tolerance: float = Field(default=1e-4, ge=0, description="relative variance change that stops the "
+                             "iteration early")
+
+    def channel_noise(self) -> "ChannelNoise":
+        return ChannelNoise(self.rho, self.prior_shape, self.prior_scale, self.iterations, self.tolerance)
+
+
+@register_estimator("vb-akf", options=VbOptions, can_smooth=False,
+                    description="variational-Bayes adaptive EKF: the VB-AUKF's noise step on the EKF (options: "
+                    "rho, prior_shape, prior_scale, iterations, tolerance)",
+                    build=lambda o, absurd_sigma, context: VbKalmanEstimator(o.channel_noise(), absurd_sigma))
 class VbKalmanEstimator(KalmanEstimator):
     """The EKF's Gaussian with a VB-adapted variance per measurement channel (VB-AKF).
 
@@ -214,26 +238,5 @@ def warm_vb() -> None:
 _WARM: list = []
 
 
-class VbAdaptiveEkf(ErrorStateEkf):
-    """Closed-loop error-state EKF with VB-adapted measurement-noise variances (VB-AKF).
-
-    Parameters
-    ----------
-    layout, imu_model, covariance_interval, absurd_sigma, clock
-        As :class:`~mixnav.filters.ekf.ErrorStateEkf`.
-    rho, prior_shape, prior_scale, iterations, tolerance
-        As :class:`ChannelNoise`.
-    """
-
-    can_smooth = False
-
-    def __init__(self, layout, imu_model, rho: float = 0.95, prior_shape: float = 1.0, prior_scale: float = 1.0,
-                 iterations: int = 3, tolerance: float = 1e-4, covariance_interval: float = 1.0,
-                 absurd_sigma: float = 1e4, clock=None):
-        super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
-        check_vb_settings(rho, prior_shape, prior_scale, iterations, tolerance)
-        self.vb = dict(rho=rho, prior_shape=prior_shape, prior_scale=prior_scale, iterations=iterations,
-                       tolerance=tolerance)
-
-    def make_estimator(self):
-        return VbKalmanEstimator(ChannelNoise(**self.vb), self.absurd_sigma)
+#: The VB-AKF: ``VbAdaptiveEkf(layout, imu_model, rho=0.95, ..., tolerance=1e-4, ...)``.
+VbAdaptiveEkf = facade("vb-akf", "VbAdaptiveEkf")

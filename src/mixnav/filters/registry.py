@@ -1,0 +1,280 @@
+"""The estimator registry: every estimator a scenario or dataset file can name.
+
+An estimator registers itself, in its own module, with everything the rest of
+mixnav needs to know about it::
+
+    from .registry import register_estimator
+
+    class StudentTOptions(pydantic.BaseModel):       # model_config = ConfigDict(extra="forbid")
+        dof: float = Field(5.0, gt=2, description="degrees of freedom")
+
+    @register_estimator("student-t", options=StudentTOptions,
+                        motions=("strapdown", "dead-reckoning", "constant-velocity"),
+                        description="Student-t filter with variational-Bayes noise")
+    class StudentTEstimator:                         # the engine's Estimator protocol
+        def __init__(self, options: StudentTOptions, absurd_sigma: float): ...
+
+Keywords of :func:`register_estimator`:
+
+``options``
+    ONE pydantic model of the estimator's settings (``[methods.options]`` of a file),
+    ``extra="forbid"``, units in the field descriptions where they apply.
+``motions``
+    The motion models it runs on: names of :data:`MOTIONS`.
+``description``
+    One line (listed by ``mixnav scenarios``).
+``measurements``
+    The measurement method types it is restricted to (None: every one).
+``can_smooth``
+    Whether the RTS smoother applies to its results (one Gaussian per event).
+``build``
+    None: the estimator is built as ``cls(options, absurd_sigma)``. Otherwise a
+    callable ``build(options, absurd_sigma, context)`` for an estimator that needs more
+    than its options (a :class:`BuildContext`: the motion model, the method entry,
+    training data, ...).
+``table``
+    Where a file gives its settings when not in ``[methods.options]`` (``"robust"``,
+    ``"mixture"``, ``"imm"``: the method's own table; ``options`` is then empty).
+``imm_mode``
+    Whether it can be a mode of an IMM (a mean-carrying child).
+``standalone``
+    False for an estimator that is only a mode of an IMM (``em-bias``).
+
+Lookup is lazy: :func:`estimator_names` lists the built-in names from a small table
+of name -> module (a module named there but absent is skipped: ``student-t`` is listed
+there before its file lands, so that the file is the only edit) and the names of the
+entry-point group ``mixnav.estimators``
+(another installed package's estimators) without importing any of them; the
+knowledge (options, motions, description) is in the estimator's module, imported by
+:func:`estimator_spec` when a method names it. An entry point's value is a module or
+an object in it (``"pkg.mod"`` or ``"pkg.mod:Class"``); loading it runs the
+registration.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from importlib import import_module
+from typing import Any, Callable
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from ..errors import ArgumentError
+
+#: the motion models an estimator can declare (mixnav.ins.motion, mixnav.motion)
+MOTIONS = ("strapdown", "dead-reckoning", "constant-velocity")
+
+#: the entry-point group another package registers estimators under
+ENTRY_POINT_GROUP = "mixnav.estimators"
+
+#: built-in estimator name -> the module that registers it (imported only when named)
+BUILTIN_MODULES = {
+    "ekf": "mixnav.filters.ekf",
+    "robust-adaptive": "mixnav.filters.robust",
+    "gaussian-mixture": "mixnav.filters.gmekf",
+    "imm": "mixnav.filters.imm",
+    "sage-husa": "mixnav.filters.sage_husa",
+    "ukf": "mixnav.filters.ukf",
+    "vb-aukf": "mixnav.filters.ukf",
+    "vb-akf": "mixnav.filters.vb",
+    "epoch-mixture": "mixnav.filters.epoch_mixture",
+    "pf": "mixnav.filters.particle",
+    "dd2": "mixnav.filters.dd2",
+    "gmpf": "mixnav.filters.gmpf",
+    "em-bias": "mixnav.filters.em_bias",
+    # a module named here may be absent (an estimator on its way): it is then not listed
+    "student-t": "mixnav.filters.student_t",
+}
+
+#: method types of a scenario's INS methods (``type = "..."``) -> one-line description
+METHOD_TYPES = {
+    "loose-ekf": "GNSS position/velocity (loose coupling)",
+    "tight-ekf": "pseudorange + Doppler (tight coupling, 17 states)",
+    "tdcp-ekf": "pseudorange + TDCP (P1 eqs. 1-4; stochastic cloning of the previous antenna position and clock)",
+}
+
+
+@dataclass
+class BuildContext:
+    """What an estimator's ``build`` may need beyond its options (all optional).
+
+    ``motion``: the motion model of the run; ``method``: the config's method entry;
+    ``training``: training residuals (simulated scenarios); ``seed``; ``measurements``:
+    the method's measurement models; ``source``, ``index``: the file and the method's
+    index (for errors); ``extra``: anything a pipeline hands over (e.g. the epoch
+    mixture's start from a track alignment)."""
+
+    motion: Any = None
+    method: Any = None
+    training: Any = None
+    seed: int = 0
+    measurements: Any = None
+    source: str | None = None
+    index: int = 0
+    extra: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class EstimatorSpec:
+    """One registered estimator (see the module docstring)."""
+
+    name: str
+    cls: type
+    options: type
+    motions: tuple
+    description: str
+    measurements: tuple | None = None
+    can_smooth: bool = True
+    build: Callable | None = None
+    table: str | None = None
+    imm_mode: bool = False
+    standalone: bool = True
+
+    def parse_options(self, values=None):
+        """``values`` (a dict, or an instance of the options model) validated: an instance
+        of ``self.options``; a bad one is an :class:`ArgumentError` naming the option."""
+        if isinstance(values, self.options):
+            return values
+        return validate_options(self.options, dict(values or {}), self.name)
+
+    def make(self, options=None, absurd_sigma: float = 1e4, context: BuildContext | None = None):
+        """A fresh estimator with ``options`` (dict or model instance) for one run."""
+        opts = self.parse_options(options)
+        if "absurd_sigma" in opts.model_fields_set:   # a file's options.absurd_sigma wins
+            absurd_sigma = opts.absurd_sigma
+        if self.build is None:
+            return self.cls(opts, absurd_sigma)
+        return self.build(opts, absurd_sigma, context or BuildContext())
+
+    def runs_on(self, motion: str) -> bool:
+        return motion in self.motions
+
+
+class GateOptions(BaseModel):
+    """The option every built-in estimator takes: its blunder gate."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    absurd_sigma: float = Field(default=1e4, gt=0, description="innovations beyond this many predicted "
+                                "standard deviations are rejected as blunders (counted)")
+
+
+class NoOptions(BaseModel):
+    """Settings of an estimator that takes them from its own table of the method, not [options]."""
+
+    model_config = ConfigDict(extra="forbid")
+
+
+def from_context(key: str, make: Callable, table: str):
+    """A ``build`` for an estimator whose settings are objects a pipeline makes from the method's
+    own ``table`` (mixtures, modes): ``make(**context.extra[key], absurd_sigma=...)``."""
+    def build(options, absurd_sigma: float, context: BuildContext):
+        if key not in context.extra:
+            raise ArgumentError(f"this estimator is built from the method's [{table}] table (its objects in "
+                                f"BuildContext.extra['{key}'])", argument=table)
+        return make(**context.extra[key], absurd_sigma=absurd_sigma)
+    return build
+
+
+def validate_options(model: type, values: dict, name: str):
+    """``model(**values)``; a bad value or an unknown key is an :class:`ArgumentError` whose
+    argument is the option (the config layer turns it into ``methods[i].options.<key>``)."""
+    from pydantic import ValidationError
+    try:
+        return model.model_validate(values)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        key = ".".join(map(str, err["loc"]))
+        known = ", ".join(model.model_fields) or "none"
+        if err["type"] == "extra_forbidden":
+            raise ArgumentError(f"estimator '{name}' has no option '{key}' (its options: {known})",
+                                argument=key) from None
+        msg = err["msg"]
+        if msg.startswith("Value error, "):
+            msg = msg[len("Value error, "):]
+        raise ArgumentError(f"{msg} (options of '{name}': {known})", argument=key) from None
+
+
+_SPECS: dict[str, EstimatorSpec] = {}
+
+
+def register_estimator(name: str, *, options: type, motions=MOTIONS, description: str,
+                       measurements=None, can_smooth: bool = True, build: Callable | None = None,
+                       table: str | None = None, imm_mode: bool = False, standalone: bool = True):
+    """Class decorator: register the estimator as ``name`` (module docstring). Returns the
+    class unchanged; one class may be registered under several names (``ukf``, ``vb-aukf``)."""
+    if not (isinstance(options, type) and issubclass(options, BaseModel)):
+        raise ArgumentError(f"options of estimator '{name}' must be a pydantic model class, got {options!r}",
+                            argument="options")
+    motions = tuple(motions)
+    bad = [m for m in motions if m not in MOTIONS]
+    if bad or not motions:
+        raise ArgumentError(f"estimator '{name}': unknown motion model(s) {bad} (known: {', '.join(MOTIONS)})",
+                            argument="motions")
+    if not description or "\n" in description:
+        raise ArgumentError(f"estimator '{name}' needs a one-line description", argument="description")
+
+    def decorate(cls):
+        old = _SPECS.get(name)
+        if old is not None and old.cls.__qualname__ != cls.__qualname__:
+            raise ArgumentError(f"estimator '{name}' is registered twice ({old.cls.__module__}."
+                                f"{old.cls.__qualname__} and {cls.__module__}.{cls.__qualname__})",
+                                argument="name")
+        _SPECS[name] = EstimatorSpec(name, cls, options, motions, description,
+                                     None if measurements is None else tuple(measurements), bool(can_smooth),
+                                     build, table, bool(imm_mode), bool(standalone))
+        return cls
+    return decorate
+
+
+def _entry_points() -> dict:
+    """name -> entry point of the group ``mixnav.estimators`` (nothing imported)."""
+    from importlib.metadata import entry_points
+    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def _present(module: str) -> bool:
+    """Whether ``module`` exists (found, not imported)."""
+    from importlib.util import find_spec
+    return find_spec(module) is not None
+
+
+def estimator_names(standalone_only: bool = True) -> list[str]:
+    """Every estimator name (built-in, then installed plug-ins, then registered at run time);
+    imports no estimator module. ``standalone_only``: leave out the IMM-only modes."""
+    imm_only = {"em-bias"}  # the one built-in that is only an IMM mode (its spec says so too)
+    names = [n for n, m in BUILTIN_MODULES.items() if not (standalone_only and n in imm_only) and _present(m)]
+    names += [n for n in _entry_points() if n not in names]
+    names += [n for n, s in _SPECS.items() if n not in names and (s.standalone or not standalone_only)]
+    return names
+
+
+def estimator_spec(name: str) -> EstimatorSpec:
+    """The registration of ``name`` (its module imported now); unknown: an
+    :class:`ArgumentError` (argument ``estimator``) listing the registered names."""
+    if name not in _SPECS:
+        module = BUILTIN_MODULES.get(name)
+        if module is not None and _present(module):
+            import_module(module)
+        else:
+            ep = _entry_points().get(name)
+            if ep is not None:
+                ep.load()
+    try:
+        return _SPECS[name]
+    except KeyError:
+        raise ArgumentError(f"unknown estimator '{name}' (known: {', '.join(estimator_names())})",
+                            argument="estimator") from None
+
+
+def check_motion(name: str, motion: str) -> EstimatorSpec:
+    """The spec of ``name`` if it runs on ``motion``; otherwise an :class:`ArgumentError`
+    (argument ``estimator``) saying which do."""
+    spec = estimator_spec(name)
+    if not spec.standalone:
+        raise ArgumentError(f"estimator '{name}' is only a mode of an IMM (estimator = \"imm\")",
+                            argument="estimator")
+    if motion not in spec.motions:
+        raise ArgumentError(f"estimator '{name}' does not run on the {motion} motion model (it runs on: "
+                            f"{', '.join(spec.motions)})", argument="estimator")
+    return spec
