@@ -16,6 +16,11 @@ block ``system_offset`` (one state per system after the first of
 ``systems``); rows of a system not in ``systems`` are dropped when the model
 is built and counted (``skipped_rows``).
 
+Ensemble estimators (UKF, DD2, PF, GMPF) get ``h`` on a batch of members
+(:meth:`PseudorangeGnss.predict_batch`): each member's own antenna, clock bias and
+inter-system offsets, the same travel time and Earth rotation per member as the
+rows above, so at the nominal ``y - Y[0]`` is the rows' ``z``.
+
 Noise: ``variance = "given"`` uses the source's variance times ``scale``;
 ``"elevation"`` uses ``scale (sigma_a^2 + sigma_b^2 / sin^2 el)``.
 
@@ -61,6 +66,8 @@ class PseudorangeGnss(MeasurementModel):
     """
 
     kinds = ("pseudorange",)
+    #: predict_batch takes each member's auxiliary states (the inter-system offsets)
+    batch_aux = True
 
     def __init__(self, epochs: PseudorangeEpochs, layout, systems=(1, 4), variance: str = "given",
                  scale: float = 1.0, sigma_a: float = 3.0, sigma_b: float = 3.0, elevation_mask: float = 0.0,
@@ -145,6 +152,37 @@ class PseudorangeGnss(MeasurementModel):
             H[rows, self._i_off + k[rows] - 1] = 1.0
         z = self.epochs.pseudorange[idx] - pred
         return Rows(z, H, self._var[idx].copy(), np.full(m, PSEUDORANGE, dtype=np.int64), self._channels[idx])
+
+    def predict_batch(self, i: int, navs: np.ndarray, w_b: np.ndarray, clocks=None, aux=None):
+        """``h`` at a batch of full states, for the ensemble estimators: ``(y, Y, R)``.
+
+        ``y`` (m,) the measured pseudoranges of the epoch's used rows [m] (the order of
+        :meth:`rows`), ``Y`` (N, m) their predictions at the states ``navs`` (N, 10)
+        (only the position ``navs[:, 7:10]`` is read: antenna at the navigation point),
+        each with its receiver clock ``clocks`` (2,) or (N, 2) (bias [m]; the drift is not
+        used: no Doppler rows) and its offsets ``aux["system_offset"]`` (n_off,) or
+        (N, n_off) [m] (default zero); ``R`` (m,) the variances. ``w_b`` is not used.
+        None with fewer than ``min_satellites`` used rows.
+        """
+        idx = self.used_rows(i)
+        if len(idx) < max(self.min_satellites, 1):
+            return None
+        navs = np.atleast_2d(np.asarray(navs, dtype=float))
+        N = len(navs)
+        r_a = lla_to_ecef(navs[:, 7:10])[:, None, :]                  # (N, 1, 3)
+        s = self.epochs.sat_ecef[idx][None, :, :]                       # (1, m, 3)
+        # per member, as in predicted(): one fixed-point step of the travel time
+        tau = np.linalg.norm(s - r_a, axis=2) / C_LIGHT                 # (N, m)
+        Y = np.linalg.norm(earth_rotation_correction(s, tau) - r_a, axis=2)
+        bias = np.zeros(N) if clocks is None else np.broadcast_to(np.asarray(clocks, dtype=float), (N, 2))[:, 0]
+        Y += bias[:, None]
+        if self._i_off >= 0:
+            n_off = len(self.systems) - 1
+            off = np.zeros((N, n_off + 1))                              # column 0: the reference system
+            if aux is not None and "system_offset" in aux:
+                off[:, 1:] = np.broadcast_to(np.asarray(aux["system_offset"], dtype=float), (N, n_off))
+            Y += off[:, self._sys[idx]]
+        return self.epochs.pseudorange[idx].copy(), Y, self._var[idx].copy()
 
     def row_kinds(self, i: int, m: int) -> np.ndarray:
         return np.full(m, PSEUDORANGE, dtype=np.int64)
