@@ -38,6 +38,7 @@ from ..errors import ArgumentError
 from ..geodesy.frames import dcm_ecef_to_ned, lla_to_ecef
 from ..gnss.geometry import C_LIGHT, earth_rotation_correction
 from ..gnss.pseudoranges import PseudorangeEpochs
+from ._pseudorange_kernel import pseudorange_predict_batch
 from .base import MeasurementModel, Rows
 from .kinds import PSEUDORANGE
 
@@ -169,20 +170,21 @@ class PseudorangeGnss(MeasurementModel):
             return None
         navs = np.atleast_2d(np.asarray(navs, dtype=float))
         N = len(navs)
-        r_a = lla_to_ecef(navs[:, 7:10])[:, None, :]                  # (N, 1, 3)
-        s = self.epochs.sat_ecef[idx][None, :, :]                       # (1, m, 3)
-        # per member, as in predicted(): one fixed-point step of the travel time
-        tau = np.linalg.norm(s - r_a, axis=2) / C_LIGHT                 # (N, m)
-        Y = np.linalg.norm(earth_rotation_correction(s, tau) - r_a, axis=2)
         bias = np.zeros(N) if clocks is None else np.broadcast_to(np.asarray(clocks, dtype=float), (N, 2))[:, 0]
-        Y += bias[:, None]
-        if self._i_off >= 0:
-            n_off = len(self.systems) - 1
-            off = np.zeros((N, n_off + 1))                              # column 0: the reference system
-            if aux is not None and "system_offset" in aux:
-                off[:, 1:] = np.broadcast_to(np.asarray(aux["system_offset"], dtype=float), (N, n_off))
-            Y += off[:, self._sys[idx]]
+        off = np.zeros((N, len(self.systems)))                           # column 0: the reference system
+        if self._i_off >= 0 and aux is not None and "system_offset" in aux:
+            off[:, 1:] = np.broadcast_to(np.asarray(aux["system_offset"], dtype=float), (N, len(self.systems) - 1))
+        Y = np.empty((N, len(idx)))
+        pseudorange_predict_batch(np.ascontiguousarray(navs[:, 7:10]), self.epochs.sat_ecef[idx],
+                                  np.ascontiguousarray(bias), off, self._sys[idx], Y)   # one compiled call
         return self.epochs.pseudorange[idx].copy(), Y, self._var[idx].copy()
+
+    def warm_up(self, nav: np.ndarray, aux: dict | None = None) -> None:
+        """Compile (or load) the batch prediction too, outside the timed loop."""
+        super().warm_up(nav, aux)
+        for i in range(len(self.times)):
+            if self.predict_batch(i, np.array(nav, dtype=float)[None], np.zeros(3)) is not None:
+                break
 
     def row_kinds(self, i: int, m: int) -> np.ndarray:
         return np.full(m, PSEUDORANGE, dtype=np.int64)
