@@ -100,8 +100,9 @@ def predict_members(epoch: Epoch, D: np.ndarray, navs: np.ndarray, clk: int, who
     """``epoch.model.predict_batch`` at the members (sigma points, particles) ``D`` (N, n) whose
     full states are ``navs`` (N, 10): each member's body rate from ``motion.member_rates``
     (the strapdown INS: its gyro-bias deviation moves it; without ``motion`` that map) and,
-    with a clock block at ``clk >= 0`` (tight coupling), its clock deviation its
-    receiver clock. Returns ``(y, Y, R)`` or None (no data); ArgumentError when the model
+    with a clock block at ``clk >= 0`` (tight coupling, pseudoranges), its clock deviation its
+    receiver clock; a model with ``batch_aux`` (the multi-system pseudoranges) also gets
+    each member's auxiliary states (``epoch.aux`` plus the member's deviation). Returns ``(y, Y, R)`` or None (no data); ArgumentError when the model
     has no ``predict_batch`` (``who``, the estimator, names itself in the message)."""
     predict_batch = getattr(epoch.model, "predict_batch", None)
     if predict_batch is None:
@@ -111,10 +112,15 @@ def predict_members(epoch: Epoch, D: np.ndarray, navs: np.ndarray, clk: int, who
         w_b = np.asarray(epoch.w_b, dtype=float) - D[:, 9:12]
     else:
         w_b = motion.member_rates(epoch.w_b, D)
+    kw = {}
+    if getattr(epoch.model, "batch_aux", False) and epoch.aux:
+        # each member's auxiliary states (an inter-system clock offset): nominal + deviation
+        kw["aux"] = {name: np.asarray(epoch.aux[name], dtype=float) + D[:, sl]
+                     for name, sl in epoch.model.layout.aux}
     if clk >= 0:
         clocks = np.asarray(epoch.clock, dtype=float) + D[:, clk:clk + 2]
-        return predict_batch(epoch.index, navs, w_b, clocks)
-    return predict_batch(epoch.index, navs, w_b)
+        return predict_batch(epoch.index, navs, w_b, clocks, **kw)
+    return predict_batch(epoch.index, navs, w_b, **kw)
 
 
 class UnscentedEstimator(NoCloneEstimator):

@@ -21,8 +21,9 @@ and the clone part of each correction is handed to
 :mod:`mixnav.engine`).
 
 The ensemble family (UKF, particle filters) evaluates ``h`` on a batch of
-full states instead of linearising: :meth:`predict_batch` (the loose model
-has it; the others follow with the P3/P5 issues).
+full states instead of linearising: :meth:`predict_batch` (the loose, tight
+and multi-system pseudorange models have it; a model that reads auxiliary
+states sets ``batch_aux`` and is given each member's).
 """
 
 from __future__ import annotations
@@ -70,6 +71,8 @@ class MeasurementModel:
     clone_size: int = 0
     #: the model needs a memory of its previous epoch (held by the engine)
     remembers: bool = False
+    #: predict_batch takes ``aux``: each member's auxiliary states, name -> (N, size)
+    batch_aux: bool = False
 
     @property
     def times(self) -> np.ndarray:
@@ -121,7 +124,8 @@ class MeasurementModel:
         ``navs[j]`` (N, 10) with body rate ``w_b`` (3,) or (N, 3) and receiver clock
         ``clocks`` (2,) or (N, 2) (models without a clock ignore it), or None when the
         epoch has no data. Implemented by the loose and tight models; the TDCP and
-        differenced models add it with the particle-filter issue."""
+        differenced models add it with the particle-filter issue. A model with
+        :attr:`batch_aux` also takes ``aux=`` (name -> (N, size) per member)."""
         raise NotImplementedError(f"{type(self).__name__} does not evaluate h on a batch of states yet")
 
     def warm_up(self, nav: np.ndarray, aux: dict | None = None) -> None:

@@ -16,6 +16,11 @@ block ``system_offset`` (one state per system after the first of
 ``systems``); rows of a system not in ``systems`` are dropped when the model
 is built and counted (``skipped_rows``).
 
+Ensemble estimators (UKF, DD2, PF, GMPF) get ``h`` on a batch of members
+(:meth:`PseudorangeGnss.predict_batch`): each member's own antenna, clock bias and
+inter-system offsets, the same travel time and Earth rotation per member as the
+rows above, so at the nominal ``y - Y[0]`` is the rows' ``z``.
+
 Noise: ``variance = "given"`` uses the source's variance times ``scale``;
 ``"elevation"`` uses ``scale (sigma_a^2 + sigma_b^2 / sin^2 el)``.
 
@@ -33,6 +38,7 @@ from ..errors import ArgumentError
 from ..geodesy.frames import dcm_ecef_to_ned, lla_to_ecef
 from ..gnss.geometry import C_LIGHT, earth_rotation_correction
 from ..gnss.pseudoranges import PseudorangeEpochs
+from ._pseudorange_kernel import pseudorange_predict_batch
 from .base import MeasurementModel, Rows
 from .kinds import PSEUDORANGE
 
@@ -61,6 +67,8 @@ class PseudorangeGnss(MeasurementModel):
     """
 
     kinds = ("pseudorange",)
+    #: predict_batch takes each member's auxiliary states (the inter-system offsets)
+    batch_aux = True
 
     def __init__(self, epochs: PseudorangeEpochs, layout, systems=(1, 4), variance: str = "given",
                  scale: float = 1.0, sigma_a: float = 3.0, sigma_b: float = 3.0, elevation_mask: float = 0.0,
@@ -145,6 +153,38 @@ class PseudorangeGnss(MeasurementModel):
             H[rows, self._i_off + k[rows] - 1] = 1.0
         z = self.epochs.pseudorange[idx] - pred
         return Rows(z, H, self._var[idx].copy(), np.full(m, PSEUDORANGE, dtype=np.int64), self._channels[idx])
+
+    def predict_batch(self, i: int, navs: np.ndarray, w_b: np.ndarray, clocks=None, aux=None):
+        """``h`` at a batch of full states, for the ensemble estimators: ``(y, Y, R)``.
+
+        ``y`` (m,) the measured pseudoranges of the epoch's used rows [m] (the order of
+        :meth:`rows`), ``Y`` (N, m) their predictions at the states ``navs`` (N, 10)
+        (only the position ``navs[:, 7:10]`` is read: antenna at the navigation point),
+        each with its receiver clock ``clocks`` (2,) or (N, 2) (bias [m]; the drift is not
+        used: no Doppler rows) and its offsets ``aux["system_offset"]`` (n_off,) or
+        (N, n_off) [m] (default zero); ``R`` (m,) the variances. ``w_b`` is not used.
+        None with fewer than ``min_satellites`` used rows.
+        """
+        idx = self.used_rows(i)
+        if len(idx) < max(self.min_satellites, 1):
+            return None
+        navs = np.atleast_2d(np.asarray(navs, dtype=float))
+        N = len(navs)
+        bias = np.zeros(N) if clocks is None else np.broadcast_to(np.asarray(clocks, dtype=float), (N, 2))[:, 0]
+        off = np.zeros((N, len(self.systems)))                           # column 0: the reference system
+        if self._i_off >= 0 and aux is not None and "system_offset" in aux:
+            off[:, 1:] = np.broadcast_to(np.asarray(aux["system_offset"], dtype=float), (N, len(self.systems) - 1))
+        Y = np.empty((N, len(idx)))
+        pseudorange_predict_batch(np.ascontiguousarray(navs[:, 7:10]), self.epochs.sat_ecef[idx],
+                                  np.ascontiguousarray(bias), off, self._sys[idx], Y)   # one compiled call
+        return self.epochs.pseudorange[idx].copy(), Y, self._var[idx].copy()
+
+    def warm_up(self, nav: np.ndarray, aux: dict | None = None) -> None:
+        """Compile (or load) the batch prediction too, outside the timed loop."""
+        super().warm_up(nav, aux)
+        for i in range(len(self.times)):
+            if self.predict_batch(i, np.array(nav, dtype=float)[None], np.zeros(3)) is not None:
+                break
 
     def row_kinds(self, i: int, m: int) -> np.ndarray:
         return np.full(m, PSEUDORANGE, dtype=np.int64)
