@@ -92,7 +92,7 @@ def test_one_update_is_the_papers_fixed_point_iteration(scale, omega, full_r, it
     est = _estimator(nu=3.0, process_nu=omega, measurement_scale=scale, iterations=iterations, tolerance=0.0)
     est.init(_Motion(4), P, 0, None)
     r = R if full_r else np.diag(R).copy()
-    P_post, dx, nis, status = est.correct(P, z, H, r)
+    P_post, dx, _, status = est.correct(P, z, H, r)
     x_ref, P_ref = _huang_oracle(P, z, H, R, 3.0, omega, scale == "row", iterations)
     assert status == 0
     np.testing.assert_allclose(dx, x_ref, rtol=1e-10, atol=1e-10)
@@ -255,7 +255,7 @@ def test_dead_reckoning_run_discounts_nlos_rows():
     same, _, _ = _dr_run(ep, t, psi, lla, _estimator(nu=math.inf), seed=2)
     np.testing.assert_array_equal(same.nav, ekf.nav)
     st, err_st, _ = _dr_run(ep, t, psi, lla, _estimator(nu=4.0), seed=2)
-    rms = lambda e: float(np.sqrt(np.mean(e[:, 0] ** 2 + e[:, 1] ** 2)))  # noqa: E731
+    rms = lambda e: float(np.sqrt(np.mean(e[:, 0] ** 2 + e[:, 1] ** 2)))
     assert rms(err_st) < 0.3 * rms(err_ekf), (rms(err_st), rms(err_ekf))  # measured 0.85 m vs 7.7 m
     assert st.outputs["student_t_min_measurement_scale"].min() < 0.1  # a 40 m row is weighted down
     assert st.timing["student_t_iterations_mean"] > 1

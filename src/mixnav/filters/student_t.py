@@ -53,7 +53,7 @@ from .ekf import KalmanEstimator
 from .kalman import innovation_is_absurd
 from .registry import register_estimator
 
-__all__ = ["StudentTOptions", "StudentTEstimator"]
+__all__ = ["StudentTEstimator", "StudentTOptions"]
 
 
 class _OptionsCalled(type(BaseModel)):
@@ -167,10 +167,10 @@ class StudentTEstimator(KalmanEstimator):
                 return np.ones(m) if per_row else 1.0
             e = z - H @ dx
             if per_row:
-                b = e * e + np.einsum("ij,jk,ik->i", H, P_post, H)
+                b = e * e + (H @ P_post * H).sum(axis=1)
                 return (o.nu + 1.0) / (o.nu + b / r)
             if r.ndim == 1:
-                tr = float(np.sum((e * e + np.einsum("ij,jk,ik->i", H, P_post, H)) / r))
+                tr = float(np.sum((e * e + (H @ P_post * H).sum(axis=1)) / r))
             else:  # tr(B R^-1) = |L^-1 e|^2 + tr(L^-1 H P+ H^T L^-T)
                 u = np.linalg.solve(L_R, e)
                 V = np.linalg.solve(L_R, H @ P_post @ H.T)
