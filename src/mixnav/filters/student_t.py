@@ -43,6 +43,7 @@ import math
 from typing import Literal
 
 import numpy as np
+from numba import njit
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from ..engine.protocols import Correction, Epoch
@@ -54,6 +55,8 @@ from .kalman import innovation_is_absurd
 from .registry import register_estimator
 
 __all__ = ["StudentTEstimator", "StudentTOptions"]
+
+_WARM: set = set()
 
 
 class _OptionsCalled(type(BaseModel)):
@@ -92,6 +95,65 @@ class StudentTOptions(BaseModel, metaclass=_OptionsCalled):
     iterations: int = Field(default=10, ge=1)
     #: stop when no scale expectation changes by more than this, relative (>= 0).
     tolerance: float = Field(default=1e-6, ge=0)
+
+
+@njit(cache=True)
+def _scales_into(lam, b, r, nu, per_row):
+    """``E[lambda]`` (m,) from ``B_ii`` (module docstring), written into ``lam``."""
+    m = lam.shape[0]
+    if per_row:
+        for i in range(m):
+            lam[i] = (nu + 1.0) / (nu + b[i] / r[i])
+    else:
+        t = 0.0
+        for i in range(m):
+            t += b[i] / r[i]
+        for i in range(m):
+            lam[i] = (nu + m) / (nu + t)
+
+
+@njit(cache=True)
+def _b_diagonal(b, z, H, dx, P_post):
+    """``B_ii = e_i^2 + (H P+ H^T)_ii``, ``e = z - H dx``, written into ``b``."""
+    m, n = H.shape
+    HP = H @ P_post
+    for i in range(m):
+        e = z[i]
+        s = 0.0
+        for k in range(n):
+            e -= H[i, k] * dx[k]
+            s += HP[i, k] * H[i, k]
+        b[i] = e * e + s
+
+
+@njit(cache=True)
+def _vb_diagonal(P, z, H, r, nu, per_row, iterations, tol):
+    """The fixed point for a diagonal ``r`` (m,) and a Gaussian prediction, in one compiled
+    call (the module docstring's loop, as :meth:`StudentTEstimator.correct` writes it):
+    ``(P_post, dx, nis, status, lam, iters, hit_limit)``, ``lam`` the scales the state used."""
+    m, n = H.shape
+    b = np.empty(m)
+    lam = np.empty(m)
+    _b_diagonal(b, z, H, np.zeros(n), P)            # from the prior
+    _scales_into(lam, b, r, nu, per_row)
+    used = lam.copy()
+    P_post, dx, nis, status = kalman_correct(P, z, H, r / used, np.inf)
+    iters = 1
+    while True:
+        if status != OK and status != NEEDS_REPAIR:
+            return P_post, dx, nis, status, used, iters, False
+        if iters >= iterations:
+            return P_post, dx, nis, status, used, iters, True
+        _b_diagonal(b, z, H, dx, P_post)
+        _scales_into(lam, b, r, nu, per_row)
+        change = 0.0
+        for i in range(m):
+            change = max(change, abs(lam[i] - used[i]) / used[i])
+        if change <= tol:
+            return P_post, dx, nis, status, used, iters, False
+        used = lam.copy()
+        P_post, dx, nis, status = kalman_correct(P, z, H, r / used, np.inf)
+        iters += 1
 
 
 def _relative_change(new, old) -> float:
@@ -161,6 +223,14 @@ class StudentTEstimator(KalmanEstimator):
         rd = r if r.ndim == 1 else np.ascontiguousarray(np.diag(r))
         if innovation_is_absurd(z, H, P, rd, self.absurd_sigma):
             return P, np.zeros(n), np.inf, ABSURD
+        if r.ndim == 1 and not self._process and not self._gaussian_meas:
+            P_post, dx, nis, status, lam, iters, hit = _vb_diagonal(P, z, H, r, float(o.nu), per_row,
+                                                                    o.iterations, o.tolerance)
+            if status != OK and status != NEEDS_REPAIR:
+                return P, np.zeros(n), nis, status
+            self.limit_hits += int(hit)
+            self._record(iters, 1.0, float(lam.min()))
+            return P_post, dx, nis, status
 
         def meas_scale(dx, P_post):
             if self._gaussian_meas:
@@ -210,12 +280,26 @@ class StudentTEstimator(KalmanEstimator):
             lam, xi = lam_new, xi_new
             if change <= o.tolerance:
                 break
+        self._record(iters, xi, float(np.min(lam)))
+        return P_post, dx, nis, status
+
+    def _record(self, iters, xi, lam_min):
         tr = self.trace
         tr["time"].append(self._time)
         tr["iterations"].append(iters)
         tr["process_scale"].append(xi)
-        tr["min_measurement_scale"].append(float(np.min(lam)))
-        return P_post, dx, nis, status
+        tr["min_measurement_scale"].append(lam_min)
+
+    def warm_up(self) -> None:
+        """Compile (or load) the EKF's correction and the compiled fixed point once."""
+        super().warm_up()
+        if "student_t" in _WARM:
+            return
+        H = np.zeros((3, 15))
+        H[:, 6:9] = np.eye(3)
+        for per_row in (True, False):
+            _vb_diagonal(np.eye(15), np.ones(3), H, np.ones(3), 4.0, per_row, 3, 1e-6)
+        _WARM.add("student_t")
 
     # --- reporting ---------------------------------------------------------------------------
     def diagnostics(self) -> dict:
