@@ -24,7 +24,9 @@ LOG = "pseudoranges_log_2016_06_30_21_26_07.txt"
 
 #: the estimators the strapdown INS alone runs today (the ensemble filters need its batch
 #: mechanization; the IMM and its em-bias mode are INS-only)
-STRAPDOWN_ONLY = {"imm", "ukf", "vb-aukf", "pf", "dd2", "gmpf", "em-bias"}
+#: the IMM's modes and the EM bias estimator work on the strapdown INS only; the ensemble
+#: filters (UKF, VB-AUKF, PF, DD2, GMPF) run on every motion model through the motion seam
+STRAPDOWN_ONLY = {"imm", "em-bias"}
 
 
 def _scenario(tmp_path, method_lines, name="sc.toml"):
@@ -128,7 +130,7 @@ def test_an_unknown_or_bad_option_names_its_key(tmp_path):
     assert e.value.key == "methods[0].options"
 
 
-@pytest.mark.parametrize("estimator", ["pf", "ukf", "gmpf", "dd2", "vb-aukf", "imm"])
+@pytest.mark.parametrize("estimator", ["imm"])
 def test_an_estimator_on_a_motion_model_it_does_not_support_says_so(tmp_path, estimator):
     with pytest.raises(ConfigError, match=f"'{estimator}' does not run on the constant-velocity motion "
                                           "model.*strapdown") as e:
@@ -136,6 +138,13 @@ def test_an_estimator_on_a_motion_model_it_does_not_support_says_so(tmp_path, es
                                     'estimator = "ekf"\n\n'
                                     f'[[methods]]\nname = "c"\nestimator = "{estimator}"\n'))
     assert e.value.key == "methods[2].estimator"
+
+
+@pytest.mark.parametrize("estimator", ["pf", "ukf", "gmpf", "dd2", "vb-aukf", "student-t"])
+def test_the_ensemble_and_student_t_are_accepted_on_every_motion_model(tmp_path, estimator):
+    ds, _, _ = load_dataset(_raw(tmp_path, '[[methods]]\nname = "a"\nestimator = "wls"\n\n'
+                                 f'[[methods]]\nname = "c"\nestimator = "{estimator}"\n'))
+    assert ds.methods[1].estimator == estimator
 
 
 def test_an_imm_mode_must_be_registered_as_one(tmp_path):

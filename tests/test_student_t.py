@@ -17,7 +17,7 @@ from mixnav.filters.ekf import KalmanEstimator
 from mixnav.filters.student_t import StudentTEstimator, StudentTOptions
 from mixnav.geodesy.frames import lla_to_ned
 from mixnav.ins.error_model import get_layout
-from mixnav.ins.motion import StrapdownMotion
+from mixnav.ins.strapdown import StrapdownMotion
 from mixnav.measurements.loose import LooseGnss
 from mixnav.measurements.pseudorange import PseudorangeGnss
 from mixnav.motion import ConstantVelocityMotion, clock_ticks

@@ -351,8 +351,8 @@ class Dd2Options(GateOptions):
                           "per step (0: every IMU increment)")
 
 
-#: MOTIONS[:1]: the strapdown INS only, until the ensemble runs on the motion seam (then: MOTIONS).
-register_estimator("dd2", options=Dd2Options, motions=MOTIONS[:1], can_smooth=False,
+#: every motion model: the ensemble runs on the motion seam (member_states, propagate_members, ...)
+register_estimator("dd2", options=Dd2Options, motions=MOTIONS, can_smooth=False,
                    build=lambda o, absurd_sigma, context: Dd2Estimator(o.dd2_step, o.substeps, absurd_sigma),
                    description="second-order divided-difference filter (Norgaard et al. 2000; issue 19): 2n+1 "
                    "points mechanized as full states (options: dd2_step, substeps)")(Dd2Estimator)

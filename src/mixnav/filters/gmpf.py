@@ -434,8 +434,8 @@ def _build_gmpf(o: GmpfOptions, absurd_sigma: float, context):
                          dd2_step=o.dd2_step, substeps=o.substeps, sampling=o.sampling, absurd_sigma=absurd_sigma)
 
 
-#: MOTIONS[:1]: the strapdown INS only, until the ensemble runs on the motion seam (then: MOTIONS).
-register_estimator("gmpf", options=GmpfOptions, motions=MOTIONS[:1], can_smooth=False, build=_build_gmpf,
+#: every motion model: the ensemble runs on the motion seam (member_states, propagate_members, ...)
+register_estimator("gmpf", options=GmpfOptions, motions=MOTIONS, can_smooth=False, build=_build_gmpf,
                    description="M8 Gaussian-mixture particle filter (paper P3): DD2 per mixture component builds "
                    "the importance density, weighted EM refit instead of resampling (options: particles, "
                    "components, em_iterations, dd2_step, substeps, sampling)")(GmpfEstimator)

@@ -501,8 +501,8 @@ def _build_pf(o: ParticleOptions, absurd_sigma: float, context):
                              absurd_sigma=absurd_sigma)
 
 
-#: MOTIONS[:1]: the strapdown INS only, until the ensemble runs on the motion seam (then: MOTIONS).
-register_estimator("pf", options=ParticleOptions, motions=MOTIONS[:1], can_smooth=False, build=_build_pf,
+#: every motion model: the ensemble runs on the motion seam (member_states, propagate_members, ...)
+register_estimator("pf", options=ParticleOptions, motions=MOTIONS, can_smooth=False, build=_build_pf,
                    description="SIR particle filter (issue 19): particles as full states mechanized over each "
                    "IMU block, Gaussian log-weights, systematic resampling (options: particles, "
                    "resample_threshold, roughening, substeps, parallel)")(ParticleEstimator)

@@ -61,7 +61,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ..errors import ArgumentError
 
-#: the motion models an estimator can declare (mixnav.ins.motion, mixnav.motion)
+#: the motion models an estimator can declare (mixnav.ins.strapdown, mixnav.motion)
 MOTIONS = ("strapdown", "dead-reckoning", "constant-velocity")
 
 #: the entry-point group another package registers estimators under

@@ -319,11 +319,11 @@ def _build_ukf(options: UnscentedOptions, absurd_sigma: float, context):
     return UnscentedEstimator(absurd_sigma=absurd_sigma, noise=noise, **ut)
 
 
-#: MOTIONS[:1]: the strapdown INS only, until the ensemble runs on the motion seam (then: MOTIONS).
-register_estimator("ukf", options=UnscentedOptions, motions=MOTIONS[:1], can_smooth=False, build=_build_ukf,
+#: every motion model: the ensemble runs on the motion seam (member_states, propagate_members, ...)
+register_estimator("ukf", options=UnscentedOptions, motions=MOTIONS, can_smooth=False, build=_build_ukf,
                    description="M7 unscented Kalman filter: sigma points mechanized as full states, loose or "
                    "tight GNSS through predict_batch (options: alpha, beta, kappa, substeps)")(UnscentedEstimator)
-register_estimator("vb-aukf", options=VbUnscentedOptions, motions=MOTIONS[:1], can_smooth=False,
+register_estimator("vb-aukf", options=VbUnscentedOptions, motions=MOTIONS, can_smooth=False,
                    build=_build_ukf,
                    description="M7 variational-Bayes adaptive UKF (paper P5): an inverse-Gamma noise variance per "
                    "measurement channel with forgetting (options: rho, prior_shape, prior_scale, iterations, "

@@ -27,7 +27,7 @@ Noise: ``variance = "given"`` uses the source's variance times ``scale``;
 The model reads only the position, clock and offset blocks, so it serves the
 strapdown INS (no lever arm: the antenna is taken at the navigation point),
 the dead-reckoning and the constant-velocity models alike. Channels: one per
-satellite, ``PSEUDORANGE * 1000000 + system * 1000 + sat_id``.
+satellite, :func:`~mixnav.measurements.kinds.channel_id` of the kind, system and satellite.
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ from ..gnss.geometry import C_LIGHT, earth_rotation_correction
 from ..gnss.pseudoranges import PseudorangeEpochs
 from ._pseudorange_kernel import pseudorange_predict_batch
 from .base import MeasurementModel, Rows
-from .kinds import PSEUDORANGE
+from .kinds import PSEUDORANGE, channel_id
 
 
 class PseudorangeGnss(MeasurementModel):
@@ -107,7 +107,7 @@ class PseudorangeGnss(MeasurementModel):
         else:
             s_el = np.sin(np.where(np.isfinite(el), el, np.pi / 2))
             self._var = scale * (sigma_a ** 2 + sigma_b ** 2 / np.maximum(s_el, 0.05) ** 2)
-        self._channels = PSEUDORANGE * 1000000 + epochs.system * 1000 + epochs.sat_id
+        self._channels = channel_id(PSEUDORANGE, epochs.sat_id, epochs.system)
         self._i_off = layout.slice("system_offset").start if n_off else -1
 
     @property
