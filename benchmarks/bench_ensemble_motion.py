@@ -42,7 +42,7 @@ def estimators(particles: int) -> dict:
     from mixnav.filters.gmpf import GmpfEstimator
     from mixnav.filters.particle import ParticleEstimator
     from mixnav.filters.ukf import UnscentedEstimator
-    from mixnav.filters.vb import ChannelNoise
+    from mixnav.filters.vb_akf import ChannelNoise
     return {"ekf": None,
             "ukf": UnscentedEstimator,
             "vb-aukf": lambda: UnscentedEstimator(noise=ChannelNoise()),

@@ -10,7 +10,7 @@ import pytest
 
 from mixnav.config.loader import resolve
 from mixnav.filters._ekf_kernels import ABSURD, OK, ekf_correct_dx
-from mixnav.filters.robust import RobustEstimator, adaptive_factor, igg3_factors
+from mixnav.filters.robust_adaptive import RobustEstimator, adaptive_factor, igg3_factors
 from mixnav.ins.error_model import get_layout
 
 

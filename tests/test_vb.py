@@ -12,7 +12,7 @@ from mixnav.errors import ArgumentError
 from mixnav.experiment.run import solution_table
 from mixnav.filters._ukf_kernels import vb_correct
 from mixnav.filters.ukf import VbAdaptiveUkf
-from mixnav.filters.vb import ChannelNoise, VbAdaptiveEkf
+from mixnav.filters.vb_akf import ChannelNoise, VbAdaptiveEkf
 from mixnav.geodesy.frames import displace
 from mixnav.ins.error_model import get_layout
 from mixnav.ins.imu_model import ImuErrorModel
@@ -230,7 +230,7 @@ def test_channel_ids_round_trip_and_label_every_scheme():
     the noise columns name the observable and the satellite. The multi-system
     pseudorange channels had their own scheme, which the label read as another kind
     (smartLoc's GPS 12 pseudorange was labelled 'range_rate_12')."""
-    from mixnav.filters.vb import channel_label
+    from mixnav.filters.vb_akf import channel_label
     from mixnav.measurements.kinds import channel_parts, kind_code
     pr, vel = kind_code("pseudorange"), kind_code("velocity")
     ids = channel_id(np.array([pr, pr, pr, vel]), np.array([12, 5, 12, 2]), np.array([1, 8, 0, 0]))

@@ -193,7 +193,7 @@ def _imm(method, layout, model, gnss, aids, source, index, common, training=None
     from ..filters.imm import ImmEkf
     from ..filters.em_bias import EmBiasKalman, EmBiasSettings
     from ..filters.gmekf import BankEstimator
-    from ..filters.robust import RobustEstimator
+    from ..filters.robust_adaptive import RobustEstimator
     ic = method.imm
     by_name = {"gnss": gnss, **dict(zip(method.aiding, aids))}
     sets = [[by_name[x] for x in mode.measurements] for mode in ic.modes]

@@ -79,7 +79,7 @@ METRIC_KEYS_DOC: dict[str, str] = {
     "innovation_log_likelihood": "epoch mixture: sum over the rows of the log predictive density of each "
                                  "innovation under the mixture (compares settings without a reference)",
     "recoveries": "counts of numerical recoveries (see mixnav.engine.engine); the robust adaptive EKF "
-                  "adds its row and epoch counts (see mixnav.filters.robust); learned-mixture methods add "
+                  "adds its row and epoch counts (see mixnav.filters.robust_adaptive); learned-mixture methods add "
                   "learner_not_converged (offline fits that stopped before converging); mixture banks add "
                   "bank_reset (the divergence safeguard re-opened the covariance)",
     "mode_probability_mean": "IMM methods: {mode: mean probability} over the solution records",

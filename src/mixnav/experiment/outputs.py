@@ -137,7 +137,7 @@ def _noise_columns(res: FilterResult) -> dict:
     out = getattr(res, "outputs", None) or {}
     if "vb_sigma" not in out or not len(out["vb_time"]):
         return {}
-    from ..filters.vb import channel_label
+    from ..filters.vb_akf import channel_label
     t, chans, sig = out["vb_time"], out["vb_channel"], out["vb_sigma"]
     cols = {}
     for ch in dict.fromkeys(chans[chans >= 0].tolist()):   # first-seen order

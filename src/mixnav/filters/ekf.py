@@ -5,7 +5,7 @@ blocks) and implements the engine's estimator protocol
 (:mod:`mixnav.engine.protocols`): the engine mechanizes, calls ``predict``
 with each step's transition and ``update`` with each measurement epoch, and
 feeds the returned correction back. Subclasses change only :meth:`correct`
-(the robust adaptive EKF, :mod:`mixnav.filters.robust`) or the whole belief
+(the robust adaptive EKF, :mod:`mixnav.filters.robust_adaptive`) or the whole belief
 (the Gaussian-mixture bank, :mod:`mixnav.filters.gmekf`).
 
 :class:`ErrorStateEkf` is the filter a user runs: the strapdown motion model

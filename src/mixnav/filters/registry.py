@@ -70,13 +70,13 @@ ENTRY_POINT_GROUP = "mixnav.estimators"
 #: built-in estimator name -> the module that registers it (imported only when named)
 BUILTIN_MODULES = {
     "ekf": "mixnav.filters.ekf",
-    "robust-adaptive": "mixnav.filters.robust",
+    "robust-adaptive": "mixnav.filters.robust_adaptive",
     "gaussian-mixture": "mixnav.filters.gmekf",
     "imm": "mixnav.filters.imm",
     "sage-husa": "mixnav.filters.sage_husa",
     "ukf": "mixnav.filters.ukf",
     "vb-aukf": "mixnav.filters.ukf",
-    "vb-akf": "mixnav.filters.vb",
+    "vb-akf": "mixnav.filters.vb_akf",
     "epoch-mixture": "mixnav.filters.epoch_mixture",
     "pf": "mixnav.filters.particle",
     "dd2": "mixnav.filters.dd2",

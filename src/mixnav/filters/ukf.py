@@ -43,8 +43,8 @@ can lose positive definiteness) are rejected (ArgumentError naming the key).
 A sigma-point covariance that is not positive definite (Cholesky fails) is
 repaired (eigenvalues floored) and counted (``sigma_repair``).
 
-With a :class:`~mixnav.filters.vb.ChannelNoise` the update is the VB one of
-:mod:`mixnav.filters.vb` (VB-AUKF): the measurement moments come from the
+With a :class:`~mixnav.filters.vb_akf.ChannelNoise` the update is the VB one of
+:mod:`mixnav.filters.vb_akf` (VB-AUKF): the measurement moments come from the
 sigma points, the posterior residual moments by statistical linearisation
 (``G = Pxy^T P^-1 Pxy``), so the iterations re-use the one batch of ``h``.
 """
@@ -63,7 +63,7 @@ from pydantic import Field
 from .ekf import repair_covariance
 from .facade import facade
 from .registry import MOTIONS, GateOptions, register_estimator
-from .vb import ChannelNoise, VbOptions, channel_label, warm_vb
+from .vb_akf import ChannelNoise, VbOptions, channel_label, warm_vb
 
 __all__ = ["ut_weights", "UnscentedEstimator", "UnscentedKalmanFilter", "VbAdaptiveUkf"]
 
@@ -307,7 +307,7 @@ class UnscentedOptions(GateOptions):
 
 
 class VbUnscentedOptions(VbOptions, UnscentedOptions):
-    """``[methods.options]`` of ``estimator = "vb-aukf"``: :class:`~mixnav.filters.vb.VbOptions`
+    """``[methods.options]`` of ``estimator = "vb-aukf"``: :class:`~mixnav.filters.vb_akf.VbOptions`
     and :class:`UnscentedOptions`."""
 
 

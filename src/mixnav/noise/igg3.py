@@ -1,4 +1,4 @@
-"""Robust weight functions shared by the robust filter (:mod:`mixnav.filters.robust`, M2)
+"""Robust weight functions shared by the robust filter (:mod:`mixnav.filters.robust_adaptive`, M2)
 and the robust single-point solution (:mod:`mixnav.gnss.spp`)."""
 
 from __future__ import annotations
