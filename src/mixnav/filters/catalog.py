@@ -8,6 +8,7 @@ so it is built only when asked); :func:`filter_class`: the filter maker of a nam
 from __future__ import annotations
 
 from .registry import METHOD_TYPES  # noqa: F401  (re-exported)
+from .registry import ABSURD_SIGMA
 
 
 def __getattr__(name):
@@ -24,7 +25,7 @@ def filter_class(name: str):
     from .registry import check_motion
     check_motion(name, "strapdown")
 
-    def maker(layout, imu_model, covariance_interval: float = 1.0, absurd_sigma: float = 1e4, clock=None,
+    def maker(layout, imu_model, covariance_interval: float = 1.0, absurd_sigma: float = ABSURD_SIGMA, clock=None,
               **options):
         return Filter(name, layout, imu_model, options, covariance_interval, absurd_sigma, clock)
     return maker

@@ -50,6 +50,7 @@ from numba import njit
 from ..errors import ArgumentError
 from ..measurements.kinds import MAX_KINDS, kind_code
 from .gmekf import BankEstimator, GaussianMixtureEkf
+from .registry import ABSURD_SIGMA
 
 #: Error states the coloured process noise lives on (attitude, velocity, position).
 N_W = 9
@@ -255,7 +256,7 @@ class ColoredMixtureEkf(GaussianMixtureEkf):
 
     def __init__(self, layout, imu_model, mixtures, psi_process=0.0, psi_measurement=None,
                  process_interval: float = 1.0, max_components: int = 16, covariance_interval: float = 1.0,
-                 absurd_sigma: float = 1e4, clock=None, learning_time_s: float = 0.0,
+                 absurd_sigma: float = ABSURD_SIGMA, clock=None, learning_time_s: float = 0.0,
                  augment: bool | None = None, learner_not_converged: int = 0, gate: float = 2.0,
                  outlier_mean: float = 4.0, divergence_window: int = 10, divergence_nis: float = 9.0):
         super().__init__(layout, imu_model, mixtures, max_components, covariance_interval, absurd_sigma,

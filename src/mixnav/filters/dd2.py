@@ -42,6 +42,7 @@ from pydantic import Field
 from .facade import facade
 from .registry import MOTIONS, GateOptions, register_estimator
 from .ukf import predict_members
+from .registry import ABSURD_SIGMA
 
 __all__ = ["DEFAULT_STEP", "check_dd2_step", "dd2_points", "dd2_moments", "dd2_time", "dd2_measure",
            "dd2_predict", "dd2_update", "psd_cholesky", "Dd2Estimator", "Dd2Filter"]
@@ -238,7 +239,7 @@ class Dd2Estimator(NoCloneEstimator):
 
     label = "the DD2 filter"
 
-    def __init__(self, dd2_step: float = DEFAULT_STEP, substeps: int = 4, absurd_sigma: float = 1e4):
+    def __init__(self, dd2_step: float = DEFAULT_STEP, substeps: int = 4, absurd_sigma: float = ABSURD_SIGMA):
         self.h = check_dd2_step(dd2_step)
         if int(substeps) != substeps or substeps < 0:
             raise ArgumentError(f"must be an integer >= 0, got {substeps}", argument="substeps")

@@ -30,6 +30,7 @@ from ..ins._error_kernels import covariance_predict
 from ..ins.strapdown import StrapdownMotion
 from ._ekf_kernels import NEEDS_REPAIR, OK, kalman_correct
 from .registry import GateOptions, register_estimator
+from .registry import ABSURD_SIGMA
 
 _WARM: set = set()
 
@@ -65,7 +66,7 @@ class KalmanEstimator:
         the engine, it gives the closed-loop filter's numbers.
     """
 
-    def __init__(self, absurd_sigma: float = 1e4, carry_mean: bool = False):
+    def __init__(self, absurd_sigma: float = ABSURD_SIGMA, carry_mean: bool = False):
         if not absurd_sigma > 0:
             raise ArgumentError(f"must be positive, got {absurd_sigma}", argument="absurd_sigma")
         self.absurd_sigma = float(absurd_sigma)
@@ -216,7 +217,7 @@ class ErrorStateEkf:
     can_smooth = True
 
     def __init__(self, layout: StateLayout, imu_model: ImuErrorModel,
-                 covariance_interval: float = 1.0, absurd_sigma: float = 1e4,
+                 covariance_interval: float = 1.0, absurd_sigma: float = ABSURD_SIGMA,
                  clock: ClockModel | None = None):
         check_covariance_interval(covariance_interval)  # now, not at the first run
         KalmanEstimator(absurd_sigma)                    # checks absurd_sigma

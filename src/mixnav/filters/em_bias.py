@@ -63,6 +63,7 @@ from ..measurements.base import Rows
 from ..measurements.kinds import POSITION
 from .ekf import KalmanEstimator
 from .registry import NoOptions, from_context, register_estimator
+from .registry import ABSURD_SIGMA
 
 
 @lru_cache(maxsize=64)
@@ -188,7 +189,7 @@ class EmBiasKalman(KalmanEstimator):
         As :class:`~mixnav.filters.ekf.KalmanEstimator`.
     """
 
-    def __init__(self, models, settings: EmBiasSettings = EmBiasSettings(), absurd_sigma: float = 1e4,
+    def __init__(self, models, settings: EmBiasSettings = EmBiasSettings(), absurd_sigma: float = ABSURD_SIGMA,
                  carry_mean: bool = False):
         super().__init__(absurd_sigma, carry_mean)
         self.models = frozenset(models)

@@ -67,6 +67,7 @@ from .ekf import KalmanEstimator
 from .facade import facade
 from .registry import GateOptions, register_estimator
 from ._epoch_mixture_kernels import epoch_em, predictive_log_density
+from .registry import ABSURD_SIGMA
 
 __all__ = ["EpochMixtureEstimator", "EpochMixtureEkf"]
 
@@ -147,7 +148,7 @@ class EpochMixtureEstimator(KalmanEstimator):
                  los_scale: float = 1.0, learn: bool = True, learn_scale: bool = False, forget: float = 0.999,
                  prior_rows: float = 200.0, min_delay_sd: float = 5.0, iterations: int = 20,
                  tolerance: float = 1e-3, kinds=("pseudorange",), cn0_edges=(), los_weight_bands=None,
-                 correlation_time: float = 0.0, absurd_sigma: float = 1e4):
+                 correlation_time: float = 0.0, absurd_sigma: float = ABSURD_SIGMA):
         super().__init__(absurd_sigma)
         if not (math.isfinite(correlation_time) and correlation_time >= 0):
             raise ArgumentError(f"must be >= 0 [s], got {correlation_time}", argument="correlation_time")

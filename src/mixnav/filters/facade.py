@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from .ekf import ErrorStateEkf
 from .registry import BuildContext, check_motion
+from .registry import ABSURD_SIGMA
 
 
 class Filter(ErrorStateEkf):
@@ -32,7 +33,7 @@ class Filter(ErrorStateEkf):
     """
 
     def __init__(self, estimator: str, layout, imu_model, options=None, covariance_interval: float = 1.0,
-                 absurd_sigma: float = 1e4, clock=None, context: BuildContext | None = None):
+                 absurd_sigma: float = ABSURD_SIGMA, clock=None, context: BuildContext | None = None):
         self.spec = check_motion(estimator, "strapdown")
         self.options = self.spec.parse_options(options)
         if "absurd_sigma" in self.options.model_fields_set:
@@ -49,10 +50,10 @@ class Filter(ErrorStateEkf):
 
 
 def facade(name: str, public_name: str):
-    """``public_name(layout, imu_model, *, covariance_interval=1.0, absurd_sigma=1e4, clock=None,
+    """``public_name(layout, imu_model, *, covariance_interval=1.0, absurd_sigma=ABSURD_SIGMA, clock=None,
     **options)``: the :class:`Filter` of estimator ``name`` (keywords only: the old classes'
     positional order differed per estimator)."""
-    def make(layout, imu_model, *, covariance_interval: float = 1.0, absurd_sigma: float = 1e4, clock=None,
+    def make(layout, imu_model, *, covariance_interval: float = 1.0, absurd_sigma: float = ABSURD_SIGMA, clock=None,
              **options) -> Filter:
         return Filter(name, layout, imu_model, options, covariance_interval, absurd_sigma, clock)
     make.__name__ = make.__qualname__ = public_name

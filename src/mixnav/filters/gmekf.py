@@ -61,6 +61,7 @@ from ._bank_kernels import (bank_epoch, bank_epoch_collect, bank_epoch_guarded, 
 from ._ekf_kernels import NEEDS_REPAIR, OK
 from .ekf import ErrorStateEkf, repair_covariance
 from .registry import NoOptions, from_context, register_estimator
+from .registry import ABSURD_SIGMA
 
 
 def independent_rows(z, r) -> tuple[np.ndarray, np.ndarray]:
@@ -137,7 +138,7 @@ class BankEstimator:
         3e-7 per epoch for P4's p = 0.3 and W = 10).
     """
 
-    def __init__(self, mixtures: BankMixtures, max_components: int = 16, absurd_sigma: float = 1e4,
+    def __init__(self, mixtures: BankMixtures, max_components: int = 16, absurd_sigma: float = ABSURD_SIGMA,
                  online=None, carry_mean: bool = False, gate: float = 2.0, outlier_mean: float = 4.0,
                  divergence_window: int = 10, divergence_nis: float = 9.0):
         if int(max_components) < 1:
@@ -488,7 +489,7 @@ class GaussianMixtureEkf(ErrorStateEkf):
     can_smooth = True
 
     def __init__(self, layout: StateLayout, imu_model: ImuErrorModel, mixtures: BankMixtures,
-                 max_components: int = 16, covariance_interval: float = 1.0, absurd_sigma: float = 1e4,
+                 max_components: int = 16, covariance_interval: float = 1.0, absurd_sigma: float = ABSURD_SIGMA,
                  clock: ClockModel | None = None, learning_time_s: float = 0.0, online=None,
                  learner_not_converged: int = 0, gate: float = 2.0, outlier_mean: float = 4.0,
                  divergence_window: int = 10, divergence_nis: float = 9.0):

@@ -89,6 +89,7 @@ from .dd2 import (DEFAULT_STEP, Dd2Options, check_dd2_step, dd2_measure, dd2_poi
                   predict_points, psd_cholesky)
 from .facade import facade
 from .registry import MOTIONS, register_estimator
+from .registry import ABSURD_SIGMA
 
 __all__ = ["GmpfEstimator", "GaussianMixtureParticleFilter", "check_gmpf_settings", "mixture_logpdf",
            "fit_weighted_mixture"]
@@ -102,7 +103,7 @@ EM_TOL = 1e-5
 SAMPLING = ("iid", "matched")
 
 
-def check_gmpf_settings(particles, components, em_iterations, dd2_step, substeps=4, absurd_sigma=1e4,
+def check_gmpf_settings(particles, components, em_iterations, dd2_step, substeps=4, absurd_sigma=ABSURD_SIGMA,
                         sampling="matched") -> None:
     """ArgumentError naming the key of a setting out of range."""
     if not _is_int(particles) or particles < 2:
@@ -211,7 +212,7 @@ class GmpfEstimator(NoCloneEstimator):
     label = "the GMPF"
 
     def __init__(self, particles: int = 1000, components: int = 3, em_iterations: int = 10,
-                 dd2_step: float = DEFAULT_STEP, substeps: int = 4, absurd_sigma: float = 1e4,
+                 dd2_step: float = DEFAULT_STEP, substeps: int = 4, absurd_sigma: float = ABSURD_SIGMA,
                  sampling: str = "matched"):
         check_gmpf_settings(particles, components, em_iterations, dd2_step, substeps, absurd_sigma, sampling)
         self.sampling = sampling

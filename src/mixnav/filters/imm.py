@@ -57,6 +57,7 @@ from ..ins.imu_model import ImuErrorModel
 from .ekf import ErrorStateEkf, KalmanEstimator
 from .registry import NoOptions, from_context, register_estimator
 from ..engine.status import ABSURD, NEEDS_REPAIR, NON_FINITE, OK
+from .registry import ABSURD_SIGMA
 
 _LOG_2PI = math.log(2.0 * math.pi)
 #: the recoveries an IMM counts itself (per mode for the rejections)
@@ -543,7 +544,7 @@ class ImmEkf(ErrorStateEkf):
 
     def __init__(self, layout: StateLayout, imu_model: ImuErrorModel, measurement_sets, transition,
                  initial_probabilities=None, transition_interval: float | None = 1.0, names=None,
-                 mode_estimators=None, covariance_interval: float = 1.0, absurd_sigma: float = 1e4,
+                 mode_estimators=None, covariance_interval: float = 1.0, absurd_sigma: float = ABSURD_SIGMA,
                  clock: ClockModel | None = None, output: str = "combined"):
         super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
         self.measurement_sets = [frozenset(s) for s in measurement_sets]

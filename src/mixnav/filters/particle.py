@@ -70,6 +70,7 @@ from pydantic import Field
 from .facade import facade
 from .registry import MOTIONS, GateOptions, register_estimator
 from .ukf import predict_members
+from .registry import ABSURD_SIGMA
 
 __all__ = ["ParticleEstimator", "ParticleFilter", "systematic_resample", "normalise_log_weights",
            "check_particle_settings", "linear_gaussian_particles"]
@@ -80,7 +81,7 @@ _WARM: set = set()
 DEGENERATE_INFLATION = 2.0
 
 
-def check_particle_settings(particles, resample_threshold, roughening, substeps=4, absurd_sigma=1e4) -> None:
+def check_particle_settings(particles, resample_threshold, roughening, substeps=4, absurd_sigma=ABSURD_SIGMA) -> None:
     """ArgumentError naming the key of a setting out of range."""
     if int(particles) != particles or particles < 2:
         raise ArgumentError(f"must be an integer >= 2, got {particles}", argument="particles")
@@ -149,7 +150,7 @@ class ParticleEstimator(NoCloneEstimator):
     label = "the particle filter"
 
     def __init__(self, particles: int = 1000, resample_threshold: float = 0.5, roughening: float = 0.9,
-                 substeps: int = 4, absurd_sigma: float = 1e4, parallel: bool = False, fused: bool = True):
+                 substeps: int = 4, absurd_sigma: float = ABSURD_SIGMA, parallel: bool = False, fused: bool = True):
         check_particle_settings(particles, resample_threshold, roughening, substeps, absurd_sigma)
         self.parallel = bool(parallel)
         self.fused = bool(fused)

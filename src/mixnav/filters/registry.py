@@ -61,6 +61,12 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ..errors import ArgumentError
 
+#: The default absurd-innovation gate [standard deviations]: an innovation this many
+#: predicted standard deviations out is a blunder (a units or timing error, a wrong
+#: satellite), not noise, and its epoch is rejected (``ABSURD``, counted). Every
+#: estimator's ``absurd_sigma`` defaults to it.
+ABSURD_SIGMA = 1e4
+
 #: the motion models an estimator can declare (mixnav.ins.strapdown, mixnav.motion)
 MOTIONS = ("strapdown", "dead-reckoning", "constant-velocity")
 
@@ -137,7 +143,7 @@ class EstimatorSpec:
             return values
         return validate_options(self.options, dict(values or {}), self.name)
 
-    def make(self, options=None, absurd_sigma: float = 1e4, context: BuildContext | None = None):
+    def make(self, options=None, absurd_sigma: float = ABSURD_SIGMA, context: BuildContext | None = None):
         """A fresh estimator with ``options`` (dict or model instance) for one run."""
         opts = self.parse_options(options)
         if "absurd_sigma" in opts.model_fields_set:   # a file's options.absurd_sigma wins
@@ -155,7 +161,7 @@ class GateOptions(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    absurd_sigma: float = Field(default=1e4, gt=0, description="innovations beyond this many predicted "
+    absurd_sigma: float = Field(default=ABSURD_SIGMA, gt=0, description="innovations beyond this many predicted "
                                 "standard deviations are rejected as blunders (counted)")
 
 

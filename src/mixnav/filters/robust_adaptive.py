@@ -48,6 +48,7 @@ from .ekf import KalmanEstimator
 from .facade import facade
 from .registry import GateOptions, register_estimator
 from .kalman import innovation_is_absurd
+from .registry import ABSURD_SIGMA
 
 
 def adaptive_factor(d: float, c: float) -> float:
@@ -87,7 +88,7 @@ class RobustEstimator(KalmanEstimator):
         As :class:`~mixnav.filters.ekf.KalmanEstimator` (``carry_mean`` for a mode of an IMM).
     """
 
-    def __init__(self, k0: float = 2.5, k1: float = 5.0, c: float = 1.5, absurd_sigma: float = 1e4,
+    def __init__(self, k0: float = 2.5, k1: float = 5.0, c: float = 1.5, absurd_sigma: float = ABSURD_SIGMA,
                  carry_mean: bool = False):
         super().__init__(absurd_sigma, carry_mean)
         if not 0.0 < k0 < k1:

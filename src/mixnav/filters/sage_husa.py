@@ -35,6 +35,7 @@ from pydantic import Field
 from .ekf import KalmanEstimator
 from .facade import facade
 from .registry import GateOptions, register_estimator
+from .registry import ABSURD_SIGMA
 
 __all__ = ["SageHusaEstimator", "SageHusaEkf"]
 
@@ -65,7 +66,7 @@ class SageHusaEstimator(KalmanEstimator):
         As :class:`~mixnav.filters.ekf.KalmanEstimator`.
     """
 
-    def __init__(self, fading: float = 0.98, scale0: float = 1.0, absurd_sigma: float = 1e4):
+    def __init__(self, fading: float = 0.98, scale0: float = 1.0, absurd_sigma: float = ABSURD_SIGMA):
         super().__init__(absurd_sigma)
         if not 0.0 < fading < 1.0:
             raise ArgumentError(f"must be in (0, 1), got {fading}", argument="fading")

@@ -53,6 +53,7 @@ from ._ekf_kernels import kalman_correct
 from .ekf import KalmanEstimator
 from .kalman import innovation_is_absurd
 from .registry import register_estimator
+from .registry import ABSURD_SIGMA
 
 __all__ = ["StudentTEstimator", "StudentTOptions"]
 
@@ -176,7 +177,7 @@ class StudentTEstimator(KalmanEstimator):
         As :class:`~mixnav.filters.ekf.KalmanEstimator` (an IMM mode).
     """
 
-    def __init__(self, options: StudentTOptions | None = None, absurd_sigma: float = 1e4,
+    def __init__(self, options: StudentTOptions | None = None, absurd_sigma: float = ABSURD_SIGMA,
                  carry_mean: bool = False):
         super().__init__(absurd_sigma, carry_mean)
         if options is None:

@@ -64,6 +64,7 @@ from .ekf import repair_covariance
 from .facade import facade
 from .registry import MOTIONS, GateOptions, register_estimator
 from .vb_akf import ChannelNoise, VbOptions, channel_label, warm_vb
+from .registry import ABSURD_SIGMA
 
 __all__ = ["ut_weights", "UnscentedEstimator", "UnscentedKalmanFilter", "VbAdaptiveUkf"]
 
@@ -149,7 +150,7 @@ class UnscentedEstimator(NoCloneEstimator):
     label = "the UKF"
 
     def __init__(self, alpha: float = 0.6, beta: float = 2.0, kappa: float = 0.0, substeps: int = 4,
-                 absurd_sigma: float = 1e4, noise: ChannelNoise | None = None):
+                 absurd_sigma: float = ABSURD_SIGMA, noise: ChannelNoise | None = None):
         if not absurd_sigma > 0:
             raise ArgumentError(f"must be positive, got {absurd_sigma}", argument="absurd_sigma")
         if int(substeps) != substeps or substeps < 0:

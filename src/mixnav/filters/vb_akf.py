@@ -40,6 +40,7 @@ from .ekf import KalmanEstimator
 from .facade import facade
 from .registry import GateOptions, register_estimator
 from ..engine.status import NEEDS_REPAIR, OK
+from .registry import ABSURD_SIGMA
 
 __all__ = ["ChannelNoise", "VbKalmanEstimator", "VbAdaptiveEkf", "VbOptions", "check_vb_settings"]
 
@@ -180,7 +181,7 @@ class VbKalmanEstimator(KalmanEstimator):
         As :class:`~mixnav.filters.ekf.KalmanEstimator` (the gate uses the predicted variance).
     """
 
-    def __init__(self, noise: ChannelNoise | None = None, absurd_sigma: float = 1e4):
+    def __init__(self, noise: ChannelNoise | None = None, absurd_sigma: float = ABSURD_SIGMA):
         super().__init__(absurd_sigma)
         self.noise = noise if noise is not None else ChannelNoise()
 
