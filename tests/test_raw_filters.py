@@ -49,8 +49,8 @@ def test_shipped_config_validates():
 
 
 @pytest.mark.parametrize("edit, key, message", [
-    (('estimator = "vb-akf"', 'estimator = "ukf"'), "methods[6].estimator",
-     "'ukf' does not run on the constant-velocity motion model"),
+    (('estimator = "vb-akf"', 'estimator = "imm"'), "methods[6].estimator",
+     "'imm' does not run on the constant-velocity motion model"),
     (('estimator = "ekf"', 'estimator = "kalman"'), "methods[2].estimator",
      "unknown estimator 'kalman' \\(known: ekf, .*epoch-mixture"),
     (('accel_sigma = "0.1 m/s^2/sqrt(Hz)"', 'accel_sigma = "-0.1 m/s^2/sqrt(Hz)"'), "motion.accel_sigma",

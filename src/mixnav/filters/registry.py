@@ -53,8 +53,11 @@ registration.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
+from functools import lru_cache
 from importlib import import_module
+from pathlib import Path
 from typing import Any, Callable
 
 from pydantic import BaseModel, ConfigDict, Field
@@ -73,24 +76,32 @@ MOTIONS = ("strapdown", "dead-reckoning", "constant-velocity")
 #: the entry-point group another package registers estimators under
 ENTRY_POINT_GROUP = "mixnav.estimators"
 
-#: built-in estimator name -> the module that registers it (imported only when named)
-BUILTIN_MODULES = {
-    "ekf": "mixnav.filters.ekf",
-    "robust-adaptive": "mixnav.filters.robust_adaptive",
-    "gaussian-mixture": "mixnav.filters.gmekf",
-    "imm": "mixnav.filters.imm",
-    "sage-husa": "mixnav.filters.sage_husa",
-    "ukf": "mixnav.filters.ukf",
-    "vb-aukf": "mixnav.filters.ukf",
-    "vb-akf": "mixnav.filters.vb_akf",
-    "epoch-mixture": "mixnav.filters.epoch_mixture",
-    "pf": "mixnav.filters.particle",
-    "dd2": "mixnav.filters.dd2",
-    "gmpf": "mixnav.filters.gmpf",
-    "em-bias": "mixnav.filters.em_bias",
-    # a module named here may be absent (an estimator on its way): it is then not listed
-    "student-t": "mixnav.filters.student_t",
-}
+#: the package whose modules hold the built-in estimators
+BUILTIN_PACKAGE = "mixnav.filters"
+
+#: a module-level registration, ``register_estimator("name", ...)`` or its decorator form
+_REGISTRATION = re.compile(r'^@?register_estimator\(\s*"([^"]+)"', re.M)
+
+
+def find_registrations(folder, package: str) -> dict[str, str]:
+    """Estimator name -> module, for every module of ``folder`` (the files of ``package``)
+    that registers an estimator at module level, read from the source text: nothing is
+    imported, so listing the estimators compiles no kernel. ``"ekf"`` (the default) first,
+    then by name."""
+    found = {}
+    for path in sorted(Path(folder).glob("*.py")):
+        for name in _REGISTRATION.findall(path.read_text(encoding="utf-8")):
+            found.setdefault(name, f"{package}.{path.stem}")
+    return dict(sorted(found.items(), key=lambda item: (item[0] != "ekf", item[0])))
+
+
+@lru_cache(maxsize=1)
+def builtin_modules() -> dict[str, str]:
+    """Built-in estimator name -> the module that registers it (imported only when named).
+    A new estimator is one module of this package that calls :func:`register_estimator`:
+    it is found here, with no list to edit."""
+    return find_registrations(Path(__file__).resolve().parent, BUILTIN_PACKAGE)
+
 
 #: method types of a scenario's INS methods (``type = "..."``) -> one-line description
 METHOD_TYPES = {
@@ -239,17 +250,11 @@ def _entry_points() -> dict:
     return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
 
 
-def _present(module: str) -> bool:
-    """Whether ``module`` exists (found, not imported)."""
-    from importlib.util import find_spec
-    return find_spec(module) is not None
-
-
 def estimator_names(standalone_only: bool = True) -> list[str]:
     """Every estimator name (built-in, then installed plug-ins, then registered at run time);
     imports no estimator module. ``standalone_only``: leave out the IMM-only modes."""
     imm_only = {"em-bias"}  # the one built-in that is only an IMM mode (its spec says so too)
-    names = [n for n, m in BUILTIN_MODULES.items() if not (standalone_only and n in imm_only) and _present(m)]
+    names = [n for n in builtin_modules() if not (standalone_only and n in imm_only)]
     names += [n for n in _entry_points() if n not in names]
     names += [n for n, s in _SPECS.items() if n not in names and (s.standalone or not standalone_only)]
     return names
@@ -259,8 +264,8 @@ def estimator_spec(name: str) -> EstimatorSpec:
     """The registration of ``name`` (its module imported now); unknown: an
     :class:`ArgumentError` (argument ``estimator``) listing the registered names."""
     if name not in _SPECS:
-        module = BUILTIN_MODULES.get(name)
-        if module is not None and _present(module):
+        module = builtin_modules().get(name)
+        if module is not None:
             import_module(module)
         else:
             ep = _entry_points().get(name)
