@@ -133,9 +133,8 @@ def _decay(tau, T, fdec):
         fdec[b] = math.exp(-T / tau[b]) if tau[b] > 0.0 and np.isfinite(tau[b]) else 1.0
 
 
-@njit(cache=True, parallel=True)
-def pf_step(nav0, prev0, sensor0, D, SQT, Z, dtheta, dvel, dt, substeps, layout, tau, T,
-            navs, prevs, sensors, scr, gth, gdv, gdt, fdec, Dn):
+def _pf_step(nav0, prev0, sensor0, D, SQT, Z, dtheta, dvel, dt, substeps, layout, tau, T,
+             navs, prevs, sensors, scr, gth, gdv, gdt, fdec, Dn):
     """Propagate the particles ``D`` (N, n) about ``nav0`` over one IMU block, fused
     per particle, parallel over particles (``prange``).
 
@@ -162,25 +161,10 @@ def pf_step(nav0, prev0, sensor0, D, SQT, Z, dtheta, dvel, dt, substeps, layout,
         _finish_member(j, D, navs, layout, fdec, T, SQT, Z, Dn)
 
 
-@njit(cache=True)
-def pf_step_serial(nav0, prev0, sensor0, D, SQT, Z, dtheta, dvel, dt, substeps, layout, tau, T,
-                   navs, prevs, sensors, scr, gth, gdv, gdt, fdec, Dn):
-    """:func:`pf_step` compiled without ``parallel`` (the same arithmetic; for the
-    serial-versus-parallel measurement in benchmarks/bench_pf.py)."""
-    N = D.shape[0]
-    S = merge_block_into(dtheta, dvel, dt, substeps, gth, gdv, gdt)
-    _decay(tau, T, fdec)
-    trig = np.empty((S, TRIG_POINTS, 3))
-    _start_member(N, nav0, prev0, sensor0, D, layout, navs, prevs, sensors, scr)
-    _mechanize_one(navs[N], prevs[N], sensors[N], scr[N], gth, gdv, gdt, S, trig, RECORD)
-    for j in range(N):
-        _start_member(j, nav0, prev0, sensor0, D, layout, navs, prevs, sensors, scr)
-        _mechanize_one(navs[j], prevs[j], sensors[j], scr[j], gth, gdv, gdt, S, trig, NEAR)
-        _finish_member(j, D, navs, layout, fdec, T, SQT, Z, Dn)
+pf_step_serial, pf_step = serial_and_parallel(_pf_step, "pf_step")
 
 
-@njit(cache=True, parallel=True)
-def pf_mechanize(navs, prevs, sensors, scr, gth, gdv, gdt, S):
+def _pf_mechanize(navs, prevs, sensors, scr, gth, gdv, gdt, S):
     """Every row of ``navs`` mechanized over ``S`` merged sub-intervals (in place, parallel
     over rows), the last row as the reference (RECORD, first) and the others as particles
     about it (NEAR), as in :func:`pf_step`: one "IMU step" of the array, timed in
@@ -192,14 +176,7 @@ def pf_mechanize(navs, prevs, sensors, scr, gth, gdv, gdt, S):
         _mechanize_one(navs[j], prevs[j], sensors[j], scr[j], gth, gdv, gdt, S, trig, NEAR)
 
 
-@njit(cache=True)
-def pf_mechanize_serial(navs, prevs, sensors, scr, gth, gdv, gdt, S):
-    """:func:`pf_mechanize`, serial."""
-    N = navs.shape[0] - 1
-    trig = np.empty((S, TRIG_POINTS, 3))
-    _mechanize_one(navs[N], prevs[N], sensors[N], scr[N], gth, gdv, gdt, S, trig, RECORD)
-    for j in range(N):
-        _mechanize_one(navs[j], prevs[j], sensors[j], scr[j], gth, gdv, gdt, S, trig, NEAR)
+pf_mechanize_serial, pf_mechanize = serial_and_parallel(_pf_mechanize, "pf_mechanize")
 
 
 @njit(cache=True)
@@ -230,8 +207,7 @@ def _member_nav(j, nav, D, layout, navs, sensors, scr):
     apply_feedback(navs[j], sensors[j], scr[j, 9:11], D[j], layout)
 
 
-@njit(cache=True, parallel=True)
-def pf_member_navs(nav, D, layout, navs, sensors, scr):
+def _pf_member_navs(nav, D, layout, navs, sensors, scr):
     """The particles ``D`` (N, n) about ``nav`` as full navigation states ``navs``
     (>= N, 10) (the engine's feedback map on a copy of ``nav``); ``sensors`` (>= N, 12)
     and ``scr`` (>= N, 11) receive the sensor and clock parts (scratch, not used).
@@ -240,11 +216,7 @@ def pf_member_navs(nav, D, layout, navs, sensors, scr):
         _member_nav(j, nav, D, layout, navs, sensors, scr)
 
 
-@njit(cache=True)
-def pf_member_navs_serial(nav, D, layout, navs, sensors, scr):
-    """:func:`pf_member_navs`, serial."""
-    for j in range(D.shape[0]):
-        _member_nav(j, nav, D, layout, navs, sensors, scr)
+pf_member_navs_serial, pf_member_navs = serial_and_parallel(_pf_member_navs, "pf_member_navs")
 
 
 @njit(cache=True)
@@ -962,9 +934,8 @@ def _loose_prologue(D, layout, nav, w_b, lever, fix, w0, m, work):
     return i_bg, g, C0, y, r, 1.0 / r, yk0, work[0:n], work[n]
 
 
-@njit(cache=True, parallel=True)
-def pf_loose_update(D, layout, nav, w_b, lever, fix, logw0, w0, thr, YT, logw, w, ym, Pyy, x, P, yp, pa, part,
-                    work):
+def _pf_loose_update(D, layout, nav, w_b, lever, fix, logw0, w0, thr, YT, logw, w, ym, Pyy, x, P, yp, pa, part,
+                     work):
     """A loose GNSS update of the particles ``D`` (N, n), fused, parallel over the
     :data:`CHUNKS` chunks: each particle's prediction (into ``YT`` (m, N), m = 3 or 6,
     state-major), its log-likelihood added to the prior log-weight ``logw0`` (into
@@ -996,24 +967,7 @@ def pf_loose_update(D, layout, nav, w_b, lever, fix, logw0, w0, thr, YT, logw, w
     return best, tot * tot / sq, nis
 
 
-@njit(cache=True)
-def pf_loose_update_serial(D, layout, nav, w_b, lever, fix, logw0, w0, thr, YT, logw, w, ym, Pyy, x, P, yp, pa,
-                           part, work):
-    """:func:`pf_loose_update`, serial (the same chunks, the same sums: bitwise equal)."""
-    i_bg, g, C0, y, r, ir, yk0, DT, S = _loose_prologue(D, layout, nav, w_b, lever, fix, w0, YT.shape[0], work)
-    for c in range(CHUNKS):
-        _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, YT, logw, yp, DT, S)
-    best, top = _sum_loose(yp, yk0, ym, Pyy)
-    nis = _nis(y, ym, Pyy, r)
-    if not np.isfinite(top) or not best <= thr:
-        return best, 0.0, nis
-    for c in range(CHUNKS):
-        _exp_chunk(c, logw, top, w, DT, pa)
-    tot, sq = _sum_exp(pa, x)
-    for c in range(CHUNKS):
-        _normalise_cov_chunk(c, w, tot, x, DT, part)
-    _sum_cov(part, P)
-    return best, tot * tot / sq, nis
+pf_loose_update_serial, pf_loose_update = serial_and_parallel(_pf_loose_update, "pf_loose_update")
 
 
 class Kernels:
