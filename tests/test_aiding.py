@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mixnav.config.loader import load_scenario
-from mixnav.config import schema
+from mixnav.config import aiding_schema
 from mixnav.errors import ConfigError
 from mixnav.experiment.run import run_scenario, run_tables
 
@@ -111,7 +111,7 @@ colored = { process = 0.0, measurement = { position = 0.5 } }
 
 
 def test_schema_units():
-    a = schema.AidingConfig(vehicle_mounting=["1 deg", "0 deg", "0 deg"],
+    a = aiding_schema.AidingConfig(vehicle_mounting=["1 deg", "0 deg", "0 deg"],
                             zupt={"accel_std": "0.2 m/s^2", "gyro_rate": "1 deg/s"})
     assert a.vehicle_mounting[0] == pytest.approx(np.radians(1.0))
     assert a.zupt.gyro_rate == pytest.approx(np.radians(1.0))

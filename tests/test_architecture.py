@@ -15,6 +15,8 @@ SRC = Path(__file__).resolve().parents[1] / "src" / "mixnav"
 #: floor of each top-level module or package of mixnav (ARCHITECTURE.md, "Floors")
 FLOORS = {
     "errors": 0, "units": 0, "linalg": 0, "_version": 0,
+    "names": 0,  # safe_name: the file-name rule of the config's method names and the output folders
+    "markov": 0,  # check_transition: the IMM's transition matrix, checked by the filter and the config
     "_jit": 0,  # serial_and_parallel: the kernels' twin factory (numba only)
     "attitude": 1, "geodesy": 1, "data": 2,
     "ins": 3, "motion": 3, "gnss": 3, "noise": 3, "io": 3, "alignment": 4,
@@ -196,3 +198,29 @@ def test_ensemble_filters_import_no_strapdown_kernels(module):
     bad = [f"{module}:{line} imports {t}" for t, line in _imports(path)
            if t.startswith("mixnav.ins._") or t == "mixnav.ins._kernels"]
     assert not bad, "\n".join(bad)
+
+
+def _config_reaches_beyond(graph) -> list[str]:
+    """Imports of a ``mixnav.config`` module into ``filters`` other than the registry, or into ``io``."""
+    return [f"{mod}:{line} imports {t}" for mod, targets in graph.items()
+            if mod == "mixnav.config" or mod.startswith("mixnav.config.")
+            for t, line in targets
+            if (_top(t) == "filters" and t != "mixnav.filters.registry") or _top(t) == "io"]
+
+
+def test_config_imports_only_the_registry_from_filters_and_nothing_from_io():
+    """The config validates estimator names and options against the registry, and nothing
+    else of the filters (checks both need live below both: mixnav.markov, mixnav.names)."""
+    graph = _graph()
+    config = [ts for mod, ts in graph.items() if mod.startswith("mixnav.config.")]
+    assert any(t == "mixnav.filters.registry" for ts in config for t, _ in ts)  # its lazy imports are seen
+    bad = _config_reaches_beyond(graph)
+    assert not bad, "\n".join(bad)
+
+
+def test_the_config_import_check_sees_a_forbidden_import():
+    fake = {"mixnav.config.method_schema": [("mixnav.filters.imm", 7), ("mixnav.filters.registry", 8)],
+            "mixnav.config.vehicle_schema": [("mixnav.io.outdir", 9)],
+            "mixnav.experiment.run": [("mixnav.io.outdir", 3)]}
+    assert _config_reaches_beyond(fake) == ["mixnav.config.method_schema:7 imports mixnav.filters.imm",
+                                            "mixnav.config.vehicle_schema:9 imports mixnav.io.outdir"]

@@ -10,7 +10,8 @@ from scipy.stats import multivariate_normal
 from mixnav.engine import Engine
 from mixnav.errors import ArgumentError, ConfigError
 from mixnav.filters.ekf import KalmanEstimator
-from mixnav.filters.imm import ImmEstimator, check_transition, combine, log_likelihood, mix
+from mixnav.filters.imm import ImmEstimator, combine, log_likelihood, mix
+from mixnav.markov import check_transition
 from mixnav.ins.error_model import get_layout
 from mixnav.ins.strapdown import StrapdownMotion
 from mixnav.measurements.loose import LooseGnss

@@ -174,7 +174,7 @@ def test_config_errors_name_the_key(tmp_path):
     """The installation states belong to the loose model: asking a tightly coupled method
     for them, or listing one twice, is a ConfigError naming methods[i].estimate."""
     from mixnav.experiment.aiding import method_layout
-    from mixnav.config.schema import MethodConfig
+    from mixnav.config.method_schema import MethodConfig
     m = MethodConfig(name="t", type="tight-ekf", estimate=["imu_time_offset"])
     with pytest.raises(ConfigError, match=r"loose") as e:
         method_layout(m, None, "x.toml", 2)

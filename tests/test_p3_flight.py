@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from mixnav.config.loader import load_scenario
-from mixnav.config.schema import AccelerateSegment, ClimbSegment, TurnSegment
+from mixnav.config.scenario_schema import AccelerateSegment, ClimbSegment, TurnSegment
 
 DEG_H = math.radians(1.0) / 3600.0      # 1 deg/h [rad/s]
 UG = 9.80665e-6                          # 1 ug [m/s^2]

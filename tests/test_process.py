@@ -193,7 +193,7 @@ def test_static_alignment_of_a_navigation_grade_unit(tmp_path):
     # 50 s at rest gives the heading to ~ bias / (Omega cos lat) = 0.02 deg;
     # the filter then starts at rest with that attitude.
     from mixnav.config.loader import _validate
-    from mixnav.config.schema import Scenario
+    from mixnav.config.scenario_schema import Scenario
     demo = (Path(__file__).resolve().parents[1] / "src/mixnav/config/scenarios/loose-demo.toml").read_text()
     sc = _validate(Scenario, demo.replace('grade = "mems"', 'grade = "navigation"'), "nav.toml")
     run = simulate(sc, 1, "nav.toml")

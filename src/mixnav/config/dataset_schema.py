@@ -11,12 +11,13 @@ from typing import Literal
 from pydantic import Field, field_validator, model_validator
 
 from .. import units as u
-from .schema import (AidingConfig, AngleVec, AngSigma, LengthVec, MethodConfig, PosSigma, Strict, VelSigma, Windows,
-                     _quantity, check_position)
+from .aiding_schema import AidingConfig
+from .fields import AngleVec, AngSigma, LengthVec, PosSigma, Strict, VelSigma, Windows, check_position, quantity
+from .method_schema import MethodConfig
 
-Offset = _quantity(u.TIME)
-Gap = _quantity(u.TIME, positive=True)
-MinSpeed = _quantity(u.VELOCITY, positive=True)
+Offset = quantity(u.TIME)
+Gap = quantity(u.TIME, positive=True)
+MinSpeed = quantity(u.VELOCITY, positive=True)
 
 
 class DatasetInfo(Strict):
@@ -54,11 +55,11 @@ class GnssFile(Strict):
     format: Literal["rtklib-pos", "kf-gins", "csv"]
     file: str
     qualities: list[int] = Field(default_factory=lambda: [1, 2, 5])
-    min_sigma: _quantity(u.LENGTH, nonnegative=True) = 0.0  # type: ignore[valid-type]
+    min_sigma: quantity(u.LENGTH, nonnegative=True) = 0.0  # type: ignore[valid-type]
     use_velocity: bool = True
     # the file's velocity is valid this long before its epoch time (rtklib-pos
     # only): it is interpolated to the epoch times (io.rtklib.PosSolution.velocity_at_epochs)
-    velocity_delay: _quantity(u.TIME, nonnegative=True) = 0.0  # type: ignore[valid-type]
+    velocity_delay: quantity(u.TIME, nonnegative=True) = 0.0  # type: ignore[valid-type]
     withhold: Windows = Field(default_factory=list)
     #: a hole between used fixes longer than this (outside the withheld windows) is reported:
     #: a warning and gnss_gaps_s in metrics.json ("warn"), or an error naming the line ("fail")
@@ -80,7 +81,7 @@ class ReferenceFile(Strict):
     qualities: list[int] = Field(default_factory=lambda: [1])
     point: Literal["antenna", "imu"] = "antenna"
     #: rtklib-pos: the velocity columns are valid this long before the epoch (as ``[gnss]``'s)
-    velocity_delay: _quantity(u.TIME, nonnegative=True) = 0.0  # type: ignore[valid-type]
+    velocity_delay: quantity(u.TIME, nonnegative=True) = 0.0  # type: ignore[valid-type]
 
 
 class Installation(Strict):
@@ -150,12 +151,12 @@ class RawGnss(Strict):
     format: Literal["android-gnsslogger", "rinex-obs"]
     file: str
     navigation: str
-    elevation_mask: _quantity(u.ANGLE, nonnegative=True) = 10.0 * u.DEG  # type: ignore[valid-type]
-    sigma_a: _quantity(u.LENGTH, nonnegative=True) = 3.0  # type: ignore[valid-type]
-    sigma_b: _quantity(u.LENGTH, nonnegative=True) = 3.0  # type: ignore[valid-type]
+    elevation_mask: quantity(u.ANGLE, nonnegative=True) = 10.0 * u.DEG  # type: ignore[valid-type]
+    sigma_a: quantity(u.LENGTH, nonnegative=True) = 3.0  # type: ignore[valid-type]
+    sigma_b: quantity(u.LENGTH, nonnegative=True) = 3.0  # type: ignore[valid-type]
     troposphere: bool = True
     ionosphere: bool = True
-    max_sv_time_uncertainty: _quantity(u.TIME, positive=True) = 500e-9  # type: ignore[valid-type]
+    max_sv_time_uncertainty: quantity(u.TIME, positive=True) = 500e-9  # type: ignore[valid-type]
 
 
 class InsRawGnss(RawGnss):
@@ -183,12 +184,12 @@ class InsRawGnss(RawGnss):
     file: str | list[str]
     navigation: str | list[str]
     imu_time: Literal["gps-week-seconds", "gps-seconds"] = "gps-week-seconds"
-    pseudorange_sigma: _quantity(u.LENGTH, positive=True) = 3.0  # type: ignore[valid-type]
+    pseudorange_sigma: quantity(u.LENGTH, positive=True) = 3.0  # type: ignore[valid-type]
     pseudorange_weights: Literal["constant", "elevation"] = "constant"
-    range_rate_sigma: _quantity(u.VELOCITY, positive=True) = 0.1  # type: ignore[valid-type]
+    range_rate_sigma: quantity(u.VELOCITY, positive=True) = 0.1  # type: ignore[valid-type]
     clock_q_bias: float = Field(default=0.1, ge=0, le=1e8)
     clock_q_drift: float = Field(default=0.01, ge=0, le=1e6)
-    clock_jump: _quantity(u.LENGTH, positive=True) = 1000.0  # type: ignore[valid-type]
+    clock_jump: quantity(u.LENGTH, positive=True) = 1000.0  # type: ignore[valid-type]
     withhold: Windows = Field(default_factory=list)
     max_gap: Gap = 5.0
     gap_action: Literal["warn", "fail"] = "warn"
@@ -212,12 +213,12 @@ class ReferencePoint(Strict):
     survey reports give it), one of the two. After validation ``latitude``,
     ``longitude``, ``height`` are always set (ECEF converted)."""
 
-    latitude: _quantity(u.ANGLE) | None = None  # type: ignore[valid-type]
-    longitude: _quantity(u.ANGLE) | None = None  # type: ignore[valid-type]
-    height: _quantity(u.LENGTH) | None = None  # type: ignore[valid-type]
-    x: _quantity(u.LENGTH) | None = None  # type: ignore[valid-type]
-    y: _quantity(u.LENGTH) | None = None  # type: ignore[valid-type]
-    z: _quantity(u.LENGTH) | None = None  # type: ignore[valid-type]
+    latitude: quantity(u.ANGLE) | None = None  # type: ignore[valid-type]
+    longitude: quantity(u.ANGLE) | None = None  # type: ignore[valid-type]
+    height: quantity(u.LENGTH) | None = None  # type: ignore[valid-type]
+    x: quantity(u.LENGTH) | None = None  # type: ignore[valid-type]
+    y: quantity(u.LENGTH) | None = None  # type: ignore[valid-type]
+    z: quantity(u.LENGTH) | None = None  # type: ignore[valid-type]
 
     @model_validator(mode="after")
     def _one_form(self):

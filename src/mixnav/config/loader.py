@@ -13,7 +13,7 @@ from pydantic import ValidationError
 
 from ..errors import ConfigError
 from ..ins.imu_model import ImuErrorModel
-from .schema import Scenario
+from .scenario_schema import Scenario
 
 def _shipped_dir(folder: str = "scenarios"):
     return resources.files("mixnav.config").joinpath(folder)

@@ -18,15 +18,15 @@ from pydantic import Field, field_validator, model_validator
 
 from .. import units as u
 from .dataset_schema import DatasetInfo, RawGnss, ReferencePoint
-from .schema import Strict, _quantity
-from .schema import registered_estimator
+from .fields import Strict, quantity
+from .method_schema import registered_estimator
 from .vehicle_schema import VehicleMethod, unique_method_names
 
 #: sections of an IMU dataset that a raw-GNSS one must not have (a config error naming them)
 FOREIGN_SECTIONS = ("imu", "gnss", "alignment", "reference", "installation", "aiding", "odometry",
                     "pseudoranges")
 
-AccelDensity = _quantity(u.VELOCITY_RANDOM_WALK, nonnegative=True)
+AccelDensity = quantity(u.VELOCITY_RANDOM_WALK, nonnegative=True)
 
 
 class RawMethod(VehicleMethod):
@@ -86,11 +86,11 @@ class ConstantVelocityConfig(Strict):
     vertical_accel_sigma: AccelDensity = 0.3  # type: ignore[valid-type]
     clock_q_bias: float = Field(default=1000.0, ge=0, le=1e8)
     clock_q_drift: float = Field(default=1.0, ge=0, le=1e6)
-    step: _quantity(u.TIME, positive=True) = 1.0  # type: ignore[valid-type]
-    velocity_sigma: _quantity(u.VELOCITY, positive=True) = 5.0  # type: ignore[valid-type]
-    clock_drift_sigma: _quantity(u.VELOCITY, positive=True) = 100.0  # type: ignore[valid-type]
+    step: quantity(u.TIME, positive=True) = 1.0  # type: ignore[valid-type]
+    velocity_sigma: quantity(u.VELOCITY, positive=True) = 5.0  # type: ignore[valid-type]
+    clock_drift_sigma: quantity(u.VELOCITY, positive=True) = 100.0  # type: ignore[valid-type]
     position_sigma_factor: float = Field(default=1.0, ge=1.0, le=100.0)
-    clock_jump: _quantity(u.LENGTH, positive=True) = 1000.0  # type: ignore[valid-type]
+    clock_jump: quantity(u.LENGTH, positive=True) = 1000.0  # type: ignore[valid-type]
 
     @field_validator("accel_sigma", "vertical_accel_sigma")
     @classmethod

@@ -12,16 +12,17 @@ from pydantic import Field, field_validator
 
 from .. import units as u
 from .dataset_schema import DatasetInfo
-from .schema import MixtureConfig, RobustConfig, Strict, _quantity, registered_estimator, registered_options
+from .fields import Strict, quantity
+from .method_schema import MixtureConfig, RobustConfig, method_file_name, registered_estimator, registered_options
 
-Speed = _quantity(u.VELOCITY, positive=True)
-SpeedNN = _quantity(u.VELOCITY, nonnegative=True)
-Rate = _quantity(u.ANGULAR_RATE, positive=True)
-RateNN = _quantity(u.ANGULAR_RATE, nonnegative=True)
-Length = _quantity(u.LENGTH, positive=True)
-LengthNN = _quantity(u.LENGTH, nonnegative=True)
-Angle = _quantity(u.ANGLE, nonnegative=True)
-Time = _quantity(u.TIME, positive=True)
+Speed = quantity(u.VELOCITY, positive=True)
+SpeedNN = quantity(u.VELOCITY, nonnegative=True)
+Rate = quantity(u.ANGULAR_RATE, positive=True)
+RateNN = quantity(u.ANGULAR_RATE, nonnegative=True)
+Length = quantity(u.LENGTH, positive=True)
+LengthNN = quantity(u.LENGTH, nonnegative=True)
+Angle = quantity(u.ANGLE, nonnegative=True)
+Time = quantity(u.TIME, positive=True)
 
 def unique_method_names(methods):
     """A ``[[methods]]`` list whose names are distinct (the solutions are filed by name)."""
@@ -113,7 +114,7 @@ class VehicleAlignment(Strict):
     window: Time = 20.0  # type: ignore[valid-type]
     cn0_edges: list[float] = Field(default_factory=list)
     position_sigma: Length = 10.0  # type: ignore[valid-type]
-    heading_sigma: _quantity(u.ANGLE, positive=True) = 0.1  # type: ignore[valid-type]
+    heading_sigma: quantity(u.ANGLE, positive=True) = 0.1  # type: ignore[valid-type]
     hand_over_mixture: bool = True
 
     @field_validator("cn0_edges")
@@ -142,12 +143,7 @@ class VehicleMethod(Strict):
     @field_validator("name")
     @classmethod
     def _file_name(cls, v):
-        from ..errors import ArgumentError
-        from ..io.outdir import safe_name
-        try:
-            return safe_name(v, "method name")
-        except ArgumentError as exc:
-            raise ValueError(exc.message) from None
+        return method_file_name(v)
 
     @field_validator("estimator")
     @classmethod

@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..config.schema import AidingConfig, MethodConfig, ZuptConfig
+from ..config.aiding_schema import AidingConfig, ZuptConfig
+from ..config.method_schema import MethodConfig
 from ..data import GnssFixes, ImuData, OdometerData
 from ..errors import ConfigError
 from ..ins.error_model import StateLayout, get_layout

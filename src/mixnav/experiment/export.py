@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from ..attitude import quat_to_euler
-from ..config.schema import Scenario, StaticSegment
+from ..config.scenario_schema import Scenario, StaticSegment
 from ..errors import ArgumentError, ConfigError
 from ..gnss.geometry import LAMBDA_L1, SECONDS_PER_WEEK
 from ..io.atomic import atomic_write_text

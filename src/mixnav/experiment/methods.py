@@ -17,7 +17,7 @@ import numpy as np
 
 from ..config.errors import config_keys
 from ..config.loader import imu_model
-from ..config.schema import EmBiasConfig, MethodConfig, MixtureConfig, RobustConfig
+from ..config.method_schema import EmBiasConfig, MethodConfig, MixtureConfig, RobustConfig
 from ..errors import ConfigError
 from ..filters.registry import METHOD_TYPES, BuildContext, check_motion
 from ..ins.error_model import ClockModel

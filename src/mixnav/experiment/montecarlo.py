@@ -134,7 +134,7 @@ def _load(scenario: str, expect_sha: str | None = None):
 
     ``variants`` is ``[(sweep_value, Scenario), ...]`` (one entry, the
     scenario itself with a NaN value, when it has no sweep); ``sweep`` is
-    its :class:`~mixnav.config.schema.SweepConfig` or None. Without ``expect_sha`` the file is
+    its :class:`~mixnav.config.scenario_schema.SweepConfig` or None. Without ``expect_sha`` the file is
     always read again (the caller wants its current text); with it, the
     cached copy serves while it matches.
     """

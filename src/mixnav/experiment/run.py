@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..config.schema import Scenario
+from ..config.scenario_schema import Scenario
 from . import methods
 from .aiding import AidingInputs
 from ..filters.ekf import FilterResult

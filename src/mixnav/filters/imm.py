@@ -54,6 +54,7 @@ from ._imm_kernels import imm_combine, imm_epoch, imm_mix_score, imm_predict, im
 from ..errors import ArgumentError
 from ..ins.error_model import ClockModel, StateLayout
 from ..ins.imu_model import ImuErrorModel
+from ..markov import check_transition
 from .ekf import ErrorStateEkf, KalmanEstimator
 from .registry import NoOptions, from_context, register_estimator
 from ..engine.status import ABSURD, NEEDS_REPAIR, NON_FINITE, OK
@@ -62,26 +63,6 @@ from .registry import ABSURD_SIGMA
 _LOG_2PI = math.log(2.0 * math.pi)
 #: the recoveries an IMM counts itself (per mode for the rejections)
 _COUNTS = ("rejected_not_pd", "rejected_absurd", "covariance_repair", "imm_no_likelihood")
-
-
-def check_transition(transition, r: int | None = None, argument: str = "transition") -> np.ndarray:
-    """The transition matrix as an (r, r) array, or ArgumentError naming ``argument``: square,
-    finite, non-negative, rows summing to one (to 1e-9)."""
-    P = np.asarray(transition, dtype=float)
-    if P.ndim != 2 or P.shape[0] != P.shape[1] or (r is not None and P.shape[0] != r):
-        want = f"({r}, {r})" if r is not None else "square"
-        raise ArgumentError(f"must be a {want} matrix, got shape {P.shape}", argument=argument)
-    if not np.all(np.isfinite(P)):
-        raise ArgumentError("has entries that are not finite", argument=argument)
-    if np.any(P < 0):
-        i, j = np.argwhere(P < 0)[0]
-        raise ArgumentError(f"entry [{i}][{j}] is negative ({P[i, j]:g}): probabilities are >= 0", argument=argument)
-    s = P.sum(axis=1)
-    bad = np.nonzero(np.abs(s - 1.0) > 1e-9)[0]
-    if bad.size:
-        raise ArgumentError(f"row {bad[0]} sums to {s[bad[0]]:.6g}, not 1 (row i: the probabilities of "
-                            f"going from mode i to each mode)", argument=argument)
-    return P
 
 
 class _FractionalPower:

@@ -43,6 +43,7 @@ from pathlib import Path
 from typing import Iterable, Iterator
 
 from ..errors import ArgumentError
+from ..names import safe_name
 from .atomic import atomic_write_json, default_mode, process_alive
 
 __all__ = ["MARKER", "OutputFolder", "safe_name", "check_out_dir", "staged_output", "read_marker",
@@ -50,24 +51,6 @@ __all__ = ["MARKER", "OutputFolder", "safe_name", "check_out_dir", "staged_outpu
 
 #: the marker of a folder written by mixnav
 MARKER = ".mixnav-output.json"
-#: longest file name written (bytes; file systems allow 255)
-MAX_NAME_BYTES = 200
-_NAME = re.compile(r"^[A-Za-z0-9_+\-][A-Za-z0-9_.+\-]*$")
-
-
-def safe_name(name: str, what: str = "file name") -> str:
-    """``name`` when it is a safe single file-name component, else an ArgumentError.
-
-    Safe: letters, digits, ``_ + - .``; not starting with ``.``; no ``..``;
-    at most :data:`MAX_NAME_BYTES` bytes.
-    """
-    if not isinstance(name, str) or not name:
-        raise ArgumentError(f"{what} must be a non-empty string, got {name!r}", what)
-    if ".." in name or not _NAME.match(name) or len(name.encode("utf-8")) > MAX_NAME_BYTES:
-        raise ArgumentError(f"{what} {name!r} cannot be part of a file name: use letters, digits "
-                            f"and _ + - . only (not starting with '.', no '..', at most "
-                            f"{MAX_NAME_BYTES} characters)", what)
-    return name
 
 
 class OutputFolder:

@@ -8,8 +8,8 @@ import numpy as np
 
 from ..attitude import euler_to_dcm, quat_multiply, rotvec_to_quat
 from ..config.loader import gnss_noise, imu_model, imu_white_noise
-from ..config.schema import (AccelerateSegment, ClimbSegment, Scenario, StaticSegment,
-                             TurnSegment, UniformSegment)
+from ..config.scenario_schema import (AccelerateSegment, ClimbSegment, Scenario, StaticSegment,
+                                      TurnSegment, UniformSegment)
 from ..data import GnssFixes, ImuData, OdometerData, Trajectory
 from ..data import InitialState
 from ..ins.imu_model import ImuErrorDraw, ImuErrorModel, corrupt

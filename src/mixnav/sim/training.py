@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 from ..config.loader import gnss_noise, imu_white_noise, observable_noise
-from ..config.schema import Scenario
+from ..config.scenario_schema import Scenario
 from ..errors import ConfigError
 from ..noise.processes import Gaussian
 from .rng import Streams
