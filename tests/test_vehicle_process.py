@@ -36,7 +36,7 @@ file = "Berlin_Potsdamer_Platz_Input.txt"
 
 
 @pytest.mark.parametrize("extra, key", [
-    ('[[methods]]\nname = "u"\nestimator = "ukf"\n', "methods"),
+    ('[[methods]]\nname = "u"\nestimator = "imm"\n', "methods"),   # strapdown only
     ('[[methods]]\nname = "e"\nestimator = "ekf"\n[[methods]]\nname = "e"\nestimator = "robust-adaptive"\n',
      "methods"),
     ('[alignment]\nwindow = "10 m"\n[[methods]]\nname = "e"\n', "alignment.window"),
