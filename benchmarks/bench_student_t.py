@@ -7,10 +7,9 @@
 
 nu is fixed a priori at 4 (the default of Lange, Little & Taylor 1989 for t-based robust
 regression), not chosen from either reference. Each run goes through the dataset pipeline
-on a temporary COPY of the shipped config with the Student-t methods appended (the shipped
-files are not changed). With the estimator registry of issue 33 merged the copy names
-``estimator = "student-t"``; before it (this branch), the copy names the EKF and this
-script swaps the estimator of the methods named ``student-t*`` in the pipeline's builder.
+on a temporary COPY of the shipped config with the Student-t methods appended as
+``estimator = "student-t"`` (the estimator registry finds it; the shipped files are not
+changed).
 
     PYTHONPATH=src python benchmarks/bench_student_t.py [--data ../shared/data] [--repeat 2]
 
@@ -36,52 +35,19 @@ EXTRA = {
 SHOW = {"smartloc-berlin": ["ekf", "student-t"], "drive-0708-peer": ["ekf", "student-t", "aided", "student-t-aided"]}
 
 
-def _copy_config(name: str, registered: bool) -> str:
+def _copy_config(name: str) -> str:
     """The shipped dataset config with the Student-t methods appended, as TOML text."""
     from mixnav.config.loader import resolve
     text, _ = resolve(name, "datasets", "dataset")
-    estimator = "student-t" if registered else "ekf"
     for extra in EXTRA[name]:
-        block = f'\n[[methods]]\nname = "{extra["name"]}"\nestimator = "{estimator}"\n'
+        block = f'\n[[methods]]\nname = "{extra["name"]}"\nestimator = "student-t"\n'
         if name == "drive-0708-peer":
             block += 'type = "loose-ekf"\nstates = 15\ncovariance_interval = "0.25 s"\n'
             if extra["like"] == "aided":
                 block += 'aiding = ["nhc", "zupt", "zaru"]\n'
-        if registered:
-            block += f"[methods.options]\nnu = {NU}\n"
+        block += f"[methods.options]\nnu = {NU}\n"
         text += block
     return text
-
-
-def _patch_builders():
-    """Before the registry: the methods named student-t* get the Student-t estimator."""
-    from mixnav.experiment import methods, model_methods, vehicle_process
-    from mixnav.filters.student_t import StudentTEstimator, StudentTOptions
-    options = StudentTOptions(nu=NU)
-    make0, build0 = model_methods.make_estimator, methods.build
-
-    def make_estimator(method, *args, **kwargs):
-        if method.name.startswith("student-t"):
-            return StudentTEstimator(options, 1e4)
-        return make0(method, *args, **kwargs)
-
-    def build(method, *args, **kwargs):
-        filt, meas = build0(method, *args, **kwargs)
-        if method.name.startswith("student-t"):
-            filt.make_estimator = lambda: StudentTEstimator(options, filt.absurd_sigma)
-            filt.can_smooth = False
-        return filt, meas
-
-    model_methods.make_estimator = vehicle_process.make_estimator = make_estimator
-    methods.build = build
-
-
-def _registered() -> bool:
-    try:
-        from mixnav.filters import registry
-        return "student-t" in getattr(registry, "ESTIMATORS", {}) or "student-t" in getattr(registry, "REGISTRY", {})
-    except ImportError:
-        return False
 
 
 def _horizontal(table) -> np.ndarray:
@@ -92,13 +58,10 @@ def _horizontal(table) -> np.ndarray:
 
 def run(name: str, data: str | None, repeat: int) -> list[dict]:
     from mixnav.api import process_dataset
-    registered = _registered()
-    if not registered:
-        _patch_builders()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / f"{name}-student-t.toml"
-        path.write_text(_copy_config(name, registered))
+        path.write_text(_copy_config(name))
         best = {}
         for _ in range(repeat):   # timings: the best of `repeat` runs (a shared machine)
             t0 = time.perf_counter()
@@ -117,7 +80,6 @@ def run(name: str, data: str | None, repeat: int) -> list[dict]:
                                    update_us=t["update_time_mean_us"], epoch_us=t["epoch_time_mean_us"],
                                    iterations=t.get("student_t_iterations_mean", math.nan), wall=wall)
         rows += [best[m] for m in SHOW[name]]
-    print(f"{name}: estimator {'from the registry' if registered else 'swapped in the builder (no registry)'}")
     return rows
 
 
