@@ -1,15 +1,14 @@
-"""Estimators by name (the registry, mixnav.filters.registry; the old catalogue module is a
-view of it): a registration is all a new estimator needs to be usable from a scenario file;
+"""Estimators by name (the registry, mixnav.filters.registry): a registration is all a new estimator needs to be usable from a scenario file;
 its options are checked by its options model and reported with the file's keys."""
 
 import numpy as np
 import pytest
 
 from mixnav.config import load_scenario
-from mixnav.errors import ArgumentError, ConfigError
+from mixnav.errors import ConfigError
 from mixnav.experiment import methods
 from mixnav.experiment.run import run_scenario
-from mixnav.filters import catalog, registry
+from mixnav.filters import registry
 from mixnav.filters.facade import Filter
 from mixnav.filters.sage_husa import SageHusaEkf
 
@@ -53,15 +52,13 @@ def test_an_unknown_estimator_is_a_config_error_listing_the_known_ones(tmp_path)
     assert e.value.key == "methods[0].estimator"
 
 
-def test_the_catalogue_view_lists_the_registry():
-    assert catalog.ESTIMATORS == {n: registry.estimator_spec(n).description for n in registry.estimator_names()}
-    assert "em-bias" not in catalog.ESTIMATORS
-    with pytest.raises(ArgumentError, match="unknown estimator 'kalman'") as e:
-        catalog.filter_class("kalman")
-    assert e.value.argument == "estimator"
+def test_every_listed_name_has_a_registration_and_the_imm_modes_are_apart():
+    names = registry.estimator_names()
+    assert all(registry.estimator_spec(n).name == n for n in names)
+    assert "em-bias" not in names and "em-bias" in registry.estimator_names(standalone_only=False)
 
 
-def test_the_catalogue_imports_nothing_until_asked():
+def test_listing_imports_no_estimator_until_asked():
     import subprocess
     import sys
     code = ("import sys, mixnav.filters.registry as r; assert 'sage-husa' in r.estimator_names(); "

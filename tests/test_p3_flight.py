@@ -195,8 +195,8 @@ def test_make_p3_variants_and_gmpf_block():
     """make_p3's scenario texts: the GMPF is appended (with P3's 2000 particles) only when
     asked and not yet listed; fix-init changes the initial position sigma and the name and
     nothing else; the paper variant is the shipped text; and whether the GMPF is asked
-    follows the catalogue."""
-    from mixnav.filters.catalog import ESTIMATORS
+    follows the registry."""
+    from mixnav.filters.registry import estimator_names
     mk = _make_p3()
     _, _, shipped = load_scenario("P3-flight")
     assert mk.scenario_text("paper", gmpf=False) == shipped
@@ -209,7 +209,7 @@ def test_make_p3_variants_and_gmpf_block():
     changed = [(x, y) for x, y in zip(a, b) if x != y]
     assert len(a) == len(b) and len(changed) == 2, changed
     assert 'position_sigma = ["3.7 m", "3.7 m", "5 m"]' in fix and 'name = "P3-flight-fix-init"' in fix
-    assert mk.has_gmpf() == ("gmpf" in ESTIMATORS)
+    assert mk.has_gmpf() == ("gmpf" in estimator_names())
 
 
 @pytest.mark.slow

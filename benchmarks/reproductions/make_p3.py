@@ -10,7 +10,7 @@ intervals (:func:`~mixnav.experiment.montecarlo.aggregate`, t distribution;
 :func:`~mixnav.experiment.montecarlo.paired_comparison` for the paired differences).
 
 Methods: those of the scenario file (EKF, UKF, the SIR particle filter with 2000
-particles) and P3's GMPF when the estimator catalogue has ``"gmpf"`` (appended here with
+particles) and P3's GMPF when the estimator registry has ``"gmpf"`` (appended here with
 2000 particles; otherwise skipped with a note, and its columns wait for a rerun).
 
 Variants (``--variants``, default both):
@@ -75,9 +75,9 @@ PANELS = [("err_pitch_deg", "pitch (P3 fig. 2)", "deg"), ("err_yaw_deg", "headin
 
 
 def has_gmpf() -> bool:
-    """Whether the estimator catalogue of this mixnav has P3's GMPF."""
-    from mixnav.filters.catalog import ESTIMATORS
-    return "gmpf" in ESTIMATORS
+    """Whether the estimator registry of this mixnav has P3's GMPF."""
+    from mixnav.filters.registry import estimator_names
+    return "gmpf" in estimator_names()
 
 
 def scenario_text(variant: str, gmpf: bool) -> str:
@@ -152,7 +152,7 @@ def tables(results: dict, runs: int, elapsed: float, workers: int, gmpf: bool) -
              "Mean ± half width of the 95 % confidence interval of the mean over runs (t distribution, "
              "mixnav.experiment.montecarlo.aggregate). Whole-run RMS unless the column says otherwise.", ""]
     if not gmpf:
-        lines += ["**GMPF not run**: this mixnav's estimator catalogue has no \"gmpf\"; its rows "
+        lines += ["**GMPF not run**: this mixnav's estimator registry has no \"gmpf\"; its rows "
                   "wait for a rerun of make_p3.py after it is merged.", ""]
     for variant, (res, _, _) in results.items():
         methods = [m for m in LABEL if m in set(res.method)]
@@ -237,7 +237,7 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     gmpf = has_gmpf()
     if not gmpf:
-        print("note: the estimator catalogue has no 'gmpf' (P3's GMPF): running EKF, UKF and PF only; "
+        print("note: the estimator registry has no 'gmpf' (P3's GMPF): running EKF, UKF and PF only; "
               "rerun after it is merged to fill the GMPF rows", file=sys.stderr)
     t0 = time.perf_counter()
     results = {}
