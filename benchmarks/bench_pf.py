@@ -56,6 +56,7 @@ from mixnav.filters.ekf import ErrorStateEkf
 import numba
 
 from mixnav.filters import _pf_kernels as K
+from mixnav.ins import _particle_kernels as PK
 from mixnav.filters.particle import ParticleEstimator, ParticleFilter
 from mixnav.filters.ukf import UnscentedKalmanFilter
 from mixnav.ins.error_model import get_layout
@@ -128,17 +129,17 @@ def imu_step_us(N=5000, repeats=40):
     dt = np.full(1, 0.01)
     la, tau = lay.as_array(), np.array([3600.0, 3600.0, np.inf, np.inf])
     navs, prevs, sensors = np.empty((N + 1, 10)), np.empty((N + 1, 6)), np.empty((N + 1, 12))
-    scr, g, Z, Dn = np.empty((N + 1, K.SCRATCH)), np.empty((4, 7)), np.empty((N, n)), np.empty((N, n))
+    scr, g, Z, Dn = np.empty((N + 1, PK.SCRATCH)), np.empty((4, 7)), np.empty((N, n)), np.empty((N, n))
     navs0 = np.empty((N + 1, 10))       # the particles as full states, the reference last (as pf_step)
-    K.pf_member_navs_serial(nav0, D, lay.as_array(), navs0, sensors, scr)
+    PK.pf_member_navs_serial(nav0, D, lay.as_array(), navs0, sensors, scr)
     navs0[N] = nav0
     out = {}
     old = numba.get_num_threads()
-    for label, mech, step, threads in (("serial", K.pf_mechanize_serial, K.pf_step_serial, old),
-                                       ("parallel_1_thread", K.pf_mechanize, K.pf_step, 1),
-                                       ("parallel_2_threads", K.pf_mechanize, K.pf_step, min(2, old))):
+    for label, mech, step, threads in (("serial", PK.pf_mechanize_serial, PK.pf_step_serial, old),
+                                       ("parallel_1_thread", PK.pf_mechanize, PK.pf_step, 1),
+                                       ("parallel_2_threads", PK.pf_mechanize, PK.pf_step, min(2, old))):
         numba.set_num_threads(threads)
-        K.merge_block_into(dth, dv, dt, 1, g[:, 0:3], g[:, 3:6], g[:, 6])
+        PK.merge_block_into(dth, dv, dt, 1, g[:, 0:3], g[:, 3:6], g[:, 6])
 
         def one_step():
             rng.standard_normal(out=Z)
@@ -239,7 +240,7 @@ def update_split(sim, lever, N=5000, n_epochs=12, seconds=360.0, repeats=15):
         ep = c[0]
         fix, lev = ep.model.batch_fix(ep.index)
         wb = np.asarray(ep.w_b, dtype=float)
-        calls = {"kernel": lambda: K.pf_loose_update_serial(c[1], la, ep.nav, wb, lev, fix, c[2], c[3], 1e30, YT, logw,
+        calls = {"kernel": lambda: PK.pf_loose_update_serial(c[1], la, ep.nav, wb, lev, fix, c[2], c[3], 1e30, YT, logw,
                                                              w, ym, Pyy, x, P, yp, pa, part, work),
                  "systematic": lambda: K.pf_systematic(w, 0.5, idx),
                  "cholesky": lambda: cholesky_lower(P, L),

@@ -186,10 +186,10 @@ def test_the_graph_reader_sees_imports(probe):
 
 #: the ensemble estimators reach the strapdown kernels only through the motion model's
 #: seam (engine/protocols.py MotionModel: member_states, propagate_members, ...), so they run
-#: on every motion model. The particle filter (particle.py, _pf_kernels.py) runs on the seam
-#: too, but keeps its fused strapdown step and loose update on the INS (issue 33: not yet moved).
+#: on every motion model; the particle filter's fused strapdown step and loose update are the
+#: strapdown motion's too (StrapdownMotion.particle_kernels, ins/_particle_kernels.py).
 ENSEMBLE_MODULES = ("mixnav.filters.ukf", "mixnav.filters.dd2", "mixnav.filters.gmpf",
-                    "mixnav.filters._ukf_kernels")
+                    "mixnav.filters._ukf_kernels", "mixnav.filters.particle", "mixnav.filters._pf_kernels")
 
 
 @pytest.mark.parametrize("module", ENSEMBLE_MODULES)

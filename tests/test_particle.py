@@ -21,6 +21,7 @@ from mixnav.errors import ArgumentError, ConfigError
 from mixnav.experiment.run import solution_table
 from mixnav.filters.ekf import ErrorStateEkf
 from mixnav.filters import _pf_kernels as K
+from mixnav.ins import _particle_kernels as PK
 from mixnav.filters.particle import (ParticleFilter, _sqrt_psd, linear_gaussian_particles,
                                      normalise_log_weights, systematic_resample)
 from mixnav.ins.error_model import get_layout
@@ -251,14 +252,14 @@ def test_the_fused_propagation_equals_the_first_kernel(substeps):
     nav0, prev0, s0, D, SQ, Z, dth, dv, dt, la, tau = _ins_particles(257)
     N, n = D.shape
     ref = np.empty((N, n))
-    K.pf_propagate(nav0, prev0, s0, D, SQ, Z, dth, dv, dt, substeps, la, tau, 1.0, np.empty((N + 1, 10)),
+    PK.pf_propagate(nav0, prev0, s0, D, SQ, Z, dth, dv, dt, substeps, la, tau, 1.0, np.empty((N + 1, 10)),
                    np.empty((N + 1, 6)), np.empty((N + 1, 12)), ref)
     scale = np.abs(ref).max(axis=0)
-    for step in (K.pf_step, K.pf_step_serial):
+    for step in (PK.pf_step, PK.pf_step_serial):
         g = np.empty((120, 7))
         out = np.empty((N, n))
         step(nav0, prev0, s0, D, np.ascontiguousarray(SQ.T), Z, dth, dv, dt, substeps, la, tau, 1.0,
-             np.empty((N + 1, 10)), np.empty((N + 1, 6)), np.empty((N + 1, 12)), np.empty((N + 1, K.SCRATCH)),
+             np.empty((N + 1, 10)), np.empty((N + 1, 6)), np.empty((N + 1, 12)), np.empty((N + 1, PK.SCRATCH)),
              g[:, 0:3], g[:, 3:6], g[:, 6], np.empty(4), out)
         assert (np.abs(out - ref) <= 1e-12 * scale).all(), np.abs(out - ref).max(axis=0) / scale
 

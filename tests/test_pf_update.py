@@ -18,6 +18,7 @@ import pytest
 from mixnav.config import load_scenario
 from mixnav.data import GnssFixes
 from mixnav.filters import _pf_kernels as K
+from mixnav.ins import _particle_kernels as PK
 from mixnav.filters.particle import ParticleFilter, linear_gaussian_particles
 from mixnav.ins.error_model import get_layout
 from mixnav.measurements.loose import LooseGnss
@@ -48,7 +49,7 @@ def _case(N, att_sigma, pos_sigma, lever, use_vel, seed=0):
 def _generic(lay, D, nav, model, logw0, w0, w_b):
     N, n = D.shape
     navs = np.empty((N, 10))
-    K.pf_member_navs_serial(nav, D, lay.as_array(), navs, np.empty((N, 12)), np.empty((N, K.SCRATCH)))
+    PK.pf_member_navs_serial(nav, D, lay.as_array(), navs, np.empty((N, 12)), np.empty((N, PK.SCRATCH)))
     y, Y, r = model.predict_batch(0, navs, w_b - D[:, 9:12])
     m = len(y)
     logw, w, ym, Pyy = np.empty(N), np.empty(N), np.empty(m), np.empty((m, m))
@@ -92,19 +93,19 @@ def test_the_fused_loose_update_equals_the_generic_path(att_sigma, pos_sigma, le
     if pos_sigma > 1000:
         assert np.abs(case[1][:, 6]).max() > 6.4e3 > np.abs(case[1][:, 6]).min()
     g = _generic(*case)
-    f = _fused(K.pf_loose_update_serial, *case)
+    f = _fused(PK.pf_loose_update_serial, *case)
     for key in ("Y", "logw", "x", "P"):
         scale = np.abs(g[key]).max(axis=0) if key == "Y" else np.abs(g[key]).max()
         assert (np.abs(f[key] - g[key]) <= 1e-12 * scale).all(), (key, np.abs(f[key] - g[key]).max() / scale)
     assert np.abs(f["w"] - g["w"]).max() <= 1e-12 * g["w"].max()
     for key in ("best", "ess", "nis"):
         assert f[key] == pytest.approx(g[key], rel=1e-12), key
-    p = _fused(K.pf_loose_update, *case)
+    p = _fused(PK.pf_loose_update, *case)
     for key in f:
         np.testing.assert_array_equal(np.asarray(p[key]), np.asarray(f[key]))
     lay, D, nav, model, _, _, w_b = case
     YT = np.empty_like(f["Y"].T)
-    K.pf_loose_predict(D, lay.as_array(), nav, w_b, *model.batch_fix(0)[::-1], YT)   # the predictions alone
+    PK.pf_loose_predict(D, lay.as_array(), nav, w_b, *model.batch_fix(0)[::-1], YT)   # the predictions alone
     np.testing.assert_array_equal(YT.T, f["Y"])
 
 
@@ -118,7 +119,7 @@ def test_the_fused_update_detects_a_degenerate_epoch_like_the_generic_one():
     N, n = D.shape
     fix, lever = model.batch_fix(0)
     w = np.full(N, -1.0)
-    best, ess, nis = K.pf_loose_update_serial(
+    best, ess, nis = PK.pf_loose_update_serial(
         D, lay.as_array(), nav, w_b, lever, fix, logw0, w0, 6 * 1e4 ** 2 / 1e3, np.empty((6, N)), np.empty(N), w,
         np.empty(6), np.empty((6, 6)), np.empty(n), np.empty((n, n)), np.empty((K.CHUNKS, 44)),
         np.empty((K.CHUNKS, 2 + n)), np.empty((K.CHUNKS, n + n * n)), np.empty((n + 1, N)))
@@ -215,7 +216,7 @@ def test_a_non_finite_particle_weighs_nothing_and_leaves_the_moments_finite():
     D = D.copy()
     D[7] = np.nan
     D[300, 4] = np.inf
-    for kernel in (K.pf_loose_update_serial, K.pf_loose_update):
+    for kernel in (PK.pf_loose_update_serial, PK.pf_loose_update):
         f = _fused(kernel, lay, D, nav, model, logw0, w0, w_b)
         assert f["w"][7] == 0.0 and f["w"][300] == 0.0 and np.isfinite(f["w"]).all()
         ok = np.isfinite(D).all(axis=1)

@@ -6,8 +6,9 @@ belief is ``N`` weighted particles ``D[j]`` over the error state ``dx = x_true
 - x_est`` of the layout (attitude as a rotation vector about the nominal
 quaternion, velocity, NED position metres, sensor/clock/auxiliary errors).
 
-Per propagation step (:func:`_pf_kernels.pf_step`, one compiled call for the
-whole array, fused per particle): each particle becomes the full state
+Per propagation step (the motion model's ``particle_kernels().step``,
+:func:`mixnav.ins._particle_kernels.pf_step`, one compiled call for the whole array,
+fused per particle): each particle becomes the full state
 ``nominal_before (+) D[j]``, is mechanized with its own sensor errors over the
 step's IMU block and differenced from the mechanized nominal (the engine's
 feedback map, the strapdown step, the UKF's difference map); process noise
@@ -23,8 +24,8 @@ nominal, ``epoch.model.predict_batch`` gives ``(y, Y, R)``, and each log-weight
 gains the Gaussian log-likelihood ``-1/2 sum (y - Y_j)^2 / R`` (normalised in
 log space: subtract the maximum, exponentiate, divide by the sum). On a loose GNSS
 epoch (:class:`~mixnav.measurements.loose.LooseGnss`) one fused kernel
-(``_pf_kernels.pf_loose_update``) does all of it from the particle array, with the
-weighted mean and covariance: the generic path's numbers to round-off (tested;
+(the motion model's ``particle_kernels().loose_update``) does all of it from the particle
+array, with the weighted mean and covariance: the generic path's numbers to round-off (tested;
 ``fused=False`` keeps the generic path). The
 effective sample size ``1 / sum w^2`` decides a systematic resampling (ESS <
 ``resample_threshold`` N); with ``roughening = h > 0`` (on by default, 0.9: plain SIR
@@ -62,9 +63,8 @@ from ..engine.status import ABSURD, OK
 from ..errors import ArgumentError
 from ..linalg import cholesky_lower
 from ..measurements.loose import LooseGnss
-from ..ins._error_kernels import L_BG
 from ._no_clone import NoCloneEstimator
-from ._pf_kernels import CHUNKS, PARALLEL, SCRATCH, SERIAL, pf_log_weights, pf_systematic
+from ._pf_kernels import CHUNKS, PARALLEL, SERIAL, pf_log_weights, pf_systematic
 from pydantic import Field
 
 from .facade import facade
@@ -155,6 +155,7 @@ class ParticleEstimator(NoCloneEstimator):
         self.parallel = bool(parallel)
         self.fused = bool(fused)
         self._k = SERIAL
+        self._sk = None   # the motion model's strapdown particle kernels (the strapdown INS only)
         self.N = int(particles)
         self.resample_threshold = float(resample_threshold)
         self.roughening = float(roughening)
@@ -178,7 +179,9 @@ class ParticleEstimator(NoCloneEstimator):
         self._sensor = np.zeros(12)   # the engine's sensor estimates, once a step has shown them
         self._eye = None if lay.is_ins else np.eye(n)
         self.rng = rng
-        self._k = PARALLEL if self.parallel and threading.current_thread() is threading.main_thread() else SERIAL
+        threads = self.parallel and threading.current_thread() is threading.main_thread()
+        self._k = PARALLEL if threads else SERIAL
+        self._sk = motion.particle_kernels(threads) if lay.is_ins else None
         N = self.N
         self.D = np.ascontiguousarray(self.rng.standard_normal((N, n)) @ _sqrt_psd(np.asarray(P0, float)).T)
         self.logw = np.zeros(N)
@@ -193,7 +196,7 @@ class ParticleEstimator(NoCloneEstimator):
         self._navs = np.empty((N + 1, 10))
         self._prevs = np.empty((N + 1, 6))
         self._sensors = np.empty((N + 1, 12))
-        self._scr = np.empty((N + 1, SCRATCH))
+        self._scr = np.empty((N + 1, self._sk.scratch)) if self._sk is not None else None
         self._g = np.empty((8, 7))        # merged sub-intervals: gth (0:3), gdv (3:6), gdt (6); grown on demand
         self._fdec = np.empty(4)
         self._part = np.empty((CHUNKS, n + n * n))
@@ -247,9 +250,9 @@ class ParticleEstimator(NoCloneEstimator):
             if S > len(self._g):
                 self._g = np.empty((2 * S, 7))
             g = self._g
-            self._k.step(inp.nav0, inp.prev0, inp.sensor, self.D, SQT, Z, inp.dtheta, inp.dvel, inp.dt, self.substeps,
-                         self.layout_array, self.tau, T, self._navs, self._prevs, self._sensors, self._scr,
-                         g[:, 0:3], g[:, 3:6], g[:, 6], self._fdec, self._Dn)
+            self._sk.step(inp.nav0, inp.prev0, inp.sensor, self.D, SQT, Z, inp.dtheta, inp.dvel, inp.dt, self.substeps,
+                          self.layout_array, self.tau, T, self._navs, self._prevs, self._sensors, self._scr,
+                          g[:, 0:3], g[:, 3:6], g[:, 6], self._fdec, self._Dn)
         self.D, self._Dn = self._Dn, self.D
         self._stale = True
 
@@ -275,11 +278,11 @@ class ParticleEstimator(NoCloneEstimator):
             self.motion.member_states(epoch.nav, self._sensor, self.D, navs)
             out = predict_members(epoch, self.D, navs, self._clk, "the particle filter needs", self.motion)
         else:
-            if self.fused and type(epoch.model) is LooseGnss and self.layout_array[L_BG] >= 0:
+            if self.fused and type(epoch.model) is LooseGnss:   # an INS layout: gyro bias at 9
                 fx = epoch.model.batch_fix(epoch.index)
                 if fx is not None:
                     return self._update_loose(epoch, *fx)
-            self._k.member_navs(epoch.nav, self.D, self.layout_array, navs, self._sensors, self._scr)
+            self._sk.member_navs(epoch.nav, self.D, self.layout_array, navs, self._sensors, self._scr)
             out = predict_members(epoch, self.D, navs, self._clk, "the particle filter needs")
         if out is None:
             return None
@@ -295,10 +298,10 @@ class ParticleEstimator(NoCloneEstimator):
             bufs = self._Yl[m] = (np.empty((m, self.N)), np.empty(m), np.empty((m, m)))
         YT, ym, Pyy = bufs
         logw, w = self._logw_new, self._w_new
-        best, ess, nis = self._k.loose_update(self.D, self.layout_array, epoch.nav,
-                                              np.asarray(epoch.w_b, dtype=float), lever, fix, self.logw, self.w,
-                                              m * self.absurd_sigma ** 2, YT, logw, w, ym, Pyy, self._x, self._P,
-                                              self._yp, self._pa, self._part, self._work)
+        best, ess, nis = self._sk.loose_update(self.D, self.layout_array, epoch.nav,
+                                               np.asarray(epoch.w_b, dtype=float), lever, fix, self.logw, self.w,
+                                               m * self.absurd_sigma ** 2, YT, logw, w, ym, Pyy, self._x, self._P,
+                                               self._yp, self._pa, self._part, self._work)
         return self._weighed(best, ess, nis, m, logw, w, moments=False)
 
     def weigh(self, y: np.ndarray, Y: np.ndarray, r: np.ndarray) -> Correction:
@@ -397,18 +400,20 @@ class ParticleEstimator(NoCloneEstimator):
             return
         k = PARALLEL if self.parallel else SERIAL
         from ..ins.error_model import LAYOUTS
+        from ..ins.strapdown import StrapdownMotion
+        sk = StrapdownMotion.particle_kernels(self.parallel)
         lay = LAYOUTS[15]
         n, N = lay.n, 3
         nav = np.array([1.0, 0, 0, 0, 0, 0, 0, 0.5, 0.5, 0.0])
         D = np.zeros((N, n))
         one = np.zeros((2, 3))
         g = np.empty((2, 7))
-        scr = np.empty((N + 1, SCRATCH))
+        scr = np.empty((N + 1, sk.scratch))
         navs, sensors = np.empty((N + 1, 10)), np.empty((N + 1, 12))
-        k.step(nav, np.zeros(6), np.zeros(12), D, np.eye(n), D.copy(), one, one, np.full(2, 0.01), 1,
-               lay.as_array(), np.full(4, np.inf), 0.02, navs, np.empty((N + 1, 6)), sensors, scr,
-               g[:, 0:3], g[:, 3:6], g[:, 6], np.empty(4), np.empty((N, n)))
-        k.member_navs(nav, D, lay.as_array(), navs, sensors, scr)
+        sk.step(nav, np.zeros(6), np.zeros(12), D, np.eye(n), D.copy(), one, one, np.full(2, 0.01), 1,
+                lay.as_array(), np.full(4, np.inf), 0.02, navs, np.empty((N + 1, 6)), sensors, scr,
+                g[:, 0:3], g[:, 3:6], g[:, 6], np.empty(4), np.empty((N, n)))
+        sk.member_navs(nav, D, lay.as_array(), navs, sensors, scr)
         w = np.full(N, 1.0 / N)
         pf_log_weights(np.zeros(N), w, np.zeros(3), np.zeros((N, 3)), np.ones(3), np.empty(N), np.empty(N),
                        np.empty(3), np.empty((3, 3)))
@@ -420,10 +425,10 @@ class ParticleEstimator(NoCloneEstimator):
         k.linear_step_drawn(D, np.eye(n), np.eye(n), np.zeros(CHUNKS, np.uint64), np.empty((N, n)), np.empty((N, n)))
         fix = np.r_[nav[7:10], np.ones(3), np.zeros(3), np.ones(3)]
         for m in (3, 6):
-            k.loose_update(D, lay.as_array(), nav, np.zeros(3), np.zeros(3), fix, np.zeros(N), w, 1e8,
-                           np.empty((m, N)), np.empty(N), np.empty(N), np.empty(m), np.empty((m, m)), np.empty(n),
-                           np.empty((n, n)), np.empty((CHUNKS, 2 + 6 + 36)), np.empty((CHUNKS, 2 + n)),
-                           np.empty((CHUNKS, n + n * n)), np.empty((n + 1, N)))
+            sk.loose_update(D, lay.as_array(), nav, np.zeros(3), np.zeros(3), fix, np.zeros(N), w, 1e8,
+                            np.empty((m, N)), np.empty(N), np.empty(N), np.empty(m), np.empty((m, m)), np.empty(n),
+                            np.empty((n, n)), np.empty((CHUNKS, 2 + 6 + 36)), np.empty((CHUNKS, 2 + n)),
+                            np.empty((CHUNKS, n + n * n)), np.empty((n + 1, N)))
         cholesky_lower(np.eye(n), np.empty((n, n)))
         _WARM.add(key)
 

@@ -17,7 +17,8 @@ The ensemble family (UKF, DD2, GMPF) uses the member seam
 about the nominal before a step, propagated over it and differenced back against
 the propagated nominal, one compiled call: :mod:`mixnav.ins._batch_kernels`),
 ``difference_members`` and ``member_rates``. ``propagate_batch`` mechanizes raw
-full states. A vehicle dead-reckoning or constant-velocity model is another
+full states. ``particle_kernels`` gives the particle filter its fused strapdown kernels
+(:mod:`mixnav.ins._particle_kernels`). A vehicle dead-reckoning or constant-velocity model is another
 class with the same methods (:mod:`mixnav.motion`).
 """
 
@@ -28,6 +29,8 @@ import numpy as np
 from ..data import InitialState, OdometryIncrements
 from ._batch_kernels import difference_members, member_navs, propagate_members
 from ._error_kernels import apply_feedback, mechanize_batch, propagate_block
+from ._particle_kernels import PARALLEL as _PARTICLES_PARALLEL
+from ._particle_kernels import SERIAL as _PARTICLES_SERIAL
 from .error_model import ClockModel, StateLayout, body_noise, process_noise
 from .imu_model import ImuErrorModel
 
@@ -146,6 +149,17 @@ class StrapdownMotion:
         (rotation vector, velocity, NED metres); the other blocks copied from ``D`` (N, n).
         The inverse of :meth:`member_states`: ``difference(member_states(nav, D), nav) == D``."""
         difference_members(navs, ref, D, Dn, self.layout_array, np.full(4, np.inf), 0.0)
+
+    @staticmethod
+    def particle_kernels(parallel: bool = False):
+        """The particle filter's compiled strapdown kernels, serial or parallel (the same
+        arithmetic, :mod:`mixnav.ins._particle_kernels`), each one compiled call per use:
+        ``step`` (the particles propagated over an IMU block, fused per particle, plus their
+        process noise), ``member_navs`` (the particles as full states), ``loose_update`` (a
+        loose GNSS update straight from the particle array); ``scratch`` the width of their
+        per-particle scratch rows. A static method: the estimator's warm-up needs the set
+        before it has a motion model."""
+        return _PARTICLES_PARALLEL if parallel else _PARTICLES_SERIAL
 
     def warm_up(self) -> None:
         """Compile (or load from numba's cache) the kernels for this layout size once per
