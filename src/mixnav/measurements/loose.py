@@ -217,7 +217,7 @@ class LooseGnss(MeasurementModel):
 
     def batch_fix(self, i: int):
         """``(fix, lever)`` for a fused ensemble update of fix ``i`` (the particle filter's,
-        ``_pf_kernels.pf_loose_update``): the fix's row (12,: lat, lon, h [rad, rad, m],
+        ``ins._particle_kernels.pf_loose_update``): the fix's row (12,: lat, lon, h [rad, rad, m],
         position sigmas N, E, D [m], velocity NED and its sigmas [m/s]; the velocity part
         unused when ``use_velocity`` is off) and the lever arm (3,) [m]; None where
         :meth:`predict_batch` refuses (an estimated lever arm or time offset)."""
