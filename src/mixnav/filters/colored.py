@@ -131,7 +131,7 @@ _COLORED_WARM = []
 
 
 class ColoredBankEstimator(BankEstimator):
-    """The bank of :class:`ColoredMixtureEkf`: M3's bank with the AR(1)
+    """The bank of :func:`ColoredMixtureEkf`: M3's bank with the AR(1)
     process-noise state ``w`` and the differencing clone (module docstring).
 
     Parameters
@@ -236,7 +236,7 @@ def ColoredMixtureEkf(layout, imu_model, mixtures, psi_process=0.0, psi_measurem
     ----------
     layout, imu_model, mixtures, max_components, covariance_interval, absurd_sigma, clock, learning_time_s,
     gate, outlier_mean, divergence_window, divergence_nis
-        As :class:`~mixnav.filters.gmekf.GaussianMixtureEkf`. The measurement
+        As :func:`~mixnav.filters.gmekf.GaussianMixtureEkf`. The measurement
         mixtures are those of the white driving noise ``zeta`` (P2 eq. 7), the
         process mixture that of ``xi`` (P2 eq. 6).
     psi_process : float or array_like (9,)
