@@ -11,7 +11,7 @@ import pytest
 from mixnav.config.loader import load_scenario, resolve
 from mixnav.errors import ArgumentError, ConfigError
 from mixnav.experiment import methods as registry
-from mixnav.filters.colored import N_W, ColoredMixtureEkf, colored_split, fit_coefficient
+from mixnav.filters.colored import N_W, ColoredBankEstimator, ColoredMixtureEkf, colored_split, fit_coefficient
 from mixnav.filters.gmekf import BankMixtures, GaussianMixtureEkf, StandardMixture
 from mixnav.ins.error_model import ClockModel
 from mixnav.measurements.differenced import STATIONARY, DifferencedMeasurement
@@ -84,7 +84,7 @@ def test_zero_coefficients_equal_the_gaussian_mixture_ekf():
     m6 = ColoredMixtureEkf(ekf.layout, ekf.imu_model, mix, psi_process=0.0, psi_measurement=psi,
                            max_components=4, clock=clock, augment=True)
     r6 = m6.run(sim.imu, sim.init, dm)
-    assert m6._last.process_steps > 500 and m6._last.nw == N_W
+    assert m6.estimator.process_steps > 500 and m6.estimator.nw == N_W
     np.testing.assert_allclose(r6.nav[:, :7], r3.nav[:, :7], atol=1e-10)
     np.testing.assert_allclose(r6.nav[:, 7:9], r3.nav[:, 7:9], atol=1e-15)
     np.testing.assert_allclose(r6.nav[:, 9], r3.nav[:, 9], atol=1e-9)
@@ -208,7 +208,8 @@ def test_scenario_fits_the_coefficient_and_learns_the_whitened_mixture(tmp_path)
     sim = simulate(sc, 0, src)
     f, meas = registry.build(sc.methods[-1], sim.imu_model, None, np.zeros(3), src, len(sc.methods) - 1,
                              observations=sim.observations, clock=ClockModel(), training=training, seed=0)
-    assert isinstance(f, ColoredMixtureEkf) and isinstance(meas[0], DifferencedMeasurement)
+    assert isinstance(f.estimator or f.make_estimator(), ColoredBankEstimator)
+    assert isinstance(meas[0], DifferencedMeasurement) and not f.can_smooth
     assert f.psi_measurement[0] == pytest.approx(0.9, abs=0.03)  # 167 epochs x 12 channels
     assert f.psi_measurement[1] == 0.3
     assert meas[0].psi_channels == {3: 0.5}

@@ -49,7 +49,8 @@ from numba import njit
 
 from ..errors import ArgumentError
 from ..measurements.kinds import MAX_KINDS, kind_code
-from .gmekf import BankEstimator, GaussianMixtureEkf
+from .facade import Filter
+from .gmekf import BankEstimator
 from .registry import ABSURD_SIGMA
 
 #: Error states the coloured process noise lives on (attitude, velocity, position).
@@ -130,7 +131,7 @@ _COLORED_WARM = []
 
 
 class ColoredBankEstimator(BankEstimator):
-    """The bank of :class:`ColoredMixtureEkf`: M3's bank with the AR(1)
+    """The bank of :func:`ColoredMixtureEkf`: M3's bank with the AR(1)
     process-noise state ``w`` and the differencing clone (module docstring).
 
     Parameters
@@ -224,14 +225,18 @@ class ColoredBankEstimator(BankEstimator):
 ColoredBankBelief = ColoredBankEstimator
 
 
-class ColoredMixtureEkf(GaussianMixtureEkf):
+def ColoredMixtureEkf(layout, imu_model, mixtures, psi_process=0.0, psi_measurement=None,
+                      process_interval: float = 1.0, max_components: int = 16, covariance_interval: float = 1.0,
+                      absurd_sigma: float = ABSURD_SIGMA, clock=None, learning_time_s: float = 0.0,
+                      augment: bool | None = None, learner_not_converged: int = 0, gate: float = 2.0,
+                      outlier_mean: float = 4.0, divergence_window: int = 10, divergence_nis: float = 9.0):
     """Coloured-noise Gaussian-mixture EKF, method M6 (paper P2).
 
     Parameters
     ----------
     layout, imu_model, mixtures, max_components, covariance_interval, absurd_sigma, clock, learning_time_s,
     gate, outlier_mean, divergence_window, divergence_nis
-        As :class:`~mixnav.filters.gmekf.GaussianMixtureEkf`. The measurement
+        As :func:`~mixnav.filters.gmekf.GaussianMixtureEkf`. The measurement
         mixtures are those of the white driving noise ``zeta`` (P2 eq. 7), the
         process mixture that of ``xi`` (P2 eq. 6).
     psi_process : float or array_like (9,)
@@ -249,38 +254,35 @@ class ColoredMixtureEkf(GaussianMixtureEkf):
         non-zero (with all zero they cannot change the estimate, so leaving
         them out is exact and M6 then costs what M3 does); True forces them
         (the tests use it to check the zero-coefficient invariant).
+
+    The :class:`~mixnav.filters.facade.Filter` of a :class:`ColoredBankEstimator` made fresh
+    per run; it carries ``mixtures``, ``psi_process`` (9,), ``psi_measurement`` (by kind code),
+    ``process_interval`` and ``augment``. Its AR(1) process-noise states are not in the
+    history: the smoother does not apply.
     """
+    guards = dict(gate=gate, outlier_mean=outlier_mean, divergence_window=divergence_window,
+                  divergence_nis=divergence_nis)
+    BankEstimator(mixtures, max_components, absurd_sigma, **guards)  # the bank's arguments named first
+    psi_w = np.broadcast_to(np.asarray(psi_process, dtype=float), (N_W,)).copy()
+    if not (np.all(np.isfinite(psi_w)) and np.all(np.abs(psi_w) < 1.0)):
+        raise ArgumentError(f"AR(1) coefficient must satisfy |psi| < 1 (stationary), got {psi_process}",
+                            argument="psi_process")
+    if not process_interval > 0:
+        raise ArgumentError(f"must be positive, got {process_interval}", argument="process_interval")
+    psi_kinds = np.zeros(MAX_KINDS)
+    for name, v in (psi_measurement or {}).items():
+        psi_kinds[kind_code(name, argument=f"psi_measurement.{name}")] = v
+    process_interval = float(process_interval)
+    augment = bool(np.any(psi_w != 0.0)) if augment is None else bool(augment)
+    max_components = int(max_components)
 
-    #: its AR(1) process-noise states are not in the history: the smoother does not apply
-    can_smooth = False
-
-    def __init__(self, layout, imu_model, mixtures, psi_process=0.0, psi_measurement=None,
-                 process_interval: float = 1.0, max_components: int = 16, covariance_interval: float = 1.0,
-                 absurd_sigma: float = ABSURD_SIGMA, clock=None, learning_time_s: float = 0.0,
-                 augment: bool | None = None, learner_not_converged: int = 0, gate: float = 2.0,
-                 outlier_mean: float = 4.0, divergence_window: int = 10, divergence_nis: float = 9.0):
-        super().__init__(layout, imu_model, mixtures, max_components, covariance_interval, absurd_sigma,
-                         clock, learning_time_s, learner_not_converged=learner_not_converged, gate=gate,
-                         outlier_mean=outlier_mean, divergence_window=divergence_window,
-                         divergence_nis=divergence_nis)
-        psi_w = np.broadcast_to(np.asarray(psi_process, dtype=float), (N_W,)).copy()
-        if not (np.all(np.isfinite(psi_w)) and np.all(np.abs(psi_w) < 1.0)):
-            raise ArgumentError(f"AR(1) coefficient must satisfy |psi| < 1 (stationary), got {psi_process}",
-                                argument="psi_process")
-        if not process_interval > 0:
-            raise ArgumentError(f"must be positive, got {process_interval}", argument="process_interval")
-        self.psi_process = psi_w
-        self.psi_measurement = np.zeros(MAX_KINDS)
-        for name, v in (psi_measurement or {}).items():
-            self.psi_measurement[kind_code(name, argument=f"psi_measurement.{name}")] = v
-        self.process_interval = float(process_interval)
-        self.augment = bool(np.any(psi_w != 0.0)) if augment is None else bool(augment)
-
-    def make_estimator(self):
-        self._last = ColoredBankEstimator(self.mixtures, self.max_components, self.absurd_sigma,
-                                          self.psi_process, self.process_interval, self.psi_measurement,
-                                          self.augment, **self.update_options)
-        return self._last
+    def bank():
+        return ColoredBankEstimator(mixtures, max_components, float(absurd_sigma), psi_w, process_interval,
+                                    psi_kinds, augment, **guards)
+    return Filter(bank, layout, imu_model, None, covariance_interval, absurd_sigma, clock, name="gaussian-mixture",
+                  can_smooth=False, learning_time_s=learning_time_s, learner_not_converged=learner_not_converged,
+                  attributes=dict(mixtures=mixtures, max_components=max_components, psi_process=psi_w,
+                                  psi_measurement=psi_kinds, process_interval=process_interval, augment=augment))
 
 
 def fit_coefficient(series: np.ndarray) -> float:

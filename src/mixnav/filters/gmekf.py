@@ -59,7 +59,8 @@ from ..noise.mixture import BankMixtures, GaussianMixture, StandardMixture  # no
 from ._bank_kernels import (bank_epoch, bank_epoch_collect, bank_epoch_guarded, bank_log_likelihood, bank_moments,
                             bank_propagate, bank_reduce, bank_split, bank_update, predicted_nis)
 from ._ekf_kernels import NEEDS_REPAIR, OK
-from .ekf import ErrorStateEkf, repair_covariance
+from .ekf import repair_covariance
+from .facade import Filter
 from .registry import NoOptions, from_context, register_estimator
 from .registry import ABSURD_SIGMA
 
@@ -459,8 +460,13 @@ class BankEstimator:
 BankBelief = BankEstimator
 
 
-class GaussianMixtureEkf(ErrorStateEkf):
-    """Gaussian-mixture (Gaussian sum) closed-loop error-state EKF, method M3.
+def GaussianMixtureEkf(layout: StateLayout, imu_model: ImuErrorModel, mixtures: BankMixtures,
+                       max_components: int = 16, covariance_interval: float = 1.0, absurd_sigma: float = ABSURD_SIGMA,
+                       clock: ClockModel | None = None, learning_time_s: float = 0.0, online=None,
+                       learner_not_converged: int = 0, gate: float = 2.0, outlier_mean: float = 4.0,
+                       divergence_window: int = 10, divergence_nis: float = 9.0):
+    """Gaussian-mixture (Gaussian sum) closed-loop error-state EKF, method M3: the
+    :class:`~mixnav.filters.facade.Filter` of a :class:`BankEstimator` made fresh per run.
 
     Parameters
     ----------
@@ -483,42 +489,19 @@ class GaussianMixtureEkf(ErrorStateEkf):
     gate, outlier_mean, divergence_window, divergence_nis
         The update's guards and the divergence safeguard, as :class:`BankEstimator`
         (``gate = outlier_mean = inf``, ``divergence_window = 0``: P1's plain update).
+
+    The filter carries ``mixtures``, ``max_components``, ``online`` and, after a run,
+    ``online_learner`` (that run's learner, or None). The RTS smoother applies on the
+    bank's merged Gaussian (an approximation, docs/smoother.md).
     """
+    guards = dict(gate=gate, outlier_mean=outlier_mean, divergence_window=divergence_window,
+                  divergence_nis=divergence_nis)
+    max_components = int(max_components)
 
-    #: the RTS smoother applies on the bank's merged Gaussian (an approximation, docs/smoother.md)
-    can_smooth = True
-
-    def __init__(self, layout: StateLayout, imu_model: ImuErrorModel, mixtures: BankMixtures,
-                 max_components: int = 16, covariance_interval: float = 1.0, absurd_sigma: float = ABSURD_SIGMA,
-                 clock: ClockModel | None = None, learning_time_s: float = 0.0, online=None,
-                 learner_not_converged: int = 0, gate: float = 2.0, outlier_mean: float = 4.0,
-                 divergence_window: int = 10, divergence_nis: float = 9.0):
-        super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
-        self.update_options = dict(gate=gate, outlier_mean=outlier_mean, divergence_window=divergence_window,
-                                   divergence_nis=divergence_nis)
-        BankEstimator(mixtures, max_components, absurd_sigma, online, **self.update_options)  # validate now
-        self.mixtures = mixtures
-        self.max_components = int(max_components)
-        self.learning_time_s = float(learning_time_s)
-        self.learner_not_converged = int(learner_not_converged)
-        self.online = online
-        self._last = None
-
-    def make_estimator(self):
-        self._last = BankEstimator(self.mixtures, self.max_components, self.absurd_sigma, self.online,
-                                   **self.update_options)
-        return self._last
-
-    def run(self, imu, init, measurements=(), output_times=None, rng=None, history: bool = False):
-        res = super().run(imu, init, measurements, output_times, rng, history)
-        res.timing["learning_time_s"] = self.learning_time_s
-        if self.learner_not_converged:
-            res.recoveries["learner_not_converged"] = self.learner_not_converged
-        return res
-
-    @property
-    def online_learner(self):
-        """The online learner of the last run (its ``history`` and counters), or None."""
-        return None if self._last is None else self._last.online
+    def bank():
+        return BankEstimator(mixtures, max_components, float(absurd_sigma), online, **guards)
+    return Filter(bank, layout, imu_model, None, covariance_interval, absurd_sigma, clock, name="gaussian-mixture",
+                  can_smooth=True, learning_time_s=learning_time_s, learner_not_converged=learner_not_converged,
+                  attributes=dict(mixtures=mixtures, max_components=max_components, online=online))
 
 

@@ -55,7 +55,8 @@ from ..errors import ArgumentError
 from ..ins.error_model import ClockModel, StateLayout
 from ..ins.imu_model import ImuErrorModel
 from ..markov import check_transition
-from .ekf import ErrorStateEkf, KalmanEstimator
+from .ekf import KalmanEstimator
+from .facade import Filter
 from .registry import NoOptions, from_context, register_estimator
 from ..engine.status import ABSURD, NEEDS_REPAIR, NON_FINITE, OK
 from .registry import ABSURD_SIGMA
@@ -503,9 +504,13 @@ class ImmEstimator:
         imm_probabilities(np.zeros(2), np.array([0.5, 0.5]), np.empty(2))
 
 
-class ImmEkf(ErrorStateEkf):
-    """The IMM as a filter a user runs (method M9): the strapdown motion model, an
-    :class:`ImmEstimator` of EKF (or robust EKF) modes, and the engine.
+def ImmEkf(layout: StateLayout, imu_model: ImuErrorModel, measurement_sets, transition,
+           initial_probabilities=None, transition_interval: float | None = 1.0, names=None,
+           mode_estimators=None, covariance_interval: float = 1.0, absurd_sigma: float = ABSURD_SIGMA,
+           clock: ClockModel | None = None, output: str = "combined"):
+    """The IMM as a filter a user runs (method M9): the
+    :class:`~mixnav.filters.facade.Filter` of an :class:`ImmEstimator` of EKF (or robust EKF)
+    modes, made fresh per run.
 
     Parameters
     ----------
@@ -518,24 +523,19 @@ class ImmEkf(ErrorStateEkf):
     mode_estimators : list of r callables, optional
         Each returns a fresh mean-carrying estimator for its mode (default:
         ``KalmanEstimator(absurd_sigma, carry_mean=True)``).
+
+    The filter carries ``measurement_sets`` and ``mode_estimators``. A mixture of modes:
+    the RTS smoother (one Gaussian per event) does not apply.
     """
+    measurement_sets = [frozenset(s) for s in measurement_sets]
+    if mode_estimators is None:
+        mode_estimators = [lambda: KalmanEstimator(float(absurd_sigma), carry_mean=True)] * len(measurement_sets)
+    mode_estimators = list(mode_estimators)
+    settings = dict(transition=transition, initial_probabilities=initial_probabilities,
+                    transition_interval=transition_interval, names=names, output=output)
 
-    #: a mixture of modes: the RTS smoother needs one Gaussian per event
-    can_smooth = False
-
-    def __init__(self, layout: StateLayout, imu_model: ImuErrorModel, measurement_sets, transition,
-                 initial_probabilities=None, transition_interval: float | None = 1.0, names=None,
-                 mode_estimators=None, covariance_interval: float = 1.0, absurd_sigma: float = ABSURD_SIGMA,
-                 clock: ClockModel | None = None, output: str = "combined"):
-        super().__init__(layout, imu_model, covariance_interval, absurd_sigma, clock)
-        self.measurement_sets = [frozenset(s) for s in measurement_sets]
-        r = len(self.measurement_sets)
-        if mode_estimators is None:
-            mode_estimators = [lambda: KalmanEstimator(self.absurd_sigma, carry_mean=True)] * r
-        self.mode_estimators = list(mode_estimators)
-        self.options = dict(transition=transition, initial_probabilities=initial_probabilities,
-                            transition_interval=transition_interval, names=names, output=output)
-        self.make_estimator()   # checks every argument now, not at the first run
-
-    def make_estimator(self) -> ImmEstimator:
-        return ImmEstimator([make() for make in self.mode_estimators], self.measurement_sets, **self.options)
+    def imm() -> ImmEstimator:
+        return ImmEstimator([make() for make in mode_estimators], measurement_sets, **settings)
+    return Filter(imm, layout, imu_model, None, covariance_interval, absurd_sigma, clock, name="imm",
+                  can_smooth=False, attributes=dict(measurement_sets=measurement_sets,
+                                                    mode_estimators=mode_estimators))
