@@ -129,5 +129,4 @@ def _read(path: Path, options: ReadOptions) -> ImuData:
     ``gap_action``, ``spike_action``); times as the tag gives them (no offset: the installation's)."""
     tag = options.get("tag")
     return read_drive_imu(path, options.folder / tag if tag else None, time_offset=0.0,
-                          max_gap=options.get("max_gap", 0.05), gap_action=options.get("gap_action", "warn"),
-                          spike_action=options.get("spike_action", "fail"))
+                          **options.imu_checks(max_gap=0.05))

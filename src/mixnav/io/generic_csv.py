@@ -145,8 +145,7 @@ def read_reference_csv(path) -> Trajectory:
 @register_reader("imu", "csv")
 def _read_imu(path: Path, options: ReadOptions) -> ImuData:
     """The registered IMU reader (``options``: ``max_gap``, ``gap_action``, ``spike_action``)."""
-    return read_imu_csv(path, max_gap=options.get("max_gap"), gap_action=options.get("gap_action", "warn"),
-                        spike_action=options.get("spike_action", "fail"))
+    return read_imu_csv(path, **options.imu_checks())
 
 
 @register_reader("gnss-fixes", "csv")

@@ -67,8 +67,7 @@ def _check_sigma(sd, tab):
 @register_reader("imu", "kf-gins")
 def _read_imu(path: Path, options: ReadOptions) -> ImuData:
     """The registered IMU reader (``options``: ``max_gap``, ``gap_action``, ``spike_action``)."""
-    return read_kfgins_imu(path, max_gap=options.get("max_gap"), gap_action=options.get("gap_action", "warn"),
-                           spike_action=options.get("spike_action", "fail"))
+    return read_kfgins_imu(path, **options.imu_checks())
 
 
 @register_reader("gnss-fixes", "kf-gins")

@@ -109,5 +109,5 @@ def read_psins_imu(path) -> tuple[ImuData, PsinsHeader]:
 def _read(path: Path, options: ReadOptions) -> ImuData:
     """The registered reader (``options``: ``spike_action``; the header is dropped)."""
     imu = read_psins_imu(path)[0]
-    action = options.get("spike_action", "fail")
+    action = options.imu_checks()["spike_action"]
     return imu if action == "fail" else check_spikes(imu, None, action)

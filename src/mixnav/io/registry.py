@@ -46,6 +46,13 @@ class ReadOptions:
     def get(self, key: str, default: Any = None) -> Any:
         return default if self.table is None else getattr(self.table, key, default)
 
+    def imu_checks(self, max_gap: float | None = None) -> dict:
+        """The data checks an ``[imu]`` table sets, as the IMU readers' keywords:
+        ``max_gap`` [s] (default: ``max_gap``, the format's own), ``gap_action``
+        (default ``"warn"``) and ``spike_action`` (default ``"fail"``)."""
+        return {"max_gap": self.get("max_gap", max_gap), "gap_action": self.get("gap_action", "warn"),
+                "spike_action": self.get("spike_action", "fail")}
+
 
 @dataclass(frozen=True)
 class Reader:
