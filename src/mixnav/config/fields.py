@@ -62,6 +62,9 @@ PosAccel = quantity(u.ACCELERATION, positive=True)
 PosRate = quantity(u.ANGULAR_RATE, positive=True)
 PosAngle = quantity(u.ANGLE, positive=True)
 PosLength = quantity(u.LENGTH, positive=True)
+NonNegRate = quantity(u.ANGULAR_RATE, nonnegative=True)
+NonNegLength = quantity(u.LENGTH, nonnegative=True)
+NonNegAngle = quantity(u.ANGLE, nonnegative=True)
 
 
 def _ordered_windows(v):

@@ -10,19 +10,11 @@ from typing import Any, ClassVar, Literal
 
 from pydantic import Field, field_validator
 
-from .. import units as u
 from .dataset_schema import DatasetInfo
-from .fields import Strict, quantity
+from .fields import (Duration, NonNegAngle, NonNegLength, NonNegRate, NonNegSpeed, PosAngle, PosLength, PosRate,
+                     PosSpeed, Strict)
 from .method_schema import MixtureConfig, RobustConfig, method_file_name, registered_estimator, registered_options
 
-Speed = quantity(u.VELOCITY, positive=True)
-SpeedNN = quantity(u.VELOCITY, nonnegative=True)
-Rate = quantity(u.ANGULAR_RATE, positive=True)
-RateNN = quantity(u.ANGULAR_RATE, nonnegative=True)
-Length = quantity(u.LENGTH, positive=True)
-LengthNN = quantity(u.LENGTH, nonnegative=True)
-Angle = quantity(u.ANGLE, nonnegative=True)
-Time = quantity(u.TIME, positive=True)
 
 def unique_method_names(methods):
     """A ``[[methods]]`` list whose names are distinct (the solutions are filed by name)."""
@@ -49,9 +41,9 @@ class OdometryFile(Strict):
     format: Literal["smartloc"]
     file: str
     yaw_rate_axis: Literal["up", "down"] = "up"
-    speed_sigma: Speed | None = None  # type: ignore[valid-type]
-    yaw_rate_sigma: Rate | None = None  # type: ignore[valid-type]
-    sample_interval: Time | None = None  # type: ignore[valid-type]
+    speed_sigma: PosSpeed | None = None  # type: ignore[valid-type]
+    yaw_rate_sigma: PosRate | None = None  # type: ignore[valid-type]
+    sample_interval: Duration | None = None  # type: ignore[valid-type]
 
 
 class Pseudoranges(Strict):
@@ -66,9 +58,9 @@ class Pseudoranges(Strict):
     systems: list[Literal["G", "R", "E", "C", "J", "S"]] = Field(default_factory=lambda: ["G", "R"], min_length=1)
     variance: Literal["given", "elevation"] = "given"
     scale: float = Field(default=1.0, gt=0)
-    sigma_a: LengthNN = 3.0  # type: ignore[valid-type]
-    sigma_b: LengthNN = 3.0  # type: ignore[valid-type]
-    elevation_mask: Angle = 0.0  # type: ignore[valid-type]
+    sigma_a: NonNegLength = 3.0  # type: ignore[valid-type]
+    sigma_b: NonNegLength = 3.0  # type: ignore[valid-type]
+    elevation_mask: NonNegAngle = 0.0  # type: ignore[valid-type]
 
     @field_validator("systems")
     @classmethod
@@ -89,15 +81,15 @@ class DeadReckoningConfig(Strict):
     frequency ``clock_q_drift`` [m^2/s^3], plain numbers)."""
 
     model: Literal["dead-reckoning"] = "dead-reckoning"
-    lateral_sigma: SpeedNN = 0.1  # type: ignore[valid-type]
-    vertical_sigma: SpeedNN = 0.1  # type: ignore[valid-type]
+    lateral_sigma: NonNegSpeed = 0.1  # type: ignore[valid-type]
+    vertical_sigma: NonNegSpeed = 0.1  # type: ignore[valid-type]
     scale_sigma0: float = Field(default=0.02, ge=0)
-    bias_sigma0: RateNN = 0.002  # type: ignore[valid-type]
+    bias_sigma0: NonNegRate = 0.002  # type: ignore[valid-type]
     scale_walk: float = Field(default=1e-4, ge=0)
     bias_walk: float = Field(default=1e-5, ge=0)
     clock_q_bias: float = Field(default=0.01, ge=0)
     clock_q_drift: float = Field(default=1e-3, ge=0)
-    offset_sigma0: Length = 100.0  # type: ignore[valid-type]
+    offset_sigma0: PosLength = 100.0  # type: ignore[valid-type]
 
 
 class VehicleAlignment(Strict):
@@ -111,10 +103,10 @@ class VehicleAlignment(Strict):
     own options win)."""
 
     mode: Literal["track", "reference"] = "track"
-    window: Time = 20.0  # type: ignore[valid-type]
+    window: Duration = 20.0  # type: ignore[valid-type]
     cn0_edges: list[float] = Field(default_factory=list)
-    position_sigma: Length = 10.0  # type: ignore[valid-type]
-    heading_sigma: quantity(u.ANGLE, positive=True) = 0.1  # type: ignore[valid-type]
+    position_sigma: PosLength = 10.0  # type: ignore[valid-type]
+    heading_sigma: PosAngle = 0.1  # type: ignore[valid-type]
     hand_over_mixture: bool = True
 
     @field_validator("cn0_edges")
