@@ -170,7 +170,8 @@ def vehicle_tables(vo: VehicleOutput) -> dict[str, pd.DataFrame]:
     return {name: solution_table(res, vo.reference) for name, res in vo.results.items()}
 
 
-def write_vehicle(out_dir, vo: VehicleOutput, config_text: str | None = None, overwrite: bool = False) -> dict:
+def write_vehicle(out_dir, vo: VehicleOutput, config_text: str | None = None, overwrite: bool = False,
+                  sweeps=()) -> dict:
     """Solutions, metrics, figures (map, error over time) and report of a processed
     ``odometry-gnss`` dataset (the folder policy of :mod:`mixnav.io.outdir`)."""
     tables = vehicle_tables(vo)
@@ -186,4 +187,4 @@ def write_vehicle(out_dir, vo: VehicleOutput, config_text: str | None = None, ov
     ref = None if vo.reference is None else lla_frame(vo.reference.time, vo.reference.lla)
     return write_outputs(out_dir, f"mixnav process: {vo.dataset.dataset.name}", header, vo.results, tables, [],
                          ref, None, notes, config_text, command="process", overwrite=overwrite,
-                         protect=[vo.source, vo.data_dir])
+                         protect=[vo.source, vo.data_dir], sweeps=sweeps)

@@ -148,9 +148,11 @@ def truth(po: ProcessOutput) -> pd.DataFrame | None:
     return None if po.reference is None else lla_frame(po.reference.time, po.reference.lla)
 
 
-def write(out_dir: Path, po: ProcessOutput, config_text: str | None = None, overwrite: bool = False) -> dict:
+def write(out_dir: Path, po: ProcessOutput, config_text: str | None = None, overwrite: bool = False,
+          sweeps=()) -> dict:
     """Solutions, metrics (against the reference), figures and report of a processed INS dataset
-    (the folder policy of :mod:`mixnav.io.outdir`; fixes or RINEX alike)."""
+    (the folder policy of :mod:`mixnav.io.outdir`; fixes or RINEX alike), with the ``sweeps``
+    run on it (:mod:`mixnav.experiment.sweep`)."""
     withheld = withheld_windows(po)
     solutions = tables(po)
     for t in solutions.values():
@@ -190,4 +192,5 @@ def write(out_dir: Path, po: ProcessOutput, config_text: str | None = None, over
     ref = None if po.reference is None else lla_frame(po.reference.time, po.reference.lla)
     return write_outputs(out_dir, f"mixnav process: {po.dataset.dataset.name}", header, po.results, solutions,
                          withheld, ref, lla_frame(po.fixes.time, po.fixes.lla), notes, config_text, po.gnss_bias,
-                         command="process", overwrite=overwrite, protect=[po.source, po.data_dir])
+                         command="process", overwrite=overwrite, protect=[po.source, po.data_dir],
+                         sweeps=sweeps)
