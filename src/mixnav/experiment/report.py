@@ -97,6 +97,9 @@ def sweep_table(summary: dict, settings: dict) -> str:
     skipped = settings.get("skipped_windows_no_reference") or []
     if skipped:
         rows.append(f"<p>{len(skipped)} windows left out: the reference has no epoch in them.</p>")
+    late = settings.get("skipped_windows_alignment") or []
+    if late:
+        rows.append(f"<p>{len(late)} windows left out: without their GNSS the alignment ends after they start.</p>")
     return "".join(rows)
 
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 import os
 import time as _time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -169,16 +170,26 @@ def _load(dataset: str, data: str | None):
     return _LOADED[key]
 
 
-def _run_windowed(p, ds, source, folder, inputs, windows):
+def _run_windowed(p, ds, source, folder, inputs, windows, score: bool = True):
+    import warnings
+
+    from ..io.imu_checks import DataWarning
     from .ins_common import with_withheld
-    po = p.run(with_withheld(ds, windows), source, folder, inputs)
+    with warnings.catch_warnings():   # the data's warnings were said by the run without windows
+        warnings.simplefilter("ignore", DataWarning)
+        po = p.run(with_withheld(ds, windows), source, folder, inputs)
+    if not score or po.init.time > min((a for a, _ in windows), default=math.inf):
+        return po, None
     return po, p.metrics(po, p.tables(po))
 
 
 def _window_rows(dataset: str, data: str | None, window: tuple[float, float]) -> list[dict]:
-    """Every method's row for one withheld window (runs anywhere: loads the dataset once per process)."""
+    """Every method's row for one withheld window (runs anywhere: loads the dataset once per
+    process); none when the alignment, which needs GNSS, moved past the window's start."""
     ds, source, p, folder, inputs = _load(dataset, data)
     _, metrics = _run_windowed(p, ds, source, folder, inputs, [window])
+    if metrics is None:
+        return []
     rows = []
     for name, m in metrics.items():
         o = m["outages"][0]
@@ -232,7 +243,9 @@ def run_outage_sweep(dataset, window=None, step=None, span=None, *, data=None, w
     # the run without any window: where the alignment ends and the GNSS and reference end
     t0 = _time.perf_counter()
     ds_, source_, p, folder, inputs = _load(ref, None if data is None else str(data))
-    base, _ = _run_windowed(p, ds_, source_, folder, inputs, [])
+    with warnings.catch_warnings():
+        warnings.simplefilter("default")
+        base, _ = _run_windowed(p, ds_, source_, folder, inputs, [], score=False)
     first = math.ceil(base.init.time)
     last = float(min(base.all_fixes.time[-1], base.reference.time[-1], base.imu.time[-1]))
     if span is not None:
@@ -251,6 +264,13 @@ def run_outage_sweep(dataset, window=None, step=None, span=None, *, data=None, w
         raise DataError(f"the reference covers none of the {len(windows)} sweep windows in "
                         f"[{first:g}, {last:.1f}] s: nothing to score", file=source)
     rows = _run_windows(ref, None if data is None else str(data), scored, workers, scheduler, progress)
+    ran = {(r["start_s"], r["end_s"]) for r in rows}
+    late = [w for w in scored if w not in ran]   # the alignment waited for GNSS past the window's start
+    scored = [w for w in scored if w in ran]
+    if not scored:
+        raise DataError(f"no sweep window in [{first:g}, {last:.1f}] s could be scored: the reference covers "
+                        f"{len(scored) + len(late)} of {len(windows)}, and in those the alignment waits for the "
+                        "withheld GNSS", file=source)
     df = pd.DataFrame(rows)
     motion = {w: window_motion(base.reference, *w) for w in scored}
     for k in ("distance_m", "heading_change_deg", "still_s"):
@@ -260,6 +280,7 @@ def run_outage_sweep(dataset, window=None, step=None, span=None, *, data=None, w
                         kind="stable").reset_index(drop=True)[list(OUTAGE_SWEEP_COLUMNS)]
     settings = {"window_s": window, "step_s": step, "span_s": [first, last], "n_windows": len(scored),
                 "skipped_windows_no_reference": [list(w) for w in skipped],
+                "skipped_windows_alignment": [list(w) for w in late],
                 "aligned_at_s": float(base.init.time), "wall_time_s": _time.perf_counter() - t0}
     return SweepResult("outage_sweep", df, settings)
 
