@@ -118,3 +118,40 @@ def test_api_process_dataset_smartloc(shipped, tmp_path):
     assert set(r.solutions) == set(metrics["methods"])
     got = float(r.metrics.loc["epoch-mixture", "horizontal_rmse_m"])
     assert got == pytest.approx(metrics["methods"]["epoch-mixture"]["horizontal_rmse_m"], rel=1e-12)
+
+
+@pytest.mark.parametrize("start, key", [('"-5 s"', "alignment.start"), ('"5 m"', "alignment.start")])
+def test_bad_alignment_start_names_the_key(tmp_path, start, key):
+    with pytest.raises(ConfigError) as exc:
+        load_dataset(_config(tmp_path, BASE.format(data=tmp_path) + f'[alignment]\nstart = {start}\n'
+                             '[[methods]]\nname = "e"\n'))
+    assert exc.value.key.startswith(key), exc.value
+
+
+def test_alignment_start_discards_the_data_before_it(tmp_path):
+    """``[alignment] start``: the run is the one of a recording that began then (issue 34):
+    the track window is the 20 s after it, the filters start at its end; a start past the
+    data names the key."""
+    data_file("smartloc-berlin", "Berlin_Potsdamer_Platz_GT.txt")
+    from mixnav.experiment.vehicle_process import discard_before, process_vehicle, read_vehicle
+    text = BASE.format(data=DATA_DIR / "smartloc-berlin") + ('[reference]\nformat = "smartloc"\n'
+                                                            'file = "Berlin_Potsdamer_Platz_GT.txt"\n'
+                                                            '[alignment]\nstart = "60 s"\n'
+                                                            '[[methods]]\nname = "e"\n')
+    ds, source, _ = load_dataset(_config(tmp_path, text))
+    vo = process_vehicle(ds, source)
+    assert 79.5 < vo.init.time < 80.5
+    assert vo.checks["pseudorange_epochs"] < 0.8 * 1400
+    inputs = read_vehicle(ds, source, DATA_DIR / "smartloc-berlin")
+    cut = discard_before(inputs, 60.0)
+    assert cut.inc.time[0] - cut.inc.dt[0] >= 60.0 - 1e-6 and cut.epochs.time[0] > 60.0
+    assert cut.odometry.time[0] >= 60.0 - 1e-6 and len(cut.reference.time) == len(inputs.reference.time)
+    assert cut.epochs.start[-1] == len(cut.epochs.pseudorange)
+    # the rows kept are the rows of the epochs kept
+    e0 = int(np.searchsorted(inputs.epochs.time, cut.epochs.time[0]))
+    np.testing.assert_array_equal(cut.epochs.pseudorange, inputs.epochs.pseudorange[inputs.epochs.start[e0]:])
+    assert discard_before(inputs, 0.0) is inputs
+    late = ds.model_copy(update={"alignment": ds.alignment.model_copy(update={"start": 400.0})})
+    with pytest.raises(ConfigError) as exc:
+        process_vehicle(late, source)
+    assert exc.value.key == "alignment.start"

@@ -212,7 +212,13 @@ def lla_to_ecef_point(lla):
 def align_track(epochs, inc, t_align: float, systems=(1, 4), refine: bool = True,
                 clock_starts=(0.0, -10.0, -20.0, -30.0, -40.0, -60.0), cn0_edges=()) -> tuple[InitialState, dict]:
     """The initial state at ``t_align`` [s] (module docstring) and a report (fix count, fit
-    residual RMS [m], heading [deg]).
+    residual RMS ``fit_rms_m`` [m], heading [deg] ...).
+
+    ``fit_rms_m`` is measured on the fit's residuals: with ``refine``, the RMS of the
+    pseudorange residuals of the final EM fit weighted by each row's LOS responsibility
+    (and ``los_scale``, their mean square on the given variances); without, the RMS of the
+    2-D fixes about the fitted track. It is the returned state's position sigma (north,
+    east; twice that down) and, over the track's span, its heading sigma (1-30 deg).
 
     Parameters
     ----------
@@ -317,7 +323,12 @@ def align_track(epochs, inc, t_align: float, systems=(1, 4), refine: bool = True
         report.update(los_share=w_los, nlos_mean_m=mu, nlos_sd_m=s_n, clock_start_m=dc, log_likelihood=ll,
                       los_weight_bands=[float(v) for v in w_bands],
                       los_correlation_time_s=los_correlation_time(tq, sat_key, e_fit, var, g_fit))
-        rms = 5.0
+        # measured: the RMS of the fit's residuals over the rows likelier LOS (weighted by the
+        # LOS responsibility; the delayed rows are far by construction), and the LOS rows' scale
+        # on the given variances (mean g e^2 / var over mean g), both of the final fit
+        g_sum = max(float(g_fit.sum()), 1e-9)
+        rms = float(math.sqrt((g_fit * e_fit * e_fit).sum() / g_sum))
+        report["los_scale"] = float((g_fit * e_fit * e_fit / var).sum() / g_sum)
         # the clock line and the offsets at t_align, in the systems' order (absent systems: 0)
         clock0 = np.array([th[4] + th[5] * (tt[ka] - tq[0]), th[5]])
         offsets = np.zeros(len(systems) - 1)

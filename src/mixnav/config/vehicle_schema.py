@@ -13,7 +13,7 @@ from pydantic import Field, field_validator
 from .evaluation_schema import Evaluation
 from .dataset_schema import DatasetInfo
 from .fields import (Duration, NonNegAngle, NonNegLength, NonNegRate, NonNegSpeed, PosAngle, PosLength, PosRate,
-                     PosSpeed, Strict)
+                     PosSpeed, Strict, Time)
 from .method_schema import MixtureConfig, RobustConfig, method_file_name, registered_estimator, registered_options
 
 
@@ -101,9 +101,15 @@ class VehicleAlignment(Strict):
     ``cn0_edges``: C/N0 band edges [dB-Hz, plain numbers] for a line-of-sight weight per
     band in the window's fit (reflected signals arrive weaker). ``hand_over_mixture``: the
     epoch-mixture filters start from the LOS/NLOS mixture the window's fit learned (their
-    own options win)."""
+    own options win). ``start``: the run begins this long after the first odometry sample
+    (default 0: at the data's start); every odometry sample and pseudorange before it is
+    discarded, as if the recording began there (the track window is then the ``window``
+    after ``start``, the reference start the reference's first epoch at or after it); the
+    reference is kept whole for scoring. A start that leaves no data after it is an error
+    naming ``alignment.start``."""
 
     mode: Literal["track", "reference"] = "track"
+    start: Time = 0.0  # type: ignore[valid-type]
     window: Duration = 20.0  # type: ignore[valid-type]
     cn0_edges: list[float] = Field(default_factory=list)
     position_sigma: PosLength = 10.0  # type: ignore[valid-type]

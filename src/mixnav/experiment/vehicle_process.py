@@ -15,6 +15,7 @@ report.html) are those of ``mixnav run`` / ``mixnav process``
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time as _time
 from dataclasses import dataclass, field
@@ -37,7 +38,7 @@ from .model_methods import make_estimator, run_methods
 from .data_folder import find_data_dir
 from .outputs import lla_frame, solution_table, write_outputs
 
-__all__ = ["VehicleOutput", "process_vehicle", "vehicle_tables", "write_vehicle", "make_estimator"]
+__all__ = ["VehicleOutput", "discard_before", "process_vehicle", "vehicle_tables", "write_vehicle", "make_estimator"]
 
 
 @dataclass
@@ -58,13 +59,15 @@ class VehicleOutput:
 
 
 def _reference_init(truth: Trajectory, inc, sigma_pos: float, sigma_heading: float) -> InitialState:
-    """The oracle start: the reference's first two epochs give position and heading."""
-    i1 = min(5, len(truth.time) - 1)
-    d = lla_to_ned(truth.lla[i1][None], truth.lla[0])[0]
+    """The oracle start: the reference's first epochs at or after the odometry's start give
+    position and heading."""
+    i0 = min(int(np.searchsorted(truth.time, float(inc.time[0] - inc.dt[0]) - 1e-9)), len(truth.time) - 1)
+    i1 = min(i0 + 5, len(truth.time) - 1)
+    d = lla_to_ned(truth.lla[i1][None], truth.lla[i0])[0]
     nav = np.zeros(10)
     set_heading(nav, math.atan2(d[1], d[0]))
-    nav[7:10] = truth.lla[0]
-    t0 = max(float(truth.time[0]), float(inc.time[0] - inc.dt[0]))
+    nav[7:10] = truth.lla[i0]
+    t0 = max(float(truth.time[i0]), float(inc.time[0] - inc.dt[0]))
     return InitialState(time=t0, nav=nav, sigma_att=np.array([0.0, 0.0, sigma_heading]), sigma_vel=np.ones(3),
                         sigma_pos=np.full(3, sigma_pos), sigma_clock=np.array([1e4, 200.0]))
 
@@ -93,6 +96,39 @@ class VehicleInputs:
     read_time_s: float
 
 
+def discard_before(inputs: VehicleInputs, start: float, source: str | None = None) -> VehicleInputs:
+    """``inputs`` as if the recording began ``start`` [s] after the first odometry sample
+    (``[alignment] start``): the odometry increments whose interval begins before that time
+    and the pseudorange epochs at or before it are dropped; the reference is kept whole
+    (it only scores); the odometry samples before it go too. ``start = 0`` returns ``inputs`` itself. A start that leaves fewer
+    than two increments or no pseudorange epoch raises a :class:`ConfigError` naming
+    ``alignment.start``."""
+    if start == 0.0:
+        return inputs
+    inc, epochs = inputs.inc, inputs.epochs
+    t_s = float(inc.time[0] - inc.dt[0]) + float(start)
+    keep = (inc.time - inc.dt) >= t_s - 1e-6
+    e_keep = epochs.time > t_s
+    if keep.sum() < 2 or not e_keep.any():
+        raise ConfigError(f"start {start:g} s leaves no data: the odometry ends {float(inc.time[-1]):g} s, "
+                          f"the pseudoranges {float(epochs.time[-1]):g} s", file=source, key="alignment.start")
+    inc2 = dataclasses.replace(inc, time=inc.time[keep], dt=inc.dt[keep], dtheta=inc.dtheta[keep],
+                               dvel=inc.dvel[keep])
+    e0 = int(np.argmax(e_keep))
+    r0 = int(epochs.start[e0])
+    opt = lambda a: None if a is None else a[r0:]  # noqa: E731
+    epochs2 = dataclasses.replace(
+        epochs, time=epochs.time[e0:], start=epochs.start[e0:] - r0, pseudorange=epochs.pseudorange[r0:],
+        variance=epochs.variance[r0:], sat_ecef=epochs.sat_ecef[r0:], sat_id=epochs.sat_id[r0:],
+        system=epochs.system[r0:], elevation=epochs.elevation[r0:], cn0=epochs.cn0[r0:],
+        sat_vel=opt(epochs.sat_vel), range_rate=opt(epochs.range_rate))
+    o = inputs.odometry
+    ko = o.time >= t_s - 1e-6            # the samples whose interval the kept increments hold
+    odo2 = dataclasses.replace(o, **{k: getattr(o, k)[ko] for k in ("time", "speed", "yaw_rate", "speed_var",
+                                                                        "yaw_rate_var", "line")})
+    return dataclasses.replace(inputs, odometry=odo2, inc=inc2, epochs=epochs2)
+
+
 def process_vehicle(ds: VehicleDataset, source: str, data: str | None = None, seed: int = 0) -> VehicleOutput:
     """Read, align and run every method of an ``odometry-gnss`` dataset (module docstring)."""
     d = find_data_dir(ds, data, source)
@@ -115,6 +151,7 @@ def read_vehicle(ds: VehicleDataset, source: str, d: Path) -> VehicleInputs:
 def run_vehicle(ds: VehicleDataset, source: str, d: Path, inputs: VehicleInputs, seed: int = 0) -> VehicleOutput:
     """Alignment and every method on the files read (module docstring)."""
     oc, pc = ds.odometry, ds.pseudoranges
+    inputs = discard_before(inputs, float(ds.alignment.start), source)
     odo, inc, epochs, truth, read_time = inputs.odometry, inputs.inc, inputs.epochs, inputs.reference, inputs.read_time_s
 
     systems = [SYSTEM_CODES[s] for s in pc.systems]
