@@ -173,3 +173,68 @@ def test_process_writes_the_sweep_beside_its_outputs(tmp_path):
     r = CliRunner().invoke(app, ["process", "drive-0708-aided", "--out", str(tmp_path / "o2"), "--data", data,
                                  "--outage-sweep", "30 s", "--sweep-step", "0 s", "--workers", "1"])
     assert r.exit_code != 0 and "step" in r.output and not (tmp_path / "o2").exists()
+
+
+# ---------------------------------------------------------------- the start sweep (smartloc-berlin)
+
+def _needs_smartloc():
+    if not (DATA_DIR / "smartloc-berlin" / "Berlin_Potsdamer_Platz_Input.txt").exists():
+        pytest.skip(f"real data not found under {DATA_DIR}")
+    return str(DATA_DIR / "smartloc-berlin")
+
+
+def test_a_start_is_the_dataset_run_from_there(tmp_path):
+    from mixnav.experiment.sweep import START_SWEEP_COLUMNS, run_start_sweep, summarize_starts
+    data = _needs_smartloc()
+    res = run_start_sweep("smartloc-berlin", "60 s", ("0 s", "60 s"), data=data, workers=1)
+    rows = res.rows
+    assert list(rows.columns) == list(START_SWEEP_COLUMNS) and sorted(set(rows["start_s"])) == [0.0, 60.0]
+    # the independent route: the shipped file with [alignment] start = "60 s", through process_dataset
+    text = (SHIPPED / "smartloc-berlin.toml").read_text().replace('window = "20 s"', 'window = "20 s"\nstart = "60 s"')
+    text = text.replace('data_dir = "../shared/data/smartloc-berlin"', f'data_dir = "{data}"')
+    (tmp_path / "late.toml").write_text(text)
+    run = mixnav.process_dataset(str(tmp_path / "late.toml"))
+    common = res.settings["common_span_s"][0]
+    assert common == rows["filter_start_s"].max() and common >= 80.0        # 60 s + the 20 s track window
+    for name, sol in run.solutions.items():
+        row = rows[(rows["method"] == name) & (rows["start_s"] == 60.0)].iloc[0]
+        h = np.hypot(sol["err_n_m"], sol["err_e_m"]).to_numpy()
+        assert row["horizontal_rmse_m"] == pytest.approx(np.sqrt(np.mean(h ** 2)), rel=1e-12)
+        assert row["common_horizontal_rmse_m"] == pytest.approx(
+            np.sqrt(np.mean(h[sol["time_s"].to_numpy() >= common] ** 2)), rel=1e-12)
+    s = summarize_starts(rows)["ekf"]
+    e = rows[rows["method"] == "ekf"]["horizontal_rmse_m"].to_numpy()
+    assert s["median_horizontal_rmse_m"] == np.median(e) and s["worst_horizontal_rmse_m"] == e.max()
+
+
+def test_bad_start_sweeps_name_the_option():
+    data = _needs_smartloc()
+    with pytest.raises(ArgumentError) as e:
+        mixnav.start_sweep("smartloc-berlin", "0 s", data=data, workers=1)
+    assert e.value.argument == "step"
+    with pytest.raises(ArgumentError) as e:
+        mixnav.start_sweep("smartloc-berlin", "30 s", ("0 s", "400 s"), data=data, workers=1)
+    assert e.value.argument == "span"
+    with pytest.raises(ConfigError) as e:      # an INS dataset aligns on its GNSS fixes: an outage sweep suits it
+        mixnav.start_sweep("drive-0708-aided", "30 s")
+    assert "evaluation.start_sweep" in str(e.value)
+
+
+def test_evaluation_keys_are_validated_and_used(tmp_path):
+    from mixnav.config import load_dataset
+    text = (SHIPPED / "drive-0708-aided.toml").read_text()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text + '\n[evaluation]\noutage_sweep = "30 s"\nsweep_span = ["300 s", "100 s"]\n')
+    with pytest.raises(ConfigError) as e:
+        load_dataset(str(bad))
+    assert "evaluation" in str(e.value) and "before it starts" in str(e.value)
+    bad.write_text(text + '\n[evaluation]\noutage_sweep = "30"\n')
+    with pytest.raises(ConfigError) as e:
+        load_dataset(str(bad))
+    assert "evaluation.outage_sweep" in str(e.value)
+    ok = tmp_path / "ok.toml"
+    ok.write_text(text.replace('data_dir = "../shared/data/drive-0708"', f'data_dir = "{_needs_drive()}"')
+                  + '\n[evaluation]\noutage_sweep = "30 s"\nsweep_step = "45 s"\nsweep_span = ["60 s", "150 s"]\n')
+    res = run_outage_sweep(str(ok), workers=1)
+    assert res.settings["window_s"] == 30.0 and res.settings["step_s"] == 45.0
+    assert sorted(set(res.rows["start_s"])) == [60.0, 105.0]

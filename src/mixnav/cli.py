@@ -201,6 +201,11 @@ def process(dataset: str = typer.Argument(..., help="Shipped dataset config name
             sweep_span: tuple[str, str] = typer.Option(None, "--sweep-span", show_default=False,
                                                        help="START END of the sweep's windows ('60 s' '500 s'; "
                                                             "default: from the alignment to the last GNSS epoch)."),
+            start_sweep: str = typer.Option(None, "--start-sweep",
+                                            help="Also run the whole causal pipeline from start times this far "
+                                                 "apart ('30 s'; default: [evaluation] start_sweep; datasets that "
+                                                 "align from their own data); --sweep-span gives the first and "
+                                                 "last start."),
             sweeps: bool = typer.Option(True, "--sweeps/--no-sweeps",
                                         help="Run the sweeps the dataset's [evaluation] asks for."),
             workers: int = typer.Option(None, "--workers", min=1,
@@ -219,7 +224,8 @@ def process(dataset: str = typer.Argument(..., help="Shipped dataset config name
         check_out_dir(out_dir, "process", overwrite, [source, data])
         ev = getattr(ds, "evaluation", None)
         span = None if not sweep_span or sweep_span[0] is None else sweep_span
-        want = outage_sweep is not None or sweep_step is not None or span is not None or \
+        want_starts = start_sweep is not None or (sweeps and ev is not None and ev.start_sweep is not None)
+        want = outage_sweep is not None or sweep_step is not None or (span is not None and not want_starts) or \
             (sweeps and ev is not None and ev.outage_sweep is not None)
         with err.status(f"processing {ds.dataset.name}"):
             processed = run_pipeline(ds, source, None if data is None else str(data))
@@ -232,6 +238,14 @@ def process(dataset: str = typer.Argument(..., help="Shipped dataset config name
                                              scheduler=scheduler, progress=progress))
             except ArgumentError as exc:   # said as the option the user wrote
                 flag = {"window": "--outage-sweep", "step": "--sweep-step", "span": "--sweep-span"}
+                raise ArgumentError(exc.message, argument=flag.get(exc.argument, exc.argument)) from None
+        if want_starts:
+            from .experiment.sweep import run_start_sweep
+            try:
+                done.append(run_start_sweep(dataset, start_sweep, span, data=None if data is None else str(data),
+                                            workers=workers, scheduler=scheduler, progress=progress))
+            except ArgumentError as exc:
+                flag = {"step": "--start-sweep", "span": "--sweep-span"}
                 raise ArgumentError(exc.message, argument=flag.get(exc.argument, exc.argument)) from None
         with err.status(f"writing {out_dir}"):
             metrics = pipeline(ds, source).write(out_dir, processed, config_text=text, overwrite=overwrite,
@@ -255,6 +269,15 @@ def process(dataset: str = typer.Argument(..., help="Shipped dataset config name
 
 def _print_sweep(sw) -> None:
     st = sw.settings
+    if sw.kind == "start_sweep":
+        t = Table("method", "median RMSE [m]", "worst [m]", "median, common span [m]", "worst, common span [m]",
+                  title=f"start sweep: starts {', '.join(f'{x:g}' for x in st['starts_s'])} s; common span "
+                        f"{st['common_span_s'][0]:.0f}-{st['common_span_s'][1]:.0f} s ({st['wall_time_s']:.0f} s)")
+        for name, b in sw.summary.items():
+            t.add_row(name, f"{b['median_horizontal_rmse_m']:.3g}", f"{b['worst_horizontal_rmse_m']:.3g}",
+                      f"{b['median_common_horizontal_rmse_m']:.3g}", f"{b['worst_common_horizontal_rmse_m']:.3g}")
+        out.print(t)
+        return
     t = Table("method", "median max [m]", "p90 [m]", "worst [m]", "NEES out of band",
               title=f"outage sweep: {st['n_windows']} windows of {st['window_s']:g} s every {st['step_s']:g} s "
                     f"({st['wall_time_s']:.0f} s)")

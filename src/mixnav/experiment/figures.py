@@ -18,7 +18,7 @@ from matplotlib.figure import Figure
 
 from ..geodesy import earth
 
-__all__ = ["error_figure", "horizontal_error_figure", "mode_probability_figure", "sweep_figure", "trajectory_figure"]
+__all__ = ["error_figure", "horizontal_error_figure", "mode_probability_figure", "start_sweep_figure", "sweep_figure", "trajectory_figure"]
 
 # kind -> (column stems, column unit suffix, title)
 _KINDS = {
@@ -286,4 +286,24 @@ def sweep_figure(rows: pd.DataFrame, settings: dict | None = None) -> Figure:
     ax2.set_ylabel("in the window")
     ax2.grid(True, alpha=0.3)
     ax2.legend(fontsize="x-small", ncol=3)
+    return fig
+
+
+def start_sweep_figure(rows: pd.DataFrame, settings: dict | None = None) -> Figure:
+    """A start sweep (:mod:`mixnav.experiment.sweep`): each method's 2-D RMSE from its own
+    start (solid) and on the span every run covers (dashed) against the start time."""
+    for k in ("method", "start_s", "horizontal_rmse_m", "common_horizontal_rmse_m"):
+        _need(rows, k, "start sweep")
+    fig = Figure(figsize=(8.0, 4.5), layout="constrained")
+    ax = fig.subplots()
+    for i, (name, g) in enumerate(rows.groupby("method", sort=False)):
+        ax.plot(g["start_s"], g["horizontal_rmse_m"], "o-", color=f"C{i}", label=f"{name}")
+        ax.plot(g["start_s"], g["common_horizontal_rmse_m"], "s--", color=f"C{i}", alpha=0.6, ms=4)
+    span = (settings or {}).get("common_span_s")
+    ax.set_title("start sweep: 2-D RMSE from each start (solid)"
+                 + (f" and on {span[0]:.0f}-{span[1]:.0f} s (dashed)" if span else ""))
+    ax.set_xlabel("start [s]")
+    ax.set_ylabel("horizontal RMSE [m]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize="small", ncol=2)
     return fig

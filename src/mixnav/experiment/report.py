@@ -103,6 +103,24 @@ def sweep_table(summary: dict, settings: dict) -> str:
     return "".join(rows)
 
 
+def start_sweep_table(summary: dict, settings: dict) -> str:
+    """A start sweep's distribution per method (:func:`mixnav.experiment.sweep.summarize_starts`)."""
+    starts = ", ".join(f"{t:g}" for t in settings.get("starts_s", []))
+    span = settings.get("common_span_s", [float("nan")] * 2)
+    rows = [f"<p>The whole causal pipeline started at {_esc(starts)} s (the data before each discarded), each "
+            f"run scored from its own filter start and on the span all runs cover, {_fmt(span[0])} - "
+            f"{_fmt(span[1])} s.</p><table><tr><th>method</th><th>starts</th><th>median RMSE [m]</th>"
+            "<th>worst RMSE [m]</th><th>worst start [s]</th><th>median RMSE, common span [m]</th>"
+            "<th>worst, common span [m]</th></tr>"]
+    for name, b in summary.items():
+        rows.append(f"<tr><td>{_esc(name)}</td><td>{b['n_starts']}</td><td>{_fmt(b['median_horizontal_rmse_m'])}</td>"
+                    f"<td>{_fmt(b['worst_horizontal_rmse_m'])}</td><td>{_fmt(b['worst_start_s'])}</td>"
+                    f"<td>{_fmt(b['median_common_horizontal_rmse_m'])}</td>"
+                    f"<td>{_fmt(b['worst_common_horizontal_rmse_m'])}</td></tr>")
+    rows.append("</table>")
+    return "".join(rows)
+
+
 def write_report(out_dir: Path, title: str, metrics: dict, figures: dict[str, Figure],
                  notes: Sequence[str] = (), config_text: str | None = None,
                  sections: Sequence[tuple[str, str]] = ()) -> Path:

@@ -1,4 +1,4 @@
-"""Accuracy as a distribution, not one favourable case: the outage sweep.
+"""Accuracy as a distribution, not one favourable case: the outage sweep and the start sweep.
 
 :func:`outage_sweep` withholds the GNSS in one window at a time, sliding across the whole
 recording after the alignment (the dataset's own ``withhold`` windows are not withheld in
@@ -13,6 +13,12 @@ runs.
 maxima and the share of windows whose mean position NEES is above the chi-square(3) 99 %
 bound. :class:`SweepResult` is what ``mixnav process --outage-sweep`` writes beside the
 dataset's own outputs (``outage_sweep.csv``, the block, a figure and a report table).
+
+:func:`start_sweep`, for datasets that align from their own data (odometry-gnss), runs the
+whole causal pipeline from several start times (the data before each discarded, as if the
+recording began there) and scores each run from its own start and on the span every run
+covers (from the last run's filter start to the end): one row per method and start
+(:data:`START_SWEEP_COLUMNS`), ``start_sweep.csv`` and a ``start_sweep`` block.
 """
 
 from __future__ import annotations
@@ -31,14 +37,21 @@ from scipy.stats import chi2
 from .. import units as u
 from ..errors import ArgumentError, ConfigError, DataError, MixnavError
 
-__all__ = ["outage_sweep", "run_outage_sweep", "summarize", "sweep_windows", "SweepResult",
-           "OUTAGE_SWEEP_COLUMNS", "NEES_POS_99"]
+__all__ = ["outage_sweep", "run_outage_sweep", "start_sweep", "run_start_sweep", "summarize", "summarize_starts",
+           "sweep_windows", "SweepResult", "OUTAGE_SWEEP_COLUMNS", "START_SWEEP_COLUMNS", "NEES_POS_99"]
 
 #: One row per method and window: the window [s], the method's errors inside it (and in the
 #: unaided stretch until the next GNSS update) [m], its mean NEES there, and what the vehicle
 #: did in it according to the reference: distance [m], course change [deg], time still [s].
 OUTAGE_SWEEP_COLUMNS = ("method", "start_s", "end_s", "horizontal_max_m", "horizontal_rmse_m", "vertical_max_m",
                         "nees_pos_mean", "nees_vel_mean", "distance_m", "heading_change_deg", "still_s")
+
+#: One row per method and start time: the start [s] and where the filters began after the
+#: alignment [s]; the 2-D error from the run's own start (RMSE, p95, max [m], epochs) and on
+#: the span every run covers (``common_*``).
+START_SWEEP_COLUMNS = ("method", "start_s", "filter_start_s", "horizontal_rmse_m", "horizontal_p95_m",
+                       "horizontal_max_m", "n_epochs", "common_start_s", "common_horizontal_rmse_m",
+                       "common_horizontal_p95_m", "common_horizontal_max_m")
 
 #: The chi-square(3) 99 % point (11.34): a window whose mean 3-D position NEES is above it is
 #: counted in ``share_nees_above_99``. The per-epoch bound, applied to the window's mean, as the
@@ -136,18 +149,22 @@ class SweepResult:
 
     @property
     def summary(self) -> dict[str, dict]:
-        return summarize(self.rows)
+        return summarize(self.rows) if self.kind == "outage_sweep" else summarize_starts(self.rows)
 
     def figure(self):
-        """Each method's horizontal maximum against the window's start, with the distance
-        and course change of each window below (the vehicle's motion by the reference)."""
-        from .figures import sweep_figure
-        return sweep_figure(self.rows, self.settings)
+        """Outage sweep: each method's horizontal maximum against the window's start, with the
+        distance and course change of each window below (the vehicle's motion by the
+        reference). Start sweep: each method's RMSE from its own start and on the common span
+        against the start time."""
+        from .figures import start_sweep_figure, sweep_figure
+        return sweep_figure(self.rows, self.settings) if self.kind == "outage_sweep" else \
+            start_sweep_figure(self.rows, self.settings)
 
     def section_html(self) -> str:
-        """The report's table: per method the distribution of the windows' errors."""
-        from .report import sweep_table
-        return sweep_table(self.summary, self.settings)
+        """The report's table: per method the distribution over the windows or start times."""
+        from .report import start_sweep_table, sweep_table
+        return sweep_table(self.summary, self.settings) if self.kind == "outage_sweep" else \
+            start_sweep_table(self.summary, self.settings)
 
 
 # ---------------------------------------------------------------- running one window
@@ -263,7 +280,8 @@ def run_outage_sweep(dataset, window=None, step=None, span=None, *, data=None, w
     if not scored:
         raise DataError(f"the reference covers none of the {len(windows)} sweep windows in "
                         f"[{first:g}, {last:.1f}] s: nothing to score", file=source)
-    rows = _run_windows(ref, None if data is None else str(data), scored, workers, scheduler, progress)
+    rows = [r for rs in _run_tasks(_window_rows, ref, None if data is None else str(data), scored, workers,
+                                   scheduler, progress, "windows") for r in rs]
     ran = {(r["start_s"], r["end_s"]) for r in rows}
     late = [w for w in scored if w not in ran]   # the alignment waited for GNSS past the window's start
     scored = [w for w in scored if w in ran]
@@ -285,59 +303,60 @@ def run_outage_sweep(dataset, window=None, step=None, span=None, *, data=None, w
     return SweepResult("outage_sweep", df, settings)
 
 
-def _run_windows(ref: str, data: str | None, windows, workers, scheduler, progress) -> list[dict]:
+def _run_tasks(task, ref: str, data: str | None, items, workers, scheduler, progress, label) -> list:
+    """``task(ref, data, item)`` for every item: here, on a local process pool or on a Dask
+    cluster, with a progress bar; the results in completion order."""
     from .parallel import Progress
-    bar = Progress(len(windows), progress, label="windows")
-    rows: list[dict] = []
+    bar = Progress(len(items), progress, label=label)
     try:
         if scheduler:
-            rows = _run_dask(scheduler, ref, data, windows, bar)
-        elif (workers or os.cpu_count() or 1) == 1 or len(windows) < 2:
-            for w in windows:
-                rows += _window_rows(ref, data, w)
+            return _run_dask(task, scheduler, ref, data, items, bar)
+        if (workers or os.cpu_count() or 1) == 1 or len(items) < 2:
+            out = []
+            for it in items:
+                out.append(task(ref, data, it))
                 bar.advance()
-        else:
-            rows = _run_pool(ref, data, windows, workers or os.cpu_count() or 1, bar)
+            return out
+        return _run_pool(task, ref, data, items, workers or os.cpu_count() or 1, bar)
     finally:
         bar.close()
-    return rows
 
 
-def _run_pool(ref, data, windows, workers, bar) -> list[dict]:
+def _run_pool(task, ref, data, items, workers, bar) -> list:
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from .parallel import terminate_pool
-    pool = ProcessPoolExecutor(max_workers=min(workers, len(windows)), initializer=_worker_init,
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(items)), initializer=_worker_init,
                                initargs=(ref, data))
-    rows: list[dict] = []
+    out: list = []
     try:
-        pending = {pool.submit(_window_rows, ref, data, w) for w in windows}
+        pending = {pool.submit(task, ref, data, it) for it in items}
         while pending:
             done, pending = wait(pending, return_when=FIRST_COMPLETED)
             for f in done:
-                rows += f.result()
+                out.append(f.result())
                 bar.advance()
     except BaseException:
         terminate_pool(pool)   # no worker outlives the command
         raise
     pool.shutdown(wait=True)
-    return rows
+    return out
 
 
-def _run_dask(scheduler: str, ref, data, windows, bar) -> list[dict]:
+def _run_dask(task, scheduler: str, ref, data, items, bar) -> list:
     from distributed import as_completed
     from .parallel import dask_client
     client = dask_client(scheduler.strip())
     try:
-        futures = [client.submit(_window_rows, ref, data, w, pure=False) for w in windows]
-        rows: list[dict] = []
+        futures = [client.submit(task, ref, data, it, pure=False) for it in items]
+        out: list = []
         try:
             for f in as_completed(futures, loop=client.loop):
-                rows += f.result()
+                out.append(f.result())
                 bar.advance()
         except BaseException:
             client.cancel(futures)
             raise
-        return rows
+        return out
     finally:
         client.close()
 
@@ -387,3 +406,135 @@ def outage_sweep(dataset, window=None, step=None, span=None, *, data=None, worke
     return run_outage_sweep(dataset, window, step, span, data=data, workers=workers, scheduler=scheduler,
                             progress=progress).rows
 
+
+# ---------------------------------------------------------------- the start sweep
+
+def summarize_starts(rows: pd.DataFrame) -> dict[str, dict]:
+    """Per method, the ``start_sweep`` block of metrics.json: ``n_starts``, the median and
+    worst of the runs' RMSE from their own start (``{median,worst}_horizontal_rmse_m``,
+    ``worst_start_s``) and on the common span (``{median,worst}_common_horizontal_rmse_m``)."""
+    out: dict[str, dict] = {}
+    for name, g in rows.groupby("method", sort=False):
+        r, c = g["horizontal_rmse_m"].to_numpy(float), g["common_horizontal_rmse_m"].to_numpy(float)
+        out[str(name)] = {"n_starts": int(len(g)), "median_horizontal_rmse_m": float(np.median(r)),
+                          "worst_horizontal_rmse_m": float(r.max()),
+                          "worst_start_s": float(g["start_s"].to_numpy(float)[int(np.argmax(r))]),
+                          "median_common_horizontal_rmse_m": float(np.median(c)),
+                          "worst_common_horizontal_rmse_m": float(c.max())}
+    return out
+
+
+def _start_run(dataset: str, data: str | None, start: float) -> dict:
+    """One run from ``start``: per method its own-start scores and the (time, 2-D error) series
+    the common span is scored on later (runs anywhere: loads the dataset once per process)."""
+    import warnings
+
+    from ..io.imu_checks import DataWarning
+    ds, source, p, folder, inputs = _load(dataset, data)
+    with warnings.catch_warnings():   # the data's warnings are said by the run from the first start
+        if start > 0:
+            warnings.simplefilter("ignore", DataWarning)
+        out = p.run(p.with_start(ds, start), source, folder, inputs)
+    tables = p.tables(out)
+    metrics = p.metrics(out, tables)
+    runs = {}
+    for name, t in tables.items():
+        m = metrics[name]
+        runs[name] = {"filter_start_s": float(out.init.time), "horizontal_rmse_m": m["horizontal_rmse_m"],
+                      "horizontal_p95_m": m["horizontal_p95_m"], "horizontal_max_m": m["horizontal_max_m"],
+                      "n_epochs": m["n_epochs"], "time": t["time_s"].to_numpy(float),
+                      "h": np.hypot(t["err_n_m"].to_numpy(float), t["err_e_m"].to_numpy(float))}
+    return {"start": float(start), "runs": runs}
+
+
+def run_start_sweep(dataset, step=None, span=None, *, data=None, workers: int | None = None,
+                    scheduler: str | None = None, progress: bool = False) -> SweepResult:
+    """:func:`start_sweep` with its settings (:class:`SweepResult`)."""
+    from ..config import load_dataset
+    from .pipelines import pipeline
+    ref = _dataset_ref(dataset)
+    ds, source, _ = load_dataset(ref)
+    ev = getattr(ds, "evaluation", None)
+    p = pipeline(ds, source)
+    if not hasattr(p, "with_start"):
+        raise ConfigError(f"a start sweep runs the whole causal pipeline from later starts; dataset kind "
+                          f"'{ds.dataset.kind}' does not align from its own data here (odometry-gnss only; an "
+                          "outage sweep suits an IMU + GNSS dataset)", file=source, key="evaluation.start_sweep")
+    if getattr(ds, "reference", None) is None:
+        raise ConfigError("a start sweep scores every run against the reference: the dataset has no "
+                          "[reference]", file=source, key="reference")
+    step = _seconds(step if step is not None else (ev.start_sweep if ev else None), "step")
+    if not step > 0:
+        raise ArgumentError(f"must be positive, got {step:g} s", argument="step")
+    if span is None and ev is not None and ev.sweep_span is not None:
+        span = ev.sweep_span
+    t0 = _time.perf_counter()
+    first = _start_run(ref, None if data is None else str(data), 0.0)
+    end = float(max(r["time"][-1] for r in first["runs"].values()))
+    if span is None:   # at least half the recording left to score from the last start
+        a, b = 0.0, 0.5 * end
+    else:
+        a, b = _seconds(span[0], "span"), _seconds(span[1], "span")
+        if not b >= a:
+            raise ArgumentError(f"ends ({b:g} s) before it starts ({a:g} s)", argument="span")
+        if b >= end:
+            raise ArgumentError(f"[{a:g}, {b:g}] s: the last start must be before the recording's end "
+                                f"({end:.1f} s)", argument="span")
+    starts = [a + i * step for i in range(int(math.floor((b - a) / step + 1e-9)) + 1)]
+    rest = [t for t in starts if t != 0.0]
+    runs = ([first] if 0.0 in starts else []) + _run_tasks(_start_run, ref, None if data is None else str(data),
+                                                           rest, workers, scheduler, progress, "starts")
+    runs.sort(key=lambda r: r["start"])
+    common = max(r["filter_start_s"] for run in runs for r in run["runs"].values())
+    rows = []
+    for run in runs:
+        for name, r in run["runs"].items():
+            sel = r["time"] >= common
+            h = r["h"][sel]
+            rows.append({"method": name, "start_s": run["start"], "filter_start_s": r["filter_start_s"],
+                         "horizontal_rmse_m": r["horizontal_rmse_m"], "horizontal_p95_m": r["horizontal_p95_m"],
+                         "horizontal_max_m": r["horizontal_max_m"], "n_epochs": r["n_epochs"],
+                         "common_start_s": common, "common_horizontal_rmse_m": float(np.sqrt(np.mean(h ** 2))),
+                         "common_horizontal_p95_m": float(np.percentile(h, 95)),
+                         "common_horizontal_max_m": float(h.max())})
+    order = {name: i for i, name in enumerate(first["runs"])}
+    df = pd.DataFrame(rows).sort_values(["method", "start_s"], key=lambda c: c.map(order) if c.name == "method"
+                                        else c, kind="stable").reset_index(drop=True)[list(START_SWEEP_COLUMNS)]
+    settings = {"step_s": step, "starts_s": starts, "common_span_s": [common, end],
+                "wall_time_s": _time.perf_counter() - t0}
+    return SweepResult("start_sweep", df, settings)
+
+
+def start_sweep(dataset, step=None, span=None, *, data=None, workers: int | None = None,
+                scheduler: str | None = None, progress: bool = False) -> pd.DataFrame:
+    """Run the whole causal pipeline from several start times and score each run.
+
+    Parameters
+    ----------
+    dataset : str
+        A shipped dataset config or a .toml file that aligns from its own data
+        (``odometry-gnss``, e.g. ``"smartloc-berlin"``) and has a ``[reference]``.
+    step : str or float, optional
+        Between the start times: ``"30 s"`` or seconds (default: ``[evaluation] start_sweep``).
+    span : (first, last), optional
+        The first and last start time [s since the first odometry sample, or text with
+        units] (default: ``[evaluation] sweep_span``, else from 0 to half the recording).
+    data, workers, scheduler, progress
+        As :func:`outage_sweep`.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per method and start, columns :data:`START_SWEEP_COLUMNS`: each run scored
+        from its own filter start and on the common span (from the latest filter start of
+        all runs to the end); :func:`summarize_starts` gives the per-method distribution.
+
+    Raises
+    ------
+    ArgumentError
+        A step that is not positive, a span that ends before it starts or at the recording's end.
+    ConfigError
+        A dataset kind that does not align from its own data, or no reference.
+    """
+    return run_start_sweep(dataset, step, span, data=data, workers=workers, scheduler=scheduler,
+                           progress=progress).rows
