@@ -9,16 +9,22 @@ A vehicle is taken as still over a window when, in that window,
   ``gyro_rate`` [rad/s] (default 0.03; it includes the gyro bias and the
   vibration, 0.005-0.025 parked on drive-0708, and a car pulling away or creeping
   round a corner reads 0.03-0.5), and
-* the mean specific-force vector stays at the stop's own level: it differs from
-  the median of the stretch's window means by less than ``accel_drift`` [m/s^2]
-  (default 0.1). At rest the specific force is gravity in the body frame and does
-  not change; a smooth pull-away changes its forward component by the
+* the mean specific-force vector stays at the level the still stretch starts at
+  (the median of the window means of its first second): it differs from it by
+  less than ``accel_drift`` [m/s^2] (default 0.1). At rest the specific force is
+  gravity in the body frame and does not change; a smooth pull-away changes its forward component by the
   acceleration (0.3-0.6 m/s^2) while neither test above sees it: the magnitude
   changes by only a^2 / 2g (< 0.02 m/s^2) and a steady acceleration has no spread
   within a window (drive-0708, the 198-207 s stop: the car moved at 0.2-0.6 m/s
   for 0.9 s before the magnitude test ended the stop, and ZUPT/ZARU there turned
   the acceleration into a 2-3 deg tilt error; 1 s window means at rest stay within
-  0.015 m/s^2 of their stop's median at four stops, 0.064 m/s^2 at the last one), and
+  0.015 m/s^2 of their stop's median at four stops, 0.064 m/s^2 at the last one).
+  The level is the stretch's start, not its median: a stretch is found still from
+  where a vehicle has come to rest, and without vibration (a simulated drive, a
+  very smooth road) the steady acceleration after a stop passes the other tests
+  and can be the longer part of a stretch (then its median). Windows back at the
+  start level later in the stretch (a simulated constant-velocity drive) pass;
+  the models' ``max_speed`` gate is what guards those. And
 * when GNSS velocity is given, the nearest fix within ``gnss_gap`` says the
   speed is below ``gnss_speed`` [m/s] (a fix further away does not vote), and
   when odometer speeds are given, the nearest sample within ``gnss_gap`` says
@@ -134,7 +140,7 @@ def detect_still(imu: ImuData, window: float = 1.0, accel_std: float = 0.1, gyro
         A wheel speed above ``gnss_speed`` within ``gnss_gap`` vetoes its time.
     accel_drift : float
         Largest distance of a window's mean specific-force vector from its still
-        stretch's level (the median of the window means inside the stretch) [m/s^2].
+        stretch's level (the median of the window means of its first second) [m/s^2].
     """
     for name, v in (("window", window), ("accel_std", accel_std), ("gyro_rate", gyro_rate),
                     ("gnss_speed", gnss_speed), ("gnss_gap", gnss_gap), ("accel_drift", accel_drift)):
@@ -163,12 +169,12 @@ def detect_still(imu: ImuData, window: float = 1.0, accel_std: float = 0.1, gyro
         vetoes &= ~_vetoed(odometer.time, np.abs(odometer.speed), imu.time, gnss_gap, gnss_speed)
     mask = _eroded(ok, n, w) & vetoes
     # the level test: per still stretch, the windows whose mean specific-force vector left
-    # the stretch's level (a pull-away or a creep) are not still either
+    # the level the stretch starts at (a pull-away or a creep) are not still either
     mean_fb = np.column_stack([_moving(f_b[:, k], w) for k in range(3)])
     drifted = np.zeros(len(ok), dtype=bool)
     for a, b in _runs(mask):
-        inside = np.arange(a, max(b - w + 2, a + 1))          # windows within the stretch
-        level = np.median(mean_fb[inside], axis=0)
+        first = np.arange(a, max(min(a + w, b - w + 2), a + 1))   # windows in its first second
+        level = np.median(mean_fb[first], axis=0)
         j = np.arange(max(a - w + 1, 0), min(b + 1, len(ok)))   # windows holding a sample of it
         drifted[j] = np.linalg.norm(mean_fb[j] - level, axis=1) >= accel_drift
     if drifted.any():
