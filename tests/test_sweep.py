@@ -238,3 +238,12 @@ def test_evaluation_keys_are_validated_and_used(tmp_path):
     res = run_outage_sweep(str(ok), workers=1)
     assert res.settings["window_s"] == 30.0 and res.settings["step_s"] == 45.0
     assert sorted(set(res.rows["start_s"])) == [60.0, 105.0]
+
+
+def test_every_pipeline_writes_sweeps():
+    """The CLI hands every pipeline's write the sweeps it ran (none for most): each accepts them."""
+    import inspect
+
+    from mixnav.experiment.pipelines import PIPELINES
+    for key, p in PIPELINES.items():
+        assert "sweeps" in inspect.signature(p.write).parameters, key

@@ -246,19 +246,26 @@ def _write_outputs(folder, title, header, results, tables, outages, reference, g
     tracked = figures.noise_sigma_figure(tables, noise_truth, outages)
     if tracked is not None:
         figs["tracked_noise_sigma"] = tracked
+    sections = add_sweeps(out_dir, metrics, figs, sweeps)
+    # metrics.json last: its presence marks a complete output folder.
+    write_report(out_dir, title, metrics, figs, notes=list(notes), config_text=config_text, sections=sections)
+    atomic_write_json(out_dir / "metrics.json", metrics)
+    return metrics
+
+
+def add_sweeps(out_dir: Path, metrics: dict, figs: dict, sweeps=()) -> list[tuple[str, str]]:
+    """Write each sweep's rows (``<kind>.csv``), put its settings and per-method blocks into
+    ``metrics`` and its figure into ``figs``; the report sections (:mod:`mixnav.experiment.sweep`)."""
     sections = []
-    for sw in sweeps:   # outage / start sweeps (mixnav.experiment.sweep)
-        atomic_write_dataframe(folder.file(f"{sw.kind}.csv"), sw.rows)
+    for sw in sweeps:
+        atomic_write_dataframe(Path(out_dir) / f"{sw.kind}.csv", sw.rows)
         metrics[sw.kind] = sw.settings
         for name, block in sw.summary.items():
             if name in metrics["methods"]:
                 metrics["methods"][name][sw.kind] = block
         figs[sw.kind] = sw.figure()
         sections.append((sw.kind.replace("_", " "), sw.section_html()))
-    # metrics.json last: its presence marks a complete output folder.
-    write_report(out_dir, title, metrics, figs, notes=list(notes), config_text=config_text, sections=sections)
-    atomic_write_json(out_dir / "metrics.json", metrics)
-    return metrics
+    return sections
 
 
 def lla_frame(time, lla) -> pd.DataFrame:

@@ -42,6 +42,7 @@ from ..gnss.spp import SppOptions, SppTrack, solve_epochs
 from ..io.readers import read_table
 from ..io.atomic import atomic_write_dataframe, atomic_write_json
 from . import figures
+from .outputs import add_sweeps
 from .report import write_report
 
 METHOD = "spp"
@@ -346,15 +347,17 @@ def method_metrics(po: SppOutput, name: str, table: pd.DataFrame) -> dict:
     return m
 
 
-def write_raw(out_dir: Path, po: SppOutput, config_text: str | None = None, overwrite: bool = False) -> dict:
+def write_raw(out_dir: Path, po: SppOutput, config_text: str | None = None, overwrite: bool = False,
+              sweeps=()) -> dict:
     """Solution table (CSV + Parquet), metrics.json, figures and report of an SPP run
-    (the folder policy of :mod:`mixnav.io.outdir`, as ``mixnav process``)."""
+    (the folder policy of :mod:`mixnav.io.outdir`, as ``mixnav process``), with ``sweeps``
+    (:func:`mixnav.experiment.outputs.add_sweeps`)."""
     from ..io.outdir import staged_output
     with staged_output(out_dir, "process", overwrite, [po.source, po.data_dir]) as folder:
-        return _write_raw(folder.path, po, config_text)
+        return _write_raw(folder.path, po, config_text, sweeps)
 
 
-def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None) -> dict:
+def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None, sweeps=()) -> dict:
     table = solution_table(po)
     tables = raw_tables(po)
     tr = po.track
@@ -417,7 +420,8 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None) -> dict:
                      f"q_bias {mc.clock_q_bias:g} m^2/s, q_drift {mc.clock_q_drift:g} m^2/s^3), the same "
                      f"corrected pseudoranges and weights as the SPP, started at the first fix "
                      f"(t = {po.init.time:.2f} s).")
+    sections = add_sweeps(out_dir, metrics, figs, sweeps)
     write_report(out_dir, f"mixnav process: {po.dataset.dataset.name}", metrics, figs, notes=notes,
-                 config_text=config_text)
+                 config_text=config_text, sections=sections)
     atomic_write_json(out_dir / "metrics.json", metrics)       # last: marks a complete folder
     return metrics
