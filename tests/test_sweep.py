@@ -151,7 +151,7 @@ def test_bad_sweep_requests_name_the_option(tmp_path):
         mixnav.outage_sweep("android-static", "30 s")
     assert "evaluation.outage_sweep" in str(e.value)
     with pytest.raises(ArgumentError) as e:
-        mixnav.outage_sweep("drive-0708-aided", data=data)   # no window and no [evaluation] key
+        mixnav.outage_sweep("drive-0708", data=data)   # no window and no [evaluation] key
     assert e.value.argument == "window"
 
 
@@ -222,7 +222,7 @@ def test_bad_start_sweeps_name_the_option():
 
 def test_evaluation_keys_are_validated_and_used(tmp_path):
     from mixnav.config import load_dataset
-    text = (SHIPPED / "drive-0708-aided.toml").read_text()
+    text = (SHIPPED / "drive-0708.toml").read_text()      # no [evaluation] of its own
     bad = tmp_path / "bad.toml"
     bad.write_text(text + '\n[evaluation]\noutage_sweep = "30 s"\nsweep_span = ["300 s", "100 s"]\n')
     with pytest.raises(ConfigError) as e:
