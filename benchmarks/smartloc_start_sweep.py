@@ -119,7 +119,8 @@ def summary(res: dict, key: str = "own") -> dict:
 
 def report(res, aligns, t_common, starts, elapsed, before=None, librsf=None) -> list[str]:
     names = list(next(iter(res.values())))
-    lines = ["# smartLoc Berlin: the causal pipeline started every 30 s (issue 34)", "",
+    lines = [f"# smartLoc Berlin: the causal pipeline started at {', '.join(f'{v:g}' for v in starts)} s (issue 34)",
+             "",
              f"Produced by `benchmarks/smartloc_start_sweep.py` ({platform.machine()}, Python "
              f"{platform.python_version()}; {elapsed:.0f} s). Config: the shipped `smartloc-berlin` with "
              "`[alignment] start = S`: data before S discarded, the track alignment on [S, S + 20 s], the filters "
