@@ -1132,3 +1132,49 @@ def test_rtklib_velocity_delay_moves_velocity_to_epoch_times():
     f = sol.fixes(qualities=(1,), velocity_delay=0.125)
     np.testing.assert_allclose(f.vel_n[:-1], true_v(t)[:-1], atol=1e-12)
     np.testing.assert_array_equal(sol.fixes(qualities=(1,)).vel_n, sol.vel_ned)
+
+
+def test_rtklib_velocity_delay_interpolates_only_between_the_given_epochs():
+    """Oracle: epochs 1.0-1.75 s and 32-33 s (a 30 s hole, as a withheld window leaves):
+    the last epoch before the hole has no later velocity within 1.5 intervals, so it keeps
+    its reported value instead of taking half of a velocity from inside the hole."""
+    from mixnav.io.rtklib import velocity_at_epochs
+    t = np.concatenate([1.0 + 0.25 * np.arange(4), 32.0 + 0.25 * np.arange(5)])
+    v = np.column_stack([t, -t, 0 * t])
+    out = velocity_at_epochs(t, v, 0.125)
+    np.testing.assert_array_equal(out[3], v[3])
+    np.testing.assert_allclose(out[:3, 0], t[:3] + 0.125)   # v(t) = t reported at t - 0.125 -> t + 0.125
+    assert velocity_at_epochs(t, None, 0.125) is None
+
+
+def test_drive0708_withheld_velocities_do_not_leak_into_the_kept_fixes():
+    """issue 34: the velocity-delay interpolation ran over every fix before the windows
+    were withheld, so the last fix before a window carried half of the first withheld
+    velocity. Now the last kept fix before each window keeps its reported velocity (its
+    next kept neighbour is 30 s away), a kept fix away from the windows is interpolated
+    as before, and the velocity the filter gets is the same whatever lies in the window."""
+    from dataclasses import replace
+    from mixnav.config import load_dataset
+    from mixnav.experiment.pipelines import ins_fixes
+    from mixnav.io.rtklib import read_pos
+    folder = data_file("drive-0708")
+    ds, src, _ = load_dataset("drive-0708-aided")
+    inputs = ins_fixes.load(ds, src, folder)
+    po = ins_fixes.run(ds, src, folder, inputs)
+    pos = read_pos(folder / ds.gnss.file)
+    t0 = inputs.imu.start_time
+    sel = pos.select(ds.gnss.qualities)
+    reported = dict(zip(np.round(pos.time[sel] - t0, 3), pos.vel_ned[sel]))
+    for a, b in ds.gnss.withhold:
+        k = np.flatnonzero(po.fixes.time < a)[-1]
+        np.testing.assert_array_equal(po.fixes.vel_n[k], reported[round(po.fixes.time[k], 3)])
+    # away from the windows: the same interpolation as over the whole file
+    i = np.flatnonzero((po.all_fixes.time > 300.0) & (po.all_fixes.time < 301.0))
+    j = np.flatnonzero((po.fixes.time > 300.0) & (po.fixes.time < 301.0))
+    np.testing.assert_allclose(po.fixes.vel_n[j], po.all_fixes.vel_n[i], atol=1e-12)
+    # what lies inside a window does not reach the filter's fixes
+    changed = replace(inputs.fixes, vel_n=np.where(
+        np.isin(np.round(inputs.fixes.time - t0, 3), np.round(po.all_fixes.time[
+            (po.all_fixes.time >= 133.0) & (po.all_fixes.time <= 163.0)], 3))[:, None], 99.0, inputs.fixes.vel_n))
+    po2 = ins_fixes.run(ds, src, folder, replace(inputs, fixes=changed))
+    np.testing.assert_array_equal(po2.fixes.vel_n, po.fixes.vel_n)

@@ -1,6 +1,7 @@
 """IMU + RINEX datasets through the tight INS: RINEX writers, the simulator's export and the
 round trip back through ``mixnav process`` (experiment/rinex_ins.py, experiment/export.py)."""
 
+import math
 import re
 
 import numpy as np
@@ -500,3 +501,23 @@ def test_outputs_are_those_of_an_ins_dataset(exported, tmp_path):
     assert m["methods"]["tight"]["horizontal_rmse_m"] < 1.5
     assert (tmp_path / "out" / "report.html").is_file()
     assert "of the week of the first RINEX epoch" in (tmp_path / "out" / "report.html").read_text()
+
+
+def test_outage_sweep_withholds_the_rinex_observations(exported):
+    """The outage sweep on a RINEX dataset withholds the observation epochs ([raw_gnss]
+    withhold): the tight filter coasts through each window on the IMU alone. A window that
+    starts at the alignment is left out and said (the alignment needs the GNSS in it)."""
+    from mixnav.experiment.sweep import run_outage_sweep
+    _, _, ex, po = exported
+    res = run_outage_sweep(str(ex.files["dataset"]), "10 s", "10 s", (math.ceil(po.init.time), 80.0), workers=1)
+    assert res.settings["skipped_windows_alignment"] == [[math.ceil(po.init.time), math.ceil(po.init.time) + 10.0]]
+    tight = res.rows[res.rows["method"] == "tight"]
+    assert len(tight) == len(res.rows) / 2 >= 1
+    # coasting 10 s on a tactical-grade IMU: worse than with GNSS, far from lost
+    assert (tight["horizontal_max_m"] > po_error(po, "tight")).all() and (tight["horizontal_max_m"] < 20).all()
+
+
+def po_error(po, name):
+    """The largest horizontal error of a method with every GNSS epoch used (the run without windows)."""
+    from mixnav.experiment.pipelines import pipeline
+    return pipeline(po.dataset).metrics(po, pipeline(po.dataset).tables(po))[name]["horizontal_rmse_m"]

@@ -2,7 +2,8 @@
 
 The notebook API (:mod:`mixnav.api`, imported on first use so ``import mixnav``
 stays cheap): :func:`run_scenario`, :func:`process_dataset`, :func:`filter_loose`,
-:func:`imu_grade`, :func:`export_rinex`. See docs/library.md.
+:func:`imu_grade`, :func:`export_rinex`, :func:`outage_sweep`,
+:func:`start_sweep`. See docs/library.md.
 """
 
 from ._version import __version__  # noqa: F401  (mixnav.__version__)
@@ -60,7 +61,8 @@ def _numba_without_cache() -> None:
 if not _numba_cache_usable():
     _numba_without_cache()
 
-_API = ("run_scenario", "process_dataset", "filter_loose", "imu_grade", "export_rinex", "RunResult", "LooseResult")
+_API = ("run_scenario", "process_dataset", "outage_sweep", "start_sweep", "filter_loose", "imu_grade", "export_rinex", "RunResult",
+        "LooseResult")
 
 
 def __getattr__(name):

@@ -23,8 +23,8 @@ import numpy as np
 from .data import GnssFixes, ImuData, InitialState
 from .errors import ArgumentError
 
-__all__ = ["RunResult", "LooseResult", "run_scenario", "process_dataset", "filter_loose", "imu_grade",
-           "export_rinex"]
+__all__ = ["RunResult", "LooseResult", "run_scenario", "process_dataset", "outage_sweep", "start_sweep", "filter_loose",
+           "imu_grade", "export_rinex"]
 
 
 @dataclass
@@ -133,6 +133,32 @@ def process_dataset(name_or_path: str, data: str | None = None) -> RunResult:
     out = process(ds, source, data)
     tables = p.tables(out)
     return RunResult(tables, _metrics_frame(p.metrics(out, tables)), out.results, p.truth(out), out, text)
+
+
+def outage_sweep(name_or_path: str, window=None, step=None, span=None, *, data: str | None = None,
+                 workers: int | None = None, scheduler: str | None = None, progress: bool = False):
+    """Withhold the GNSS in one window at a time across a recording and score every method in
+    each: a DataFrame, one row per method and window
+    (:func:`mixnav.experiment.sweep.outage_sweep`, arguments and columns there).
+
+        rows = mixnav.outage_sweep("drive-0708-aided", "30 s", "10 s")
+        mixnav.experiment.sweep.summarize(rows)["aided"]["p90_horizontal_max_m"]
+    """
+    from .experiment.sweep import outage_sweep as _sweep
+    return _sweep(name_or_path, window, step, span, data=data, workers=workers, scheduler=scheduler,
+                  progress=progress)
+
+
+def start_sweep(name_or_path: str, step=None, span=None, *, data: str | None = None,
+                workers: int | None = None, scheduler: str | None = None, progress: bool = False):
+    """Run a dataset's whole causal pipeline from several start times (every ``step``) and score
+    each run from its own start and on the span all runs cover: a DataFrame, one row per
+    method and start (:func:`mixnav.experiment.sweep.start_sweep`, arguments and columns there).
+
+        rows = mixnav.start_sweep("smartloc-berlin", "30 s", ("0 s", "150 s"))
+    """
+    from .experiment.sweep import start_sweep as _sweep
+    return _sweep(name_or_path, step, span, data=data, workers=workers, scheduler=scheduler, progress=progress)
 
 
 def export_rinex(name_or_path: str, out_dir, seed: int | None = None, start: str = "2024-03-13T10:00:00",

@@ -14,7 +14,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from ._version import __version__
-from .errors import MixnavError
+from .errors import ArgumentError, MixnavError
 
 try:   # typer >= 0.2x carries its own click; its usage errors derive from TyperException
     from typer.exceptions import TyperException as _UsageError
@@ -192,6 +192,27 @@ def process(dataset: str = typer.Argument(..., help="Shipped dataset config name
             out_dir: Path = typer.Option(..., "--out", help="Folder for the solution, metrics, figures and report."),
             data: Path = typer.Option(None, "--data", help="Folder holding the data files "
                                       "(default: the config's data_dir)."),
+            outage_sweep: str = typer.Option(None, "--outage-sweep",
+                                             help="Also withhold the GNSS one window of this length at a time "
+                                                  "across the recording ('30 s'; default: [evaluation] "
+                                                  "outage_sweep) and score every method in each."),
+            sweep_step: str = typer.Option(None, "--sweep-step", help="Between the sweep's window starts "
+                                           "('10 s'; default: [evaluation] sweep_step, else a third of the window)."),
+            sweep_span: tuple[str, str] = typer.Option(None, "--sweep-span", show_default=False,
+                                                       help="START END of the sweep's windows ('60 s' '500 s'; "
+                                                            "default: from the alignment to the last GNSS epoch)."),
+            start_sweep: str = typer.Option(None, "--start-sweep",
+                                            help="Also run the whole causal pipeline from start times this far "
+                                                 "apart ('30 s'; default: [evaluation] start_sweep; datasets that "
+                                                 "align from their own data); --sweep-span gives the first and "
+                                                 "last start."),
+            sweeps: bool = typer.Option(True, "--sweeps/--no-sweeps",
+                                        help="Run the sweeps the dataset's [evaluation] asks for."),
+            workers: int = typer.Option(None, "--workers", min=1,
+                                        help="Local worker processes of a sweep (default: all cores)."),
+            scheduler: str = typer.Option(None, "--scheduler", help="Dask scheduler address (tcp://host:8786) "
+                                          "to run a sweep's windows on; needs mixnav[dask]."),
+            progress: bool = typer.Option(True, "--progress/--no-progress"),
             overwrite: bool = _OVERWRITE):
     """Run the methods of a dataset config on real recorded data and score them."""
     from .config import load_dataset
@@ -201,9 +222,34 @@ def process(dataset: str = typer.Argument(..., help="Shipped dataset config name
     with _errors():
         ds, source, text = load_dataset(dataset)
         check_out_dir(out_dir, "process", overwrite, [source, data])
+        ev = getattr(ds, "evaluation", None)
+        span = None if not sweep_span or sweep_span[0] is None else sweep_span
+        want_starts = start_sweep is not None or (sweeps and ev is not None and ev.start_sweep is not None)
+        want = outage_sweep is not None or sweep_step is not None or (span is not None and not want_starts) or \
+            (sweeps and ev is not None and ev.outage_sweep is not None)
         with err.status(f"processing {ds.dataset.name}"):
             processed = run_pipeline(ds, source, None if data is None else str(data))
-            metrics = pipeline(ds, source).write(out_dir, processed, config_text=text, overwrite=overwrite)
+        done = []
+        if want:
+            from .experiment.sweep import run_outage_sweep
+            try:
+                done.append(run_outage_sweep(dataset, outage_sweep, sweep_step, span,
+                                             data=None if data is None else str(data), workers=workers,
+                                             scheduler=scheduler, progress=progress))
+            except ArgumentError as exc:   # said as the option the user wrote
+                flag = {"window": "--outage-sweep", "step": "--sweep-step", "span": "--sweep-span"}
+                raise ArgumentError(exc.message, argument=flag.get(exc.argument, exc.argument)) from None
+        if want_starts:
+            from .experiment.sweep import run_start_sweep
+            try:
+                done.append(run_start_sweep(dataset, start_sweep, span, data=None if data is None else str(data),
+                                            workers=workers, scheduler=scheduler, progress=progress))
+            except ArgumentError as exc:
+                flag = {"step": "--start-sweep", "span": "--sweep-span"}
+                raise ArgumentError(exc.message, argument=flag.get(exc.argument, exc.argument)) from None
+        with err.status(f"writing {out_dir}"):
+            metrics = pipeline(ds, source).write(out_dir, processed, config_text=text, overwrite=overwrite,
+                                                 sweeps=done)
     smooth = _smoother_column(metrics["methods"])
     t = Table("method", "horiz. RMSE [m]", "horiz. max [m]", "outage max [m]", "time/epoch [us]", *smooth,
               title=f"{ds.dataset.name}: {metrics['duration_s']:.0f} s in "
@@ -215,8 +261,31 @@ def process(dataset: str = typer.Argument(..., help="Shipped dataset config name
                   _num(m, "epoch_time_mean_us"),
                   *(_num(m, "smoother_time_s") for _ in smooth))
     out.print(t)
+    for sw in done:
+        _print_sweep(sw)
     _warn(metrics)
     out.print(f"report: {Path(out_dir) / 'report.html'}")
+
+
+def _print_sweep(sw) -> None:
+    st = sw.settings
+    if sw.kind == "start_sweep":
+        t = Table("method", "median RMSE [m]", "worst [m]", "median, common span [m]", "worst, common span [m]",
+                  title=f"start sweep: starts {', '.join(f'{x:g}' for x in st['starts_s'])} s; common span "
+                        f"{st['common_span_s'][0]:.0f}-{st['common_span_s'][1]:.0f} s ({st['wall_time_s']:.0f} s)")
+        for name, b in sw.summary.items():
+            t.add_row(name, f"{b['median_horizontal_rmse_m']:.3g}", f"{b['worst_horizontal_rmse_m']:.3g}",
+                      f"{b['median_common_horizontal_rmse_m']:.3g}", f"{b['worst_common_horizontal_rmse_m']:.3g}")
+        out.print(t)
+        return
+    t = Table("method", "median max [m]", "p90 [m]", "worst [m]", "NEES out of band",
+              title=f"outage sweep: {st['n_windows']} windows of {st['window_s']:g} s every {st['step_s']:g} s "
+                    f"({st['wall_time_s']:.0f} s)")
+    for name, b in sw.summary.items():
+        share = b.get("share_nees_above_99")
+        t.add_row(name, f"{b['median_horizontal_max_m']:.3g}", f"{b['p90_horizontal_max_m']:.3g}",
+                  f"{b['worst_horizontal_max_m']:.3g}", "-" if share is None else f"{100 * share:.0f} %")
+    out.print(t)
 
 
 @app.command()

@@ -48,7 +48,8 @@ class OdometerAidingConfig(Strict):
 
 class ZuptConfig(Strict):
     """Zero-velocity updates at the epochs the stillness detector finds
-    (``mixnav.measurements.stillness.detect_still``: window, thresholds), at
+    (``mixnav.measurements.stillness.detect_still``: window, thresholds, the level
+    test ``accel_drift`` that ends a stop where the car pulls away), at
     ``rate``; ``sigma`` the velocity at rest; no update while the navigation
     solution moves faster than ``max_speed`` (an IMU alone cannot tell rest from
     a smooth constant-velocity drive)."""
@@ -58,6 +59,7 @@ class ZuptConfig(Strict):
     window: Duration = 1.0
     accel_std: PosAccel = 0.1
     gyro_rate: PosRate = 0.03
+    accel_drift: PosAccel = 0.1
     gnss_speed: PosSpeed = 0.1
     min_duration: Time = 1.0
     max_speed: PosSpeed = 1.0

@@ -10,6 +10,7 @@ from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
 
+from .evaluation_schema import Evaluation
 from .. import units as u
 from .aiding_schema import AidingConfig
 from .fields import AngleVec, AngSigma, LengthVec, PosSigma, Strict, VelSigma, Windows, check_position, quantity
@@ -262,3 +263,4 @@ class Dataset(Strict):
     aiding: AidingConfig | None = None
     raw_gnss: InsRawGnss | None = None
     reference_point: ReferencePoint | None = None
+    evaluation: Evaluation | None = None

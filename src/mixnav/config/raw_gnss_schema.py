@@ -16,6 +16,7 @@ from typing import ClassVar, Literal
 
 from pydantic import Field, field_validator, model_validator
 
+from .evaluation_schema import Evaluation
 from .. import units as u
 from .dataset_schema import DatasetInfo, RawGnss, ReferencePoint
 from .fields import Strict, quantity
@@ -118,6 +119,7 @@ class RawGnssDataset(Strict):
     reference_point: ReferencePoint | None = None
     motion: ConstantVelocityConfig = ConstantVelocityConfig()
     methods: list[RawMethod] | None = Field(default=None, min_length=1)
+    evaluation: Evaluation | None = None
 
     @field_validator("methods")
     @classmethod

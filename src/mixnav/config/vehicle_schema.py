@@ -10,6 +10,7 @@ from typing import Any, ClassVar, Literal
 
 from pydantic import Field, field_validator
 
+from .evaluation_schema import Evaluation
 from .dataset_schema import DatasetInfo
 from .fields import (Duration, NonNegAngle, NonNegLength, NonNegRate, NonNegSpeed, PosAngle, PosLength, PosRate,
                      PosSpeed, Strict, Time)
@@ -162,6 +163,7 @@ class VehicleDataset(Strict):
     motion: DeadReckoningConfig = DeadReckoningConfig()
     alignment: VehicleAlignment = VehicleAlignment()
     methods: list[VehicleMethod] = Field(min_length=1)
+    evaluation: Evaluation | None = None
 
     @field_validator("methods")
     @classmethod

@@ -49,7 +49,7 @@ class AidingInputs:
                 z = ZuptConfig()
             self._still = detect_still(self.imu, window=z.window, accel_std=z.accel_std, gyro_rate=z.gyro_rate,
                                        fixes=self.fixes, gnss_speed=z.gnss_speed, min_duration=z.min_duration,
-                                       odometer=self.odometer)
+                                       odometer=self.odometer, accel_drift=z.accel_drift)
         return self._still
 
     def summary(self) -> dict:

@@ -18,7 +18,7 @@ from matplotlib.figure import Figure
 
 from ..geodesy import earth
 
-__all__ = ["error_figure", "horizontal_error_figure", "mode_probability_figure", "trajectory_figure"]
+__all__ = ["error_figure", "horizontal_error_figure", "mode_probability_figure", "start_sweep_figure", "sweep_figure", "trajectory_figure"]
 
 # kind -> (column stems, column unit suffix, title)
 _KINDS = {
@@ -256,4 +256,54 @@ def noise_sigma_figure(solutions: dict[str, pd.DataFrame], truth=None,
         ax.grid(alpha=0.3)
         ax.legend(fontsize="x-small", loc="upper left", ncol=4)
     axes[-1].set_xlabel("time [s]")
+    return fig
+
+
+def sweep_figure(rows: pd.DataFrame, settings: dict | None = None) -> Figure:
+    """An outage sweep (:mod:`mixnav.experiment.sweep`): each method's horizontal maximum in
+    each window against the window's start (log scale), and below it what the vehicle did
+    in the window by the reference: distance [m] and course change [deg] (bars) and the time
+    it stood still [s] (line). ``rows``: the sweep's rows (``method, start_s, end_s,
+    horizontal_max_m, distance_m, heading_change_deg, still_s``)."""
+    for k in ("method", "start_s", "end_s", "horizontal_max_m", "distance_m", "heading_change_deg", "still_s"):
+        _need(rows, k, "sweep")
+    fig = Figure(figsize=(9.0, 6.0), layout="constrained")
+    ax, ax2 = fig.subplots(2, 1, sharex=True, height_ratios=(2, 1))
+    for i, (name, g) in enumerate(rows.groupby("method", sort=False)):
+        ax.semilogy(g["start_s"], g["horizontal_max_m"], "o-", ms=3, lw=1, color=f"C{i}", label=str(name))
+    ax.set_ylabel("horizontal max in window [m]")
+    window = settings.get("window_s") if settings else None
+    ax.set_title("outage sweep" + (f": {window:g} s windows" if window else "") + ", by window start")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize="small")
+    w = rows.drop_duplicates("start_s")
+    width = float(np.min(np.diff(w["start_s"]))) * 0.8 if len(w) > 1 else 1.0
+    ax2.bar(w["start_s"], w["distance_m"], width=width, color="0.6", label="distance [m]")
+    ax2.bar(w["start_s"], w["heading_change_deg"], width=width * 0.4, color="C3", alpha=0.7,
+            label="course change [deg]")
+    ax2.plot(w["start_s"], w["still_s"], "k.-", lw=1, label="still [s]")
+    ax2.set_xlabel("window start [s]")
+    ax2.set_ylabel("in the window")
+    ax2.grid(True, alpha=0.3)
+    ax2.legend(fontsize="x-small", ncol=3)
+    return fig
+
+
+def start_sweep_figure(rows: pd.DataFrame, settings: dict | None = None) -> Figure:
+    """A start sweep (:mod:`mixnav.experiment.sweep`): each method's 2-D RMSE from its own
+    start (solid) and on the span every run covers (dashed) against the start time."""
+    for k in ("method", "start_s", "horizontal_rmse_m", "common_horizontal_rmse_m"):
+        _need(rows, k, "start sweep")
+    fig = Figure(figsize=(8.0, 4.5), layout="constrained")
+    ax = fig.subplots()
+    for i, (name, g) in enumerate(rows.groupby("method", sort=False)):
+        ax.plot(g["start_s"], g["horizontal_rmse_m"], "o-", color=f"C{i}", label=f"{name}")
+        ax.plot(g["start_s"], g["common_horizontal_rmse_m"], "s--", color=f"C{i}", alpha=0.6, ms=4)
+    span = (settings or {}).get("common_span_s")
+    ax.set_title("start sweep: 2-D RMSE from each start (solid)"
+                 + (f" and on {span[0]:.0f}-{span[1]:.0f} s (dashed)" if span else ""))
+    ax.set_xlabel("start [s]")
+    ax.set_ylabel("horizontal RMSE [m]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize="small", ncol=2)
     return fig

@@ -166,6 +166,14 @@ def gnss_section(ds: Dataset):
     return (ds.gnss, "gnss") if ds.gnss is not None else (ds.raw_gnss, "raw_gnss")
 
 
+def with_withheld(ds: Dataset, windows) -> Dataset:
+    """The dataset with its GNSS withheld in ``windows`` ``[(start, end), ...]`` [s] instead of
+    its own ``withhold`` windows (the outage sweep: :mod:`mixnav.experiment.sweep`)."""
+    section, key = gnss_section(ds)
+    held = [(float(a), float(b)) for a, b in windows]
+    return ds.model_copy(update={key: section.model_copy(update={"withhold": held})})
+
+
 def run_ins_methods(ds: Dataset, imu: ImuData, fixes: GnssFixes, init: InitialState, reference,
                     lever: np.ndarray, source: str, make_aiding, **build) -> tuple[dict, object, float]:
     """Every ``[[methods]]`` entry on the IMU from ``init``: ``(results, aiding,

@@ -43,7 +43,8 @@ METRIC_KEYS_DOC: dict[str, str] = {
     "outages": "per GNSS outage window: start_s, end_s, unaided_end_s (the first epoch after end_s with a "
                "GNSS update: the unaided stretch ends there, it is scored up to just before it), "
                "horizontal_max_m, vertical_max_m, horizontal_rmse_m, vertical_rmse_m (over the window and "
-               "the unaided stretch after it), horizontal_final_m (at the last epoch scored)",
+               "the unaided stretch after it), horizontal_final_m (at the last epoch scored), nees_pos_mean and "
+               "nees_vel_mean (the mean NEES over the same epochs, when the filter gives covariances)",
     "horizontal_rmse_outside_outages_m": "RMS of the horizontal error over the epochs outside every "
                                          "outage window [m] (only when there are outages)",
     "vertical_rmse_outside_outages_m": "RMS of the vertical error outside every outage window [m]",
@@ -198,12 +199,17 @@ def compute_metrics(solution: pd.DataFrame,
             unaided_end = float(t[nxt[0]]) if nxt.size else float(t[-1])
             sel |= (t > b) & (t < unaided_end) if nxt.size else (t > b)
         h = hor[sel]
-        windows.append({"start_s": a, "end_s": b, "unaided_end_s": unaided_end,
-                        "horizontal_max_m": float(h.max()),
-                        "vertical_max_m": float(ver[sel].max()),
-                        "horizontal_rmse_m": _rms(h), "vertical_rmse_m": _rms(ver[sel]),
-                        # rows are in time order: the last selected row ends the window
-                        "horizontal_final_m": float(h[-1])})
+        w = {"start_s": a, "end_s": b, "unaided_end_s": unaided_end,
+             "horizontal_max_m": float(h.max()),
+             "vertical_max_m": float(ver[sel].max()),
+             "horizontal_rmse_m": _rms(h), "vertical_rmse_m": _rms(ver[sel]),
+             # rows are in time order: the last selected row ends the window
+             "horizontal_final_m": float(h[-1])}
+        for k in ("nees_pos", "nees_vel"):   # the window's consistency (declined epochs left out)
+            if k in solution.columns:
+                v = np.asarray(solution[k], dtype=float)[sel]
+                w[f"{k}_mean"] = float(np.mean(v[np.isfinite(v)])) if np.isfinite(v).any() else float("nan")
+        windows.append(w)
     m["outages"] = windows
     if windows:
         outside = np.ones(len(t), dtype=bool)

@@ -192,24 +192,27 @@ def write_outputs(out_dir: Path, title: str, header: dict, results: dict[str, Fi
                   tables: dict[str, pd.DataFrame], outages, reference: pd.DataFrame | None,
                   gnss: pd.DataFrame | None, notes=(), config_text: str | None = None, gnss_bias=None,
                   noise_truth: tuple | None = None, command: str = "run", overwrite: bool = False,
-                  protect=()) -> dict:
+                  protect=(), sweeps=()) -> dict:
     """Write solution tables, metrics.json, figures and report.html; returns the metrics.
 
     Shared by ``mixnav run`` (simulation, truth as reference) and ``mixnav
     process`` (real data, e.g. RTK fixes as reference). ``gnss_bias``: the fixes'
     systematic error (:func:`bias_metrics`); ``noise_truth``: ``(times, {channel: sd})`` of
-    the simulated GNSS noise, drawn under the sigma a VB-adaptive filter tracked. The
+    the simulated GNSS noise, drawn under the sigma a VB-adaptive filter tracked; ``sweeps``:
+    :class:`~mixnav.experiment.sweep.SweepResult` s written beside (``<kind>.csv``, a
+    ``<kind>`` block per method and the settings in metrics.json, a figure, a report
+    table). The
     folder follows the output-folder policy (:mod:`mixnav.io.outdir`): written whole into
     a temporary sibling and swapped in, a folder of another command (or with foreign
     files) refused unless ``overwrite``.
     """
     with staged_output(out_dir, command, overwrite, protect) as folder:
         return _write_outputs(folder, title, header, results, tables, outages, reference, gnss, notes,
-                              config_text, gnss_bias, noise_truth)
+                              config_text, gnss_bias, noise_truth, sweeps)
 
 
 def _write_outputs(folder, title, header, results, tables, outages, reference, gnss, notes, config_text,
-                   gnss_bias, noise_truth):
+                   gnss_bias, noise_truth, sweeps=()):
     out_dir = folder.path
     metrics = dict(header)
     metrics["mixnav_version"] = __version__
@@ -243,8 +246,17 @@ def _write_outputs(folder, title, header, results, tables, outages, reference, g
     tracked = figures.noise_sigma_figure(tables, noise_truth, outages)
     if tracked is not None:
         figs["tracked_noise_sigma"] = tracked
+    sections = []
+    for sw in sweeps:   # outage / start sweeps (mixnav.experiment.sweep)
+        atomic_write_dataframe(folder.file(f"{sw.kind}.csv"), sw.rows)
+        metrics[sw.kind] = sw.settings
+        for name, block in sw.summary.items():
+            if name in metrics["methods"]:
+                metrics["methods"][name][sw.kind] = block
+        figs[sw.kind] = sw.figure()
+        sections.append((sw.kind.replace("_", " "), sw.section_html()))
     # metrics.json last: its presence marks a complete output folder.
-    write_report(out_dir, title, metrics, figs, notes=list(notes), config_text=config_text)
+    write_report(out_dir, title, metrics, figs, notes=list(notes), config_text=config_text, sections=sections)
     atomic_write_json(out_dir / "metrics.json", metrics)
     return metrics
 

@@ -75,6 +75,52 @@ def _outage_table(methods: dict) -> str:
     return "".join(rows)
 
 
+def sweep_table(summary: dict, settings: dict) -> str:
+    """An outage sweep's distribution per method (:func:`mixnav.experiment.sweep.summarize`)."""
+    window, step = settings.get("window_s"), settings.get("step_s")
+    span = settings.get("span_s", [float("nan")] * 2)
+    head = (f"<p>{_fmt(settings.get('n_windows', ''))} windows of {_fmt(window)} s, every {_fmt(step)} s, "
+            f"{_fmt(span[0])} - {_fmt(span[1])} s; one withheld at a time (the dataset's own windows are not "
+            "withheld here). A window counts as out of band when its mean position NEES is above the "
+            "chi-square(3) 99 % point, 11.3.</p>")
+    rows = [head + "<table><tr><th>method</th><th>windows</th><th>median horiz. max [m]</th>"
+            "<th>p90 [m]</th><th>worst [m]</th><th>worst window starts [s]</th>"
+            "<th>median horiz. RMSE [m]</th><th>NEES out of band</th></tr>"]
+    for name, b in summary.items():
+        share = b.get("share_nees_above_99")
+        rows.append(f"<tr><td>{_esc(name)}</td><td>{b['n_windows']}</td>"
+                    f"<td>{_fmt(b['median_horizontal_max_m'])}</td><td>{_fmt(b['p90_horizontal_max_m'])}</td>"
+                    f"<td>{_fmt(b['worst_horizontal_max_m'])}</td><td>{_fmt(b['worst_window_start_s'])}</td>"
+                    f"<td>{_fmt(b['median_horizontal_rmse_m'])}</td>"
+                    f"<td>{'' if share is None else f'{100 * share:.0f} %'}</td></tr>")
+    rows.append("</table>")
+    skipped = settings.get("skipped_windows_no_reference") or []
+    if skipped:
+        rows.append(f"<p>{len(skipped)} windows left out: the reference has no epoch in them.</p>")
+    late = settings.get("skipped_windows_alignment") or []
+    if late:
+        rows.append(f"<p>{len(late)} windows left out: without their GNSS the alignment ends after they start.</p>")
+    return "".join(rows)
+
+
+def start_sweep_table(summary: dict, settings: dict) -> str:
+    """A start sweep's distribution per method (:func:`mixnav.experiment.sweep.summarize_starts`)."""
+    starts = ", ".join(f"{t:g}" for t in settings.get("starts_s", []))
+    span = settings.get("common_span_s", [float("nan")] * 2)
+    rows = [f"<p>The whole causal pipeline started at {_esc(starts)} s (the data before each discarded), each "
+            f"run scored from its own filter start and on the span all runs cover, {_fmt(span[0])} - "
+            f"{_fmt(span[1])} s.</p><table><tr><th>method</th><th>starts</th><th>median RMSE [m]</th>"
+            "<th>worst RMSE [m]</th><th>worst start [s]</th><th>median RMSE, common span [m]</th>"
+            "<th>worst, common span [m]</th></tr>"]
+    for name, b in summary.items():
+        rows.append(f"<tr><td>{_esc(name)}</td><td>{b['n_starts']}</td><td>{_fmt(b['median_horizontal_rmse_m'])}</td>"
+                    f"<td>{_fmt(b['worst_horizontal_rmse_m'])}</td><td>{_fmt(b['worst_start_s'])}</td>"
+                    f"<td>{_fmt(b['median_common_horizontal_rmse_m'])}</td>"
+                    f"<td>{_fmt(b['worst_common_horizontal_rmse_m'])}</td></tr>")
+    rows.append("</table>")
+    return "".join(rows)
+
+
 def write_report(out_dir: Path, title: str, metrics: dict, figures: dict[str, Figure],
                  notes: Sequence[str] = (), config_text: str | None = None,
                  sections: Sequence[tuple[str, str]] = ()) -> Path:

@@ -100,10 +100,10 @@ class VehicleInputs:
 
 def discard_before(inputs: VehicleInputs, start: float, source: str | None = None) -> VehicleInputs:
     """``inputs`` as if the recording began ``start`` [s] after the first odometry sample
-    (``[alignment] start``): the odometry increments whose interval begins before that time
-    and the pseudorange epochs at or before it are dropped; the reference is kept whole
-    (it only scores); the odometry samples before it go too. ``start = 0`` returns ``inputs`` itself. A start that leaves fewer
-    than two increments or no pseudorange epoch raises a :class:`ConfigError` naming
+    (``[alignment] start``): the odometry samples and increments before that time and the
+    pseudorange epochs at or before it are dropped; the reference is kept whole (it only
+    scores). ``start = 0`` returns ``inputs`` itself. A start that leaves fewer than two
+    increments or no pseudorange epoch raises a :class:`ConfigError` naming
     ``alignment.start``."""
     if start == 0.0:
         return inputs
@@ -209,7 +209,8 @@ def vehicle_tables(vo: VehicleOutput) -> dict[str, pd.DataFrame]:
     return {name: solution_table(res, vo.reference) for name, res in vo.results.items()}
 
 
-def write_vehicle(out_dir, vo: VehicleOutput, config_text: str | None = None, overwrite: bool = False) -> dict:
+def write_vehicle(out_dir, vo: VehicleOutput, config_text: str | None = None, overwrite: bool = False,
+                  sweeps=()) -> dict:
     """Solutions, metrics, figures (map, error over time) and report of a processed
     ``odometry-gnss`` dataset (the folder policy of :mod:`mixnav.io.outdir`)."""
     tables = vehicle_tables(vo)
@@ -225,4 +226,4 @@ def write_vehicle(out_dir, vo: VehicleOutput, config_text: str | None = None, ov
     ref = None if vo.reference is None else lla_frame(vo.reference.time, vo.reference.lla)
     return write_outputs(out_dir, f"mixnav process: {vo.dataset.dataset.name}", header, vo.results, tables, [],
                          ref, None, notes, config_text, command="process", overwrite=overwrite,
-                         protect=[vo.source, vo.data_dir])
+                         protect=[vo.source, vo.data_dir], sweeps=sweeps)

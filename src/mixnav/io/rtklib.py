@@ -63,7 +63,10 @@ class PosSolution:
         """GNSS fixes of the chosen qualities; sigmas floored at ``min_sigma`` [m].
 
         ``velocity_delay`` [s]: the velocity columns are valid at ``t - velocity_delay``
-        (:meth:`velocity_at_epochs`); they are moved to the epoch times.
+        (:func:`velocity_at_epochs`); they are moved to the epoch times, interpolated
+        between the chosen epochs only. A pipeline that withholds fixes reads them with
+        no delay and moves the velocities of the fixes it keeps
+        (:mod:`mixnav.experiment.pipelines.ins_fixes`).
         """
         m = self.select(qualities)
         if not m.any():
@@ -71,38 +74,15 @@ class PosSolution:
         sd = np.maximum(self.sd_ned[m], max(min_sigma, 1e-4))
         if self.vel_ned is None:
             return GnssFixes(time=self.time[m], lla=self.lla[m], pos_sigma=sd, source=self.source)
-        vel = self.velocity_at_epochs(velocity_delay) if velocity_delay else self.vel_ned
+        vel = velocity_at_epochs(self.time[m], self.vel_ned[m], velocity_delay)
         sv = np.maximum(self.sd_vel[m], 1e-4)
-        return GnssFixes(time=self.time[m], lla=self.lla[m], pos_sigma=sd, vel_n=vel[m],
+        return GnssFixes(time=self.time[m], lla=self.lla[m], pos_sigma=sd, vel_n=vel,
                          vel_sigma=sv, source=self.source)
 
     def velocity_at_epochs(self, delay: float) -> np.ndarray:
-        """The velocity at the epoch times when the file's velocity is valid ``delay`` [s] earlier.
-
-        RTKLIB's velocity can be an average over the interval before the epoch
-        (a backward difference of positions, or a Doppler over the interval):
-        then it is the velocity at ``t - dt/2``, not at ``t``
-        (drive-0708: 0.125 s at 4 Hz, see
-        ``benchmarks/results/drive0708_installation.md``). Each epoch's velocity
-        is interpolated linearly between the two reported velocities whose
-        validity times ``t_j - delay`` bracket it. Where they do not (the last
-        ``delay`` of the file, or a gap longer than 1.5 times the median
-        interval) the reported value is kept.
-        """
-        v = self.vel_ned
-        t = self.time
-        if v is None or delay == 0.0 or len(t) < 2:
-            return v
-        tv = t - delay                       # when each reported velocity is valid
-        j = np.searchsorted(tv, t, side="right")  # tv[j-1] <= t < tv[j]
-        ok = (j >= 1) & (j < len(t))
-        jj = np.clip(j, 1, len(t) - 1)
-        span = tv[jj] - tv[jj - 1]
-        ok &= span <= 1.5 * float(np.median(np.diff(t)))
-        w = np.where(ok, (t - tv[jj - 1]) / np.where(span > 0, span, 1.0), 0.0)[:, None]
-        out = v.copy()
-        out[ok] = ((1.0 - w) * v[jj - 1] + w * v[jj])[ok]
-        return out
+        """The velocity at the epoch times when the file's velocity is valid ``delay`` [s]
+        earlier, over every epoch of the file (:func:`velocity_at_epochs`)."""
+        return velocity_at_epochs(self.time, self.vel_ned, delay)
 
     def reference(self, qualities=(1,)) -> Trajectory:
         """Reference trajectory (position, and velocity when present) of the chosen qualities."""
@@ -111,6 +91,45 @@ class PosSolution:
             raise DataError(f"no epoch with quality in {list(qualities)} for the reference", file=self.source)
         return Trajectory(time=self.time[m], lla=self.lla[m],
                           v_n=None if self.vel_ned is None else self.vel_ned[m], q_nb=None)
+
+
+def velocity_at_epochs(time: np.ndarray, vel: np.ndarray | None, delay: float) -> np.ndarray | None:
+    """The velocity at the epoch times when each reported velocity is valid ``delay`` [s] earlier.
+
+    RTKLIB's velocity can be an average over the interval before the epoch
+    (a backward difference of positions, or a Doppler over the interval):
+    then it is the velocity at ``t - dt/2``, not at ``t``
+    (drive-0708: 0.125 s at 4 Hz, see
+    ``benchmarks/results/drive0708_installation.md``). Each epoch's velocity
+    is interpolated linearly between the two reported velocities whose
+    validity times ``t_j - delay`` bracket it. Where they do not (the last
+    ``delay`` of the record, or a gap longer than 1.5 times the median
+    interval) the reported value is kept. Only the epochs given take part: pass
+    the fixes a filter uses (after quality selection and withholding), so that a
+    fix next to a withheld window carries nothing of the withheld ones.
+
+    Parameters
+    ----------
+    time : ndarray (n,)
+        Epoch times [s], increasing.
+    vel : ndarray (n, 3) or None
+        Reported velocities [m/s]; None gives None.
+    delay : float
+        How much earlier than its epoch each velocity is valid [s].
+    """
+    v, t = vel, np.asarray(time, dtype=float)
+    if v is None or delay == 0.0 or len(t) < 2:
+        return v
+    tv = t - delay                       # when each reported velocity is valid
+    j = np.searchsorted(tv, t, side="right")  # tv[j-1] <= t < tv[j]
+    ok = (j >= 1) & (j < len(t))
+    jj = np.clip(j, 1, len(t) - 1)
+    span = tv[jj] - tv[jj - 1]
+    ok &= span <= 1.5 * float(np.median(np.diff(t)))
+    w = np.where(ok, (t - tv[jj - 1]) / np.where(span > 0, span, 1.0), 0.0)[:, None]
+    out = np.array(v, dtype=float, copy=True)
+    out[ok] = ((1.0 - w) * v[jj - 1] + w * v[jj])[ok]
+    return out
 
 
 def _header(path: Path) -> tuple[list[str], int]:

@@ -24,6 +24,7 @@ from ...data import GnssFixes, ImuData, OdometerData, Trajectory
 from ...errors import ConfigError
 from ...geodesy.frames import displace
 from ...io.readers import read_table
+from ...io.rtklib import velocity_at_epochs
 from ...sim.gnss import in_windows
 from ..aiding import AidingInputs, installation_check
 from ..ins_common import (ProcessOutput, _shift, data_checks, gnss_section, initial_state, install, read_imu,
@@ -34,17 +35,29 @@ from ..outputs import lla_frame, solution_table, write_outputs
 
 def read_gnss(ds: Dataset, folder: Path) -> GnssFixes:
     """The ``[gnss]`` fixes, by the reader registered for its format; sigmas floored at
-    ``min_sigma``, velocities dropped unless ``use_velocity``."""
+    ``min_sigma``, velocities dropped unless ``use_velocity``. The velocities are as the
+    file reports them: ``velocity_delay`` is applied by :func:`delay_velocities` to the
+    fixes kept after withholding."""
     c = ds.gnss
     if c.velocity_delay and c.format != "rtklib-pos":
         raise ConfigError(f"velocity_delay is supported for the rtklib-pos format only, not '{c.format}'",
                           key="gnss.velocity_delay")
-    fixes = read_table("gnss-fixes", c, folder, "gnss")
+    fixes = read_table("gnss-fixes", c.model_copy(update={"velocity_delay": 0.0}), folder, "gnss")
     if c.min_sigma > 0:
         fixes = replace(fixes, pos_sigma=np.maximum(fixes.pos_sigma, c.min_sigma))
     if not c.use_velocity and fixes.vel_n is not None:
         fixes = replace(fixes, vel_n=None, vel_sigma=None)
     return fixes
+
+
+def delay_velocities(fixes: GnssFixes, delay: float) -> GnssFixes:
+    """The fixes with their velocities moved to the epoch times (``delay`` [s]: how much
+    earlier each reported velocity is valid; :func:`mixnav.io.rtklib.velocity_at_epochs`),
+    interpolated between these fixes only: withhold first, so that the last fix before a
+    window carries nothing of the first withheld one."""
+    if not delay or fixes.vel_n is None:
+        return fixes
+    return replace(fixes, vel_n=velocity_at_epochs(fixes.time, fixes.vel_n, delay))
 
 
 def read_odometer(ds: Dataset, folder: Path, t0: float) -> OdometerData | None:
@@ -92,22 +105,26 @@ def run(ds: Dataset, source: str, folder: Path, inputs: Inputs, seed: int = 0) -
     imu, all_fixes, reference, read_time = inputs.imu, inputs.fixes, inputs.reference, inputs.read_time_s
     t0 = imu.start_time
     imu = _shift(imu, t0)
-    all_fixes = _shift(all_fixes, t0)
+    reported = _shift(all_fixes, t0)          # velocities as the file reports them
+    all_fixes = delay_velocities(reported, ds.gnss.velocity_delay)
     if reference is not None:
         reference = _shift(reference, t0)
     checks = data_checks(ds, source, imu, all_fixes)
     corrupt = corruption(ds, source)
-    if corrupt is not None:
+    if corrupt is not None:   # positions only: the same draw for the delayed and the reported velocities
         all_fixes, bias = _corrupt(all_fixes, corrupt, np.random.default_rng(ds.gnss.corrupt_seed))
+        reported = replace(reported, lla=all_fixes.lla)
         gnss_bias = (all_fixes.time.copy(), bias)
     else:
         gnss_bias = None
     withheld = tuple(tuple(w) for w in ds.gnss.withhold)
-    keep = ~in_windows(all_fixes.time, withheld)
-    fixes = GnssFixes(time=all_fixes.time[keep], lla=all_fixes.lla[keep], pos_sigma=all_fixes.pos_sigma[keep],
-                      vel_n=None if all_fixes.vel_n is None else all_fixes.vel_n[keep],
-                      vel_sigma=None if all_fixes.vel_sigma is None else all_fixes.vel_sigma[keep],
-                      source=all_fixes.source)
+    keep = ~in_windows(reported.time, withheld)
+    # withhold first, then move the velocities to the epochs between the kept fixes only
+    fixes = delay_velocities(
+        GnssFixes(time=reported.time[keep], lla=reported.lla[keep], pos_sigma=reported.pos_sigma[keep],
+                  vel_n=None if reported.vel_n is None else reported.vel_n[keep],
+                  vel_sigma=None if reported.vel_sigma is None else reported.vel_sigma[keep],
+                  source=reported.source), ds.gnss.velocity_delay)
     inst = ds.installation
     lever = np.asarray(inst.antenna_position, float) - np.asarray(inst.imu_position, float)
     init = initial_state(ds, imu, fixes, lever)
@@ -148,9 +165,11 @@ def truth(po: ProcessOutput) -> pd.DataFrame | None:
     return None if po.reference is None else lla_frame(po.reference.time, po.reference.lla)
 
 
-def write(out_dir: Path, po: ProcessOutput, config_text: str | None = None, overwrite: bool = False) -> dict:
+def write(out_dir: Path, po: ProcessOutput, config_text: str | None = None, overwrite: bool = False,
+          sweeps=()) -> dict:
     """Solutions, metrics (against the reference), figures and report of a processed INS dataset
-    (the folder policy of :mod:`mixnav.io.outdir`; fixes or RINEX alike)."""
+    (the folder policy of :mod:`mixnav.io.outdir`; fixes or RINEX alike), with the ``sweeps``
+    run on it (:mod:`mixnav.experiment.sweep`)."""
     withheld = withheld_windows(po)
     solutions = tables(po)
     for t in solutions.values():
@@ -190,4 +209,5 @@ def write(out_dir: Path, po: ProcessOutput, config_text: str | None = None, over
     ref = None if po.reference is None else lla_frame(po.reference.time, po.reference.lla)
     return write_outputs(out_dir, f"mixnav process: {po.dataset.dataset.name}", header, po.results, solutions,
                          withheld, ref, lla_frame(po.fixes.time, po.fixes.lla), notes, config_text, po.gnss_bias,
-                         command="process", overwrite=overwrite, protect=[po.source, po.data_dir])
+                         command="process", overwrite=overwrite, protect=[po.source, po.data_dir],
+                         sweeps=sweeps)

@@ -13,7 +13,7 @@ from ..metrics import method_metrics
 from ..outputs import lla_frame
 from ..vehicle_process import VehicleInputs, VehicleOutput, read_vehicle, run_vehicle, vehicle_tables, write_vehicle
 
-__all__ = ["load", "run", "tables", "metrics", "truth", "write"]
+__all__ = ["load", "run", "tables", "metrics", "truth", "write", "with_start"]
 
 
 def load(ds: VehicleDataset, source: str, folder: Path) -> VehicleInputs:
@@ -42,3 +42,10 @@ def truth(vo: VehicleOutput) -> pd.DataFrame | None:
 
 
 write = write_vehicle
+
+
+def with_start(ds: VehicleDataset, start: float) -> VehicleDataset:
+    """The dataset run as if its recording began ``start`` [s] after its first odometry
+    sample (``[alignment] start``: the start sweep, :mod:`mixnav.experiment.sweep`)."""
+    return ds.model_copy(update={"alignment": ds.alignment.model_copy(update={"start": float(start)})})
+
