@@ -23,7 +23,9 @@ vehicle that is already moving, from the first seconds of data only.
    keeps the start of largest likelihood. The mixture it learns (a LOS weight per
    C/N0 band, ``mu``, ``s``) is reported, for a filter that starts here to go on
    from (``los_weight_bands``, ``nlos_mean_m``, ``nlos_sd_m``), with the correlation
-   time of the line-of-sight residuals (:func:`los_correlation_time`).
+   time of the line-of-sight residuals (:func:`los_correlation_time`, each epoch's common
+   part removed: the fit's track and clock errors are the filter's states, not a
+   satellite's own correlated error).
 
 Uses data up to ``t_align`` only: a filter started at ``t_align`` from the
 returned state is causal.
@@ -111,21 +113,29 @@ def _window_rows(epochs, t0, t_align, sysmap):
     return t, epochs.sat_ecef[idx], epochs.pseudorange[idx], epochs.variance[idx], sidx, epochs.cn0[idx], key
 
 
-def los_correlation_time(t, key, e, var, g, max_time: float = 30.0) -> float:
+def los_correlation_time(t, key, e, var, g, max_time: float = 30.0, common: bool = False) -> float:
     """Correlation time [s] of the line-of-sight errors: the lag-one correlation ``rho`` of
     the standardised residuals ``e / sqrt(var)`` of rows likelier LOS than not (``g > 0.5``),
     paired satellite by satellite across consecutive epochs, turned into ``-dt / ln rho``
     (``dt`` the median epoch interval). Multipath and near-LOS diffraction keep a
     satellite's error for seconds, so a filter that takes each epoch's rows as
     independent is overconfident (:class:`~mixnav.filters.epoch_mixture.EpochMixtureEstimator`,
-    ``correlation_time``). 0 when uncorrelated (or too few pairs); at most ``max_time``."""
-    ut = np.unique(t)
+    ``correlation_time``). 0 when uncorrelated (or too few pairs); at most ``max_time``.
+
+    ``common = True``: each epoch's mean standardised residual over its LOS rows is removed
+    first. What all satellites of an epoch share (a track or clock error of the fit, which a
+    filter's states take up) is then not counted as a satellite's own correlation."""
+    ut, inv = np.unique(t, return_inverse=True)
     if len(ut) < 3:
         return 0.0
     dt = float(np.median(np.diff(ut)))
     los = g > 0.5
+    zs = e / np.sqrt(var)
+    if common:
+        n_los = np.bincount(inv, weights=los.astype(float), minlength=len(ut))
+        zs = zs - (np.bincount(inv, weights=np.where(los, zs, 0.0), minlength=len(ut)) / np.maximum(n_los, 1.0))[inv]
     o = np.lexsort((t, key))
-    k, tt, z, ok = key[o], t[o], (e / np.sqrt(var))[o], los[o]
+    k, tt, z, ok = key[o], t[o], zs[o], los[o]
     pair = (k[1:] == k[:-1]) & (np.abs(tt[1:] - tt[:-1] - dt) < 0.5 * dt) & ok[1:] & ok[:-1]
     if pair.sum() < 20:
         return 0.0
@@ -322,7 +332,7 @@ def align_track(epochs, inc, t_align: float, systems=(1, 4), refine: bool = True
         lla = ned_to_lla(np.array([[pa[0], pa[1], th[2]]]), np.array([lla_ref[0], lla_ref[1], h_ref]))[0]
         report.update(los_share=w_los, nlos_mean_m=mu, nlos_sd_m=s_n, clock_start_m=dc, log_likelihood=ll,
                       los_weight_bands=[float(v) for v in w_bands],
-                      los_correlation_time_s=los_correlation_time(tq, sat_key, e_fit, var, g_fit))
+                      los_correlation_time_s=los_correlation_time(tq, sat_key, e_fit, var, g_fit, common=True))
         # measured: the RMS of the fit's residuals over the rows likelier LOS (weighted by the
         # LOS responsibility; the delayed rows are far by construction), and the LOS rows' scale
         # on the given variances (mean g e^2 / var over mean g), both of the final fit

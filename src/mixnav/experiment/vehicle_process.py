@@ -74,13 +74,15 @@ def _reference_init(truth: Trajectory, inc, sigma_pos: float, sigma_heading: flo
 
 def mixture_handover(align: dict, cn0_edges) -> dict | None:
     """The epoch mixture's starting values from a track alignment's report: its LOS weight
-    (per C/N0 band of ``cn0_edges``), delay mean and spread and the LOS errors' correlation
+    (per C/N0 band of ``cn0_edges``), delay mean and spread, the LOS rows' scale on the given
+    variances (``los_scale``: measured on the window's fit) and the LOS errors' correlation
     time, learned on the window the filter starts after (causal). ``None`` when the report has no mixture."""
     if "nlos_mean_m" not in align:
         return None
     return {"los_weight": float(align["los_share"]), "delay_mean": float(align["nlos_mean_m"]),
             "delay_sd": float(align["nlos_sd_m"]), "los_weight_bands": list(align["los_weight_bands"]),
             "correlation_time": float(align["los_correlation_time_s"]),
+            **({"los_scale": float(align["los_scale"])} if "los_scale" in align else {}),
             "cn0_edges": [float(v) for v in cn0_edges]}
 
 
@@ -98,10 +100,10 @@ class VehicleInputs:
 
 def discard_before(inputs: VehicleInputs, start: float, source: str | None = None) -> VehicleInputs:
     """``inputs`` as if the recording began ``start`` [s] after the first odometry sample
-    (``[alignment] start``): the odometry increments whose interval begins before that time
-    and the pseudorange epochs at or before it are dropped; the reference is kept whole
-    (it only scores); the odometry samples before it go too. ``start = 0`` returns ``inputs`` itself. A start that leaves fewer
-    than two increments or no pseudorange epoch raises a :class:`ConfigError` naming
+    (``[alignment] start``): the odometry samples and increments before that time and the
+    pseudorange epochs at or before it are dropped; the reference is kept whole (it only
+    scores). ``start = 0`` returns ``inputs`` itself. A start that leaves fewer than two
+    increments or no pseudorange epoch raises a :class:`ConfigError` naming
     ``alignment.start``."""
     if start == 0.0:
         return inputs
