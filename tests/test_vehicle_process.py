@@ -96,14 +96,16 @@ def test_shipped_smartloc_runs_every_method_with_a_map(shipped):
 
 def test_the_mixture_filters_beat_the_ekf_on_smartloc(shipped):
     """The whole-epoch mixture is better than the Gaussian EKF on the urban drive, and its
-    smoothed solution better still (numbers in benchmarks/results/smartloc.md); causal, it
-    meets issue 21's targets set by libRSF's best smoother (RMSE <= 8 m, p95 <= 13 m,
-    max <= 15 m; smoothed RMSE <= 6 m)."""
+    smoothed solution better still (numbers in benchmarks/results/smartloc.md). Causal, from
+    20 s: 6.53 m RMSE, p95 10.2, max 11.5 m; the bounds are 10 % above those (a regression
+    fails) and stay below libRSF's online estimate on the same span and epochs, 8.01 m
+    (benchmarks/results/smartloc_start_sweep.md, start 0 s; its p95 12.9 and max 14.4 m are
+    over its own span from 0 s). Smoothed RMSE 5.29 m, bound 5.8 m."""
     _, metrics, _ = shipped
     m = metrics["methods"]
     em, ems = m["epoch-mixture"], m["epoch-mixture-smoothed"]
-    assert em["horizontal_rmse_m"] <= 8.0 and em["horizontal_p95_m"] <= 13.0 and em["horizontal_max_m"] <= 15.0, em
-    assert ems["horizontal_rmse_m"] <= 6.0, ems
+    assert em["horizontal_rmse_m"] <= 7.2 and em["horizontal_p95_m"] <= 11.2 and em["horizontal_max_m"] <= 12.7, em
+    assert ems["horizontal_rmse_m"] <= 5.8, ems
     assert m["epoch-mixture"]["horizontal_rmse_m"] < 0.85 * m["ekf"]["horizontal_rmse_m"]
     assert m["epoch-mixture-smoothed"]["horizontal_rmse_m"] < m["epoch-mixture"]["horizontal_rmse_m"]
     assert m["epoch-mixture-smoothed"]["horizontal_max_m"] < m["ekf"]["horizontal_max_m"]
