@@ -123,3 +123,33 @@ def test_zupt_not_used_when_the_solution_moves():
     assert ZeroAngularRate([1.0], lay, sigma=0.01, max_speed=1.0).rows(0, nav, np.zeros(3)) is None
     nav[4:7] = [0.5, 0.0, 0.0]
     assert ZeroVelocity([1.0], lay, max_speed=1.0).rows(0, nav, np.zeros(3)) is not None
+
+
+def test_nhc_suspension_pitch_expects_squat_times_speed():
+    """With ``pitch_per_accel`` the vertical row expects ``k a_x v_x`` (the body squats when
+    the car speeds up): a car pitched nose-up against its path by exactly that much gives a
+    zero innovation; without the gain (or at the first epoch) it is the plain constraint."""
+    from mixnav.attitude import dcm_to_quat
+    lay = StateLayout("plain")
+    k, a, v = np.radians(0.33), 1.5, 14.0             # 0.33 deg per m/s^2, 1.5 m/s^2, 14 m/s
+    pitch_up = k * a                                   # body x above the path
+    C_nb = euler_to_dcm(np.array([0.0, pitch_up, 0.4]))   # path level, heading 0.4 rad
+    v_n = euler_to_dcm(np.array([0.0, 0.0, 0.4])) @ np.array([v, 0.0, 0.0])
+    nav = nav_vector(dcm_to_quat(C_nb), v_n, np.array([0.7, -1.9, 300.0]))
+    times = np.array([1.0, 1.1])
+    nhc = NonHolonomic(times, lay, pitch_per_accel=k)
+    assert nhc.remembers and not NonHolonomic(times, lay).remembers
+    vx = (C_nb.T @ v_n)[0]
+    memory = (1.0, vx - a * 0.1)                       # the forward speed 0.1 s earlier
+    r = nhc.rows(1, nav, np.zeros(3), np.zeros(2), memory)
+    assert abs(r.z[1]) < 0.01 * abs(k * a * v)         # the squat explains the vertical velocity
+    plain = NonHolonomic(times, lay).rows(1, nav, np.zeros(3), np.zeros(2), memory)
+    np.testing.assert_allclose(plain.z[1], -(C_nb.T @ v_n)[2])
+    assert abs(plain.z[1]) > 0.9 * k * a * v           # the plain constraint sees it as a violation
+    np.testing.assert_allclose(nhc.rows(1, nav, np.zeros(3), np.zeros(2), None).z, plain.z)   # no memory: plain
+    np.testing.assert_allclose(nhc.rows(1, nav, np.zeros(3), np.zeros(2), (-5.0, 0.0)).z, plain.z)  # gap > 1 s
+    np.testing.assert_allclose(r.H, plain.H)
+    t0, v0 = nhc.remember(1, nav, np.zeros(3), np.zeros(2))
+    assert t0 == 1.1 and v0 == pytest.approx(vx)
+    with pytest.raises(ArgumentError, match="pitch_per_accel"):
+        NonHolonomic(times, lay, pitch_per_accel=float("nan"))

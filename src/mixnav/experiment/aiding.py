@@ -118,7 +118,7 @@ def aiding_models(method: MethodConfig, layout: StateLayout, inputs: AidingInput
         if name == "nhc":
             t = np.arange(np.floor(span[0] * c.rate) / c.rate + 1.0 / c.rate, span[1] + 1e-9, 1.0 / c.rate)
             models.append(NonHolonomic(t, layout, cfg.vehicle_mounting, cfg.vehicle_point, np.asarray(c.sigma),
-                                       c.min_speed))
+                                       c.min_speed, c.pitch_per_accel))
         elif name == "odometer":
             if inputs.odometer is None:
                 raise ConfigError("odometer aiding needs odometer samples: a dataset's aiding.odometer.file, or "

@@ -24,7 +24,11 @@ with ``C_vb = Rz(y) Ry(p) Rx(r)``::
 
     d v_v / d yaw = e_z x v_v,      d v_v / d pitch = (Rz(y) e_y) x v_v
 
-* :class:`NonHolonomic`: ``v_v[1] = v_v[2] = 0`` (two rows, kind ``nhc``).
+* :class:`NonHolonomic`: ``v_v[1] = v_v[2] = 0`` (two rows, kind ``nhc``); with a
+  suspension pitch gain ``k`` the vertical row expects ``v_v[2] = k a_x v_v[0]``
+  (the body squats when the car accelerates and dives when it brakes: its x axis
+  pitches by ``k a_x`` against the path), ``a_x`` the forward acceleration from the
+  nominal forward velocity at this and the model's previous epoch.
 * :class:`Odometer`: ``speed = (1 + k) v_v[0]`` with ``k`` the odometer scale
   error (auxiliary block ``odometer_scale`` when estimated; kind ``odometer``).
 * :class:`ZeroVelocity` (ZUPT): ``v_n = 0`` at rest (three rows, kind ``zupt``).
@@ -138,13 +142,28 @@ class NonHolonomic(VehicleVelocity):
     min_speed : float
         No rows while the nominal speed is below this [m/s] (the constraint
         still holds at rest, but a ZUPT says more there); 0 uses every epoch.
+    pitch_per_accel : float
+        Suspension pitch gain ``k`` [rad per m/s^2]: the vehicle frame's x axis
+        pitches up by ``k a_x`` against the path when the car accelerates forward at
+        ``a_x`` (squat; dive when braking), so the vertical row expects
+        ``v_v[2] = k a_x v_v[0]`` instead of 0. ``a_x`` is the change of the nominal
+        forward velocity since the model's previous epoch (none at the first epoch
+        or after a gap of more than 1 s: then 0). 0 (default): the plain constraint.
     """
 
     kinds = ("nhc",)
+    #: longest gap [s] between two epochs over which the forward acceleration is differenced
+    ACCEL_MAX_GAP = 1.0
 
     def __init__(self, times, layout, mounting=(0.0, 0.0, 0.0), lever_arm=(0.0, 0.0, 0.0),
-                 sigma=(0.1, 0.1), min_speed: float = 0.0):
+                 sigma=(0.1, 0.1), min_speed: float = 0.0, pitch_per_accel: float = 0.0):
         super().__init__(layout, mounting, lever_arm)
+        if not np.isfinite(pitch_per_accel):
+            raise ArgumentError(f"must be finite, got {pitch_per_accel!r}", argument="pitch_per_accel")
+        self.pitch_per_accel = float(pitch_per_accel)
+        # the forward acceleration comes from the previous epoch's forward velocity (the
+        # engine's memory); without the gain the model stays memoryless, as before
+        self.remembers = self.pitch_per_accel != 0.0
         self._times = _times(times, "times")
         s = np.broadcast_to(np.asarray(sigma, dtype=float), (2,))
         for k in range(2):
@@ -164,7 +183,19 @@ class NonHolonomic(VehicleVelocity):
         if self.min_speed > 0 and np.dot(nav[4:7], nav[4:7]) < self.min_speed ** 2:
             return None
         v_v, H = self.vehicle_velocity(nav, w_b, aux)
-        return Rows(-v_v[1:3], H[1:3].copy(), self.r.copy(), self._kinds, self._channels)
+        z = -v_v[1:3]
+        if self.pitch_per_accel != 0.0 and memory is not None:
+            t_prev, vx_prev = memory
+            dt = self._times[i] - t_prev
+            if 0.0 < dt <= self.ACCEL_MAX_GAP:
+                z[1] += self.pitch_per_accel * (v_v[0] - vx_prev) / dt * v_v[0]
+        return Rows(z, H[1:3].copy(), self.r.copy(), self._kinds, self._channels)
+
+    def remember(self, i, nav, w_b, clock):
+        """The epoch's time and nominal forward velocity (after its update), for the
+        forward acceleration at the next epoch (only with ``pitch_per_accel``)."""
+        v_v, _ = self.vehicle_velocity(nav, w_b)
+        return (float(self._times[i]), float(v_v[0]))
 
 
 class Odometer(VehicleVelocity):
