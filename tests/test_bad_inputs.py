@@ -385,6 +385,20 @@ def test_real_truncated_tag_refused(box):
 
 
 @needs_drive
+def test_real_tag_truncated_slightly_refused(box):
+    """A record-aligned cut of 0.8 % of the tag (4.4 s) was within the old 1 % tolerance: the IMU
+    time was stretched and the run ended normally (72 m RMSE instead of 5 m)."""
+    d = _drive_copy(box)
+    b = (d / "imu_1934.csv.tag").read_bytes()
+    n = (len(b) - 76) // 8
+    (d / "imu_1934.csv.tag").write_bytes(b[:76 + 8 * int(n * 0.992)])
+    box.snapshot()
+    code, out = invoke("process", "drive-0708", "--data", d, "--out", box.out, cwd=box.root)
+    expect_error(code, out, "imu_1934.csv.tag", "truncated", "548.590 s")
+    box.check()
+
+
+@needs_drive
 def test_real_gyro_spike_refused_with_line(box):
     d = _drive_copy(box)
     lines = (d / "imu_1934.csv").read_text().splitlines(keepends=True)
