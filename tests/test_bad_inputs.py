@@ -399,6 +399,40 @@ def test_real_tag_truncated_slightly_refused(box):
 
 
 @needs_drive
+@pytest.mark.parametrize("cut, where", [
+    (lambda s: s[:-4], "the last line (line 54860)"),          # the tick cut: "810496" -> "810"
+    (lambda s: s[8:], "the first line (line 1)"),               # six fields left
+    (lambda s: s[8:-4], "the first line (line 1) and the last line (line 54860)"),
+], ids=["last-tick-cut", "first", "both"])
+def test_real_partial_edge_lines_skipped_and_counted(box, cut, where):
+    """The data README: the first and last lines may be partial, skip them. A last line cut in its
+    tick was read as whole and refused as "ticks do not increase"."""
+    d = _drive_copy(box)
+    p = d / "imu_1934.csv"
+    p.write_text(cut(p.read_text()))
+    box.snapshot()
+    code, out = invoke("process", "drive-0708", "--data", d, "--out", box.out, cwd=box.root)
+    assert code == 0, out
+    flat = " ".join(out.split())
+    assert "imu_1934.csv" in flat and where in flat and "partial" in flat, out
+    m = json.loads((box.out / "metrics.json").read_text())
+    assert m["imu_partial_lines_skipped"] == where.count("line (")
+    box.check()
+
+
+@needs_drive
+def test_real_partial_line_inside_refused_with_line(box):
+    d = _drive_copy(box)
+    lines = (d / "imu_1934.csv").read_text().splitlines(keepends=True)
+    lines[3000] = lines[3000][:12] + "\n"
+    (d / "imu_1934.csv").write_text("".join(lines))
+    box.snapshot()
+    code, out = invoke("process", "drive-0708", "--data", d, "--out", box.out, cwd=box.root)
+    expect_error(code, out, "imu_1934.csv", "line 3001", "partial line inside")
+    box.check()
+
+
+@needs_drive
 def test_real_gyro_spike_refused_with_line(box):
     d = _drive_copy(box)
     lines = (d / "imu_1934.csv").read_text().splitlines(keepends=True)

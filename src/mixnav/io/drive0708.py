@@ -15,6 +15,7 @@ then the logger's latency offset (-0.125 s for this recording) is added.
 from __future__ import annotations
 
 import struct
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -23,7 +24,7 @@ import numpy as np
 from ..data import ImuData
 from ..errors import DataError
 from ..units import DEG
-from .imu_checks import G0, check_plausible, rates_to_increments
+from .imu_checks import G0, DataWarning, check_plausible, rates_to_increments
 from .registry import ReadOptions, register_reader
 from .tables import check_times, read_numeric
 
@@ -88,13 +89,30 @@ def read_drive_imu(csv_path, tag_path=None, time_offset: float = -0.125, max_gap
     tag = read_time_tag(tag_path or Path(str(csv_path) + ".tag"))
     # The first and last lines may be partial: drop them, but use their
     # ticks (when readable) as the span that the tag's start and end cover.
-    tab = read_numeric(csv_path, 7, delimiter=",", drop_edges=True, what="IMU")
-    text = [ln for ln in csv_path.read_text(encoding="utf-8", errors="replace").splitlines() if ln.strip()]
+    try:
+        tab = read_numeric(csv_path, 7, delimiter=",", drop_edges=True, what="IMU")
+    except DataError as exc:   # only the edges may be partial: one inside is a damaged file
+        if exc.line is None or not exc.message.startswith("expected 7 columns"):
+            raise
+        raise DataError(f"a partial line inside the file ({exc.message}); only the first and the last line "
+                        "may be partial", file=exc.file, line=exc.line) from None
+    numbered = [(i, ln) for i, ln in enumerate(csv_path.read_text(encoding="utf-8", errors="replace")
+                                               .splitlines(), start=1) if ln.strip()]
     ticks = tab.values[:, 6]
     step = float(np.median(np.diff(ticks))) if len(ticks) > 1 else 10.0
-    # a cut edge line has lost its tick: it was one sample before/after its neighbour
-    first_tick = _tick(text[0], ticks[0] - step)
-    last_tick = _tick(text[-1], ticks[-1] + step)
+    # a cut edge line has lost its tick (fewer fields, or digits cut off the last one): it was
+    # one sample before/after its neighbour
+    first_tick = _tick(numbered[0][1], ticks[0], before=True)
+    last_tick = _tick(numbered[-1][1], ticks[-1], before=False)
+    partial = [(i, which) for (i, _), tk, which in ((numbered[0], first_tick, "first"), (numbered[-1], last_tick, "last"))
+               if tk is None]
+    if partial:
+        warnings.warn(f"{csv_path}: {' and '.join(f'the {w} line (line {i})' for i, w in partial)} "
+                      f"{'is' if len(partial) == 1 else 'are'} partial: skipped as the format says, the tick taken "
+                      "one sample from its neighbour's (metrics.json: imu_partial_lines_skipped)",
+                      DataWarning, stacklevel=2)
+    first_tick = ticks[0] - step if first_tick is None else first_tick
+    last_tick = ticks[-1] + step if last_tick is None else last_tick
     check_times(ticks, tab.lines, str(csv_path), what="IMU tick")
     span = last_tick - first_tick
     if span <= 0:
@@ -116,18 +134,21 @@ def read_drive_imu(csv_path, tag_path=None, time_offset: float = -0.125, max_gap
     gaps = check_times(t, tab.lines, str(csv_path), max_gap=max_gap, gap_action=gap_action, what="IMU").gaps
     f = tab.values[:, 0:3] * G0
     w = tab.values[:, 3:6] * DEG
-    imu = replace(rates_to_increments(t, w, f, source=str(csv_path)), gaps=gaps)
+    imu = replace(rates_to_increments(t, w, f, source=str(csv_path)), gaps=gaps, partial_lines=len(partial))
     return check_plausible(imu, "deg/s", "g", tab.lines[1:], spike_action)
 
 
-def _tick(line: str, fallback: float) -> float:
-    """The tick of an edge line when the line is whole (7 numbers), else ``fallback``."""
+def _tick(line: str, neighbour: float, before: bool) -> float | None:
+    """The tick of an edge line when the line is whole (7 numbers, the tick before/after its
+    neighbour's), else None (a partial line: a cut last line keeps a prefix of its tick)."""
     parts = line.strip().split(",")
     try:
         vals = [float(x) for x in parts]
     except ValueError:
-        return fallback
-    return vals[6] if len(vals) == 7 else fallback
+        return None
+    if len(vals) != 7 or not ((vals[6] < neighbour) if before else (vals[6] > neighbour)):
+        return None
+    return vals[6]
 
 
 @register_reader("imu", "drive-0708")
