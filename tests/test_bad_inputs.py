@@ -151,6 +151,8 @@ def refuse_run(box, text, *names, name="sc.toml"):
     ({'states = 15': 'states = 16'}, "methods[0].states"),
     ({'rate = "100 Hz"': 'rate = "0 Hz"'}, "imu.rate"),
     ({'rate = "100 Hz"': 'rate = "1e6 Hz"'}, "imu.rate"),
+    ({'rate = "100 Hz"': 'rate = "0.5 Hz"'}, "imu.rate"),     # was blamed on gnss.rate
+    ({'rate = "100 Hz"': 'rate = "1e-9 Hz"'}, "imu.rate"),
     ({'"26 s" }': '"1e9 s" }'}, "trajectory.segments"),
     ({'angle = "90 deg"': 'angle = "1e9 deg"'}, "trajectory.segments[2]"),
     ({'lever_arm = ["0.5 m"': 'lever_arm = ["1e9 m"'}, "gnss.lever_arm"),
