@@ -202,7 +202,9 @@ def _dataset(**repl) -> str:
     ({'latitude = "': 'latitude = "91 deg" #'}, "reference_point"),
     ({'height = "': 'height = "-1e5 m" #'}, "reference_point"),
     ({'[raw_gnss]': '[raw_gnss]\nunknown_key = 1'}, "raw_gnss.unknown_key"),
-], ids=["lat-1e300", "lat-91", "height", "unknown-key"])
+    ({'elevation_mask = "10 deg"': 'elevation_mask = "100 deg"'}, "raw_gnss.elevation_mask"),   # was "no epoch
+    ({'elevation_mask = "10 deg"': 'elevation_mask = "90 deg"'}, "raw_gnss.elevation_mask"),    # could be solved"
+], ids=["lat-1e300", "lat-91", "height", "unknown-key", "mask-100", "mask-90"])
 def test_dataset_values_refused_with_key(box, repl, key):
     p = box.write("ds.toml", _dataset(**repl))
     box.snapshot()
