@@ -32,6 +32,7 @@ runner = CliRunner()
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 DRIVE = DATA_DIR / "drive-0708"
 ANDROID = DATA_DIR / "android-static"
+SMARTLOC = DATA_DIR / "smartloc-berlin"
 
 # ----------------------------------------------------------------------------- helpers
 
@@ -366,6 +367,7 @@ def test_data_withhold_outside_the_data(box):
 
 needs_drive = pytest.mark.skipif(not DRIVE.is_dir(), reason="drive-0708 data not found")
 needs_android = pytest.mark.skipif(not ANDROID.is_dir(), reason="android-static data not found")
+needs_smartloc = pytest.mark.skipif(not SMARTLOC.is_dir(), reason="smartloc-berlin data not found")
 
 
 def _drive_copy(box) -> Path:
@@ -482,6 +484,35 @@ def test_real_android_duplicated_epoch_refused(box):
     box.snapshot()
     code, out = invoke("process", "android-static", "--data", d, "--out", box.out, cwd=box.root)
     expect_error(code, out, log.name, f"line {k + 2}", "twice")
+    box.check()
+
+
+def _smartloc_copy(box) -> Path:
+    d = box.inp / "smartloc"
+    d.mkdir()
+    for f in SMARTLOC.iterdir():
+        if f.is_file():
+            shutil.copy(f, d / f.name)
+    return d
+
+
+@needs_smartloc
+@pytest.mark.parametrize("value, words", [
+    ("nan", ["not finite"]),
+    ("", ["empty", "non-finite"]),          # a NaN written as nothing (pandas): was "has 11 fields, found 10"
+], ids=["nan", "nan-as-nothing"])
+def test_real_smartloc_nan_pseudorange_named(box, value, words):
+    d = _smartloc_copy(box)
+    inp = d / "Berlin_Potsdamer_Platz_Input.txt"
+    lines = inp.read_text().splitlines(keepends=True)
+    k = next(i for i, ln in enumerate(lines) if ln.startswith("pseudorange3"))
+    toks = lines[k].split(" ")
+    toks[2] = value                              # the pseudorange (column 3)
+    lines[k] = " ".join(toks)
+    inp.write_text("".join(lines))
+    box.snapshot()
+    code, out = invoke("process", "smartloc-berlin", "--data", d, "--out", box.out, cwd=box.root)
+    expect_error(code, out, inp.name, f"line {k + 1}", "column 3", *words)
     box.check()
 
 
