@@ -168,6 +168,29 @@ def test_config_duplicate_method_names(box):
     refuse_run(box, text, "methods", "unique")
 
 
+@pytest.mark.parametrize("estimator", ["pf", "gmpf"])
+def test_config_particles_beyond_memory_name_the_key(box, estimator):
+    """A particle cloud larger than the memory available ended in "out of memory" naming no setting;
+    refused when the filter is built, with the estimate (particles x (4 x states + 28) x 8 bytes)."""
+    text = TINY + (f'\n[[methods]]\nname = "{estimator}"\ntype = "loose-ekf"\nestimator = "{estimator}"\n'
+                   "options = { particles = 1000000000000 }\n")
+    refuse_run(box, text, "methods[1].options.particles", "1000000000000 particles of 15 states", "GB",
+               "memory available")
+
+
+def test_particle_memory_estimate_and_check(monkeypatch):
+    from mixnav.errors import ArgumentError
+    from mixnav.filters import particle
+    assert particle.particle_memory(1000, 15) == 1000 * 8 * (4 * 15 + 28)
+    lay = type("M", (), {"layout": type("L", (), {"n": 15})()})()
+    monkeypatch.setattr(particle, "available_memory", lambda: 10 ** 6)
+    particle.check_particle_memory(1000, lay)                    # 0.7 MB: fits
+    with pytest.raises(ArgumentError, match="particles of 15 states"):
+        particle.check_particle_memory(2000, lay)
+    monkeypatch.setattr(particle, "available_memory", lambda: None)
+    particle.check_particle_memory(10 ** 12, lay)                # the system does not say: no check
+
+
 @pytest.mark.parametrize("content, words", [
     (b"\x00\x01\x02binary\xff", ["binary", "line 1"]),
     ("[scenario]\nname = \"caf\xe9\"\n".encode("latin-1"), ["UTF-8", "line 2"]),
