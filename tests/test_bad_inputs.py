@@ -539,6 +539,30 @@ def test_real_smartloc_nan_pseudorange_named(box, value, words):
     box.check()
 
 
+@needs_smartloc
+@pytest.mark.parametrize("drop, words, key", [
+    (lambda t: t > 150.0, ["the odometry ends at t = 150.0 s", "282.8 s"], "pseudorange_epochs_after_odometry"),
+    (lambda t: 100.0 < t < 160.0, ["hole", "from t = 100.0 s", "holds the last speed"], "odometry_gaps_s"),
+], ids=["odometry-stops", "odometry-hole"])
+def test_real_smartloc_odometry_stops_while_pseudoranges_go_on(box, drop, words, key):
+    """The dead reckoning held the last odometry across a hole, or the solution ended with the
+    odometry while the pseudoranges went on, without a word."""
+    d = _smartloc_copy(box)
+    inp = d / "Berlin_Potsdamer_Platz_Input.txt"
+    lines = inp.read_text().splitlines(keepends=True)
+    inp.write_text("".join(ln for ln in lines if not (ln.startswith("odom3") and drop(float(ln.split()[1])))))
+    box.snapshot()
+    code, out = invoke("process", "smartloc-berlin", "--data", d, "--out", box.out, "--no-sweeps", cwd=box.root)
+    assert code == 0, out
+    flat = " ".join(out.split())
+    assert "warning" in flat and inp.name in flat, out
+    for w in words:
+        assert w in flat, out
+    m = json.loads((box.out / "metrics.json").read_text())
+    assert m[key]
+    box.check()
+
+
 # ----------------------------------------------------------------------------- units
 
 @pytest.mark.parametrize("repl, key", [
