@@ -650,6 +650,49 @@ def test_cli_diagnose_misuse(box, extra, words):
     box.check()
 
 
+def _documented_examples():
+    """The rows of docs/validation.md's "Examples the tests feed to the validator" table."""
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "validation.md").read_text(encoding="utf-8")
+    part = doc.split("## Examples the tests feed to the validator", 1)[1].split("\n## ", 1)[0]
+    rows = [[c.strip() for c in ln.strip().strip("|").split("|")] for ln in part.splitlines()
+            if ln.startswith("| ") and not ln.startswith("| input") and not ln.startswith("| ---")]
+    assert len(rows) >= 10, rows
+    return rows
+
+
+@pytest.mark.parametrize("what, example, outcome", _documented_examples(), ids=lambda v: str(v)[:24])
+def test_documented_examples_agree_with_validation(box, what, example, outcome):
+    """Every documented example of accepted (and refused) input is fed to the validator: method
+    names with non-ASCII letters were "letters" in the docs and refused by the validation."""
+    assert outcome in ("accepted", "refused")
+    if what == "method name":
+        name = example.strip("`")
+        p = box.write("sc.toml", tiny(**{'name = "ekf"': f'name = "{name}"'}))
+        from mixnav.config.loader import load_scenario
+        from mixnav.errors import ConfigError
+        if outcome == "accepted":
+            load_scenario(str(p))
+        else:
+            with pytest.raises(ConfigError) as ei:
+                load_scenario(str(p))
+            assert ei.value.key == "methods[0].name" and "ASCII" in ei.value.message
+        return
+    m = re.match(r"`diagnose --max-lag`, (\d+) values", what)
+    assert m, what
+    p = _series(box, int(m.group(1)))
+    lag = [] if example.startswith("(") else ["--max-lag", example.strip("`")]
+    box.snapshot()
+    code, out = invoke("diagnose", p, "--column", "res", *lag, "--out", box.out, cwd=box.root)
+    if outcome == "accepted":
+        assert code == 0, out
+        if not lag:   # the default, clipped
+            assert json.loads((box.out / "diagnostics.json").read_text())["acf"]["max_lag"] == int(m.group(1)) - 1
+    else:
+        expect_error(code, out, "--max-lag", m.group(1))
+        assert not box.out.exists()
+    box.check()
+
+
 @pytest.mark.parametrize("make, words", [
     (lambda b: b.write("afile", "x"), ["--out", "not a folder"]),
     (lambda b: "bad\x00name", ["--out", "null byte"]),
