@@ -481,14 +481,16 @@ def test_real_gnss_hole_reported(box):
     lines = (d / "gnss_1934_sf.pos").read_text().splitlines(keepends=True)
     head = [ln for ln in lines if ln.startswith("%")]
     data = [ln for ln in lines if not ln.startswith("%")]
-    data = data[:1800] + data[2040:]            # 60 s of 4 Hz epochs removed
+    data = data[:1800] + data[2040:]            # 60 s of 4 Hz epochs removed, outside the withheld windows
     (d / "gnss_1934_sf.pos").write_text("".join(head + data))
     box.snapshot()
     code, out = invoke("process", "drive-0708", "--data", d, "--out", box.out, cwd=box.root)
     assert code == 0, out
     m = json.loads((box.out / "metrics.json").read_text())
     assert len(m["gnss_gaps_s"]) == 1 and m["gnss_gaps_s"][0][1] - m["gnss_gaps_s"][0][0] > 59
-    assert "gnss.max_gap" in out
+    assert not any(a <= m["gnss_gaps_s"][0][0] <= b for a, b in m["gnss_withheld_s"])
+    flat = " ".join(out.split())
+    assert "warning" in flat and "gnss_1934_sf.pos" in flat and "gnss.max_gap" in flat, out
     box.check()
 
 
