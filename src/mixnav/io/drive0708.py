@@ -30,9 +30,9 @@ from .tables import check_times, read_numeric
 
 _HEADER = 60
 _FIXED = 16  # tick, seconds, fraction
-#: largest difference between the tag's span (first to last pair) and the IMU tick counter's:
-#: an absolute part [s] (a sample or two of logging jitter) plus a relative part (the two clocks'
-#: drift, 2e-4 = 200 ppm; drive-0708: 10 ms over 549 s). A record-aligned truncation of the tag
+#: largest difference between the tag's span and the IMU tick counter's (beyond the tag's lead, its
+#: first pair's tick): an absolute part [s] (logging jitter) plus a relative part (the two clocks'
+#: drift, 2e-4 = 200 ppm; drive-0708: 141 ms over 549 s, of which the lead 131 ms). A record-aligned truncation of the tag
 #: beyond it would stretch every IMU time stamp (0.8 % of drive-0708's tag: 72 m RMSE instead of 5 m).
 TAG_SPAN_TOLERANCE_S = 0.1
 TAG_SPAN_DRIFT = 2e-4
@@ -119,17 +119,19 @@ def read_drive_imu(csv_path, tag_path=None, time_offset: float = -0.125, max_gap
         raise DataError("IMU ticks do not increase from the first to the last line", file=str(csv_path))
     if len(ticks) < 2:
         raise DataError("need at least two IMU samples", file=str(csv_path))
-    # time continuity: the tag's span (its first pair to its last) and the IMU's own millisecond
-    # counter must agree (a truncated or foreign tag would stretch or squeeze every IMU time stamp)
+    # time continuity: the tag's span (start to its last pair) and the IMU's own millisecond
+    # counter must agree (a truncated or foreign tag would stretch or squeeze every IMU time stamp);
+    # the tag may begin up to its first pair's tick before the data (drive-0708: 131 ms)
     tag_file = tag_path or Path(str(csv_path) + ".tag")
-    tag_span, tick_span = tag.end - tag.start - tag.first, span / 1000.0
+    tag_span, tick_span = tag.end - tag.start, span / 1000.0
     allowed = TAG_SPAN_TOLERANCE_S + TAG_SPAN_DRIFT * tick_span
-    if not abs(tag_span - tick_span) <= allowed:
-        raise DataError(f"the time-tag file spans {tag_span:.3f} s (its last tick {tag.end - tag.start:.3f} s) but "
-                        f"the IMU's tick counter in {csv_path.name} {tick_span:.3f} s (its first tick to its last): "
-                        f"one of the two files is truncated, or the tag belongs to another recording (they must "
-                        f"agree within {allowed:.3f} s: {TAG_SPAN_TOLERANCE_S:g} s + {TAG_SPAN_DRIFT * 1e6:g} ppm)",
-                        file=str(tag_file))
+    if not tick_span - allowed <= tag_span <= tick_span + tag.first + allowed:
+        raise DataError(f"the time-tag file spans {tag_span:.3f} s (to its last tick) but the IMU's tick counter in "
+                        f"{csv_path.name} {tick_span:.3f} s (its first tick to its last): one of the two files is "
+                        f"truncated, or the tag belongs to another recording (the tag must span "
+                        f"{tick_span - allowed:.3f}..{tick_span + tag.first + allowed:.3f} s: the ticks' span, plus "
+                        f"its first pair's lead of {tag.first:.3f} s, within {TAG_SPAN_TOLERANCE_S:g} s + "
+                        f"{TAG_SPAN_DRIFT * 1e6:g} ppm)", file=str(tag_file))
     t = tag.start + (ticks - first_tick) / span * (tag.end - tag.start) + time_offset
     gaps = check_times(t, tab.lines, str(csv_path), max_gap=max_gap, gap_action=gap_action, what="IMU").gaps
     f = tab.values[:, 0:3] * G0
