@@ -275,3 +275,19 @@ def test_a_phone_start_sweep_restarts_the_filters(tmp_path):
     with pytest.raises(ConfigError) as e:
         mixnav.process_dataset(str(bad))
     assert "motion.start" in str(e.value)
+
+
+def test_an_impossible_evaluation_key_is_named_as_the_key(tmp_path):
+    """A span read from [evaluation] that the recording cannot hold is said as
+    evaluation.sweep_span of the file, not as an option the user did not give."""
+    data = _needs_drive()
+    text = (SHIPPED / "drive-0708.toml").read_text().replace('data_dir = "../shared/data/drive-0708"',
+                                                              f'data_dir = "{data}"')
+    p = tmp_path / "late.toml"
+    p.write_text(text + '\n[evaluation]\noutage_sweep = "30 s"\nsweep_span = ["60 s", "900 s"]\n')
+    with pytest.raises(ConfigError) as e:
+        run_outage_sweep(str(p), workers=1)
+    assert e.value.key == "evaluation.sweep_span" and str(p.name) in str(e.value)
+    with pytest.raises(ArgumentError) as e:                 # given as an argument: said as the argument
+        run_outage_sweep(str(p), span=("60 s", "900 s"), workers=1)
+    assert e.value.argument == "span"

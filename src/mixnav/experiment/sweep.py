@@ -229,6 +229,42 @@ def _dataset_ref(dataset) -> str:
     return str(p.resolve()) if p.suffix == ".toml" or p.exists() else str(dataset)
 
 
+def _evaluation_keys(dataset, given: dict) -> tuple[dict, str]:
+    """The ``[evaluation]`` keys an argument left as None takes its value from (argument ->
+    ``evaluation.<key>``), and the dataset's source: an impossible value read from the file is
+    said as its key, not as an argument the caller did not give."""
+    from ..config import load_dataset
+    ds, source, _ = load_dataset(_dataset_ref(dataset))
+    ev = getattr(ds, "evaluation", None)
+    keys = {"window": "outage_sweep", "step": "start_sweep" if "window" not in given else "sweep_step",
+            "span": "sweep_span"}
+    return {a: f"evaluation.{k}" for a, k in keys.items()
+            if a in given and given[a] is None and ev is not None and getattr(ev, k) is not None}, source
+
+
+def _said_as_keys(fn):
+    """Run a sweep; an ArgumentError about a value taken from ``[evaluation]`` becomes a
+    ConfigError naming the file and the key."""
+    import functools
+    import inspect
+    sig = inspect.signature(fn)
+
+    @functools.wraps(fn)
+    def run(*args, **kwargs):
+        bound = sig.bind(*args, **kwargs)
+        bound.apply_defaults()
+        given = {k: bound.arguments[k] for k in ("window", "step", "span") if k in bound.arguments}
+        keys, source = _evaluation_keys(bound.arguments["dataset"], given)
+        try:
+            return fn(*args, **kwargs)
+        except ArgumentError as exc:
+            if exc.argument in keys:
+                raise ConfigError(exc.message, file=source, key=keys[exc.argument]) from None
+            raise
+    return run
+
+
+@_said_as_keys
 def run_outage_sweep(dataset, window=None, step=None, span=None, *, data=None, workers: int | None = None,
                      scheduler: str | None = None, progress: bool = False) -> SweepResult:
     """:func:`outage_sweep` with its settings and skipped windows (:class:`SweepResult`)."""
@@ -458,6 +494,7 @@ def _start_run(dataset: str, data: str | None, start: float) -> dict:
     return {"start": float(start), "runs": runs}
 
 
+@_said_as_keys
 def run_start_sweep(dataset, step=None, span=None, *, data=None, workers: int | None = None,
                     scheduler: str | None = None, progress: bool = False) -> SweepResult:
     """:func:`start_sweep` with its settings (:class:`SweepResult`)."""
