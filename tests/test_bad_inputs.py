@@ -32,6 +32,7 @@ runner = CliRunner()
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 DRIVE = DATA_DIR / "drive-0708"
 ANDROID = DATA_DIR / "android-static"
+SMARTLOC = DATA_DIR / "smartloc-berlin"
 
 # ----------------------------------------------------------------------------- helpers
 
@@ -151,6 +152,8 @@ def refuse_run(box, text, *names, name="sc.toml"):
     ({'states = 15': 'states = 16'}, "methods[0].states"),
     ({'rate = "100 Hz"': 'rate = "0 Hz"'}, "imu.rate"),
     ({'rate = "100 Hz"': 'rate = "1e6 Hz"'}, "imu.rate"),
+    ({'rate = "100 Hz"': 'rate = "0.5 Hz"'}, "imu.rate"),     # was blamed on gnss.rate
+    ({'rate = "100 Hz"': 'rate = "1e-9 Hz"'}, "imu.rate"),
     ({'"26 s" }': '"1e9 s" }'}, "trajectory.segments"),
     ({'angle = "90 deg"': 'angle = "1e9 deg"'}, "trajectory.segments[2]"),
     ({'lever_arm = ["0.5 m"': 'lever_arm = ["1e9 m"'}, "gnss.lever_arm"),
@@ -163,6 +166,29 @@ def test_config_values_refused_with_key(box, repl, key):
 def test_config_duplicate_method_names(box):
     text = TINY + '\n[[methods]]\nname = "ekf"\ntype = "loose-ekf"\n'
     refuse_run(box, text, "methods", "unique")
+
+
+@pytest.mark.parametrize("estimator", ["pf", "gmpf"])
+def test_config_particles_beyond_memory_name_the_key(box, estimator):
+    """A particle cloud larger than the memory available ended in "out of memory" naming no setting;
+    refused when the filter is built, with the estimate (particles x (4 x states + 28) x 8 bytes)."""
+    text = TINY + (f'\n[[methods]]\nname = "{estimator}"\ntype = "loose-ekf"\nestimator = "{estimator}"\n'
+                   "options = { particles = 1000000000000 }\n")
+    refuse_run(box, text, "methods[1].options.particles", "1000000000000 particles of 15 states", "GB",
+               "memory available")
+
+
+def test_particle_memory_estimate_and_check(monkeypatch):
+    from mixnav.errors import ArgumentError
+    from mixnav.filters import particle
+    assert particle.particle_memory(1000, 15) == 1000 * 8 * (4 * 15 + 28)
+    lay = type("M", (), {"layout": type("L", (), {"n": 15})()})()
+    monkeypatch.setattr(particle, "available_memory", lambda: 10 ** 6)
+    particle.check_particle_memory(1000, lay)                    # 0.7 MB: fits
+    with pytest.raises(ArgumentError, match="particles of 15 states"):
+        particle.check_particle_memory(2000, lay)
+    monkeypatch.setattr(particle, "available_memory", lambda: None)
+    particle.check_particle_memory(10 ** 12, lay)                # the system does not say: no check
 
 
 @pytest.mark.parametrize("content, words", [
@@ -200,7 +226,9 @@ def _dataset(**repl) -> str:
     ({'latitude = "': 'latitude = "91 deg" #'}, "reference_point"),
     ({'height = "': 'height = "-1e5 m" #'}, "reference_point"),
     ({'[raw_gnss]': '[raw_gnss]\nunknown_key = 1'}, "raw_gnss.unknown_key"),
-], ids=["lat-1e300", "lat-91", "height", "unknown-key"])
+    ({'elevation_mask = "10 deg"': 'elevation_mask = "100 deg"'}, "raw_gnss.elevation_mask"),   # was "no epoch
+    ({'elevation_mask = "10 deg"': 'elevation_mask = "90 deg"'}, "raw_gnss.elevation_mask"),    # could be solved"
+], ids=["lat-1e300", "lat-91", "height", "unknown-key", "mask-100", "mask-90"])
 def test_dataset_values_refused_with_key(box, repl, key):
     p = box.write("ds.toml", _dataset(**repl))
     box.snapshot()
@@ -362,6 +390,7 @@ def test_data_withhold_outside_the_data(box):
 
 needs_drive = pytest.mark.skipif(not DRIVE.is_dir(), reason="drive-0708 data not found")
 needs_android = pytest.mark.skipif(not ANDROID.is_dir(), reason="android-static data not found")
+needs_smartloc = pytest.mark.skipif(not SMARTLOC.is_dir(), reason="smartloc-berlin data not found")
 
 
 def _drive_copy(box) -> Path:
@@ -385,6 +414,54 @@ def test_real_truncated_tag_refused(box):
 
 
 @needs_drive
+def test_real_tag_truncated_slightly_refused(box):
+    """A record-aligned cut of 0.8 % of the tag (4.4 s) was within the old 1 % tolerance: the IMU
+    time was stretched and the run ended normally (72 m RMSE instead of 5 m)."""
+    d = _drive_copy(box)
+    b = (d / "imu_1934.csv.tag").read_bytes()
+    n = (len(b) - 76) // 8
+    (d / "imu_1934.csv.tag").write_bytes(b[:76 + 8 * int(n * 0.992)])
+    box.snapshot()
+    code, out = invoke("process", "drive-0708", "--data", d, "--out", box.out, cwd=box.root)
+    expect_error(code, out, "imu_1934.csv.tag", "truncated", "548.590 s")
+    box.check()
+
+
+@needs_drive
+@pytest.mark.parametrize("cut, where", [
+    (lambda s: s[:-4], "the last line (line 54860)"),          # the tick cut: "810496" -> "810"
+    (lambda s: s[8:], "the first line (line 1)"),               # six fields left
+    (lambda s: s[8:-4], "the first line (line 1) and the last line (line 54860)"),
+], ids=["last-tick-cut", "first", "both"])
+def test_real_partial_edge_lines_skipped_and_counted(box, cut, where):
+    """The data README: the first and last lines may be partial, skip them. A last line cut in its
+    tick was read as whole and refused as "ticks do not increase"."""
+    d = _drive_copy(box)
+    p = d / "imu_1934.csv"
+    p.write_text(cut(p.read_text()))
+    box.snapshot()
+    code, out = invoke("process", "drive-0708", "--data", d, "--out", box.out, cwd=box.root)
+    assert code == 0, out
+    flat = " ".join(out.split())
+    assert "imu_1934.csv" in flat and where in flat and "partial" in flat, out
+    m = json.loads((box.out / "metrics.json").read_text())
+    assert m["imu_partial_lines_skipped"] == where.count("line (")
+    box.check()
+
+
+@needs_drive
+def test_real_partial_line_inside_refused_with_line(box):
+    d = _drive_copy(box)
+    lines = (d / "imu_1934.csv").read_text().splitlines(keepends=True)
+    lines[3000] = lines[3000][:12] + "\n"
+    (d / "imu_1934.csv").write_text("".join(lines))
+    box.snapshot()
+    code, out = invoke("process", "drive-0708", "--data", d, "--out", box.out, cwd=box.root)
+    expect_error(code, out, "imu_1934.csv", "line 3001", "partial line inside")
+    box.check()
+
+
+@needs_drive
 def test_real_gyro_spike_refused_with_line(box):
     d = _drive_copy(box)
     lines = (d / "imu_1934.csv").read_text().splitlines(keepends=True)
@@ -404,14 +481,16 @@ def test_real_gnss_hole_reported(box):
     lines = (d / "gnss_1934_sf.pos").read_text().splitlines(keepends=True)
     head = [ln for ln in lines if ln.startswith("%")]
     data = [ln for ln in lines if not ln.startswith("%")]
-    data = data[:1800] + data[2040:]            # 60 s of 4 Hz epochs removed
+    data = data[:1800] + data[2040:]            # 60 s of 4 Hz epochs removed, outside the withheld windows
     (d / "gnss_1934_sf.pos").write_text("".join(head + data))
     box.snapshot()
     code, out = invoke("process", "drive-0708", "--data", d, "--out", box.out, cwd=box.root)
     assert code == 0, out
     m = json.loads((box.out / "metrics.json").read_text())
     assert len(m["gnss_gaps_s"]) == 1 and m["gnss_gaps_s"][0][1] - m["gnss_gaps_s"][0][0] > 59
-    assert "gnss.max_gap" in out
+    assert not any(a <= m["gnss_gaps_s"][0][0] <= b for a, b in m["gnss_withheld_s"])
+    flat = " ".join(out.split())
+    assert "warning" in flat and "gnss_1934_sf.pos" in flat and "gnss.max_gap" in flat, out
     box.check()
 
 
@@ -430,6 +509,59 @@ def test_real_android_duplicated_epoch_refused(box):
     box.snapshot()
     code, out = invoke("process", "android-static", "--data", d, "--out", box.out, cwd=box.root)
     expect_error(code, out, log.name, f"line {k + 2}", "twice")
+    box.check()
+
+
+def _smartloc_copy(box) -> Path:
+    d = box.inp / "smartloc"
+    d.mkdir()
+    for f in SMARTLOC.iterdir():
+        if f.is_file():
+            shutil.copy(f, d / f.name)
+    return d
+
+
+@needs_smartloc
+@pytest.mark.parametrize("value, words", [
+    ("nan", ["not finite"]),
+    ("", ["empty", "non-finite"]),          # a NaN written as nothing (pandas): was "has 11 fields, found 10"
+], ids=["nan", "nan-as-nothing"])
+def test_real_smartloc_nan_pseudorange_named(box, value, words):
+    d = _smartloc_copy(box)
+    inp = d / "Berlin_Potsdamer_Platz_Input.txt"
+    lines = inp.read_text().splitlines(keepends=True)
+    k = next(i for i, ln in enumerate(lines) if ln.startswith("pseudorange3"))
+    toks = lines[k].split(" ")
+    toks[2] = value                              # the pseudorange (column 3)
+    lines[k] = " ".join(toks)
+    inp.write_text("".join(lines))
+    box.snapshot()
+    code, out = invoke("process", "smartloc-berlin", "--data", d, "--out", box.out, cwd=box.root)
+    expect_error(code, out, inp.name, f"line {k + 1}", "column 3", *words)
+    box.check()
+
+
+@needs_smartloc
+@pytest.mark.parametrize("drop, words, key", [
+    (lambda t: t > 150.0, ["the odometry ends at t = 150.0 s", "282.8 s"], "pseudorange_epochs_after_odometry"),
+    (lambda t: 100.0 < t < 160.0, ["hole", "from t = 100.0 s", "holds the last speed"], "odometry_gaps_s"),
+], ids=["odometry-stops", "odometry-hole"])
+def test_real_smartloc_odometry_stops_while_pseudoranges_go_on(box, drop, words, key):
+    """The dead reckoning held the last odometry across a hole, or the solution ended with the
+    odometry while the pseudoranges went on, without a word."""
+    d = _smartloc_copy(box)
+    inp = d / "Berlin_Potsdamer_Platz_Input.txt"
+    lines = inp.read_text().splitlines(keepends=True)
+    inp.write_text("".join(ln for ln in lines if not (ln.startswith("odom3") and drop(float(ln.split()[1])))))
+    box.snapshot()
+    code, out = invoke("process", "smartloc-berlin", "--data", d, "--out", box.out, "--no-sweeps", cwd=box.root)
+    assert code == 0, out
+    flat = " ".join(out.split())
+    assert "warning" in flat and inp.name in flat, out
+    for w in words:
+        assert w in flat, out
+    m = json.loads((box.out / "metrics.json").read_text())
+    assert m[key]
     box.check()
 
 
@@ -517,6 +649,49 @@ def test_cli_diagnose_misuse(box, extra, words):
     code, out = invoke("diagnose", p, *extra, "--out", box.out, cwd=box.root)
     expect_error(code, out, *words)
     assert not box.out.exists()
+    box.check()
+
+
+def _documented_examples():
+    """The rows of docs/validation.md's "Examples the tests feed to the validator" table."""
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "validation.md").read_text(encoding="utf-8")
+    part = doc.split("## Examples the tests feed to the validator", 1)[1].split("\n## ", 1)[0]
+    rows = [[c.strip() for c in ln.strip().strip("|").split("|")] for ln in part.splitlines()
+            if ln.startswith("| ") and not ln.startswith("| input") and not ln.startswith("| ---")]
+    assert len(rows) >= 10, rows
+    return rows
+
+
+@pytest.mark.parametrize("what, example, outcome", _documented_examples(), ids=lambda v: str(v)[:24])
+def test_documented_examples_agree_with_validation(box, what, example, outcome):
+    """Every documented example of accepted (and refused) input is fed to the validator: method
+    names with non-ASCII letters were "letters" in the docs and refused by the validation."""
+    assert outcome in ("accepted", "refused")
+    if what == "method name":
+        name = example.strip("`")
+        p = box.write("sc.toml", tiny(**{'name = "ekf"': f'name = "{name}"'}))
+        from mixnav.config.loader import load_scenario
+        from mixnav.errors import ConfigError
+        if outcome == "accepted":
+            load_scenario(str(p))
+        else:
+            with pytest.raises(ConfigError) as ei:
+                load_scenario(str(p))
+            assert ei.value.key == "methods[0].name" and "ASCII" in ei.value.message
+        return
+    m = re.match(r"`diagnose --max-lag`, (\d+) values", what)
+    assert m, what
+    p = _series(box, int(m.group(1)))
+    lag = [] if example.startswith("(") else ["--max-lag", example.strip("`")]
+    box.snapshot()
+    code, out = invoke("diagnose", p, "--column", "res", *lag, "--out", box.out, cwd=box.root)
+    if outcome == "accepted":
+        assert code == 0, out
+        if not lag:   # the default, clipped
+            assert json.loads((box.out / "diagnostics.json").read_text())["acf"]["max_lag"] == int(m.group(1)) - 1
+    else:
+        expect_error(code, out, "--max-lag", m.group(1))
+        assert not box.out.exists()
     box.check()
 
 

@@ -247,3 +247,47 @@ def test_every_pipeline_writes_sweeps():
     from mixnav.experiment.pipelines import PIPELINES
     for key, p in PIPELINES.items():
         assert "sweeps" in inspect.signature(p.write).parameters, key
+
+
+def test_a_phone_start_sweep_restarts_the_filters(tmp_path):
+    """gnss-raw: a start moves the filters' start to the first SPP fix at or after it
+    ([motion] start); each run is scored from there, the SPP's epochs too."""
+    from mixnav.experiment.sweep import run_start_sweep
+    d = DATA_DIR / "android-static"
+    if not d.is_dir():
+        pytest.skip(f"real data not found at {d}")
+    res = run_start_sweep("android-static-filters", "60 s", ("0 s", "60 s"), data=str(d), workers=1)
+    text = (SHIPPED / "android-static-filters.toml").read_text().replace('step = "1 s"', 'step = "1 s"\nstart = "60 s"')
+    text = text.replace('data_dir = "../shared/data/android-static"', f'data_dir = "{d}"')
+    (tmp_path / "late.toml").write_text(text)
+    run = mixnav.process_dataset(str(tmp_path / "late.toml"))
+    late = res.rows[res.rows["start_s"] == 60.0].set_index("method")
+    t0 = late["filter_start_s"].iloc[0]
+    assert 60.0 <= t0 < 62.0                                # the first fix at or after 60 s
+    for name in ("spp", "ekf", "epoch-mixture"):
+        sol = run.solutions[name]
+        h = np.hypot(sol["err_n_m"], sol["err_e_m"]).to_numpy()
+        keep = (sol["time_s"].to_numpy() >= t0) & np.isfinite(h)
+        assert late.loc[name, "horizontal_rmse_m"] == pytest.approx(np.sqrt(np.mean(h[keep] ** 2)), rel=1e-12)
+    assert np.isnan(run.solutions["ekf"]["err_n_m"].to_numpy()[run.solutions["ekf"]["time_s"].to_numpy() < t0]).all()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace('start = "60 s"', 'start = "900 s"'))
+    with pytest.raises(ConfigError) as e:
+        mixnav.process_dataset(str(bad))
+    assert "motion.start" in str(e.value)
+
+
+def test_an_impossible_evaluation_key_is_named_as_the_key(tmp_path):
+    """A span read from [evaluation] that the recording cannot hold is said as
+    evaluation.sweep_span of the file, not as an option the user did not give."""
+    data = _needs_drive()
+    text = (SHIPPED / "drive-0708.toml").read_text().replace('data_dir = "../shared/data/drive-0708"',
+                                                              f'data_dir = "{data}"')
+    p = tmp_path / "late.toml"
+    p.write_text(text + '\n[evaluation]\noutage_sweep = "30 s"\nsweep_span = ["60 s", "900 s"]\n')
+    with pytest.raises(ConfigError) as e:
+        run_outage_sweep(str(p), workers=1)
+    assert e.value.key == "evaluation.sweep_span" and str(p.name) in str(e.value)
+    with pytest.raises(ArgumentError) as e:                 # given as an argument: said as the argument
+        run_outage_sweep(str(p), span=("60 s", "900 s"), workers=1)
+    assert e.value.argument == "span"

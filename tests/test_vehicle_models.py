@@ -123,3 +123,53 @@ def test_zupt_not_used_when_the_solution_moves():
     assert ZeroAngularRate([1.0], lay, sigma=0.01, max_speed=1.0).rows(0, nav, np.zeros(3)) is None
     nav[4:7] = [0.5, 0.0, 0.0]
     assert ZeroVelocity([1.0], lay, max_speed=1.0).rows(0, nav, np.zeros(3)) is not None
+
+
+def test_nhc_suspension_pitch_expects_squat_times_speed():
+    """With ``pitch_per_accel`` the vertical row expects ``k a_x v_x`` (the body squats when
+    the car speeds up), ``a_x`` from the specific force and the attitude: a car pitched
+    nose-up against its path by exactly that much gives a zero innovation; without the gain,
+    or where the specific force is unknown, it is the plain constraint."""
+    from mixnav.attitude import dcm_to_quat
+    from mixnav.geodesy.earth import normal_gravity
+    lay = StateLayout("plain")
+    k, a, v = np.radians(0.33), 1.5, 14.0             # 0.33 deg per m/s^2, 1.5 m/s^2, 14 m/s
+    C_nv = euler_to_dcm(np.array([0.0, np.radians(2.0), 0.4]))    # path 2 deg uphill, heading 0.4 rad
+    C_nb = C_nv @ euler_to_dcm(np.array([0.0, k * a, 0.0]))        # body nose-up k a against the path
+    v_n = C_nv @ np.array([v, 0.0, 0.0])
+    nav = nav_vector(dcm_to_quat(C_nb), v_n, np.array([0.7, -1.9, 300.0]))
+    g_n = np.array([0.0, 0.0, normal_gravity(0.7, 300.0)])
+    f_b = C_nb.T @ (C_nv @ np.array([a, 0.0, 0.0]) - g_n)           # accelerating along the path
+    times = np.array([1.0, 1.1])
+    f = np.vstack([np.full(3, np.nan), f_b])
+    nhc = NonHolonomic(times, lay, pitch_per_accel=k, specific_force=f)
+    assert nhc.forward_acceleration(1, nav) == pytest.approx(a * np.cos(k * a), rel=1e-9)
+    r = nhc.rows(1, nav, np.zeros(3))
+    plain = NonHolonomic(times, lay).rows(1, nav, np.zeros(3))
+    np.testing.assert_allclose(plain.z[1], -(C_nb.T @ v_n)[2])
+    assert abs(plain.z[1]) > 0.9 * k * a * v          # the plain constraint sees the squat as a violation
+    assert abs(r.z[1]) < 0.01 * k * a * v             # the gain explains it
+    np.testing.assert_allclose(r.H, plain.H)
+    np.testing.assert_allclose(r.z[0], plain.z[0])
+    np.testing.assert_allclose(nhc.rows(0, nav, np.zeros(3)).z, plain.z)   # unknown specific force: plain row
+    assert not nhc.remembers
+    with pytest.raises(ArgumentError, match="pitch_per_accel"):
+        NonHolonomic(times, lay, pitch_per_accel=float("nan"), specific_force=f)
+    with pytest.raises(ArgumentError, match="specific_force"):
+        NonHolonomic(times, lay, pitch_per_accel=k)
+    with pytest.raises(ArgumentError, match="specific_force"):
+        NonHolonomic(times, lay, pitch_per_accel=k, specific_force=f[:1])
+
+
+def test_mean_specific_force_averages_the_increments_before_each_epoch():
+    from mixnav.data import ImuData
+    from mixnav.measurements.vehicle import mean_specific_force
+    t = np.arange(1, 301) * 0.01                       # increments ending at 0.01 .. 3.00 s
+    f = np.column_stack([np.sin(t), np.zeros_like(t), np.full_like(t, -9.8)])
+    imu = ImuData(time=t, dt=np.full_like(t, 0.01), dtheta=np.zeros((300, 3)), dvel=f * 0.01)
+    out = mean_specific_force(imu, [0.5, 2.0, 5.0, -1.0], 0.5)
+    np.testing.assert_allclose(out[1], f[(t > 1.5 + 1e-9) & (t <= 2.0 + 1e-9)].mean(0), atol=1e-12)
+    assert np.isnan(out[2]).all() and np.isnan(out[3]).all()   # no increment in the span
+    np.testing.assert_allclose(out[0], f[t <= 0.5 + 1e-9].mean(0), atol=1e-12)
+    with pytest.raises(ArgumentError, match="span"):
+        mean_specific_force(imu, [1.0], 0.0)

@@ -109,6 +109,8 @@ class ImuData:
         accepted with a warning (reported in metrics.json).
     spikes : int
         Number of samples the reader replaced as spikes (reported in metrics.json).
+    partial_lines : int
+        Partial first or last lines the reader skipped (drive-0708; reported in metrics.json).
     """
 
     time: np.ndarray
@@ -118,6 +120,7 @@ class ImuData:
     source: str | None = None
     gaps: int = 0
     spikes: int = 0   # samples replaced by the reader's spike rule (io/imu_checks.check_spikes)
+    partial_lines: int = 0   # partial edge lines the reader skipped (drive-0708)
 
     def __post_init__(self):
         n = len(self.time)

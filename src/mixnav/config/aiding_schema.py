@@ -7,8 +7,12 @@ from __future__ import annotations
 
 from typing import Literal
 
+from .. import units as u
 from .fields import (AngleVec, Duration, Fraction, Frequency, LengthVec, NonNegSpeed, PosAccel, PosAngle, PosLength,
-                     PosRate, PosSpeed, Strict, Time)
+                     PosRate, PosSpeed, Strict, Time, quantity)
+
+#: an angle per acceleration (rad per m/s^2): ``"0.3 deg/(m/s^2)"``
+PitchPerAccel = quantity(u.Dimension(1.0, -1.0, 2.0))
 
 
 class NhcConfig(Strict):
@@ -17,11 +21,16 @@ class NhcConfig(Strict):
     really has (slip, bumps); no rows below ``min_speed``. The violations are
     correlated over seconds, and the rows are treated as independent: at 10 Hz
     the filter over-trusts them tenfold (vehicle-demo: position NEES 16-19 in
-    the outages at 10 Hz, 3-4 at 1 Hz, and smaller errors), hence 1 Hz."""
+    the outages at 10 Hz, 3-4 at 1 Hz, and smaller errors), hence 1 Hz.
+    ``pitch_per_accel`` (e.g. ``"0.3 deg/(m/s^2)"``): the body's pitch on its
+    suspension per m/s^2 of forward acceleration (squat, dive when braking); the
+    vertical row then expects that pitch times the forward speed instead of 0
+    (``NonHolonomic``'s ``pitch_per_accel``). Default 0: the plain constraint."""
 
     rate: Frequency = 1.0
     sigma: tuple[PosSpeed, PosSpeed] = (0.1, 0.1)
     min_speed: NonNegSpeed = 0.0
+    pitch_per_accel: PitchPerAccel = 0.0
 
 
 class OdometerAidingConfig(Strict):

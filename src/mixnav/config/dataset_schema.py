@@ -13,7 +13,7 @@ from pydantic import Field, field_validator, model_validator
 from .evaluation_schema import Evaluation
 from .. import units as u
 from .aiding_schema import AidingConfig
-from .fields import AngleVec, AngSigma, LengthVec, PosSigma, Strict, VelSigma, Windows, check_position, quantity
+from .fields import AngleVec, AngSigma, ElevationMask, LengthVec, PosSigma, Strict, VelSigma, Windows, check_position, quantity
 from .method_schema import MethodConfig
 
 Offset = quantity(u.TIME)
@@ -152,7 +152,7 @@ class RawGnss(Strict):
     format: Literal["android-gnsslogger", "rinex-obs"]
     file: str
     navigation: str
-    elevation_mask: quantity(u.ANGLE, nonnegative=True) = 10.0 * u.DEG  # type: ignore[valid-type]
+    elevation_mask: ElevationMask = 10.0 * u.DEG  # type: ignore[valid-type]
     sigma_a: quantity(u.LENGTH, nonnegative=True) = 3.0  # type: ignore[valid-type]
     sigma_b: quantity(u.LENGTH, nonnegative=True) = 3.0  # type: ignore[valid-type]
     troposphere: bool = True

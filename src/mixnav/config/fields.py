@@ -16,8 +16,9 @@ from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict
 from .. import units as u
 
 
-def quantity(dim, positive: bool = False, nonnegative: bool = False):
-    """A float field written with a unit of dimension ``dim`` (``"2 deg/h"``), held in SI."""
+def quantity(dim, positive: bool = False, nonnegative: bool = False, below: tuple[float, str] | None = None):
+    """A float field written with a unit of dimension ``dim`` (``"2 deg/h"``), held in SI;
+    ``below``: ``(limit in SI, the limit as written)``, an exclusive upper bound."""
     def parse(v):
         if isinstance(v, bool):
             raise ValueError("expected a quantity with a unit, e.g. '2 deg/h'")
@@ -26,6 +27,8 @@ def quantity(dim, positive: bool = False, nonnegative: bool = False):
             raise ValueError(f"must be positive, got {v!r}")
         if nonnegative and not x >= 0:
             raise ValueError(f"must not be negative, got {v!r}")
+        if below is not None and not x < below[0]:
+            raise ValueError(f"must be below {below[1]}, got {v!r}")
         return x
     return Annotated[float, BeforeValidator(parse)]
 
@@ -65,6 +68,9 @@ PosLength = quantity(u.LENGTH, positive=True)
 NonNegRate = quantity(u.ANGULAR_RATE, nonnegative=True)
 NonNegLength = quantity(u.LENGTH, nonnegative=True)
 NonNegAngle = quantity(u.ANGLE, nonnegative=True)
+#: an elevation mask: 0 (the horizon) up to, not including, the zenith (a mask of 90 deg or more
+#: leaves no satellite: every epoch would be unsolvable)
+ElevationMask = quantity(u.ANGLE, nonnegative=True, below=(math.pi / 2, "90 deg (the zenith)"))
 
 
 def _ordered_windows(v):

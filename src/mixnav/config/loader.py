@@ -123,6 +123,7 @@ def load_scenario(name_or_path: str) -> tuple[Scenario, str, str]:
 
 def _check_scenario(sc, source: str) -> None:
     """What the schema alone cannot check: IMU models and noise tables build."""
+    _check_imu_rate(sc, source)   # first: the checks below divide by it (or by the GNSS rate into it)
     _check_imu_models(sc, source)
     gnss_noise(sc, source)
     imu_white_noise(sc, source)
@@ -135,6 +136,7 @@ def _check_scenario(sc, source: str) -> None:
 #: plausibility limits of a simulated run (docs/validation.md): the IMU rate, the samples of one
 #: run (memory: about 200 bytes each), a segment's turn or pitch rate, a lever arm's component
 MAX_IMU_RATE = 10e3
+MIN_IMU_RATE = 1.0
 MAX_IMU_SAMPLES = 20_000_000
 MAX_SEGMENT_RATE = float(np.radians(2000.0))
 MAX_LEVER = 100.0
@@ -147,11 +149,17 @@ def check_lever(v, source, key) -> None:
                           file=source, key=key)
 
 
+def _check_imu_rate(sc, source) -> None:
+    """``imu.rate`` within :data:`MIN_IMU_RATE`..:data:`MAX_IMU_RATE`, named itself (an absurd
+    IMU rate was blamed on ``gnss.rate``, which must divide it)."""
+    if not MIN_IMU_RATE <= sc.imu.rate <= MAX_IMU_RATE:
+        raise ConfigError(f"{sc.imu.rate:g} Hz is outside {MIN_IMU_RATE:g}..{MAX_IMU_RATE:g} Hz (an inertial "
+                          "navigation rate)", file=source, key="imu.rate")
+
+
 def _check_windows(sc, source) -> None:
     """GNSS fixes fall on IMU samples; outage windows lie inside the run; the run fits in
     memory; segments turn no faster than a gyro measures; lever arms (docs/validation.md)."""
-    if sc.imu.rate > MAX_IMU_RATE:
-        raise ConfigError(f"{sc.imu.rate:g} Hz is above {MAX_IMU_RATE:g} Hz", file=source, key="imu.rate")
     if sc.imu.rate * sc.duration > MAX_IMU_SAMPLES:
         raise ConfigError(f"{sc.duration:g} s at {sc.imu.rate:g} Hz is {sc.imu.rate * sc.duration:.3g} IMU samples; "
                           f"at most {MAX_IMU_SAMPLES:.0e} per run", file=source, key="trajectory.segments")

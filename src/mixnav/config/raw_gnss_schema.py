@@ -80,7 +80,10 @@ class ConstantVelocityConfig(Strict):
     first SPP fix with its covariance, inflated by ``position_sigma_factor``.
     ``clock_jump``: a jump of the SPP clock bias beyond its drift by more than this is
     taken off the pseudoranges the filters see (millisecond jumps exactly:
-    :func:`mixnav.gnss.spp.clock_jumps`), counted in metrics.json."""
+    :func:`mixnav.gnss.spp.clock_jumps`), counted in metrics.json. ``start``: the filters
+    start at the first SPP fix at or after this time [s since the first epoch] (default 0:
+    the first fix; the start sweep, :func:`mixnav.start_sweep`, moves it); the epoch-by-epoch
+    SPP is not changed by it."""
 
     model: Literal["constant-velocity"] = "constant-velocity"
     accel_sigma: AccelDensity = 1.0  # type: ignore[valid-type]
@@ -92,6 +95,7 @@ class ConstantVelocityConfig(Strict):
     clock_drift_sigma: quantity(u.VELOCITY, positive=True) = 100.0  # type: ignore[valid-type]
     position_sigma_factor: float = Field(default=1.0, ge=1.0, le=100.0)
     clock_jump: quantity(u.LENGTH, positive=True) = 1000.0  # type: ignore[valid-type]
+    start: quantity(u.TIME, nonnegative=True) = 0.0  # type: ignore[valid-type]
 
     @field_validator("accel_sigma", "vertical_accel_sigma")
     @classmethod

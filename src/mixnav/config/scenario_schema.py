@@ -6,6 +6,7 @@ errors, the sweep, and the file as a whole (its ``[[methods]]`` and ``[aiding]``
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, Literal, Union
 
 import numpy as np
@@ -163,7 +164,7 @@ class SatellitesConfig(Strict):
     process is given for that observable, the Gaussian noise added."""
 
     constellation: Literal["gps24", "gps30"] = "gps30"
-    mask: Angle = float(np.radians(10.0))
+    mask: quantity(u.ANGLE, below=(math.pi / 2, "90 deg (the zenith)")) = float(np.radians(10.0))  # type: ignore[valid-type]
     pseudorange_sigma: quantity(u.LENGTH, positive=True)
     range_rate_sigma: quantity(u.VELOCITY, positive=True)
     carrier_sigma: quantity(u.LENGTH, positive=True) = 0.003

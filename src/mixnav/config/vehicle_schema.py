@@ -12,7 +12,7 @@ from pydantic import Field, field_validator
 
 from .evaluation_schema import Evaluation
 from .dataset_schema import DatasetInfo
-from .fields import (Duration, NonNegAngle, NonNegLength, NonNegRate, NonNegSpeed, PosAngle, PosLength, PosRate,
+from .fields import (Duration, ElevationMask, NonNegLength, NonNegRate, NonNegSpeed, PosAngle, PosLength, PosRate,
                      PosSpeed, Strict, Time)
 from .method_schema import MixtureConfig, RobustConfig, method_file_name, registered_estimator, registered_options
 
@@ -61,7 +61,7 @@ class Pseudoranges(Strict):
     scale: float = Field(default=1.0, gt=0)
     sigma_a: NonNegLength = 3.0  # type: ignore[valid-type]
     sigma_b: NonNegLength = 3.0  # type: ignore[valid-type]
-    elevation_mask: NonNegAngle = 0.0  # type: ignore[valid-type]
+    elevation_mask: ElevationMask = 0.0  # type: ignore[valid-type]
 
     @field_validator("systems")
     @classmethod

@@ -20,8 +20,8 @@ from ..errors import ConfigError
 from ..ins.error_model import StateLayout, get_layout
 from ..measurements.loose import gnss_lever_block, time_offset_block
 from ..measurements.stillness import Stillness, detect_still
-from ..measurements.vehicle import (NonHolonomic, Odometer, ZeroAngularRate, ZeroVelocity, mounting_block,
-                                    odometer_scale_block)
+from ..measurements.vehicle import (NonHolonomic, Odometer, ZeroAngularRate, ZeroVelocity, mean_specific_force,
+                                    mounting_block, odometer_scale_block)
 
 
 @dataclass
@@ -117,8 +117,11 @@ def aiding_models(method: MethodConfig, layout: StateLayout, inputs: AidingInput
         c = _need(cfg, name, method, index, source)
         if name == "nhc":
             t = np.arange(np.floor(span[0] * c.rate) / c.rate + 1.0 / c.rate, span[1] + 1e-9, 1.0 / c.rate)
+            # the suspension pitch's forward acceleration: the specific force over the 0.5 s
+            # before each epoch (the span over which the gain is measured: docs/aiding.md)
+            f = mean_specific_force(inputs.imu, t, 0.5) if c.pitch_per_accel != 0.0 else None
             models.append(NonHolonomic(t, layout, cfg.vehicle_mounting, cfg.vehicle_point, np.asarray(c.sigma),
-                                       c.min_speed))
+                                       c.min_speed, c.pitch_per_accel, f))
         elif name == "odometer":
             if inputs.odometer is None:
                 raise ConfigError("odometer aiding needs odometer samples: a dataset's aiding.odometer.file, or "

@@ -85,7 +85,12 @@ def diagnose_file(path, column: str, out_dir, max_lag: int | None = None, n_comp
     out_dir : str or PathLike
         Created if missing; receives ``diagnostics.json`` and ``qq.png``,
         ``acf.png``, ``histogram.png`` (each written atomically).
-    max_lag, n_components, seed
+    max_lag : int, optional
+        Largest autocorrelation lag; default 50, clipped to the series length - 1 for a short
+        series (as :func:`diagnose` clips it). Given explicitly it must be below the number of
+        values: a larger one is an ArgumentError naming ``--max-lag`` (docs/validation.md),
+        not clipped silently.
+    n_components, seed
         As in :func:`diagnose`.
 
     Returns

@@ -36,7 +36,7 @@ from .._version import __version__
 from ..config.raw_gnss_schema import RawGnssDataset
 from ..data import InitialState, RawPseudoranges
 from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla, lla_to_ecef
-from ..errors import DataError
+from ..errors import ConfigError, DataError
 from ..gnss.ephemeris import BroadcastEphemeris
 from ..gnss.spp import SppOptions, SppTrack, solve_epochs
 from ..io.readers import read_table
@@ -140,6 +140,11 @@ def filter_start(po: SppOutput) -> InitialState:
     if len(ok) == 0:
         raise DataError(f"no epoch could be solved (status counts: {tr.status_counts()}), so the filters have "
                         "no first fix to start from", file=po.observations.source)
+    if mc.start > 0:   # [motion] start: the first fix at or after it
+        ok = ok[_epoch_times(tr)[ok] >= float(mc.start) - 1e-9]
+        if len(ok) == 0:
+            raise ConfigError(f"start {float(mc.start):g} s: no SPP fix at or after it (the log ends at "
+                              f"{float(_epoch_times(tr)[-1]):.1f} s)", file=po.source, key="motion.start")
     j = int(ok[0])
     lla = ecef_to_lla(tr.pos_ecef[j])
     C_ne = dcm_ecef_to_ned(lla[0], lla[1])

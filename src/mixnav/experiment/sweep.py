@@ -14,7 +14,7 @@ maxima and the share of windows whose mean position NEES is above the chi-square
 bound. :class:`SweepResult` is what ``mixnav process --outage-sweep`` writes beside the
 dataset's own outputs (``outage_sweep.csv``, the block, a figure and a report table).
 
-:func:`start_sweep`, for datasets that align from their own data (odometry-gnss), runs the
+:func:`start_sweep`, for datasets that start from their own data (odometry-gnss, gnss-raw), runs the
 whole causal pipeline from several start times (the data before each discarded, as if the
 recording began there) and scores each run from its own start and on the span every run
 covers (from the last run's filter start to the end): one row per method and start
@@ -229,6 +229,42 @@ def _dataset_ref(dataset) -> str:
     return str(p.resolve()) if p.suffix == ".toml" or p.exists() else str(dataset)
 
 
+def _evaluation_keys(dataset, given: dict) -> tuple[dict, str]:
+    """The ``[evaluation]`` keys an argument left as None takes its value from (argument ->
+    ``evaluation.<key>``), and the dataset's source: an impossible value read from the file is
+    said as its key, not as an argument the caller did not give."""
+    from ..config import load_dataset
+    ds, source, _ = load_dataset(_dataset_ref(dataset))
+    ev = getattr(ds, "evaluation", None)
+    keys = {"window": "outage_sweep", "step": "start_sweep" if "window" not in given else "sweep_step",
+            "span": "sweep_span"}
+    return {a: f"evaluation.{k}" for a, k in keys.items()
+            if a in given and given[a] is None and ev is not None and getattr(ev, k) is not None}, source
+
+
+def _said_as_keys(fn):
+    """Run a sweep; an ArgumentError about a value taken from ``[evaluation]`` becomes a
+    ConfigError naming the file and the key."""
+    import functools
+    import inspect
+    sig = inspect.signature(fn)
+
+    @functools.wraps(fn)
+    def run(*args, **kwargs):
+        bound = sig.bind(*args, **kwargs)
+        bound.apply_defaults()
+        given = {k: bound.arguments[k] for k in ("window", "step", "span") if k in bound.arguments}
+        keys, source = _evaluation_keys(bound.arguments["dataset"], given)
+        try:
+            return fn(*args, **kwargs)
+        except ArgumentError as exc:
+            if exc.argument in keys:
+                raise ConfigError(exc.message, file=source, key=keys[exc.argument]) from None
+            raise
+    return run
+
+
+@_said_as_keys
 def run_outage_sweep(dataset, window=None, step=None, span=None, *, data=None, workers: int | None = None,
                      scheduler: str | None = None, progress: bool = False) -> SweepResult:
     """:func:`outage_sweep` with its settings and skipped windows (:class:`SweepResult`)."""
@@ -435,18 +471,30 @@ def _start_run(dataset: str, data: str | None, start: float) -> dict:
         if start > 0:
             warnings.simplefilter("ignore", DataWarning)
         out = p.run(p.with_start(ds, start), source, folder, inputs)
-    tables = p.tables(out)
-    metrics = p.metrics(out, tables)
+    if getattr(out, "init", None) is None:
+        raise ConfigError("a start sweep moves the filters' start: the dataset has no filter method (only the "
+                          "epoch-by-epoch SPP, which no start changes)", file=source, key="methods")
+    t_start = float(out.init.time)
     runs = {}
-    for name, t in tables.items():
-        m = metrics[name]
-        runs[name] = {"filter_start_s": float(out.init.time), "horizontal_rmse_m": m["horizontal_rmse_m"],
-                      "horizontal_p95_m": m["horizontal_p95_m"], "horizontal_max_m": m["horizontal_max_m"],
-                      "n_epochs": m["n_epochs"], "time": t["time_s"].to_numpy(float),
-                      "h": np.hypot(t["err_n_m"].to_numpy(float), t["err_e_m"].to_numpy(float))}
+    for name, t in p.tables(out).items():
+        if "err_n_m" not in t:
+            raise ConfigError("a start sweep scores every run against the reference: the dataset has none",
+                              file=source, key="reference")
+        time = t["time_s"].to_numpy(float)
+        h = np.hypot(t["err_n_m"].to_numpy(float), t["err_e_m"].to_numpy(float))
+        # from the filters' start on, at the epochs with a solution (a raw-GNSS table has a row
+        # for every epoch, empty before the start and where the SPP failed)
+        keep = (time >= t_start - 1e-9) & np.isfinite(h)
+        time, h = time[keep], h[keep]
+        if not len(h):
+            raise DataError(f"method '{name}' has no solution after the start {start:g} s", file=source)
+        runs[name] = {"filter_start_s": t_start, "horizontal_rmse_m": float(np.sqrt(np.mean(h ** 2))),
+                      "horizontal_p95_m": float(np.percentile(h, 95)), "horizontal_max_m": float(h.max()),
+                      "n_epochs": int(len(h)), "time": time, "h": h}
     return {"start": float(start), "runs": runs}
 
 
+@_said_as_keys
 def run_start_sweep(dataset, step=None, span=None, *, data=None, workers: int | None = None,
                     scheduler: str | None = None, progress: bool = False) -> SweepResult:
     """:func:`start_sweep` with its settings (:class:`SweepResult`)."""
@@ -458,11 +506,11 @@ def run_start_sweep(dataset, step=None, span=None, *, data=None, workers: int | 
     p = pipeline(ds, source)
     if not hasattr(p, "with_start"):
         raise ConfigError(f"a start sweep runs the whole causal pipeline from later starts; dataset kind "
-                          f"'{ds.dataset.kind}' does not align from its own data here (odometry-gnss only; an "
-                          "outage sweep suits an IMU + GNSS dataset)", file=source, key="evaluation.start_sweep")
-    if getattr(ds, "reference", None) is None:
+                          f"'{ds.dataset.kind}' does not start from its own data (odometry-gnss and gnss-raw "
+                          "do; an outage sweep suits an IMU + GNSS dataset)", file=source, key="evaluation.start_sweep")
+    if getattr(ds, "reference", None) is None and getattr(ds, "reference_point", None) is None:
         raise ConfigError("a start sweep scores every run against the reference: the dataset has no "
-                          "[reference]", file=source, key="reference")
+                          "[reference] or [reference_point]", file=source, key="reference")
     step = _seconds(step if step is not None else (ev.start_sweep if ev else None), "step")
     if not step > 0:
         raise ArgumentError(f"must be positive, got {step:g} s", argument="step")
@@ -512,8 +560,11 @@ def start_sweep(dataset, step=None, span=None, *, data=None, workers: int | None
     Parameters
     ----------
     dataset : str
-        A shipped dataset config or a .toml file that aligns from its own data
-        (``odometry-gnss``, e.g. ``"smartloc-berlin"``) and has a ``[reference]``.
+        A shipped dataset config or a .toml file that starts from its own data and has a
+        reference: ``odometry-gnss`` (e.g. ``"smartloc-berlin"``: ``[alignment] start``, the
+        data before it discarded) or ``gnss-raw`` with filter methods (``[motion] start``:
+        the filters start at the first SPP fix at or after it; the SPP rows, epoch by
+        epoch, are scored from there too).
     step : str or float, optional
         Between the start times: ``"30 s"`` or seconds (default: ``[evaluation] start_sweep``).
     span : (first, last), optional

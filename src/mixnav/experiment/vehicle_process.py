@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time as _time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -131,6 +132,41 @@ def discard_before(inputs: VehicleInputs, start: float, source: str | None = Non
     return dataclasses.replace(inputs, odometry=odo2, inc=inc2, epochs=epochs2)
 
 
+#: the shortest odometry hole that is reported (or five sample intervals, when longer): across
+#: a hole the dead reckoning holds the last speed and yaw rate
+ODOMETRY_GAP_S = 1.0
+
+
+def check_odometry_coverage(odo_time, epoch_time, odo_file) -> dict:
+    """The odometry against the pseudoranges: holes in the odometry with pseudorange epochs
+    inside (the dead reckoning holds the last speed and yaw rate across them) and pseudorange
+    epochs after the odometry's end (not used: the solution ends with the odometry), each
+    longer than :data:`ODOMETRY_GAP_S` (or five sample intervals); a
+    :class:`~mixnav.io.imu_checks.DataWarning` naming the odometry file and the times.
+    Returns ``odometry_gaps_s`` ([start, end] of each hole) and
+    ``pseudorange_epochs_after_odometry`` for metrics.json."""
+    from ..io.imu_checks import DataWarning
+    t, e = np.asarray(odo_time, float), np.asarray(epoch_time, float)
+    d = np.diff(t)
+    tol = max(ODOMETRY_GAP_S, 5.0 * float(np.median(d))) if d.size else ODOMETRY_GAP_S
+    holes = [k for k in np.flatnonzero(d > tol) if np.any((e > t[k]) & (e < t[k + 1]))]
+    after = e > t[-1] + tol
+    said = []
+    if holes:
+        k = max(holes, key=lambda j: d[j])
+        said.append(f"{len(holes)} hole(s) longer than {tol:g} s in the odometry while the pseudoranges go on, "
+                    f"the longest {d[k]:.1f} s from t = {t[k]:.1f} s (the dead reckoning holds the last speed and "
+                    "yaw rate across it; metrics.json: odometry_gaps_s)")
+    if after.any():
+        said.append(f"the odometry ends at t = {t[-1]:.1f} s but the pseudoranges go on to {e[after][-1]:.1f} s: "
+                    f"their {int(after.sum())} epochs after it are not used (the solution ends with the odometry; "
+                    "metrics.json: pseudorange_epochs_after_odometry)")
+    if said:
+        warnings.warn(f"{odo_file}: " + "; ".join(said), DataWarning, stacklevel=2)
+    return {"odometry_gaps_s": [[float(t[k]), float(t[k + 1])] for k in holes],
+            "pseudorange_epochs_after_odometry": int(after.sum())}
+
+
 def process_vehicle(ds: VehicleDataset, source: str, data: str | None = None, seed: int = 0) -> VehicleOutput:
     """Read, align and run every method of an ``odometry-gnss`` dataset (module docstring)."""
     d = find_data_dir(ds, data, source)
@@ -155,6 +191,7 @@ def run_vehicle(ds: VehicleDataset, source: str, d: Path, inputs: VehicleInputs,
     oc, pc = ds.odometry, ds.pseudoranges
     inputs = discard_before(inputs, float(ds.alignment.start), source)
     odo, inc, epochs, truth, read_time = inputs.odometry, inputs.inc, inputs.epochs, inputs.reference, inputs.read_time_s
+    coverage = check_odometry_coverage(odo.time, epochs.time, d / oc.file)
 
     systems = [SYSTEM_CODES[s] for s in pc.systems]
     mc = ds.motion
@@ -199,7 +236,7 @@ def run_vehicle(ds: VehicleDataset, source: str, d: Path, inputs: VehicleInputs,
                           mixture_start=start)
     filter_time = _time.perf_counter() - t_filter
     checks = {"pseudorange_rows_skipped": model.skipped_rows, "odometry_rows": len(odo),
-              "pseudorange_epochs": len(epochs)}
+              "pseudorange_epochs": len(epochs), **coverage}
     return VehicleOutput(ds, source, d, init, align, results, truth, read_time, filter_time, float(inc.time[-1]),
                          checks)
 

@@ -431,6 +431,8 @@ class GmpfOptions(Dd2Options):
 
 
 def _build_gmpf(o: GmpfOptions, absurd_sigma: float, context):
+    from .particle import check_particle_memory
+    check_particle_memory(o.particles, context.motion)
     return GmpfEstimator(particles=o.particles, components=o.components, em_iterations=o.em_iterations,
                          dd2_step=o.dd2_step, substeps=o.substeps, sampling=o.sampling, absurd_sigma=absurd_sigma)
 

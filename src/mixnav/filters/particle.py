@@ -54,6 +54,7 @@ mean is doubled; ``counts["pf_degenerate"]`` counts it. Never a NaN.
 
 from __future__ import annotations
 
+import os
 import threading
 
 import numpy as np
@@ -73,7 +74,7 @@ from .ukf import predict_members
 from .registry import ABSURD_SIGMA
 
 __all__ = ["ParticleEstimator", "ParticleFilter", "systematic_resample", "normalise_log_weights",
-           "check_particle_settings", "linear_gaussian_particles"]
+           "check_particle_settings", "check_particle_memory", "linear_gaussian_particles", "particle_memory"]
 
 _WARM: set = set()
 
@@ -93,6 +94,47 @@ def check_particle_settings(particles, resample_threshold, roughening, substeps=
         raise ArgumentError(f"must be an integer >= 0, got {substeps}", argument="substeps")
     if not absurd_sigma > 0:
         raise ArgumentError(f"must be positive, got {absurd_sigma}", argument="absurd_sigma")
+
+
+#: arrays of particles x states a particle filter keeps at once (the particles, their next draw, the
+#: noise draws, the fused update's state-major scratch), and the further numbers per particle (the
+#: strapdown kernels' navigation, previous and sensor rows): :func:`particle_memory`
+PARTICLE_STATE_COPIES = 4
+PARTICLE_EXTRA = 28
+
+
+def particle_memory(particles: int, states: int, copies: int = PARTICLE_STATE_COPIES) -> int:
+    """Bytes of a particle cloud: ``particles x (copies x states + PARTICLE_EXTRA) x 8``."""
+    return int(particles) * 8 * (int(copies) * int(states) + PARTICLE_EXTRA)
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (psutil when installed, else the free
+    physical pages), or None when the system does not say."""
+    try:
+        import psutil
+        return int(psutil.virtual_memory().available)
+    except Exception:   # noqa: BLE001  not installed, or no answer on this system
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_particle_memory(particles: int, motion, copies: int = PARTICLE_STATE_COPIES) -> None:
+    """ArgumentError naming ``particles`` when the cloud on ``motion``'s layout would not fit in the
+    memory available (an "out of memory" deep in a run named no setting). No check without a
+    motion model (its state count is not known yet) or when the system does not say."""
+    layout = getattr(motion, "layout", None)
+    if layout is None:
+        return
+    n = int(layout.n)
+    need, avail = particle_memory(particles, n, copies), available_memory()
+    if avail is not None and need > avail:
+        raise ArgumentError(f"{int(particles)} particles of {n} states need about {need / 1e9:.3g} GB "
+                            f"({int(particles)} x ({copies} x {n} + {PARTICLE_EXTRA}) x 8 bytes), more than the "
+                            f"{avail / 1e9:.3g} GB of memory available", argument="particles")
 
 
 def normalise_log_weights(logw: np.ndarray):
@@ -502,6 +544,7 @@ class ParticleOptions(GateOptions):
 
 
 def _build_pf(o: ParticleOptions, absurd_sigma: float, context):
+    check_particle_memory(o.particles, context.motion)
     return ParticleEstimator(particles=o.particles, resample_threshold=o.resample_threshold,
                              roughening=o.roughening, substeps=o.substeps, parallel=o.parallel,
                              absurd_sigma=absurd_sigma)

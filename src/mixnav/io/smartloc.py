@@ -21,7 +21,8 @@ the row type (see the data set's ``readme.txt``):
     time [s], ECEF x, y, z of the reference [m], a 3x3 covariance (zeros).
 
 Validation (every failure is a :class:`~mixnav.errors.DataError` naming the
-file and the 1-based line): token count, numbers (finite), an unknown row
+file and the 1-based line): token count (an empty field, e.g. a NaN written as nothing,
+named by its column), numbers (finite, named by their column), an unknown row
 type, time going backwards (pseudoranges: non-decreasing; ground truth:
 strictly increasing), a repeated (time, system, satellite), a non-integer
 satellite id or unknown system code, a non-positive variance, an elevation
@@ -80,6 +81,7 @@ tracked (or its group was left out).
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -235,6 +237,13 @@ def _rows(path: Path, tag: str, what: str) -> tuple[np.ndarray, np.ndarray]:
         if toks[0] != tag:
             continue
         if len(toks) != ntok:
+            # an empty field (two separators in a row) is a value written as nothing: what a
+            # writer makes of a NaN (pandas' default); name its column, not the field count
+            fields = re.split(r"[ \t]", raw.strip())
+            if "" in fields and len(toks) < ntok:
+                k = fields.index("") + 1
+                raise DataError(f"column {k} is empty: a missing or non-finite value (a NaN written as nothing); "
+                                f"a {tag} row has {ntok} fields, found {len(toks)}", file=str(path), line=lineno)
             raise DataError(f"a {tag} row has {ntok} fields, found {len(toks)}", file=str(path), line=lineno)
         vals = []
         for k, t in enumerate(toks[1:], start=2):

@@ -24,7 +24,11 @@ with ``C_vb = Rz(y) Ry(p) Rx(r)``::
 
     d v_v / d yaw = e_z x v_v,      d v_v / d pitch = (Rz(y) e_y) x v_v
 
-* :class:`NonHolonomic`: ``v_v[1] = v_v[2] = 0`` (two rows, kind ``nhc``).
+* :class:`NonHolonomic`: ``v_v[1] = v_v[2] = 0`` (two rows, kind ``nhc``); with a
+  suspension pitch gain ``k`` the vertical row expects ``v_v[2] = k a_x v_v[0]``
+  (the body squats when the car accelerates and dives when it brakes: its x axis
+  pitches by ``k a_x`` against the path), ``a_x`` the forward acceleration from the
+  IMU's specific force (:func:`mean_specific_force`) and the nominal attitude.
 * :class:`Odometer`: ``speed = (1 + k) v_v[0]`` with ``k`` the odometer scale
   error (auxiliary block ``odometer_scale`` when estimated; kind ``odometer``).
 * :class:`ZeroVelocity` (ZUPT): ``v_n = 0`` at rest (three rows, kind ``zupt``).
@@ -42,7 +46,7 @@ import numpy as np
 from ..attitude import quat_to_dcm, skew
 from ..data import OdometerData
 from ..errors import ArgumentError
-from ..geodesy.earth import earth_rate_ned
+from ..geodesy.earth import earth_rate_ned, normal_gravity
 from ..ins.error_model import StateBlock, StateLayout
 from ._vehicle_kernel import vehicle_velocity_jac
 from .base import MeasurementModel, Rows
@@ -138,13 +142,28 @@ class NonHolonomic(VehicleVelocity):
     min_speed : float
         No rows while the nominal speed is below this [m/s] (the constraint
         still holds at rest, but a ZUPT says more there); 0 uses every epoch.
+    pitch_per_accel : float
+        Suspension pitch gain ``k`` [rad per m/s^2]: the vehicle frame's x axis
+        pitches up by ``k a_x`` against the path when the car accelerates forward at
+        ``a_x`` (squat; dive when braking), so the vertical row expects
+        ``v_v[2] = k a_x v_v[0]`` instead of 0. 0 (default): the plain constraint.
+    specific_force : (M, 3) array, optional
+        The body-frame specific force [m/s^2] at each epoch, averaged over a short span
+        before it (:func:`mean_specific_force`); required with ``pitch_per_accel``.
+        ``a_x`` is its vehicle-frame x component plus that of gravity by the nominal
+        attitude (the accelerometer bias, a few mg, is left out: 0.06 m/s^2 is below
+        0.01 m/s^2 of expected vertical velocity at the gains and speeds of a car).
+        An epoch whose average is not finite (outside the IMU's span) gets the plain row.
     """
 
     kinds = ("nhc",)
 
     def __init__(self, times, layout, mounting=(0.0, 0.0, 0.0), lever_arm=(0.0, 0.0, 0.0),
-                 sigma=(0.1, 0.1), min_speed: float = 0.0):
+                 sigma=(0.1, 0.1), min_speed: float = 0.0, pitch_per_accel: float = 0.0, specific_force=None):
         super().__init__(layout, mounting, lever_arm)
+        if not np.isfinite(pitch_per_accel):
+            raise ArgumentError(f"must be finite, got {pitch_per_accel!r}", argument="pitch_per_accel")
+        self.pitch_per_accel = float(pitch_per_accel)
         self._times = _times(times, "times")
         s = np.broadcast_to(np.asarray(sigma, dtype=float), (2,))
         for k in range(2):
@@ -155,16 +174,58 @@ class NonHolonomic(VehicleVelocity):
         self.min_speed = float(min_speed)
         self._kinds = np.array([NHC, NHC], dtype=np.int64)
         self._channels = channel_id(self._kinds, np.array([1, 2]))
+        self._f = None
+        if self.pitch_per_accel != 0.0:
+            if specific_force is None:
+                raise ArgumentError("the suspension pitch needs the forward acceleration: pass the specific force "
+                                    "at the epochs (mean_specific_force)", argument="specific_force")
+            f = np.asarray(specific_force, dtype=float)
+            if f.shape != (len(self._times), 3):
+                raise ArgumentError(f"expected ({len(self._times)}, 3), got {f.shape}", argument="specific_force")
+            self._f = f
+            c = self.mounting
+            sr, cr, sp, cp, sy, cy = np.sin(c[0]), np.cos(c[0]), np.sin(c[1]), np.cos(c[1]), np.sin(c[2]), np.cos(c[2])
+            self._cvb_x = np.array([cp * cy, sr * sp * cy - cr * sy, cr * sp * cy + sr * sy])  # first row of C_vb
 
     @property
     def times(self) -> np.ndarray:
         return self._times
 
+    def forward_acceleration(self, i, nav) -> float:
+        """``a_x`` [m/s^2] at epoch ``i``: the vehicle-frame x component of the specific
+        force plus gravity (``f_b + C_bn g_n``), NaN where the specific force is unknown."""
+        g = normal_gravity(nav[7], nav[9])
+        a_b = self._f[i] + g * quat_to_dcm(nav[0:4])[2]    # C_bn (0, 0, g) = g * (row 2 of C_nb)
+        return float(self._cvb_x @ a_b)
+
     def rows(self, i, nav, w_b, clock=None, memory=None, aux=None):
         if self.min_speed > 0 and np.dot(nav[4:7], nav[4:7]) < self.min_speed ** 2:
             return None
         v_v, H = self.vehicle_velocity(nav, w_b, aux)
-        return Rows(-v_v[1:3], H[1:3].copy(), self.r.copy(), self._kinds, self._channels)
+        z = -v_v[1:3]
+        if self._f is not None:
+            a_x = self.forward_acceleration(i, nav)
+            if np.isfinite(a_x):
+                z[1] += self.pitch_per_accel * a_x * v_v[0]
+        return Rows(z, H[1:3].copy(), self.r.copy(), self._kinds, self._channels)
+
+
+def mean_specific_force(imu, times, span: float) -> np.ndarray:
+    """The body-frame specific force [m/s^2] averaged over ``(t - span, t]`` at each of
+    ``times`` (M, 3), from the IMU's velocity increments (whole increments that end in the
+    span); NaN rows where no increment does."""
+    t = np.asarray(times, dtype=float)
+    if not (np.isfinite(span) and span > 0):
+        raise ArgumentError(f"must be a positive time, got {span!r}", argument="span")
+    cum_v = np.vstack([np.zeros(3), np.cumsum(imu.dvel, axis=0)])
+    cum_t = np.concatenate([[0.0], np.cumsum(imu.dt)])
+    hi = np.searchsorted(imu.time, t, side="right")
+    lo = np.searchsorted(imu.time, t - span, side="right")
+    dur = cum_t[hi] - cum_t[lo]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = (cum_v[hi] - cum_v[lo]) / dur[:, None]
+    out[hi <= lo] = np.nan
+    return out
 
 
 class Odometer(VehicleVelocity):

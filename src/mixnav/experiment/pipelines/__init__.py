@@ -9,7 +9,10 @@ A pipeline is a module with
 - ``tables(output)``: method name -> solution table (docs/outputs.md);
 - ``metrics(output, tables)``: method name -> its metrics;
 - ``truth(output)``: the reference trajectory as a table, or None;
-- ``write(out_dir, output, config_text=None, overwrite=False) -> metrics.json's dict``.
+- ``write(out_dir, output, config_text=None, overwrite=False, sweeps=()) -> metrics.json's dict``
+  (``sweeps``: :class:`~mixnav.experiment.sweep.SweepResult` s written beside);
+- optionally ``with_start(ds, start) -> ds``: the dataset run as if it began at ``start`` [s]
+  (the start sweep; kinds that start from their own data).
 
 The CLI (``mixnav process``), the API (:func:`mixnav.process_dataset`,
 ``RunResult.write``) and :mod:`mixnav.experiment.process` find the pipeline here. A new

@@ -11,7 +11,7 @@ import pandas as pd
 from ...config.raw_gnss_schema import RawGnssDataset
 from ..spp_process import SppOutput, method_metrics, raw_tables, read_raw, solve_raw, write_raw
 
-__all__ = ["load", "run", "tables", "metrics", "truth", "write"]
+__all__ = ["load", "run", "tables", "metrics", "truth", "write", "with_start"]
 
 
 def load(ds: RawGnssDataset, source: str, folder: Path) -> tuple:
@@ -41,3 +41,10 @@ def truth(po: SppOutput) -> None:
 
 
 write = write_raw
+
+
+def with_start(ds: RawGnssDataset, start: float) -> RawGnssDataset:
+    """The dataset with its filters started at the first SPP fix at or after ``start`` [s since
+    the first epoch] (``[motion] start``: the start sweep, :mod:`mixnav.experiment.sweep`)."""
+    return ds.model_copy(update={"motion": ds.motion.model_copy(update={"start": float(start)})})
+

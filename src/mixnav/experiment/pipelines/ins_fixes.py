@@ -183,6 +183,7 @@ def write(out_dir: Path, po: ProcessOutput, config_text: str | None = None, over
               "imu_gaps_accepted": int(po.imu.gaps),
               **({} if po.odometer is None else {"odometer_gaps_accepted": int(po.odometer.gaps)}),
               **({"imu_spikes_rejected": int(po.imu.spikes)} if po.imu.spikes else {}),
+              **({"imu_partial_lines_skipped": int(po.imu.partial_lines)} if po.imu.partial_lines else {}),
               **po.checks}
     if po.aiding:
         header["aiding"] = po.aiding
