@@ -236,3 +236,12 @@ def test_make_p3_two_runs(tmp_path):
             else:
                 assert r["pf", seed] > mk.DIVERGED_M
     assert "PF (SIR, 2000 particles) | 2" in text
+
+
+def test_the_scenario_runs_p3s_own_method():
+    """P3-flight runs P3's method, the GMPF with P3's 2000 particles, beside the SIR filter it is
+    compared with (issue 37: every paper scenario runs the paper's own method)."""
+    sc, _, _ = load_scenario("P3-flight")
+    by = {m.estimator: m for m in sc.methods}
+    assert "gmpf" in by and "pf" in by
+    assert by["gmpf"].options["particles"] == by["pf"].options["particles"] == 2000
