@@ -15,6 +15,7 @@ coordinates rounded to 7 decimals (1 cm).
 from __future__ import annotations
 
 import html
+import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -152,5 +153,12 @@ def map_html(solutions: dict[str, pd.DataFrame], reference: pd.DataFrame | None 
                         opacity=0.9, tooltip=html.escape(tr.name)).add_to(g)
         g.add_to(m)
     folium.LayerControl(collapsed=False).add_to(m)
-    m.fit_bounds(layers.bounds())
+    bounds = layers.bounds()
+    m.fit_bounds(bounds)
+    # In the report's iframe the map may have no size yet when the page's script runs (zoom 0,
+    # the whole world): fit again once the frame is laid out
+    name = m.get_name()
+    m.get_root().script.add_child(folium.Element(
+        f"window.addEventListener('load', function () {{ {name}.invalidateSize(); "
+        f"{name}.fitBounds({json.dumps(bounds)}); }});"))
     return m.get_root().render()
