@@ -152,13 +152,14 @@ def map_html(solutions: dict[str, pd.DataFrame], reference: pd.DataFrame | None 
         folium.PolyLine(tr.latlon.tolist(), color=tr.colour, weight=3 if tr.name == "reference" else 2,
                         opacity=0.9, tooltip=html.escape(tr.name)).add_to(g)
         g.add_to(m)
-    folium.LayerControl(collapsed=False).add_to(m)
+    control = folium.LayerControl(collapsed=False).add_to(m)
     bounds = layers.bounds()
     m.fit_bounds(bounds)
     # In the report's iframe the map may have no size yet when the page's script runs (zoom 0,
-    # the whole world): fit again once the frame is laid out
+    # the whole world; a layer list cut to a scrolling sliver): fit both again once the frame
+    # is laid out
     name = m.get_name()
     m.get_root().script.add_child(folium.Element(
         f"window.addEventListener('load', function () {{ {name}.invalidateSize(); "
-        f"{name}.fitBounds({json.dumps(bounds)}); }});"))
+        f"{name}.fitBounds({json.dumps(bounds)}); {control.get_name()}.expand(); }});"))
     return m.get_root().render()
