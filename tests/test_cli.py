@@ -5,6 +5,7 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 from typer.testing import CliRunner
@@ -27,7 +28,7 @@ def demo_out(tmp_path_factory):
 def test_demo_writes_solution_metrics_figures_report(demo_out):
     names = {p.name for p in demo_out.iterdir()}
     for f in ("solution_ekf.csv", "solution_ekf.parquet", "metrics.json", "report.html",
-              "errors_position.png", "trajectory.png"):
+              "errors_position.png", "trajectory.png", "map.html"):
         assert f in names
     assert not [n for n in names if n.endswith(".tmp")]
     csv = pd.read_csv(demo_out / "solution_ekf.csv")
@@ -47,6 +48,23 @@ def test_demo_writes_solution_metrics_figures_report(demo_out):
     assert m["horizontal_max_m"] == pytest.approx(h.max(), rel=1e-8)
     assert m["outages"][0]["start_s"] == 300.0
     assert sum(m["recoveries"].values()) == 0
+
+
+def test_map_holds_the_solution_and_the_outage(demo_out):
+    from mixnav.experiment.webmap import decimation_index
+    from .test_webmap import polylines
+    page = (demo_out / "map.html").read_text()
+    assert "map.html" in (demo_out / "report.html").read_text()
+    csv = pd.read_csv(demo_out / "solution_ekf.csv")
+    ref = pd.read_parquet(demo_out / "reference.parquet")
+    window = json.loads((demo_out / "metrics.json").read_text())["outages_s"]
+    lines = polylines(page)   # spans first (under the tracks), then the reference, then ekf
+    assert len(lines) == 2 * len(window) + 2
+    for line, df in zip(lines[-2:], (ref, csv)):
+        k = decimation_index(df.time_s.to_numpy(), 3000, window)
+        np.testing.assert_allclose(line, df[["lat_deg", "lon_deg"]].to_numpy()[k], rtol=0, atol=6e-8)
+    for (a, b) in window:
+        assert f"ekf: GNSS outage {a:g} - {b:g} s" in page
 
 
 def test_report_embeds_every_figure(demo_out):

@@ -93,6 +93,12 @@ def test_android_static_end_to_end(tmp_path):
     h = np.hypot(csv["err_n_m"], csv["err_e_m"])[csv["status"] == "ok"]
     assert np.sqrt(np.mean(h**2)) == pytest.approx(s["horizontal_rmse_m"], rel=1e-9)
     assert (out / "report.html").exists() and (out / "horizontal_error.png").exists()
+    # the map draws the solved epochs (the unsolved have no position)
+    from .test_webmap import polylines
+    (line,) = polylines((out / "map.html").read_text())
+    ok = csv[csv["status"] == "ok"]
+    assert len(line) == len(ok)
+    np.testing.assert_allclose(line, ok[["lat_deg", "lon_deg"]].to_numpy(), rtol=0, atol=6e-8)
     # every metrics key is documented
     doc = (DOCS / "outputs.md").read_text()
     for key in list(m) + list(s):

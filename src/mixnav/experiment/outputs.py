@@ -8,6 +8,7 @@ Output folder (every file written atomically, the folder policy of :mod:`mixnav.
     reference.parquet                  the truth (run) or the reference (process)
     metrics.json                       per-method metrics, timing, recoveries
     <figure>.png                       error and trajectory figures
+    map.html                           the trajectories on a web map (Leaflet, tiles online)
     report.html                        one self-contained report
 """
 
@@ -28,6 +29,7 @@ from ..io.outdir import staged_output
 from ..measurements.loose import antenna_lla
 from ..sim.gnss import in_windows
 from . import figures
+from .webmap import map_html
 from .metrics import NIS_CAUSES, NIS_CAUSES_NO_INS, method_metrics, nees, nis_warnings
 from .report import write_report
 
@@ -248,7 +250,8 @@ def _write_outputs(folder, title, header, results, tables, outages, reference, g
         figs["tracked_noise_sigma"] = tracked
     sections = add_sweeps(out_dir, metrics, figs, sweeps)
     # metrics.json last: its presence marks a complete output folder.
-    write_report(out_dir, title, metrics, figs, notes=list(notes), config_text=config_text, sections=sections)
+    write_report(out_dir, title, metrics, figs, notes=list(notes), config_text=config_text, sections=sections,
+                 web_map=map_html(tables, reference, gnss, outages, title=title))
     atomic_write_json(out_dir / "metrics.json", metrics)
     return metrics
 

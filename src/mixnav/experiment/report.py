@@ -2,7 +2,11 @@
 
 The page has no JavaScript and no external resource, so it can be mailed or
 archived as a single file. Every piece of text is escaped with
-``html.escape``.
+``html.escape``. The one exception is the interactive map
+(:mod:`mixnav.experiment.webmap`), when given: written beside as ``map.html`` and
+inlined as an iframe's ``srcdoc`` (the page stays one file), whose own page loads
+Leaflet and the map tiles from the web when viewed; offline the iframe stays empty
+and the trajectory PNG is the plan view.
 """
 
 from __future__ import annotations
@@ -38,6 +42,7 @@ table{border-collapse:collapse;margin:1em 0;font-size:90%}
 td,th{border:1px solid #bbb;padding:4px 8px;text-align:right}
 th{background:#eee}td:first-child,th:first-child{text-align:left}
 img{max-width:100%;display:block;margin:1em 0}
+iframe{width:100%;height:560px;border:1px solid #bbb}
 pre{background:#f6f6f6;padding:1em;overflow:auto;font-size:85%}"""
 
 
@@ -123,7 +128,7 @@ def start_sweep_table(summary: dict, settings: dict) -> str:
 
 def write_report(out_dir: Path, title: str, metrics: dict, figures: dict[str, Figure],
                  notes: Sequence[str] = (), config_text: str | None = None,
-                 sections: Sequence[tuple[str, str]] = ()) -> Path:
+                 sections: Sequence[tuple[str, str]] = (), web_map: str | None = None) -> Path:
     """Save the figures as PNG and write ``report.html`` with them embedded.
 
     Parameters
@@ -146,6 +151,9 @@ def write_report(out_dir: Path, title: str, metrics: dict, figures: dict[str, Fi
     sections : sequence of (title, html)
         Further sections placed after the metrics tables; the HTML must be
         built with every piece of text already escaped.
+    web_map : str, optional
+        An interactive map page (:func:`mixnav.experiment.webmap.map_html`): written as
+        ``map.html`` and shown in an iframe ahead of the figures.
 
     Returns
     -------
@@ -177,6 +185,13 @@ def write_report(out_dir: Path, title: str, metrics: dict, figures: dict[str, Fi
     if notes:
         parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{_esc(n)}</li>" for n in notes) + "</ul>")
 
+    if web_map is not None:
+        atomic_write_text(out_dir / "map.html", web_map)
+        parts.append("<h2>Map</h2><p>The trajectories on OpenStreetMap (needs a connection; also "
+                     "<a href='map.html'>map.html</a>; offline, the plan view below): each method's track, the "
+                     "reference, the GNSS fixes, the GNSS outage windows in orange; layers switch on and off "
+                     "at the top right.</p>"
+                     f"<iframe title='map' sandbox='allow-scripts' srcdoc='{_esc(web_map)}'></iframe>")
     if figures:
         parts.append("<h2>Figures</h2>")
     for name, fig in figures.items():

@@ -44,6 +44,7 @@ from ..io.atomic import atomic_write_dataframe, atomic_write_json
 from . import figures
 from .outputs import add_sweeps
 from .report import write_report
+from .webmap import map_html
 
 METHOD = "spp"
 
@@ -426,7 +427,8 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None, sweeps=())
                      f"corrected pseudoranges and weights as the SPP, started at the first fix "
                      f"(t = {po.init.time:.2f} s).")
     sections = add_sweeps(out_dir, metrics, figs, sweeps)
-    write_report(out_dir, f"mixnav process: {po.dataset.dataset.name}", metrics, figs, notes=notes,
-                 config_text=config_text, sections=sections)
+    title = f"mixnav process: {po.dataset.dataset.name}"
+    write_report(out_dir, title, metrics, figs, notes=notes, config_text=config_text, sections=sections,
+                 web_map=map_html({n: o for n, o in oks.items() if len(o)}, title=title))
     atomic_write_json(out_dir / "metrics.json", metrics)       # last: marks a complete folder
     return metrics
