@@ -185,7 +185,7 @@ def window_table(D: Drive) -> tuple[list[dict], list[dict]]:
         tau = rep["los_correlation_time_s"]
         rho_c = math.exp(-0.2 / tau) if tau > 0 else 0.0
         infl = (1 + rho_c) / (1 - rho_c)
-        g, e, var, A, th = best["g"], best["e"], best["var"], best["A"], best["theta"]
+        g, var, A, th = best["g"], best["var"], best["A"], best["theta"]
         # the fit's own covariance (LOS information on the given variances times los_scale,
         # delayed rows on sd^2), times the correlation factor; mapped to the window's end
         wt = g / (rep["los_scale"] * var) + (1 - g) / best["sd"] ** 2
