@@ -26,6 +26,10 @@ def p4_run(tmp_path_factory):
     cut = next(i for i, ln in enumerate(lines) if ln.strip() == "# block 5: 1820 - 2170 s")
     end = next(i for i in range(cut, len(lines)) if lines[i].strip() == "]")
     text = "".join(lines[:cut] + lines[end:]).replace('losses = [["2400 s", "3000 s", 0.3]]\n', "")
+    for seg in ('  { name = "loss", start = "2400 s", end = "3000 s" },\n',      # scored segments past the cut
+                '  { name = "after", start = "3000 s", end = "3600 s" },\n'):
+        assert seg in text
+        text = text.replace(seg, "")
     head, *methods = text.split("[[methods]]")
     keep = [m for m in methods if 'name = "ekf-od"' not in m and 'name = "gm-online"' not in m]
     p = tmp_path_factory.mktemp("p4") / "p4.toml"
@@ -44,6 +48,9 @@ def test_p4_vehicle_em_imm_beats_the_imm_in_multipath(p4_run):
     t = p4_run.solutions
     em, imm, ekf = (_segment_max(t[m], 1200, 1800) for m in ("em-imm", "imm", "ekf"))
     assert em <= 2.0 and em < imm and em < ekf, (em, imm, ekf)
+    # the scenario's [scoring] segment "multipath" reports the same maximum (P4's number)
+    for name, v in (("em-imm", em), ("imm", imm), ("ekf", ekf)):
+        assert p4_run.metrics.loc[name, "segment_multipath_horizontal_max_m"] == pytest.approx(v, rel=1e-12)
     seg = t["em-imm"][(t["em-imm"].time_s >= 1200) & (t["em-imm"].time_s < 1800)]
     b = seg[["bias_n_m", "bias_e_m"]].to_numpy()
     applied = np.linalg.norm(b, axis=1) > 0

@@ -78,6 +78,8 @@ def _metrics_frame(metrics: dict):
     for name, m in metrics.items():
         row = {k: v for k, v in m.items() if not isinstance(v, (dict, list))}
         row.update({f"recoveries.{k}": v for k, v in m.get("recoveries", {}).items()})
+        for seg, sm in m.get("segments", {}).items():   # a scenario's [scoring] segments
+            row.update({f"segment_{seg}_{k}": v for k, v in sm.items() if k not in ("start_s", "end_s")})
         rows[name] = row
     return pd.DataFrame.from_dict(rows, orient="index")
 
@@ -106,7 +108,8 @@ def run_scenario(name_or_path: str, seed: int | None = None) -> RunResult:
     run = _run(sc, source, seed=seed)
     sim = run.sim
     tables = run_tables(run)
-    metrics = {name: method_metrics(res, tables[name], sim.outages, sim.gnss_bias) for name, res in run.results.items()}
+    metrics = {name: method_metrics(res, tables[name], sim.outages, sim.gnss_bias, sc.scored_segments)
+               for name, res in run.results.items()}
     return RunResult(tables, _metrics_frame(metrics), run.results, _frame(sim.truth.time, sim.truth.lla), run, text)
 
 

@@ -176,10 +176,13 @@ def run(scenario: str = typer.Argument(..., help="Shipped scenario name or path 
             result = run_scenario(sc, source, seed=seed)
             metrics = write_run(out_dir, result, config_text=text, overwrite=overwrite)
     smooth = _smoother_column(metrics["methods"])
-    t = Table("method", "horiz. RMSE [m]", "horiz. max [m]", "yaw RMSE [deg]", "vel. RMSE [m/s]",
+    segs = list(metrics.get("segments_s", {}))      # the scenario's [scoring] segments: their maxima
+    t = Table("method", "horiz. RMSE [m]", "horiz. max [m]", *(f"{g}: horiz. max [m]" for g in segs),
+              "yaw RMSE [deg]", "vel. RMSE [m/s]",
               "time/epoch [us]", *smooth, title=f"{sc.scenario.name} (seed {metrics['seed']})")
     for name, m in metrics["methods"].items():
         t.add_row(name, f"{m['horizontal_rmse_m']:.3g}", f"{m['horizontal_max_m']:.3g}",
+                  *(_num(m.get("segments", {}).get(g, {}), "horizontal_max_m") for g in segs),
                   f"{m['yaw_rmse_deg']:.3g}", f"{m['velocity_rmse_mps']:.3g}",
                   _num(m, "epoch_time_mean_us"), *(_num(m, "smoother_time_s") for _ in smooth))
     out.print(t)
@@ -267,6 +270,12 @@ def process(dataset: str = typer.Argument(..., help="Shipped dataset config name
     out.print(f"report: {Path(out_dir) / 'report.html'}")
 
 
+def _scored_segments(scenario: str) -> list:
+    """The ``[scoring]`` segments of an experiment's scenario (as loaded by the experiment)."""
+    from .experiment.montecarlo import _load
+    return _load(scenario)[0][0][1].scored_segments
+
+
 def _print_sweep(sw) -> None:
     st = sw.settings
     if sw.kind == "start_sweep":
@@ -311,7 +320,10 @@ def experiment(scenario: str = typer.Argument(..., help="Shipped scenario name o
     sweep = "sweep_value" in summary.columns
     t = Table(*(["sweep"] if sweep else []), "method", "metric", "mean", "95 % CI", "n",
               title=f"{scenario}: {df['seed'].nunique()} runs")
-    shown = summary["metric"].isin(["horizontal_rmse_m", "yaw_rmse_deg", "velocity_rmse_mps", "epoch_time_mean_us"])
+    # and per scored segment of the scenario's [scoring] its maximum horizontal error (the rest is in the report)
+    segs = [f"segment_{g}_horizontal_max_m" for g, _, _ in _scored_segments(scenario)]
+    shown = summary["metric"].isin(["horizontal_rmse_m", "yaw_rmse_deg", "velocity_rmse_mps",
+                                    "epoch_time_mean_us", *segs])
     for _, r in summary[shown & (summary["n"] > 0)].iterrows():  # n = 0: a smoothed method's epoch time
         t.add_row(*([f"{r['sweep_value']:g}"] if sweep else []), r["method"], r["metric"],
                   f"{r['mean']:.4g}", f"+-{r['ci95_half']:.2g}", str(int(r["n"])))

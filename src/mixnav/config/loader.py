@@ -158,7 +158,7 @@ def _check_imu_rate(sc, source) -> None:
 
 
 def _check_windows(sc, source) -> None:
-    """GNSS fixes fall on IMU samples; outage windows lie inside the run; the run fits in
+    """GNSS fixes fall on IMU samples; outage windows and scored segments lie inside the run; the run fits in
     memory; segments turn no faster than a gyro measures; lever arms (docs/validation.md)."""
     if sc.imu.rate * sc.duration > MAX_IMU_SAMPLES:
         raise ConfigError(f"{sc.duration:g} s at {sc.imu.rate:g} Hz is {sc.imu.rate * sc.duration:.3g} IMU samples; "
@@ -178,6 +178,15 @@ def _check_windows(sc, source) -> None:
         if a >= end or b > end + 1e-9:
             raise ConfigError(f"outage [{a:g}, {b:g}] s reaches beyond the end of the run ({end:g} s)",
                               file=source, key=f"gnss.outages[{i}]")
+    seen: dict[str, int] = {}
+    for i, (name, a, b) in enumerate(sc.scored_segments):
+        if a >= end or b > end + 1e-9:
+            raise ConfigError(f"segment '{name}' [{a:g}, {b:g}] s reaches beyond the end of the run ({end:g} s)",
+                              file=source, key=f"scoring.segments[{i}]")
+        if name in seen:
+            raise ConfigError(f"segment name '{name}' is used by scoring.segments[{seen[name]}] too: names "
+                              "must differ", file=source, key=f"scoring.segments[{i}].name")
+        seen[name] = i
 
 
 def _check_odometer(sc, source) -> None:

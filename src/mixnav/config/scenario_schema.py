@@ -327,6 +327,32 @@ class SweepConfig(Strict):
         return self
 
 
+class ScoredSegment(Strict):
+    """A span of the run scored on its own (``[scoring] segments``): every accuracy metric of
+    the solution rows with ``start <= time_s < end`` (half open, so that segments meeting at
+    a time share no row). ``name`` (letters, digits, ``-``, ``_``) names the block in
+    metrics.json (``segments.<name>``) and the columns of an experiment's results
+    (``segment_<name>_<metric>``)."""
+
+    name: Annotated[str, Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_-]{0,39}$")]
+    start: Time
+    end: Time
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        if not self.end > self.start:
+            raise ValueError(f"end ({self.end:g} s) must be after start ({self.start:g} s)")
+        return self
+
+
+class ScoringConfig(Strict):
+    """``[scoring]``: the spans of the run scored on their own besides the whole run
+    (a paper's episode: P4's multipath 1200-1800 s). Each must lie inside the run and
+    the names must differ (checked by :func:`mixnav.config.loader.load_scenario`)."""
+
+    segments: list[ScoredSegment] = Field(default_factory=list)
+
+
 class Scenario(Strict):
     scenario: ScenarioInfo
     trajectory: TrajectoryConfig
@@ -339,6 +365,12 @@ class Scenario(Strict):
     vehicle: VehicleConfig | None = None
     installation: InstallationConfig | None = None
     odometer: OdometerConfig | None = None
+    scoring: ScoringConfig | None = None
+
+    @property
+    def scored_segments(self) -> list[tuple[str, float, float]]:
+        """``[(name, start_s, end_s), ...]`` of ``[scoring] segments`` (empty without)."""
+        return [] if self.scoring is None else [(s.name, s.start, s.end) for s in self.scoring.segments]
 
     @model_validator(mode="after")
     def _unique_methods(self):

@@ -212,15 +212,37 @@ LABELS = {**BOX_METRICS,
              for k in ("horizontal", "vertical")}}
 
 
-def headline_columns(keys: Sequence[str]) -> dict[str, str]:
-    """Labels of a scenario's ``report_table`` metric keys (the key itself when unknown)."""
-    return {k: LABELS.get(k, k) for k in keys}
+def _label(key: str, segments: Sequence[str] = ()) -> str:
+    """The label of a metric key; ``segment_<name>_<metric>`` (a scored segment of ``segments``)
+    as ``<name>: <metric's label>``."""
+    for g in sorted(segments, key=len, reverse=True):     # the longest name first: "a" vs "a_b"
+        if key.startswith(f"segment_{g}_"):
+            rest = key[len(f"segment_{g}_"):]
+            return f"{g}: {LABELS.get(rest, rest)}"
+    return LABELS.get(key, key)
+
+
+def headline_columns(keys: Sequence[str], segments: Sequence[str] = ()) -> dict[str, str]:
+    """Labels of a scenario's ``report_table`` metric keys (the key itself when unknown;
+    ``segments``: the names of its scored segments, whose keys are labelled by segment)."""
+    return {k: _label(k, segments) for k in keys}
+
+
+#: Per scored segment, the metrics of the report's segment table.
+SEGMENT_METRICS = ("horizontal_rmse_m", "horizontal_max_m", "vertical_rmse_m", "vertical_max_m",
+                   "velocity_rmse_mps", "nees_pos_mean")
+
+
+def segment_columns(segments: Sequence[str]) -> dict[str, str]:
+    """Column -> label of the segment table: :data:`SEGMENT_METRICS` of each scored segment."""
+    return {f"segment_{g}_{k}": _label(f"segment_{g}_{k}", segments) for g in segments for k in SEGMENT_METRICS}
 
 
 def write_experiment_report(out_dir: Path, scenario: str, results: pd.DataFrame, summary: pd.DataFrame,
                             config_text: str | None = None, series: pd.DataFrame | None = None,
                             consistency: pd.DataFrame | None = None, outages=(),
-                            sweep_name: str | None = None, headline: Sequence[str] = ()) -> Path:
+                            sweep_name: str | None = None, headline: Sequence[str] = (),
+                            segments: Sequence[str] = ()) -> Path:
     """``report.html`` of an experiment folder.
 
     Parameters
@@ -237,6 +259,9 @@ def write_experiment_report(out_dir: Path, scenario: str, results: pd.DataFrame,
     headline : sequence of str
         Metric keys of the scenario's headline table (``scenario.report_table``),
         shown first and, for a sweep, drawn against the swept value.
+    segments : sequence of str
+        Names of the scenario's scored segments (``[scoring]``): a table of their
+        metrics (means over runs), after the headline table.
     """
     sweep = "sweep_value" in results.columns
     runs = int(results["seed"].nunique())
@@ -252,13 +277,16 @@ def write_experiment_report(out_dir: Path, scenario: str, results: pd.DataFrame,
     sections = []
     if headline:
         sections.append(("Headline table: means over runs (95 % CI)",
-                         _table(_mean_ci_table(summary, headline_columns(headline)))))
+                         _table(_mean_ci_table(summary, headline_columns(headline, segments)))))
+    if segments:
+        sections.append(("Scored segments: means over runs (95 % CI)",
+                         _table(_mean_ci_table(summary, segment_columns(segments)))))
     sections.append(("Means over runs (95 % CI)", _table(_mean_ci_table(summary))))
     if consistency is not None and not consistency.empty:
         sections.append(("Monte Carlo consistency", _table(consistency)))
     figs: dict[str, Figure] = {}
     if sweep:
-        figs["sweep"] = sweep_figure(summary, headline_columns(headline) if headline else BOX_METRICS,
+        figs["sweep"] = sweep_figure(summary, headline_columns(headline, segments) if headline else BOX_METRICS,
                                      sweep_name or "sweep value")
     else:
         figs["boxplots"] = boxplot_figure(results, BOX_METRICS)

@@ -45,6 +45,10 @@ METRIC_KEYS_DOC: dict[str, str] = {
                "horizontal_max_m, vertical_max_m, horizontal_rmse_m, vertical_rmse_m (over the window and "
                "the unaided stretch after it), horizontal_final_m (at the last epoch scored), nees_pos_mean and "
                "nees_vel_mean (the mean NEES over the same epochs, when the filter gives covariances)",
+    "segments": "per scored segment of a scenario's [scoring] (docs/scenarios.md), {name: metrics}: "
+                "start_s, end_s and every whole-run accuracy key above (RMSE, max, p95 of horizontal, "
+                "vertical, velocity and attitude errors, n_epochs, NEES means) over the epochs with "
+                "start_s <= time_s < end_s; only when the scenario declares segments",
     "horizontal_rmse_outside_outages_m": "RMS of the horizontal error over the epochs outside every "
                                          "outage window [m] (only when there are outages)",
     "vertical_rmse_outside_outages_m": "RMS of the vertical error outside every outage window [m]",
@@ -121,7 +125,8 @@ def _rms(x: np.ndarray) -> float:
 
 
 def compute_metrics(solution: pd.DataFrame,
-                    outages: Sequence[tuple[float, float]] = ()) -> dict:
+                    outages: Sequence[tuple[float, float]] = (),
+                    segments: Sequence[tuple[str, float, float]] = ()) -> dict:
     """RMSE, maxima and per-outage maxima of a solution table.
 
     Parameters
@@ -135,6 +140,9 @@ def compute_metrics(solution: pd.DataFrame,
     outages : sequence of (start_s, end_s)
         GNSS outage windows [s]; a row belongs to a window when
         ``start_s <= time_s <= end_s``.
+    segments : sequence of (name, start_s, end_s)
+        Scored segments [s] (a scenario's ``[scoring] segments``); a row
+        belongs to one when ``start_s <= time_s < end_s`` (half open).
 
     Returns
     -------
@@ -144,7 +152,9 @@ def compute_metrics(solution: pd.DataFrame,
         ``n_epochs`` (int), ``outages`` (one dict per window with
         ``start_s, end_s, horizontal_max_m, vertical_max_m,
         horizontal_final_m``) and, when the NEES columns exist,
-        ``nees_pos_mean``, ``nees_vel_mean``. See :data:`METRIC_KEYS_DOC`.
+        ``nees_pos_mean``, ``nees_vel_mean``; with ``segments``, ``segments``:
+        ``{name: metrics}``, every whole-run metric above (no outages) of
+        the segment's rows plus its ``start_s, end_s``. See :data:`METRIC_KEYS_DOC`.
         Horizontal error is ``hypot(err_n, err_e)``, vertical ``|err_d|``,
         velocity the 3-D norm; RMSE is over all rows, max of the absolute
         error.
@@ -153,8 +163,8 @@ def compute_metrics(solution: pd.DataFrame,
     ------
     ValueError
         If a needed column is missing or holds a NaN/infinity (the message
-        names the column), if the table is empty, or if an outage window
-        holds no row (the message names the window).
+        names the column), if the table is empty, or if an outage window or
+        a segment holds no row (the message names it).
     """
     groups = [g for g in (_VEL, _ATT) if any(k in solution.columns for k in g)]
     c = {k: _col(solution, k) for k in _NEEDED + sum(groups, ())}
@@ -229,7 +239,27 @@ def compute_metrics(solution: pd.DataFrame,
     singular = int(singular.sum())   # epochs where either block was declined
     if singular:   # the filter's covariance was singular there (:func:`nees`): said, not hidden
         m["nees_singular_epochs"] = singular
+    if segments:
+        m["segments"] = segment_metrics(solution, segments)
     return m
+
+
+def segment_metrics(solution: pd.DataFrame, segments: Sequence[tuple[str, float, float]]) -> dict:
+    """``{name: metrics}`` of each scored segment ``(name, start_s, end_s)``: the whole-run
+    metrics of :func:`compute_metrics` (RMSE, max, p95 per group, NEES means, ``n_epochs``)
+    of the rows with ``start_s <= time_s < end_s``, plus ``start_s`` and ``end_s``.
+    ValueError naming the segment when it holds no row."""
+    t = _col(solution, "time_s")
+    out = {}
+    for name, a, b in segments:
+        a, b = float(a), float(b)
+        sel = (t >= a) & (t < b)
+        if not sel.any():
+            raise ValueError(f"scored segment '{name}' [{a:g}, {b:g}) s holds no solution epoch")
+        m = compute_metrics(solution.loc[sel])
+        m.pop("outages", None)
+        out[str(name)] = {"start_s": a, "end_s": b, **m}
+    return out
 
 
 #: A covariance is taken as singular where its correlation matrix's condition number may
@@ -309,12 +339,13 @@ def bias_metrics(res: FilterResult, gnss_bias) -> dict:
     return m
 
 
-def method_metrics(res: FilterResult, table: pd.DataFrame, outages, gnss_bias=None) -> dict:
+def method_metrics(res: FilterResult, table: pd.DataFrame, outages, gnss_bias=None, segments=()) -> dict:
     """Accuracy metrics plus timing, recoveries and NIS of one method; with ``gnss_bias``
     (the fixes' systematic error, simulation or injected) the bias-estimate metrics
-    (:func:`bias_metrics`)."""
+    (:func:`bias_metrics`); with ``segments`` (``(name, start_s, end_s)``, a scenario's
+    ``[scoring]``) the metrics of each (:func:`segment_metrics`)."""
     # without a reference there is nothing to score: timing and health only
-    m = compute_metrics(table, outages=list(outages)) if "err_n_m" in table else {}
+    m = compute_metrics(table, outages=list(outages), segments=list(segments)) if "err_n_m" in table else {}
     m.update({k: float(v) for k, v in res.timing.items()})
     if "wall_time_s" in m:  # a smoothed method has only its smoother_time_s (rts_smooth)
         m["total_time_s"] = m["wall_time_s"] + m.get("learning_time_s", 0.0)

@@ -29,7 +29,9 @@ running the seeds that have none (``resume=True``). Records hold numbers only
 (no solution tables) to stay small for thousands of runs.
 
 Metrics are those of :func:`mixnav.experiment.run.method_metrics`, flattened:
-per outage window ``outage<i>_<key>`` (``outage0_horizontal_max_m``...),
+per outage window ``outage<i>_<key>`` (``outage0_horizontal_max_m``...), per scored
+segment of the scenario's ``[scoring]`` ``segment_<name>_<key>``
+(``segment_multipath_horizontal_max_m``...; its span is in the scenario),
 ``recoveries_total`` plus ``recoveries_<kind>``. The timing metrics
 (:data:`TIMING_METRICS`) are wall-clock measurements and differ between two
 executions of the same seed; every other column is reproducible exactly.
@@ -119,6 +121,11 @@ def flatten_metrics(m: dict) -> dict:
                 for kk, vv in w.items():
                     if _is_scalar(vv):
                         out[f"outage{i}_{kk}"] = _scalar(vv)
+        elif k == "segments":
+            for name, seg in v.items():
+                for kk, vv in seg.items():
+                    if _is_scalar(vv) and kk not in ("start_s", "end_s"):
+                        out[f"segment_{name}_{kk}"] = _scalar(vv)
         elif k == "recoveries":
             out["recoveries_total"] = int(sum(int(x) for x in v.values()))
             for kk, vv in v.items():
@@ -197,7 +204,8 @@ def _compute_run(scenario: str, sha: str, seed: int, variant: int | None = None)
         row = {"scenario": sc.scenario.name, "seed": int(seed), "method": name}
         if variant is not None:
             row["sweep_value"] = value
-        rows.append({**row, **flatten_metrics(method_metrics(res, table, out.sim.outages, out.sim.gnss_bias)),
+        rows.append({**row, **flatten_metrics(method_metrics(res, table, out.sim.outages, out.sim.gnss_bias,
+                                                             sc.scored_segments)),
                      "scenario_sha256": sha})   # provenance: checked by a resume
         series.append(_series(name, res, table))
     return pd.DataFrame(rows), pd.concat(series, ignore_index=True)
@@ -603,7 +611,8 @@ def write_experiment_outputs(scenario: str, results: pd.DataFrame, out_dir: Path
                             series=series, consistency=consistency,
                             outages=[tuple(o) for o in sc.gnss.outages],
                             sweep_name=None if sweep is None else sweep.name,
-                            headline=sc.scenario.report_table)
+                            headline=sc.scenario.report_table,
+                            segments=[g for g, _, _ in sc.scored_segments])
     from ..io.outdir import write_marker
     write_marker(out_dir, "experiment", True, [p.name for p in out_dir.iterdir()])
     return {"summary": summary, "series": series, "consistency": consistency}

@@ -194,7 +194,7 @@ def write_outputs(out_dir: Path, title: str, header: dict, results: dict[str, Fi
                   tables: dict[str, pd.DataFrame], outages, reference: pd.DataFrame | None,
                   gnss: pd.DataFrame | None, notes=(), config_text: str | None = None, gnss_bias=None,
                   noise_truth: tuple | None = None, command: str = "run", overwrite: bool = False,
-                  protect=(), sweeps=()) -> dict:
+                  protect=(), sweeps=(), segments=()) -> dict:
     """Write solution tables, metrics.json, figures and report.html; returns the metrics.
 
     Shared by ``mixnav run`` (simulation, truth as reference) and ``mixnav
@@ -203,23 +203,27 @@ def write_outputs(out_dir: Path, title: str, header: dict, results: dict[str, Fi
     the simulated GNSS noise, drawn under the sigma a VB-adaptive filter tracked; ``sweeps``:
     :class:`~mixnav.experiment.sweep.SweepResult` s written beside (``<kind>.csv``, a
     ``<kind>`` block per method and the settings in metrics.json, a figure, a report
-    table). The
+    table); ``segments``: ``(name, start_s, end_s)`` scored on their own (a scenario's
+    ``[scoring]``: ``segments_s`` and a ``segments`` block per method). The
     folder follows the output-folder policy (:mod:`mixnav.io.outdir`): written whole into
     a temporary sibling and swapped in, a folder of another command (or with foreign
     files) refused unless ``overwrite``.
     """
     with staged_output(out_dir, command, overwrite, protect) as folder:
         return _write_outputs(folder, title, header, results, tables, outages, reference, gnss, notes,
-                              config_text, gnss_bias, noise_truth, sweeps)
+                              config_text, gnss_bias, noise_truth, sweeps, segments)
 
 
 def _write_outputs(folder, title, header, results, tables, outages, reference, gnss, notes, config_text,
-                   gnss_bias, noise_truth, sweeps=()):
+                   gnss_bias, noise_truth, sweeps=(), segments=()):
     out_dir = folder.path
     metrics = dict(header)
     metrics["mixnav_version"] = __version__
     metrics["outages_s"] = [list(map(float, o)) for o in outages]
-    metrics["methods"] = {name: method_metrics(results[name], tables[name], outages, gnss_bias) for name in tables}
+    if segments:
+        metrics["segments_s"] = {str(n): [float(a), float(b)] for n, a, b in segments}
+    metrics["methods"] = {name: method_metrics(results[name], tables[name], outages, gnss_bias, segments)
+                          for name in tables}
     ins = any(getattr(r.layout, "is_ins", True) for r in results.values())
     warned = nis_warnings(metrics["methods"], NIS_CAUSES if ins else NIS_CAUSES_NO_INS)
     if warned:

@@ -80,6 +80,21 @@ def _outage_table(methods: dict) -> str:
     return "".join(rows)
 
 
+def _segment_table(methods: dict) -> str:
+    """Per method and scored segment (a scenario's ``[scoring]``): its span and main errors."""
+    cols = (("horizontal_rmse_m", "horiz. RMSE [m]"), ("horizontal_max_m", "horiz. max [m]"),
+            ("vertical_rmse_m", "vert. RMSE [m]"), ("vertical_max_m", "vert. max [m]"),
+            ("velocity_rmse_mps", "vel. RMSE [m/s]"), ("nees_pos_mean", "mean position NEES"))
+    rows = ["<table><tr><th>method</th><th>segment</th><th>span [s]</th>"
+            + "".join(f"<th>{_esc(h)}</th>" for _, h in cols) + "</tr>"]
+    for name, m in methods.items():
+        for seg, g in m.get("segments", {}).items():
+            rows.append(f"<tr><td>{_esc(name)}</td><td>{_esc(seg)}</td><td>{g['start_s']:g} - {g['end_s']:g}</td>"
+                        + "".join(f"<td>{_fmt(g[k]) if k in g else ''}</td>" for k, _ in cols) + "</tr>")
+    rows.append("</table>")
+    return "".join(rows)
+
+
 def sweep_table(summary: dict, settings: dict) -> str:
     """An outage sweep's distribution per method (:func:`mixnav.experiment.sweep.summarize`)."""
     window, step = settings.get("window_s"), settings.get("step_s")
@@ -175,6 +190,9 @@ def write_report(out_dir: Path, title: str, metrics: dict, figures: dict[str, Fi
     if any(m.get("outages") for m in methods.values()):
         parts.append("<h2>GNSS outages</h2>")
         parts.append(_outage_table(methods))
+    if any(m.get("segments") for m in methods.values()):
+        parts.append("<h2>Scored segments</h2>")
+        parts.append(_segment_table(methods))
     rec = {n: m["recoveries"] for n, m in methods.items() if m.get("recoveries")}
     if rec:
         parts.append("<h2>Numerical recoveries</h2><ul>" + "".join(

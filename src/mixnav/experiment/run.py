@@ -132,4 +132,5 @@ def write_run(out_dir: Path, run: RunOutput, config_text: str | None = None, ove
     return write_outputs(out_dir, f"mixnav run: {run.scenario.scenario.name}", header, run.results, tables,
                          sim.outages, lla_frame(sim.truth.time, sim.truth.lla)[::10],
                          lla_frame(sim.fixes.time, sim.fixes.lla), notes, config_text, sim.gnss_bias,
-                         noise_truth=truth, command="run", overwrite=overwrite, protect=[run.source])
+                         noise_truth=truth, command="run", overwrite=overwrite, protect=[run.source],
+                         segments=run.scenario.scored_segments)
