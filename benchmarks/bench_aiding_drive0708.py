@@ -2,7 +2,7 @@
 
     python benchmarks/bench_aiding_drive0708.py [--data DIR]
 
-Runs the shipped dataset configs ``drive-0708-peer`` (the GNSS_IMU project's
+Runs the shipped dataset configs ``drive-0708`` (the GNSS_IMU project's
 windows) and ``drive-0708-aided`` (mixnav's shipped windows); each holds the plain
 EKF and the aided EKF (NHC 10 Hz, ZUPT, ZARU) with its RTS smoother. Writes
 benchmarks/results/aiding_drive0708.md: maximum horizontal error and mean
@@ -26,7 +26,7 @@ from mixnav.config import load_dataset
 
 PEER = {"plain": (39.3, 25.3, 22.5), "zupt": (18.7, 5.2, 23.7), "smoother": (2.94, 3.37, 1.42)}
 CHI2_99_3 = 11.345  # chi-square(3) 99 % quantile: the share of epochs above it is reported
-CASES = {"drive-0708-peer": ((100, 130), (250, 280), (400, 430)),
+CASES = {"drive-0708": ((100, 130), (250, 280), (400, 430)),
          "drive-0708-aided": ((133, 163), (228, 258), (363, 393))}
 
 
@@ -83,7 +83,7 @@ def main():
         for m, cells in window_rows(r, wins):
             lines.append(f"| {m} | " + " | ".join(f"{e:.2f} / {p:.1f} ({100 * f:.0f} %) / {v:.1f}"
                                                    for e, p, f, v in cells) + " |")
-        if name == "drive-0708-peer":
+        if name == "drive-0708":
             for k, v in PEER.items():
                 lines.append(f"| GNSS_IMU {k} (published) | " + " | ".join(f"{x:.2f}" for x in v) + " |")
         lines += ["", "NIS/dof per kind (aided):", ""]

@@ -27,7 +27,7 @@ RESULTS = ROOT / "benchmarks" / "results"
 
 
 def main():
-    ds, src, _ = load_dataset("drive-0708")
+    ds, src, _ = load_dataset("drive-0708-plain")
     # the first call warms up numba's cache
     wall, po = best_of(lambda: process(ds, src, str(DATA)), 3, warmup=True)
     res = po.results["ekf"]

@@ -81,7 +81,7 @@ def drive_0708():
     from mixnav.config.loader import imu_model
     from mixnav.experiment import methods
     from mixnav.experiment.process import process
-    ds, src, _ = load_dataset("drive-0708")
+    ds, src, _ = load_dataset("drive-0708-plain")
     po = process(ds, src, str(DATA / "drive-0708"))  # read, withhold, align: as `mixnav process`
     m = ds.methods[0]
     filt, meas = methods.build(m, imu_model(ds.imu.grade, ds.imu.errors, src, "imu.errors", "imu.grade"),

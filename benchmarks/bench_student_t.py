@@ -2,7 +2,7 @@
 
 * smartloc-berlin: dead reckoning + GPS/GLONASS pseudoranges in an urban canyon;
   methods "ekf" and "student-t" (nu = 4, one scale per pseudorange row).
-* drive-0708-peer: strapdown INS + RTK positions/velocities with three 30 s outages;
+* drive-0708: strapdown INS + RTK positions/velocities with three 30 s outages;
   "ekf" and "aided" (NHC/ZUPT/ZARU) beside "student-t" and "student-t-aided".
 
 nu is fixed a priori at 4 (the default of Lange, Little & Taylor 1989 for t-based robust
@@ -30,9 +30,9 @@ import numpy as np
 NU = 4.0
 EXTRA = {
     "smartloc-berlin": [dict(name="student-t", like=None)],
-    "drive-0708-peer": [dict(name="student-t", like="ekf"), dict(name="student-t-aided", like="aided")],
+    "drive-0708": [dict(name="student-t", like="ekf"), dict(name="student-t-aided", like="aided")],
 }
-SHOW = {"smartloc-berlin": ["ekf", "student-t"], "drive-0708-peer": ["ekf", "student-t", "aided", "student-t-aided"]}
+SHOW = {"smartloc-berlin": ["ekf", "student-t"], "drive-0708": ["ekf", "student-t", "aided", "student-t-aided"]}
 
 
 def _copy_config(name: str) -> str:
@@ -41,7 +41,7 @@ def _copy_config(name: str) -> str:
     text, _ = resolve(name, "datasets", "dataset")
     for extra in EXTRA[name]:
         block = f'\n[[methods]]\nname = "{extra["name"]}"\nestimator = "student-t"\n'
-        if name == "drive-0708-peer":
+        if name == "drive-0708":
             block += 'type = "loose-ekf"\nstates = 15\ncovariance_interval = "0.25 s"\n'
             if extra["like"] == "aided":
                 block += 'aiding = ["nhc", "zupt", "zaru"]\n'
@@ -93,7 +93,7 @@ def main():
     rows = []
     for name in a.datasets:
         data = None if a.data is None else str(Path(a.data) / {"smartloc-berlin": "smartloc-berlin",
-                                                                 "drive-0708-peer": "drive-0708"}[name])
+                                                                 "drive-0708": "drive-0708"}[name])
         rows += run(name, data, a.repeat)
     print("| dataset | method | epochs | horizontal RMSE m | p95 m | max m | update us | epoch us | VB iterations |")
     print("|---|---|---|---|---|---|---|---|---|")

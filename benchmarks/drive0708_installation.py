@@ -30,7 +30,7 @@ from mixnav.filters import ekf as _ekf
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("MIXNAV_DATA", ROOT.parent / "shared" / "data")) / "drive-0708"
-CONFIG = ROOT / "src" / "mixnav" / "config" / "datasets" / "drive-0708.toml"
+CONFIG = ROOT / "src" / "mixnav" / "config" / "datasets" / "drive-0708-plain.toml"
 
 RECORDER = {"arw": "0.0038 deg/s/sqrt(Hz)", "vrw": "70 ug/sqrt(Hz)"}
 WINDOWS_EXTRA = [(100.0, 130.0), (250.0, 280.0), (400.0, 430.0)]

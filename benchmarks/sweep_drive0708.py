@@ -5,7 +5,7 @@
 Runs :func:`mixnav.experiment.sweep.run_outage_sweep` on ``drive-0708-aided`` (the plain
 EKF, the aided EKF with NHC/ZUPT/ZARU and its RTS smoother): 30 s GNSS windows every 10 s
 from the alignment to the end of the drive, one withheld at a time, and beside it the
-three windows the GNSS_IMU project published (``drive-0708-peer``) and the dataset's own
+three windows the GNSS_IMU project published (``drive-0708``) and the dataset's own
 three. Writes ``outage_sweep_drive0708.md`` and ``.json`` (every row, the per-method
 distribution, the wall time of the whole sweep on ``--workers`` processes).
 """
@@ -47,7 +47,7 @@ def main() -> int:
     a = ap.parse_args()
     res = run_outage_sweep("drive-0708-aided", "30 s", "10 s", data=a.data, workers=a.workers)
     summary, st = res.summary, res.settings
-    peer_rows = own_windows("drive-0708-peer", a.data)
+    peer_rows = own_windows("drive-0708", a.data)
     own_rows = own_windows("drive-0708-aided", a.data)
     out = Path(a.out)
     doc = {"recorded": datetime.now().isoformat(timespec="minutes"), "machine": platform.machine(),

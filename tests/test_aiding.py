@@ -159,7 +159,7 @@ def test_drive0708_peer_windows():
     and the data sheet's drift 18 / 19 / 4 and 42 / 39 / 18)."""
     from mixnav.api import process_dataset
     from .conftest import data_file
-    r = process_dataset("drive-0708-peer", str(data_file("drive-0708")))
+    r = process_dataset("drive-0708", str(data_file("drive-0708")))
     t = r.solutions
     wins = ((100, 130), (250, 280), (400, 430))
     for (a, b), causal_bound, smooth_bound in zip(wins, (13.1, 3.6, 16.6), (2.94, 3.37, 1.42)):

@@ -161,7 +161,7 @@ def test_rest_checks_and_library_errors():
 
 
 def _dataset(tmp_path, alignment: str, aiding: str = ""):
-    text = (Path(__file__).resolve().parents[1] / "src/mixnav/config/datasets/drive-0708.toml").read_text()
+    text = (Path(__file__).resolve().parents[1] / "src/mixnav/config/datasets/drive-0708-plain.toml").read_text()
     start = text.index("[alignment]")
     end = text.index("[[methods]]")
     text = text[:start] + "[alignment]\n" + alignment + '''

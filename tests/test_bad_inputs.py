@@ -408,7 +408,7 @@ def test_real_truncated_tag_refused(box):
     n = (len(b) - 76) // 8
     (d / "imu_1934.csv.tag").write_bytes(b[:76 + 8 * (n // 3)])   # record-aligned cut
     box.snapshot()
-    code, out = invoke("process", "drive-0708", "--data", d, "--out", box.out, cwd=box.root)
+    code, out = invoke("process", "drive-0708-plain", "--data", d, "--out", box.out, cwd=box.root)
     expect_error(code, out, "imu_1934.csv.tag", "truncated")
     box.check()
 
@@ -422,7 +422,7 @@ def test_real_tag_truncated_slightly_refused(box):
     n = (len(b) - 76) // 8
     (d / "imu_1934.csv.tag").write_bytes(b[:76 + 8 * int(n * 0.992)])
     box.snapshot()
-    code, out = invoke("process", "drive-0708", "--data", d, "--out", box.out, cwd=box.root)
+    code, out = invoke("process", "drive-0708-plain", "--data", d, "--out", box.out, cwd=box.root)
     expect_error(code, out, "imu_1934.csv.tag", "truncated", "548.590 s")
     box.check()
 
@@ -440,7 +440,7 @@ def test_real_partial_edge_lines_skipped_and_counted(box, cut, where):
     p = d / "imu_1934.csv"
     p.write_text(cut(p.read_text()))
     box.snapshot()
-    code, out = invoke("process", "drive-0708", "--data", d, "--out", box.out, cwd=box.root)
+    code, out = invoke("process", "drive-0708-plain", "--data", d, "--out", box.out, cwd=box.root)
     assert code == 0, out
     flat = " ".join(out.split())
     assert "imu_1934.csv" in flat and where in flat and "partial" in flat, out
@@ -456,7 +456,7 @@ def test_real_partial_line_inside_refused_with_line(box):
     lines[3000] = lines[3000][:12] + "\n"
     (d / "imu_1934.csv").write_text("".join(lines))
     box.snapshot()
-    code, out = invoke("process", "drive-0708", "--data", d, "--out", box.out, cwd=box.root)
+    code, out = invoke("process", "drive-0708-plain", "--data", d, "--out", box.out, cwd=box.root)
     expect_error(code, out, "imu_1934.csv", "line 3001", "partial line inside")
     box.check()
 
@@ -470,7 +470,7 @@ def test_real_gyro_spike_refused_with_line(box):
     lines[5000] = ",".join(parts)
     (d / "imu_1934.csv").write_text("".join(lines))
     box.snapshot()
-    code, out = invoke("process", "drive-0708", "--data", d, "--out", box.out, cwd=box.root)
+    code, out = invoke("process", "drive-0708-plain", "--data", d, "--out", box.out, cwd=box.root)
     expect_error(code, out, "imu_1934.csv", "line 5001", "spike")
     box.check()
 
@@ -484,7 +484,7 @@ def test_real_gnss_hole_reported(box):
     data = data[:1800] + data[2040:]            # 60 s of 4 Hz epochs removed, outside the withheld windows
     (d / "gnss_1934_sf.pos").write_text("".join(head + data))
     box.snapshot()
-    code, out = invoke("process", "drive-0708", "--data", d, "--out", box.out, cwd=box.root)
+    code, out = invoke("process", "drive-0708-plain", "--data", d, "--out", box.out, cwd=box.root)
     assert code == 0, out
     m = json.loads((box.out / "metrics.json").read_text())
     assert len(m["gnss_gaps_s"]) == 1 and m["gnss_gaps_s"][0][1] - m["gnss_gaps_s"][0][0] > 59
@@ -616,7 +616,7 @@ def test_unit_plausibility_of_data(box, imu, words):
     (["run", "../etc/passwd"], ["passwd"]),
     (["run", "loose\x00demo"], ["not a scenario name"]),
     (["process", "no-such-dataset"], ["unknown dataset"]),
-    (["process", "drive-0708", "--data", "/nonexistent/folder"], ["/nonexistent/folder"]),
+    (["process", "drive-0708-plain", "--data", "/nonexistent/folder"], ["/nonexistent/folder"]),
     (["run", "loose-demo", "--seed", "-1"], ["--seed"]),
     (["run", "loose-demo", "--bogus"], ["--bogus"]),
 ], ids=["runs-1e9", "runs-0", "workers-0", "seeds-from", "seeds-from-1e23", "resume-overwrite", "scheduler",

@@ -210,7 +210,7 @@ def _readers():
                                            "loose-demo.toml", t / "s.toml"),
          "s.toml", lambda p: load_scenario(str(p)), 40),
         ("dataset", lambda t: shutil.copy(Path(load_dataset.__code__.co_filename).parent / "datasets" /
-                                          "drive-0708.toml", t / "d.toml"),
+                                          "drive-0708-plain.toml", t / "d.toml"),
          "d.toml", lambda p: load_dataset(str(p)), 30),
     ]
 

@@ -201,7 +201,7 @@ def test_drive0708_installation_states_find_a_wrong_offset_and_lever(tmp_path):
     from mixnav.api import process_dataset
     from .conftest import data_file
     folder = data_file("drive-0708")
-    text = Path(__file__).parents[1].joinpath("src/mixnav/config/datasets/drive-0708.toml").read_text()
+    text = Path(__file__).parents[1].joinpath("src/mixnav/config/datasets/drive-0708-plain.toml").read_text()
     for a, b in (('imu_time_offset = "-0.2 s"', 'imu_time_offset = "-0.125 s"'),
                  ('antenna_position = ["0 m", "-0.05 m", "-0.65 m"]', 'antenna_position = ["0 m", "1.0 m", "-0.65 m"]')):
         assert a in text

@@ -174,7 +174,7 @@ def test_dataset_config_errors_name_the_key(tmp_path, simulated):
 def test_drive_0708_with_three_outages():
     if not (DATA_DIR / "drive-0708" / "imu_1934.csv").exists():
         pytest.skip(f"real data not found under {DATA_DIR}")
-    ds, src, _ = load_dataset("drive-0708")
+    ds, src, _ = load_dataset("drive-0708-plain")
     po = process(ds, src, str(DATA_DIR / "drive-0708"))
     from mixnav.experiment.run import method_metrics, solution_table
     t = solution_table(po.results["ekf"], po.reference, ds.gnss.withhold, lever=po.lever)

@@ -151,7 +151,7 @@ def test_bad_sweep_requests_name_the_option(tmp_path):
         mixnav.outage_sweep("android-static", "30 s")
     assert "evaluation.outage_sweep" in str(e.value)
     with pytest.raises(ArgumentError) as e:
-        mixnav.outage_sweep("drive-0708", data=data)   # no window and no [evaluation] key
+        mixnav.outage_sweep("drive-0708-plain", data=data)   # no window and no [evaluation] key
     assert e.value.argument == "window"
 
 
@@ -222,7 +222,7 @@ def test_bad_start_sweeps_name_the_option():
 
 def test_evaluation_keys_are_validated_and_used(tmp_path):
     from mixnav.config import load_dataset
-    text = (SHIPPED / "drive-0708.toml").read_text()      # no [evaluation] of its own
+    text = (SHIPPED / "drive-0708-plain.toml").read_text()      # no [evaluation] of its own
     bad = tmp_path / "bad.toml"
     bad.write_text(text + '\n[evaluation]\noutage_sweep = "30 s"\nsweep_span = ["300 s", "100 s"]\n')
     with pytest.raises(ConfigError) as e:
@@ -281,7 +281,7 @@ def test_an_impossible_evaluation_key_is_named_as_the_key(tmp_path):
     """A span read from [evaluation] that the recording cannot hold is said as
     evaluation.sweep_span of the file, not as an option the user did not give."""
     data = _needs_drive()
-    text = (SHIPPED / "drive-0708.toml").read_text().replace('data_dir = "../shared/data/drive-0708"',
+    text = (SHIPPED / "drive-0708-plain.toml").read_text().replace('data_dir = "../shared/data/drive-0708"',
                                                               f'data_dir = "{data}"')
     p = tmp_path / "late.toml"
     p.write_text(text + '\n[evaluation]\noutage_sweep = "30 s"\nsweep_span = ["60 s", "900 s"]\n')
