@@ -125,6 +125,64 @@ def cmd_suspension(a):
                   f"vertical std {vb[sel, 2].std():.4f} -> {e.std():.4f} m/s")
 
 
+def gnss_loglik(config_path: str) -> tuple[float, int]:
+    """The aided filter's GNSS position/velocity innovation log-likelihood on a config file (its
+    own windows withheld) and the GNSS epochs it sums: a criterion that reads no reference."""
+    from mixnav.config import load_dataset
+    from mixnav.experiment.data_folder import find_data_dir
+    from mixnav.experiment.pipelines import pipeline
+    from mixnav.filters import ekf as _ekf
+    from mixnav.measurements.kinds import KINDS
+    log = []
+    orig = _ekf.KalmanEstimator.update
+
+    def update(self, epoch):
+        rows = epoch.rows()
+        if rows is not None:
+            log.append((rows.z.copy(), rows.H @ self.P @ rows.H.T + np.diag(rows.R), np.asarray(rows.kinds) % 32))
+        return self.update_rows(rows)
+    gnss = [KINDS["position"], KINDS["velocity"]]
+    _ekf.KalmanEstimator.update = update
+    try:
+        ds, src, _ = load_dataset(config_path)
+        ds = ds.model_copy(update={"methods": [m for m in ds.methods if m.name == "aided"]})
+        p = pipeline(ds, src)
+        folder = find_data_dir(ds, None, src)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            p.run(ds, src, folder, p.load(ds, src, folder))
+    finally:
+        _ekf.KalmanEstimator.update = orig
+    ll, n = 0.0, 0
+    for z, S, k in log:
+        sel = np.isin(k, gnss)
+        if sel.any():
+            zz, SS = z[sel], S[np.ix_(sel, sel)]
+            ll -= 0.5 * (zz @ np.linalg.solve(SS, zz) + np.linalg.slogdet(SS)[1] + len(zz) * np.log(2 * np.pi))
+            n += 1
+    return ll, n
+
+
+def cmd_nhc_rate(a):
+    """The NHC rate by the GNSS innovation log-likelihood (no reference read): the shipped
+    config with each rate, the sigmas as shipped and scaled by sqrt(rate / 10 Hz) (the
+    violation is correlated over about 2 s, so a row's white-noise equivalent grows with
+    the rate: the shipped 0.1 / 0.25 m/s are its 10 Hz values)."""
+    for scaled in (False, True):
+        for r in (1, 2, 5, 10, 20, 50):
+            path = variant("after")
+            text = Path(path).read_text()
+            text = re.sub(r'(?m)^rate = "10 Hz"$', f'rate = "{r} Hz"', text, count=1)
+            if scaled:
+                f = (r / 10.0) ** 0.5
+                text = text.replace('sigma = ["0.1 m/s", "0.25 m/s"]',
+                                    f'sigma = ["{0.1 * f:.4f} m/s", "{0.25 * f:.4f} m/s"]')
+            Path(path).write_text(text)
+            ll, n = gnss_loglik(path)
+            print(f"NHC {r:3d} Hz, sigmas {'scaled' if scaled else 'as shipped'}: GNSS epochs {n}  "
+                  f"log-likelihood {ll:.1f}", flush=True)
+
+
 def cmd_likelihood(a):
     from mixnav.config import load_dataset
     from mixnav.experiment.data_folder import find_data_dir
@@ -166,10 +224,11 @@ def cmd_likelihood(a):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("sweep", "suspension", "likelihood"))
+    ap.add_argument("what", choices=("sweep", "suspension", "likelihood", "nhc-rate"))
     ap.add_argument("--out", default=None, help="sweep: write the summaries and windows as JSON")
     a = ap.parse_args(argv)
-    {"sweep": cmd_sweep, "suspension": cmd_suspension, "likelihood": cmd_likelihood}[a.what](a)
+    {"sweep": cmd_sweep, "suspension": cmd_suspension, "likelihood": cmd_likelihood,
+     "nhc-rate": cmd_nhc_rate}[a.what](a)
 
 
 if __name__ == "__main__":
