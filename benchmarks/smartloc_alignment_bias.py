@@ -21,9 +21,8 @@ A **diagnostic**: it uses the reference to find causes, never to choose a shippe
    ``smartloc_choose_settings.py`` (innovation log-likelihood, rows from S + 40 s) beside.
 4. The runs from 0 s and 120 s over 140-190 s: north error and heading.
 
-The held fits run a copy of ``mixnav.alignment.track._refine`` with one added term, a
-Gaussian pseudo-observation on chosen components of the fit's parameters
-(``_refine_held``). Writes ``smartloc_alignment_bias.md`` and ``.json`` into ``--out``.
+The held fits run ``mixnav.alignment.track._refine`` with its ``prior``, a Gaussian
+pseudo-observation on chosen components of the fit's parameters (``_refine_held``). Writes ``smartloc_alignment_bias.md`` and ``.json`` into ``--out``.
 """
 
 from __future__ import annotations
@@ -44,8 +43,9 @@ from mixnav.config.loader import load_dataset
 from mixnav.experiment.data_folder import find_data_dir
 from mixnav.experiment.vehicle_process import discard_before, read_vehicle, run_vehicle, vehicle_tables
 from mixnav.filters.epoch_mixture import EpochMixtureEstimator
-from mixnav.geodesy.frames import dcm_ecef_to_ned, lla_to_ned
-from mixnav.gnss.geometry import C_LIGHT, earth_rotation_correction
+from mixnav.geodesy.frames import lla_to_ned
+
+from smartloc_choose_settings import _LOG, _logged_update  # each epoch's innovation log-likelihood
 
 SWEEP = (0.0, 30.0, 60.0, 90.0, 120.0, 150.0)
 WINDOWS = tuple(float(s) for s in range(0, 160, 10))
@@ -55,73 +55,19 @@ WINDOW = 20.0
 #: final state is appended to "fits"
 HOLD: dict = {}
 _orig_refine = T._refine
-_LOG: list[tuple[float, float]] = []
 
 
 def _refine_held(theta0, lla_ref, tq, sat, rho, var, sidx, n_sys, track, iterations=30, band=None):
-    """``track._refine`` with the components in ``HOLD["hold"]`` held near given values."""
+    """``track._refine`` with the components in ``HOLD["hold"]`` held near given values (its
+    ``prior``), every fit's final state appended to ``HOLD["fits"]``."""
     hold = {k: (v(lla_ref) if callable(v) else v, sg) for k, (v, sg) in HOLD.get("hold", {}).items()}
-    C_en = dcm_ecef_to_ned(lla_ref[0], lla_ref[1]).T
-    r_ref = T.lla_to_ecef_point(lla_ref)
-    dn, de = track(tq)
-    t_ref = tq[0]
-    theta = np.array(theta0, dtype=float)
-    for k, (v, _) in hold.items():
-        theta[k] = v
     band = np.zeros(len(rho), dtype=np.int64) if band is None else band
-    nb = int(band.max()) + 1
-    w_b = np.full(nb, 0.5)
-    mu, s = 20.0, 30.0
-    ll = -np.inf
-    for _ in range(iterations):
-        c, sn = math.cos(theta[3]), math.sin(theta[3])
-        pn = theta[0] + c * dn - sn * de
-        pe = theta[1] + sn * dn + c * de
-        r = r_ref + np.stack([pn, pe, np.full_like(pn, theta[2])], axis=1) @ C_en.T
-        tau = np.linalg.norm(sat - r, axis=1) / C_LIGHT
-        d = earth_rotation_correction(sat, tau) - r
-        rng = np.linalg.norm(d, axis=1)
-        off = np.concatenate([[0.0], theta[6:]])
-        e = rho - (rng + theta[4] + theta[5] * (tq - t_ref) + off[sidx])
-        w = w_b[band]
-        a = np.log(w) - 0.5 * e * e / var - 0.5 * np.log(2 * np.pi * var)
-        b = np.log(1 - w) - 0.5 * (e - mu) ** 2 / s ** 2 - 0.5 * np.log(2 * np.pi * s * s)
-        mx = np.maximum(a, b)
-        lse = mx + np.log(np.exp(a - mx) + np.exp(b - mx))
-        ll_new = float(lse.sum())
-        g = np.exp(a - lse)
-        w_b = np.clip(np.bincount(band, weights=g, minlength=nb) / np.maximum(np.bincount(band, minlength=nb), 1),
-                      0.05, 0.95)
-        mu = float(((1 - g) * e).sum() / (1 - g).sum())
-        s = float(max(math.sqrt(((1 - g) * (e - mu) ** 2).sum() / (1 - g).sum()), 5.0))
-        u_n = (d / rng[:, None]) @ C_en
-        A = np.zeros((len(e), len(theta)))
-        A[:, 0], A[:, 1], A[:, 2] = u_n[:, 0], u_n[:, 1], u_n[:, 2]
-        A[:, 3] = u_n[:, 0] * (-sn * dn - c * de) + u_n[:, 1] * (c * dn - sn * de)
-        A[:, 4] = -1.0
-        A[:, 5] = -(tq - t_ref)
-        for k in range(1, n_sys):
-            A[sidx == k, 5 + k] = -1.0
-        wt = g / var + (1 - g) / s ** 2
-        tgt = (g * e / var + (1 - g) * (e - mu) / s ** 2) / wt
-        N = A.T @ (A * wt[:, None])
-        rhs = A.T @ (wt * tgt)
-        for k, (v, sg) in hold.items():          # the added term
-            N[k, k] += 1.0 / sg ** 2
-            rhs[k] += (theta[k] - v) / sg ** 2
-        try:
-            step = np.linalg.solve(N + 1e-9 * np.eye(len(theta)), rhs)
-        except np.linalg.LinAlgError:
-            break
-        theta = theta - step
-        if abs(ll_new - ll) < 1e-3 and np.abs(step).max() < 1e-3:
-            ll = ll_new
-            break
-        ll = ll_new
-    HOLD.setdefault("fits", []).append({"theta": theta.copy(), "ll": ll, "e": e, "g": g, "A": A, "var": var,
-                                        "sd": s, "u": u_n, "lla_ref": np.array(lla_ref), "tq": tq, "rho": rho,
-                                        "sat": sat, "sidx": sidx, "band": band, "n_sys": n_sys, "track": track})
-    return theta, ll, w_b, mu, s, e, g
+
+    def record(fit):
+        HOLD.setdefault("fits", []).append({**fit, "lla_ref": np.array(lla_ref), "tq": tq, "rho": rho, "sat": sat,
+                                            "sidx": sidx, "band": band, "n_sys": n_sys, "track": track})
+    return _orig_refine(theta0, lla_ref, tq, sat, rho, var, sidx, n_sys, track, iterations, band,
+                        prior=hold, record=record)
 
 
 class Drive:
@@ -287,14 +233,7 @@ def main(argv=None) -> None:
     t_wall = time.perf_counter()
     T._refine = _refine_held
 
-    def logged(update):
-        def wrapped(self, epoch):
-            before = self.log_likelihood
-            out = update(self, epoch)
-            _LOG.append((float(epoch.time), self.log_likelihood - before))
-            return out
-        return wrapped
-    EpochMixtureEstimator.update = logged(EpochMixtureEstimator.update)
+    EpochMixtureEstimator.update = _logged_update(EpochMixtureEstimator.update)
     D = Drive(a.data)
     shipped = sweep(D)
     # the height the pseudoranges put the car at, relative to the reference: the smoothed

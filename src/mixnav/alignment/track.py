@@ -146,19 +146,28 @@ def los_correlation_time(t, key, e, var, g, max_time: float = 30.0, common: bool
     return float(min(-dt / math.log(min(rho, 1.0 - 1e-12)), max_time))
 
 
-def _refine(theta0, lla_ref, tq, sat, rho, var, sidx, n_sys, track, iterations=30, band=None):
+def _refine(theta0, lla_ref, tq, sat, rho, var, sidx, n_sys, track, iterations=30, band=None,
+            prior=None, record=None):
     """EM fit of the window's pseudoranges to the dead-reckoned track (module docstring, step 4).
 
     ``theta = [p0_n, p0_e, p0_d, psi0, b0, d1, offsets...]``; ``track(t)`` gives the
     dead-reckoned north, east [m] at times ``t``. Returns ``(theta, log-likelihood, w, mu, s)``
     with ``w`` the LOS weight of each band present (``band.max() + 1`` of them), then the last
-    iteration's residuals and LOS responsibilities."""
+    iteration's residuals and LOS responsibilities.
+
+    ``prior``: ``{index: (value, sigma)}``, components of ``theta`` started at ``value`` and
+    held near it by a Gaussian prior of ``sigma`` (diagnostics: the fit held at a reference;
+    none in the pipeline). ``record``: called once at the end with the fit's final state
+    (``theta, ll, e, g, A, u, var, sd``)."""
     from ..geodesy.frames import dcm_ecef_to_ned
     C_en = dcm_ecef_to_ned(lla_ref[0], lla_ref[1]).T
     r_ref = lla_to_ecef_point(lla_ref)
     dn, de = track(tq)
     t_ref = tq[0]
     theta = np.array(theta0, dtype=float)
+    prior = prior or {}
+    for k, (v, _) in prior.items():
+        theta[k] = v
     band = np.zeros(len(rho), dtype=np.int64) if band is None else band
     nb = int(band.max()) + 1
     w_b = np.full(nb, 0.5)
@@ -202,8 +211,12 @@ def _refine(theta0, lla_ref, tq, sat, rho, var, sidx, n_sys, track, iterations=3
         wt = g / var + (1 - g) / s ** 2
         tgt = (g * e / var + (1 - g) * (e - mu) / s ** 2) / wt
         N = A.T @ (A * wt[:, None])
+        rhs = A.T @ (wt * tgt)
+        for k, (v, sg) in prior.items():
+            N[k, k] += 1.0 / sg ** 2
+            rhs[k] += (theta[k] - v) / sg ** 2
         try:
-            step = np.linalg.solve(N + 1e-9 * np.eye(len(theta)), A.T @ (wt * tgt))
+            step = np.linalg.solve(N + 1e-9 * np.eye(len(theta)), rhs)
         except np.linalg.LinAlgError:
             break
         theta = theta - step
@@ -211,6 +224,8 @@ def _refine(theta0, lla_ref, tq, sat, rho, var, sidx, n_sys, track, iterations=3
             ll = ll_new
             break
         ll = ll_new
+    if record is not None:
+        record({"theta": theta.copy(), "ll": ll, "e": e, "g": g, "A": A, "u": u_n, "var": var, "sd": s})
     return theta, ll, w_b, mu, s, e, g
 
 
