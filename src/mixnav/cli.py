@@ -233,23 +233,17 @@ def process(dataset: str = typer.Argument(..., help="Shipped dataset config name
         with err.status(f"processing {ds.dataset.name}"):
             processed = run_pipeline(ds, source, None if data is None else str(data))
         done = []
+        folder = None if data is None else str(data)
         if want:
             from .experiment.sweep import run_outage_sweep
-            try:
-                done.append(run_outage_sweep(dataset, outage_sweep, sweep_step, span,
-                                             data=None if data is None else str(data), workers=workers,
+            with _as_options(window="--outage-sweep", step="--sweep-step", span="--sweep-span"):
+                done.append(run_outage_sweep(dataset, outage_sweep, sweep_step, span, data=folder, workers=workers,
                                              scheduler=scheduler, progress=progress))
-            except ArgumentError as exc:   # said as the option the user wrote
-                flag = {"window": "--outage-sweep", "step": "--sweep-step", "span": "--sweep-span"}
-                raise ArgumentError(exc.message, argument=flag.get(exc.argument, exc.argument)) from None
         if want_starts:
             from .experiment.sweep import run_start_sweep
-            try:
-                done.append(run_start_sweep(dataset, start_sweep, span, data=None if data is None else str(data),
-                                            workers=workers, scheduler=scheduler, progress=progress))
-            except ArgumentError as exc:
-                flag = {"step": "--start-sweep", "span": "--sweep-span"}
-                raise ArgumentError(exc.message, argument=flag.get(exc.argument, exc.argument)) from None
+            with _as_options(step="--start-sweep", span="--sweep-span"):
+                done.append(run_start_sweep(dataset, start_sweep, span, data=folder, workers=workers,
+                                            scheduler=scheduler, progress=progress))
         with err.status(f"writing {out_dir}"):
             metrics = pipeline(ds, source).write(out_dir, processed, config_text=text, overwrite=overwrite,
                                                  sweeps=done)
@@ -274,6 +268,15 @@ def _scored_segments(scenario: str) -> list:
     """The ``[scoring]`` segments of an experiment's scenario (as loaded by the experiment)."""
     from .experiment.montecarlo import _load
     return _load(scenario)[0][0][1].scored_segments
+
+
+@contextmanager
+def _as_options(**flags: str):
+    """An ArgumentError about a library argument said as the command-line option the user wrote."""
+    try:
+        yield
+    except ArgumentError as exc:
+        raise ArgumentError(exc.message, argument=flags.get(exc.argument, exc.argument)) from None
 
 
 def _print_sweep(sw) -> None:

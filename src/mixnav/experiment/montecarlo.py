@@ -44,7 +44,6 @@ import math
 import os
 import re
 import sys
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 
 import numpy as np
@@ -57,6 +56,7 @@ from .parallel import DASK_CONNECT_TIMEOUT_S, DASK_WORKER_WAIT_S  # noqa: F401  
 from .parallel import Progress as _Progress
 from .parallel import dask_client as _dask_client
 from .parallel import die_with_parent as _die_with_parent
+from .parallel import dask_map, pool_map
 from .parallel import terminate_pool as _terminate_pool
 
 __all__ = ["run_experiment", "aggregate", "paired_comparison", "flatten_metrics", "series_files",
@@ -512,24 +512,11 @@ def _run_tasks(scenario, sc, sweep, source, sha, tasks, methods, old_seeds, out_
 
 def _run_pool(scenario: str, sha: str, todo: list[tuple], out_dir: Path, workers: int,
               bar: _Progress) -> None:
-    pool = ProcessPoolExecutor(max_workers=workers, initializer=_worker_init,
-                               initargs=(scenario, sha))
-    try:
-        pending = {pool.submit(_run_and_write, scenario, sha, s, str(out_dir), v)
-                   for s, v in todo}
-        while pending:
-            done, pending = wait(pending, return_when=FIRST_COMPLETED)
-            for f in done:
-                f.result()  # re-raises a worker's error (noted with its seed)
-                bar.advance()
-    except BaseException:
-        # finished records stay on disk: the experiment can be resumed. The running
-        # workers are ended now (a run can take minutes; no worker outlives the command);
-        # one ended in the middle of an atomic write leaves its temporary file
-        ended = _terminate_pool(pool)
-        remove_stale_temporaries(out_dir / RUNS_DIR, ended)
-        raise
-    pool.shutdown(wait=True)
+    # finished records stay on disk: the experiment can be resumed. A worker ended in the
+    # middle of an atomic write leaves its temporary file: removed after the pool ends
+    pool_map(_run_and_write, [(scenario, sha, s, str(out_dir), v) for s, v in todo], workers, bar,
+             initializer=_worker_init, initargs=(scenario, sha), terminate=_terminate_pool,
+             on_abort=lambda ended: remove_stale_temporaries(out_dir / RUNS_DIR, ended))
 
 
 def _task_scenario(scenario: str) -> str:
@@ -540,23 +527,12 @@ def _task_scenario(scenario: str) -> str:
 
 def _run_dask(client, scenario: str, sha: str, todo: list[tuple], out_dir: Path,
               bar: _Progress) -> None:
+    # finished records stay on disk: an interrupted experiment can be resumed
     import uuid
-    from distributed import as_completed
     task_scenario, target = _task_scenario(scenario), str(Path(out_dir).resolve())
     tag = uuid.uuid4().hex[:8]
-    futures = [client.submit(_run_and_write, task_scenario, sha, s, target, v, pure=False,
-                             key=f"mixnav-run-{tag}-{_stem(s, v)}") for s, v in todo]
-    try:
-        for f in as_completed(futures, loop=client.loop):
-            f.result()  # re-raises a worker's error (noted with its seed)
-            bar.advance()
-    except BaseException:
-        # finished records stay on disk: the experiment can be resumed
-        client.cancel(futures)
-        raise
-    finally:
-        for f in futures:
-            f.release()
+    dask_map(client, _run_and_write, [(task_scenario, sha, s, target, v) for s, v in todo], bar,
+             keys=[f"mixnav-run-{tag}-{_stem(s, v)}" for s, v in todo])
 
 
 def series_files(out_dir: Path) -> tuple[list[Path], list[float] | None]:

@@ -4,7 +4,9 @@
 - :func:`die_with_parent`: a pool worker's initializer ends it with its parent (also ``kill -9``);
 - :class:`Progress`: a rich progress bar on a terminal, else a plain line every few tasks;
 - :func:`terminate_pool`: end a process pool's workers now (an interrupted command leaves none);
-- :func:`dask_client`: a connected ``distributed.Client`` or a ConfigError saying why not.
+- :func:`dask_client`: a connected ``distributed.Client`` or a ConfigError saying why not;
+- :func:`pool_map`, :func:`dask_map`: ``fn(*task)`` for every task on a process pool or a Dask
+  cluster, the results in completion order, the progress bar advanced per task.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ from __future__ import annotations
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
 from ..errors import ConfigError
 
@@ -144,3 +146,49 @@ def dask_client(address: str):
         client.close()
         raise
     return client
+
+
+def pool_map(fn, tasks, workers: int, bar: Progress, initializer=None, initargs=(), terminate=terminate_pool,
+             on_abort=None) -> list:
+    """``fn(*task)`` for every task on a pool of ``workers`` processes (each started by
+    ``initializer(*initargs)``): the results in completion order. A task's error or an
+    interruption ends the running workers now (``terminate(pool)``, which returns the pids
+    that ended; a task can take minutes and no worker outlives the command), then
+    ``on_abort(pids)`` cleans up after them, and the error is raised."""
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=initializer, initargs=initargs)
+    out: list = []
+    try:
+        pending = {pool.submit(fn, *task) for task in tasks}
+        while pending:
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for f in done:
+                out.append(f.result())  # re-raises a worker's error
+                bar.advance()
+    except BaseException:
+        ended = terminate(pool)
+        if on_abort is not None:
+            on_abort(ended)
+        raise
+    pool.shutdown(wait=True)
+    return out
+
+
+def dask_map(client, fn, tasks, bar: Progress, keys=None) -> list:
+    """``fn(*task)`` for every task on a Dask cluster (``keys``: the tasks' keys, else Dask's):
+    the results in completion order; an error or interruption cancels the rest."""
+    from distributed import as_completed
+    futures = [client.submit(fn, *task, pure=False, **({} if keys is None else {"key": keys[i]}))
+               for i, task in enumerate(tasks)]
+    out: list = []
+    try:
+        for f in as_completed(futures, loop=client.loop):
+            out.append(f.result())  # re-raises a worker's error
+            bar.advance()
+    except BaseException:
+        client.cancel(futures)
+        raise
+    finally:
+        for f in futures:
+            f.release()
+    return out
+

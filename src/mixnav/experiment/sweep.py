@@ -27,6 +27,7 @@ import math
 import os
 import time as _time
 import warnings
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -187,26 +188,23 @@ def _load(dataset: str, data: str | None):
     return _LOADED[key]
 
 
-def _run_windowed(p, ds, source, folder, inputs, windows, score: bool = True):
-    import warnings
-
+def _run_quietly(p, ds, source, folder, inputs):
+    """The pipeline's run of ``ds`` without the data's warnings: the sweep's first run said them."""
     from ..io.imu_checks import DataWarning
-    from .ins_common import with_withheld
-    with warnings.catch_warnings():   # the data's warnings were said by the run without windows
+    with warnings.catch_warnings():
         warnings.simplefilter("ignore", DataWarning)
-        po = p.run(with_withheld(ds, windows), source, folder, inputs)
-    if not score or po.init.time > min((a for a, _ in windows), default=math.inf):
-        return po, None
-    return po, p.metrics(po, p.tables(po))
+        return p.run(ds, source, folder, inputs)
 
 
 def _window_rows(dataset: str, data: str | None, window: tuple[float, float]) -> list[dict]:
     """Every method's row for one withheld window (runs anywhere: loads the dataset once per
     process); none when the alignment, which needs GNSS, moved past the window's start."""
+    from .ins_common import with_withheld
     ds, source, p, folder, inputs = _load(dataset, data)
-    _, metrics = _run_windowed(p, ds, source, folder, inputs, [window])
-    if metrics is None:
+    po = _run_quietly(p, with_withheld(ds, [window]), source, folder, inputs)
+    if po.init.time > window[0]:
         return []
+    metrics = p.metrics(po, p.tables(po))
     rows = []
     for name, m in metrics.items():
         o = m["outages"][0]
@@ -229,42 +227,26 @@ def _dataset_ref(dataset) -> str:
     return str(p.resolve()) if p.suffix == ".toml" or p.exists() else str(dataset)
 
 
-def _evaluation_keys(dataset, given: dict) -> tuple[dict, str]:
-    """The ``[evaluation]`` keys an argument left as None takes its value from (argument ->
-    ``evaluation.<key>``), and the dataset's source: an impossible value read from the file is
-    said as its key, not as an argument the caller did not give."""
-    from ..config import load_dataset
-    ds, source, _ = load_dataset(_dataset_ref(dataset))
-    ev = getattr(ds, "evaluation", None)
-    keys = {"window": "outage_sweep", "step": "start_sweep" if "window" not in given else "sweep_step",
-            "span": "sweep_span"}
-    return {a: f"evaluation.{k}" for a, k in keys.items()
-            if a in given and given[a] is None and ev is not None and getattr(ev, k) is not None}, source
+@contextmanager
+def _said_as_keys(source: str, keys: dict[str, str]):
+    """An ArgumentError about a value read from ``[evaluation]`` (``keys``: argument ->
+    ``evaluation.<key>``) becomes a ConfigError naming the file and the key, not an argument
+    the caller did not give."""
+    try:
+        yield
+    except ArgumentError as exc:
+        if exc.argument in keys:
+            raise ConfigError(exc.message, file=source, key=keys[exc.argument]) from None
+        raise
 
 
-def _said_as_keys(fn):
-    """Run a sweep; an ArgumentError about a value taken from ``[evaluation]`` becomes a
-    ConfigError naming the file and the key."""
-    import functools
-    import inspect
-    sig = inspect.signature(fn)
-
-    @functools.wraps(fn)
-    def run(*args, **kwargs):
-        bound = sig.bind(*args, **kwargs)
-        bound.apply_defaults()
-        given = {k: bound.arguments[k] for k in ("window", "step", "span") if k in bound.arguments}
-        keys, source = _evaluation_keys(bound.arguments["dataset"], given)
-        try:
-            return fn(*args, **kwargs)
-        except ArgumentError as exc:
-            if exc.argument in keys:
-                raise ConfigError(exc.message, file=source, key=keys[exc.argument]) from None
-            raise
-    return run
+def _from_file(ev, **arguments) -> dict[str, str]:
+    """argument -> ``evaluation.<key>`` for each argument (``name=(value, key)``) left as None
+    that the dataset's ``[evaluation]`` gives."""
+    return {a: f"evaluation.{k}" for a, (v, k) in arguments.items()
+            if v is None and ev is not None and getattr(ev, k) is not None}
 
 
-@_said_as_keys
 def run_outage_sweep(dataset, window=None, step=None, span=None, *, data=None, workers: int | None = None,
                      scheduler: str | None = None, progress: bool = False) -> SweepResult:
     """:func:`outage_sweep` with its settings and skipped windows (:class:`SweepResult`)."""
@@ -281,24 +263,24 @@ def run_outage_sweep(dataset, window=None, step=None, span=None, *, data=None, w
     if ds.reference is None:
         raise ConfigError("an outage sweep scores the withheld windows against the reference: the dataset "
                           "has no [reference]", file=source, key="reference")
-    window = _seconds(window if window is not None else (ev.outage_sweep if ev else None), "window")
-    step = _seconds(step, "step") if step is not None else \
-        (ev.sweep_step if ev is not None and ev.sweep_step is not None else window / 3.0)
-    if span is None and ev is not None and ev.sweep_span is not None:
-        span = ev.sweep_span
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
         raise ArgumentError(f"must be a positive integer, got {workers!r}", argument="workers")
-    if not window > 0:
-        raise ArgumentError(f"must be positive, got {window:g} s", argument="window")
-    if not step > 0:
-        raise ArgumentError(f"must be positive, got {step:g} s", argument="step")
+    keys = _from_file(ev, window=(window, "outage_sweep"), step=(step, "sweep_step"), span=(span, "sweep_span"))
+    with _said_as_keys(source, keys):
+        window = _seconds(window if window is not None else (ev.outage_sweep if ev else None), "window")
+        step = _seconds(step, "step") if step is not None else \
+            (ev.sweep_step if ev is not None and ev.sweep_step is not None else window / 3.0)
+        if span is None and ev is not None and ev.sweep_span is not None:
+            span = ev.sweep_span
+        return _outage_sweep(ref, source, window, step, span, data, workers, scheduler, progress)
 
+
+def _outage_sweep(ref, source, window, step, span, data, workers, scheduler, progress) -> SweepResult:
     # the run without any window: where the alignment ends and the GNSS and reference end
     t0 = _time.perf_counter()
-    ds_, source_, p, folder, inputs = _load(ref, None if data is None else str(data))
-    with warnings.catch_warnings():
-        warnings.simplefilter("default")
-        base, _ = _run_windowed(p, ds_, source_, folder, inputs, [], score=False)
+    ds, source_, p, folder, inputs = _load(ref, None if data is None else str(data))
+    from .ins_common import with_withheld
+    base = p.run(with_withheld(ds, []), source_, folder, inputs)   # says the data's warnings, once
     first = math.ceil(base.init.time)
     last = float(min(base.all_fixes.time[-1], base.reference.time[-1], base.imu.time[-1]))
     if span is not None:
@@ -342,59 +324,26 @@ def run_outage_sweep(dataset, window=None, step=None, span=None, *, data=None, w
 def _run_tasks(task, ref: str, data: str | None, items, workers, scheduler, progress, label) -> list:
     """``task(ref, data, item)`` for every item: here, on a local process pool or on a Dask
     cluster, with a progress bar; the results in completion order."""
-    from .parallel import Progress
+    from .parallel import Progress, dask_client, dask_map, pool_map
     bar = Progress(len(items), progress, label=label)
+    tasks = [(ref, data, it) for it in items]
     try:
         if scheduler:
-            return _run_dask(task, scheduler, ref, data, items, bar)
+            client = dask_client(scheduler.strip())
+            try:
+                return dask_map(client, task, tasks, bar)
+            finally:
+                client.close()
         if (workers or os.cpu_count() or 1) == 1 or len(items) < 2:
             out = []
-            for it in items:
-                out.append(task(ref, data, it))
+            for t in tasks:
+                out.append(task(*t))
                 bar.advance()
             return out
-        return _run_pool(task, ref, data, items, workers or os.cpu_count() or 1, bar)
+        return pool_map(task, tasks, min(workers or os.cpu_count() or 1, len(items)), bar,
+                        initializer=_worker_init, initargs=(ref, data))
     finally:
         bar.close()
-
-
-def _run_pool(task, ref, data, items, workers, bar) -> list:
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-    from .parallel import terminate_pool
-    pool = ProcessPoolExecutor(max_workers=min(workers, len(items)), initializer=_worker_init,
-                               initargs=(ref, data))
-    out: list = []
-    try:
-        pending = {pool.submit(task, ref, data, it) for it in items}
-        while pending:
-            done, pending = wait(pending, return_when=FIRST_COMPLETED)
-            for f in done:
-                out.append(f.result())
-                bar.advance()
-    except BaseException:
-        terminate_pool(pool)   # no worker outlives the command
-        raise
-    pool.shutdown(wait=True)
-    return out
-
-
-def _run_dask(task, scheduler: str, ref, data, items, bar) -> list:
-    from distributed import as_completed
-    from .parallel import dask_client
-    client = dask_client(scheduler.strip())
-    try:
-        futures = [client.submit(task, ref, data, it, pure=False) for it in items]
-        out: list = []
-        try:
-            for f in as_completed(futures, loop=client.loop):
-                out.append(f.result())
-                bar.advance()
-        except BaseException:
-            client.cancel(futures)
-            raise
-        return out
-    finally:
-        client.close()
 
 
 def outage_sweep(dataset, window=None, step=None, span=None, *, data=None, workers: int | None = None,
@@ -463,13 +412,10 @@ def summarize_starts(rows: pd.DataFrame) -> dict[str, dict]:
 def _start_run(dataset: str, data: str | None, start: float) -> dict:
     """One run from ``start``: per method its own-start scores and the (time, 2-D error) series
     the common span is scored on later (runs anywhere: loads the dataset once per process)."""
-    import warnings
-
-    from ..io.imu_checks import DataWarning
     ds, source, p, folder, inputs = _load(dataset, data)
-    with warnings.catch_warnings():   # the data's warnings are said by the run from the first start
-        if start > 0:
-            warnings.simplefilter("ignore", DataWarning)
+    if start > 0:
+        out = _run_quietly(p, p.with_start(ds, start), source, folder, inputs)
+    else:   # the first start's run says the data's warnings
         out = p.run(p.with_start(ds, start), source, folder, inputs)
     if getattr(out, "init", None) is None:
         raise ConfigError("a start sweep moves the filters' start: the dataset has no filter method (only the "
@@ -494,7 +440,6 @@ def _start_run(dataset: str, data: str | None, start: float) -> dict:
     return {"start": float(start), "runs": runs}
 
 
-@_said_as_keys
 def run_start_sweep(dataset, step=None, span=None, *, data=None, workers: int | None = None,
                     scheduler: str | None = None, progress: bool = False) -> SweepResult:
     """:func:`start_sweep` with its settings (:class:`SweepResult`)."""
@@ -511,11 +456,17 @@ def run_start_sweep(dataset, step=None, span=None, *, data=None, workers: int | 
     if getattr(ds, "reference", None) is None and getattr(ds, "reference_point", None) is None:
         raise ConfigError("a start sweep scores every run against the reference: the dataset has no "
                           "[reference] or [reference_point]", file=source, key="reference")
-    step = _seconds(step if step is not None else (ev.start_sweep if ev else None), "step")
-    if not step > 0:
-        raise ArgumentError(f"must be positive, got {step:g} s", argument="step")
-    if span is None and ev is not None and ev.sweep_span is not None:
-        span = ev.sweep_span
+    keys = _from_file(ev, step=(step, "start_sweep"), span=(span, "sweep_span"))
+    with _said_as_keys(source, keys):
+        step = _seconds(step if step is not None else (ev.start_sweep if ev else None), "step")
+        if not step > 0:
+            raise ArgumentError(f"must be positive, got {step:g} s", argument="step")
+        if span is None and ev is not None and ev.sweep_span is not None:
+            span = ev.sweep_span
+        return _start_sweep(ref, source, step, span, data, workers, scheduler, progress)
+
+
+def _start_sweep(ref, source, step, span, data, workers, scheduler, progress) -> SweepResult:
     t0 = _time.perf_counter()
     first = _start_run(ref, None if data is None else str(data), 0.0)
     end = float(max(r["time"][-1] for r in first["runs"].values()))
