@@ -120,6 +120,12 @@ def _col(df: pd.DataFrame, name: str) -> np.ndarray:
     return a
 
 
+def _finite_mean(x: np.ndarray) -> float:
+    """Mean of the finite values (NaN when there are none)."""
+    ok = np.isfinite(x)
+    return float(np.mean(x[ok])) if ok.any() else float("nan")
+
+
 def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(x))))
 
@@ -194,6 +200,8 @@ def compute_metrics(solution: pd.DataFrame,
 
     t = c["time_s"]
     used = solution["gnss_used"].to_numpy(dtype=bool) if "gnss_used" in solution.columns else None
+    # NaN allowed here: a singular covariance (:func:`nees`), left out of the means
+    nees_cols = {k: np.asarray(solution[k], dtype=float) for k in ("nees_pos", "nees_vel") if k in solution.columns}
     windows = []
     for a, b in outages:
         a, b = float(a), float(b)
@@ -215,10 +223,8 @@ def compute_metrics(solution: pd.DataFrame,
              "horizontal_rmse_m": _rms(h), "vertical_rmse_m": _rms(ver[sel]),
              # rows are in time order: the last selected row ends the window
              "horizontal_final_m": float(h[-1])}
-        for k in ("nees_pos", "nees_vel"):   # the window's consistency (declined epochs left out)
-            if k in solution.columns:
-                v = np.asarray(solution[k], dtype=float)[sel]
-                w[f"{k}_mean"] = float(np.mean(v[np.isfinite(v)])) if np.isfinite(v).any() else float("nan")
+        for k, v in nees_cols.items():   # the window's consistency
+            w[f"{k}_mean"] = _finite_mean(v[sel])
         windows.append(w)
     m["outages"] = windows
     if windows:
@@ -230,12 +236,9 @@ def compute_metrics(solution: pd.DataFrame,
             m["vertical_rmse_outside_outages_m"] = _rms(ver[outside])
 
     singular = np.zeros(len(solution), dtype=bool)
-    for k in ("nees_pos", "nees_vel"):
-        if k in solution.columns:
-            v = np.asarray(solution[k], dtype=float)    # NaN allowed here: a singular covariance
-            ok = np.isfinite(v)
-            singular |= ~ok
-            m[f"{k}_mean"] = float(np.mean(v[ok])) if ok.any() else float("nan")
+    for k, v in nees_cols.items():
+        singular |= ~np.isfinite(v)
+        m[f"{k}_mean"] = _finite_mean(v)
     singular = int(singular.sum())   # epochs where either block was declined
     if singular:   # the filter's covariance was singular there (:func:`nees`): said, not hidden
         m["nees_singular_epochs"] = singular

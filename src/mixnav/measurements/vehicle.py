@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..attitude import quat_to_dcm, skew
+from ..attitude import euler_to_dcm, quat_to_dcm, skew
 from ..data import OdometerData
 from ..errors import ArgumentError
 from ..geodesy.earth import earth_rate_ned, normal_gravity
@@ -183,9 +183,7 @@ class NonHolonomic(VehicleVelocity):
             if f.shape != (len(self._times), 3):
                 raise ArgumentError(f"expected ({len(self._times)}, 3), got {f.shape}", argument="specific_force")
             self._f = f
-            c = self.mounting
-            sr, cr, sp, cp, sy, cy = np.sin(c[0]), np.cos(c[0]), np.sin(c[1]), np.cos(c[1]), np.sin(c[2]), np.cos(c[2])
-            self._cvb_x = np.array([cp * cy, sr * sp * cy - cr * sy, cr * sp * cy + sr * sy])  # first row of C_vb
+            self._cvb_x = euler_to_dcm(self.mounting)[0]   # first row of C_vb = Rz(y) Ry(p) Rx(r)
 
     @property
     def times(self) -> np.ndarray:
