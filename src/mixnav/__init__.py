@@ -3,7 +3,7 @@
 The notebook API (:mod:`mixnav.api`, imported on first use so ``import mixnav``
 stays cheap): :func:`run_scenario`, :func:`process_dataset`, :func:`filter_loose`,
 :func:`imu_grade`, :func:`export_rinex`, :func:`outage_sweep`,
-:func:`start_sweep`. See docs/library.md.
+:func:`start_sweep`, :func:`tune`. See docs/library.md.
 """
 
 from ._version import __version__  # noqa: F401  (mixnav.__version__)
@@ -61,7 +61,7 @@ def _numba_without_cache() -> None:
 if not _numba_cache_usable():
     _numba_without_cache()
 
-_API = ("run_scenario", "process_dataset", "outage_sweep", "start_sweep", "filter_loose", "imu_grade", "export_rinex", "RunResult",
+_API = ("run_scenario", "process_dataset", "outage_sweep", "start_sweep", "tune", "filter_loose", "imu_grade", "export_rinex", "RunResult",
         "LooseResult")
 
 

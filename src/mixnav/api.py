@@ -138,6 +138,23 @@ def process_dataset(name_or_path: str, data: str | None = None) -> RunResult:
     return RunResult(tables, _metrics_frame(p.metrics(out, tables)), out.results, p.truth(out), out, text)
 
 
+def tune(name_or_path: str, out, *, budget: int = 80, workers: int | None = None, scheduler: str | None = None,
+         data: str | None = None, fix=(), span=None, window="30 s", folds: int = 3, method: str | None = None,
+         resume: bool = False, overwrite: bool = False, progress: bool = False, seed: int = 0):
+    """Tune a dataset file from its own data, never reading its reference, and write ``out``
+    (``tuned.toml``, ``tune.json``, ``report.md``): a
+    :class:`~mixnav.experiment.tuning.TuneResult` (:func:`mixnav.experiment.tuning.tune`,
+    arguments there; docs/tuning.md).
+
+        r = mixnav.tune("my-car.toml", "runs/tune", budget=60)
+        r.tuned["nlpd"], r.chosen["imu.errors.arw"]["value"]
+    """
+    from .experiment.tuning import tune as _tune
+    return _tune(name_or_path, out, budget=budget, workers=workers, scheduler=scheduler, data=data, fix=fix,
+                 span=span, window=window, folds=folds, method=method, resume=resume, overwrite=overwrite,
+                 progress=progress, seed=seed)
+
+
 def outage_sweep(name_or_path: str, window=None, step=None, span=None, *, data: str | None = None,
                  workers: int | None = None, scheduler: str | None = None, progress: bool = False):
     """Withhold the GNSS in one window at a time across a recording and score every method in

@@ -335,6 +335,49 @@ def experiment(scenario: str = typer.Argument(..., help="Shipped scenario name o
 
 
 @app.command()
+def tune(dataset: str = typer.Argument(..., help="Shipped dataset config name or path of a .toml file "
+                                               "(IMU + GNSS fixes)."),
+         out_dir: Path = typer.Option(..., "--out", help="Folder for tuned.toml, tune.json, report.md, tune.png."),
+         budget: int = typer.Option(80, "--budget", help="Candidate settings scored at most (each is --folds "
+                                                         "filter runs; at least 1)."),
+         workers: int = typer.Option(None, "--workers", min=1, help="Local worker processes (default: all cores)."),
+         scheduler: str = typer.Option(None, "--scheduler", help="Dask scheduler address (tcp://host:8786) to run "
+                                                               "the candidates on; needs mixnav[dask]."),
+         fix: list[str] = typer.Option(None, "--fix", help="A key kept as the file gives it (repeatable; "
+                                                           "docs/tuning.md lists the keys)."),
+         span: tuple[str, str] = typer.Option(None, "--span", show_default=False,
+                                              help="START END of the part tuned on ('60 s' '300 s'; seconds since "
+                                                   "the first IMU sample; default: the whole recording)."),
+         window: str = typer.Option("30 s", "--window", help="Length of the cross-validation outages."),
+         folds: int = typer.Option(3, "--folds", help="Runs the cross-validation windows are dealt to (>= 2)."),
+         method: str = typer.Option(None, "--method", help="The method tuned (default: the most aided)."),
+         data: Path = typer.Option(None, "--data", help="Folder holding the data files (default: the config's "
+                                                        "data_dir)."),
+         resume: bool = typer.Option(False, "--resume", help="Reuse the evaluations of an earlier run into --out."),
+         progress: bool = typer.Option(True, "--progress/--no-progress"),
+         overwrite: bool = _OVERWRITE):
+    """Tune a recording's filter from its own data (never its reference): writes tuned.toml and a report."""
+    from .experiment.tuning import tune as _tune
+
+    with _errors():
+        r = _tune(dataset, out_dir, budget=budget, workers=workers, scheduler=scheduler,
+                  data=None if data is None else str(data), fix=fix or (),
+                  span=None if not span or span[0] is None else span, window=window, folds=folds, method=method,
+                  resume=resume, overwrite=overwrite, progress=progress)
+    t = Table("", "CV mean NLPD", "innovation log-lik./update", "CV median / p90 horizontal max [m]",
+              title=f"{dataset}: {r.runs} filter runs")
+    for name, s in (("as given", r.given), ("tuned", r.tuned)):
+        t.add_row(name, f"{s['nlpd']:.3f}", f"{s['innovation_ll_per_update']:.3f}",
+                  f"{s['cv_median_hmax_m']:.2f} / {s['cv_p90_hmax_m']:.2f}")
+    out.print(t)
+    for k, c in r.chosen.items():
+        out.print(f"  {k} = {c.get('value', c.get('from_data'))}")
+    for k, why in r.not_tuned.items():
+        out.print(f"  [dim]{k}: not tuned ({why})[/dim]")
+    out.print(f"tuned file: {Path(out_dir) / 'tuned.toml'}, report: {Path(out_dir) / 'report.md'}")
+
+
+@app.command()
 def export(scenario: str = typer.Argument(..., help="Shipped scenario name or path of a .toml file "
                                           "(with [gnss.satellites])."),
            out_dir: Path = typer.Option(..., "--out", help="Folder for the IMU CSV, RINEX files, reference and "

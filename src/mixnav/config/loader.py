@@ -364,8 +364,15 @@ def load_dataset(name_or_path: str):
 
     Returns ``(dataset, source, text)`` like :func:`load_scenario`.
     """
-    from .dataset_schema import Dataset
     text, source = resolve(name_or_path, "datasets", "dataset")
+    return load_dataset_text(text, source)
+
+
+def load_dataset_text(text: str, source: str):
+    """:func:`load_dataset` of a dataset file's text (``source``: the file it stands for:
+    its relative ``data_dir`` resolves from there, and errors name it). Returns
+    ``(dataset, source, text)``."""
+    from .dataset_schema import Dataset
     kind = _declared_kind(text)
     if kind == "odometry-gnss":   # its own schema (config/vehicle_schema.py)
         from .vehicle_schema import VehicleDataset

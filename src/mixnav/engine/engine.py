@@ -234,6 +234,7 @@ class Engine:
                      "clock": np.empty((n_out, 2)), "pv": np.empty((n_out, 6, 6)), "w_b": np.empty((n_out, 3)),
                      "aux": {name: np.empty((n_out, len(v))) for name, v in self.aux.items()}}
         self._nis, self._nis_dim, self._nis_kind = [], [], []
+        self._nis_time, self._nis_logdet = [], []
         self._history = self._allocate_history(len(times), lay.n) if self.keep_history else None
         self._update_time = 0.0
         self._n_updates = 0
@@ -292,6 +293,8 @@ class Engine:
                     self._nis.append(corr.nis)
                     self._nis_dim.append(corr.m)
                     self._nis_kind.append(model)
+                    self._nis_time.append(t)
+                    self._nis_logdet.append(corr.logdet)
                     used = True
                     if hist is not None:
                         dx_sum += corr.dx[:self._n]
@@ -398,7 +401,8 @@ class Engine:
             sensor=sensor, pv_cov=r["pv"][:io], w_b=r["w_b"][:io], nis=np.array(self._nis),
             nis_dim=np.array(self._nis_dim, dtype=int), recoveries=self.counts, layout=lay,
             P=self.estimator.covariance(), timing=timing, estimates=estimates, nis_kind=nis_kind,
-            outputs=outputs, history=history, motion=self.motion)
+            outputs=outputs, history=history, motion=self.motion, nis_time=np.array(self._nis_time, float),
+            nis_logdet=np.array(self._nis_logdet, float))
 
     def run(self, imu: ImuData, init: InitialState, output_times: np.ndarray | None = None) -> FilterResult:
         """Run over all the IMU data: :meth:`start`, :meth:`step` to the end, :meth:`result`."""

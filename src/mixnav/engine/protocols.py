@@ -78,13 +78,18 @@ class Correction(NamedTuple):
     innovation squared of the epoch (inf when rejected); ``status`` one of
     ``OK``, ``NEEDS_REPAIR`` (applied, the covariance needs repair),
     ``ABSURD``, ``S_NOT_POSITIVE_DEFINITE`` (rejected, counted),
-    ``NON_FINITE`` (the engine raises); ``m`` the number of rows.
+    ``NON_FINITE`` (the engine raises); ``m`` the number of rows; ``logdet``
+    the log-determinant of the innovation covariance, NaN unless the estimator
+    gives it (:class:`~mixnav.filters.ekf.KalmanEstimator` inside
+    :func:`~mixnav.filters.ekf.innovation_likelihood`): with ``nis`` and ``m`` it
+    is the epoch's Gaussian innovation log-likelihood.
     """
 
     dx: np.ndarray
     nis: float
     status: int
     m: int
+    logdet: float = float("nan")
 
 
 class Epoch:

@@ -47,6 +47,11 @@ class FilterResult:
     nis_kind : ndarray (M,) of object
         The observable kinds of each applied update, as a ``+``-joined string
         of kind names (``"position+velocity"``): NIS per kind is a groupby.
+    nis_time : ndarray (M,) or None
+        The time [s] of each applied update.
+    nis_logdet : ndarray (M,) or None
+        log det of each applied update's innovation covariance (NaN unless the
+        estimator gives it: :func:`mixnav.filters.ekf.innovation_likelihood`).
     outputs : dict
         Estimator-specific series (model probabilities, tracked noise...):
         name -> array, documented by the estimator.
@@ -75,6 +80,8 @@ class FilterResult:
     outputs: dict = field(default_factory=dict)
     history: "History | None" = None
     motion: object = None
+    nis_time: np.ndarray | None = None
+    nis_logdet: np.ndarray | None = None
 
 
 @dataclass

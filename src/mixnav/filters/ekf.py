@@ -16,6 +16,8 @@ The recoveries the run counts are listed in :mod:`mixnav.engine.engine`.
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 import numpy as np
 
 from ..data import ImuData, InitialState  # noqa: F401  (InitialState re-exported)
@@ -33,6 +35,29 @@ from .registry import GateOptions, register_estimator
 from .registry import ABSURD_SIGMA
 
 _WARM: set = set()
+
+
+@contextmanager
+def innovation_likelihood():
+    """Within it, every :class:`KalmanEstimator` correction (its subclasses' too) also
+    gives ``log det S`` of its innovation covariance (``Correction.logdet``, recorded as
+    ``FilterResult.nis_logdet``): with the NIS and the row count, each update's Gaussian
+    innovation log-likelihood ``-(nis + logdet + m log 2 pi) / 2``, the criterion of
+    :mod:`mixnav.experiment.tuning`. Off by default: it costs a small dense product per
+    update. Process-wide (a class attribute), so a worker process sets it for itself."""
+    before = KalmanEstimator.record_logdet
+    KalmanEstimator.record_logdet = True
+    try:
+        yield
+    finally:
+        KalmanEstimator.record_logdet = before
+
+
+def _logdet(P, H, r) -> float:
+    """log det (H P H^T + diag(r)); NaN when it is not positive definite (then the
+    correction is refused anyway)."""
+    sign, ld = np.linalg.slogdet(H @ P @ H.T + np.diag(r))
+    return float(ld) if sign > 0 else float("nan")
 
 
 def repair_covariance(P: np.ndarray) -> None:
@@ -65,6 +90,9 @@ class KalmanEstimator:
         ``dx`` is fed back it calls :meth:`recentre` (``x -= dx``). Alone, with
         the engine, it gives the closed-loop filter's numbers.
     """
+
+    #: give each correction's log det S (:func:`innovation_likelihood` sets it)
+    record_logdet = False
 
     def __init__(self, absurd_sigma: float = ABSURD_SIGMA, carry_mean: bool = False):
         if not absurd_sigma > 0:
@@ -129,25 +157,27 @@ class KalmanEstimator:
             Pa = self.augmented_covariance()
             if H.shape[1] == n:
                 H = np.hstack([H, np.zeros((len(z), nc))])
+            ld = _logdet(Pa, H, r) if self.record_logdet else float("nan")
             Pa_new, dx, nis, status = self.correct(Pa, z, H, r)
             if status == OK or status == NEEDS_REPAIR:  # applied: split the blocks back
                 self.P = np.ascontiguousarray(Pa_new[:n, :n])
                 self.P_xc = Pa_new[:n, n:].copy()
                 self.P_cc = Pa_new[n:, n:].copy()
-            return Correction(dx, nis, status, len(z))
+            return Correction(dx, nis, status, len(z), ld)
         if H.shape[1] != n:
             raise NumericalError("a measurement model returned H for a clone the "
                                  "filter does not carry")  # a bug, not bad input
+        ld = _logdet(self.P, H, r) if self.record_logdet else float("nan")
         if self.carry_mean:  # the innovation about the mean, and the posterior mean
             P_new, dx, nis, status = self.correct(self.P, z - H @ self.x, H, r)
             if status == OK or status == NEEDS_REPAIR:
                 self.P = P_new
                 self.x = self.x + dx
-            return Correction(self.x.copy(), nis, status, len(z))
+            return Correction(self.x.copy(), nis, status, len(z), ld)
         P_new, dx, nis, status = self.correct(self.P, z, H, r)
         if status == OK or status == NEEDS_REPAIR:
             self.P = P_new
-        return Correction(dx, nis, status, len(z))
+        return Correction(dx, nis, status, len(z), ld)
 
     def augmented_covariance(self) -> np.ndarray:
         """``[[P, P_xc], [P_xc^T, P_cc]]`` (n + c, n + c): the error state and its clone."""

@@ -1,0 +1,464 @@
+"""``mixnav tune``: a recording's filter tuned from its own data, without any reference.
+
+:func:`tune` reads the dataset file, takes ``[reference]`` and ``[reference_point]`` out of it
+before anything is loaded, and then, for an IMU + GNSS-fixes dataset (``ins-gnss`` with
+``[gnss]``):
+
+1. **from the data alone** (:mod:`.data_stage`): the IMU's white noise per axis from the
+   still segments (overlapping Allan deviation at 1 s, :mod:`.allan`) and the ZUPT/ZARU
+   thresholds from the stillness statistics;
+2. **by the criterion** (:mod:`.criterion`): cross-validation on the recording's own GNSS
+   (withheld windows dealt to folds, the withheld fixes as truth, the mean negative log
+   predictive density minimised) with the GNSS innovation log-likelihood reported beside it;
+   a coordinate search (:mod:`.search`) over the noise scales, bias walks, NHC sigmas, the
+   fixes' sigma floor, the IMU time offset and the GNSS velocity delay
+   (:func:`.parameters.ins_parameters`), each candidate's folds run in parallel on local
+   processes or a Dask cluster;
+3. writes ``tuned.toml`` (the dataset file with each tuned value and a comment saying how it
+   was found and its spread), ``tune.json`` (every evaluation, the chosen values, the
+   criteria of the file as given and as tuned) and ``report.md`` with ``tune.png``.
+
+Deterministic (no random draw: ``seed`` is recorded only), and resumable: every evaluation
+is appended to ``tune_journal.jsonl`` in the output folder as it finishes, keyed by the
+candidate file's hash, and a rerun into the same folder (``resume=True``) takes them from
+there. docs/tuning.md says what is tuned, how, and what is not.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import tomlkit
+
+from ...errors import ArgumentError, ConfigError
+from .criterion import Evaluator, cv_windows, without_reference
+from .parameters import Parameter, get_value, ins_parameters, set_value
+
+__all__ = ["tune", "TuneResult", "tunable_keys"]
+
+#: what a tune folder holds
+TUNE_FILES = ("tuned.toml", "tune.json", "report.md", "tune.png", "tune_journal.jsonl")
+
+
+def tunable_keys() -> list[str]:
+    """The names ``--fix`` accepts (IMU + GNSS-fixes datasets), plus the data-stage keys."""
+    return [p.name for p in ins_parameters()] + ["aiding.zupt.accel_std", "aiding.zupt.gyro_rate"]
+
+
+@dataclass
+class TuneResult:
+    """What :func:`tune` found (also written to ``out``)."""
+
+    tuned_text: str
+    chosen: dict                      # key -> {"value": text, "how": str, "spread": text or None}
+    given: dict                       # Score.as_dict() of the file as given
+    tuned: dict                       # Score.as_dict() of the tuned file
+    evaluations: list = field(default_factory=list)   # every candidate: {"changed", "score"}
+    not_tuned: dict = field(default_factory=dict)     # key -> why it kept its value
+    runs: int = 0                     # filter runs made (evaluations x folds; journal hits excluded)
+    out: Path | None = None
+
+
+# ---------------------------------------------------------------- worker side
+
+_EVALUATORS: dict = {}
+
+
+def _evaluator(setup: tuple) -> Evaluator:
+    key = hashlib.sha256(json.dumps(setup, default=str).encode()).hexdigest()
+    if key not in _EVALUATORS:
+        _EVALUATORS.clear()
+        _EVALUATORS[key] = Evaluator(*setup)
+    return _EVALUATORS[key]
+
+
+def _evaluate_task(setup: tuple, text: str) -> tuple[str, dict]:
+    """A candidate file's score, anywhere (the evaluator is built once per process)."""
+    return text, _evaluator(setup).evaluate(text).as_dict()
+
+
+def _worker_init(setup: tuple) -> None:
+    from ..parallel import die_with_parent
+    die_with_parent()
+    _evaluator(setup)
+
+
+# ---------------------------------------------------------------- driver side
+
+def _seconds(value, argument: str) -> float:
+    from ..sweep import _seconds as seconds
+    return seconds(value, argument)
+
+
+class _Scorer:
+    """Scores candidate files: from the journal, else on the executor; appends to the journal."""
+
+    def __init__(self, setup, journal: Path, workers, scheduler, progress, budget: int):
+        self.setup, self.journal, self.workers, self.scheduler = setup, journal, workers, scheduler
+        self.progress, self.budget, self.runs = progress, budget, 0
+        self.cache: dict[str, dict] = {}
+        self.seen: set[str] = set()
+        self.setup_key = hashlib.sha256(json.dumps(setup[1:], default=str).encode()).hexdigest()[:16]
+        if journal.exists():
+            for line in journal.read_text().splitlines():
+                try:
+                    rec = json.loads(line)
+                except json.JSONDecodeError:
+                    continue   # a line cut by an interruption: that candidate runs again
+                if rec.get("setup") == self.setup_key:
+                    self.cache[rec["key"]] = rec["score"]
+
+    @staticmethod
+    def key(text: str) -> str:
+        return hashlib.sha256(text.encode()).hexdigest()
+
+    def left(self) -> int:
+        return self.budget - len(self.seen)
+
+    def score(self, texts: list[str]) -> list[dict]:
+        """Scores of ``texts`` in order. Each distinct candidate counts once against the budget,
+        whether it is run or found in the journal (a resumed search takes the same path and
+        stops at the same place); those beyond the budget get None."""
+        todo = []
+        for t in texts:
+            k = self.key(t)
+            if k not in self.seen:
+                if self.left() <= 0:
+                    continue
+                self.seen.add(k)
+            if k not in self.cache and t not in todo:
+                todo.append(t)
+        if todo:
+            from ..parallel import Progress
+            bar = Progress(len(todo), self.progress, label="tune")
+            try:
+                results = self._map(todo, bar)
+            finally:
+                bar.close()
+            with open(self.journal, "a") as fh:
+                for text, sc in results:
+                    self.cache[self.key(text)] = sc
+                    fh.write(json.dumps({"setup": self.setup_key, "key": self.key(text), "score": sc}) + "\n")
+            self.runs += len(todo) * len(self.setup[4])
+        return [self.cache.get(k) if k in self.seen else None for k in map(self.key, texts)]
+
+    def _map(self, texts, bar):
+        from ..parallel import dask_client, dask_map, pool_map
+        tasks = [(self.setup, t) for t in texts]
+        if self.scheduler:
+            client = dask_client(self.scheduler.strip())
+            try:
+                return dask_map(client, _evaluate_task, tasks, bar)
+            finally:
+                client.close()
+        n = min(self.workers or os.cpu_count() or 1, len(tasks))
+        if n <= 1:
+            out = []
+            for t in tasks:
+                out.append(_evaluate_task(*t))
+                bar.advance()
+            return out
+        return pool_map(_evaluate_task, tasks, n, bar, initializer=_worker_init, initargs=(self.setup,))
+
+
+def _value_text(p: Parameter, v) -> str:
+    v = np.atleast_1d(v)
+    parts = [f"{x / p.scale:.4g}" for x in v]
+    return (parts[0] if len(parts) == 1 else "[" + ", ".join(parts) + "]") + f" {p.unit}"
+
+
+def _target_method(ds, method: str | None) -> str:
+    names = [m.name for m in ds.methods]
+    if method is not None:
+        if method not in names:
+            raise ArgumentError(f"no method '{method}' in the dataset (it has {', '.join(names)})",
+                                argument="method")
+        return method
+    # the most-aided method: the aiding sigmas are tuned on it, the IMU noise serves all
+    return max(ds.methods, key=lambda m: len(getattr(m, "aiding", None) or ())).name
+
+
+def tune(dataset, out, *, budget: int = 80, workers: int | None = None, scheduler: str | None = None,
+         data: str | None = None, fix=(), span=None, window="30 s", folds: int = 3, method: str | None = None,
+         resume: bool = False, overwrite: bool = False, progress: bool = False, seed: int = 0) -> TuneResult:
+    """Tune a dataset file from its own data (never its reference) and write ``out``.
+
+    Parameters
+    ----------
+    dataset : str or Path
+        A shipped dataset name or a dataset file; ``ins-gnss`` with ``[gnss]`` fixes.
+    out : str or Path
+        Output folder: ``tuned.toml``, ``tune.json``, ``report.md``, ``tune.png``,
+        ``tune_journal.jsonl``.
+    budget : int
+        Largest number of candidate settings evaluated by the criterion (each is ``folds``
+        filter runs); at least 1.
+    workers : int, optional
+        Local worker processes (default: all cores); ``scheduler``: a Dask scheduler
+        address instead.
+    data : str, optional
+        Another copy of the data folder.
+    fix : iterable of str
+        Keys kept as the file gives them (:func:`tunable_keys`).
+    span : (start, end), optional
+        The part of the recording tuned on, seconds since the first IMU sample (numbers or
+        text with a unit); default: from 10 s after the filter starts to the last fix. Only
+        data inside it enters the criterion and the still segments.
+    window : str or float
+        Length of the cross-validation windows (default 30 s); ``folds`` runs deal them out.
+    method : str, optional
+        The method tuned (default: the one with most aiding).
+    resume : bool
+        Reuse the evaluations ``out/tune_journal.jsonl`` holds (same file, data and span).
+    overwrite : bool
+        Write into a folder that has outputs (the journal is kept only with ``resume``).
+    progress : bool
+        A progress bar on stderr.
+    seed : int
+        Recorded only: the tuning draws nothing at random.
+    """
+    from ...config.loader import load_dataset_text, resolve
+    from ...io.outdir import check_out_dir, clear_folder, write_marker
+    if isinstance(budget, bool) or not isinstance(budget, (int, np.integer)) or budget < 1:
+        raise ArgumentError(f"must be a whole number of evaluations >= 1, got {budget!r}", argument="budget")
+    if isinstance(folds, bool) or not isinstance(folds, (int, np.integer)) or folds < 2:
+        raise ArgumentError(f"must be a whole number >= 2, got {folds!r}", argument="folds")
+    fix = list(fix or ())
+    unknown = [k for k in fix if k not in tunable_keys()]
+    if unknown:
+        raise ArgumentError(f"unknown key(s) {', '.join(unknown)}; tunable: {', '.join(tunable_keys())}",
+                            argument="fix")
+    w = _seconds(window, "window")
+    if w <= 0:
+        raise ArgumentError(f"must be positive, got {window!r}", argument="window")
+
+    from ..sweep import _dataset_ref
+    text, source = resolve(_dataset_ref(dataset), "datasets", "dataset")
+    stripped = without_reference(text)
+    ds, _, _ = load_dataset_text(stripped, source)
+    if getattr(ds, "gnss", None) is None or getattr(ds, "imu", None) is None:
+        raise ConfigError("mixnav tune needs an IMU + GNSS-fixes dataset ([imu] and [gnss]); tuning "
+                          "odometry + pseudorange and raw-GNSS datasets is not built yet (docs/tuning.md)",
+                          file=source, key="dataset.kind")
+    target = _target_method(ds, method)
+    # the folder is built in place (resumable, like `experiment`): marked incomplete until the end
+    from ..data_folder import find_data_dir
+    protect = [Path(source)] if Path(source).exists() else []
+    data_folder = find_data_dir(ds, data, source)
+    protect.append(data_folder)
+    out, state = check_out_dir(out, "tune", overwrite=overwrite, protect=protect, resume=resume)
+    if state == "clear" or (state == "same" and not resume):
+        clear_folder(out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_marker(out, "tune", False, TUNE_FILES)
+    journal = out / "tune_journal.jsonl"
+
+    # a probe run: where the filter starts and the fixes' span (no window withheld)
+    probe = Evaluator(stripped, source, data, target, [[]], (0.0, math.inf))
+    pds = probe.dataset(stripped)
+    po = probe.run(pds, [])
+    t_first, t_last = float(po.init.time) + 10.0, float(po.all_fixes.time[-1])
+    if span is not None:
+        a, b = _seconds(span[0], "span"), _seconds(span[1], "span")
+        if not b > a:
+            raise ArgumentError(f"end must be after start, got {span!r}", argument="span")
+        t_first, t_last = max(a, t_first), min(b, t_last)
+    own = [tuple(map(float, x)) for x in ds.gnss.withhold]
+    windows = cv_windows(t_first, t_last, w, folds, avoid=own)
+    if sum(len(f) for f in windows) < folds:
+        raise ArgumentError(f"the span {t_first:.1f}-{t_last:.1f} s holds {sum(len(f) for f in windows)} "
+                            f"cross-validation windows of {w:g} s; at least {folds} are needed (a shorter "
+                            "window or a longer span)", argument="span")
+    windows = [f for f in windows if f]
+    setup = (stripped, source, None if data is None else str(data), target, windows, (t_first, t_last))
+    scorer = _Scorer(setup, journal, workers, scheduler, progress, budget)
+
+    doc = tomlkit.parse(stripped)
+    chosen, not_tuned, evaluations = {}, {}, []
+
+    # 1. the data stage
+    from .data_stage import imu_noise, stillness_thresholds
+    inputs = probe._load(pds)
+    imu_run = po.imu
+    fixes_run = po.all_fixes
+    noise = imu_noise(imu_run, fixes_run, (t_first, t_last))
+    params = {p.name: p for p in ins_parameters()}
+    start_doc = tomlkit.parse(tomlkit.dumps(doc))
+    for name, attr, rel in (("imu.errors.arw", "arw", "arw_rel_sigma"), ("imu.errors.vrw", "vrw", "vrw_rel_sigma")):
+        p = params[name]
+        if name in fix:
+            not_tuned[name] = "fixed by the user (--fix)"
+            continue
+        if noise is None:
+            not_tuned[name + " (Allan)"] = ("no still segment of 3 s or more in the span: the white noise was "
+                                            "not read from the data; the file's value is the search's start")
+            continue
+        if get_value(doc, p) is None:
+            not_tuned[name] = "not in the file"
+            continue
+        set_value(start_doc, p, getattr(noise, attr))
+        chosen[name] = {"from_data": _value_text(p, getattr(noise, attr)),
+                        "data_how": f"Allan deviation at 1 s over {noise.segments} still segments "
+                                    f"({noise.still_s:.0f} s), +-{100 * getattr(noise, rel):.0f} % (1 sigma)"}
+    del inputs
+    if "aiding" in doc and "zupt" in doc["aiding"]:
+        th = stillness_thresholds(imu_run, fixes_run, (t_first, t_last))
+        for k, (val, how) in th.items():
+            name = f"aiding.zupt.{k}"
+            if name in fix:
+                not_tuned[name] = "fixed by the user (--fix)"
+            elif val is None:
+                not_tuned[name] = how
+            else:
+                unit = "m/s^2" if k == "accel_std" else "rad/s"
+                item = tomlkit.string(f"{val:.4g} {unit}")
+                item.comment(f"mixnav tune: {how}")
+                start_doc["aiding"]["zupt"][k] = item
+                chosen[name] = {"value": f"{val:.4g} {unit}", "how": how, "spread": None}
+
+    from .data_stage import BIAS_INCREMENT_S, LOOSEN, bias_walks
+    wanted = [n for n in ("imu.errors.gyro_bias_walk", "imu.errors.accel_bias_walk") if n not in fix]
+    if wanted:
+        local = Evaluator(stripped, source, data, target, windows, (t_first, t_last))
+        walks = bias_walks(local, tomlkit.dumps(start_doc), (t_first, t_last))
+        if walks is None:
+            for n in wanted:
+                not_tuned[n + " (smoothed)"] = ("the span holds fewer than three 10 s increments, or the method "
+                                                "cannot be smoothed: the walks were not read from the data")
+        else:
+            for n in wanted:
+                p = params[n]
+                v = walks[n.rsplit(".", 1)[1]]
+                set_value(start_doc, p, v)
+                chosen[n] = {"from_data": _value_text(p, v),
+                             "data_how": f"RTS-smoothed bias increments over {BIAS_INCREMENT_S:g} s "
+                                         f"({walks['increments']} increments; the file's walks loosened "
+                                         f"x{LOOSEN:g} for that run)"}
+
+    # 2. the criterion: the file as given, the data stage's start, then the coordinate search
+    given_text, start_text = tomlkit.dumps(doc), tomlkit.dumps(start_doc)
+    given, started = scorer.score([given_text, start_text])
+    if given is None or started is None:
+        raise ArgumentError("a budget of at least 2 evaluations is needed to score the file as given "
+                            "and the data's start", argument="budget")
+    evaluations += [{"changed": "the file as given", "score": given},
+                    {"changed": "the data stage (Allan noise, smoothed bias walks, stillness thresholds)", "score": started}]
+    if started["nlpd"] <= given["nlpd"]:
+        cur_doc, cur = start_doc, started
+    else:
+        cur_doc, cur = tomlkit.parse(given_text), given
+        for name in ("imu.errors.arw", "imu.errors.vrw", "imu.errors.gyro_bias_walk", "imu.errors.accel_bias_walk"):
+            if name in chosen and "data_how" in chosen[name]:
+                chosen[name]["data_how"] += " (not kept: the criterion preferred the file's value)"
+    from .search import coordinate_search
+    searched = [p for p in ins_parameters() if p.name not in fix and _applies(cur_doc, p, ds)]
+    for p in ins_parameters():
+        if p.name in fix:
+            not_tuned[p.name] = "fixed by the user (--fix)"
+        elif p not in searched:
+            not_tuned[p.name] = _why_not(cur_doc, p, ds)
+    cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations)
+    n_windows = sum(len(f) for f in windows)
+    for p in searched:
+        if len(curves.get(p.name, [])) < 2:   # only the current point: the budget ran out first
+            not_tuned[p.name] = "the budget ran out before the search reached it: the file's value kept"
+            chosen.pop(p.name, None)
+            continue
+        v = get_value(cur_doc, p)
+        spread = _spread(p, curves.get(p.name, []), cur["nlpd"], n_windows)
+        entry = chosen.setdefault(p.name, {})
+        entry.update({"value": _value_text(p, v), "how": _how(p, curves.get(p.name, []), cur, entry),
+                      "spread": spread, "curve": [(c[0], c[1], c[2]) for c in curves.get(p.name, [])]})
+
+    tuned_text = _write_tuned(text, cur_doc, chosen, [p for p in searched if p.name in chosen])
+    tuned_text = _data_dir_from(tuned_text, ds.dataset.data_dir, data_folder, out)
+    result = TuneResult(tuned_text=tuned_text, chosen=chosen, given=given, tuned=cur, evaluations=evaluations,
+                        not_tuned=not_tuned, runs=scorer.runs, out=out)
+    from .report import write_outputs
+    write_outputs(out, result, {"dataset": str(dataset), "source": source, "method": target, "budget": budget,
+                                "evaluations_spent": len(scorer.seen), "filter_runs": scorer.runs, "seed": seed,
+                                "span_s": [t_first, t_last], "window_s": w, "folds": len(windows),
+                                "cv_windows": windows, "fixed": fix})
+    write_marker(out, "tune", True, TUNE_FILES)
+    return result
+
+
+def _applies(doc, p: Parameter, ds) -> bool:
+    return _why_not(doc, p, ds) is None
+
+
+def _why_not(doc, p: Parameter, ds) -> str | None:
+    """Why a parameter is not searched on this file (None: it is)."""
+    if p.path[0] == "aiding":
+        if "aiding" not in doc or p.path[1] not in doc["aiding"]:
+            return f"no [aiding.{p.path[1]}] in the file"
+    if p.name == "gnss.velocity_delay" and (not ds.gnss.use_velocity or ds.gnss.format != "rtklib-pos"):
+        return "the fixes' velocities are not used, or their format is not rtklib-pos"
+    if get_value(doc, p) is None:
+        return "not in the file (the IMU grade's value is used)"
+    return None
+
+
+def _spread(p: Parameter, curve, best: float, n_windows: int) -> str | None:
+    """The evaluated values whose criterion is within 2 / n_windows of the best mean (a
+    likelihood-ratio interval counting each window as one independent observation: the
+    fixes within a window are strongly correlated)."""
+    if not curve:
+        return None
+    tol = 2.0 / max(n_windows, 1)
+    ok = [c[1] for c in curve if c[2] <= best + tol]
+    if not ok:
+        return None
+    lo, hi = min(ok), max(ok)
+    return f"{lo:.4g}-{hi:.4g} {p.unit}" + ("" if p.index is None and p.kind == "log" else "")
+
+
+def _how(p: Parameter, curve, cur: dict, entry: dict) -> str:
+    base = entry.get("data_how")
+    n = len(curve)
+    s = f"cross-validation on the recording's own GNSS ({n} values tried along this key)"
+    return f"start: {base}; then {s}" if base else s
+
+
+def _data_dir_from(text: str, written: str, folder: Path, out: Path) -> str:
+    """``dataset.data_dir`` as seen from the output folder when the file's relative path would
+    not find the data from there (tuned.toml lives in ``out``, not beside the dataset file)."""
+    if Path(written).is_absolute() or (out / written).is_dir():
+        return text
+    doc = tomlkit.parse(text)
+    item = tomlkit.string(Path(os.path.relpath(Path(folder).resolve(), out.resolve())).as_posix())
+    item.comment(f"mixnav tune: the data folder as seen from this file (the dataset file said {written!r})")
+    doc["dataset"]["data_dir"] = item
+    return tomlkit.dumps(doc)
+
+
+def _write_tuned(text: str, cur_doc, chosen: dict, searched) -> str:
+    """The dataset file as given (its reference sections kept) with the tuned values, each
+    with a comment saying how it was found and its spread."""
+    doc = tomlkit.parse(text)
+    seen = set()
+    for p in searched:
+        key = p.path
+        if key in seen:
+            continue
+        seen.add(key)
+        v = get_value(cur_doc, p)
+        names = [q.name for q in searched if q.path == key]
+        notes = []
+        for n in names:
+            c = chosen.get(n, {})
+            notes.append(f"{c.get('how', '')}" + (f"; within the criterion's spread: {c['spread']}"
+                                                   if c.get("spread") else ""))
+        set_value(doc, p, v, comment="mixnav tune: " + " | ".join(notes))
+    for name, c in chosen.items():
+        if name.startswith("aiding.zupt.") and "value" in c and "aiding" in doc and "zupt" in doc["aiding"]:
+            item = tomlkit.string(c["value"])
+            item.comment(f"mixnav tune: {c['how']}")
+            doc["aiding"]["zupt"][name.rsplit(".", 1)[1]] = item
+    return tomlkit.dumps(doc)

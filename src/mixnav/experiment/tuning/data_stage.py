@@ -1,0 +1,117 @@
+"""What the data says before any filter runs: the still segments' IMU noise (Allan deviation)
+and the ZUPT/ZARU thresholds from the stillness statistics, both inside the tuning span."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .allan import still_noise
+
+#: a 1 s window counts as still (moving) for the threshold statistics when the nearest GNSS
+#: velocity within 0.5 s says below (above) this speed [m/s]
+STILL_BELOW_MPS, MOVING_ABOVE_MPS = 0.05, 1.0
+
+
+def _window_stats(imu, window: float = 1.0):
+    """Per window of ``window`` s: centre time, std of the specific-force magnitude [m/s^2],
+    mean angular-rate magnitude [rad/s] (the statistics the stillness detector tests)."""
+    dt = float(np.median(imu.dt))
+    n = max(int(round(window / dt)), 2)
+    k = len(imu.time) // n
+    f = np.linalg.norm(imu.dvel[:k * n] / imu.dt[:k * n, None], axis=1).reshape(k, n)
+    w = np.linalg.norm(imu.dtheta[:k * n] / imu.dt[:k * n, None], axis=1).reshape(k, n)
+    return imu.time[:k * n].reshape(k, n).mean(axis=1), f.std(axis=1), w.mean(axis=1)
+
+
+def _speed_at(fixes, t, gap: float = 0.5):
+    """GNSS horizontal speed nearest each time (NaN without a fix within ``gap`` s or without velocities)."""
+    if fixes.vel_n is None or len(fixes.time) == 0:
+        return np.full(len(t), np.nan)
+    j = np.clip(np.searchsorted(fixes.time, t), 1, len(fixes.time) - 1)
+    j -= (t - fixes.time[j - 1]) < (fixes.time[j] - t)
+    s = np.hypot(fixes.vel_n[j, 0], fixes.vel_n[j, 1])
+    return np.where(np.abs(fixes.time[j] - t) <= gap, s, np.nan)
+
+
+def stillness_thresholds(imu, fixes, span) -> dict:
+    """ZUPT/ZARU thresholds from the recording's own stillness statistics.
+
+    1 s windows are labelled still or moving by the GNSS speed (below 0.05 m/s, above 1 m/s);
+    each threshold is the geometric mean of the still windows' 90th percentile and the moving
+    windows' 5th percentile when those are apart (a margin on both sides), else it is not
+    set (``None``, with the reason). Returns ``{"accel_std": (value or None, note),
+    "gyro_rate": (...)}`` [m/s^2], [rad/s]."""
+    t, fstd, wmean = _window_stats(imu)
+    sel = (t >= span[0]) & (t <= span[1])
+    v = _speed_at(fixes, t)
+    still, moving = sel & (v < STILL_BELOW_MPS), sel & (v > MOVING_ABOVE_MPS)
+    out = {}
+    for key, x in (("accel_std", fstd), ("gyro_rate", wmean)):
+        if still.sum() < 10 or moving.sum() < 10:
+            out[key] = (None, f"{int(still.sum())} still and {int(moving.sum())} moving 1 s windows: "
+                              "too few to set a threshold (at least 10 of each)")
+            continue
+        hi_still, lo_moving = np.percentile(x[still], 90), np.percentile(x[moving], 5)
+        if hi_still >= lo_moving:
+            out[key] = (None, f"still windows' p90 {hi_still:.4g} not below the moving windows' p5 "
+                              f"{lo_moving:.4g}: no threshold separates them")
+            continue
+        out[key] = (float(np.sqrt(hi_still * lo_moving)),
+                    f"geometric mean of the still 1 s windows' p90 ({hi_still:.4g}, {int(still.sum())} windows) "
+                    f"and the moving ones' p5 ({lo_moving:.4g}, {int(moving.sum())} windows)")
+    return out
+
+
+def imu_noise(imu, fixes, span, min_segment: float = 3.0):
+    """The Allan-deviation noise of the still segments inside ``span`` (IMU stillness with the
+    GNSS speed's veto at the detector's defaults), or None with none long enough."""
+    from ...measurements.stillness import detect_still
+    st = detect_still(imu, fixes=fixes)
+    iv = np.asarray(st.intervals, float).reshape(-1, 2)
+    iv = np.column_stack([np.maximum(iv[:, 0], span[0]), np.minimum(iv[:, 1], span[1])])
+    iv = iv[iv[:, 1] > iv[:, 0]]
+    return still_noise(imu, iv, min_segment=min_segment)
+
+
+#: the interval over which the smoothed bias increments are taken [s]: long against the
+#: smoother's 0.25 s records and the GNSS noise, short against the drive
+BIAS_INCREMENT_S = 10.0
+#: the walks are loosened by this factor for the smoothed run that reads them, so that the
+#: smoother follows what the data say rather than the file's (possibly far too tight) prior
+LOOSEN = 10.0
+
+
+def bias_walks(evaluator, doc_text: str, span) -> dict | None:
+    """Per-axis gyro and accelerometer bias random walks from the smoothed bias estimates.
+
+    The tuned method is run once with the RTS smoother on the whole span (every fix used,
+    the walks in the file loosened tenfold), and the smoothed biases' increments over
+    :data:`BIAS_INCREMENT_S` give each axis' walk density ``sqrt(mean(db^2) / dT)``. Only the
+    recording's own GNSS enters. Returns ``{"gyro_bias_walk": (3,) rad/s^1.5,
+    "accel_bias_walk": (3,) m/s^2.5, "increments": n}`` or None when the span holds fewer than
+    three increments or the method cannot be smoothed."""
+    import tomlkit
+    from .parameters import ins_parameters, get_value, set_value
+    doc = tomlkit.parse(doc_text)
+    for p in ins_parameters():
+        if p.name in ("imu.errors.gyro_bias_walk", "imu.errors.accel_bias_walk"):
+            v = get_value(doc, p)
+            if v is None:
+                return None
+            set_value(doc, p, v * LOOSEN)
+    ds = evaluator.dataset(tomlkit.dumps(doc), smooth=True)
+    if not ds.methods or not getattr(ds.methods[0], "smooth", False):
+        return None
+    po = evaluator.run(ds, [])
+    res = po.results.get(f"{evaluator.method}-smoothed")
+    if res is None or "gyro_bias" not in res.estimates:
+        return None
+    grid = np.arange(span[0], span[1] + 1e-9, BIAS_INCREMENT_S)
+    if len(grid) < 4:
+        return None
+    out = {"increments": len(grid) - 1}
+    for key, est in (("gyro_bias_walk", "gyro_bias"), ("accel_bias_walk", "accel_bias")):
+        b = np.column_stack([np.interp(grid, res.time, res.estimates[est][:, i]) for i in range(3)])
+        d = np.diff(b, axis=0)
+        out[key] = np.sqrt(np.mean(d * d, axis=0) / BIAS_INCREMENT_S)
+    return out

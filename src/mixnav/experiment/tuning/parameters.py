@@ -1,0 +1,168 @@
+"""What ``mixnav tune`` tunes in a dataset file, and how a value is read from and written to it.
+
+A :class:`Parameter` is one key of the dataset file (a TOML path; a vector key may be tuned
+as a whole or by element), its physical dimension and the unit it is written in, and how the
+search moves it: ``"log"`` multiplies it by factors (noise densities, sigmas: scale
+parameters), ``"shift"`` adds offsets (times). Values are SI inside, one array per key, and
+are written back as text with their unit (``"0.151 deg/s/sqrt(Hz)"``), keeping the key's
+shape (a per-axis list stays a list).
+
+:func:`ins_parameters` lists what is tuned for an IMU + GNSS-fixes dataset. The file is
+edited as a :mod:`tomlkit` document, so its comments and layout survive into ``tuned.toml``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import tomlkit
+
+from ... import units as u
+
+_SQRT2 = float(np.sqrt(2.0))
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One tuned key.
+
+    Attributes
+    ----------
+    name : str
+        The dotted key as the report and ``--fix`` name it (``"imu.errors.arw"``,
+        ``"aiding.nhc.sigma[1]"`` for one element).
+    path : tuple of str
+        The TOML path of the key.
+    dimension : units.Dimension
+    unit : str
+        The unit the value is written in.
+    kind : str
+        ``"log"`` (scaled by factors) or ``"shift"`` (offsets in SI).
+    coarse, fine : tuple of float
+        The moves of the search's first and second pass (factors or SI offsets).
+    lower, upper : float
+        Bounds in SI.
+    index : int or None
+        The element of a vector key this parameter moves (None: the whole key).
+    default : float, tuple or None
+        The key's whole value when the file lacks it (the schema's default), SI; None: a
+        missing key is not tuned.
+    about : str
+        What the parameter is, for the report.
+    """
+
+    name: str
+    path: tuple
+    dimension: object
+    unit: str
+    kind: str
+    coarse: tuple
+    fine: tuple
+    lower: float
+    upper: float
+    index: int | None = None
+    default: float | tuple | None = None
+    about: str = ""
+
+    @property
+    def scale(self) -> float:
+        """The unit's size in SI."""
+        return float(u.parse_quantity(f"1 {self.unit}", self.dimension))
+
+
+_LOG_COARSE, _LOG_FINE = (0.25, 0.5, 2.0, 4.0), (1 / _SQRT2, _SQRT2)
+
+
+def ins_parameters() -> list[Parameter]:
+    """The tuned keys of an IMU + GNSS-fixes dataset, in the order the search visits them."""
+    arw, vrw = u.ANGLE_RANDOM_WALK, u.VELOCITY_RANDOM_WALK
+    # the systematic keys first: a wrong time offset or velocity delay would otherwise be absorbed
+    # by the noise scales the search visits next
+    return [
+        Parameter("installation.imu_time_offset", ("installation", "imu_time_offset"), u.TIME, "s", "shift",
+                  (-0.1, -0.05, 0.05, 0.1), (-0.025, 0.025), -1.0, 1.0, default=0.0,
+                  about="IMU time tags minus GNSS time"),
+        Parameter("gnss.velocity_delay", ("gnss", "velocity_delay"), u.TIME, "s", "shift",
+                  (-0.1, -0.05, 0.05, 0.1), (-0.025, 0.025), 0.0, 1.0, default=0.0,
+                  about="how much earlier than its epoch a GNSS velocity is valid"),
+        Parameter("imu.errors.arw", ("imu", "errors", "arw"), arw, "deg/s/sqrt(Hz)", "log", _LOG_COARSE,
+                  _LOG_FINE, 1e-7, 1e-1, about="gyro white noise (ARW), per axis; the search scales all axes"),
+        Parameter("imu.errors.vrw", ("imu", "errors", "vrw"), vrw, "ug/sqrt(Hz)", "log", _LOG_COARSE, _LOG_FINE,
+                  1e-7, 1.0, about="accelerometer white noise (VRW), per axis; the search scales all axes"),
+        Parameter("aiding.nhc.sigma[0]", ("aiding", "nhc", "sigma"), u.VELOCITY, "m/s", "log", _LOG_COARSE,
+                  _LOG_FINE, 1e-3, 10.0, index=0, default=(0.1, 0.1), about="NHC lateral velocity sigma"),
+        Parameter("aiding.nhc.sigma[1]", ("aiding", "nhc", "sigma"), u.VELOCITY, "m/s", "log", _LOG_COARSE,
+                  _LOG_FINE, 1e-3, 10.0, index=1, default=(0.1, 0.1), about="NHC vertical velocity sigma"),
+        Parameter("aiding.nhc.pitch_per_accel", ("aiding", "nhc", "pitch_per_accel"), u.Dimension(1.0, -1.0, 2.0),
+                  "deg/(m/s^2)", "shift", tuple(x * u.DEG for x in (-0.4, -0.2, 0.2, 0.4)),
+                  (-0.1 * u.DEG, 0.1 * u.DEG), -3.0 * u.DEG, 3.0 * u.DEG, default=0.0,
+                  about="the body's pitch on its suspension per m/s^2 of forward acceleration"),
+        Parameter("imu.errors.gyro_bias_walk", ("imu", "errors", "gyro_bias_walk"), u.GYRO_BIAS_DRIFT,
+                  "deg/s^2/sqrt(Hz)", "log", (1 / 8, 0.25, 0.5, 2.0, 4.0, 8.0), _LOG_FINE, 1e-10, 1e-1,
+                  about="gyro bias random walk"),
+        Parameter("imu.errors.accel_bias_walk", ("imu", "errors", "accel_bias_walk"), u.ACCEL_BIAS_DRIFT,
+                  "ug/s/sqrt(Hz)", "log", (1 / 8, 0.25, 0.5, 2.0, 4.0, 8.0), _LOG_FINE, 1e-10, 1.0,
+                  about="accelerometer bias random walk"),
+        Parameter("gnss.min_sigma", ("gnss", "min_sigma"), u.LENGTH, "m", "log", _LOG_COARSE, _LOG_FINE,
+                  1e-3, 100.0, default=0.0, about="floor of the fixes' position sigmas"),
+    ]
+
+
+def _node(doc, path, create: bool = False):
+    """The table holding the last key of ``path`` (None when absent and not ``create``)."""
+    t = doc
+    for k in path[:-1]:
+        if k not in t:
+            if not create:
+                return None
+            t[k] = tomlkit.table()
+        t = t[k]
+    return t
+
+
+def get_value(doc, p: Parameter) -> np.ndarray | None:
+    """The key's whole value in SI (1-D array; a scalar key gives one element); the default when the
+    file lacks it, or None when it has no default."""
+    t = _node(doc, p.path)
+    if t is None or p.path[-1] not in t:
+        return None if p.default is None else np.atleast_1d(np.asarray(p.default, float)).copy()
+    v = t[p.path[-1]]
+    items = list(v) if isinstance(v, list) else [v]
+    return np.array([float(u.parse_quantity(str(x), p.dimension)) for x in items])
+
+
+def _text(p: Parameter, value: float) -> str:
+    return f"{value / p.scale:.4g} {p.unit}"
+
+
+def set_value(doc, p: Parameter, value: np.ndarray, comment: str | None = None) -> None:
+    """Write ``value`` (SI, the key's whole value, as :func:`get_value` gives it) into ``doc``
+    in the parameter's unit, a list when the file had one (or the value has several
+    elements), with ``comment`` after it."""
+    t = _node(doc, p.path, create=True)
+    key = p.path[-1]
+    had_list = key in t and isinstance(t[key], list)
+    value = np.atleast_1d(np.asarray(value, float))
+    if had_list or len(value) > 1:
+        item = tomlkit.array()
+        item.extend(_text(p, x) for x in value)
+    else:
+        item = tomlkit.string(_text(p, float(value[0])))
+    if comment:
+        item.comment(comment)
+    t[key] = item
+
+
+def moved(p: Parameter, value: np.ndarray, step: float) -> np.ndarray:
+    """``value`` moved by one search step (the whole key, or its element ``p.index``), clipped
+    to the bounds."""
+    v = np.array(value, float)
+    sel = slice(None) if p.index is None else p.index
+    if p.kind == "log":
+        base = v[sel]
+        v[sel] = np.where(base > 0, base * step, p.lower * step if step > 1 else base)
+    else:
+        v[sel] = v[sel] + step
+    v[sel] = np.clip(v[sel], p.lower, p.upper)
+    return v

@@ -1,0 +1,96 @@
+"""``mixnav tune``'s files: ``tuned.toml``, ``tune.json``, ``report.md`` and ``tune.png``,
+each written whole or not at all (:mod:`mixnav.io.atomic`)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+
+def _f(x, fmt=".3f") -> str:
+    return "-" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, fmt)
+
+
+def write_outputs(out: Path, result, header: dict) -> None:
+    from ...io.atomic import atomic_write_text
+    atomic_write_text(out / "tuned.toml", result.tuned_text)
+    body = {**header, "criterion": "mean negative log predictive density of the withheld GNSS fixes "
+                                   "(cross-validation); the GNSS innovation log-likelihood per update beside it",
+            "given": result.given, "tuned": result.tuned, "chosen": result.chosen, "not_tuned": result.not_tuned,
+            "evaluations": result.evaluations}
+    atomic_write_text(out / "tune.json", json.dumps(body, indent=1, default=float) + "\n")
+    _figure(out / "tune.png", result)
+    atomic_write_text(out / "report.md", _report(result, header))
+
+
+def _report(result, h: dict) -> str:
+    g, t = result.given, result.tuned
+    lines = [f"# mixnav tune: {h['dataset']}", "",
+             f"Method tuned: `{h['method']}`; span {h['span_s'][0]:.1f}-{h['span_s'][1]:.1f} s; "
+             f"{sum(len(f) for f in h['cv_windows'])} cross-validation windows of {h['window_s']:g} s in "
+             f"{h['folds']} folds; {h['evaluations_spent']} evaluations ({h['filter_runs']} filter runs) of a "
+             f"budget of {h['budget']}. No reference was read.", "",
+             "## The criterion, the file as given against tuned", "",
+             "| | CV mean NLPD (lower is better) | innovation log-lik. per update | CV median / p90 / worst "
+             "horizontal max vs own GNSS [m] |", "|---|---|---|---|"]
+    for name, s in (("as given", g), ("tuned", t)):
+        lines.append(f"| {name} | {_f(s['nlpd'])} | {_f(s['innovation_ll_per_update'])} | "
+                     f"{_f(s['cv_median_hmax_m'], '.2f')} / {_f(s['cv_p90_hmax_m'], '.2f')} / "
+                     f"{_f(s['cv_worst_hmax_m'], '.2f')} |")
+    lines += ["", "## Chosen values", "", "| key | value | how | spread |", "|---|---|---|---|"]
+    for k, c in result.chosen.items():
+        lines.append(f"| `{k}` | {c.get('value', c.get('from_data', '-'))} | {c.get('how', c.get('data_how', ''))} "
+                     f"| {c.get('spread') or '-'} |")
+    if result.not_tuned:
+        lines += ["", "## Not tuned", ""] + [f"- `{k}`: {v}" for k, v in result.not_tuned.items()]
+    lines += ["", "## Where the two criteria disagree", "",
+              "Per key, the value each criterion prefers among the candidates tried (the search follows the "
+              "cross-validation: it scores positions after seconds without GNSS, which is what the bias walks "
+              "and the constraint sigmas act on; the innovation likelihood scores 0.25-1 s predictions).", "",
+              "| key | CV best | innovation-likelihood best |", "|---|---|---|"]
+    for k, c in result.chosen.items():
+        cur = c.get("curve") or []
+        if not cur:
+            continue
+        lls = {}
+        for e in result.evaluations:
+            if e["changed"].startswith(k + " "):
+                lls[e["changed"]] = e["score"]
+        best_cv = min(cur, key=lambda x: x[2])
+        pts = [(e["changed"], e["score"]["innovation_ll_per_update"]) for e in result.evaluations
+               if e["changed"].startswith(k + " ") and e["score"]["innovation_ll_per_update"] is not None]
+        best_ll = max(pts, key=lambda x: x[1])[0] if pts else "-"
+        lines.append(f"| `{k}` | {best_cv[1]:.4g} | {best_ll} |")
+    lines += ["", "![criterion against each key](tune.png)", ""]
+    return "\n".join(lines)
+
+
+def _figure(path: Path, result) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from ...io.atomic import atomic_savefig
+    curves = {k: c["curve"] for k, c in result.chosen.items() if c.get("curve")}
+    n = max(len(curves), 1)
+    cols = min(3, n)
+    rows = int(np.ceil(n / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.0 * rows), squeeze=False)
+    for ax, (k, cv) in zip(axes.ravel(), curves.items()):
+        x = np.array([c[1] for c in cv], float)
+        y = np.array([c[2] for c in cv], float)
+        ok = np.isfinite(y)
+        ax.plot(x[ok], y[ok], "o", ms=4)
+        ax.set_title(k, fontsize=9)
+        if (x[ok] > 0).all():
+            ax.set_xscale("log")
+        ax.set_ylabel("CV mean NLPD")
+    for ax in axes.ravel()[len(curves):]:
+        ax.axis("off")
+    fig.tight_layout()
+    try:
+        atomic_savefig(fig, path, dpi=90)
+    finally:
+        plt.close(fig)

@@ -1,0 +1,80 @@
+"""The search: coordinate-wise, on a grid of moves per key, two passes.
+
+Each key in turn is moved by every step of its grid (factors for scale parameters, offsets
+for times, :class:`~.parameters.Parameter`), the candidates are scored together (in
+parallel), and the best replaces the current setting when it lowers the criterion. The
+first pass uses the coarse grid (x0.25 ... x4; a winner at the grid's edge is followed one
+step further), the second the fine one (x0.71, x1.41) about the values the first pass left.
+
+Why not a black-box optimiser: the criterion is smooth in the logarithm of each scale and
+the keys interact weakly (noise densities against the GNSS sigma floor, the two NHC sigmas),
+so a coordinate search with the candidates of a key run side by side uses two cores fully
+and reaches a flat optimum in 40-60 evaluations; every evaluation is also a point of the
+report's criterion-against-parameter curves. benchmarks/tune_search.py compares it with
+optuna's TPE sampler on the same budget (benchmarks/results/tune_search.md).
+"""
+
+from __future__ import annotations
+
+import tomlkit
+
+from .parameters import Parameter, get_value, moved, set_value
+
+#: a move is kept only when it lowers the mean NLPD by more than this: where the criterion is
+#: flat in a key (a bias walk swamped by a larger white noise) the file's value stays rather
+#: than a grid edge chosen by rounding
+MIN_GAIN = 1e-3
+
+
+def _with(doc, p: Parameter, value) -> str:
+    d = tomlkit.parse(tomlkit.dumps(doc))
+    set_value(d, p, value)
+    return tomlkit.dumps(d)
+
+
+def _shown(p: Parameter, value) -> float:
+    """The scalar a curve point is drawn at: the element moved, or the first axis of a vector."""
+    return float(value[p.index if p.index is not None else 0] / p.scale)
+
+
+def coordinate_search(doc, cur: dict, params: list[Parameter], scorer, evaluations: list):
+    """Search ``params`` from ``doc`` (scored ``cur``) with ``scorer`` (its budget bounds the
+    evaluations). Returns the best document, its score and per key the evaluated points
+    ``(label, shown value, nlpd)``."""
+    curves: dict[str, list] = {p.name: [] for p in params}
+    for grid in ("coarse", "fine"):
+        for p in params:
+            if scorer.left() <= 0:
+                return doc, cur, curves
+            base = get_value(doc, p)
+            curves[p.name].append(("current", _shown(p, base), cur["nlpd"]))
+            steps = list(p.coarse if grid == "coarse" else p.fine)
+            doc, cur, best_step = _try(doc, cur, p, base, steps, scorer, evaluations, curves)
+            if grid == "coarse" and best_step is not None and best_step in (min(steps), max(steps)):
+                further = best_step * best_step if p.kind == "log" else 2 * best_step
+                doc, cur, _ = _try(doc, cur, p, base, [further], scorer, evaluations, curves)
+    return doc, cur, curves
+
+
+def _try(doc, cur, p, base, steps, scorer, evaluations, curves):
+    """Score ``base`` moved by each step; keep the best if it beats ``cur``. Returns the
+    (possibly new) document, its score and the winning step (None: none won)."""
+    values = [moved(p, base, s) for s in steps]
+    keep = [(s, v) for s, v in zip(steps, values) if not (v == base).all()]
+    if not keep:
+        return doc, cur, None
+    texts = [_with(doc, p, v) for _, v in keep]
+    scores = scorer.score(texts)
+    best, best_step = None, None
+    for (s, v), text, sc in zip(keep, texts, scores):
+        if sc is None:        # beyond the budget
+            continue
+        evaluations.append({"changed": f"{p.name} x{s:g}" if p.kind == "log" else
+                            f"{p.name} {s / p.scale:+g} {p.unit}",
+                            "score": sc})
+        curves[p.name].append((f"{s:g}" if p.kind == "log" else f"{s / p.scale:+g}", _shown(p, v), sc["nlpd"]))
+        if sc["nlpd"] < (cur["nlpd"] - MIN_GAIN if best is None else best[1]["nlpd"]):
+            best, best_step = (text, sc), s
+    if best is None:
+        return doc, cur, None
+    return tomlkit.parse(best[0]), best[1], best_step

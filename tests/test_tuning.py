@@ -1,0 +1,199 @@
+"""mixnav tune (issue 35): the Allan deviation against allantools and its closed form, the
+engine's innovation log-likelihood against scipy, the cross-validation windows, the file
+edits, and the tool itself on drive-0708: never reading the reference (bitwise the same
+tuned.toml without the reference file), --fix, resume, and bad input."""
+
+from __future__ import annotations
+
+import shutil
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+import tomlkit
+
+from mixnav.data import ImuData
+from mixnav.errors import ArgumentError, ConfigError
+from mixnav.experiment.tuning import tune
+from mixnav.experiment.tuning.allan import overlapping_adev, still_noise
+from mixnav.experiment.tuning.criterion import cv_windows, without_reference
+from mixnav.experiment.tuning.parameters import get_value, ins_parameters, moved, set_value
+
+ROOT = Path(__file__).resolve().parents[1]
+SHIPPED = ROOT / "src" / "mixnav" / "config" / "datasets"
+DATA = ROOT.parent / "shared" / "data" / "drive-0708"
+need_data = pytest.mark.skipif(not DATA.is_dir(), reason="needs ../shared/data/drive-0708")
+
+
+def test_adev_equals_allantools():
+    allantools = pytest.importorskip("allantools")
+    rng = np.random.default_rng(3)
+    y = rng.normal(size=12000) * 0.2 + np.cumsum(rng.normal(size=12000)) * 1e-3   # white + random walk
+    taus = np.array([0.01, 0.05, 0.3, 1.0, 7.0])
+    ours, _ = overlapping_adev([y], 0.01, taus)
+    _, theirs, _, _ = allantools.oadev(y, rate=100.0, data_type="freq", taus=taus)
+    np.testing.assert_allclose(ours, theirs, rtol=1e-10)
+
+
+def test_adev_pools_segments_without_crossing_them():
+    """Two segments pooled: the count-weighted mean of their Allan variances, no difference across the join."""
+    rng = np.random.default_rng(4)
+    a, b = rng.normal(size=900), 5.0 + rng.normal(size=1300)    # a jump between them that must not show
+    taus = [0.02, 0.5, 2.0]
+    (va, ca), (vb, cb) = overlapping_adev([a], 0.01, taus), overlapping_adev([b], 0.01, taus)
+    both, c = overlapping_adev([a, b], 0.01, taus)
+    np.testing.assert_array_equal(c, ca + cb)
+    np.testing.assert_allclose(both ** 2, (va ** 2 * ca + vb ** 2 * cb) / (ca + cb), rtol=1e-12)
+
+
+def test_still_noise_reads_the_white_noise_density():
+    """White rate noise of density N: the Allan deviation at 1 s is N (IEEE 952); within 4 of the
+    estimate's own relative sigma (1 / sqrt(2 (K - 1)), K = 1 s differences: seeded)."""
+    rng = np.random.default_rng(5)
+    dt, n = 0.01, 60000
+    N_g = np.array([2e-3, 4e-3, 1e-3])       # rad/s/sqrt(Hz)
+    N_a = np.array([1e-3, 2e-3, 3e-3])       # m/s^2/sqrt(Hz)
+    w = rng.normal(size=(n, 3)) * N_g / np.sqrt(dt)
+    f = rng.normal(size=(n, 3)) * N_a / np.sqrt(dt) + [0, 0, -9.8]
+    t = dt * np.arange(1, n + 1)
+    imu = ImuData(time=t, dt=np.full(n, dt), dtheta=w * dt, dvel=f * dt)
+    sn = still_noise(imu, [[0.0, 250.0], [300.0, 600.0]])
+    assert sn.segments == 2 and abs(sn.still_s - 550.0) < 0.1
+    assert np.all(np.abs(sn.arw / N_g - 1) < 4 * sn.arw_rel_sigma)
+    assert np.all(np.abs(sn.vrw / N_a - 1) < 4 * sn.vrw_rel_sigma)
+    assert still_noise(imu, [[0.0, 2.0]]) is None     # nothing of 3 s: not read
+
+
+def test_cv_windows_deal_round_robin_and_avoid_the_users_windows():
+    w = cv_windows(10.0, 190.0, 30.0, 3, avoid=[(100.0, 110.0)])
+    # back to back from 10 s: 10-40, 40-70, 70-100 kept; 100-130, 130-160 touch 100-110 (+30 s); 160-190 kept
+    assert w == [[(10.0, 40.0), (160.0, 190.0)], [(40.0, 70.0)], [(70.0, 100.0)]]
+
+
+def test_parameters_round_trip_through_the_file():
+    doc = tomlkit.parse((SHIPPED / "drive-0708.toml").read_text())
+    for p in ins_parameters():
+        v = get_value(doc, p)
+        assert v is not None, p.name
+        set_value(doc, p, v)
+        np.testing.assert_allclose(get_value(doc, p), v, rtol=5e-4)   # 4 significant digits written
+    p = next(q for q in ins_parameters() if q.name == "aiding.nhc.sigma[1]")
+    v = moved(p, get_value(doc, p), 2.0)
+    np.testing.assert_allclose(v, [0.1, 0.5])        # only the vertical element moves
+    data = tomllib.loads(tomlkit.dumps(doc))
+    assert isinstance(data["imu"]["errors"]["arw"], list) and isinstance(data["imu"]["errors"]["vrw"], str)
+
+
+def test_without_reference_removes_only_the_reference():
+    text = (SHIPPED / "drive-0708.toml").read_text()
+    d = tomllib.loads(without_reference(text))
+    assert "reference" not in d and d["gnss"] == tomllib.loads(text)["gnss"]
+
+
+@need_data
+def test_innovation_log_likelihood_equals_scipy(monkeypatch):
+    """The engine's per-update -(nis + log det S + m log 2 pi)/2 against scipy's multivariate normal
+    of the same innovations and S = H P H^T + R taken from the estimator before each update."""
+    from scipy.stats import multivariate_normal
+    import mixnav.filters.ekf as ekf
+    from mixnav.config import load_dataset
+    from mixnav.experiment.data_folder import find_data_dir
+    from mixnav.experiment.pipelines import pipeline
+    ds, src, _ = load_dataset("drive-0708-plain")
+    ds = ds.model_copy(update={"methods": ds.methods[:1]})
+    logged = []
+    orig = ekf.KalmanEstimator.update_rows
+
+    def spy(self, rows):
+        if rows is not None:
+            S = rows.H @ self.P @ rows.H.T + np.diag(rows.R)
+            logged.append(multivariate_normal(np.zeros(len(rows.z)), S).logpdf(rows.z))
+        return orig(self, rows)
+    monkeypatch.setattr(ekf.KalmanEstimator, "update_rows", spy)
+    p = pipeline(ds, src)
+    folder = find_data_dir(ds, None, src)
+    with ekf.innovation_likelihood():
+        po = p.run(ds, src, folder, p.load(ds, src, folder))
+    r = next(iter(po.results.values()))
+    ours = -0.5 * (r.nis + r.nis_logdet + r.nis_dim * np.log(2 * np.pi))
+    assert len(ours) == len(logged) > 1000          # every update applied (none gated on this drive)
+    np.testing.assert_allclose(ours, logged, rtol=1e-7, atol=1e-7)
+    assert not ekf.KalmanEstimator.record_logdet    # switched off again
+    po2 = p.run(ds, src, folder, p.load(ds, src, folder))
+    assert np.isnan(next(iter(po2.results.values())).nis_logdet).all()   # off by default
+
+
+def _copy(tmp_path: Path, with_reference: bool) -> Path:
+    """drive-0708 with its reference in a file of its own (the GNSS file copied), in tmp_path."""
+    d = tmp_path / "data"
+    d.mkdir()
+    for f in ("imu_1934.csv", "imu_1934.csv.tag", "gnss_1934_sf.pos"):
+        shutil.copy(DATA / f, d / f)
+    if with_reference:
+        shutil.copy(DATA / "gnss_1934_sf.pos", d / "reference.pos")
+    text = (SHIPPED / "drive-0708.toml").read_text()
+    text = text.replace('data_dir = "../shared/data/drive-0708"', 'data_dir = "data"')
+    text = text.replace('file = "gnss_1934_sf.pos"\nqualities = [1]', 'file = "reference.pos"\nqualities = [1]')
+    assert 'file = "reference.pos"' in text
+    (tmp_path / "car.toml").write_text(text)
+    return tmp_path / "car.toml"
+
+
+FAST = dict(budget=3, workers=1, span=("60 s", "185 s"), window="20 s", folds=2)
+
+
+@need_data
+def test_tune_never_reads_the_reference(tmp_path):
+    """The same tuned.toml, byte for byte, with the reference file removed; resumed from the
+    journal it runs no filter and writes the same file again."""
+    a = _copy(tmp_path / "a", True) if (tmp_path / "a").mkdir() is None else None
+    b = _copy(tmp_path / "b", False) if (tmp_path / "b").mkdir() is None else None
+    ra = tune(str(a), tmp_path / "a" / "out", **FAST)
+    rb = tune(str(b), tmp_path / "b" / "out", **FAST)
+    ta = (tmp_path / "a" / "out" / "tuned.toml").read_bytes()
+    assert ta == (tmp_path / "b" / "out" / "tuned.toml").read_bytes()
+    assert b"mixnav tune:" in ta and ra.runs == rb.runs == 3 * 2
+    assert 'file = "reference.pos"' in ta.decode()       # the user's reference section is kept as written
+    again = tune(str(a), tmp_path / "a" / "out", resume=True, **FAST)
+    assert again.runs == 0
+    assert (tmp_path / "a" / "out" / "tuned.toml").read_bytes() == ta
+    # the tuned file is a dataset file that loads, and finds its data from where it is
+    from mixnav.config import load_dataset
+    from mixnav.experiment.data_folder import find_data_dir
+    ds, src, _ = load_dataset(str(tmp_path / "a" / "out" / "tuned.toml"))
+    assert find_data_dir(ds, None, src).resolve() == (tmp_path / "a" / "data").resolve()
+
+
+@need_data
+def test_fixed_keys_keep_their_text(tmp_path):
+    (tmp_path / "a").mkdir()
+    a = _copy(tmp_path / "a", True)
+    keep = ["imu.errors.arw", "imu.errors.vrw"]
+    r = tune(str(a), tmp_path / "out", fix=keep, **FAST)
+    given = tomllib.loads(a.read_text())
+    tuned = tomllib.loads((tmp_path / "out" / "tuned.toml").read_text())
+    assert tuned["imu"]["errors"]["arw"] == given["imu"]["errors"]["arw"]
+    assert tuned["imu"]["errors"]["vrw"] == given["imu"]["errors"]["vrw"]
+    assert all(r.not_tuned[k] == "fixed by the user (--fix)" for k in keep)
+
+
+@need_data
+@pytest.mark.parametrize("kwargs, argument", [
+    (dict(budget=0), "budget"),
+    (dict(fix=["imu.errors.nonsense"]), "fix"),
+    (dict(span=("60 s", "70 s")), "span"),
+    (dict(folds=1), "folds"),
+    (dict(method="nope"), "method"),
+])
+def test_bad_arguments_are_named(tmp_path, kwargs, argument):
+    args = {**FAST, **kwargs}
+    with pytest.raises(ArgumentError) as e:
+        tune("drive-0708", tmp_path / "out", **args)
+    assert e.value.argument == argument
+
+
+def test_a_dataset_without_gnss_fixes_is_refused_by_name(tmp_path):
+    with pytest.raises(ConfigError) as e:
+        tune("smartloc-berlin", tmp_path / "out", budget=2)
+    assert e.value.key == "dataset.kind" and "not built yet" in str(e.value)
