@@ -69,6 +69,10 @@ def test_cv_windows_deal_round_robin_and_avoid_the_users_windows():
     w = cv_windows(10.0, 190.0, 30.0, 3, avoid=[(100.0, 110.0)])
     # back to back from 10 s: 10-40, 40-70, 70-100 kept; 100-130, 130-160 touch 100-110 (+30 s); 160-190 kept
     assert w == [[(10.0, 40.0), (160.0, 190.0)], [(40.0, 70.0)], [(70.0, 100.0)]]
+    # one every half window, six folds: a fold's windows start 90 s apart (60 s of GNSS between them)
+    w = cv_windows(0.0, 200.0, 30.0, 6, step=15.0)
+    assert [f[:2] for f in w[:2]] == [[(0.0, 30.0), (90.0, 120.0)], [(15.0, 45.0), (105.0, 135.0)]]
+    assert sum(map(len, w)) == 12
 
 
 def test_parameters_round_trip_through_the_file():
@@ -140,7 +144,7 @@ def _copy(tmp_path: Path, with_reference: bool) -> Path:
     return tmp_path / "car.toml"
 
 
-FAST = dict(budget=3, workers=1, span=("60 s", "185 s"), window="20 s", folds=2)
+FAST = dict(budget=3, workers=1, span=("60 s", "185 s"), window="20 s", folds=4)
 
 
 @need_data
@@ -153,7 +157,7 @@ def test_tune_never_reads_the_reference(tmp_path):
     rb = tune(str(b), tmp_path / "b" / "out", **FAST)
     ta = (tmp_path / "a" / "out" / "tuned.toml").read_bytes()
     assert ta == (tmp_path / "b" / "out" / "tuned.toml").read_bytes()
-    assert b"mixnav tune:" in ta and ra.runs == rb.runs == 3 * 2
+    assert b"mixnav tune:" in ta and ra.runs == rb.runs == 3 * 4
     assert 'file = "reference.pos"' in ta.decode()       # the user's reference section is kept as written
     again = tune(str(a), tmp_path / "a" / "out", resume=True, **FAST)
     assert again.runs == 0
@@ -183,7 +187,7 @@ def test_fixed_keys_keep_their_text(tmp_path):
     (dict(budget=0), "budget"),
     (dict(fix=["imu.errors.nonsense"]), "fix"),
     (dict(span=("60 s", "70 s")), "span"),
-    (dict(folds=1), "folds"),
+    (dict(folds=3), "folds"),
     (dict(method="nope"), "method"),
 ])
 def test_bad_arguments_are_named(tmp_path, kwargs, argument):

@@ -139,7 +139,7 @@ def process_dataset(name_or_path: str, data: str | None = None) -> RunResult:
 
 
 def tune(name_or_path: str, out, *, budget: int = 80, workers: int | None = None, scheduler: str | None = None,
-         data: str | None = None, fix=(), span=None, window="30 s", folds: int = 3, method: str | None = None,
+         data: str | None = None, fix=(), span=None, window="30 s", folds: int = 6, method: str | None = None,
          resume: bool = False, overwrite: bool = False, progress: bool = False, seed: int = 0):
     """Tune a dataset file from its own data, never reading its reference, and write ``out``
     (``tuned.toml``, ``tune.json``, ``report.md``): a

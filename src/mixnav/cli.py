@@ -349,7 +349,8 @@ def tune(dataset: str = typer.Argument(..., help="Shipped dataset config name or
                                               help="START END of the part tuned on ('60 s' '300 s'; seconds since "
                                                    "the first IMU sample; default: the whole recording)."),
          window: str = typer.Option("30 s", "--window", help="Length of the cross-validation outages."),
-         folds: int = typer.Option(3, "--folds", help="Runs the cross-validation windows are dealt to (>= 2)."),
+         folds: int = typer.Option(6, "--folds", help="Runs the cross-validation windows (one every half window) "
+                                                   "are dealt to (>= 4)."),
          method: str = typer.Option(None, "--method", help="The method tuned (default: the most aided)."),
          data: Path = typer.Option(None, "--data", help="Folder holding the data files (default: the config's "
                                                         "data_dir)."),

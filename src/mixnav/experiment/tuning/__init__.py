@@ -185,7 +185,7 @@ def _target_method(ds, method: str | None) -> str:
 
 
 def tune(dataset, out, *, budget: int = 80, workers: int | None = None, scheduler: str | None = None,
-         data: str | None = None, fix=(), span=None, window="30 s", folds: int = 3, method: str | None = None,
+         data: str | None = None, fix=(), span=None, window="30 s", folds: int = 6, method: str | None = None,
          resume: bool = False, overwrite: bool = False, progress: bool = False, seed: int = 0) -> TuneResult:
     """Tune a dataset file from its own data (never its reference) and write ``out``.
 
@@ -211,7 +211,9 @@ def tune(dataset, out, *, budget: int = 80, workers: int | None = None, schedule
         text with a unit); default: from 10 s after the filter starts to the last fix. Only
         data inside it enters the criterion and the still segments.
     window : str or float
-        Length of the cross-validation windows (default 30 s); ``folds`` runs deal them out.
+        Length of the cross-validation windows (default 30 s), one starting every half window;
+        ``folds`` runs deal them out (at least 4, so that a fold's windows do not overlap and
+        leave a window of GNSS between them: with the default 6, 90 s apart).
     method : str, optional
         The method tuned (default: the one with most aiding).
     resume : bool
@@ -227,8 +229,9 @@ def tune(dataset, out, *, budget: int = 80, workers: int | None = None, schedule
     from ...io.outdir import check_out_dir, clear_folder, write_marker
     if isinstance(budget, bool) or not isinstance(budget, (int, np.integer)) or budget < 1:
         raise ArgumentError(f"must be a whole number of evaluations >= 1, got {budget!r}", argument="budget")
-    if isinstance(folds, bool) or not isinstance(folds, (int, np.integer)) or folds < 2:
-        raise ArgumentError(f"must be a whole number >= 2, got {folds!r}", argument="folds")
+    if isinstance(folds, bool) or not isinstance(folds, (int, np.integer)) or folds < 4:
+        raise ArgumentError(f"must be a whole number >= 4 (windows start every half window; a fold's must "
+                            f"not overlap), got {folds!r}", argument="folds")
     fix = list(fix or ())
     unknown = [k for k in fix if k not in tunable_keys()]
     if unknown:
@@ -270,7 +273,7 @@ def tune(dataset, out, *, budget: int = 80, workers: int | None = None, schedule
             raise ArgumentError(f"end must be after start, got {span!r}", argument="span")
         t_first, t_last = max(a, t_first), min(b, t_last)
     own = [tuple(map(float, x)) for x in ds.gnss.withhold]
-    windows = cv_windows(t_first, t_last, w, folds, avoid=own)
+    windows = cv_windows(t_first, t_last, w, folds, avoid=own, step=w / 2.0)
     if sum(len(f) for f in windows) < folds:
         raise ArgumentError(f"the span {t_first:.1f}-{t_last:.1f} s holds {sum(len(f) for f in windows)} "
                             f"cross-validation windows of {w:g} s; at least {folds} are needed (a shorter "

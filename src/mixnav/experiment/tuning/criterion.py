@@ -45,10 +45,13 @@ def without_reference(text: str) -> str:
     return tomlkit.dumps(doc)
 
 
-def cv_windows(first: float, last: float, window: float, folds: int, avoid=()) -> list[list[tuple]]:
-    """Windows of ``window`` s from ``first`` to ``last`` [s], back to back, dealt round-robin to
-    ``folds`` lists; a window overlapping one of ``avoid`` (the dataset's own windows, widened
-    by ``window`` after their end: the filter is reconverging there) is left out."""
+def cv_windows(first: float, last: float, window: float, folds: int, avoid=(), step: float | None = None
+               ) -> list[list[tuple]]:
+    """Windows of ``window`` s from ``first`` to ``last`` [s], one starting every ``step`` s
+    (default: back to back), dealt round-robin to ``folds`` lists; a window overlapping one of
+    ``avoid`` (the dataset's own windows, widened by ``window`` after their end: the filter is
+    reconverging there) is left out. Windows of one fold start ``folds x step`` apart."""
+    step = window if step is None else step
     out: list[list[tuple]] = [[] for _ in range(folds)]
     k, a = 0, first
     while a + window <= last + 1e-9:
@@ -56,7 +59,7 @@ def cv_windows(first: float, last: float, window: float, folds: int, avoid=()) -
         if not any(a < e + window and b > s for s, e in avoid):
             out[k % folds].append((a, b))
             k += 1
-        a = b
+        a += step
     return out
 
 
