@@ -79,8 +79,8 @@ GM_GLO = 3.986004418e14          # [m^3/s^2]
 AE_GLO = 6378136.0               # equatorial radius [m]
 J2_GLO = 1.08262575e-3           # second zonal harmonic
 OMEGA_E_GLO = 7.2921151467e-5    # [rad/s]
-#: Default (largest) GLONASS integration step [s].
-GLONASS_STEP = 60.0
+#: Default (largest) GLONASS integration step [s] (ICD: at most 60 s; see the module docstring).
+GLONASS_STEP = 30.0
 
 
 def beidou_geo_rotation(omega_e_tk) -> tuple[np.ndarray, np.ndarray]:
