@@ -11,8 +11,10 @@ pandas 3 / xarray stack here. georinex's own orbit routine
 (``georinex.keplerian.keplerian2ecef``) is not used: it solves Kepler's
 equation with a single fixed-point step (an error up to about e^2 A, a
 kilometre at e = 0.01), uses a GM other than the GPS value, and fails with
-the xarray installed here. The orbit and clock below are written
-from IS-GPS-200 directly.
+the xarray installed here. The orbit and clock are written
+from IS-GPS-200 directly, in :func:`mixnav.gnss.orbits.kepler_states` (the
+Keplerian kernel every system shares, called here with the GPS constants).
+Other systems: :mod:`mixnav.gnss.multi_ephemeris`.
 
 Everything georinex may raise (unreadable text, wrong file type) is turned
 into a :class:`~mixnav.errors.DataError` naming the file; records georinex
