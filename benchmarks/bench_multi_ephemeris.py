@@ -160,8 +160,10 @@ def main() -> None:
         lines.append(f"| {SYSTEM_NAMES[s]} | {n} | {dmax * 1e3:.3f} mm | {drms * 1e3:.3f} mm | {cmax:.2e} ns |")
     lines += [
         "",
-        "RTKLIB prints positions to 0.1 mm. GLONASS: RTKLIB integrates with 60 s steps and GM = 3.9860044e14 "
-        "(ICD 5.0); mixnav with 30 s steps and ICD 5.1's 3.986004418e14, hence the millimetre there.",
+        "RTKLIB prints positions to 0.1 mm. GLONASS: RTKLIB uses ICD 5.0's constants (GM 3.9860044e14, "
+        "Omega_e 7.292115e-5, J2 1.0826257e-3) and 60 s steps, mixnav ICD 5.1's (3.986004418e14, "
+        "7.2921151467e-5, 1.08262575e-3) and 30 s steps: that is the millimetres; with RTKLIB's constants and "
+        "step mixnav agrees within 0.26 mm (test_glonass_with_rtklibs_constants_and_step_agrees_to_the_printed_digits).",
         "",
         "numba: only the GLONASS RK4 loop (`orbits._glonass_rk4`). Measured before it, with the same "
         "integration as numpy array operations (2026-11-28, this machine): one call an epoch 1659 ms "

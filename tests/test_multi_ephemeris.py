@@ -72,12 +72,12 @@ def _rtklib_rows(multi, system):
         idx.append(hits[0])
     idx = np.array(idx)
     pos, vel, clk, drift = eph._compute(idx, eph._system_time(p["t"][rows]), False)
-    return p, rows, pos, clk
+    return p, rows, pos, clk, idx
 
 
 @pytest.mark.parametrize("system", ["G", "R", "E", "C", "J"])
 def test_orbits_and_clocks_agree_with_rtklib(multi, system):
-    p, rows, pos, clk = _rtklib_rows(multi, system)
+    p, rows, pos, clk, _ = _rtklib_rows(multi, system)
     assert len(rows) >= 20
     dpos = np.linalg.norm(pos - p["pos"][rows], axis=1)
     dclk = np.abs(clk - p["clk"][rows])
@@ -88,7 +88,7 @@ def test_orbits_and_clocks_agree_with_rtklib(multi, system):
 
 
 def test_beidou_geo_covered_by_the_rtklib_pins(multi):
-    p, rows, pos, _ = _rtklib_rows(multi, "C")
+    p, rows, pos, _, _ = _rtklib_rows(multi, "C")
     geo = np.isin([int(s[1:]) for s in p["sat"][rows]], [1, 2, 3, 4, 5])
     assert geo.sum() >= 40
     assert np.linalg.norm(pos[geo] - p["pos"][rows][geo], axis=1).max() < 0.01
@@ -100,6 +100,17 @@ def test_beidou_geo_covered_by_the_rtklib_pins(multi):
     with_geo = orbits.kepler_states(r, t, orbits.BEIDOU, geo=np.ones(3, bool))[0]
     as_meo = orbits.kepler_states(r, t, orbits.BEIDOU)[0]
     assert np.linalg.norm(with_geo - as_meo, axis=1).min() > 1e5
+
+
+def test_glonass_with_rtklibs_constants_and_step_agrees_to_the_printed_digits(multi):
+    """The GLONASS millimetres are ICD 5.1's constants against RTKLIB's ICD 5.0 ones (and its step)."""
+    p, rows, _, _, idx = _rtklib_rows(multi, "R")
+    eph = multi["R"]
+    r = {k: v[idx] for k, v in eph.rec.items()}
+    r["tb"] = r["week"] * SECONDS_PER_WEEK + r["toe"]
+    icd50 = orbits.GlonassConstants(3.9860044e14, 6378136.0, 1.0826257e-3, 7.292115e-5)
+    pos = orbits.glonass_states(r, p["t"][rows], 60.0, icd50)[0]
+    assert np.linalg.norm(pos - p["pos"][rows], axis=1).max() < 5e-4
 
 
 def test_public_selection_agrees_with_rtklib(multi):

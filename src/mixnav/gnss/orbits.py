@@ -75,11 +75,32 @@ BEIDOU = KeplerConstants.of(3.986004418e14, 7.2921150e-5)
 #: BeiDou GEO inclination of the broadcast frame [rad] (BDS-SIS-ICD-B1I 5.2.4.12).
 BEIDOU_GEO_TILT = np.deg2rad(-5.0)
 
-# GLONASS ICD 5.1 (2008), 3.1.3 / A.3.1.2: PZ-90 constants.
-GM_GLO = 3.986004418e14          # [m^3/s^2]
-AE_GLO = 6378136.0               # equatorial radius [m]
-J2_GLO = 1.08262575e-3           # second zonal harmonic
-OMEGA_E_GLO = 7.2921151467e-5    # [rad/s]
+
+
+@dataclass(frozen=True)
+class GlonassConstants:
+    """The PZ-90 constants of the GLONASS equations of motion.
+
+    Attributes
+    ----------
+    gm : float
+        [m^3/s^2].
+    ae : float
+        Equatorial radius [m].
+    j2 : float
+        Second zonal harmonic.
+    omega_e : float
+        Earth rotation rate [rad/s].
+    """
+
+    gm: float
+    ae: float
+    j2: float
+    omega_e: float
+
+
+#: GLONASS ICD 5.1 (2008), 3.1.3 / A.3.1.2.
+GLONASS = GlonassConstants(3.986004418e14, 6378136.0, 1.08262575e-3, 7.2921151467e-5)
 #: Default (largest) GLONASS integration step [s] (ICD: at most 60 s; see the module docstring).
 GLONASS_STEP = 30.0
 
@@ -209,23 +230,23 @@ def kepler_states(r: dict, t, const: KeplerConstants, apply_group_delay: bool = 
 
 
 @njit(cache=True)
-def _glonass_rates(y, acc, out):
+def _glonass_rates(y, acc, gm, ae, j2c, we, out):
     """d/dt of one GLONASS state y (6,) = (x, y, z, vx, vy, vz) in the rotating PZ-90 frame, into out."""
     x, yy, z = y[0], y[1], y[2]
     r2 = x * x + yy * yy + z * z
     r = np.sqrt(r2)
-    mu_r3 = GM_GLO / (r2 * r)
-    j2 = 1.5 * J2_GLO * GM_GLO * AE_GLO**2 / (r2 * r2 * r)
+    mu_r3 = gm / (r2 * r)
+    j2 = 1.5 * j2c * gm * ae**2 / (r2 * r2 * r)
     zz = 5.0 * z * z / r2
-    w2 = OMEGA_E_GLO**2
+    w2 = we**2
     out[0], out[1], out[2] = y[3], y[4], y[5]
-    out[3] = -mu_r3 * x - j2 * x * (1.0 - zz) + w2 * x + 2.0 * OMEGA_E_GLO * y[4] + acc[0]
-    out[4] = -mu_r3 * yy - j2 * yy * (1.0 - zz) + w2 * yy - 2.0 * OMEGA_E_GLO * y[3] + acc[1]
+    out[3] = -mu_r3 * x - j2 * x * (1.0 - zz) + w2 * x + 2.0 * we * y[4] + acc[0]
+    out[4] = -mu_r3 * yy - j2 * yy * (1.0 - zz) + w2 * yy - 2.0 * we * y[3] + acc[1]
     out[5] = -mu_r3 * z - j2 * z * (3.0 - zz) + acc[2]
 
 
 @njit(cache=True)
-def _glonass_rk4(y0, acc, dt, step):
+def _glonass_rk4(y0, acc, dt, step, gm, ae, j2, we):
     """Each row's state y0 (n, 6) carried over dt (n,) [s] by RK4 in ceil(|dt| / step) equal steps.
 
     Compiled: per row, up to 60 steps of 4 small evaluations, which cost
@@ -241,23 +262,23 @@ def _glonass_rk4(y0, acc, dt, step):
         a = acc[i]
         y[:] = y0[i]
         for _ in range(steps):
-            _glonass_rates(y, a, k1)
+            _glonass_rates(y, a, gm, ae, j2, we, k1)
             for j in range(6):
                 tmp[j] = y[j] + 0.5 * h * k1[j]
-            _glonass_rates(tmp, a, k2)
+            _glonass_rates(tmp, a, gm, ae, j2, we, k2)
             for j in range(6):
                 tmp[j] = y[j] + 0.5 * h * k2[j]
-            _glonass_rates(tmp, a, k3)
+            _glonass_rates(tmp, a, gm, ae, j2, we, k3)
             for j in range(6):
                 tmp[j] = y[j] + h * k3[j]
-            _glonass_rates(tmp, a, k4)
+            _glonass_rates(tmp, a, gm, ae, j2, we, k4)
             for j in range(6):
                 y[j] += h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
         out[i] = y
     return out
 
 
-def glonass_states(r: dict, t, step: float = GLONASS_STEP):
+def glonass_states(r: dict, t, step: float = GLONASS_STEP, const: GlonassConstants = GLONASS):
     """Position, velocity and clock from GLONASS broadcast records by RK4 integration.
 
     Parameters
@@ -272,6 +293,8 @@ def glonass_states(r: dict, t, step: float = GLONASS_STEP):
     step : float
         Largest integration step [s]; each query takes ``ceil(|t - tb| /
         step)`` equal steps.
+    const : GlonassConstants
+        ICD 5.1's by default.
 
     Returns
     -------
@@ -289,6 +312,7 @@ def glonass_states(r: dict, t, step: float = GLONASS_STEP):
         return np.zeros((0, 3)), np.zeros((0, 3)), z, z
     dt = t - r["tb"]
     y0 = np.ascontiguousarray(np.concatenate([r["pos"], r["vel"]], axis=1), dtype=float)
-    y = _glonass_rk4(y0, np.ascontiguousarray(r["acc"], dtype=float), np.ascontiguousarray(dt), float(step))
+    y = _glonass_rk4(y0, np.ascontiguousarray(r["acc"], dtype=float), np.ascontiguousarray(dt), float(step),
+                     const.gm, const.ae, const.j2, const.omega_e)
     clk = r["minus_tau_n"] + r["gamma_n"] * dt
     return y[:, :3].copy(), y[:, 3:].copy(), clk, np.asarray(r["gamma_n"], float).copy()
