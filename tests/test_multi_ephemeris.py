@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mixnav.errors import DataError
+from mixnav.errors import ArgumentError, DataError
 from mixnav.gnss import gnss_time, orbits
 from mixnav.gnss.ephemeris import BroadcastEphemeris
 from mixnav.gnss.geometry import C_LIGHT, SECONDS_PER_WEEK
@@ -276,7 +276,7 @@ def test_galileo_fnav_uses_bgd_e1_e5a():
     assert set(np.unique(fnav["E"].rec["data_source"])) == {258}
     assert np.array_equal(fnav["E"].rec["tgd"], fnav["E"].rec["bgd_e5a"])
     assert inav.dropped == {"Galileo F/NAV records": len(fnav["E"])}
-    with pytest.raises(DataError, match="galileo_nav"):
+    with pytest.raises(ArgumentError, match="galileo_nav"):
         MultiEphemeris.from_rinex(paths, galileo_nav="cnav")
 
 
@@ -373,7 +373,7 @@ def test_system_without_navigation_data_is_counted_not_raised():
     assert m.summary()["BeiDou"] == 0
     with pytest.raises(DataError, match="no GLONASS frequency channel number for R01"):
         m.glonass_channel(1)
-    with pytest.raises(DataError, match="unknown satellite system"):
+    with pytest.raises(ArgumentError, match="unknown satellite system"):
         m.states("X", [1], WEEK, TOW0)
 
 

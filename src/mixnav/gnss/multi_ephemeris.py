@@ -53,7 +53,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataError
+from ..errors import ArgumentError, DataError
 from . import gnss_time
 from .ephemeris import DEFAULT_MAX_AGE, BroadcastEphemeris, EphemerisSkips
 from .geometry import SECONDS_PER_WEEK, SatelliteStates
@@ -204,10 +204,12 @@ class MultiEphemeris:
         DataError
             A file missing, unreadable, not a navigation file, of an
             unsupported RINEX 2 type, or with an incomplete record; the
-            message names the file (and the satellite and epoch).
+            message names the file (and the satellite, epoch and line).
+        ArgumentError
+            ``galileo_nav`` not one of the two.
         """
         if galileo_nav not in ("inav", "fnav"):
-            raise DataError(f"galileo_nav must be 'inav' or 'fnav', not {galileo_nav!r}")
+            raise ArgumentError(f"must be 'inav' or 'fnav', not {galileo_nav!r}", "galileo_nav")
         paths = [Path(paths)] if isinstance(paths, (str, Path)) else [Path(p) for p in paths]
         ages = dict(DEFAULT_MAX_AGES, **(max_age or {}))
         parts: dict[str, list] = {}
@@ -300,7 +302,8 @@ class MultiEphemeris:
         eph = self.systems.get(system)
         if eph is None:
             if system not in SYSTEM_NAMES:
-                raise DataError(f"unknown satellite system {system!r} (known: {', '.join(SYSTEM_NAMES)})")
+                raise ArgumentError(f"unknown satellite system {system!r} (known: {', '.join(SYSTEM_NAMES)})",
+                                    "system")
             prns = np.atleast_1d(np.asarray([] if prn is None else prn, dtype=int))
             z = np.zeros(0)
             return (SatelliteStates(np.zeros(0, int), np.zeros((0, 3)), np.zeros((0, 3)), z, z),
@@ -331,7 +334,7 @@ class MultiEphemeris:
         try:
             prns = np.array([int(s[1:]) for s in ids], dtype=int)
         except ValueError as exc:
-            raise DataError(f"satellite ids must look like 'G05' ({exc})") from exc
+            raise ArgumentError(f"satellite ids must look like 'G05' ({exc})", "sat_ids") from exc
         n = len(ids)
         tow_n = np.broadcast_to(np.asarray(tow, float), (n,))
         week_n = np.broadcast_to(np.asarray(week), (n,))
@@ -445,7 +448,8 @@ def read_rinex_nav(path) -> tuple[dict, dict]:
             epoch = (np.datetime64(f"{y:04d}-{mo:02d}-{d:02d}T{h:02d}:{mi:02d}", "ns")
                      + np.timedelta64(int(round(sec * 1e9)), "ns"))
         except ValueError as exc:
-            raise DataError(f"unreadable navigation record ({exc})", file=str(path), line=a + 1) from None
+            raise DataError(f"unreadable navigation record {ln[:3].strip()!r} ({exc})", file=str(path),
+                            line=a + 1) from None
         rec = per.setdefault(letter, {"prn": [], "epoch": [], "values": [], "line": []})
         rec["prn"].append(prn)
         rec["epoch"].append(epoch)
@@ -550,9 +554,19 @@ def _take(raw: dict, index: dict, letter: str) -> dict:
     return out
 
 
+def _check(raw: dict, letter: str, ok: np.ndarray, what: str) -> None:
+    """A record whose values cannot be an orbit (a damaged file) is a DataError naming it."""
+    if not ok.all():
+        i = int(np.argmin(ok))
+        raise DataError(f"impossible ephemeris record for {letter}{raw['prn'][i]:02d} at "
+                        f"{str(raw['epoch'][i])[:19]}: {what}", file=raw["source"], line=int(raw["line"][i]))
+
+
 def _kepler_records(raw: dict, letter: str, galileo_nav: str):
     """Records of one Keplerian system, times in its own scale; (None, 0) if none."""
     rec = _take(raw, {**_KEPLER_INDEX, **_KEPLER_EXTRA[letter]}, letter)
+    _check(raw, letter, (rec["e"] >= 0) & (rec["e"] < 1) & (rec["sqrt_a"] > 0),
+           "eccentricity outside [0, 1) or sqrt(A) <= 0")
     origin = _BDT_EPOCH if letter == "C" else _GPS_EPOCH
     toc_s = (raw["epoch"] - origin) / np.timedelta64(1, "s")
     rec["toc_week"] = np.floor(toc_s / SECONDS_PER_WEEK)
@@ -578,6 +592,8 @@ def _kepler_records(raw: dict, letter: str, galileo_nav: str):
 def _glonass_records(raw: dict, leap):
     """GLONASS records with t_b in GPST (GPS week and seconds of week)."""
     rec = _take(raw, _GLONASS_INDEX, "R")
+    radius = 1000.0 * np.sqrt(rec["x"] ** 2 + rec["y"] ** 2 + rec["z"] ** 2)
+    _check(raw, "R", (radius > 1e7) & (radius < 1e8), "position not 10 000 - 100 000 km from the geocentre")
     vals = raw["values"]
     channel = vals[:, _GLONASS_CHANNEL] if vals.shape[1] > _GLONASS_CHANNEL else np.full(len(vals), np.nan)
     km = 1000.0                                   # RINEX gives km, km/s, km/s^2
