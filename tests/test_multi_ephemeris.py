@@ -341,6 +341,22 @@ def test_rinex2_glonass_equals_rinex3(tmp_path):
         assert np.array_equal(a["R"].rec[k], b["R"].rec[k]), k
 
 
+def test_rinex2_galileo_and_qzss_with_rinex3_style_records(tmp_path, multi):
+    """RINEX 2.12 'L' (Galileo) and RTKLIB's 'J' (QZSS) files write RINEX 3 style records."""
+    for src, ftype, system in ((_nav("hksc155c.20l"), "L: GALILEO NAV DATA", "E"),
+                               (QZSS, "J: QZSS NAV DATA    ", "J")):
+        lines = src.read_text().splitlines()
+        end = next(i for i, ln in enumerate(lines) if "END OF HEADER" in ln)
+        dst = tmp_path / f"v2_{system}.nav"
+        dst.write_text("\n".join([f"     2.12           {ftype:<40}RINEX VERSION / TYPE",
+                                   "                                                            END OF HEADER"]
+                                  + lines[end + 1:]) + "\n")
+        a = MultiEphemeris.from_rinex(src)[system]
+        b = MultiEphemeris.from_rinex(dst)[system]
+        for k in a.rec:
+            assert np.array_equal(a.rec[k], b.rec[k]), k
+
+
 def test_mixed_rinex3_equals_per_system_files(tmp_path):
     body = []
     for name in NAV[:4]:

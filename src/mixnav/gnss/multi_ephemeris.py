@@ -2,7 +2,8 @@
 
 :class:`MultiEphemeris` reads any number of RINEX navigation files -- RINEX 3
 mixed (``M``) or single-system files, RINEX 2 GPS (``N``, ``.n``), GLONASS
-(``G``, ``.g``) and Galileo (``E``) files -- with its own reader
+(``G``, ``.g``), Galileo (``E``, or RTKLIB's ``L``) and QZSS (RTKLIB's ``J``)
+files -- with its own reader
 (:func:`read_rinex_nav`; georinex 1.16 loses BeiDou records with blank spare
 fields) -- and keeps one ephemeris per system letter:
 
@@ -422,14 +423,16 @@ def read_rinex_nav(path) -> tuple[dict, dict]:
         ln = lines[num]
         if not ln.strip():
             continue
-        if (v3 and ln[:1].isalpha()) or (not v3 and ln[:2].strip()):
+        # RINEX 2 Galileo / QZSS files (RTKLIB's 'E', 'L', 'J') write RINEX 3 style records
+        if ln[:1].isalpha() or (not v3 and ln[:2].strip().isdigit()):
             starts.append(num)
     starts.append(len(lines))
     per: dict[str, dict[str, list]] = {}
     for a, b in zip(starts[:-1], starts[1:]):
         ln = lines[a]
+        v3rec = ln[:1].isalpha()
         try:
-            if v3:
+            if v3rec:
                 letter, prn = ln[0].upper(), int(ln[1:3])
                 y, mo, d, h, mi = (int(ln[k:k + w]) for k, w in ((4, 4), (9, 2), (12, 2), (15, 2), (18, 2)))
                 sec = float(ln[21:23])
@@ -440,7 +443,7 @@ def read_rinex_nav(path) -> tuple[dict, dict]:
                 y += 2000 if y < 80 else 1900
                 sec = float(ln[17:22])
                 first = 22
-            cont = 4 if v3 else 3
+            cont = 4 if v3rec else 3
             vals = [_field(ln[first + 19 * k:first + 19 * (k + 1)]) for k in range(3)]
             for c in range(a + 1, b):
                 lc = lines[c]
@@ -491,10 +494,10 @@ def _parse_header(lines: list, source: str) -> dict:
                             "(expected 'N')", file=source, line=1)
         system = first[40:41].upper().strip() or "G"
     else:
-        system = {"N": "G", "G": "R", "E": "E"}.get(ftype)
+        system = {"N": "G", "G": "R", "E": "E", "L": "E", "J": "J"}.get(ftype)
         if system is None:
             raise DataError(f"unsupported RINEX 2 navigation file type {first[20:40].strip()!r} "
-                            "(N: GPS, G: GLONASS, E: Galileo)", file=source, line=1)
+                            "(N: GPS, G: GLONASS, E or L: Galileo, J: QZSS)", file=source, line=1)
     leap, end, klob = None, None, {}
     for num, ln in enumerate(lines, start=1):
         label = ln[60:].strip()
