@@ -177,6 +177,19 @@ def _rinex2_from_android(tmp):
     _write_rinex2(tmp / "o.16o", [_time(a.week[k], a.tow[k]) for k in range(40)], _phone_records(a, 40))
 
 
+def _multi_nav_states(path):
+    """Read a navigation file with MultiEphemeris; every system's states a minute after its first record."""
+    from mixnav.gnss.gnss_time import bdt_to_gpst, gpst_week_tow
+    from mixnav.gnss.multi_ephemeris import MultiEphemeris
+    m = MultiEphemeris.from_rinex(path)
+    out = []
+    for s, eph in m.systems.items():
+        t = eph.rec["week"][0] * 604800.0 + eph.rec["toe"][0] + 60.0
+        week, tow = gpst_week_tow(bdt_to_gpst(t) if s == "C" else t)
+        out.append(m.states(s, None, week, tow))
+    return out
+
+
 def _readers():
     from mixnav.config.loader import load_dataset, load_scenario
     from mixnav.io import android, comma2k19, drive0708, generic_csv, psins, rinex_obs, rtklib, smartloc
@@ -196,6 +209,9 @@ def _readers():
          "a.txt", lambda p: android.read_gnsslogger(p), 40),
         ("rinex-obs", _rinex_from_android, "o.rnx", lambda p: rinex_obs.read_rinex_obs(p), 30),
         ("rinex2-obs", _rinex2_from_android, "o.16o", lambda p: rinex_obs.read_rinex_obs(p), 30),
+        *[(f"multi-nav-{ext}", lambda t, ext=ext: shutil.copy(DATA_DIR / "urbannav-tst-static" / f"hksc155c.20{ext}",
+                                                               t / f"h.20{ext}"),
+           f"h.20{ext}", _multi_nav_states, 20) for ext in "nglb"],
         ("smartloc-pr", lambda t: (t / "in.txt").write_bytes(
             _head(DATA_DIR / "smartloc-berlin" / "Berlin_Potsdamer_Platz_Input.txt", 1500)),
          "in.txt", smartloc.read_pseudoranges, 25),

@@ -9,5 +9,10 @@ clock.py         two-state receiver clock (the filters' ClockModel), sampled exa
 observables.py   simulated pseudorange, range rate, carrier per satellite and epoch
 ephemeris.py     GPS broadcast ephemeris from RINEX navigation files (georinex),
                  orbit, velocity and clock per IS-GPS-200
+orbits.py        broadcast orbit and clock kernels of every system (Keplerian with
+                 per-system constants and the BeiDou GEO case; GLONASS RK4)
+gnss_time.py     GPST, BDT, GLONASST and UTC conversions, leap seconds
+multi_ephemeris.py  MultiEphemeris: RINEX 2/3 navigation files of any systems, one
+                 ephemeris per system letter (G, R, E, C, J)
 spp.py           single-point positioning by iterated weighted least squares
 """

@@ -11,8 +11,10 @@ pandas 3 / xarray stack here. georinex's own orbit routine
 (``georinex.keplerian.keplerian2ecef``) is not used: it solves Kepler's
 equation with a single fixed-point step (an error up to about e^2 A, a
 kilometre at e = 0.01), uses a GM other than the GPS value, and fails with
-the xarray installed here. The orbit and clock below are written
-from IS-GPS-200 directly.
+the xarray installed here. The orbit and clock are written
+from IS-GPS-200 directly, in :func:`mixnav.gnss.orbits.kepler_states` (the
+Keplerian kernel every system shares, called here with the GPS constants).
+Other systems: :mod:`mixnav.gnss.multi_ephemeris`.
 
 Everything georinex may raise (unreadable text, wrong file type) is turned
 into a :class:`~mixnav.errors.DataError` naming the file; records georinex
@@ -53,10 +55,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError
-from .geometry import GM_GPS, OMEGA_E_GPS, SECONDS_PER_WEEK, SatelliteStates
+from .geometry import SECONDS_PER_WEEK, SatelliteStates
+from .orbits import GPS as GPS_CONSTANTS
+from .orbits import kepler_states
 
 #: Relativistic clock constant F = -2 sqrt(GM) / c^2 [s/m^(1/2)] (IS-GPS-200, 20.3.3.3.3.1).
-F_REL = -4.442807633e-10
+F_REL = GPS_CONSTANTS.f_rel
 #: Default validity window around toe [s].
 DEFAULT_MAX_AGE = 2 * 3600.0 + 15 * 60.0
 
@@ -188,7 +192,7 @@ class BroadcastEphemeris:
     # ------------------------------------------------------------------ selection
     def _select(self, week, tow, prns):
         """Record index per asked satellite (-1 if none) and the skip reasons."""
-        t = (np.asarray(week, float) * SECONDS_PER_WEEK + np.asarray(tow, float))
+        t = self._system_time(np.asarray(week, float) * SECONDS_PER_WEEK + np.asarray(tow, float))
         t = np.broadcast_to(t, prns.shape)
         t_oe = self.rec["week"] * SECONDS_PER_WEEK + self.rec["toe"]  # (m,)
         age = np.abs(t[:, None] - t_oe[None, :])                       # (n, m)
@@ -247,58 +251,13 @@ class BroadcastEphemeris:
         return SatelliteStates(prns[use].astype(int), pos, vel, clk, drift), skips
 
     # ------------------------------------------------------------------ IS-GPS-200
+    def _system_time(self, t_gps):
+        """Continuous seconds in the records' time scale of continuous GPS seconds (GPS: the same)."""
+        return t_gps
+
     def _compute(self, idx, t, apply_tgd):
         r = {k: v[idx] for k, v in self.rec.items()}
-        n = len(idx)
-        if n == 0:
-            z = np.zeros(0)
-            return np.zeros((0, 3)), np.zeros((0, 3)), z, z
-        A = r["sqrt_a"] ** 2                                   # semi-major axis
-        n0 = np.sqrt(GM_GPS / A**3)                            # computed mean motion
-        tk = t - (r["week"] * SECONDS_PER_WEEK + r["toe"])     # time from ephemeris epoch
-        nk = n0 + r["delta_n"]                                 # corrected mean motion
-        M = r["m0"] + nk * tk                                  # mean anomaly
-        e = r["e"]
-        E = M.copy()
-        for _ in range(8):                                     # Kepler M = E - e sin E, Newton
-            E = E - (E - e * np.sin(E) - M) / (1.0 - e * np.cos(E))
-        sinE, cosE = np.sin(E), np.cos(E)
-        one_ecos = 1.0 - e * cosE
-        nu = np.arctan2(np.sqrt(1.0 - e**2) * sinE, cosE - e)  # true anomaly
-        phi = nu + r["omega"]                                  # argument of latitude
-        s2, c2 = np.sin(2 * phi), np.cos(2 * phi)
-        du = r["cus"] * s2 + r["cuc"] * c2                     # second-harmonic perturbations
-        dr = r["crs"] * s2 + r["crc"] * c2
-        di = r["cis"] * s2 + r["cic"] * c2
-        u = phi + du                                           # corrected argument of latitude
-        rad = A * one_ecos + dr                                # corrected radius
-        inc = r["i0"] + di + r["idot"] * tk                    # corrected inclination
-        x_p, y_p = rad * np.cos(u), rad * np.sin(u)            # position in the orbital plane
-        Om = r["omega0"] + (r["omega_dot"] - OMEGA_E_GPS) * tk - OMEGA_E_GPS * r["toe"]
-        cO, sO, ci, si = np.cos(Om), np.sin(Om), np.cos(inc), np.sin(inc)
-        x = x_p * cO - y_p * ci * sO
-        y = x_p * sO + y_p * ci * cO
-        z = y_p * si
-        # time derivatives of the expressions above
-        E_dot = nk / one_ecos
-        phi_dot = np.sqrt(1.0 - e**2) * E_dot / one_ecos       # d(nu)/dt
-        u_dot = phi_dot * (1.0 + 2.0 * (r["cus"] * c2 - r["cuc"] * s2))
-        r_dot = A * e * sinE * E_dot + 2.0 * phi_dot * (r["crs"] * c2 - r["crc"] * s2)
-        i_dot = r["idot"] + 2.0 * phi_dot * (r["cis"] * c2 - r["cic"] * s2)
-        Om_dot = r["omega_dot"] - OMEGA_E_GPS
-        xp_dot = r_dot * np.cos(u) - y_p * u_dot
-        yp_dot = r_dot * np.sin(u) + x_p * u_dot
-        vx = xp_dot * cO - yp_dot * ci * sO + y_p * si * sO * i_dot - y * Om_dot
-        vy = xp_dot * sO + yp_dot * ci * cO - y_p * si * cO * i_dot + x * Om_dot
-        vz = yp_dot * si + y_p * ci * i_dot
-        # clock, IS-GPS-200 20.3.3.3.3.1
-        dtc = t - (r["toc_week"] * SECONDS_PER_WEEK + r["toc"])
-        rel = F_REL * e * r["sqrt_a"] * sinE
-        clk = r["af0"] + r["af1"] * dtc + r["af2"] * dtc**2 + rel
-        if apply_tgd:
-            clk = clk - r["tgd"]
-        drift = r["af1"] + 2.0 * r["af2"] * dtc + F_REL * e * r["sqrt_a"] * cosE * E_dot
-        return (np.stack([x, y, z], axis=-1), np.stack([vx, vy, vz], axis=-1), clk, drift)
+        return kepler_states(r, t, GPS_CONSTANTS, apply_group_delay=apply_tgd)
 
 
 def _stack(nav, source: str) -> dict:
