@@ -89,10 +89,21 @@ def process_raw(ds: RawGnssDataset, source: str, folder: Path, seed: int = 0) ->
     return solve_raw(ds, source, folder, *read_raw(ds, source, folder), seed=seed)
 
 
+def gps_only(c, source: str) -> None:
+    """The SPP and the filters solve GPS alone so far (GPS broadcast orbits and clocks): a
+    ``[raw_gnss]`` table ``c`` whose ``systems`` name another is a ConfigError naming the
+    key, before any file is read (the reader reads them: :mod:`mixnav.io.rinex_obs`)."""
+    if tuple(c.systems) != ("G",):
+        raise ConfigError(f"systems = {list(c.systems)}: positioning uses GPS alone so far (the other systems' "
+                          "broadcast orbits are not read yet); set systems = [\"G\"] or leave the key out",
+                          file=source, key="raw_gnss.systems")
+
+
 def read_raw(ds: RawGnssDataset, source: str, folder: Path) -> tuple[RawPseudoranges, BroadcastEphemeris, float]:
     """The raw log (the raw-GNSS reader of ``raw_gnss.format``) and the navigation file, and
     the time it took [s]."""
     c = ds.raw_gnss
+    gps_only(c, source)
     t0 = _time.perf_counter()
     obs = read_table("raw-gnss", c, folder, "raw_gnss", source)
     eph = BroadcastEphemeris.from_rinex(folder / c.navigation)
