@@ -551,3 +551,46 @@ def test_numbers_not_written_f14_3_and_a_satellite_listed_twice(tmp_path):
     with pytest.raises(DataError, match="satellite G05 is listed twice") as e:
         read_rinex_obs(path)
     assert e.value.line == g5[1] + 2
+
+
+def test_files_merged_keep_every_field(tmp_path):
+    """Observation files read one after the other (rinex_ins.read_observations, the
+    ins-gnss route) with the dataset's systems: one record equal to the single file's read,
+    every new field (system, signal, carrier, LLI, C/N0, GLONASS channels) carried."""
+    from types import SimpleNamespace
+
+    from mixnav.experiment.rinex_ins import read_observations
+    from mixnav.io.readers import ReadOptions
+    from mixnav.io.rinex_obs import read_rinex_obs
+    rng = np.random.default_rng(11)
+    epochs = _draw(rng, 12, TYPES3, 3)
+    _write3(tmp_path / "all.rnx", epochs)
+    lines = (tmp_path / "all.rnx").read_text().splitlines()
+    at = [i for i, ln in enumerate(lines) if ln.startswith(">")]
+    end = next(i for i, ln in enumerate(lines) if "END OF HEADER" in ln)
+    (tmp_path / "a.rnx").write_text("\n".join(lines[:at[5]]) + "\n")
+    (tmp_path / "b.rnx").write_text("\n".join(lines[:end + 1] + lines[at[5]:]) + "\n")
+    whole = read_rinex_obs(tmp_path / "all.rnx", systems="GRECJ")
+    table = SimpleNamespace(systems=list("GRECJ"), signals={})
+    merged = read_observations([tmp_path / "a.rnx", tmp_path / "b.rnx"], options=ReadOptions(table, tmp_path))
+    for name in ("week", "tow", "epoch", "prn", "system", "signal", "pseudorange", "carrier", "doppler", "cn0", "lli"):
+        np.testing.assert_array_equal(getattr(merged, name), getattr(whole, name), err_msg=name)
+    assert merged.glonass_channels == whole.glonass_channels == dict(sorted(CHANNELS.items()))
+    assert merged.rejected == whole.rejected and merged.code == whole.code
+
+
+def test_raw_pseudoranges_checks_the_new_fields():
+    """RawPseudoranges refuses optional fields of the wrong length, unknown system letters
+    and GLONASS channels outside -7..6 (DataError naming the source)."""
+    from mixnav.data import RawPseudoranges
+    base = dict(week=np.array([2100]), tow=np.array([1.0]), epoch=np.array([0, 0]), prn=np.array([3, 4]),
+                pseudorange=np.array([2e7, 2.1e7]), source="x.rnx")
+    RawPseudoranges(**base, system=np.array(["G", "R"]), lli=np.zeros((2, 4), np.int8))
+    for extra, message in [({"system": np.array(["G"])}, "system has shape"),
+                           ({"system": np.array(["G", "Q"])}, "system letters"),
+                           ({"lli": np.zeros((2, 3))}, "lli has shape"),
+                           ({"carrier": np.zeros(3)}, "carrier has shape"),
+                           ({"glonass_channels": {4: 7}}, "channel 7 is outside")]:
+        with pytest.raises(DataError, match=message) as e:
+            RawPseudoranges(**base, **extra)
+        assert e.value.file == "x.rnx"
