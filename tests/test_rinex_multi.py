@@ -594,3 +594,27 @@ def test_raw_pseudoranges_checks_the_new_fields():
         with pytest.raises(DataError, match=message) as e:
             RawPseudoranges(**base, **extra)
         assert e.value.file == "x.rnx"
+
+
+def test_signal_tables():
+    """gnss/signals.py: systems and signals as given (letters, strings, lists), repeats
+    dropped; wrong types and empty lists named; every default is a code of its system and
+    version; companions replace the C."""
+    from mixnav.gnss.signals import (DEFAULT_SIGNALS, SYSTEMS, check_signals, check_systems, code_error,
+                                     companions)
+    assert check_systems("GEG") == ("G", "E") and check_systems(["C"]) == ("C",)
+    assert check_signals({"E": "C1X", "C": ["C2I", "C1I", "C2I"]}) == {"E": ("C1X",), "C": ("C2I", "C1I")}
+    for bad, arg in [(None, "systems"), ("", "systems")]:
+        with pytest.raises(ArgumentError) as e:
+            check_systems(bad)
+        assert e.value.argument == arg
+    for bad, arg in [(["C1C"], "signals"), ({"E": []}, "signals.E"), ({"E": 5}, "signals.E"),
+                     ({"G": "C1Q"}, "signals.G"), ({"R": "C1X"}, "signals.R"), ({"G": "C9"}, "signals.G")]:
+        with pytest.raises(ArgumentError) as e:
+            check_signals(bad)
+        assert e.value.argument == arg
+    for major, table in DEFAULT_SIGNALS.items():
+        assert set(table) == set(SYSTEMS)
+        for s, codes in table.items():
+            assert all(code_error(s, c) is None and len(c) == major for c in codes), (s, codes)
+    assert companions("C2I") == ("L2I", "D2I", "S2I") and companions("P1") == ("L1", "D1", "S1")

@@ -48,7 +48,11 @@ def check_systems(systems, argument: str = "systems") -> tuple[str, ...]:
     """``systems`` (an iterable of RINEX letters, or one string of them such as ``"GRE"``)
     as a tuple without repeats, in the order given; an empty one or a letter not in
     :data:`SYSTEMS` is an ArgumentError naming ``argument``."""
-    letters = list(systems)
+    try:
+        letters = list(systems)
+    except TypeError:
+        raise ArgumentError(f"give the systems as letters (e.g. ['G', 'E'] or 'GE'), not {systems!r}",
+                            argument) from None
     if not letters:
         raise ArgumentError("give at least one system", argument)
     for s in letters:
@@ -79,9 +83,14 @@ def check_signals(signals, argument: str = "signals") -> dict[str, tuple[str, ..
     ``argument.<letter>``. Codes of both RINEX versions may be listed: a file uses those of
     its own version."""
     out = {}
+    if signals is not None and not hasattr(signals, "items"):
+        raise ArgumentError(f"give the signals as a table of system letter -> codes, not {signals!r}", argument)
     for s, codes in dict(signals or {}).items():
         check_systems([s], argument)
-        codes = (codes,) if isinstance(codes, str) else tuple(codes)
+        try:
+            codes = (codes,) if isinstance(codes, str) else tuple(codes)
+        except TypeError:
+            raise ArgumentError(f"give a code or a list of codes, not {codes!r}", f"{argument}.{s}") from None
         if not codes:
             raise ArgumentError("give at least one code", f"{argument}.{s}")
         for c in codes:
