@@ -54,7 +54,7 @@ from ..io.imu_checks import DataWarning
 from ..io.readers import ReadOptions, get_reader
 from ..sim.gnss import in_windows
 from .aiding import AidingInputs, installation_check
-from .spp_process import gps_only, options as spp_options
+from .spp_process import gps_only, gps_rows, options as spp_options
 
 
 def _subset(obs, keep):
@@ -181,6 +181,7 @@ def run_rinex_ins(ds: Dataset, source: str, folder, inputs: RinexInputs):
     imu, obs, eph, reference, read_time = inputs.imu, inputs.obs, inputs.eph, inputs.reference, inputs.read_time_s
     obs_files, nav_files = inputs.obs_files, inputs.nav_files
     obs_file = obs_files[0]     # the file an error names (the message lists them all)
+    gps_rows(obs)
     if c.ionosphere and eph.iono_alpha is None:   # asked for, and impossible: said, not silent
         warnings.warn(f"{', '.join(map(str, nav_files))}: the header has no ionosphere (Klobuchar) coefficients, "
                       "so the ionosphere "
