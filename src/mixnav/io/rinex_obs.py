@@ -34,7 +34,7 @@ written as RINEX's ``F14.3`` is its integer of thousandths divided by 1000, the 
 double as Python's ``float`` of the text; any other number is parsed by ``float``.
 georinex, the independent implementation, gives the same value for every system,
 signal and epoch (tests/test_rinex_multi.py) and is several hundred times slower
-(benchmarks/results/rinex_read.md: 42 s of CPU against 0.11 s on a 3.7 MB mixed file).
+(benchmarks/results/rinex_read.md: 40 s of CPU against 0.12 s on a 3.7 MB mixed file).
 
 Nothing passes over silently: every satellite record of every observation epoch is
 counted per system letter; records of systems not read are reported in ``rejected``
