@@ -72,7 +72,7 @@ def _finite(obj, where="result"):
     if isinstance(obj, np.ndarray):
         if obj.dtype.kind == "f":
             bad = ~np.isfinite(obj)
-            if where.endswith(("cn0", "vel_ned", "sd_vel", "doppler")) and obj.dtype.kind == "f":
+            if where.endswith(("cn0", "vel_ned", "sd_vel", "doppler", "carrier")) and obj.dtype.kind == "f":
                 return   # optional columns: NaN marks "not given" (documented)
             assert not bad.any(), f"{where} has {int(bad.sum())} non-finite values"
         return
@@ -190,6 +190,13 @@ def _multi_nav_states(path):
     return out
 
 
+def _urbannav_epochs(tmp):
+    """The urbannav RINEX 3.02 mixed file's header and first 15 epochs (5 systems)."""
+    lines = (DATA_DIR / "urbannav-tst-static" / "2020_06_03_TST_03.obs").read_bytes().splitlines(keepends=True)
+    at = [i for i, ln in enumerate(lines) if ln.startswith(b">")]
+    (tmp / "u.obs").write_bytes(b"".join(lines[:at[15]]))
+
+
 def _readers():
     from mixnav.config.loader import load_dataset, load_scenario
     from mixnav.io import android, comma2k19, drive0708, generic_csv, psins, rinex_obs, rtklib, smartloc
@@ -212,6 +219,10 @@ def _readers():
         *[(f"multi-nav-{ext}", lambda t, ext=ext: shutil.copy(DATA_DIR / "urbannav-tst-static" / f"hksc155c.20{ext}",
                                                                t / f"h.20{ext}"),
            f"h.20{ext}", _multi_nav_states, 20) for ext in "nglb"],
+
+
+        ("rinex2-obs-multi", _rinex2_from_android, "o.16o", lambda p: rinex_obs.read_rinex_obs(p, systems="GRE"), 30),
+        ("rinex3-obs-urbannav", _urbannav_epochs, "u.obs", lambda p: rinex_obs.read_rinex_obs(p, systems="GRECJ"), 30),
         ("smartloc-pr", lambda t: (t / "in.txt").write_bytes(
             _head(DATA_DIR / "smartloc-berlin" / "Berlin_Potsdamer_Platz_Input.txt", 1500)),
          "in.txt", smartloc.read_pseudoranges, 25),

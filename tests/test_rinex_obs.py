@@ -440,30 +440,3 @@ def test_event_and_cycle_slip_records_are_skipped_and_counted(tmp_path, phone, v
         np.testing.assert_array_equal(getattr(r, name), getattr(r0, name), err_msg=name)
     assert r.rejected == r0.rejected and r.epochs_all_rejected == r0.epochs_all_rejected
     assert r0.event_records == {} and r.event_records == {"flag 4": 1, "flag 5": 1, "flag 6": 1}
-
-
-def test_an_epoch_georinex_does_not_return_is_warned_of_and_counted(tmp_path, phone, monkeypatch):
-    """The guard for georinex losing an observation epoch (as it did after a flag-5 record):
-    the epoch's GPS records are counted as 'epoch not read', with a warning naming the
-    file and the epoch's line, and not as blank pseudoranges."""
-    import georinex
-    from mixnav.io.rinex_obs import read_rinex_obs
-    a = phone[0]
-    n = 30
-    path = tmp_path / "lost.16o"
-    _write_rinex2(path, _times(a, n), _phone_records(a, n))
-    r0 = read_rinex_obs(path)
-    real = georinex.load
-
-    def loses_epoch_12(*args, **kw):
-        ds = real(*args, **kw)
-        return ds.isel(time=[k for k in range(ds.sizes["time"]) if k != 12])
-
-    monkeypatch.setattr(georinex, "load", loses_epoch_12)
-    line = _epoch_lines(path.read_text().splitlines(), 2)[12]
-    with pytest.warns(UserWarning, match=rf"lost.16o: georinex did not read 1 observation epochs .*line {line + 1}\)"):
-        r = read_rinex_obs(path)
-    lost = int((a.epoch == 12).sum())
-    assert r.rejected == {**r0.rejected, "epoch not read": lost}
-    assert len(r) == n - 1 and r.epochs_all_rejected == 1
-    assert len(r.pseudorange) == len(r0.pseudorange) - lost

@@ -310,6 +310,15 @@ class OdometerData:
         return len(self.time)
 
 
+#: RINEX system letters a raw-GNSS record may hold (mixnav.gnss.signals.SYSTEMS names them)
+GNSS_SYSTEMS = ("G", "R", "E", "C", "J")
+#: columns of RawPseudoranges.lli: the observation each loss-of-lock indicator belongs to
+LLI_COLUMNS = ("pseudorange", "carrier", "doppler", "cn0")
+#: GLONASS frequency channel numbers (inclusive), and the value of a row without one
+GLONASS_CHANNELS = (-7, 6)
+NO_CHANNEL = -128
+
+
 @dataclass(frozen=True, eq=False)
 class RawPseudoranges:
     """Receiver pseudoranges grouped by epoch, the broadcast corrections (satellite clock,
@@ -348,6 +357,25 @@ class RawPseudoranges:
         The file's format version (RINEX).
     event_records : dict
         Records skipped because they are not observations, per epoch flag (RINEX).
+    system : ndarray of str (m,) or None
+        RINEX system letter of each measurement (``G`` GPS, ``R`` GLONASS, ``E`` Galileo,
+        ``C`` BeiDou, ``J`` QZSS); ``prn`` is then the satellite number within its system
+        (``R12``: slot 12). None: every measurement is GPS (what readers of GPS alone give).
+    signal : ndarray of str (m,) or None
+        The observation code each pseudorange was read from (RINEX: ``C1C``, ``C1X``, ``C2I``,
+        ``C1``, ``P1``); the carrier, Doppler and C/N0 are those of the same signal.
+    carrier : ndarray (m,) or None
+        Carrier phase [cycles] (NaN where blank), when the format gives it (RINEX ``L1C``...).
+    lli : ndarray of int8 (m, 4) or None
+        RINEX loss-of-lock indicators of the pseudorange, carrier, Doppler and C/N0 values
+        (columns :data:`LLI_COLUMNS`; 0 where blank): bit 0 a possible cycle slip, bit 1
+        half-cycle ambiguity, bit 2 (RINEX 3) BOC tracking / (RINEX 2) anti-spoofing.
+    line : ndarray of int (m,) or None
+        1-based line of each measurement's satellite record in ``source`` (RINEX).
+    glonass_channels : dict
+        GLONASS slot -> frequency channel number k (-7..+6; carrier frequency
+        ``1602 + 0.5625 k`` MHz on L1): the observation header's ``GLONASS SLOT / FRQ #``,
+        or attached from a navigation file (:meth:`with_glonass_channels`).
     """
 
     week: np.ndarray
@@ -365,9 +393,75 @@ class RawPseudoranges:
     code: str = ""
     version: float = 0.0
     event_records: dict = field(default_factory=dict)
+    system: np.ndarray | None = None
+    signal: np.ndarray | None = None
+    carrier: np.ndarray | None = None
+    lli: np.ndarray | None = None
+    line: np.ndarray | None = None
+    glonass_channels: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        m = len(self.prn)
+        for name in ("system", "signal", "carrier", "line"):
+            a = getattr(self, name)
+            _check(a is None or np.shape(a) == (m,), f"{name} has shape {np.shape(a)}, expected ({m},)", self.source)
+        _check(self.lli is None or np.shape(self.lli) == (m, len(LLI_COLUMNS)),
+               f"lli has shape {np.shape(self.lli)}, expected ({m}, {len(LLI_COLUMNS)})", self.source)
+        if self.system is not None and m:
+            bad = sorted(set(np.unique(self.system).tolist()) - set(GNSS_SYSTEMS))
+            _check(not bad, f"system letters {bad} are not among {', '.join(GNSS_SYSTEMS)}", self.source)
+        for slot, k in self.glonass_channels.items():
+            _check(GLONASS_CHANNELS[0] <= int(k) <= GLONASS_CHANNELS[1],
+                   f"GLONASS slot {slot}: frequency channel {k} is outside {GLONASS_CHANNELS[0]}..{GLONASS_CHANNELS[1]}",
+                   self.source)
 
     def __len__(self) -> int:
         return len(self.tow)
+
+    def systems(self) -> np.ndarray:
+        """The system letter of each measurement ((m,) str; ``G`` for every row when
+        ``system`` is None)."""
+        return np.full(len(self.prn), "G") if self.system is None else np.asarray(self.system)
+
+    def satellite_ids(self) -> np.ndarray:
+        """RINEX satellite names of the measurements ((m,) str: ``G05``, ``R12``)."""
+        return np.char.add(self.systems().astype("<U1"), np.char.zfill(np.asarray(self.prn).astype(str), 2))
+
+    def with_glonass_channels(self, channels: dict) -> RawPseudoranges:
+        """A copy with the GLONASS frequency channels ``channels`` (slot -> k, e.g. from the
+        navigation file's records) added to those the observation header gave. A slot both
+        give with different numbers is a DataError naming ``source``."""
+        from dataclasses import replace
+        merged = dict(self.glonass_channels)
+        for slot, k in channels.items():
+            slot, k = int(slot), int(k)
+            if slot in merged and merged[slot] != k:
+                raise DataError(f"GLONASS slot {slot}: frequency channel {k} given, but the observation header "
+                                f"gives {merged[slot]}", file=self.source)
+            merged[slot] = k
+        return replace(self, glonass_channels=dict(sorted(merged.items())))
+
+    def glonass_channel(self) -> np.ndarray:
+        """Frequency channel k of each measurement ((m,) int: GLONASS rows their slot's,
+        :data:`NO_CHANNEL` for other systems and for slots without one)."""
+        out = np.full(len(self.prn), NO_CHANNEL, dtype=np.int64)
+        glo = self.systems() == "R"
+        for slot, k in self.glonass_channels.items():
+            out[glo & (np.asarray(self.prn) == slot)] = k
+        return out
+
+    def check_glonass_channels(self) -> None:
+        """Raise DataError (naming ``source`` and the line of the first such record, when
+        known) if a GLONASS measurement's slot has no frequency channel number: what a
+        user of GLONASS carrier phase or Doppler (wavelength per channel) needs first."""
+        missing = (self.systems() == "R") & (self.glonass_channel() == NO_CHANNEL)
+        if missing.any():
+            i = int(np.flatnonzero(missing)[0])
+            slots = sorted(set(np.asarray(self.prn)[missing].tolist()))
+            raise DataError(f"GLONASS slots {', '.join(f'R{s:02d}' for s in slots)} have no frequency channel number "
+                            "(the observation header has no 'GLONASS SLOT / FRQ #' entry for them: attach the "
+                            "navigation file's with with_glonass_channels)", file=self.source,
+                            line=None if self.line is None else int(self.line[i]))
 
 
 @dataclass(frozen=True)

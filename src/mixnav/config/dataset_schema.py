@@ -15,6 +15,8 @@ from .. import units as u
 from .aiding_schema import AidingConfig
 from .fields import AngleVec, AngSigma, ElevationMask, LengthVec, PosSigma, Strict, VelSigma, Windows, check_position, quantity
 from .method_schema import MethodConfig
+from ..errors import ArgumentError
+from ..gnss.signals import DEFAULT_SYSTEMS, check_signals, check_systems
 
 Offset = quantity(u.TIME)
 Gap = quantity(u.TIME, positive=True)
@@ -145,8 +147,12 @@ class RawGnss(Strict):
     navigation header has its coefficients) set the solver
     (:class:`mixnav.gnss.spp.SppOptions`); ``max_sv_time_uncertainty``
     rejects measurements the receiver reports as worse than it (Android logs).
-    ``format = "rinex-obs"``: a RINEX 2.x/3.x observation file, its GPS L1 C/A
-    pseudoranges (:mod:`mixnav.io.rinex_obs`).
+    ``format = "rinex-obs"``: a RINEX 2.x/3.x observation file (:mod:`mixnav.io.rinex_obs`):
+    ``systems`` (RINEX letters ``G``, ``R``, ``E``, ``C``, ``J``; default ``["G"]``, GPS L1
+    C/A as before) and ``signals`` (a table of system letter -> pseudorange code, or list of
+    codes in order of preference, e.g. ``{ E = ["C1C", "C1X"], C = "C2I" }``; a system not
+    named takes :data:`mixnav.gnss.signals.DEFAULT_SIGNALS`) choose what is read. The
+    phone-log format reads GPS alone, so it takes neither key.
     """
 
     format: Literal["android-gnsslogger", "rinex-obs"]
@@ -158,6 +164,33 @@ class RawGnss(Strict):
     troposphere: bool = True
     ionosphere: bool = True
     max_sv_time_uncertainty: quantity(u.TIME, positive=True) = 500e-9  # type: ignore[valid-type]
+    systems: list[str] = Field(default_factory=lambda: list(DEFAULT_SYSTEMS))
+    signals: dict[str, str | list[str]] = Field(default_factory=dict)
+
+    @field_validator("systems")
+    @classmethod
+    def _systems(cls, v):
+        try:
+            return list(check_systems(v))
+        except ArgumentError as exc:
+            raise ValueError(exc.message) from None
+
+    @field_validator("signals")
+    @classmethod
+    def _signals(cls, v):
+        try:
+            return {k: list(c) for k, c in check_signals(v).items()}
+        except ArgumentError as exc:   # argument "signals.<letter>"
+            raise ValueError(f"{exc.argument.split('.', 1)[-1]}: {exc.message}") from None
+
+    @model_validator(mode="after")
+    def _rinex_keys(self):
+        if self.format != "rinex-obs":
+            for key in ("systems", "signals"):
+                if key in self.model_fields_set:
+                    raise ValueError(f"{key}: only format = \"rinex-obs\" reads other systems or signals "
+                                     f"(\"{self.format}\" reads GPS L1 C/A)")
+        return self
 
 
 class InsRawGnss(RawGnss):

@@ -42,7 +42,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..config.dataset_schema import Dataset
-from ..data import GnssFixes, RawPseudoranges
+from ..data import LLI_COLUMNS, GnssFixes, RawPseudoranges
 from ..errors import ConfigError, DataError
 from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla
 from ..gnss.ephemeris import BroadcastEphemeris
@@ -51,10 +51,10 @@ from ..gnss.raw_observations import doppler_velocity, tight_observations
 from ..gnss.spp import clock_jumps, corrected_pseudoranges, solve_epochs
 from ..ins.error_model import ClockModel
 from ..io.imu_checks import DataWarning
-from ..io.readers import get_reader
+from ..io.readers import ReadOptions, get_reader
 from ..sim.gnss import in_windows
 from .aiding import AidingInputs, installation_check
-from .spp_process import options as spp_options
+from .spp_process import gps_only, gps_rows, options as spp_options
 
 
 def _subset(obs, keep):
@@ -64,15 +64,16 @@ def _subset(obs, keep):
     return replace(obs, **{k: v[keep] for k, v in f.items()})
 
 
-def read_observations(paths, read=None) -> RawPseudoranges:
-    """The GPS pseudoranges (and Doppler) of one or more RINEX observation files, in time order
-    (:func:`mixnav.io.rinex_obs.read_rinex_obs` each): one record whose epochs run on from
-    file to file. A file that does not start after the previous one's last epoch is a
-    DataError naming it; Doppler missing from some of the files is NaN there (counted as
-    ``no Doppler`` by the tight observables). ``read``: the raw-GNSS reader (default: the
-    registered ``rinex-obs`` one)."""
+def read_observations(paths, read=None, options: ReadOptions | None = None) -> RawPseudoranges:
+    """The pseudoranges (and Doppler, carrier, C/N0 when read) of one or more RINEX observation
+    files, in time order (:func:`mixnav.io.rinex_obs.read_rinex_obs` each): one record whose
+    epochs run on from file to file. A file that does not start after the previous one's
+    last epoch is a DataError naming it; Doppler missing from some of the files is NaN
+    there (counted as ``no Doppler`` by the tight observables), as are carrier and C/N0.
+    ``read``: the raw-GNSS reader (default: the registered ``rinex-obs`` one); ``options``:
+    its options (the ``[raw_gnss]`` table: ``systems``, ``signals``)."""
     read = get_reader("raw-gnss", "rinex-obs") if read is None else read
-    parts = [read(p) for p in paths]
+    parts = [read(p, options) for p in paths]
     if len(parts) == 1:
         return parts[0]
     for prev, (p, cur) in zip(parts, zip(paths[1:], parts[1:])):
@@ -82,18 +83,30 @@ def read_observations(paths, read=None) -> RawPseudoranges:
                             f"epoch of {prev.source}: give the observation files in time order, without overlap",
                             file=str(p))
     offsets = np.cumsum([0] + [len(x.tow) for x in parts[:-1]])
-    any_doppler = any(x.doppler is not None for x in parts)
+    cat = np.concatenate
+
+    def optional(name, blank):
+        """An optional per-measurement field over the files (``blank`` where a file has none)."""
+        if all(getattr(x, name) is None for x in parts):
+            return None
+        return cat([np.full(len(x.prn), blank) if getattr(x, name) is None else getattr(x, name) for x in parts])
+
+    glonass = {}
+    for x in parts:   # the headers' GLONASS channels (a slot given twice differently: DataError)
+        glonass = x.with_glonass_channels(glonass).glonass_channels
     rejected = sum((Counter(x.rejected) for x in parts), Counter())
     events = sum((Counter(x.event_records) for x in parts), Counter())
-    cat = np.concatenate
     return RawPseudoranges(
         week=cat([x.week for x in parts]), tow=cat([x.tow for x in parts]),
         epoch=cat([x.epoch + o for x, o in zip(parts, offsets)]), prn=cat([x.prn for x in parts]),
         pseudorange=cat([x.pseudorange for x in parts]), code="/".join(dict.fromkeys(x.code for x in parts)),
         rejected=dict(rejected), epochs_all_rejected=sum(x.epochs_all_rejected for x in parts),
         version=parts[0].version, source=", ".join(x.source for x in parts), event_records=dict(sorted(events.items())),
-        doppler=cat([x.doppler if x.doppler is not None else np.full(len(x.prn), np.nan) for x in parts])
-        if any_doppler else None)
+        doppler=optional("doppler", np.nan), cn0=optional("cn0", np.nan), carrier=optional("carrier", np.nan),
+        system=optional("system", "G"), signal=optional("signal", ""),
+        lli=cat([np.zeros((len(x.prn), len(LLI_COLUMNS)), np.int8) if x.lli is None else x.lli for x in parts])
+        if any(x.lli is not None for x in parts) else None,
+        glonass_channels=glonass)
 
 
 def read_navigation(paths) -> BroadcastEphemeris:
@@ -149,7 +162,9 @@ def read_rinex_ins(ds: Dataset, source: str, folder) -> RinexInputs:
     imu = install(read_imu(ds, folder), ds)
     obs_files = [folder / f for f in c.files("file")]
     nav_files = [folder / f for f in c.files("navigation")]
-    obs = read_observations(obs_files, get_reader("raw-gnss", c.format, key="raw_gnss.format", file=source))
+    gps_only(c, source)
+    obs = read_observations(obs_files, get_reader("raw-gnss", c.format, key="raw_gnss.format", file=source),
+                            ReadOptions(c, folder))
     eph = read_navigation(nav_files)
     for i, m in enumerate(ds.methods):   # before any work
         if m.type == "tight-ekf" and m.use_range_rate and obs.doppler is None:
@@ -166,6 +181,7 @@ def run_rinex_ins(ds: Dataset, source: str, folder, inputs: RinexInputs):
     imu, obs, eph, reference, read_time = inputs.imu, inputs.obs, inputs.eph, inputs.reference, inputs.read_time_s
     obs_files, nav_files = inputs.obs_files, inputs.nav_files
     obs_file = obs_files[0]     # the file an error names (the message lists them all)
+    gps_rows(obs)
     if c.ionosphere and eph.iono_alpha is None:   # asked for, and impossible: said, not silent
         warnings.warn(f"{', '.join(map(str, nav_files))}: the header has no ionosphere (Klobuchar) coefficients, "
                       "so the ionosphere "

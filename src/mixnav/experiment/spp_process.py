@@ -36,7 +36,7 @@ from .._version import __version__
 from ..config.raw_gnss_schema import RawGnssDataset
 from ..data import InitialState, RawPseudoranges
 from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla, lla_to_ecef
-from ..errors import ConfigError, DataError
+from ..errors import ArgumentError, ConfigError, DataError
 from ..gnss.ephemeris import BroadcastEphemeris
 from ..gnss.spp import SppOptions, SppTrack, solve_epochs
 from ..io.readers import read_table
@@ -89,10 +89,30 @@ def process_raw(ds: RawGnssDataset, source: str, folder: Path, seed: int = 0) ->
     return solve_raw(ds, source, folder, *read_raw(ds, source, folder), seed=seed)
 
 
+def gps_only(c, source: str) -> None:
+    """The SPP and the filters solve GPS alone so far (GPS broadcast orbits and clocks): a
+    ``[raw_gnss]`` table ``c`` whose ``systems`` name another is a ConfigError naming the
+    key, before any file is read (the reader reads them: :mod:`mixnav.io.rinex_obs`)."""
+    if tuple(c.systems) != ("G",):
+        raise ConfigError(f"systems = {list(c.systems)}: positioning uses GPS alone so far (the other systems' "
+                          "broadcast orbits are not read yet); set systems = [\"G\"] or leave the key out",
+                          file=source, key="raw_gnss.systems")
+
+
+def gps_rows(obs: RawPseudoranges) -> None:
+    """Observations handed to the SPP or the filters directly (library use) must be GPS: a
+    row of another system is an ArgumentError (its number would be taken for a GPS PRN)."""
+    if obs.system is not None and (np.asarray(obs.system) != "G").any():
+        others = sorted(set(np.asarray(obs.system).tolist()) - {"G"})
+        raise ArgumentError(f"observations of systems {', '.join(others)}: positioning uses GPS alone so far "
+                            "(read with systems = ['G'])", argument="obs")
+
+
 def read_raw(ds: RawGnssDataset, source: str, folder: Path) -> tuple[RawPseudoranges, BroadcastEphemeris, float]:
     """The raw log (the raw-GNSS reader of ``raw_gnss.format``) and the navigation file, and
     the time it took [s]."""
     c = ds.raw_gnss
+    gps_only(c, source)
     t0 = _time.perf_counter()
     obs = read_table("raw-gnss", c, folder, "raw_gnss", source)
     eph = BroadcastEphemeris.from_rinex(folder / c.navigation)
@@ -101,7 +121,8 @@ def read_raw(ds: RawGnssDataset, source: str, folder: Path) -> tuple[RawPseudora
 
 def solve_raw(ds: RawGnssDataset, source: str, folder: Path, obs, eph: BroadcastEphemeris, read_time_s: float = 0.0,
               seed: int = 0) -> SppOutput:
-    """SPP of every epoch of ``obs`` (read observations) and the filter methods."""
+    """SPP of every epoch of ``obs`` (read observations, GPS) and the filter methods."""
+    gps_rows(obs)
     c = ds.raw_gnss
     if c.ionosphere and eph.iono_alpha is None:   # asked for, and impossible: said, not silent
         import warnings

@@ -5,6 +5,7 @@ geometry.py      constants of the GPS signal and Earth model used by GNSS code,
                  during signal travel), the :class:`SatelliteStates` type every
                  satellite source returns
 constellation.py nominal GPS constellation (6 planes, circular Kepler orbits) for simulation
+signals.py       the systems read (G R E C J), their RINEX pseudorange codes, the default signal per system
 clock.py         two-state receiver clock (the filters' ClockModel), sampled exactly
 observables.py   simulated pseudorange, range rate, carrier per satellite and epoch
 ephemeris.py     GPS broadcast ephemeris from RINEX navigation files (georinex),
