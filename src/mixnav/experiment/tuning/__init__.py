@@ -39,6 +39,7 @@ import tomlkit
 from ...errors import ArgumentError, ConfigError
 from .criterion import Evaluator, cv_windows, without_reference
 from .parameters import Parameter, get_value, ins_parameters, set_value
+from .search import MIN_GAIN
 
 __all__ = ["tune", "TuneResult", "tunable_keys"]
 
@@ -48,7 +49,8 @@ TUNE_FILES = ("tuned.toml", "tune.json", "report.md", "tune.png", "tune_journal.
 
 def tunable_keys() -> list[str]:
     """The names ``--fix`` accepts (IMU + GNSS-fixes datasets), plus the data-stage keys."""
-    return [p.name for p in ins_parameters()] + ["aiding.zupt.accel_std", "aiding.zupt.gyro_rate"]
+    return [p.name for p in ins_parameters()] + ["aiding.zupt.accel_std", "aiding.zupt.gyro_rate",
+                                                 "installation.antenna_position", "aiding.vehicle_mounting"]
 
 
 @dataclass
@@ -366,7 +368,45 @@ def tune(dataset, out, *, budget: int = 80, workers: int | None = None, schedule
             not_tuned[p.name] = "fixed by the user (--fix)"
         elif p not in searched:
             not_tuned[p.name] = _why_not(cur_doc, p, ds)
-    cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations)
+    cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations, grids=("coarse",))
+    # the installation mixnav estimates as states, kept when the criterion agrees; between the
+    # passes, after the time offset and velocity delay (a lever arm would otherwise absorb a
+    # timing error along the track)
+    from .installation import ANTENNA, MOUNTING, proposal
+    inst_keys = [k for k in (ANTENNA.name, MOUNTING.name) if k not in fix]
+    if not inst_keys:
+        for k in (ANTENNA.name, MOUNTING.name):
+            not_tuned[k] = "fixed by the user (--fix)"
+    elif scorer.left() > 0:
+        local = Evaluator(stripped, source, data, target, windows, (t_first, t_last))
+        prop = proposal(local, tomlkit.dumps(cur_doc))
+        if prop is None:
+            not_tuned[ANTENNA.name] = "the tuned method cannot estimate the installation (not a loose EKF)"
+        else:
+            pdoc, notes = prop
+            for k in (ANTENNA.name, MOUNTING.name):   # a fixed key keeps the file's value
+                if k in fix:
+                    src_doc = cur_doc
+                    p = ANTENNA if k == ANTENNA.name else MOUNTING
+                    if get_value(src_doc, p) is not None:
+                        set_value(pdoc, p, get_value(src_doc, p))
+                    notes.pop(k, None)
+                    not_tuned[k] = "fixed by the user (--fix)"
+            (sc,) = scorer.score([tomlkit.dumps(pdoc)])
+            if sc is not None:
+                evaluations.append({"changed": "installation estimated as states", "score": sc})
+                keep = sc["nlpd"] < cur["nlpd"] - MIN_GAIN
+                for k, (val, how) in notes.items():
+                    if keep:
+                        chosen[k] = {"value": val, "how": f"{how}; the criterion {cur['nlpd']:.3f} -> {sc['nlpd']:.3f}",
+                                     "spread": None}
+                    else:
+                        not_tuned[k] = (f"{how}; not written: the criterion did not improve "
+                                        f"({cur['nlpd']:.3f} -> {sc['nlpd']:.3f})")
+                if keep:
+                    cur_doc, cur = pdoc, sc
+    cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations, grids=("fine",),
+                                             curves=curves)
     n_windows = sum(len(f) for f in windows)
     for p in searched:
         if len(curves.get(p.name, [])) < 2:   # only the current point: the budget ran out first
@@ -459,6 +499,10 @@ def _write_tuned(text: str, cur_doc, chosen: dict, searched) -> str:
             notes.append(f"{c.get('how', '')}" + (f"; within the criterion's spread: {c['spread']}"
                                                    if c.get("spread") else ""))
         set_value(doc, p, v, comment="mixnav tune: " + " | ".join(notes))
+    from .installation import ANTENNA, MOUNTING
+    for p in (ANTENNA, MOUNTING):
+        if p.name in chosen:
+            set_value(doc, p, get_value(cur_doc, p), comment=f"mixnav tune: {chosen[p.name]['how']}")
     for name, c in chosen.items():
         if name.startswith("aiding.zupt.") and "value" in c and "aiding" in doc and "zupt" in doc["aiding"]:
             item = tomlkit.string(c["value"])

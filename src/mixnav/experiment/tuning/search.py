@@ -37,12 +37,15 @@ def _shown(p: Parameter, value) -> float:
     return float(value[p.index if p.index is not None else 0] / p.scale)
 
 
-def coordinate_search(doc, cur: dict, params: list[Parameter], scorer, evaluations: list):
+def coordinate_search(doc, cur: dict, params: list[Parameter], scorer, evaluations: list,
+                      grids=("coarse", "fine"), curves: dict | None = None):
     """Search ``params`` from ``doc`` (scored ``cur``) with ``scorer`` (its budget bounds the
-    evaluations). Returns the best document, its score and per key the evaluated points
-    ``(label, shown value, nlpd)``."""
-    curves: dict[str, list] = {p.name: [] for p in params}
-    for grid in ("coarse", "fine"):
+    evaluations), one pass per grid of ``grids``. Returns the best document, its score and per
+    key the evaluated points ``(label, shown value, nlpd)`` (added to ``curves`` when given)."""
+    curves = {p.name: [] for p in params} if curves is None else curves
+    for p in params:
+        curves.setdefault(p.name, [])
+    for grid in grids:
         for p in params:
             if scorer.left() <= 0:
                 return doc, cur, curves
