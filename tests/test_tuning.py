@@ -15,7 +15,7 @@ import tomlkit
 
 from mixnav.data import ImuData
 from mixnav.errors import ArgumentError, ConfigError
-from mixnav.experiment.tuning import tune
+from mixnav.experiment.tuning import tunable_keys, tune
 from mixnav.experiment.tuning.allan import overlapping_adev, still_noise
 from mixnav.experiment.tuning.criterion import cv_windows, without_reference
 from mixnav.experiment.tuning.parameters import get_value, ins_parameters, moved, set_value
@@ -201,3 +201,21 @@ def test_a_dataset_without_gnss_fixes_is_refused_by_name(tmp_path):
     with pytest.raises(ConfigError) as e:
         tune("smartloc-berlin", tmp_path / "out", budget=2)
     assert e.value.key == "dataset.kind" and "not built yet" in str(e.value)
+
+
+@need_data
+def test_a_wrong_lever_arm_is_estimated_and_written_back(tmp_path):
+    """The antenna put 0.6 m too far forward in the file: the lever-arm state's estimate brings it
+    back to within 0.1 m of the recorder's (0, -0.05, -0.65) m, and the criterion keeps it."""
+    (tmp_path / "a").mkdir()
+    car = _copy(tmp_path / "a", True)
+    car.write_text(car.read_text().replace('antenna_position = ["0 m", "-0.05 m", "-0.65 m"]',
+                                           'antenna_position = ["0.6 m", "-0.05 m", "-0.65 m"]'))
+    others = [k for k in tunable_keys() if k not in ("installation.antenna_position", "aiding.vehicle_mounting")]
+    r = tune(str(car), tmp_path / "out", fix=others, **{**FAST, "budget": 4})
+    assert "installation.antenna_position" in r.chosen, r.not_tuned
+    tuned = tomllib.loads((tmp_path / "out" / "tuned.toml").read_text())
+    from mixnav import units as u
+    ant = [u.parse_quantity(x, u.LENGTH) for x in tuned["installation"]["antenna_position"]]
+    np.testing.assert_allclose(ant, [0.0, -0.05, -0.65], atol=0.1)
+    assert r.tuned["nlpd"] < r.given["nlpd"]
