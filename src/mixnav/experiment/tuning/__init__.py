@@ -439,8 +439,9 @@ def _applies(doc, p: Parameter, ds) -> bool:
 def _why_not(doc, p: Parameter, ds) -> str | None:
     """Why a parameter is not searched on this file (None: it is)."""
     if p.path[0] == "aiding":
-        if "aiding" not in doc or p.path[1] not in doc["aiding"]:
-            return f"no [aiding.{p.path[1]}] in the file"
+        table = p.path[1] if len(p.path) > 2 else "nhc"   # aiding.vehicle_point serves the NHC
+        if "aiding" not in doc or table not in doc["aiding"]:
+            return f"no [aiding.{table}] in the file"
     if p.name == "gnss.velocity_delay" and (not ds.gnss.use_velocity or ds.gnss.format != "rtklib-pos"):
         return "the fixes' velocities are not used, or their format is not rtklib-pos"
     if get_value(doc, p) is None:

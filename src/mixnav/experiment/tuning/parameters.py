@@ -94,6 +94,10 @@ def ins_parameters() -> list[Parameter]:
                   _LOG_FINE, 1e-3, 10.0, index=0, default=(0.1, 0.1), about="NHC lateral velocity sigma"),
         Parameter("aiding.nhc.sigma[1]", ("aiding", "nhc", "sigma"), u.VELOCITY, "m/s", "log", _LOG_COARSE,
                   _LOG_FINE, 1e-3, 10.0, index=1, default=(0.1, 0.1), about="NHC vertical velocity sigma"),
+        Parameter("aiding.vehicle_point[0]", ("aiding", "vehicle_point"), u.LENGTH, "m", "shift",
+                  (-2.0, -1.0, 1.0, 2.0), (-0.5, 0.5), -6.0, 6.0, index=0, default=(0.0, 0.0, 0.0),
+                  about="where the NHC holds (the rear axle), forward of the IMU: in a turn the IMU "
+                        "moves sideways by the yaw rate times this distance"),
         Parameter("aiding.nhc.pitch_per_accel", ("aiding", "nhc", "pitch_per_accel"), u.Dimension(1.0, -1.0, 2.0),
                   "deg/(m/s^2)", "shift", tuple(x * u.DEG for x in (-0.4, -0.2, 0.2, 0.4)),
                   (-0.1 * u.DEG, 0.1 * u.DEG), -3.0 * u.DEG, 3.0 * u.DEG, default=0.0,
