@@ -219,3 +219,29 @@ def test_a_wrong_lever_arm_is_estimated_and_written_back(tmp_path):
     ant = [u.parse_quantity(x, u.LENGTH) for x in tuned["installation"]["antenna_position"]]
     np.testing.assert_allclose(ant, [0.0, -0.05, -0.65], atol=0.1)
     assert r.tuned["nlpd"] < r.given["nlpd"]
+
+
+@need_data
+def test_no_still_segment_keeps_the_noise_and_says_why(tmp_path):
+    """300-420 s of drive-0708 is the parking lot: no stop of 3 s, so no Allan deviation; the
+    white noise keeps the file's value as the search's start and the report says so."""
+    r = tune("drive-0708", tmp_path / "out", budget=2, workers=1, span=("300 s", "420 s"), window="20 s", folds=4,
+             fix=["aiding.zupt.accel_std", "aiding.zupt.gyro_rate"])
+    assert "no still segment" in r.not_tuned["imu.errors.arw (Allan)"]
+    assert "no still segment" in (tmp_path / "out" / "report.md").read_text()
+
+
+@need_data
+def test_the_command_line_writes_the_folder(tmp_path):
+    from typer.testing import CliRunner
+    from mixnav.cli import app
+    res = CliRunner().invoke(app, ["tune", "drive-0708", "--out", str(tmp_path / "out"), "--budget", "2",
+                                   "--workers", "1", "--span", "60 s", "185 s", "--window", "20 s", "--folds", "4",
+                                   "--fix", "imu.errors.arw", "--no-progress"])
+    assert res.exit_code == 0, res.output
+    assert {"tuned.toml", "tune.json", "report.md", "tune.png", "tune_journal.jsonl"} <= \
+        {p.name for p in (tmp_path / "out").iterdir()}
+    body = __import__("json").loads((tmp_path / "out" / "tune.json").read_text())
+    assert body["fixed"] == ["imu.errors.arw"] and body["evaluations_spent"] == 2
+    res = CliRunner().invoke(app, ["tune", "drive-0708", "--out", str(tmp_path / "out"), "--budget", "0"])
+    assert res.exit_code != 0 and "budget" in res.output
