@@ -149,13 +149,17 @@ def dask_client(address: str):
 
 
 def pool_map(fn, tasks, workers: int, bar: Progress, initializer=None, initargs=(), terminate=terminate_pool,
-             on_abort=None) -> list:
+             on_abort=None, pool: ProcessPoolExecutor | None = None) -> list:
     """``fn(*task)`` for every task on a pool of ``workers`` processes (each started by
     ``initializer(*initargs)``): the results in completion order. A task's error or an
     interruption ends the running workers now (``terminate(pool)``, which returns the pids
     that ended; a task can take minutes and no worker outlives the command), then
-    ``on_abort(pids)`` cleans up after them, and the error is raised."""
-    pool = ProcessPoolExecutor(max_workers=workers, initializer=initializer, initargs=initargs)
+    ``on_abort(pids)`` cleans up after them, and the error is raised. ``pool``: a pool the
+    caller keeps across calls (its workers keep what they loaded; the caller shuts it down),
+    instead of one made and shut down here."""
+    own = pool is None
+    if own:
+        pool = ProcessPoolExecutor(max_workers=workers, initializer=initializer, initargs=initargs)
     out: list = []
     try:
         pending = {pool.submit(fn, *task) for task in tasks}
@@ -169,7 +173,8 @@ def pool_map(fn, tasks, workers: int, bar: Progress, initializer=None, initargs=
         if on_abort is not None:
             on_abort(ended)
         raise
-    pool.shutdown(wait=True)
+    if own:
+        pool.shutdown(wait=True)
     return out
 
 

@@ -99,11 +99,16 @@ def _seconds(value, argument: str) -> float:
 
 
 class _Scorer:
-    """Scores candidate files: from the journal, else on the executor; appends to the journal."""
+    """Scores candidate files: from the journal, else on the executor; appends to the journal.
+    One progress bar over the budget, and one process pool (or Dask client) for the whole
+    tuning: the workers keep the data they read (:meth:`close` ends them)."""
 
     def __init__(self, setup, journal: Path, workers, scheduler, progress, budget: int):
+        from ..parallel import Progress
         self.setup, self.journal, self.workers, self.scheduler = setup, journal, workers, scheduler
-        self.progress, self.budget, self.runs = progress, budget, 0
+        self.budget, self.runs = budget, 0
+        self.bar = Progress(budget, progress, label="tune")
+        self._pool, self._client = None, None
         self.cache: dict[str, dict] = {}
         self.seen: set[str] = set()
         self.setup_key = hashlib.sha256(json.dumps(setup[1:], default=str).encode()).hexdigest()[:16]
@@ -134,15 +139,12 @@ class _Scorer:
                 if self.left() <= 0:
                     continue
                 self.seen.add(k)
+                if k in self.cache:
+                    self.bar.advance()
             if k not in self.cache and t not in todo:
                 todo.append(t)
         if todo:
-            from ..parallel import Progress
-            bar = Progress(len(todo), self.progress, label="tune")
-            try:
-                results = self._map(todo, bar)
-            finally:
-                bar.close()
+            results = self._map(todo)
             with open(self.journal, "a") as fh:
                 for text, sc in results:
                     self.cache[self.key(text)] = sc
@@ -150,23 +152,38 @@ class _Scorer:
             self.runs += len(todo) * len(self.setup[4])
         return [self.cache.get(k) if k in self.seen else None for k in map(self.key, texts)]
 
-    def _map(self, texts, bar):
+    def _map(self, texts):
+        from concurrent.futures import ProcessPoolExecutor
         from ..parallel import dask_client, dask_map, pool_map
         tasks = [(self.setup, t) for t in texts]
         if self.scheduler:
-            client = dask_client(self.scheduler.strip())
-            try:
-                return dask_map(client, _evaluate_task, tasks, bar)
-            finally:
-                client.close()
-        n = min(self.workers or os.cpu_count() or 1, len(tasks))
-        if n <= 1:
+            if self._client is None:
+                self._client = dask_client(self.scheduler.strip())
+            return dask_map(self._client, _evaluate_task, tasks, self.bar)
+        n = self.workers or os.cpu_count() or 1
+        if n <= 1 or len(tasks) == 1 and self._pool is None:
             out = []
             for t in tasks:
                 out.append(_evaluate_task(*t))
-                bar.advance()
+                self.bar.advance()
             return out
-        return pool_map(_evaluate_task, tasks, n, bar, initializer=_worker_init, initargs=(self.setup,))
+        if self._pool is None:
+            self._pool = ProcessPoolExecutor(max_workers=n, initializer=_worker_init, initargs=(self.setup,))
+        try:
+            return pool_map(_evaluate_task, tasks, n, self.bar, pool=self._pool)
+        except BaseException:
+            self._pool = None     # pool_map ended its workers
+            raise
+
+    def close(self) -> None:
+        """End the workers (or the Dask connection) and the progress bar."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
+        if self._client is not None:
+            self._client.close()
+            self._client = None
+        self.bar.close()
 
 
 def _value_text(p: Parameter, v) -> str:
@@ -284,141 +301,142 @@ def tune(dataset, out, *, budget: int = 80, workers: int | None = None, schedule
     setup = (stripped, source, None if data is None else str(data), target, windows, (t_first, t_last))
     scorer = _Scorer(setup, journal, workers, scheduler, progress, budget)
 
-    doc = tomlkit.parse(stripped)
-    chosen, not_tuned, evaluations = {}, {}, []
+    try:
+        doc = tomlkit.parse(stripped)
+        chosen, not_tuned, evaluations = {}, {}, []
 
-    # 1. the data stage
-    from .data_stage import imu_noise, stillness_thresholds
-    inputs = probe._load(pds)
-    imu_run = po.imu
-    fixes_run = po.all_fixes
-    noise = imu_noise(imu_run, fixes_run, (t_first, t_last))
-    params = {p.name: p for p in ins_parameters()}
-    start_doc = tomlkit.parse(tomlkit.dumps(doc))
-    for name, attr, rel in (("imu.errors.arw", "arw", "arw_rel_sigma"), ("imu.errors.vrw", "vrw", "vrw_rel_sigma")):
-        p = params[name]
-        if name in fix:
-            not_tuned[name] = "fixed by the user (--fix)"
-            continue
-        if noise is None:
-            not_tuned[name + " (Allan)"] = ("no still segment of 3 s or more in the span: the white noise was "
-                                            "not read from the data; the file's value is the search's start")
-            continue
-        if get_value(doc, p) is None:
-            not_tuned[name] = "not in the file"
-            continue
-        set_value(start_doc, p, getattr(noise, attr))
-        chosen[name] = {"from_data": _value_text(p, getattr(noise, attr)),
-                        "data_how": f"Allan deviation at 1 s over {noise.segments} still segments "
-                                    f"({noise.still_s:.0f} s), +-{100 * getattr(noise, rel):.0f} % (1 sigma)"}
-    del inputs
-    if "aiding" in doc and "zupt" in doc["aiding"]:
-        th = stillness_thresholds(imu_run, fixes_run, (t_first, t_last))
-        for k, (val, how) in th.items():
-            name = f"aiding.zupt.{k}"
+        # 1. the data stage
+        from .data_stage import imu_noise, stillness_thresholds
+        imu_run = po.imu
+        fixes_run = po.all_fixes
+        noise = imu_noise(imu_run, fixes_run, (t_first, t_last))
+        params = {p.name: p for p in ins_parameters()}
+        start_doc = tomlkit.parse(tomlkit.dumps(doc))
+        for name, attr, rel in (("imu.errors.arw", "arw", "arw_rel_sigma"), ("imu.errors.vrw", "vrw", "vrw_rel_sigma")):
+            p = params[name]
             if name in fix:
                 not_tuned[name] = "fixed by the user (--fix)"
-            elif val is None:
-                not_tuned[name] = how
+                continue
+            if noise is None:
+                not_tuned[name + " (Allan)"] = ("no still segment of 3 s or more in the span: the white noise was "
+                                                "not read from the data; the file's value is the search's start")
+                continue
+            if get_value(doc, p) is None:
+                not_tuned[name] = "not in the file"
+                continue
+            set_value(start_doc, p, getattr(noise, attr))
+            chosen[name] = {"from_data": _value_text(p, getattr(noise, attr)),
+                            "data_how": f"Allan deviation at 1 s over {noise.segments} still segments "
+                                        f"({noise.still_s:.0f} s), +-{100 * getattr(noise, rel):.0f} % (1 sigma)"}
+        if "aiding" in doc and "zupt" in doc["aiding"]:
+            th = stillness_thresholds(imu_run, fixes_run, (t_first, t_last))
+            for k, (val, how) in th.items():
+                name = f"aiding.zupt.{k}"
+                if name in fix:
+                    not_tuned[name] = "fixed by the user (--fix)"
+                elif val is None:
+                    not_tuned[name] = how
+                else:
+                    unit = "m/s^2" if k == "accel_std" else "rad/s"
+                    item = tomlkit.string(f"{val:.4g} {unit}")
+                    item.comment(f"mixnav tune: {how}")
+                    start_doc["aiding"]["zupt"][k] = item
+                    chosen[name] = {"value": f"{val:.4g} {unit}", "how": how, "spread": None}
+
+        from .data_stage import BIAS_INCREMENT_S, LOOSEN, bias_walks
+        wanted = [n for n in ("imu.errors.gyro_bias_walk", "imu.errors.accel_bias_walk") if n not in fix]
+        if wanted:
+            local = Evaluator(stripped, source, data, target, windows, (t_first, t_last))
+            walks = bias_walks(local, tomlkit.dumps(start_doc), (t_first, t_last))
+            if walks is None:
+                for n in wanted:
+                    not_tuned[n + " (smoothed)"] = ("the span holds fewer than three 10 s increments, or the method "
+                                                    "cannot be smoothed: the walks were not read from the data")
             else:
-                unit = "m/s^2" if k == "accel_std" else "rad/s"
-                item = tomlkit.string(f"{val:.4g} {unit}")
-                item.comment(f"mixnav tune: {how}")
-                start_doc["aiding"]["zupt"][k] = item
-                chosen[name] = {"value": f"{val:.4g} {unit}", "how": how, "spread": None}
+                for n in wanted:
+                    p = params[n]
+                    v = walks[n.rsplit(".", 1)[1]]
+                    set_value(start_doc, p, v)
+                    chosen[n] = {"from_data": _value_text(p, v),
+                                 "data_how": f"RTS-smoothed bias increments over {BIAS_INCREMENT_S:g} s "
+                                             f"({walks['increments']} increments; the file's walks loosened "
+                                             f"x{LOOSEN:g} for that run)"}
 
-    from .data_stage import BIAS_INCREMENT_S, LOOSEN, bias_walks
-    wanted = [n for n in ("imu.errors.gyro_bias_walk", "imu.errors.accel_bias_walk") if n not in fix]
-    if wanted:
-        local = Evaluator(stripped, source, data, target, windows, (t_first, t_last))
-        walks = bias_walks(local, tomlkit.dumps(start_doc), (t_first, t_last))
-        if walks is None:
-            for n in wanted:
-                not_tuned[n + " (smoothed)"] = ("the span holds fewer than three 10 s increments, or the method "
-                                                "cannot be smoothed: the walks were not read from the data")
+        # 2. the criterion: the file as given, the data stage's start, then the coordinate search
+        given_text, start_text = tomlkit.dumps(doc), tomlkit.dumps(start_doc)
+        given, started = scorer.score([given_text, start_text])
+        if given is None or started is None:
+            raise ArgumentError("a budget of at least 2 evaluations is needed to score the file as given "
+                                "and the data's start", argument="budget")
+        evaluations += [{"changed": "the file as given", "score": given},
+                        {"changed": "the data stage (Allan noise, smoothed bias walks, stillness thresholds)", "score": started}]
+        if started["nlpd"] <= given["nlpd"]:
+            cur_doc, cur = start_doc, started
         else:
-            for n in wanted:
-                p = params[n]
-                v = walks[n.rsplit(".", 1)[1]]
-                set_value(start_doc, p, v)
-                chosen[n] = {"from_data": _value_text(p, v),
-                             "data_how": f"RTS-smoothed bias increments over {BIAS_INCREMENT_S:g} s "
-                                         f"({walks['increments']} increments; the file's walks loosened "
-                                         f"x{LOOSEN:g} for that run)"}
-
-    # 2. the criterion: the file as given, the data stage's start, then the coordinate search
-    given_text, start_text = tomlkit.dumps(doc), tomlkit.dumps(start_doc)
-    given, started = scorer.score([given_text, start_text])
-    if given is None or started is None:
-        raise ArgumentError("a budget of at least 2 evaluations is needed to score the file as given "
-                            "and the data's start", argument="budget")
-    evaluations += [{"changed": "the file as given", "score": given},
-                    {"changed": "the data stage (Allan noise, smoothed bias walks, stillness thresholds)", "score": started}]
-    if started["nlpd"] <= given["nlpd"]:
-        cur_doc, cur = start_doc, started
-    else:
-        cur_doc, cur = tomlkit.parse(given_text), given
-        for name in ("imu.errors.arw", "imu.errors.vrw", "imu.errors.gyro_bias_walk", "imu.errors.accel_bias_walk"):
-            if name in chosen and "data_how" in chosen[name]:
-                chosen[name]["data_how"] += " (not kept: the criterion preferred the file's value)"
-    from .search import coordinate_search
-    searched = [p for p in ins_parameters() if p.name not in fix and _applies(cur_doc, p, ds)]
-    for p in ins_parameters():
-        if p.name in fix:
-            not_tuned[p.name] = "fixed by the user (--fix)"
-        elif p not in searched:
-            not_tuned[p.name] = _why_not(cur_doc, p, ds)
-    cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations, grids=("coarse",))
-    # the installation mixnav estimates as states, kept when the criterion agrees; between the
-    # passes, after the time offset and velocity delay (a lever arm would otherwise absorb a
-    # timing error along the track)
-    from .installation import ANTENNA, MOUNTING, proposal
-    inst_keys = [k for k in (ANTENNA.name, MOUNTING.name) if k not in fix]
-    if not inst_keys:
-        for k in (ANTENNA.name, MOUNTING.name):
-            not_tuned[k] = "fixed by the user (--fix)"
-    elif scorer.left() > 0:
-        local = Evaluator(stripped, source, data, target, windows, (t_first, t_last))
-        prop = proposal(local, tomlkit.dumps(cur_doc))
-        if prop is None:
-            not_tuned[ANTENNA.name] = "the tuned method cannot estimate the installation (not a loose EKF)"
-        else:
-            pdoc, notes = prop
-            for k in (ANTENNA.name, MOUNTING.name):   # a fixed key keeps the file's value
-                if k in fix:
-                    src_doc = cur_doc
-                    p = ANTENNA if k == ANTENNA.name else MOUNTING
-                    if get_value(src_doc, p) is not None:
-                        set_value(pdoc, p, get_value(src_doc, p))
-                    notes.pop(k, None)
-                    not_tuned[k] = "fixed by the user (--fix)"
-            (sc,) = scorer.score([tomlkit.dumps(pdoc)])
-            if sc is not None:
-                evaluations.append({"changed": "installation estimated as states", "score": sc})
-                keep = sc["nlpd"] < cur["nlpd"] - MIN_GAIN
-                for k, (val, how) in notes.items():
+            cur_doc, cur = tomlkit.parse(given_text), given
+            for name in ("imu.errors.arw", "imu.errors.vrw", "imu.errors.gyro_bias_walk", "imu.errors.accel_bias_walk"):
+                if name in chosen and "data_how" in chosen[name]:
+                    chosen[name]["data_how"] += " (not kept: the criterion preferred the file's value)"
+        from .search import coordinate_search
+        searched = [p for p in ins_parameters() if p.name not in fix and _applies(cur_doc, p, ds)]
+        for p in ins_parameters():
+            if p.name in fix:
+                not_tuned[p.name] = "fixed by the user (--fix)"
+            elif p not in searched:
+                not_tuned[p.name] = _why_not(cur_doc, p, ds)
+        cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations, grids=("coarse",))
+        # the installation mixnav estimates as states, kept when the criterion agrees; between the
+        # passes, after the time offset and velocity delay (a lever arm would otherwise absorb a
+        # timing error along the track)
+        from .installation import ANTENNA, MOUNTING, proposal
+        inst_keys = [k for k in (ANTENNA.name, MOUNTING.name) if k not in fix]
+        if not inst_keys:
+            for k in (ANTENNA.name, MOUNTING.name):
+                not_tuned[k] = "fixed by the user (--fix)"
+        elif scorer.left() > 0:
+            local = Evaluator(stripped, source, data, target, windows, (t_first, t_last))
+            prop = proposal(local, tomlkit.dumps(cur_doc))
+            if prop is None:
+                not_tuned[ANTENNA.name] = "the tuned method cannot estimate the installation (not a loose EKF)"
+            else:
+                pdoc, notes = prop
+                for k in (ANTENNA.name, MOUNTING.name):   # a fixed key keeps the file's value
+                    if k in fix:
+                        src_doc = cur_doc
+                        p = ANTENNA if k == ANTENNA.name else MOUNTING
+                        if get_value(src_doc, p) is not None:
+                            set_value(pdoc, p, get_value(src_doc, p))
+                        notes.pop(k, None)
+                        not_tuned[k] = "fixed by the user (--fix)"
+                (sc,) = scorer.score([tomlkit.dumps(pdoc)])
+                if sc is not None:
+                    evaluations.append({"changed": "installation estimated as states", "score": sc})
+                    keep = sc["nlpd"] < cur["nlpd"] - MIN_GAIN
+                    for k, (val, how) in notes.items():
+                        if keep:
+                            chosen[k] = {"value": val, "how": f"{how}; the criterion {cur['nlpd']:.3f} -> {sc['nlpd']:.3f}",
+                                         "spread": None}
+                        else:
+                            not_tuned[k] = (f"{how}; not written: the criterion did not improve "
+                                            f"({cur['nlpd']:.3f} -> {sc['nlpd']:.3f})")
                     if keep:
-                        chosen[k] = {"value": val, "how": f"{how}; the criterion {cur['nlpd']:.3f} -> {sc['nlpd']:.3f}",
-                                     "spread": None}
-                    else:
-                        not_tuned[k] = (f"{how}; not written: the criterion did not improve "
-                                        f"({cur['nlpd']:.3f} -> {sc['nlpd']:.3f})")
-                if keep:
-                    cur_doc, cur = pdoc, sc
-    cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations, grids=("fine",),
-                                             curves=curves)
-    n_windows = sum(len(f) for f in windows)
-    for p in searched:
-        if len(curves.get(p.name, [])) < 2:   # only the current point: the budget ran out first
-            not_tuned[p.name] = "the budget ran out before the search reached it: the file's value kept"
-            chosen.pop(p.name, None)
-            continue
-        v = get_value(cur_doc, p)
-        spread = _spread(p, curves.get(p.name, []), cur["nlpd"], n_windows)
-        entry = chosen.setdefault(p.name, {})
-        entry.update({"value": _value_text(p, v), "how": _how(p, curves.get(p.name, []), cur, entry),
-                      "spread": spread, "curve": [(c[0], c[1], c[2]) for c in curves.get(p.name, [])]})
+                        cur_doc, cur = pdoc, sc
+        cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations, grids=("fine",),
+                                                 curves=curves)
+        n_windows = sum(len(f) for f in windows)
+        for p in searched:
+            if len(curves.get(p.name, [])) < 2:   # only the current point: the budget ran out first
+                not_tuned[p.name] = "the budget ran out before the search reached it: the file's value kept"
+                chosen.pop(p.name, None)
+                continue
+            v = get_value(cur_doc, p)
+            spread = _spread(p, curves.get(p.name, []), cur["nlpd"], n_windows)
+            entry = chosen.setdefault(p.name, {})
+            entry.update({"value": _value_text(p, v), "how": _how(p, curves.get(p.name, []), cur, entry),
+                          "spread": spread, "curve": [(c[0], c[1], c[2]) for c in curves.get(p.name, [])]})
 
+    finally:
+        scorer.close()
     tuned_text = _write_tuned(text, cur_doc, chosen, [p for p in searched if p.name in chosen])
     tuned_text = _data_dir_from(tuned_text, ds.dataset.data_dir, data_folder, out)
     result = TuneResult(tuned_text=tuned_text, chosen=chosen, given=given, tuned=cur, evaluations=evaluations,
