@@ -43,7 +43,7 @@ def summary(rows, method="aided") -> dict:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--budget", type=int, default=80)
+    ap.add_argument("--budget", type=int, default=96)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--work", default="/tmp/tune_drive0708", help="folder for the tune outputs")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "tune_drive0708"))

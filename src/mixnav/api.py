@@ -138,7 +138,7 @@ def process_dataset(name_or_path: str, data: str | None = None) -> RunResult:
     return RunResult(tables, _metrics_frame(p.metrics(out, tables)), out.results, p.truth(out), out, text)
 
 
-def tune(name_or_path: str, out, *, budget: int = 80, workers: int | None = None, scheduler: str | None = None,
+def tune(name_or_path: str, out, *, budget: int = 96, workers: int | None = None, scheduler: str | None = None,
          data: str | None = None, fix=(), span=None, window="30 s", folds: int = 6, method: str | None = None,
          resume: bool = False, overwrite: bool = False, progress: bool = False, seed: int = 0):
     """Tune a dataset file from its own data, never reading its reference, and write ``out``

@@ -203,7 +203,7 @@ def _target_method(ds, method: str | None) -> str:
     return max(ds.methods, key=lambda m: len(getattr(m, "aiding", None) or ())).name
 
 
-def tune(dataset, out, *, budget: int = 80, workers: int | None = None, scheduler: str | None = None,
+def tune(dataset, out, *, budget: int = 96, workers: int | None = None, scheduler: str | None = None,
          data: str | None = None, fix=(), span=None, window="30 s", folds: int = 6, method: str | None = None,
          resume: bool = False, overwrite: bool = False, progress: bool = False, seed: int = 0) -> TuneResult:
     """Tune a dataset file from its own data (never its reference) and write ``out``.
@@ -301,6 +301,7 @@ def tune(dataset, out, *, budget: int = 80, workers: int | None = None, schedule
     setup = (stripped, source, None if data is None else str(data), target, windows, (t_first, t_last))
     scorer = _Scorer(setup, journal, workers, scheduler, progress, budget)
 
+    searched_best = None
     try:
         doc = tomlkit.parse(stripped)
         chosen, not_tuned, evaluations = {}, {}, []
@@ -377,14 +378,16 @@ def tune(dataset, out, *, budget: int = 80, workers: int | None = None, schedule
             for name in ("imu.errors.arw", "imu.errors.vrw", "imu.errors.gyro_bias_walk", "imu.errors.accel_bias_walk"):
                 if name in chosen and "data_how" in chosen[name]:
                     chosen[name]["data_how"] += " (not kept: the criterion preferred the file's value)"
-        from .search import coordinate_search
+        from .search import CONSERVATIVE_KEYS, CONSERVATIVE_STEPS, conservative_pass, coordinate_search
+        CONSERVATIVE_RESERVE = len(CONSERVATIVE_KEYS) * len(CONSERVATIVE_STEPS) if budget >= 40 else 0
         searched = [p for p in ins_parameters() if p.name not in fix and _applies(cur_doc, p, ds)]
         for p in ins_parameters():
             if p.name in fix:
                 not_tuned[p.name] = "fixed by the user (--fix)"
             elif p not in searched:
                 not_tuned[p.name] = _why_not(cur_doc, p, ds)
-        cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations, grids=("coarse",))
+        cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations, grids=("coarse",),
+                                                 reserve=CONSERVATIVE_RESERVE)
         # the installation mixnav estimates as states, kept when the criterion agrees; between the
         # passes, after the time offset and velocity delay (a lever arm would otherwise absorb a
         # timing error along the track)
@@ -422,7 +425,11 @@ def tune(dataset, out, *, budget: int = 80, workers: int | None = None, schedule
                     if keep:
                         cur_doc, cur = pdoc, sc
         cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations, grids=("fine",),
-                                                 curves=curves)
+                                                 curves=curves, reserve=CONSERVATIVE_RESERVE)
+        # the most cautious setting the criterion cannot tell from the best (search.conservative_pass)
+        n_windows = sum(len(f) for f in windows)
+        searched_best = cur["nlpd"]
+        cur_doc, cur = conservative_pass(cur_doc, cur, searched, scorer, evaluations, 2.0 / n_windows, curves)
         n_windows = sum(len(f) for f in windows)
         for p in searched:
             if len(curves.get(p.name, [])) < 2:   # only the current point: the budget ran out first
@@ -445,7 +452,7 @@ def tune(dataset, out, *, budget: int = 80, workers: int | None = None, schedule
     write_outputs(out, result, {"dataset": str(dataset), "source": source, "method": target, "budget": budget,
                                 "evaluations_spent": len(scorer.seen), "filter_runs": scorer.runs, "seed": seed,
                                 "span_s": [t_first, t_last], "window_s": w, "folds": len(windows),
-                                "cv_windows": windows, "fixed": fix})
+                                "cv_windows": windows, "fixed": fix, "criterion_best_searched": searched_best})
     write_marker(out, "tune", True, TUNE_FILES)
     return result
 
