@@ -14,7 +14,8 @@ peer). Causal filters only (the ``aided`` method, unsmoothed, in all three).
 
 Writes benchmarks/results/tune_drive0708.md and .json (median, p90, worst of the windows'
 horizontal maxima; share of windows with a mean position NEES above the chi-square(3) 99 %
-point; the tuning's wall time, evaluations and filter runs).
+point; the tuning's wall time, evaluations and filter runs), and the table of docs/tuning.md
+(``--write-docs`` rewrites only that table from the recorded JSON).
 """
 
 from __future__ import annotations
@@ -41,13 +42,45 @@ def summary(rows, method="aided") -> dict:
             "per_window": {f"{a:g}": float(x) for a, x in zip(g.start_s, h)}}
 
 
+DOCS = ROOT / "docs" / "tuning.md"
+START, END = "<!-- results: benchmarks/tune_drive0708.py -->", "<!-- /results -->"
+
+
+def docs_table(res: dict) -> str:
+    """docs/tuning.md's table, from the results JSON (none copied by hand; tests/test_readme.py)."""
+    def cell(s):
+        return (f"{s['median_m']:.1f} / {s['p90_m']:.1f} / {s['worst_m']:.1f} m, "
+                f"{100 * s['nees_in_band_share']:.0f} %")
+    lines = ["| tuned on, scored on | untuned: median / p90 / worst, NEES in band | tuned | hand-tuned |",
+             "|---|---|---|---|"]
+    for name, f in res["folds"].items():
+        lines.append(f"| {name.split('-')[-1]}, {f['scored_on']} | {cell(f['untuned'])} | {cell(f['tuned'])} | "
+                     f"{cell(f['hand-tuned'])} |")
+    return "\n".join(lines)
+
+
+def docs_block(text: str) -> str:
+    return text.split(START, 1)[1].split(END, 1)[0].strip()
+
+
+def write_docs(res: dict) -> None:
+    text = DOCS.read_text()
+    head, rest = text.split(START, 1)
+    DOCS.write_text(head + START + "\n" + docs_table(res) + "\n" + END + rest.split(END, 1)[1])
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--write-docs", action="store_true",
+                    help="only put the recorded results' table into docs/tuning.md (no run)")
     ap.add_argument("--budget", type=int, default=96)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--work", default="/tmp/tune_drive0708", help="folder for the tune outputs")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "tune_drive0708"))
     a = ap.parse_args(argv)
+    if a.write_docs:
+        write_docs(json.loads(Path(a.out + ".json").read_text()))
+        return
     import mixnav
     res = {"budget": a.budget, "workers": a.workers, "folds": {}}
     for tune_half, eval_half in (("first", "second"), ("second", "first")):
@@ -93,6 +126,8 @@ def main(argv=None):
     for name, f in res["folds"].items():
         lines.append(f"- {name}: " + "; ".join(f"`{k}` = {v}" for k, v in f["chosen"].items()))
     Path(a.out + ".md").write_text("\n".join(lines) + "\n")
+    if Path(a.out) == ROOT / "benchmarks" / "results" / "tune_drive0708":
+        write_docs(res)
 
 
 if __name__ == "__main__":

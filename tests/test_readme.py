@@ -31,7 +31,17 @@ def test_a_changed_result_changes_the_table(monkeypatch):
     assert readme_results.table() != readme_results.readme_block((ROOT / "README.md").read_text())
 
 
-@pytest.mark.parametrize("doc", ["README.md", "docs/features.md", "docs/evaluation.md"])
+def test_the_tuning_table_is_built_from_the_results_file():
+    import json
+    import tune_drive0708
+    res = json.loads((ROOT / "benchmarks" / "results" / "tune_drive0708.json").read_text())
+    block = tune_drive0708.docs_block((ROOT / "docs" / "tuning.md").read_text())
+    assert block == tune_drive0708.docs_table(res), "rerun: python benchmarks/tune_drive0708.py --write-docs"
+    res["folds"]["tuned-on-first"]["tuned"]["median_m"] += 1.0      # not vacuous
+    assert tune_drive0708.docs_table(res) != block
+
+
+@pytest.mark.parametrize("doc", ["README.md", "docs/features.md", "docs/evaluation.md", "docs/tuning.md"])
 def test_relative_links_resolve(doc):
     path = ROOT / doc
     missing = []

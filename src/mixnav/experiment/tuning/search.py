@@ -12,8 +12,8 @@ so a coordinate search with the candidates of a key run side by side uses two co
 and reaches a flat optimum in 40-60 evaluations; every evaluation is also a point of the
 report's criterion-against-parameter curves. Measured (benchmarks/tune_search.py,
 benchmarks/results/tune_search.md): on drive-0708's first half with 80 evaluations it reached
-the lowest criterion (1.225; scipy's Powell 1.310 and Nelder-Mead 1.386, optuna's TPE 1.96-2.76
-over three seeds). Then :func:`conservative_pass`.
+a lower criterion than scipy's Powell and Nelder-Mead and optuna's TPE. Then
+:func:`conservative_pass`.
 """
 
 from __future__ import annotations
