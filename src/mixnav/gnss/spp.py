@@ -909,7 +909,8 @@ def atmosphere_delay(lla, elevation, azimuth, tow: float, options: SppOptions = 
 
 
 def corrected_pseudoranges(ephemeris, week, tow_rx, epoch, prn, pseudorange, receiver_ecef,
-                           options: SppOptions = SppOptions(), cn0=None, source=None, doppler=None):
+                           options: SppOptions = SppOptions(), cn0=None, source=None, doppler=None,
+                           system=None, glonass_channel=None):
     """The raw pseudoranges as a :class:`~mixnav.gnss.pseudoranges.PseudorangeEpochs` with the
     broadcast corrections applied the way SPP applies them, for a filter that estimates
     position and clock itself (:class:`mixnav.measurements.pseudorange.PseudorangeGnss`).
@@ -943,10 +944,17 @@ def corrected_pseudoranges(ephemeris, week, tow_rx, epoch, prn, pseudorange, rec
     epochs : PseudorangeEpochs
         Times in seconds since the first epoch of ``week, tow_rx`` (as the SPP table's
         ``time_s``), GPS (system code 1); an epoch without a usable satellite is absent.
+        Several systems (``system`` (m,) letters with a MultiEphemeris, as
+        :func:`solve_epochs`): each row's system code
+        (:data:`mixnav.gnss.pseudoranges.SYSTEM_LETTERS`), the ionosphere scaled to its
+        frequency, its Doppler by its own wavelength.
     skipped : dict
         Observations left out per reason (ephemeris reasons, ``no position``).
     """
     from .pseudoranges import PseudorangeEpochs
+    if system is not None and (hasattr(ephemeris, "states_of") or (np.asarray(system) != "G").any()):
+        return _corrected_multi(ephemeris, week, tow_rx, epoch, prn, pseudorange, receiver_ecef, options, cn0,
+                                source, doppler, np.asarray(system).astype(str), glonass_channel)
     week = np.asarray(week)
     tow_rx = np.asarray(tow_rx, float)
     epoch = np.asarray(epoch, int)
@@ -997,6 +1005,82 @@ def corrected_pseudoranges(ephemeris, week, tow_rx, epoch, prn, pseudorange, rec
     ep = PseudorangeEpochs.from_rows(cat["t"], cat["pr"], cat["var"], cat["sat"], cat["id"],
                                      np.ones(len(cat["pr"]), int), elevation=cat["el"], cn0=cat["cn0"],
                                      source=source, sat_vel=cat["vel"] if dop is not None else None,
+                                     range_rate=cat["rr"] if dop is not None else None)
+    return ep, skipped
+
+
+def _corrected_multi(ephemeris, week, tow_rx, epoch, prn, pseudorange, receiver_ecef, options, cn0, source,
+                     doppler, system, glonass_channel):
+    """:func:`corrected_pseudoranges` over several systems (its docstring)."""
+    from .pseudoranges import SYSTEM_LETTERS, PseudorangeEpochs
+    codes = {v: k for k, v in SYSTEM_LETTERS.items()}
+    week = np.asarray(week)
+    tow_rx = np.asarray(tow_rx, float)
+    epoch = np.asarray(epoch, int)
+    prn = np.asarray(prn, int)
+    rho = np.asarray(pseudorange, float)
+    m = len(rho)
+    cn = np.full(m, np.nan) if cn0 is None else np.asarray(cn0, float)
+    dop = None if doppler is None else np.asarray(doppler, float)
+    ids = np.char.add(system, np.char.zfill(prn.astype(str), 2))
+    if glonass_channel is None:
+        table = ephemeris["R"].channels() if "R" in ephemeris else {}
+        glonass_channel = np.array([table.get(int(p), 99) if s == "R" else 99 for s, p in zip(system, prn)])
+    freq = first_frequency(system, glonass_channel)
+    iono_on = options.ionosphere and "G" in ephemeris and ephemeris["G"].iono_alpha is not None
+    alpha = ephemeris["G"].iono_alpha if iono_on else None
+    beta = ephemeris["G"].iono_beta if iono_on else None
+    no_freq = ~np.isfinite(freq) if (iono_on or dop is not None) else np.zeros(m, bool)
+    iono_scale = iono_scale_factors(np.where(np.isfinite(freq), freq, F_L1))
+    t_abs = week * 604800.0 + tow_rx
+    t_rel = t_abs - t_abs[0]
+    order = np.argsort(epoch, kind="stable")
+    bounds = np.searchsorted(epoch[order], np.arange(len(tow_rx) + 1))
+    skipped: dict[str, int] = {}
+    out = {k: [] for k in ("t", "pr", "var", "sat", "id", "sys", "el", "cn0", "vel", "rr")}
+    for j in range(len(tow_rx)):
+        rows = order[bounds[j]:bounds[j + 1]]
+        if len(rows) == 0:
+            continue
+        x = np.asarray(receiver_ecef[j], float)
+        if not np.isfinite(x).all():
+            skipped["no position"] = skipped.get("no position", 0) + len(rows)
+            continue
+        if no_freq[rows].any():
+            skipped[NO_GLONASS_CHANNEL] = skipped.get(NO_GLONASS_CHANNEL, 0) + int(no_freq[rows].sum())
+            rows = rows[~no_freq[rows]]
+        sats, letters, keep, skips = satellites_at_transmit_multi(ephemeris, ids[rows], rho[rows], week[j], tow_rx[j])
+        for sk in skips.values():
+            for r, c in sk.counts().items():
+                skipped[r] = skipped.get(r, 0) + c
+        if len(sats) == 0:
+            continue
+        used = rows[keep]
+        r_geo = np.linalg.norm(sats.pos_ecef - x, axis=1)
+        el, az = elevation_azimuth(x, earth_rotation_correction(sats.pos_ecef, r_geo / C_LIGHT))
+        delay = atmosphere_delay(ecef_to_lla(x), el, az, tow_rx[j], options, alpha, beta, iono_scale=iono_scale[used])
+        s_el = np.sin(np.maximum(el, 1e-3))
+        n = len(sats)
+        out["t"].append(np.full(n, t_rel[j]))
+        out["pr"].append(rho[used] + C_LIGHT * sats.clock_bias - delay)
+        out["var"].append(options.sigma_a ** 2 + options.sigma_b ** 2 / s_el ** 2)
+        out["sat"].append(sats.pos_ecef)
+        out["id"].append(prn[used])
+        out["sys"].append(np.array([codes[s] for s in letters], int))
+        out["el"].append(el)
+        out["cn0"].append(cn[used])
+        if dop is not None:
+            out["vel"].append(sats.vel_ecef)
+            out["rr"].append(-(C_LIGHT / freq[used]) * dop[used] + C_LIGHT * sats.clock_drift)
+    vec = ("sat", "vel")
+    if not out["t"]:
+        cat = {k: np.zeros((0, 3)) if k in vec else np.zeros(0) for k in out}
+        cat["sys"] = np.zeros(0, int)
+    else:
+        cat = {k: (np.vstack(v) if k in vec else np.concatenate(v)) if v else None for k, v in out.items()}
+    ep = PseudorangeEpochs.from_rows(cat["t"], cat["pr"], cat["var"], cat["sat"], cat["id"], cat["sys"],
+                                     elevation=cat["el"], cn0=cat["cn0"], source=source,
+                                     sat_vel=cat["vel"] if dop is not None else None,
                                      range_rate=cat["rr"] if dop is not None else None)
     return ep, skipped
 
