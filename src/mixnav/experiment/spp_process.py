@@ -190,7 +190,11 @@ def _systems_of(obs, eph):
     """``(system, glonass_channel)`` to hand the SPP: None, None for GPS with GPS records;
     a row of another system without a MultiEphemeris is an ArgumentError."""
     if not hasattr(eph, "states_of"):
-        gps_rows(obs)
+        if obs.system is not None and (np.asarray(obs.system) != "G").any():
+            others = sorted(set(np.asarray(obs.system).tolist()) - {"G"})
+            raise ArgumentError(f"observations of systems {', '.join(others)} with GPS navigation records alone: "
+                                "give their navigation files (a MultiEphemeris; [raw_gnss] navigation = [...])",
+                                argument="obs")
         return None, None
     system = obs.systems()
     chan = obs.glonass_channel() if (system == "R").any() else None

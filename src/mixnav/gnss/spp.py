@@ -317,6 +317,11 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
     rho_corr = rho + C_LIGHT * sats.clock_bias                      # satellite clock removed
     atm = (options, iono_alpha, iono_beta, tow, iono_scale, sys_col, n_off)
     x, sel, it, converged = _gauss_newton(rho_corr, sats, x, scale, np.ones(n, bool), atm)
+    if not converged and abs(np.linalg.norm(x[:3]) - 6.371e6) < 5e5:
+        # a satellite at the mask can enter and leave from one step to the next, so the steps
+        # never settle: the last step's set is kept fixed and the iterations go on from there
+        x, sel, k, converged = _gauss_newton(rho_corr, sats, x, scale, sel, atm, mask=False)
+        it += k
     gamma, status = np.ones(n), "off"
     if options.robust is not None and converged:
         x, gamma, status, k = _igg3_solution(rho_corr, sats, x, scale, sel, atm)
@@ -417,9 +422,10 @@ def _linearise(x, sats, atm, always: bool = False):
     return H, model, el
 
 
-def _gauss_newton(rho_corr, sats, x, scale, use, atm):
-    """WLS iterations from ``x`` on the rows ``use`` above the elevation mask: ``(x, sel,
-    iterations, converged)``, ``sel`` the rows of the last step."""
+def _gauss_newton(rho_corr, sats, x, scale, use, atm, mask: bool = True):
+    """WLS iterations from ``x`` on the rows ``use`` above the elevation mask (``mask``
+    False: on the rows ``use`` as they are): ``(x, sel, iterations, converged)``, ``sel``
+    the rows of the last step."""
     options = atm[0]
     sel = use.copy()
     converged = False
@@ -428,7 +434,7 @@ def _gauss_newton(rho_corr, sats, x, scale, use, atm):
         near_surface = abs(np.linalg.norm(x[:3]) - 6.371e6) < 5e5
         H, model, el = _linearise(x, sats, atm)
         sel = use.copy()
-        if near_surface:
+        if near_surface and mask:
             # the rows below the mask are left out of the solution: what is added to them is moot
             sel &= el >= options.elevation_mask
         act = _active(sel, atm[5], atm[6])
