@@ -39,7 +39,7 @@ from mixnav.config.loader import load_dataset  # noqa: E402
 from mixnav.experiment.data_folder import find_data_dir  # noqa: E402
 from mixnav.experiment.spp_process import raw_tables, read_raw, solve_raw  # noqa: E402
 from mixnav.gnss.spp import solve_epochs  # noqa: E402
-from mixnav.experiment.spp_process import _systems_of, options  # noqa: E402
+from mixnav.experiment.spp_process import _systems_of, options, solution_table  # noqa: E402
 
 OUT = ROOT / "benchmarks" / "results"
 N_EPOCHS = 986
@@ -98,6 +98,12 @@ def run_set(name: str, letters: list[str]) -> dict:
     for m, res in po.results.items():
         methods[m]["time_per_epoch_ms"] = float(res.timing.get("epoch_time_mean_us", np.nan)) / 1e3
     methods["spp"]["time_per_epoch_ms"] = 1e3 * min(spp) / N_EPOCHS
+    # the weights' share in the plain SPP's error: the same solution with equal weights
+    # (sigma_b = 0), RTKLIB's being in between (its variances: module docstring of the report)
+    import dataclasses
+    eq = solve_epochs(eph, obs.week, obs.tow, obs.epoch, obs.prn, obs.pseudorange,
+                      dataclasses.replace(options(ds), sigma_b=0.0), system=system, glonass_channel=chan)
+    methods["spp-equal-weights"] = scores(solution_table(po, eq))
     return {"systems": letters, "read_time_s": min(reads), "spp_time_s": min(spp),
             "spp_time_per_epoch_ms": 1e3 * min(spp) / N_EPOCHS, "methods": methods,
             "status": po.track.status_counts(), "satellites_skipped_by_system": po.track.skipped_by_system,
@@ -149,9 +155,17 @@ def report(data: dict) -> str:
             s = {"epochs": q[5], "availability": q[5] / N_EPOCHS, "h_rmse_m": q[0], "h_median_m": q[1],
                  "h_p95_m": q[2], "h_max_m": q[3], "rmse_3d_m": q[4]}
             lines.append(_row(f"{name} | {label}", s))
-        for m in ("spp", "robust-spp"):
+        for m in ("spp", "spp-equal-weights", "robust-spp"):
             lines.append(_row(f"{name} | mixnav {m}", r["methods"][m]))
-    lines += ["", "## Every method, per system set", "",
+    lines += ["", "mixnav's plain SPP uses the same orbits, clocks, group delays, mask, Klobuchar (scaled "
+              "per frequency) and Saastamoinen as RTKLIB demo5; the weights differ. mixnav: sigma^2 = 3^2 + "
+              "3^2/sin^2(el) m^2. RTKLIB (rtklib_urbannav.md): 0.81 (1 + 1/sin el) m^2 code term plus the "
+              "broadcast ephemeris (URA), code-bias (0.3 m), ionosphere (half the Klobuchar delay) and "
+              "Saastamoinen (0.3 / (sin el + 0.1) m) variances, so its weights vary less with elevation. "
+              "`spp-equal-weights` (sigma_b = 0) brackets it from the other side: RTKLIB's RMSE lies between "
+              "mixnav's two, so the 10 % target against demo5 is a question of the weight model, which "
+              "mixnav does not copy (the robust SPP and the filters keep mixnav's).", "",
+              "## Every method, per system set", "",
               "| systems | method | epochs | avail. | h RMSE | median | p95 | max | 3-D RMSE | time/epoch [ms] |",
               "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for name, r in res.items():

@@ -1,4 +1,5 @@
-"""Single-point positioning (SPP) from GPS L1 C/A pseudoranges by iterated weighted least squares.
+"""Single-point positioning (SPP) by iterated weighted least squares: GPS L1 C/A, or several
+systems' first-frequency pseudoranges (GPS, GLONASS, Galileo, BeiDou, QZSS).
 
 Model of one pseudorange (all in metres)::
 
@@ -58,9 +59,20 @@ injected 80 m error). A row whose residual variance is below 5 % of its
 sigma^2 (the geometry hardly checks it) is not tested. The covariance is that
 of the final weights.
 
-A single epoch with fewer than 4 usable satellites raises ``ValueError`` in
-:func:`wls_position`; :func:`solve_epochs` counts such epochs as skipped
-(status ``"too few satellites"``) instead.
+Several systems (:func:`solve_epochs` with ``system``; :func:`wls_position` with
+``system``): ``b`` is the receiver clock of the first system present (order ``G R E C
+J``) and each other system with a satellite used adds an offset unknown ``b_s`` to its
+pseudoranges (receiver inter-system biases, the systems' time offsets, group delays not
+in the broadcast ones); ``I_i`` is Klobuchar's L1 delay times ``(f_L1 / f_i)^2``
+(:func:`first_frequency`, :func:`iono_scale_factors`). The robust solution's
+redundancy thresholds are then "2 rows beyond the unknowns" (6 for one system). One
+system is exactly the single-system solution.
+
+A single epoch with fewer usable satellites than unknowns (4, plus one per extra
+system) raises ``ValueError`` in :func:`wls_position`; :func:`solve_epochs` counts such
+epochs as skipped (status ``"too few satellites"``) instead. A satellite at the mask
+that enters and leaves from one iteration to the next (the steps never settle) is
+settled by keeping the last set fixed and iterating on from there.
 """
 
 from __future__ import annotations
