@@ -270,3 +270,21 @@ def test_glonass_without_frequency_number_left_out_and_counted(urban):
                         system=obs.system[m])
     assert NO_GLONASS_CHANNEL not in dflt.skipped_satellites
     assert np.allclose(ecef_to_lla(dflt.pos_ecef[0])[:2], REF[:2], atol=np.deg2rad(0.01))
+
+
+def test_shipped_urbannav_config(tmp_path):
+    from mixnav.config.loader import load_dataset
+    from mixnav.errors import ConfigError
+    ds, src, text = load_dataset("urbannav-tst-static")
+    c = ds.raw_gnss
+    assert ds.dataset.kind == "gnss-raw" and c.format == "rinex-obs" and c.systems == ["G", "R", "E", "C"]
+    assert len(c.files("navigation")) == 8 and np.rad2deg(c.elevation_mask) == pytest.approx(15.0)
+    assert np.rad2deg(ds.reference_point.latitude) == pytest.approx(22.299915404, abs=1e-12)
+    names = [m.name for m in ds.run_methods()]
+    assert names[:2] == ["spp", "robust-spp"] and {"epoch-mixture", "vb-akf", "ekf"} <= set(names)
+    # several navigation files are for RINEX: the phone format reads GPS from one
+    from .test_process_raw import SHIPPED, _cfg
+    bad = SHIPPED.replace('navigation = "hour1820.16n"', 'navigation = ["hour1820.16n", "other.16n"]')
+    with pytest.raises(ConfigError, match="reads GPS from one navigation file") as e:
+        load_dataset(_cfg(tmp_path, bad))
+    assert e.value.key.startswith("raw_gnss")
