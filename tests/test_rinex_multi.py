@@ -477,12 +477,17 @@ def test_unknown_systems_and_signals_are_named(tmp_path):
     ds, src, _ = load_dataset(_cfg(tmp_path, rinex.replace('format = "rinex-obs"',
                                                            'format = "rinex-obs"\nsystems = ["G", "E"]')))
     assert ds.raw_gnss.systems == ["G", "E"]
-    from mixnav.experiment.spp_process import read_raw, solve_raw
-    with pytest.raises(ConfigError, match="GPS alone so far") as e:
-        read_raw(ds, src, tmp_path)
-    assert e.value.key == "raw_gnss.systems"
-    # and observations of other systems handed over directly (library use)
-    with pytest.raises(ArgumentError, match="observations of systems E, R: positioning uses GPS alone") as e:
+    from mixnav.experiment.spp_process import solve_raw
+    # several systems are solved now (tests/test_spp_multi.py); a signal other than the
+    # system's first-frequency one is refused, naming the key, before any file is read
+    from mixnav.experiment.spp_process import read_raw
+    ds2, src2, _ = load_dataset(_cfg(tmp_path, rinex.replace(
+        'format = "rinex-obs"', 'format = "rinex-obs"\nsystems = ["G", "E"]\nsignals = { E = "C5Q" }')))
+    with pytest.raises(ConfigError, match="E: C5Q is not the system's first-frequency") as e:
+        read_raw(ds2, src2, tmp_path)
+    assert e.value.key == "raw_gnss.signals.E"
+    # observations of other systems handed over directly with GPS records alone (library use)
+    with pytest.raises(ArgumentError, match="observations of systems E, R with GPS navigation records alone") as e:
         solve_raw(ds, src, tmp_path, read_rinex_obs(path, systems="GRE"), None)
     assert e.value.argument == "obs"
 

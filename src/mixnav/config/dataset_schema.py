@@ -140,8 +140,9 @@ class Alignment(Strict):
 class RawGnss(Strict):
     """Raw GNSS measurements and the broadcast ephemeris for single-point positioning.
 
-    ``file``: the measurement log; ``navigation``: the RINEX navigation file
-    (both relative to the data folder). ``elevation_mask``, ``sigma_a``,
+    ``file``: the measurement log; ``navigation``: the RINEX navigation file, or with
+    ``format = "rinex-obs"`` a list of them (e.g. one per system and hour: every system of
+    ``systems`` other than GPS needs its broadcast records; both relative to the data folder). ``elevation_mask``, ``sigma_a``,
     ``sigma_b`` (pseudorange sigma ``sqrt(a^2 + b^2 / sin^2(el))``),
     ``troposphere`` (Saastamoinen) and ``ionosphere`` (Klobuchar, when the
     navigation header has its coefficients) set the solver
@@ -157,7 +158,7 @@ class RawGnss(Strict):
 
     format: Literal["android-gnsslogger", "rinex-obs"]
     file: str
-    navigation: str
+    navigation: str | list[str]
     elevation_mask: ElevationMask = 10.0 * u.DEG  # type: ignore[valid-type]
     sigma_a: quantity(u.LENGTH, nonnegative=True) = 3.0  # type: ignore[valid-type]
     sigma_b: quantity(u.LENGTH, nonnegative=True) = 3.0  # type: ignore[valid-type]
@@ -183,8 +184,23 @@ class RawGnss(Strict):
         except ArgumentError as exc:   # argument "signals.<letter>"
             raise ValueError(f"{exc.argument.split('.', 1)[-1]}: {exc.message}") from None
 
+    @field_validator("navigation")
+    @classmethod
+    def _some_nav(cls, v):
+        if isinstance(v, list) and not v:
+            raise ValueError("give at least one file")
+        return v
+
+    def files(self, key: str) -> list[str]:
+        """``file`` or ``navigation`` as a list."""
+        v = getattr(self, key)
+        return [v] if isinstance(v, str) else list(v)
+
     @model_validator(mode="after")
     def _rinex_keys(self):
+        if self.format != "rinex-obs" and isinstance(self.navigation, list) and len(self.navigation) > 1:
+            raise ValueError(f"navigation: format \"{self.format}\" reads GPS from one navigation file "
+                             f"(several files: format = \"rinex-obs\")")
         if self.format != "rinex-obs":
             for key in ("systems", "signals"):
                 if key in self.model_fields_set:
@@ -234,11 +250,6 @@ class InsRawGnss(RawGnss):
         if isinstance(v, list) and not v:
             raise ValueError("give at least one file")
         return v
-
-    def files(self, key: str) -> list[str]:
-        """``file`` or ``navigation`` as a list."""
-        v = getattr(self, key)
-        return [v] if isinstance(v, str) else list(v)
 
 
 class ReferencePoint(Strict):

@@ -3,7 +3,10 @@ and constant-velocity filters started from it.
 
 Steps: read the raw measurement log (the raw-GNSS reader of ``raw_gnss.format``,
 :mod:`mixnav.io.readers`: an Android log or a RINEX observation file) and the RINEX navigation file
-(:mod:`mixnav.gnss.ephemeris`), solve every epoch by WLS (:mod:`mixnav.gnss.spp`), and
+(:mod:`mixnav.gnss.ephemeris`; GPS from one file), or with ``systems`` beyond GPS the
+navigation files of every system (:class:`mixnav.gnss.multi_ephemeris.MultiEphemeris`; the
+GLONASS frequency numbers taken from them), solve every epoch by WLS (:mod:`mixnav.gnss.spp`:
+one receiver clock plus one offset per extra system in the epoch), and
 score the solutions against the surveyed static point of ``[reference_point]``: north,
 east, down errors, their RMS, maximum and 95th percentile, and the position NEES with
 the WLS covariance. Epochs without a solution are counted by status, never raised.
@@ -58,7 +61,7 @@ class SppOutput:
     source: str
     data_dir: Path
     observations: RawPseudoranges      # what the raw-GNSS reader of the format gave
-    ephemeris: BroadcastEphemeris
+    ephemeris: BroadcastEphemeris      # or a MultiEphemeris (systems beyond GPS)
     track: SppTrack
     reference_lla: np.ndarray | None   # (3,) rad, rad, m
     read_time_s: float
@@ -108,30 +111,111 @@ def gps_rows(obs: RawPseudoranges) -> None:
                             "(read with systems = ['G'])", argument="obs")
 
 
+def multi_system(c) -> bool:
+    """Whether a ``[raw_gnss]`` table is solved over several systems (a MultiEphemeris of
+    every navigation file): ``systems`` beyond GPS, or several navigation files."""
+    return tuple(c.systems) != ("G",) or len(c.files("navigation")) > 1
+
+
+#: RINEX signal codes of each system's first-frequency civil signal, the one the SPP models
+#: (the group delays of mixnav.gnss.multi_ephemeris and the frequencies of
+#: mixnav.gnss.spp.first_frequency): band 1 (GLONASS G1, Galileo E1, QZSS L1), BeiDou B1I
+#: (RINEX 3.02 wrote it C1I, the other versions C2I)
+FIRST_FREQUENCY_CODES = {"G": ("C1", "P1", "C1C", "C1S", "C1L", "C1X", "C1P", "C1W", "C1Y", "C1M"),
+                         "R": ("C1", "P1", "C1C", "C1P"), "E": ("C1", "C1A", "C1B", "C1C", "C1X", "C1Z"),
+                         "C": ("C1", "C2", "C1I", "C1Q", "C2I", "C2Q", "C2X"),
+                         "J": ("C1", "C1C", "C1S", "C1L", "C1X", "C1Z")}
+
+
+def check_first_frequency(c, source: str) -> None:
+    """The SPP of several systems models each system's first-frequency civil signal: a
+    ``signals`` entry naming another (``C5Q``, ``C7I``...) is a ConfigError naming the key."""
+    for letter, codes in c.signals.items():
+        bad = [code for code in codes if code not in FIRST_FREQUENCY_CODES.get(letter, ())]
+        if bad:
+            raise ConfigError(f"{letter}: {', '.join(bad)} is not the system's first-frequency civil signal, the "
+                              f"one the SPP's group delays and ionosphere scaling are for (use one of "
+                              f"{', '.join(FIRST_FREQUENCY_CODES[letter])})", file=source,
+                              key=f"raw_gnss.signals.{letter}")
+
+
+def read_navigation(c, folder: Path, source: str):
+    """The broadcast ephemeris of a ``[raw_gnss]`` table: GPS from one file
+    (BroadcastEphemeris, as before), else a MultiEphemeris of every file. A system of
+    ``systems`` no file gives records for is warned about, naming it and the files (its
+    satellites are then left out, counted per system); no records at all for any of them is
+    a ConfigError naming ``raw_gnss.navigation``."""
+    paths = [folder / f for f in c.files("navigation")]
+    if not multi_system(c):
+        return BroadcastEphemeris.from_rinex(paths[0])
+    from ..gnss.multi_ephemeris import SYSTEM_NAMES, MultiEphemeris
+    eph = MultiEphemeris.from_rinex(paths)
+    missing = [s for s in c.systems if s not in eph]
+    if len(missing) == len(c.systems):
+        raise ConfigError(f"no navigation records for any of the systems {', '.join(c.systems)} in "
+                          f"{', '.join(str(p) for p in paths)}", file=source, key="raw_gnss.navigation")
+    if missing:
+        import warnings
+        from ..io.imu_checks import DataWarning
+        names = ", ".join(f"{SYSTEM_NAMES[s]} ({s})" for s in missing)
+        warnings.warn(f"{source}: raw_gnss.navigation: no navigation records for {names} in "
+                      f"{', '.join(str(p) for p in paths)}; its satellites are left out (metrics.json: "
+                      "satellites_skipped_by_system)", DataWarning, stacklevel=3)
+    return eph
+
+
 def read_raw(ds: RawGnssDataset, source: str, folder: Path) -> tuple[RawPseudoranges, BroadcastEphemeris, float]:
-    """The raw log (the raw-GNSS reader of ``raw_gnss.format``) and the navigation file, and
-    the time it took [s]."""
+    """The raw log (the raw-GNSS reader of ``raw_gnss.format``) and the navigation file(s),
+    and the time it took [s]. With several systems the GLONASS frequency numbers of the
+    navigation records are attached to the observations."""
     c = ds.raw_gnss
-    gps_only(c, source)
+    if multi_system(c):
+        check_first_frequency(c, source)
     t0 = _time.perf_counter()
     obs = read_table("raw-gnss", c, folder, "raw_gnss", source)
-    eph = BroadcastEphemeris.from_rinex(folder / c.navigation)
+    eph = read_navigation(c, folder, source)
+    if "R" in c.systems and hasattr(eph, "states_of") and "R" in eph:
+        obs = obs.with_glonass_channels(eph["R"].channels())
     return obs, eph, _time.perf_counter() - t0
+
+
+def _iono_alpha(eph):
+    """The Klobuchar alpha the SPP uses (GPS's: a MultiEphemeris's GPS header), or None."""
+    if hasattr(eph, "states_of"):
+        return eph["G"].iono_alpha if "G" in eph else None
+    return eph.iono_alpha
+
+
+def _systems_of(obs, eph):
+    """``(system, glonass_channel)`` to hand the SPP: None, None for GPS with GPS records;
+    a row of another system without a MultiEphemeris is an ArgumentError."""
+    if not hasattr(eph, "states_of"):
+        if obs.system is not None and (np.asarray(obs.system) != "G").any():
+            others = sorted(set(np.asarray(obs.system).tolist()) - {"G"})
+            raise ArgumentError(f"observations of systems {', '.join(others)} with GPS navigation records alone: "
+                                "give their navigation files (a MultiEphemeris; [raw_gnss] navigation = [...])",
+                                argument="obs")
+        return None, None
+    system = obs.systems()
+    chan = obs.glonass_channel() if (system == "R").any() else None
+    return system, chan
 
 
 def solve_raw(ds: RawGnssDataset, source: str, folder: Path, obs, eph: BroadcastEphemeris, read_time_s: float = 0.0,
               seed: int = 0) -> SppOutput:
-    """SPP of every epoch of ``obs`` (read observations, GPS) and the filter methods."""
-    gps_rows(obs)
+    """SPP of every epoch of ``obs`` (read observations: GPS with a BroadcastEphemeris, any
+    systems with a MultiEphemeris) and the filter methods."""
+    system, chan = _systems_of(obs, eph)
     c = ds.raw_gnss
-    if c.ionosphere and eph.iono_alpha is None:   # asked for, and impossible: said, not silent
+    if c.ionosphere and _iono_alpha(eph) is None:   # asked for, and impossible: said, not silent
         import warnings
         from ..io.imu_checks import DataWarning
-        warnings.warn(f"{folder / c.navigation}: the header has no ionosphere (Klobuchar) coefficients, so the "
-                      "ionosphere correction is skipped and every pseudorange keeps its 2-10 m delay "
-                      "(metrics.json: ionosphere)", DataWarning, stacklevel=3)
+        warnings.warn(f"{', '.join(str(folder / f) for f in c.files('navigation'))}: no GPS header with ionosphere "
+                      "(Klobuchar) coefficients, so the ionosphere correction is skipped and every pseudorange "
+                      "keeps its 2-10 m delay (metrics.json: ionosphere)", DataWarning, stacklevel=3)
     t1 = _time.perf_counter()
-    track = solve_epochs(eph, obs.week, obs.tow, obs.epoch, obs.prn, obs.pseudorange, options(ds))
+    track = solve_epochs(eph, obs.week, obs.tow, obs.epoch, obs.prn, obs.pseudorange, options(ds), system=system,
+                         glonass_channel=chan)
     t2 = _time.perf_counter()
     rp = ds.reference_point
     ref = None if rp is None else np.array([rp.latitude, rp.longitude, rp.height])
@@ -140,7 +224,7 @@ def solve_raw(ds: RawGnssDataset, source: str, folder: Path, obs, eph: Broadcast
         if m.estimator == "wls" and m.robust is not None:
             t3 = _time.perf_counter()
             po.robust_tracks[m.name] = solve_epochs(eph, obs.week, obs.tow, obs.epoch, obs.prn, obs.pseudorange,
-                                                    options(ds, m))
+                                                    options(ds, m), system=system, glonass_channel=chan)
             po.robust_time_s[m.name] = _time.perf_counter() - t3
     filters = [(k, m) for k, m in enumerate(ds.run_methods()) if m.estimator != "wls"]
     if filters:
@@ -175,10 +259,29 @@ def filter_start(po: SppOutput) -> InitialState:
     nav = np.zeros(10)
     nav[0] = 1.0
     nav[7:10] = lla
+    clock0, aux0 = tr.clock_bias[j], None
+    letters = filter_systems(tr)
+    if len(letters) > 1:
+        # the filter's clock is its first system's; the others start at the fix's offsets to it
+        # (0 for a system the fix did not use)
+        ref = tr.offsets[letters[0]][j]
+        ref = ref if np.isfinite(ref) else 0.0
+        clock0 = clock0 + ref
+        aux0 = {"system_offset": np.array([v - ref if np.isfinite(v := tr.offsets[s][j]) else 0.0
+                                           for s in letters[1:]])}
     return InitialState(time=float(_epoch_times(tr)[j]), nav=nav, sigma_att=np.zeros(3),
                         sigma_vel=np.full(3, float(mc.velocity_sigma)), sigma_pos=sig_pos,
                         sigma_clock=np.array([f * np.sqrt(tr.cov[j, 3, 3]), float(mc.clock_drift_sigma)]),
-                        clock0=np.array([tr.clock_bias[j], 0.0]))
+                        clock0=np.array([clock0, 0.0]), aux0=aux0)
+
+
+def filter_systems(tr: SppTrack) -> tuple[str, ...]:
+    """The systems the filters estimate a clock (the first) and offsets for: those with a
+    satellite in some SPP solution, in the order ``G R E C J`` (GPS alone without
+    offsets)."""
+    if not tr.offsets:
+        return ("G",)
+    return tuple(s for s, v in tr.offsets.items() if np.isfinite(v).any())
 
 
 def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
@@ -204,13 +307,19 @@ def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
     # jumps seen by the SPP come off the pseudoranges first (the first fix has none)
     offset, jumps, spikes = clock_jumps(times, tr.clock_bias, tr.ok, float(mc.clock_jump))
     rho = np.asarray(obs.pseudorange, float) - offset[np.asarray(obs.epoch, int)]
+    system, chan = _systems_of(obs, po.ephemeris)
     epochs, skipped = corrected_pseudoranges(po.ephemeris, obs.week, obs.tow, obs.epoch, obs.prn, rho,
-                                             rx, opts, cn0=getattr(obs, "cn0", None), source=obs.source)
+                                             rx, opts, cn0=getattr(obs, "cn0", None), source=obs.source,
+                                             system=system, glonass_channel=chan)
     end = float(times[-1])
     if not end > init.time:
         raise DataError("the first SPP fix is at the last epoch: nothing left to filter", file=obs.source)
-    lay = constant_velocity_layout(clock=True)
-    model = PseudorangeGnss(epochs, lay, systems=(1,), variance="given", elevation_mask=opts.elevation_mask)
+    from ..gnss.pseudoranges import SYSTEM_LETTERS
+    codes = {v: k for k, v in SYSTEM_LETTERS.items()}
+    letters = filter_systems(tr)
+    lay = constant_velocity_layout(clock=True, system_offsets=len(letters) - 1)
+    model = PseudorangeGnss(epochs, lay, systems=tuple(codes[s] for s in letters), variance="given",
+                            elevation_mask=opts.elevation_mask)
     noise = ConstantVelocityNoise(float(mc.accel_sigma), float(mc.vertical_accel_sigma))
     clock = ClockModel(float(mc.clock_q_bias), float(mc.clock_q_drift))
     ticks = clock_ticks(init.time, end, float(mc.step))
@@ -232,7 +341,7 @@ def ionosphere_applied(po: SppOutput) -> str:
     (asked for, but the navigation header has no Klobuchar coefficients; warned)."""
     if not po.dataset.raw_gnss.ionosphere:
         return "off"
-    return "klobuchar" if po.ephemeris.iono_alpha is not None else "skipped"
+    return "klobuchar" if _iono_alpha(po.ephemeris) is not None else "skipped"
 
 
 def solution_table(po: SppOutput, track: SppTrack | None = None) -> pd.DataFrame:
@@ -412,6 +521,10 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None, sweeps=())
         {"lat_deg": float(np.degrees(po.reference_lla[0])), "lon_deg": float(np.degrees(po.reference_lla[1])),
          "height_m": float(po.reference_lla[2])},
         "ionosphere": ionosphere_applied(po),
+        "systems": list(po.dataset.raw_gnss.systems),
+        **({"satellites_skipped_by_system": dict(tr.skipped_by_system),
+            "system_offsets_median_m": {s: float(np.nanmedian(v)) for s, v in tr.offsets.items()
+                                        if np.isfinite(v).any()}} if tr.offsets else {}),
         **({"filters": po.checks} if po.results else {}),
         "methods": {name: method_metrics(po, name, t) for name, t in tables.items()},
     }
@@ -431,7 +544,11 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None, sweeps=())
     opts = options(po.dataset)
     iono = {"klobuchar": "Klobuchar (broadcast coefficients)", "off": "none (switched off)",
             "skipped": "none: the navigation header has no coefficients"}[ionosphere_applied(po)]
-    notes = [f"Single-point positioning, GPS L1 C/A pseudoranges, {used} of {len(table)} epochs solved "
+    from ..gnss.signals import SYSTEMS
+    sysnames = "+".join(SYSTEMS[s] for s in po.dataset.raw_gnss.systems)
+    what = "GPS L1 C/A pseudoranges" if sysnames == "GPS" else (
+        f"{sysnames} first-frequency pseudoranges (one receiver clock, one offset per extra system in the epoch)")
+    notes = [f"Single-point positioning, {what}, {used} of {len(table)} epochs solved "
              f"(status counts: {counts}).",
              f"Elevation mask {np.degrees(opts.elevation_mask):.1f} deg; sigma = sqrt({opts.sigma_a:g}^2 + "
              f"{opts.sigma_b:g}^2 / sin^2(el)) m; troposphere: {'Saastamoinen' if opts.troposphere else 'none'}; "

@@ -1,4 +1,5 @@
-"""Single-point positioning (SPP) from GPS L1 C/A pseudoranges by iterated weighted least squares.
+"""Single-point positioning (SPP) by iterated weighted least squares: GPS L1 C/A, or several
+systems' first-frequency pseudoranges (GPS, GLONASS, Galileo, BeiDou, QZSS).
 
 Model of one pseudorange (all in metres)::
 
@@ -58,9 +59,20 @@ injected 80 m error). A row whose residual variance is below 5 % of its
 sigma^2 (the geometry hardly checks it) is not tested. The covariance is that
 of the final weights.
 
-A single epoch with fewer than 4 usable satellites raises ``ValueError`` in
-:func:`wls_position`; :func:`solve_epochs` counts such epochs as skipped
-(status ``"too few satellites"``) instead.
+Several systems (:func:`solve_epochs` with ``system``; :func:`wls_position` with
+``system``): ``b`` is the receiver clock of the first system present (order ``G R E C
+J``) and each other system with a satellite used adds an offset unknown ``b_s`` to its
+pseudoranges (receiver inter-system biases, the systems' time offsets, group delays not
+in the broadcast ones); ``I_i`` is Klobuchar's L1 delay times ``(f_L1 / f_i)^2``
+(:func:`first_frequency`, :func:`iono_scale_factors`). The robust solution's
+redundancy thresholds are then "2 rows beyond the unknowns" (6 for one system). One
+system is exactly the single-system solution.
+
+A single epoch with fewer usable satellites than unknowns (4, plus one per extra
+system) raises ``ValueError`` in :func:`wls_position`; :func:`solve_epochs` counts such
+epochs as skipped (status ``"too few satellites"``) instead. A satellite at the mask
+that enters and leaves from one iteration to the next (the steps never settle) is
+settled by keeping the last set fixed and iterating on from there.
 """
 
 from __future__ import annotations
@@ -71,7 +83,7 @@ import numpy as np
 
 from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla
 from ..noise.igg3 import igg3_factors
-from .geometry import C_LIGHT, LAMBDA_L1, SatelliteStates, earth_rotation_correction, elevation_azimuth
+from .geometry import C_LIGHT, F_L1, LAMBDA_L1, SatelliteStates, earth_rotation_correction, elevation_azimuth
 
 #: the robust solution blames a row only if its standardised residual exceeds every other
 #: row's by this many standard deviations of their difference (module docstring, "Robust
@@ -150,8 +162,17 @@ class SppSolution:
         Rows the robust solution down-weighted, and left out (weight zero).
     robust_status : str
         ``"off"`` (plain WLS), ``"ok"`` (rows tested, weighed where needed),
-        ``"untestable"`` (fewer than 6 rows: plain WLS) or ``"not_separable"`` (the
-        suspect row's residual moves with another's: left as it was). Module docstring.
+        ``"untestable"`` (fewer than 2 rows beyond the unknowns, 6 for one system: plain
+        WLS) or ``"not_separable"`` (the suspect row's residual moves with another's: left
+        as it was). Module docstring.
+    system : ndarray of str (k,) or None
+        System letter of each satellite used (None: one system, no ``system`` given).
+    offsets : dict of str -> float
+        Several systems: the inter-system offset [m] of each system other than the
+        clock's (the first of ``G R E C J`` with a satellite used), added to the clock
+        for that system's pseudoranges; the clock's own system maps to 0. Empty for one
+        system. ``cov`` is then ``(4 + len(offsets) - 1)`` square, offsets in the order
+        of ``offsets``.
     """
 
     pos_ecef: np.ndarray
@@ -167,6 +188,8 @@ class SppSolution:
     n_downweighted: int = 0
     n_excluded: int = 0
     robust_status: str = "off"
+    system: np.ndarray | None = None
+    offsets: dict = field(default_factory=dict)
 
     @property
     def n_sat(self) -> int:
@@ -235,16 +258,24 @@ def _dops(H: np.ndarray, pos_ecef: np.ndarray) -> dict:
     lla = ecef_to_lla(pos_ecef)
     c_ne = dcm_ecef_to_ned(lla[0], lla[1])
     c_ue = np.array([c_ne[1], c_ne[0], -c_ne[2]])                  # ECEF -> ENU
-    G = np.column_stack([H[:, :3] @ c_ue.T, H[:, 3]])
-    q = np.linalg.solve(G.T @ G, np.eye(4))
+    G = np.column_stack([H[:, :3] @ c_ue.T, H[:, 3:]])          # clock (and offsets) columns
+    q = np.linalg.solve(G.T @ G, np.eye(G.shape[1]))
     d = np.diag(q)
     return {"gdop": float(np.sqrt(d.sum())), "pdop": float(np.sqrt(d[:3].sum())),
             "hdop": float(np.sqrt(d[:2].sum())), "vdop": float(np.sqrt(d[2])), "tdop": float(np.sqrt(d[3]))}
 
 
 def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOptions(), x0=None,
-                 sigma_scale=None, iono_alpha=None, iono_beta=None, tow: float = 0.0) -> SppSolution:
-    """WLS position and clock of one epoch.
+                 sigma_scale=None, iono_alpha=None, iono_beta=None, tow: float = 0.0, system=None,
+                 iono_scale=None) -> SppSolution:
+    """WLS position and clock of one epoch (one or several systems).
+
+    Several systems (``system`` naming more than one): the unknowns are position, the
+    clock of the first system present (order ``G R E C J``) and one inter-system offset
+    [m] per other system that has a satellite in the epoch (module docstring of
+    :func:`solve_epochs`); a system whose satellites all fall below the mask loses its
+    offset. One system (``system`` None or one letter throughout): exactly the
+    single-system solution.
 
     Parameters
     ----------
@@ -254,8 +285,9 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
         The satellites at their transmit times (ECEF of the transmit time),
         with their clocks [s].
     options : SppOptions
-    x0 : ndarray (4,) or None
-        Start (ECEF position [m], clock [m]); None: the Earth's centre.
+    x0 : ndarray (4,) or (4 + offsets,) or None
+        Start (ECEF position [m], clock [m], offsets [m], zeros when not given); None: the
+        Earth's centre.
     sigma_scale : ndarray (n,) or None
         Per-satellite factor on the elevation-dependent sigma.
     iono_alpha, iono_beta : ndarray (4,) or None
@@ -263,12 +295,17 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
         ``options.ionosphere``.
     tow : float
         Reception time of week [s] (Klobuchar's local time).
+    system : array_like of str (n,) or None
+        RINEX system letter of each satellite; None: one system.
+    iono_scale : ndarray (n,) or None
+        Factor on the Klobuchar (L1) delay per satellite, ``(f_L1 / f)^2`` for a signal
+        on frequency ``f`` (:func:`iono_scale_factors`); None: 1.
 
     Raises
     ------
     ValueError
-        Fewer than 4 satellites (given, or left after the elevation mask),
-        or inputs of inconsistent length.
+        Fewer satellites than unknowns (given, or left after the elevation mask: 4, plus
+        one per extra system), or inputs of inconsistent length.
     """
     rho = np.asarray(pseudorange, float)
     n = len(sats)
@@ -279,10 +316,24 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
     if n < 4:
         raise ValueError(f"{n} satellites: at least 4 are needed for position and clock")
     scale = np.ones(n) if sigma_scale is None else np.asarray(sigma_scale, float)
-    x = np.zeros(4) if x0 is None else np.asarray(x0, float).copy()
+    sys_col, letters = _system_columns(system, n)
+    n_off = len(letters) - 1 if sys_col is not None else 0
+    x = np.zeros(4 + n_off)
+    if x0 is not None:
+        start = np.asarray(x0, float)
+        x[:len(start)] = start[:len(x)]
+    if iono_scale is not None:
+        iono_scale = np.asarray(iono_scale, float)
+        if iono_scale.shape != (n,):
+            raise ValueError(f"iono_scale has shape {iono_scale.shape}, expected ({n},)")
     rho_corr = rho + C_LIGHT * sats.clock_bias                      # satellite clock removed
-    atm = (options, iono_alpha, iono_beta, tow)
+    atm = (options, iono_alpha, iono_beta, tow, iono_scale, sys_col, n_off)
     x, sel, it, converged = _gauss_newton(rho_corr, sats, x, scale, np.ones(n, bool), atm)
+    if not converged and abs(np.linalg.norm(x[:3]) - 6.371e6) < 5e5:
+        # a satellite at the mask can enter and leave from one step to the next, so the steps
+        # never settle: the last step's set is kept fixed and the iterations go on from there
+        x, sel, k, converged = _gauss_newton(rho_corr, sats, x, scale, sel, atm, mask=False)
+        it += k
     gamma, status = np.ones(n), "off"
     if options.robust is not None and converged:
         x, gamma, status, k = _igg3_solution(rho_corr, sats, x, scale, sel, atm)
@@ -291,16 +342,68 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
     used = sel & (gamma > 0)
     H, model, el = _linearise(x, sats, atm, always=True)
     sigma = _sigma(options, el, scale)[used] / np.sqrt(gamma[used])
-    H = H[used]
+    act = _active(used, sys_col, n_off)
+    H = H[used] if act is None else H[used][:, act]
     N = H.T @ (H / sigma[:, None] ** 2)
     L = np.linalg.cholesky(N)
-    L_inv = np.linalg.solve(L, np.eye(4))
+    L_inv = np.linalg.solve(L, np.eye(H.shape[1]))
     cov = L_inv.T @ L_inv
+    offsets: dict = {}
+    sys_used = None
+    if sys_col is not None:
+        full = np.full((4 + n_off, 4 + n_off), np.nan)
+        full[np.ix_(act, act)] = cov
+        cov = full
+        sys_used = np.asarray(system).astype(str)[used]
+        ref = letters[0] if np.any(used & (sys_col < 0)) else None
+        for k, letter in enumerate(letters[1:]):
+            if act[4 + k]:
+                offsets[letter] = float(x[4 + k])
+            elif ref is None and np.any(used & (sys_col == k)):
+                ref = letter                                     # the clock took this system
+        if ref is not None:
+            offsets = {ref: 0.0, **offsets}
     return SppSolution(pos_ecef=x[:3].copy(), clock_bias=float(x[3]), cov=cov, residuals=(rho_corr - model)[used],
                        prn=np.asarray(sats.prn)[used], elevation=el[used], dop=_dops(H, x[:3]), iterations=it,
                        converged=converged, n_rejected_mask=int(n - sel.sum()),
                        n_downweighted=int(np.sum((gamma > 0) & (gamma < 1))), n_excluded=int(np.sum(gamma == 0)),
-                       robust_status=status)
+                       robust_status=status, system=sys_used, offsets=offsets)
+
+
+#: the order in which systems take the receiver clock (the first present) and their offsets
+SYSTEM_ORDER = ("G", "R", "E", "C", "J")
+
+
+def _system_columns(system, n: int):
+    """``(sys_col, letters)``: per satellite the index of its offset unknown (-1: the
+    clock's system) and the systems present in clock-then-offset order; ``sys_col`` None
+    for one system (the single-system solution)."""
+    if system is None:
+        return None, ()
+    sysarr = np.asarray(system).astype(str)
+    if sysarr.shape != (n,):
+        raise ValueError(f"system has shape {sysarr.shape}, expected ({n},) (one per satellite)")
+    seen = set(sysarr.tolist())
+    letters = tuple(s for s in SYSTEM_ORDER if s in seen) + tuple(sorted(seen - set(SYSTEM_ORDER)))
+    if len(letters) < 2:
+        return None, letters
+    sys_col = np.full(n, -1, dtype=np.int64)
+    for k, letter in enumerate(letters[1:]):
+        sys_col[sysarr == letter] = k
+    return sys_col, letters
+
+
+def _active(rows, sys_col, n_off: int):
+    """Which unknowns the rows ``rows`` (bool (n,)) determine: position and clock, and the
+    offset of each system with a row; when the clock's system has none, the first system
+    with rows takes the clock (its offset held). None for one system."""
+    if sys_col is None:
+        return None
+    has = np.array([bool(np.any(rows & (sys_col == k))) for k in range(n_off)], dtype=bool)
+    act = np.concatenate([np.ones(4, bool), has])
+    if not np.any(rows & (sys_col < 0)) and has.any():
+        act[4 + int(np.argmax(has))] = False
+    return act
 
 
 def _sigma(options: SppOptions, el, scale):
@@ -312,22 +415,29 @@ def _linearise(x, sats, atm, always: bool = False):
     """Design matrix (n, 4), modelled pseudoranges (n,) and elevations (n,) at ``x``; the
     atmosphere (and true elevations) once ``x`` is within 500 km of the surface, or
     ``always``."""
-    options, iono_alpha, iono_beta, tow = atm
+    options, iono_alpha, iono_beta, tow, iono_scale, sys_col, n_off = atm
     r_geo = np.linalg.norm(sats.pos_ecef - x[:3], axis=1)
     sat_rx = earth_rotation_correction(sats.pos_ecef, r_geo / C_LIGHT)
     rng = np.linalg.norm(sat_rx - x[:3], axis=1)
     u = (sat_rx - x[:3]) / rng[:, None]
     model = rng + x[3]
+    if sys_col is not None:
+        model = model + np.append(x[4:], 0.0)[sys_col]             # index -1: the clock's system
     el = np.full(len(rng), np.pi / 2)
     if always or abs(np.linalg.norm(x[:3]) - 6.371e6) < 5e5:
         el, az = elevation_azimuth(x[:3], sat_rx)
-        model = model + atmosphere_delay(ecef_to_lla(x[:3]), el, az, tow, options, iono_alpha, iono_beta)
-    return np.column_stack([-u, np.ones(len(rng))]), model, el
+        model = model + atmosphere_delay(ecef_to_lla(x[:3]), el, az, tow, options, iono_alpha, iono_beta,
+                                         iono_scale=iono_scale)
+    H = np.column_stack([-u, np.ones(len(rng))])
+    if sys_col is not None:
+        H = np.hstack([H, (sys_col[:, None] == np.arange(n_off)[None, :]).astype(float)])
+    return H, model, el
 
 
-def _gauss_newton(rho_corr, sats, x, scale, use, atm):
-    """WLS iterations from ``x`` on the rows ``use`` above the elevation mask: ``(x, sel,
-    iterations, converged)``, ``sel`` the rows of the last step."""
+def _gauss_newton(rho_corr, sats, x, scale, use, atm, mask: bool = True):
+    """WLS iterations from ``x`` on the rows ``use`` above the elevation mask (``mask``
+    False: on the rows ``use`` as they are): ``(x, sel, iterations, converged)``, ``sel``
+    the rows of the last step."""
     options = atm[0]
     sel = use.copy()
     converged = False
@@ -336,20 +446,27 @@ def _gauss_newton(rho_corr, sats, x, scale, use, atm):
         near_surface = abs(np.linalg.norm(x[:3]) - 6.371e6) < 5e5
         H, model, el = _linearise(x, sats, atm)
         sel = use.copy()
-        if near_surface:
+        if near_surface and mask:
             # the rows below the mask are left out of the solution: what is added to them is moot
             sel &= el >= options.elevation_mask
-        if sel.sum() < 4:
+        act = _active(sel, atm[5], atm[6])
+        need = 4 if act is None else int(act.sum())
+        if sel.sum() < need:
             raise ValueError(f"{int(sel.sum())} satellites above the elevation mask "
-                             f"({np.rad2deg(options.elevation_mask):.1f} deg): at least 4 are needed")
+                             f"({np.rad2deg(options.elevation_mask):.1f} deg): at least {need} are needed")
         sigma = _sigma(options, el, scale)
-        Hs = H[sel]
+        Hs = H[sel] if act is None else H[sel][:, act]
         w = 1.0 / sigma[sel] ** 2
         dz = (rho_corr - model)[sel]
         N = Hs.T @ (w[:, None] * Hs)
         L = np.linalg.cholesky(N)
         dx = np.linalg.solve(L.T, np.linalg.solve(L, Hs.T @ (w * dz)))
-        x = x + dx
+        if act is None:
+            x = x + dx
+        else:
+            step = np.zeros(len(x))
+            step[act] = dx
+            x = x + step
         if np.linalg.norm(dx[:3]) < options.tol and near_surface:
             converged = True
             break
@@ -362,17 +479,20 @@ def _igg3_solution(rho_corr, sats, x_plain, scale, sel, atm):
     options = atm[0]
     k0, k1 = options.robust
     n = len(rho_corr)
-    if int(sel.sum()) < 6:
+    act = _active(sel, atm[5], atm[6])
+    if int(sel.sum()) < (4 if act is None else int(act.sum())) + 2:
         return x_plain, np.ones(n), "untestable", 0
     x, gamma, iterations, status = x_plain, np.ones(n), 0, "ok"
     touched = ~sel.copy()
     while True:
         keep = sel & (gamma > 0)
-        if int(keep.sum()) < 6:          # one more row out would leave nothing to check it by
+        act = _active(keep, atm[5], atm[6])
+        # one more row out would leave nothing to check it by (two rows beyond the unknowns)
+        if int(keep.sum()) < (4 if act is None else int(act.sum())) + 2:
             break
         H, model, el = _linearise(x, sats, atm)
         sigma = _sigma(options, el, scale)[keep] / np.sqrt(gamma[keep])
-        Hs = H[keep]
+        Hs = H[keep] if act is None else H[keep][:, act]
         N_inv = np.linalg.inv(Hs.T @ (Hs / sigma[:, None] ** 2))
         # each residual's own variance in this solution, sigma^2 - h N^-1 h^T: the standardisation
         q = sigma**2 - np.einsum("ij,jk,ik->i", Hs, N_inv, Hs)
@@ -434,6 +554,81 @@ def satellites_at_transmit(ephemeris, prn, pseudorange, week, tow_rx, apply_tgd:
     return states, keep, skips
 
 
+#: BeiDou B1I carrier [Hz] (BDS-SIS-ICD-B1I 3.0, 4.2)
+F_B1I = 1561.098e6
+#: GLONASS L1 FDMA carrier of channel k: ``F_G1 + k * DF_G1`` [Hz] (GLONASS ICD 5.1, 3.3.1.4)
+F_G1, DF_G1 = 1602.0e6, 0.5625e6
+#: a GLONASS satellite without a frequency channel number, when the ionosphere is applied
+NO_GLONASS_CHANNEL = "no GLONASS frequency number"
+
+
+def first_frequency(system, channel=None) -> np.ndarray:
+    """Carrier frequency [Hz] (m,) of each system's first-frequency civil signal, the one
+    the SPP models (group delays of :mod:`mixnav.gnss.multi_ephemeris`): GPS L1, QZSS L1 and
+    Galileo E1 1575.42 MHz, BeiDou B1I 1561.098 MHz, GLONASS G1 ``1602 + 0.5625 k`` MHz
+    with the channel ``k`` of ``channel`` (m,) (NaN where it is missing or out of -7..13).
+
+    Parameters
+    ----------
+    system : array_like of str (m,)
+        RINEX system letters.
+    channel : array_like of int (m,) or None
+        GLONASS frequency channel numbers (any value for other systems).
+    """
+    sysarr = np.asarray(system).astype(str)
+    f = np.full(len(sysarr), F_L1)
+    f[sysarr == "C"] = F_B1I
+    glo = sysarr == "R"
+    if glo.any():
+        k = np.full(len(sysarr), np.nan) if channel is None else np.asarray(channel, float)
+        ok = glo & (k >= -7) & (k <= 13)
+        f[glo] = np.nan
+        f[ok] = F_G1 + k[ok] * DF_G1
+    return f
+
+
+def iono_scale_factors(frequency) -> np.ndarray:
+    """``(f_L1 / f)^2`` (m,): the ionospheric group delay on frequency ``f`` [Hz] relative
+    to GPS L1's (first order, delay proportional to ``1 / f^2``), what the Klobuchar L1
+    delay is multiplied by."""
+    return (F_L1 / np.asarray(frequency, float)) ** 2
+
+
+def satellites_at_transmit_multi(ephemeris, sat_ids, pseudorange, week, tow_rx, apply_tgd: bool = True):
+    """:func:`satellites_at_transmit` over several systems
+    (:class:`~mixnav.gnss.multi_ephemeris.MultiEphemeris`, queried in GPS time; each system
+    converts to its own time scale, BDT for BeiDou, GLONASST for GLONASS).
+
+    Parameters
+    ----------
+    sat_ids : array_like of str (n,)
+        Satellites like ``"G05"``, ``"C08"``.
+    pseudorange : ndarray (n,)
+        [m].
+    week, tow_rx : int, float
+        Reception time (GPS week, seconds of week [s]).
+
+    Returns
+    -------
+    states : SatelliteStates
+        The satellites with usable ephemeris (``prn`` within their system).
+    system : ndarray of str (k,)
+        Their system letters.
+    keep : ndarray of bool (n,)
+        Which of the inputs they are.
+    skips : dict of str -> EphemerisSkips
+        Per system letter, the satellites left out and why.
+    """
+    ids = np.asarray(sat_ids)
+    rho = np.asarray(pseudorange, float)
+    t_tx = tow_rx - rho / C_LIGHT
+    first, _, keep, skips = ephemeris.states_of(ids, week, t_tx, apply_tgd)
+    states, letters, again, _ = ephemeris.states_of(ids[keep], week, t_tx[keep] - first.clock_bias, apply_tgd)
+    if not again.all():   # a record choice flipped within the travel time: left out with it
+        keep[np.flatnonzero(keep)[~again]] = False
+    return states, letters, keep, skips
+
+
 @dataclass
 class SppTrack:
     """Epoch-by-epoch SPP (epochs without a solution hold NaN).
@@ -463,6 +658,17 @@ class SppTrack:
         The robust solution's counts over the solved epochs (empty for plain
         WLS): ``rows_downweighted``, ``rows_excluded``, and the epochs per
         :attr:`SppSolution.robust_status`.
+    offsets : dict of str -> ndarray (k,)
+        Several systems: per system letter its offset to the receiver clock [m] at each
+        epoch (0 for the clock's system, NaN where the system had no satellite used or
+        the epoch no solution); empty for one system.
+    clock_system : ndarray of str (k,) or None
+        Several systems: the system whose time ``clock_bias`` is ("" where unsolved).
+    n_sat_system : dict of str -> ndarray of int (k,)
+        Several systems: satellites used per system letter.
+    skipped_by_system : dict of str -> dict
+        Several systems: per system name (``GPS``, ``BeiDou``...) the satellite
+        observations left out per reason (the ones in ``skipped_satellites``).
     """
 
     week: np.ndarray
@@ -478,6 +684,10 @@ class SppTrack:
     status: np.ndarray
     skipped_satellites: dict = field(default_factory=dict)
     robust: dict = field(default_factory=dict)
+    offsets: dict = field(default_factory=dict)
+    clock_system: np.ndarray | None = None
+    n_sat_system: dict = field(default_factory=dict)
+    skipped_by_system: dict = field(default_factory=dict)
 
     @property
     def ok(self) -> np.ndarray:
@@ -489,12 +699,26 @@ class SppTrack:
 
 
 def solve_epochs(ephemeris, week, tow_rx, epoch, prn, pseudorange, options: SppOptions = SppOptions(),
-                 sigma_scale=None) -> SppTrack:
+                 sigma_scale=None, system=None, glonass_channel=None) -> SppTrack:
     """SPP at every epoch; epochs without a solution are counted, not raised.
+
+    Several systems (``system`` given with a
+    :class:`~mixnav.gnss.multi_ephemeris.MultiEphemeris`): each satellite at its transmit
+    time from its own system's broadcast records (:func:`satellites_at_transmit_multi`),
+    one receiver clock (the first of ``G R E C J`` present in the epoch) plus one offset
+    per other system with a satellite in the epoch (an epoch needs 4 + that many
+    satellites above the mask, else status ``too few satellites``), the Klobuchar delay
+    (GPS coefficients, as RTKLIB) scaled per satellite by ``(f_L1 / f)^2``
+    (:func:`first_frequency`: GLONASS by its channel ``k``, BeiDou B1I), Saastamoinen,
+    Sagnac and the elevation mask as for GPS. A satellite whose system has no navigation
+    data is left out and counted (reason ``no navigation data for the system``, per
+    system in ``skipped_by_system``); so is a GLONASS satellite without a frequency
+    number when the ionosphere is applied (:data:`NO_GLONASS_CHANNEL`). GPS alone (no
+    ``system``, or every letter ``G``) is the single-system solution, bit for bit.
 
     Parameters
     ----------
-    ephemeris : BroadcastEphemeris
+    ephemeris : BroadcastEphemeris or MultiEphemeris
     week, tow_rx : ndarray (k,)
         Reception time of each epoch (GPS week, seconds of week [s]).
     epoch : ndarray of int (m,)
@@ -504,6 +728,12 @@ def solve_epochs(ephemeris, week, tow_rx, epoch, prn, pseudorange, options: SppO
     options : SppOptions
     sigma_scale : ndarray (m,) or None
         Per-observation factor on the sigma model.
+    system : array_like of str (m,) or None
+        RINEX system letter of each observation (``prn`` then numbers satellites within
+        their system); None: GPS.
+    glonass_channel : array_like of int (m,) or None
+        GLONASS frequency channel number of each observation (others: any value, out of
+        -7..13 for none); None: from the navigation records (``ephemeris["R"].channels()``).
 
     Returns
     -------
@@ -511,6 +741,11 @@ def solve_epochs(ephemeris, week, tow_rx, epoch, prn, pseudorange, options: SppO
         Each epoch starts from the previous solution (the Earth's centre for
         the first and after a failed one).
     """
+    if system is not None or hasattr(ephemeris, "states_of"):
+        sysarr = np.full(len(np.asarray(prn)), "G") if system is None else np.asarray(system).astype(str)
+        if hasattr(ephemeris, "states_of") or (sysarr != "G").any():
+            return _solve_epochs_multi(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, sigma_scale,
+                                       sysarr, glonass_channel)
     week = np.asarray(week)
     tow_rx = np.asarray(tow_rx, float)
     epoch = np.asarray(epoch, int)
@@ -564,23 +799,136 @@ def solve_epochs(ephemeris, week, tow_rx, epoch, prn, pseudorange, options: SppO
     return out
 
 
+def _solve_epochs_multi(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, sigma_scale, system,
+                        glonass_channel) -> SppTrack:
+    """:func:`solve_epochs` over several systems (its docstring)."""
+    from .multi_ephemeris import SYSTEM_NAMES
+    if not hasattr(ephemeris, "states_of"):
+        others = sorted(set(system.tolist()) - {"G"})
+        raise ValueError(f"observations of systems {', '.join(others)} need a MultiEphemeris "
+                         "(mixnav.gnss.multi_ephemeris), not GPS records alone")
+    week = np.asarray(week)
+    tow_rx = np.asarray(tow_rx, float)
+    epoch = np.asarray(epoch, int)
+    prn = np.asarray(prn, int)
+    rho = np.asarray(pseudorange, float)
+    m = len(rho)
+    if system.shape != (m,):
+        raise ValueError(f"system has shape {system.shape}, expected ({m},) (one per observation)")
+    scale = np.ones(m) if sigma_scale is None else np.asarray(sigma_scale, float)
+    ids = np.char.add(system, np.char.zfill(prn.astype(str), 2))
+    if glonass_channel is None:
+        table = ephemeris["R"].channels() if "R" in ephemeris else {}
+        glonass_channel = np.array([table.get(int(p), 99) if s == "R" else 99 for s, p in zip(system, prn)])
+    freq = first_frequency(system, glonass_channel)
+    iono_on = options.ionosphere and "G" in ephemeris and ephemeris["G"].iono_alpha is not None
+    alpha = ephemeris["G"].iono_alpha if iono_on else None
+    beta = ephemeris["G"].iono_beta if iono_on else None
+    no_freq = ~np.isfinite(freq) if iono_on else np.zeros(m, bool)
+    iono_scale = iono_scale_factors(np.where(np.isfinite(freq), freq, F_L1))
+    k = len(tow_rx)
+    present = [s for s in SYSTEM_ORDER if s in set(system.tolist())]
+    out = SppTrack(week=week.copy(), tow=tow_rx.copy(), pos_ecef=np.full((k, 3), np.nan),
+                   clock_bias=np.full(k, np.nan), cov=np.full((k, 4, 4), np.nan), n_sat=np.zeros(k, int),
+                   pdop=np.full(k, np.nan), hdop=np.full(k, np.nan), vdop=np.full(k, np.nan),
+                   rms_residual=np.full(k, np.nan), status=np.full(k, STATUS_OK, dtype=object),
+                   offsets={s: np.full(k, np.nan) for s in present}, clock_system=np.full(k, "", dtype=object),
+                   n_sat_system={s: np.zeros(k, int) for s in present})
+    skipped: dict[str, int] = {}
+    by_system: dict[str, dict[str, int]] = {}
+
+    def count(letter, reason, c=1):
+        skipped[reason] = skipped.get(reason, 0) + c
+        d = by_system.setdefault(SYSTEM_NAMES.get(letter, letter), {})
+        d[reason] = d.get(reason, 0) + c
+
+    order = np.argsort(epoch, kind="stable")
+    bounds = np.searchsorted(epoch[order], np.arange(k + 1))
+    x0 = None
+    for j in range(k):
+        rows = order[bounds[j]:bounds[j + 1]]
+        for r in rows[no_freq[rows]]:
+            count(system[r], NO_GLONASS_CHANNEL)
+        rows = rows[~no_freq[rows]]
+        sats, letters, keep, skips = satellites_at_transmit_multi(ephemeris, ids[rows], rho[rows], week[j], tow_rx[j])
+        for letter, sk in skips.items():
+            for reason, c in sk.counts().items():
+                count(letter, reason, c)
+        if len(sats) < 4:
+            out.status[j] = STATUS_FEW
+            continue
+        used_rows = rows[keep]
+        try:
+            sol = wls_position(rho[used_rows], sats, options, x0=x0, sigma_scale=scale[used_rows],
+                               iono_alpha=alpha, iono_beta=beta, tow=tow_rx[j], system=letters,
+                               iono_scale=iono_scale[used_rows])
+        except ValueError:
+            out.status[j] = STATUS_FEW
+            x0 = None
+            continue
+        if sol.n_rejected_mask:
+            for letter in letters[_below_mask(sol, sats, options)]:
+                count(letter, "below elevation mask")
+        if options.robust is not None:
+            rb = out.robust
+            rb["rows_downweighted"] = rb.get("rows_downweighted", 0) + sol.n_downweighted
+            rb["rows_excluded"] = rb.get("rows_excluded", 0) + sol.n_excluded
+            rb[f"epochs_{sol.robust_status}"] = rb.get(f"epochs_{sol.robust_status}", 0) + 1
+        if not sol.converged:
+            out.status[j] = STATUS_NOT_CONVERGED
+            x0 = None
+            continue
+        out.pos_ecef[j] = sol.pos_ecef
+        out.clock_bias[j] = sol.clock_bias
+        out.cov[j] = sol.cov[:4, :4]
+        out.n_sat[j] = sol.n_sat
+        out.pdop[j], out.hdop[j], out.vdop[j] = sol.dop["pdop"], sol.dop["hdop"], sol.dop["vdop"]
+        out.rms_residual[j] = float(np.sqrt(np.mean(sol.residuals**2)))
+        sys_used = letters if sol.system is None else sol.system
+        for s in present:
+            out.n_sat_system[s][j] = int(np.sum(sys_used == s))
+        if sol.offsets:
+            for s, v in sol.offsets.items():
+                out.offsets[s][j] = v
+            out.clock_system[j] = next(iter(sol.offsets))
+        else:
+            out.clock_system[j] = str(sys_used[0]) if len(sys_used) else ""
+            out.offsets[out.clock_system[j]][j] = 0.0
+        x0 = np.append(sol.pos_ecef, sol.clock_bias)     # the offsets start from 0 (linear: one step)
+    out.status = out.status.astype(str)
+    out.clock_system = out.clock_system.astype(str)
+    out.skipped_satellites = skipped
+    out.skipped_by_system = by_system
+    return out
+
+
+def _below_mask(sol: SppSolution, sats, options: SppOptions) -> np.ndarray:
+    """Which of ``sats`` are below the elevation mask seen from ``sol`` (bool (n,))."""
+    r_geo = np.linalg.norm(sats.pos_ecef - sol.pos_ecef, axis=1)
+    el, _ = elevation_azimuth(sol.pos_ecef, earth_rotation_correction(sats.pos_ecef, r_geo / C_LIGHT))
+    return el < options.elevation_mask
+
+
 def atmosphere_delay(lla, elevation, azimuth, tow: float, options: SppOptions = SppOptions(), iono_alpha=None,
-                     iono_beta=None) -> np.ndarray:
+                     iono_beta=None, iono_scale=None) -> np.ndarray:
     """Troposphere plus ionosphere delay [m] (n,) that SPP adds to its model, at the receiver
     ``lla`` (rad, rad, m) for satellites at ``elevation``, ``azimuth`` (n,) [rad]: Saastamoinen
     when ``options.troposphere``, Klobuchar when ``options.ionosphere`` and both coefficient
-    sets are given (as :func:`wls_position`)."""
+    sets are given (as :func:`wls_position`), times ``iono_scale`` (n,) when given (the
+    ``(f_L1 / f)^2`` of each signal's frequency, :func:`iono_scale_factors`)."""
     el = np.asarray(elevation, float)
     d = np.zeros(len(el))
     if options.troposphere:
         d = d + saastamoinen(lla[0], lla[2], np.maximum(el, 1e-3))
     if options.ionosphere and iono_alpha is not None and iono_beta is not None:
-        d = d + klobuchar(lla[0], lla[1], el, azimuth, tow, iono_alpha, iono_beta)
+        iono = klobuchar(lla[0], lla[1], el, azimuth, tow, iono_alpha, iono_beta)
+        d = d + (iono if iono_scale is None else iono * iono_scale)
     return d
 
 
 def corrected_pseudoranges(ephemeris, week, tow_rx, epoch, prn, pseudorange, receiver_ecef,
-                           options: SppOptions = SppOptions(), cn0=None, source=None, doppler=None):
+                           options: SppOptions = SppOptions(), cn0=None, source=None, doppler=None,
+                           system=None, glonass_channel=None):
     """The raw pseudoranges as a :class:`~mixnav.gnss.pseudoranges.PseudorangeEpochs` with the
     broadcast corrections applied the way SPP applies them, for a filter that estimates
     position and clock itself (:class:`mixnav.measurements.pseudorange.PseudorangeGnss`).
@@ -614,10 +962,17 @@ def corrected_pseudoranges(ephemeris, week, tow_rx, epoch, prn, pseudorange, rec
     epochs : PseudorangeEpochs
         Times in seconds since the first epoch of ``week, tow_rx`` (as the SPP table's
         ``time_s``), GPS (system code 1); an epoch without a usable satellite is absent.
+        Several systems (``system`` (m,) letters with a MultiEphemeris, as
+        :func:`solve_epochs`): each row's system code
+        (:data:`mixnav.gnss.pseudoranges.SYSTEM_LETTERS`), the ionosphere scaled to its
+        frequency, its Doppler by its own wavelength.
     skipped : dict
         Observations left out per reason (ephemeris reasons, ``no position``).
     """
     from .pseudoranges import PseudorangeEpochs
+    if system is not None and (hasattr(ephemeris, "states_of") or (np.asarray(system) != "G").any()):
+        return _corrected_multi(ephemeris, week, tow_rx, epoch, prn, pseudorange, receiver_ecef, options, cn0,
+                                source, doppler, np.asarray(system).astype(str), glonass_channel)
     week = np.asarray(week)
     tow_rx = np.asarray(tow_rx, float)
     epoch = np.asarray(epoch, int)
@@ -668,6 +1023,82 @@ def corrected_pseudoranges(ephemeris, week, tow_rx, epoch, prn, pseudorange, rec
     ep = PseudorangeEpochs.from_rows(cat["t"], cat["pr"], cat["var"], cat["sat"], cat["id"],
                                      np.ones(len(cat["pr"]), int), elevation=cat["el"], cn0=cat["cn0"],
                                      source=source, sat_vel=cat["vel"] if dop is not None else None,
+                                     range_rate=cat["rr"] if dop is not None else None)
+    return ep, skipped
+
+
+def _corrected_multi(ephemeris, week, tow_rx, epoch, prn, pseudorange, receiver_ecef, options, cn0, source,
+                     doppler, system, glonass_channel):
+    """:func:`corrected_pseudoranges` over several systems (its docstring)."""
+    from .pseudoranges import SYSTEM_LETTERS, PseudorangeEpochs
+    codes = {v: k for k, v in SYSTEM_LETTERS.items()}
+    week = np.asarray(week)
+    tow_rx = np.asarray(tow_rx, float)
+    epoch = np.asarray(epoch, int)
+    prn = np.asarray(prn, int)
+    rho = np.asarray(pseudorange, float)
+    m = len(rho)
+    cn = np.full(m, np.nan) if cn0 is None else np.asarray(cn0, float)
+    dop = None if doppler is None else np.asarray(doppler, float)
+    ids = np.char.add(system, np.char.zfill(prn.astype(str), 2))
+    if glonass_channel is None:
+        table = ephemeris["R"].channels() if "R" in ephemeris else {}
+        glonass_channel = np.array([table.get(int(p), 99) if s == "R" else 99 for s, p in zip(system, prn)])
+    freq = first_frequency(system, glonass_channel)
+    iono_on = options.ionosphere and "G" in ephemeris and ephemeris["G"].iono_alpha is not None
+    alpha = ephemeris["G"].iono_alpha if iono_on else None
+    beta = ephemeris["G"].iono_beta if iono_on else None
+    no_freq = ~np.isfinite(freq) if (iono_on or dop is not None) else np.zeros(m, bool)
+    iono_scale = iono_scale_factors(np.where(np.isfinite(freq), freq, F_L1))
+    t_abs = week * 604800.0 + tow_rx
+    t_rel = t_abs - t_abs[0]
+    order = np.argsort(epoch, kind="stable")
+    bounds = np.searchsorted(epoch[order], np.arange(len(tow_rx) + 1))
+    skipped: dict[str, int] = {}
+    out = {k: [] for k in ("t", "pr", "var", "sat", "id", "sys", "el", "cn0", "vel", "rr")}
+    for j in range(len(tow_rx)):
+        rows = order[bounds[j]:bounds[j + 1]]
+        if len(rows) == 0:
+            continue
+        x = np.asarray(receiver_ecef[j], float)
+        if not np.isfinite(x).all():
+            skipped["no position"] = skipped.get("no position", 0) + len(rows)
+            continue
+        if no_freq[rows].any():
+            skipped[NO_GLONASS_CHANNEL] = skipped.get(NO_GLONASS_CHANNEL, 0) + int(no_freq[rows].sum())
+            rows = rows[~no_freq[rows]]
+        sats, letters, keep, skips = satellites_at_transmit_multi(ephemeris, ids[rows], rho[rows], week[j], tow_rx[j])
+        for sk in skips.values():
+            for r, c in sk.counts().items():
+                skipped[r] = skipped.get(r, 0) + c
+        if len(sats) == 0:
+            continue
+        used = rows[keep]
+        r_geo = np.linalg.norm(sats.pos_ecef - x, axis=1)
+        el, az = elevation_azimuth(x, earth_rotation_correction(sats.pos_ecef, r_geo / C_LIGHT))
+        delay = atmosphere_delay(ecef_to_lla(x), el, az, tow_rx[j], options, alpha, beta, iono_scale=iono_scale[used])
+        s_el = np.sin(np.maximum(el, 1e-3))
+        n = len(sats)
+        out["t"].append(np.full(n, t_rel[j]))
+        out["pr"].append(rho[used] + C_LIGHT * sats.clock_bias - delay)
+        out["var"].append(options.sigma_a ** 2 + options.sigma_b ** 2 / s_el ** 2)
+        out["sat"].append(sats.pos_ecef)
+        out["id"].append(prn[used])
+        out["sys"].append(np.array([codes[s] for s in letters], int))
+        out["el"].append(el)
+        out["cn0"].append(cn[used])
+        if dop is not None:
+            out["vel"].append(sats.vel_ecef)
+            out["rr"].append(-(C_LIGHT / freq[used]) * dop[used] + C_LIGHT * sats.clock_drift)
+    vec = ("sat", "vel")
+    if not out["t"]:
+        cat = {k: np.zeros((0, 3)) if k in vec else np.zeros(0) for k in out}
+        cat["sys"] = np.zeros(0, int)
+    else:
+        cat = {k: (np.vstack(v) if k in vec else np.concatenate(v)) if v else None for k, v in out.items()}
+    ep = PseudorangeEpochs.from_rows(cat["t"], cat["pr"], cat["var"], cat["sat"], cat["id"], cat["sys"],
+                                     elevation=cat["el"], cn0=cat["cn0"], source=source,
+                                     sat_vel=cat["vel"] if dop is not None else None,
                                      range_rate=cat["rr"] if dop is not None else None)
     return ep, skipped
 
