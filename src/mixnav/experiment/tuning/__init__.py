@@ -293,9 +293,9 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
         t_first, t_last = max(a, t_first), min(b, t_last)
     own = [tuple(map(float, x)) for x in ds.gnss.withhold]
     windows = cv_windows(t_first, t_last, w, folds, avoid=own, step=w / 2.0)
-    if sum(len(f) for f in windows) < folds:
+    if sum(len(f) for f in windows) < 2:   # folds left empty by a short span are dropped below
         raise ArgumentError(f"the span {t_first:.1f}-{t_last:.1f} s holds {sum(len(f) for f in windows)} "
-                            f"cross-validation windows of {w:g} s; at least {folds} are needed (a shorter "
+                            f"cross-validation windows of {w:g} s; at least 2 are needed (a shorter "
                             "window or a longer span)", argument="span")
     windows = [f for f in windows if f]
     setup = (stripped, source, None if data is None else str(data), target, windows, (t_first, t_last))
@@ -437,10 +437,10 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
                 chosen.pop(p.name, None)
                 continue
             v = get_value(cur_doc, p)
-            spread = _spread(p, curves.get(p.name, []), cur["nlpd"], n_windows)
+            spread = _spread(p, curves.get(p.name, []), n_windows)
             entry = chosen.setdefault(p.name, {})
             entry.update({"value": _value_text(p, v), "how": _how(p, curves.get(p.name, []), cur, entry),
-                          "spread": spread, "curve": [(c[0], c[1], c[2]) for c in curves.get(p.name, [])]})
+                          "spread": spread, "curve": [list(c) for c in curves.get(p.name, [])]})
 
     finally:
         scorer.close()
@@ -474,18 +474,23 @@ def _why_not(doc, p: Parameter, ds) -> str | None:
     return None
 
 
-def _spread(p: Parameter, curve, best: float, n_windows: int) -> str | None:
-    """The evaluated values whose criterion is within 2 / n_windows of the best mean (a
-    likelihood-ratio interval counting each window as one independent observation: the
-    fixes within a window are strongly correlated)."""
-    if not curve:
+def _last_visit(curve) -> list:
+    """The points of the search's last visit of a key (they differ in that key only)."""
+    return [c for c in curve if c[4] == curve[-1][4]] if curve else []
+
+
+def _spread(p: Parameter, curve, n_windows: int) -> str | None:
+    """The values tried in the key's last visit whose criterion is within 2 / n_windows of that
+    visit's best (a likelihood-ratio interval counting each window as one independent
+    observation: the fixes within a window are strongly correlated); the other keys are the
+    same across a visit's points."""
+    pts = _last_visit(curve)
+    if len(pts) < 2:
         return None
-    tol = 2.0 / max(n_windows, 1)
-    ok = [c[1] for c in curve if c[2] <= best + tol]
-    if not ok:
-        return None
-    lo, hi = min(ok), max(ok)
-    return f"{lo:.4g}-{hi:.4g} {p.unit}" + ("" if p.index is None and p.kind == "log" else "")
+    best = min(c[2] for c in pts)
+    ok = [c[1] for c in pts if c[2] <= best + 2.0 / max(n_windows, 1)]
+    what = "" if p.index is not None or p.kind != "log" else " (x axis; the search scales all)"
+    return f"{min(ok):.4g}-{max(ok):.4g} {p.unit}{what}"
 
 
 def _how(p: Parameter, curve, cur: dict, entry: dict) -> str:

@@ -47,23 +47,19 @@ def _report(result, h: dict) -> str:
     if result.not_tuned:
         lines += ["", "## Not tuned", ""] + [f"- `{k}`: {v}" for k, v in result.not_tuned.items()]
     lines += ["", "## Where the two criteria disagree", "",
-              "Per key, the value each criterion prefers among the candidates tried (the search follows the "
-              "cross-validation: it scores positions after seconds without GNSS, which is what the bias walks "
-              "and the constraint sigmas act on; the innovation likelihood scores 0.25-1 s predictions).", "",
-              "| key | CV best | innovation-likelihood best |", "|---|---|---|"]
+              "Per key, in the search's last visit of it (the other keys the same across its points), the value "
+              "each criterion prefers. The search follows the cross-validation: it scores positions after seconds "
+              "without GNSS, which is what the bias walks and the constraint sigmas act on; the innovation "
+              "likelihood scores 0.25-1 s predictions.", "",
+              "| key | cross-validation best | innovation-likelihood best | agree |", "|---|---|---|---|"]
     for k, c in result.chosen.items():
-        cur = c.get("curve") or []
-        if not cur:
+        curve = c.get("curve") or []
+        if not curve:
             continue
-        lls = {}
-        for e in result.evaluations:
-            if e["changed"].startswith(k + " "):
-                lls[e["changed"]] = e["score"]
-        best_cv = min(cur, key=lambda x: x[2])
-        pts = [(e["changed"], e["score"]["innovation_ll_per_update"]) for e in result.evaluations
-               if e["changed"].startswith(k + " ") and e["score"]["innovation_ll_per_update"] is not None]
-        best_ll = max(pts, key=lambda x: x[1])[0] if pts else "-"
-        lines.append(f"| `{k}` | {best_cv[1]:.4g} | {best_ll} |")
+        pts = [x for x in curve if x[4] == curve[-1][4]]
+        cv = min(pts, key=lambda x: x[2])[1]
+        ll = max(pts, key=lambda x: x[3] if x[3] is not None else -math.inf)[1]
+        lines.append(f"| `{k}` | {cv:.4g} | {ll:.4g} | {'yes' if cv == ll else 'no'} |")
     lines += ["", "![criterion against each key](tune.png)", ""]
     return "\n".join(lines)
 

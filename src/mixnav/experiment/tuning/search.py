@@ -44,7 +44,9 @@ def coordinate_search(doc, cur: dict, params: list[Parameter], scorer, evaluatio
     """Search ``params`` from ``doc`` (scored ``cur``) with ``scorer`` (its budget, less
     ``reserve`` evaluations kept for later, bounds the evaluations), one pass per grid of
     ``grids``. Returns the best document, its score and per key the evaluated points
-    ``(label, shown value, nlpd)`` (added to ``curves`` when given)."""
+    ``(label, shown value, nlpd, innovation log-likelihood per update, visit)`` (added to
+    ``curves`` when given; ``visit`` counts the search's visits of the key: the points of one
+    visit differ in that key only)."""
     curves = {p.name: [] for p in params} if curves is None else curves
     for p in params:
         curves.setdefault(p.name, [])
@@ -53,13 +55,20 @@ def coordinate_search(doc, cur: dict, params: list[Parameter], scorer, evaluatio
             if scorer.left() <= reserve:
                 return doc, cur, curves
             base = get_value(doc, p)
-            curves[p.name].append(("current", _shown(p, base), cur["nlpd"]))
+            _point(curves, p, "current", base, cur, new_visit=True)
             steps = list(p.coarse if grid == "coarse" else p.fine)
             doc, cur, best_step = _try(doc, cur, p, base, steps, scorer, evaluations, curves, reserve)
             if grid == "coarse" and best_step is not None and best_step in (min(steps), max(steps)):
                 further = best_step * best_step if p.kind == "log" else 2 * best_step
                 doc, cur, _ = _try(doc, cur, p, base, [further], scorer, evaluations, curves, reserve)
     return doc, cur, curves
+
+
+def _point(curves: dict, p: Parameter, label: str, value, score: dict, new_visit: bool = False) -> None:
+    """One evaluated point of key ``p`` in ``curves`` (see :func:`coordinate_search`)."""
+    pts = curves.setdefault(p.name, [])
+    visit = (pts[-1][4] if pts else -1) + (1 if new_visit or not pts else 0)
+    pts.append((label, _shown(p, value), score["nlpd"], score["innovation_ll_per_update"], visit))
 
 
 def _try(doc, cur, p, base, steps, scorer, evaluations, curves, reserve: int = 0):
@@ -79,7 +88,7 @@ def _try(doc, cur, p, base, steps, scorer, evaluations, curves, reserve: int = 0
         evaluations.append({"changed": f"{p.name} x{s:g}" if p.kind == "log" else
                             f"{p.name} {s / p.scale:+g} {p.unit}",
                             "score": sc})
-        curves[p.name].append((f"{s:g}" if p.kind == "log" else f"{s / p.scale:+g}", _shown(p, v), sc["nlpd"]))
+        _point(curves, p, f"{s:g}" if p.kind == "log" else f"{s / p.scale:+g}", v, sc)
         if sc["nlpd"] < (cur["nlpd"] - MIN_GAIN if best is None else best[1]["nlpd"]):
             best, best_step = (text, sc), s
     if best is None:
@@ -110,6 +119,7 @@ def conservative_pass(doc, cur: dict, params: list[Parameter], scorer, evaluatio
     for p in params:
         if p.name not in CONSERVATIVE_KEYS or p.kind != "log":
             continue
+        _point(curves, p, "current", get_value(doc, p), cur, new_visit=True)
         for step in CONSERVATIVE_STEPS:
             if scorer.left() <= 0:
                 return doc, cur
@@ -119,7 +129,7 @@ def conservative_pass(doc, cur: dict, params: list[Parameter], scorer, evaluatio
             if sc is None:
                 return doc, cur
             evaluations.append({"changed": f"{p.name} x{step:g} (conservative pass)", "score": sc})
-            curves.setdefault(p.name, []).append((f"{step:g}", _shown(p, value), sc["nlpd"]))
+            _point(curves, p, f"{step:g}", value, sc)
             if sc["nlpd"] <= best + tolerance:
                 doc, cur = tomlkit.parse(text), sc
                 break
