@@ -178,6 +178,8 @@ def _frames(data: bytes, path: Path):
         end = stop
     tail = data[end:]
     cut = tail.find(_UBX_HDR)
+    if cut < 0 and tail.endswith(_UBX_HDR[:1]):     # cut after the first byte of a header
+        cut = len(tail) - 1
     if cut >= 0:
         at = end + cut
         skipped["truncated message at end"] += 1
@@ -328,6 +330,11 @@ def read_ubx(path, systems=DEFAULT_SYSTEMS, signals=None, decode: str = "numpy")
     def where(i):
         return f"byte {starts[i]} (message {numbers[i]}, RXM-RAWX)"
 
+    tow_bad = ~np.isfinite(heads["rcvTow"]) | (heads["rcvTow"] < 0) | (heads["rcvTow"] >= 604800.0)
+    if tow_bad.any():
+        j = int(np.flatnonzero(tow_bad)[0])
+        raise DataError(f"{where(j)}: rcvTow {heads['rcvTow'][j]!r} is not a time of week (0 to 604800 s)",
+                        file=str(path))
     # epoch times in integer ns (rcvTow rounded to the ns)
     t_ns = heads["week"].astype(np.int64) * _WEEK_NS + np.round(heads["rcvTow"] * 1e9).astype(np.int64)
     if len(t_ns) > 1 and np.any(np.diff(t_ns) <= 0):
@@ -438,7 +445,7 @@ def read_ubx(path, systems=DEFAULT_SYSTEMS, signals=None, decode: str = "numpy")
     tow = (t_ns[has] - week * _WEEK_NS) / 1e9
     m = meas[sel]
     cp_ok = (m["trkStat"] & 2) == 2
-    carrier = np.where(cp_ok, m["cpMes"], np.nan)
+    carrier = np.where(cp_ok & np.isfinite(m["cpMes"]), m["cpMes"], np.nan)
     lli = np.zeros((len(sel), len(LLI_COLUMNS)), np.int8)     # on the carrier phase, as converters write it
     lli[:, LLI_COLUMNS.index("carrier")] = slip[sel] | ((cp_ok & ((m["trkStat"] & 4) == 0)).astype(np.int8) << 1)
     leap = np.where((heads["recStat"][has] & 1) == 1, heads["leapS"][has].astype(float), np.nan)
@@ -447,7 +454,7 @@ def read_ubx(path, systems=DEFAULT_SYSTEMS, signals=None, decode: str = "numpy")
         week=week, tow=tow, epoch=idx[ep].astype(np.int64), prn=sv[sel], pseudorange=m["prMes"].astype(float),
         code="/".join(dict.fromkeys(signal.tolist())), rejected=dict(sorted(rejected.items())),
         epochs_all_rejected=int(len(raws) - has.sum()), version=0.0, source=str(path),
-        doppler=m["doMes"].astype(float), cn0=m["cno"].astype(float), event_records=dict(sorted(events.items())),
+        doppler=np.where(np.isfinite(m["doMes"]), m["doMes"], np.nan).astype(float), cn0=m["cno"].astype(float), event_records=dict(sorted(events.items())),
         system=sys_l[sel], signal=signal, carrier=carrier,
         lli=lli,
         glonass_channels=dict(sorted(channels.items())), leap_seconds=leap)
