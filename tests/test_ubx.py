@@ -126,6 +126,8 @@ def test_loss_of_lock_rule():
     perm = np.random.default_rng(1).permutation(2 * len(t))
     got = loss_of_lock(key[perm], np.r_[t, t][perm], np.r_[lock, lock][perm])
     np.testing.assert_array_equal(got, np.r_[want, want][perm])
+    # at 10 Hz, a lock time that decreased though still longer than the 0.1 s since the last message
+    assert loss_of_lock(np.zeros(2), np.array([0, 10**8]), np.array([1800, 1500]))[1]
     # a lock 9 ms short of the time since the previous message: within the tolerance
     assert not loss_of_lock(np.zeros(2), np.array([0, 10**9]), np.array([0, 991]))[1]
     assert loss_of_lock(np.zeros(2), np.array([0, 10**9]), np.array([0, 989]))[1]
@@ -140,6 +142,23 @@ def test_lli_and_half_cycle_through_the_reader(tmp_path):
     # a carrier flagged not valid: NaN, no half-cycle bit
     u = read_ubx(_write(tmp_path, [(100.0, [_meas(cpValid=0, lli=2)])], "c.ubx"))
     assert np.isnan(u.carrier[0]) and u.lli[0, 1] == 0
+
+
+def test_times_to_the_ns_and_leap_seconds(tmp_path):
+    """rcvTow to the ns (rounded, not truncated: 270147.0000039 s * 1e9 is just below its
+    integer), the week as given; leapS NaN where recStat says it is not determined."""
+    path = tmp_path / "t.ubx"
+    path.write_bytes(rawx(2108, 270147.0000039, [_meas()], leap_known=0).serialize()
+                     + rawx(2108, 604799.9999999, [_meas()]).serialize()
+                     + rawx(2109, 0.5, [_meas()], leap=17).serialize())
+    u = read_ubx(path)
+    np.testing.assert_array_equal(u.week, [2108, 2108, 2109])
+    np.testing.assert_array_equal(u.tow, [270147.0000039, 604799.9999999, 0.5])
+    np.testing.assert_array_equal(u.leap_seconds, [np.nan, 18.0, 17.0])
+    bad = tmp_path / "w.ubx"
+    bad.write_bytes(rawx(2108, 604800.5, [_meas()]).serialize())
+    with pytest.raises(DataError, match=r"byte 0 \(message 1, RXM-RAWX\): rcvTow 604800.5 is not a time of week"):
+        read_ubx(bad)
 
 
 def test_trkstat_invalid_pseudoranges_dropped_and_counted(tmp_path):

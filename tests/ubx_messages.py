@@ -55,10 +55,10 @@ def rows_of(obs_list, channels=None):
     return epochs
 
 
-def rawx(week, tow, meas, leap=18):
+def rawx(week, tow, meas, leap=18, leap_known=1):
     """One RXM-RAWX UBXMessage (pyubx2's generator) of the measurement dicts ``meas``."""
     from pyubx2 import GET, UBXMessage
-    kw = dict(rcvTow=tow, week=week, leapS=leap, numMeas=len(meas), leapSec=1, version=1)
+    kw = dict(rcvTow=tow, week=week, leapS=leap, numMeas=len(meas), leapSec=leap_known, version=1)
     for j, m in enumerate(meas, 1):
         s = f"_{j:02d}"
         for k in ("prMes", "cpMes", "doMes", "gnssId", "svId", "sigId", "freqId", "locktime", "cno"):

@@ -333,7 +333,7 @@ def read_ubx(path, systems=DEFAULT_SYSTEMS, signals=None, decode: str = "numpy")
     tow_bad = ~np.isfinite(heads["rcvTow"]) | (heads["rcvTow"] < 0) | (heads["rcvTow"] >= 604800.0)
     if tow_bad.any():
         j = int(np.flatnonzero(tow_bad)[0])
-        raise DataError(f"{where(j)}: rcvTow {heads['rcvTow'][j]!r} is not a time of week (0 to 604800 s)",
+        raise DataError(f"{where(j)}: rcvTow {float(heads['rcvTow'][j])!r} is not a time of week (0 to 604800 s)",
                         file=str(path))
     # epoch times in integer ns (rcvTow rounded to the ns)
     t_ns = heads["week"].astype(np.int64) * _WEEK_NS + np.round(heads["rcvTow"] * 1e9).astype(np.int64)
