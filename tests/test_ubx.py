@@ -310,3 +310,28 @@ def test_fails_without_the_fix(tmp_path, urbannav):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         read_ubx(path)        # a whole log: no warning
+
+
+def test_gnss_raw_dataset_with_a_ubx_log(tmp_path, urbannav):
+    """A gnss-raw dataset naming the u-blox log (format = "ubx") solves its 30 epochs as the
+    same dataset on the RINEX file does (GPS alone, as the RINEX path)."""
+    import shutil
+    from mixnav.config.loader import load_dataset
+    from mixnav.experiment.spp_process import process_raw, solution_table
+    from .test_process_raw import SHIPPED, _cfg
+    *_, log = urbannav
+    (tmp_path / "tst.ubx").write_bytes(log)
+    obs = data_file(*OBS)
+    shutil.copy(obs.with_name("hksc155c.20n"), tmp_path)
+    text = SHIPPED.replace('file = "pseudoranges_log_2016_06_30_21_26_07.txt"', 'file = "tst.ubx"').replace(
+        'navigation = "hour1820.16n"', 'navigation = "hksc155c.20n"')
+    tables = {}
+    for fmt, name in (("ubx", "tst.ubx"), ("rinex-obs", str(obs))):
+        t = text.replace('format = "android-gnsslogger"', f'format = "{fmt}"').replace('"tst.ubx"', f'"{name}"')
+        ds, src, _ = load_dataset(_cfg(tmp_path, t, f"{fmt}.toml"))
+        assert ds.raw_gnss.format == fmt
+        tables[fmt] = solution_table(process_raw(ds, src, tmp_path))
+    u, r = tables["ubx"], tables["rinex-obs"].iloc[:30].reset_index(drop=True)
+    assert len(u) == 30 and (u.status == "ok").all()
+    import pandas as pd
+    pd.testing.assert_frame_equal(u, r)
