@@ -120,6 +120,11 @@ SIGNAL_CODES: dict[tuple[str, int], str] = {
     ("J", 0): "C1C", ("J", 1): "C1Z", ("J", 4): "C2S", ("J", 5): "C2L", ("J", 8): "C5I", ("J", 9): "C5Q",
 }
 
+#: SIGNAL_CODES as a (gnssId, sigId) table ("" where none)
+_CODE_TABLE = np.full((256, 256), "", dtype="<U3")
+for (_letter, _sig), _code in SIGNAL_CODES.items():
+    _CODE_TABLE[next(g for g, x in GNSS_IDS.items() if x == _letter), _sig] = _code
+
 #: lock time [s] below which a signal seen again after a longer time is taken as re-locked
 LOCK_TOLERANCE = 0.010
 #: the lock time [ms] u-blox receivers stop counting at
@@ -352,7 +357,7 @@ def read_ubx(path, systems=DEFAULT_SYSTEMS, signals=None, decode: str = "numpy")
     sv = meas["svId"].astype(np.int64)
     # satellites at an epoch (per system), for the counts
     sat_key = which * 1_000_000 + meas["gnssId"].astype(np.int64) * 1000 + sv
-    sats, sat_first = np.unique(sat_key, return_index=True)
+    _, sat_first = np.unique(sat_key, return_index=True)
     for s, n in Counter(sysname[sat_first].tolist()).items():
         if s not in read:
             rejected[(f"not GPS: {s}" if only_gps else f"system not read: {s}")] += n
@@ -367,8 +372,7 @@ def read_ubx(path, systems=DEFAULT_SYSTEMS, signals=None, decode: str = "numpy")
         i = int(np.flatnonzero(bad)[0])
         raise DataError(f"{where(int(which[i]))}: {SYSTEMS[sys_l[i]]} svId {sv[i]} is not a satellite number "
                         f"({'1-32' if sys_l[i] == 'G' else '1-99'})", file=str(path))
-    codes = np.array([SIGNAL_CODES.get((s, int(g)), "") for s, g in zip(sys_l, meas["sigId"])]) \
-        if len(meas) else np.empty(0, "<U3")
+    codes = _CODE_TABLE[meas["gnssId"], meas["sigId"]]
     unknown = keep & (codes == "")
     for (s, g), n in Counter(zip(sys_l[unknown].tolist(), meas["sigId"][unknown].tolist())).items():
         rejected[f"unknown signal: {s} sigId {g}"] += n
