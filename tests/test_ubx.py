@@ -279,6 +279,10 @@ def test_dataset_keys(tmp_path):
     assert ds.raw_gnss.format == "ubx"
     with pytest.raises(ConfigError):
         load_dataset(_cfg(tmp_path, SHIPPED.replace('format = "android-gnsslogger"', 'format = "ubx-raw"')))
+    with pytest.raises(ConfigError, match="RINEX 3 codes") as e:
+        load_dataset(_cfg(tmp_path, SHIPPED.replace('format = "android-gnsslogger"',
+                                                    'format = "ubx"\nsignals = { G = "C1" }')))
+    assert e.value.key.startswith("raw_gnss")
 
 
 def test_spp_of_the_ubx_log_equals_the_rinex_files(tmp_path, urbannav):

@@ -192,6 +192,11 @@ class RawGnss(Strict):
                 if key in self.model_fields_set:
                     raise ValueError(f"{key}: only format = \"rinex-obs\" or \"ubx\" reads other systems or signals "
                                      f"(\"{self.format}\" reads GPS L1 C/A)")
+        if self.format == "ubx":
+            for s, codes in self.signals.items():
+                if not any(len(c) == 3 for c in codes):
+                    raise ValueError(f"signals: {s}: {', '.join(codes)}: a u-blox log's signals are named by "
+                                     "RINEX 3 codes (e.g. C1C)")
         return self
 
 
