@@ -108,7 +108,8 @@ def main() -> None:
               "signal are the RINEX reader's (Doppler at the float32 RXM-RAWX carries; BeiDou B1I named C2I, "
               "RINEX 3.02's C1I), as are the times to the ns, systems, PRNs and loss-of-lock indicators; the "
               "pyubx2 decoding gives the same values.", "",
-              "Where the time goes: pyubx2's `UBXReader` frames the messages (a few reads per message); the "
+              "Where the time goes: pyubx2's `UBXReader` frames the messages (a few reads per message) and "
+              "its pure-Python `calc_checksum` checks every UBX frame: about 0.1 s of the numpy path here; the "
               "RXM-RAWX payloads are then one numpy structured array (16-byte header, 32-byte blocks). "
               "`UBXReader.parse` builds one Python attribute per field and block, some 3 ms per 50-measurement "
               "message here.", ""]
