@@ -29,7 +29,8 @@ the slot; ``svId`` 255, a GLONASS satellite whose slot is not known yet, is coun
   ``C7I``, 6 E5b Q ``C7Q``;
 * BeiDou: 0 B1I D1 and 1 B1I D2 ``C2I`` (RINEX 3.03 on; 3.02 wrote ``C1I``), 2 B2I D1 and
   3 B2I D2 ``C7I``, 5 B1C pilot ``C1P``, 6 B1C data ``C1D``, 7 B2a pilot ``C5P``, 8 B2a
-  data ``C5D``;
+  data ``C5D`` (5-8: the newer receivers' identifiers, as the u-blox X20 interface
+  description lists them; no log of them is in the tests);
 * QZSS: 0 L1 C/A ``C1C``, 1 L1S ``C1Z``, 4 L2 CM ``C2S``, 5 L2 CL ``C2L``, 8 L5 I ``C5I``,
   9 L5 Q ``C5Q``.
 
@@ -139,7 +140,6 @@ MEAS = np.dtype([("prMes", "<f8"), ("cpMes", "<f8"), ("doMes", "<f4"), ("gnssId"
                  ("cpStdev", "u1"), ("doStdev", "u1"), ("trkStat", "u1"), ("reserved3", "u1")])
 assert HEADER.itemsize == 16 and MEAS.itemsize == 32
 
-_GPS_EPOCH_NS = 0
 _WEEK_NS = 604800 * 1_000_000_000
 _UBX_HDR = b"\xb5\x62"
 
