@@ -339,3 +339,23 @@ def test_gnss_raw_dataset_with_a_ubx_log(tmp_path, urbannav):
     assert len(u) == 30 and (u.status == "ok").all()
     import pandas as pd
     pd.testing.assert_frame_equal(u, r)
+
+
+def test_ins_raw_reads_ubx_logs_in_time_order(tmp_path, urbannav):
+    """The ins-gnss [raw_gnss] path reads a list of u-blox logs as one record (leap seconds too)."""
+    from mixnav.experiment.rinex_ins import read_observations
+    from mixnav.io.readers import ReadOptions, get_reader
+    l1, l2, channels, _ = urbannav
+    epochs = rows_of([l1, l2], channels)
+    paths = [tmp_path / "a.ubx", tmp_path / "b.ubx"]
+    paths[0].write_bytes(log_bytes(epochs[:12]))
+    paths[1].write_bytes(log_bytes(epochs[12:]))
+    (tmp_path / "all.ubx").write_bytes(log_bytes(epochs))
+    opts = ReadOptions(dataclasses.make_dataclass("T", [("systems", list, dataclasses.field(default_factory=lambda: list("GRECJ")))])())
+    both = read_observations(paths, get_reader("raw-gnss", "ubx"), opts)
+    whole = read_ubx(tmp_path / "all.ubx", systems="GRECJ")
+    for f in FIELDS[:-1] + ("week", "tow", "leap_seconds"):
+        np.testing.assert_array_equal(getattr(both, f), getattr(whole, f), err_msg=f)
+    assert both.glonass_channels == whole.glonass_channels
+    with pytest.raises(DataError, match="time order"):
+        read_observations(paths[::-1], get_reader("raw-gnss", "ubx"), opts)
