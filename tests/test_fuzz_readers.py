@@ -72,7 +72,7 @@ def _finite(obj, where="result"):
     if isinstance(obj, np.ndarray):
         if obj.dtype.kind == "f":
             bad = ~np.isfinite(obj)
-            if where.endswith(("cn0", "vel_ned", "sd_vel", "doppler", "carrier")) and obj.dtype.kind == "f":
+            if where.endswith(("cn0", "vel_ned", "sd_vel", "doppler", "carrier", "leap_seconds")) and obj.dtype.kind == "f":
                 return   # optional columns: NaN marks "not given" (documented)
             assert not bad.any(), f"{where} has {int(bad.sum())} non-finite values"
         return
@@ -197,9 +197,22 @@ def _urbannav_epochs(tmp):
     (tmp / "u.obs").write_bytes(b"".join(lines[:at[15]]))
 
 
+def _ubx_from_urbannav(tmp):
+    """A u-blox log (RXM-RAWX by pyubx2's generator, NAV-PVT, NMEA and junk between them) of the
+    first 15 epochs of the UrbanNav RINEX file (tests/ubx_messages.py)."""
+    import dataclasses
+    from mixnav.io.rinex_obs import read_rinex_obs
+    from .ubx_messages import log_bytes, rows_of
+    r = read_rinex_obs(DATA_DIR / "urbannav-tst-static" / "2020_06_03_TST_03.obs", systems="GRECJ")
+    k = r.epoch < 15
+    r = dataclasses.replace(r, week=r.week[:15], tow=r.tow[:15], **{f: getattr(r, f)[k] for f in (
+        "epoch", "prn", "pseudorange", "doppler", "cn0", "system", "signal", "carrier", "lli", "line")})
+    (tmp / "u.ubx").write_bytes(log_bytes(rows_of([r], {s: 0 for s in range(1, 25)})))
+
+
 def _readers():
     from mixnav.config.loader import load_dataset, load_scenario
-    from mixnav.io import android, comma2k19, drive0708, generic_csv, psins, rinex_obs, rtklib, smartloc
+    from mixnav.io import android, comma2k19, drive0708, generic_csv, psins, rinex_obs, rtklib, smartloc, ubx
     return [
         # name, prepare(tmp), file to damage, read(path), cases
         ("drive-imu", _drive, "imu.csv",
@@ -223,6 +236,7 @@ def _readers():
 
         ("rinex2-obs-multi", _rinex2_from_android, "o.16o", lambda p: rinex_obs.read_rinex_obs(p, systems="GRE"), 30),
         ("rinex3-obs-urbannav", _urbannav_epochs, "u.obs", lambda p: rinex_obs.read_rinex_obs(p, systems="GRECJ"), 30),
+        ("ubx", _ubx_from_urbannav, "u.ubx", lambda p: ubx.read_ubx(p, systems="GRECJ"), 30),
         ("smartloc-pr", lambda t: (t / "in.txt").write_bytes(
             _head(DATA_DIR / "smartloc-berlin" / "Berlin_Potsdamer_Platz_Input.txt", 1500)),
          "in.txt", smartloc.read_pseudoranges, 25),

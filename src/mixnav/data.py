@@ -323,7 +323,7 @@ NO_CHANNEL = -128
 class RawPseudoranges:
     """Receiver pseudoranges grouped by epoch, the broadcast corrections (satellite clock,
     atmosphere) still to apply: what every raw-GNSS reader returns (Android GnssLogger
-    logs, RINEX observation files), and what :func:`mixnav.gnss.spp.solve_epochs` reads.
+    logs, RINEX observation files, u-blox logs), and what :func:`mixnav.gnss.spp.solve_epochs` reads.
 
     Attributes
     ----------
@@ -356,7 +356,8 @@ class RawPseudoranges:
     version : float
         The file's format version (RINEX).
     event_records : dict
-        Records skipped because they are not observations, per epoch flag (RINEX).
+        Records skipped because they are not observations, per epoch flag (RINEX), or per
+        message type (u-blox logs: ``NAV-PVT``, ``NMEA``..., and ``bytes skipped``).
     system : ndarray of str (m,) or None
         RINEX system letter of each measurement (``G`` GPS, ``R`` GLONASS, ``E`` Galileo,
         ``C`` BeiDou, ``J`` QZSS); ``prn`` is then the satellite number within its system
@@ -375,7 +376,11 @@ class RawPseudoranges:
     glonass_channels : dict
         GLONASS slot -> frequency channel number k (-7..+6; carrier frequency
         ``1602 + 0.5625 k`` MHz on L1): the observation header's ``GLONASS SLOT / FRQ #``,
-        or attached from a navigation file (:meth:`with_glonass_channels`).
+        or attached from a navigation file (:meth:`with_glonass_channels`); a u-blox log's
+        ``freqId - 7`` (:mod:`mixnav.io.ubx`).
+    leap_seconds : ndarray (k,) or None
+        GPS - UTC [s] the receiver gave at each epoch (u-blox RXM-RAWX ``leapS``; NaN where
+        the receiver had not determined it yet), when the format gives it.
     """
 
     week: np.ndarray
@@ -399,9 +404,12 @@ class RawPseudoranges:
     lli: np.ndarray | None = None
     line: np.ndarray | None = None
     glonass_channels: dict = field(default_factory=dict)
+    leap_seconds: np.ndarray | None = None
 
     def __post_init__(self):
         m = len(self.prn)
+        _check(self.leap_seconds is None or np.shape(self.leap_seconds) == (len(self.tow),),
+               f"leap_seconds has shape {np.shape(self.leap_seconds)}, expected ({len(self.tow)},)", self.source)
         for name in ("system", "signal", "carrier", "line"):
             a = getattr(self, name)
             _check(a is None or np.shape(a) == (m,), f"{name} has shape {np.shape(a)}, expected ({m},)", self.source)

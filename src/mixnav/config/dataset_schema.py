@@ -152,11 +152,13 @@ class RawGnss(Strict):
     ``systems`` (RINEX letters ``G``, ``R``, ``E``, ``C``, ``J``; default ``["G"]``, GPS L1
     C/A as before) and ``signals`` (a table of system letter -> pseudorange code, or list of
     codes in order of preference, e.g. ``{ E = ["C1C", "C1X"], C = "C2I" }``; a system not
-    named takes :data:`mixnav.gnss.signals.DEFAULT_SIGNALS`) choose what is read. The
-    phone-log format reads GPS alone, so it takes neither key.
+    named takes :data:`mixnav.gnss.signals.DEFAULT_SIGNALS`) choose what is read.
+    ``format = "ubx"``: a binary u-blox log's RXM-RAWX messages (:mod:`mixnav.io.ubx`), with
+    the same ``systems`` and ``signals`` (RINEX 3 codes). The phone-log format reads GPS
+    alone, so it takes neither key.
     """
 
-    format: Literal["android-gnsslogger", "rinex-obs"]
+    format: Literal["android-gnsslogger", "rinex-obs", "ubx"]
     file: str
     navigation: str | list[str]
     elevation_mask: ElevationMask = 10.0 * u.DEG  # type: ignore[valid-type]
@@ -198,14 +200,19 @@ class RawGnss(Strict):
 
     @model_validator(mode="after")
     def _rinex_keys(self):
-        if self.format != "rinex-obs" and isinstance(self.navigation, list) and len(self.navigation) > 1:
+        if self.format not in ("rinex-obs", "ubx") and isinstance(self.navigation, list) and len(self.navigation) > 1:
             raise ValueError(f"navigation: format \"{self.format}\" reads GPS from one navigation file "
-                             f"(several files: format = \"rinex-obs\")")
-        if self.format != "rinex-obs":
+                             f"(several files: format = \"rinex-obs\" or \"ubx\")")
+        if self.format not in ("rinex-obs", "ubx"):
             for key in ("systems", "signals"):
                 if key in self.model_fields_set:
-                    raise ValueError(f"{key}: only format = \"rinex-obs\" reads other systems or signals "
+                    raise ValueError(f"{key}: only format = \"rinex-obs\" or \"ubx\" reads other systems or signals "
                                      f"(\"{self.format}\" reads GPS L1 C/A)")
+        if self.format == "ubx":
+            for s, codes in self.signals.items():
+                if not any(len(c) == 3 for c in codes):
+                    raise ValueError(f"signals: {s}: {', '.join(codes)}: a u-blox log's signals are named by "
+                                     "RINEX 3 codes (e.g. C1C)")
         return self
 
 
@@ -214,7 +221,8 @@ class InsRawGnss(RawGnss):
     observation file and its navigation file for the tightly coupled INS
     (:mod:`mixnav.experiment.rinex_ins`).
 
-    The keys of the raw-GNSS datasets (``format = "rinex-obs"``, ``file``, ``navigation``:
+    The keys of the raw-GNSS datasets (``format = "rinex-obs"`` or ``"ubx"``, a u-blox log's
+    RXM-RAWX messages, :mod:`mixnav.io.ubx`; ``file``, ``navigation``:
     here each one file or a list of files, e.g. hourly observation files and the daily
     navigation files they span, observation files in time order; the SPP's ``elevation_mask``, ``sigma_a``, ``sigma_b``, ``troposphere``,
     ``ionosphere``), plus: ``imu_time``: how the IMU file's time stamps (after
@@ -230,7 +238,7 @@ class InsRawGnss(RawGnss):
     ``withhold``, ``max_gap``, ``gap_action``: as ``[gnss]``'s, on the observation epochs
     (a withheld epoch gives neither the SPP fix nor the tight rows)."""
 
-    format: Literal["rinex-obs"] = "rinex-obs"
+    format: Literal["rinex-obs", "ubx"] = "rinex-obs"
     file: str | list[str]
     navigation: str | list[str]
     imu_time: Literal["gps-week-seconds", "gps-seconds"] = "gps-week-seconds"

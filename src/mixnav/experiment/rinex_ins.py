@@ -66,7 +66,8 @@ def _subset(obs, keep):
 
 def read_observations(paths, read=None, options: ReadOptions | None = None) -> RawPseudoranges:
     """The pseudoranges (and Doppler, carrier, C/N0 when read) of one or more RINEX observation
-    files, in time order (:func:`mixnav.io.rinex_obs.read_rinex_obs` each): one record whose
+    files or u-blox logs, in time order (:func:`mixnav.io.rinex_obs.read_rinex_obs` or
+    :func:`mixnav.io.ubx.read_ubx` each): one record whose
     epochs run on from file to file. A file that does not start after the previous one's
     last epoch is a DataError naming it; Doppler missing from some of the files is NaN
     there (counted as ``no Doppler`` by the tight observables), as are carrier and C/N0.
@@ -106,7 +107,9 @@ def read_observations(paths, read=None, options: ReadOptions | None = None) -> R
         system=optional("system", "G"), signal=optional("signal", ""),
         lli=cat([np.zeros((len(x.prn), len(LLI_COLUMNS)), np.int8) if x.lli is None else x.lli for x in parts])
         if any(x.lli is not None for x in parts) else None,
-        glonass_channels=glonass)
+        glonass_channels=glonass,
+        leap_seconds=None if all(x.leap_seconds is None for x in parts) else
+        cat([np.full(len(x.tow), np.nan) if x.leap_seconds is None else x.leap_seconds for x in parts]))
 
 
 def read_navigation(paths) -> BroadcastEphemeris:
