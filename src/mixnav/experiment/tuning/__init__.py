@@ -306,62 +306,9 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
         doc = tomlkit.parse(stripped)
         chosen, not_tuned, evaluations = {}, {}, []
 
-        # 1. the data stage
-        from .data_stage import imu_noise, stillness_thresholds
-        imu_run = po.imu
-        fixes_run = po.all_fixes
-        noise = imu_noise(imu_run, fixes_run, (t_first, t_last))
-        params = {p.name: p for p in ins_parameters()}
-        start_doc = tomlkit.parse(tomlkit.dumps(doc))
-        for name, attr, rel in (("imu.errors.arw", "arw", "arw_rel_sigma"), ("imu.errors.vrw", "vrw", "vrw_rel_sigma")):
-            p = params[name]
-            if name in fix:
-                not_tuned[name] = "fixed by the user (--fix)"
-                continue
-            if noise is None:
-                not_tuned[name + " (Allan)"] = ("no still segment of 3 s or more in the span: the white noise was "
-                                                "not read from the data; the file's value is the search's start")
-                continue
-            if get_value(doc, p) is None:
-                not_tuned[name] = "not in the file"
-                continue
-            set_value(start_doc, p, getattr(noise, attr))
-            chosen[name] = {"from_data": _value_text(p, getattr(noise, attr)),
-                            "data_how": f"Allan deviation at 1 s over {noise.segments} still segments "
-                                        f"({noise.still_s:.0f} s), +-{100 * getattr(noise, rel):.0f} % (1 sigma)"}
-        if "aiding" in doc and "zupt" in doc["aiding"]:
-            th = stillness_thresholds(imu_run, fixes_run, (t_first, t_last))
-            for k, (val, how) in th.items():
-                name = f"aiding.zupt.{k}"
-                if name in fix:
-                    not_tuned[name] = "fixed by the user (--fix)"
-                elif val is None:
-                    not_tuned[name] = how
-                else:
-                    unit = "m/s^2" if k == "accel_std" else "rad/s"
-                    item = tomlkit.string(f"{val:.4g} {unit}")
-                    item.comment(f"mixnav tune: {how}")
-                    start_doc["aiding"]["zupt"][k] = item
-                    chosen[name] = {"value": f"{val:.4g} {unit}", "how": how, "spread": None}
-
-        from .data_stage import BIAS_INCREMENT_S, LOOSEN, bias_walks
-        wanted = [n for n in ("imu.errors.gyro_bias_walk", "imu.errors.accel_bias_walk") if n not in fix]
-        if wanted:
-            local = Evaluator(stripped, source, data, target, windows, (t_first, t_last))
-            walks = bias_walks(local, tomlkit.dumps(start_doc), (t_first, t_last))
-            if walks is None:
-                for n in wanted:
-                    not_tuned[n + " (smoothed)"] = ("the span holds fewer than three 10 s increments, or the method "
-                                                    "cannot be smoothed: the walks were not read from the data")
-            else:
-                for n in wanted:
-                    p = params[n]
-                    v = walks[n.rsplit(".", 1)[1]]
-                    set_value(start_doc, p, v)
-                    chosen[n] = {"from_data": _value_text(p, v),
-                                 "data_how": f"RTS-smoothed bias increments over {BIAS_INCREMENT_S:g} s "
-                                             f"({walks['increments']} increments; the file's walks loosened "
-                                             f"x{LOOSEN:g} for that run)"}
+        # 1. the data stage: the search's start from the data alone
+        start_doc = _data_stage(doc, po, (t_first, t_last), fix, chosen, not_tuned,
+                                Evaluator(stripped, source, data, target, windows, (t_first, t_last)))
 
         # 2. the criterion: the file as given, the data stage's start, then the coordinate search
         given_text, start_text = tomlkit.dumps(doc), tomlkit.dumps(start_doc)
@@ -391,46 +338,15 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
         # the installation mixnav estimates as states, kept when the criterion agrees; between the
         # passes, after the time offset and velocity delay (a lever arm would otherwise absorb a
         # timing error along the track)
-        from .installation import ANTENNA, MOUNTING, proposal
-        inst_keys = [k for k in (ANTENNA.name, MOUNTING.name) if k not in fix]
-        if not inst_keys:
-            for k in (ANTENNA.name, MOUNTING.name):
-                not_tuned[k] = "fixed by the user (--fix)"
-        elif scorer.left() > 0:
-            local = Evaluator(stripped, source, data, target, windows, (t_first, t_last))
-            prop = proposal(local, tomlkit.dumps(cur_doc))
-            if prop is None:
-                not_tuned[ANTENNA.name] = "the tuned method cannot estimate the installation (not a loose EKF)"
-            else:
-                pdoc, notes = prop
-                for k in (ANTENNA.name, MOUNTING.name):   # a fixed key keeps the file's value
-                    if k in fix:
-                        src_doc = cur_doc
-                        p = ANTENNA if k == ANTENNA.name else MOUNTING
-                        if get_value(src_doc, p) is not None:
-                            set_value(pdoc, p, get_value(src_doc, p))
-                        notes.pop(k, None)
-                        not_tuned[k] = "fixed by the user (--fix)"
-                (sc,) = scorer.score([tomlkit.dumps(pdoc)])
-                if sc is not None:
-                    evaluations.append({"changed": "installation estimated as states", "score": sc})
-                    keep = sc["nlpd"] < cur["nlpd"] - MIN_GAIN
-                    for k, (val, how) in notes.items():
-                        if keep:
-                            chosen[k] = {"value": val, "how": f"{how}; the criterion {cur['nlpd']:.3f} -> {sc['nlpd']:.3f}",
-                                         "spread": None}
-                        else:
-                            not_tuned[k] = (f"{how}; not written: the criterion did not improve "
-                                            f"({cur['nlpd']:.3f} -> {sc['nlpd']:.3f})")
-                    if keep:
-                        cur_doc, cur = pdoc, sc
+        cur_doc, cur = _installation_stage(cur_doc, cur, fix, scorer, evaluations, chosen, not_tuned,
+                                           lambda: Evaluator(stripped, source, data, target, windows,
+                                                             (t_first, t_last)))
         cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations, grids=("fine",),
                                                  curves=curves, reserve=CONSERVATIVE_RESERVE)
         # the most cautious setting the criterion cannot tell from the best (search.conservative_pass)
         n_windows = sum(len(f) for f in windows)
         searched_best = cur["nlpd"]
         cur_doc, cur = conservative_pass(cur_doc, cur, searched, scorer, evaluations, 2.0 / n_windows, curves)
-        n_windows = sum(len(f) for f in windows)
         for p in searched:
             if len(curves.get(p.name, [])) < 2:   # only the current point: the budget ran out first
                 not_tuned[p.name] = "the budget ran out before the search reached it: the file's value kept"
@@ -455,6 +371,102 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
                                 "cv_windows": windows, "fixed": fix, "criterion_best_searched": searched_best})
     write_marker(out, "tune", True, TUNE_FILES)
     return result
+
+
+def _data_stage(doc, po, span, fix, chosen: dict, not_tuned: dict, local: Evaluator):
+    """The search's start from the data alone (:mod:`.data_stage`): a copy of ``doc`` with the
+    still segments' Allan noise, the stillness thresholds and the smoothed bias walks; ``po``:
+    the probe run (its IMU and fixes on the run's time axis); ``local``: an evaluator on the
+    span. What was found goes into ``chosen``, what could not be into ``not_tuned``."""
+    from .data_stage import BIAS_INCREMENT_S, LOOSEN, bias_walks, imu_noise, stillness_thresholds
+    noise = imu_noise(po.imu, po.all_fixes, span)
+    params = {p.name: p for p in ins_parameters()}
+    start_doc = tomlkit.parse(tomlkit.dumps(doc))
+    for name, attr, rel in (("imu.errors.arw", "arw", "arw_rel_sigma"), ("imu.errors.vrw", "vrw", "vrw_rel_sigma")):
+        p = params[name]
+        if name in fix:
+            not_tuned[name] = "fixed by the user (--fix)"
+            continue
+        if noise is None:
+            not_tuned[name + " (Allan)"] = ("no still segment of 3 s or more in the span: the white noise was "
+                                            "not read from the data; the file's value is the search's start")
+            continue
+        if get_value(doc, p) is None:
+            not_tuned[name] = "not in the file"
+            continue
+        set_value(start_doc, p, getattr(noise, attr))
+        chosen[name] = {"from_data": _value_text(p, getattr(noise, attr)),
+                        "data_how": f"Allan deviation at 1 s over {noise.segments} still segments "
+                                    f"({noise.still_s:.0f} s), +-{100 * getattr(noise, rel):.0f} % (1 sigma)"}
+    if "aiding" in doc and "zupt" in doc["aiding"]:
+        for k, (val, how) in stillness_thresholds(po.imu, po.all_fixes, span).items():
+            name = f"aiding.zupt.{k}"
+            if name in fix:
+                not_tuned[name] = "fixed by the user (--fix)"
+            elif val is None:
+                not_tuned[name] = how
+            else:
+                unit = "m/s^2" if k == "accel_std" else "rad/s"
+                item = tomlkit.string(f"{val:.4g} {unit}")
+                item.comment(f"mixnav tune: {how}")
+                start_doc["aiding"]["zupt"][k] = item
+                chosen[name] = {"value": f"{val:.4g} {unit}", "how": how, "spread": None}
+    wanted = [n for n in ("imu.errors.gyro_bias_walk", "imu.errors.accel_bias_walk") if n not in fix]
+    if not wanted:
+        return start_doc
+    walks = bias_walks(local, tomlkit.dumps(start_doc), span)
+    if walks is None:
+        for n in wanted:
+            not_tuned[n + " (smoothed)"] = ("the span holds fewer than three 10 s increments, or the method "
+                                            "cannot be smoothed: the walks were not read from the data")
+        return start_doc
+    for n in wanted:
+        p = params[n]
+        v = walks[n.rsplit(".", 1)[1]]
+        set_value(start_doc, p, v)
+        chosen[n] = {"from_data": _value_text(p, v),
+                     "data_how": f"RTS-smoothed bias increments over {BIAS_INCREMENT_S:g} s "
+                                 f"({walks['increments']} increments; the file's walks loosened "
+                                 f"x{LOOSEN:g} for that run)"}
+    return start_doc
+
+
+def _installation_stage(cur_doc, cur: dict, fix, scorer, evaluations: list, chosen: dict, not_tuned: dict,
+                        make_evaluator):
+    """The antenna lever arm and vehicle mounting estimated as states (:mod:`.installation`),
+    written into the file when the criterion improves by more than MIN_GAIN (a fixed key keeps
+    the file's value). Returns the (possibly new) document and its score."""
+    from .installation import ANTENNA, MOUNTING, proposal
+    if all(k in fix for k in (ANTENNA.name, MOUNTING.name)):
+        for k in (ANTENNA.name, MOUNTING.name):
+            not_tuned[k] = "fixed by the user (--fix)"
+        return cur_doc, cur
+    if scorer.left() <= 0:
+        return cur_doc, cur
+    prop = proposal(make_evaluator(), tomlkit.dumps(cur_doc))
+    if prop is None:
+        not_tuned[ANTENNA.name] = "the tuned method cannot estimate the installation (not a loose EKF)"
+        return cur_doc, cur
+    pdoc, notes = prop
+    for k, p in ((ANTENNA.name, ANTENNA), (MOUNTING.name, MOUNTING)):
+        if k in fix:
+            if get_value(cur_doc, p) is not None:
+                set_value(pdoc, p, get_value(cur_doc, p))
+            notes.pop(k, None)
+            not_tuned[k] = "fixed by the user (--fix)"
+    (sc,) = scorer.score([tomlkit.dumps(pdoc)])
+    if sc is None:
+        return cur_doc, cur
+    evaluations.append({"changed": "installation estimated as states", "score": sc})
+    keep = sc["nlpd"] < cur["nlpd"] - MIN_GAIN
+    for k, (val, how) in notes.items():
+        if keep:
+            chosen[k] = {"value": val, "how": f"{how}; the criterion {cur['nlpd']:.3f} -> {sc['nlpd']:.3f}",
+                         "spread": None}
+        else:
+            not_tuned[k] = (f"{how}; not written: the criterion did not improve "
+                            f"({cur['nlpd']:.3f} -> {sc['nlpd']:.3f})")
+    return (pdoc, sc) if keep else (cur_doc, cur)
 
 
 def _applies(doc, p: Parameter, ds) -> bool:
