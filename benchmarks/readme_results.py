@@ -78,6 +78,18 @@ def rows() -> list[tuple[str, str, str, str, str]]:
     out.append((f"smartLoc, the whole causal pipeline started at {starts} s: 2-D RMSE median / worst",
                 "the same", f"{own['median_m']:.2f} / {own['worst_m']:.2f} m",
                 f"libRSF online on the same spans: {lr_med:.2f} / {max(lr):.2f} m", src_s))
+    u = _json("urbannav_spp.json")["results"]["GPS+GLONASS+Galileo+BeiDou"]["methods"]["spp"]
+    rk = [r for r in _json("rtklib_urbannav.json")["rows"]
+          if r["version"] == "ex" and r["systems"] == "GPS+GLONASS+Galileo+BeiDou" and not r["raim"]][0]
+    out.append(("urbannav-tst-static (u-blox F9P among high-rise buildings, GPS+GLONASS+Galileo+BeiDou, 15 deg "
+                "mask): horizontal RMSE of single-point positioning, epochs solved",
+                "plain SPP, every epoch",
+                f"{u['h_rmse_m']:.1f} m, {u['epochs']} of 986",
+                f"RTKLIB demo5 EX 2.5.1 rnx2rtkp, rerun here (same orbits, mask, atmosphere; its own weights): "
+                f"{rk['h_rmse_m']:.1f} m, "
+                f"{rk['epochs_solved']} of 986",
+                "[urbannav_spp.md](benchmarks/results/urbannav_spp.md), "
+                "[rtklib_urbannav.md](benchmarks/results/rtklib_urbannav.md)"))
     p4 = ROOT / "benchmarks" / "reproductions" / "P4_tables.md"
     em, imm = _md_row(p4, "EM-IMM"), _md_row(p4, "IMM (P4")
     out.append(("P4-vehicle (simulated, 50 runs): max horizontal error in the multipath episode",
