@@ -698,6 +698,28 @@ class SppTrack:
         return {str(v): int(c) for v, c in zip(vals, counts)}
 
 
+def _record(out: "SppTrack", j: int, sol, options: SppOptions) -> bool:
+    """Book epoch ``j``'s solution into ``out`` (single- or multi-system alike): the robust
+    counts, then, when it converged, position, clock, the position + clock covariance (4, 4;
+    the inter-system offsets' rows are not kept), satellites, DOPs and residual RMS. False
+    (status ``not converged``) when it did not converge."""
+    if options.robust is not None:
+        rb = out.robust
+        rb["rows_downweighted"] = rb.get("rows_downweighted", 0) + sol.n_downweighted
+        rb["rows_excluded"] = rb.get("rows_excluded", 0) + sol.n_excluded
+        rb[f"epochs_{sol.robust_status}"] = rb.get(f"epochs_{sol.robust_status}", 0) + 1
+    if not sol.converged:
+        out.status[j] = STATUS_NOT_CONVERGED
+        return False
+    out.pos_ecef[j] = sol.pos_ecef
+    out.clock_bias[j] = sol.clock_bias
+    out.cov[j] = sol.cov[:4, :4]
+    out.n_sat[j] = sol.n_sat
+    out.pdop[j], out.hdop[j], out.vdop[j] = sol.dop["pdop"], sol.dop["hdop"], sol.dop["vdop"]
+    out.rms_residual[j] = float(np.sqrt(np.mean(sol.residuals**2)))
+    return True
+
+
 def solve_epochs(ephemeris, week, tow_rx, epoch, prn, pseudorange, options: SppOptions = SppOptions(),
                  sigma_scale=None, system=None, glonass_channel=None) -> SppTrack:
     """SPP at every epoch; epochs without a solution are counted, not raised.
@@ -778,21 +800,9 @@ def solve_epochs(ephemeris, week, tow_rx, epoch, prn, pseudorange, options: SppO
             x0 = None
             continue
         skipped["below elevation mask"] = skipped.get("below elevation mask", 0) + sol.n_rejected_mask
-        if options.robust is not None:
-            rb = out.robust
-            rb["rows_downweighted"] = rb.get("rows_downweighted", 0) + sol.n_downweighted
-            rb["rows_excluded"] = rb.get("rows_excluded", 0) + sol.n_excluded
-            rb[f"epochs_{sol.robust_status}"] = rb.get(f"epochs_{sol.robust_status}", 0) + 1
-        if not sol.converged:
-            out.status[j] = STATUS_NOT_CONVERGED
+        if not _record(out, j, sol, options):
             x0 = None
             continue
-        out.pos_ecef[j] = sol.pos_ecef
-        out.clock_bias[j] = sol.clock_bias
-        out.cov[j] = sol.cov
-        out.n_sat[j] = sol.n_sat
-        out.pdop[j], out.hdop[j], out.vdop[j] = sol.dop["pdop"], sol.dop["hdop"], sol.dop["vdop"]
-        out.rms_residual[j] = float(np.sqrt(np.mean(sol.residuals**2)))
         x0 = np.append(sol.pos_ecef, sol.clock_bias)
     out.status = out.status.astype(str)
     out.skipped_satellites = skipped
@@ -869,21 +879,9 @@ def _solve_epochs_multi(ephemeris, week, tow_rx, epoch, prn, pseudorange, option
         if sol.n_rejected_mask:
             for letter in letters[_below_mask(sol, sats, options)]:
                 count(letter, "below elevation mask")
-        if options.robust is not None:
-            rb = out.robust
-            rb["rows_downweighted"] = rb.get("rows_downweighted", 0) + sol.n_downweighted
-            rb["rows_excluded"] = rb.get("rows_excluded", 0) + sol.n_excluded
-            rb[f"epochs_{sol.robust_status}"] = rb.get(f"epochs_{sol.robust_status}", 0) + 1
-        if not sol.converged:
-            out.status[j] = STATUS_NOT_CONVERGED
+        if not _record(out, j, sol, options):
             x0 = None
             continue
-        out.pos_ecef[j] = sol.pos_ecef
-        out.clock_bias[j] = sol.clock_bias
-        out.cov[j] = sol.cov[:4, :4]
-        out.n_sat[j] = sol.n_sat
-        out.pdop[j], out.hdop[j], out.vdop[j] = sol.dop["pdop"], sol.dop["hdop"], sol.dop["vdop"]
-        out.rms_residual[j] = float(np.sqrt(np.mean(sol.residuals**2)))
         sys_used = letters if sol.system is None else sol.system
         for s in present:
             out.n_sat_system[s][j] = int(np.sum(sys_used == s))
