@@ -306,9 +306,10 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
         doc = tomlkit.parse(stripped)
         chosen, not_tuned, evaluations = {}, {}, []
 
+        # one evaluator on the span for the stages' single runs here (it keeps the data it read)
+        local = Evaluator(stripped, source, data, target, windows, (t_first, t_last))
         # 1. the data stage: the search's start from the data alone
-        start_doc = _data_stage(doc, po, (t_first, t_last), fix, chosen, not_tuned,
-                                Evaluator(stripped, source, data, target, windows, (t_first, t_last)))
+        start_doc = _data_stage(doc, po, (t_first, t_last), fix, chosen, not_tuned, local)
 
         # 2. the criterion: the file as given, the data stage's start, then the coordinate search
         given_text, start_text = tomlkit.dumps(doc), tomlkit.dumps(start_doc)
@@ -338,9 +339,7 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
         # the installation mixnav estimates as states, kept when the criterion agrees; between the
         # passes, after the time offset and velocity delay (a lever arm would otherwise absorb a
         # timing error along the track)
-        cur_doc, cur = _installation_stage(cur_doc, cur, fix, scorer, evaluations, chosen, not_tuned,
-                                           lambda: Evaluator(stripped, source, data, target, windows,
-                                                             (t_first, t_last)))
+        cur_doc, cur = _installation_stage(cur_doc, cur, fix, scorer, evaluations, chosen, not_tuned, local)
         cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations, grids=("fine",),
                                                  curves=curves, reserve=CONSERVATIVE_RESERVE)
         # the most cautious setting the criterion cannot tell from the best (search.conservative_pass)
@@ -432,7 +431,7 @@ def _data_stage(doc, po, span, fix, chosen: dict, not_tuned: dict, local: Evalua
 
 
 def _installation_stage(cur_doc, cur: dict, fix, scorer, evaluations: list, chosen: dict, not_tuned: dict,
-                        make_evaluator):
+                        local: Evaluator):
     """The antenna lever arm and vehicle mounting estimated as states (:mod:`.installation`),
     written into the file when the criterion improves by more than MIN_GAIN (a fixed key keeps
     the file's value). Returns the (possibly new) document and its score."""
@@ -443,7 +442,7 @@ def _installation_stage(cur_doc, cur: dict, fix, scorer, evaluations: list, chos
         return cur_doc, cur
     if scorer.left() <= 0:
         return cur_doc, cur
-    prop = proposal(make_evaluator(), tomlkit.dumps(cur_doc))
+    prop = proposal(local, tomlkit.dumps(cur_doc))
     if prop is None:
         not_tuned[ANTENNA.name] = "the tuned method cannot estimate the installation (not a loose EKF)"
         return cur_doc, cur

@@ -170,6 +170,14 @@ class Evaluator:
         return Score(nlpd_sum / n_fix, ll_sum / max(n_upd, 1), hmax, nees, n_fix, n_upd)
 
 
+def nearest(times: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Index into the increasing, non-empty ``times`` of the one nearest each of ``t``."""
+    if len(times) == 1:
+        return np.zeros(len(t), int)
+    j = np.clip(np.searchsorted(times, t), 1, len(times) - 1)
+    return j - ((t - times[j - 1]) < (times[j] - t))
+
+
 def _cropped(inputs, end: float):
     """The read IMU and fixes up to ``end`` [s since the first IMU sample]: a causal filter's
     criterion inside the span does not depend on what comes after it, so the runs stop
@@ -202,8 +210,7 @@ def _withheld_scores(po, res, windows) -> tuple[float, int, list, list]:
     tab = solution_table(res, truth, (), lever=po.lever)
     e = tab[["err_n_m", "err_e_m", "err_d_m"]].to_numpy()
     # the fix sigma nearest each record (the fixes are the truth, with their own noise)
-    j = np.clip(np.searchsorted(fx.time, res.time), 1, len(fx.time) - 1)
-    j -= (res.time - fx.time[j - 1]) < (fx.time[j] - res.time)
+    j = nearest(fx.time, res.time)
     sig = np.broadcast_to(np.asarray(fx.pos_sigma, float).reshape(len(fx.time), -1), (len(fx.time), 3))[j]
     total, count, hmax, nees = 0.0, 0, [], []
     for a, b in windows:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from .allan import still_noise
+from .criterion import nearest
 
 #: a 1 s window counts as still (moving) for the threshold statistics when the nearest GNSS
 #: velocity within 0.5 s says below (above) this speed [m/s]
@@ -27,8 +28,7 @@ def _speed_at(fixes, t, gap: float = 0.5):
     """GNSS horizontal speed nearest each time (NaN without a fix within ``gap`` s or without velocities)."""
     if fixes.vel_n is None or len(fixes.time) == 0:
         return np.full(len(t), np.nan)
-    j = np.clip(np.searchsorted(fixes.time, t), 1, len(fixes.time) - 1)
-    j -= (t - fixes.time[j - 1]) < (fixes.time[j] - t)
+    j = nearest(fixes.time, t)
     s = np.hypot(fixes.vel_n[j, 0], fixes.vel_n[j, 1])
     return np.where(np.abs(fixes.time[j] - t) <= gap, s, np.nan)
 
