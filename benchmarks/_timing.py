@@ -54,3 +54,14 @@ def best_of(fn: Callable, repeat: int, *, number: int = 1, warmup: bool = False,
 def best_time(fn: Callable, repeat: int, **kw) -> float:
     """:func:`best_of` without the value: the best time per call [s]."""
     return best_of(fn, repeat, **kw)[0]
+
+
+def best_wall_cpu(fn: Callable, repeat: int):
+    """Best wall and best CPU time [s] of ``repeat`` calls of ``fn``, and its last value."""
+    wall, cpu, out = [], [], None
+    for _ in range(repeat):
+        w0, c0 = time.perf_counter(), time.process_time()
+        out = fn()
+        wall.append(time.perf_counter() - w0)
+        cpu.append(time.process_time() - c0)
+    return min(wall), min(cpu), out

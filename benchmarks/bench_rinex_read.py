@@ -19,7 +19,6 @@ checks every type of every system). Writes benchmarks/results/rinex_read.md.
 from __future__ import annotations
 
 import sys
-import time
 import warnings
 from datetime import datetime, timezone
 from pathlib import Path
@@ -28,6 +27,7 @@ import numpy as np
 
 from mixnav.gnss.signals import companions
 from mixnav.io.rinex_obs import read_rinex_obs
+from _timing import best_wall_cpu as timed  # benchmarks/ is on sys.path
 
 FILE = ("urbannav-tst-static", "2020_06_03_TST_03.obs")
 GPS0 = np.datetime64("1980-01-06T00:00:00", "ns")
@@ -38,17 +38,6 @@ def georinex_load(path, use=None):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         return georinex.load(path, use=use, fast=False)
-
-
-def timed(fn, repeat):
-    """Best wall and best CPU time [s] of ``repeat`` calls of ``fn``, and its value."""
-    wall, cpu, out = [], [], None
-    for _ in range(repeat):
-        w0, c0 = time.perf_counter(), time.process_time()
-        out = fn()
-        wall.append(time.perf_counter() - w0)
-        cpu.append(time.process_time() - c0)
-    return min(wall), min(cpu), out
 
 
 def same_values(r, g) -> int:

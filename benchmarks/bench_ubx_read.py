@@ -36,20 +36,10 @@ from mixnav.gnss.multi_ephemeris import MultiEphemeris  # noqa: E402
 from mixnav.io.rinex_obs import read_rinex_obs  # noqa: E402
 from mixnav.io.ubx import read_ubx  # noqa: E402
 from tests.ubx_messages import log_bytes, rows_of  # noqa: E402
+from _timing import best_wall_cpu as timed  # benchmarks/ is on sys.path
 
 FILE = ("urbannav-tst-static", "2020_06_03_TST_03.obs")
 L2 = {"G": "C2L", "R": "C2C", "E": "C7Q", "C": "C7I", "J": "C2L"}
-
-
-def timed(fn, repeat):
-    """Best wall and best CPU time [s] of ``repeat`` calls of ``fn``, and its value."""
-    wall, cpu, out = [], [], None
-    for _ in range(repeat):
-        w0, c0 = time.perf_counter(), time.process_time()
-        out = fn()
-        wall.append(time.perf_counter() - w0)
-        cpu.append(time.process_time() - c0)
-    return min(wall), min(cpu), out
 
 
 def check(u, r) -> int:
