@@ -21,7 +21,7 @@ searchers get the SAME criterion, the SAME start and the SAME budget:
   the coarse grid's range (``"shift"`` keys), clipped to the parameter's bounds. The values are
   written into the file by :func:`~mixnav.experiment.tuning.parameters.set_value` (4 significant
   digits): a candidate is a dataset file's text, and a text already scored costs nothing again;
-- every candidate scored by the library's ``_Scorer`` (journal, budget: each distinct candidate
+- every candidate scored by the library's ``Scorer`` (mixnav.experiment.tuning.scoring) (journal, budget: each distinct candidate
   counts once) on local worker processes.
 
 The searchers:
@@ -92,7 +92,7 @@ def prepare(window: float = 30.0, folds: int = 6) -> dict:
     t_last = min(_seconds(TUNE_SPAN[1], "span"), t_last)
     own = [tuple(map(float, x)) for x in ds.gnss.withhold]
     windows = [f for f in cv_windows(t_first, t_last, window, folds, avoid=own, step=window / 2.0) if f]
-    setup = (stripped, source, None, target, windows, (t_first, t_last))
+    setup = ("cv", stripped, source, None, target, windows, (t_first, t_last))
 
     doc = tomlkit.parse(stripped)
     start_doc = tomlkit.parse(tomlkit.dumps(doc))
@@ -123,11 +123,11 @@ def prepare(window: float = 30.0, folds: int = 6) -> dict:
 # ---------------------------------------------------------------- the scorer, recording a curve
 
 def recording_scorer(prep: dict, journal: Path, workers: int, budget: int):
-    """The library's ``_Scorer`` (fresh journal) that records, per candidate counted against the
+    """The library's ``Scorer`` (mixnav.experiment.tuning.scoring) (fresh journal) that records, per candidate counted against the
     budget, its criterion in the order counted."""
-    from mixnav.experiment.tuning import _Scorer
+    from mixnav.experiment.tuning.scoring import Scorer
 
-    class Recording(_Scorer):
+    class Recording(Scorer):
         def __init__(self, *a):
             super().__init__(*a)
             self.order: list[tuple[str, float]] = []     # (key, nlpd) per counted candidate

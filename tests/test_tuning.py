@@ -200,7 +200,7 @@ def test_bad_arguments_are_named(tmp_path, kwargs, argument):
 
 def test_a_dataset_without_gnss_fixes_is_refused_by_name(tmp_path):
     with pytest.raises(ConfigError) as e:
-        tune("smartloc-berlin", tmp_path / "out", budget=2)
+        tune("android-static", tmp_path / "out", budget=2)
     assert e.value.key == "dataset.kind" and "not built yet" in str(e.value)
 
 

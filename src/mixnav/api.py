@@ -140,7 +140,8 @@ def process_dataset(name_or_path: str, data: str | None = None) -> RunResult:
 
 def tune(name_or_path: str, out, *, budget: int = 96, workers: int | None = None, scheduler: str | None = None,
          data: str | None = None, fix=(), span=None, window="30 s", folds: int = 6, method: str | None = None,
-         resume: bool = False, overwrite: bool = False, progress: bool = False, seed: int = 0):
+         criterion: str | None = None, resume: bool = False, overwrite: bool = False, progress: bool = False,
+         seed: int = 0):
     """Tune a dataset file from its own data, never reading its reference, and write ``out``
     (``tuned.toml``, ``tune.json``, ``report.md``): a
     :class:`~mixnav.experiment.tuning.TuneResult` (:func:`mixnav.experiment.tuning.tune`,
@@ -151,8 +152,8 @@ def tune(name_or_path: str, out, *, budget: int = 96, workers: int | None = None
     """
     from .experiment.tuning import tune as _tune
     return _tune(name_or_path, out, budget=budget, workers=workers, scheduler=scheduler, data=data, fix=fix,
-                 span=span, window=window, folds=folds, method=method, resume=resume, overwrite=overwrite,
-                 progress=progress, seed=seed)
+                 span=span, window=window, folds=folds, method=method, criterion=criterion, resume=resume,
+                 overwrite=overwrite, progress=progress, seed=seed)
 
 
 def outage_sweep(name_or_path: str, window=None, step=None, span=None, *, data: str | None = None,

@@ -336,7 +336,7 @@ def experiment(scenario: str = typer.Argument(..., help="Shipped scenario name o
 
 @app.command()
 def tune(dataset: str = typer.Argument(..., help="Shipped dataset config name or path of a .toml file "
-                                               "(IMU + GNSS fixes)."),
+                                               "(IMU + GNSS fixes, or odometry + pseudoranges)."),
          out_dir: Path = typer.Option(..., "--out", help="Folder for tuned.toml, tune.json, report.md, tune.png."),
          budget: int = typer.Option(96, "--budget", help="Candidate settings scored at most (each is --folds "
                                                          "filter runs; at least 1)."),
@@ -351,7 +351,10 @@ def tune(dataset: str = typer.Argument(..., help="Shipped dataset config name or
          window: str = typer.Option("30 s", "--window", help="Length of the cross-validation outages."),
          folds: int = typer.Option(6, "--folds", help="Runs the cross-validation windows (one every half window) "
                                                    "are dealt to (>= 4)."),
-         method: str = typer.Option(None, "--method", help="The method tuned (default: the most aided)."),
+         method: str = typer.Option(None, "--method", help="The method tuned (default: the most aided; odometry + "
+                                                           "pseudoranges: the first epoch mixture)."),
+         criterion: str = typer.Option(None, "--criterion", help="Odometry + pseudoranges only: 'likelihood' "
+                                                                 "(default) or 'withheld-satellites' (docs/tuning.md)."),
          data: Path = typer.Option(None, "--data", help="Folder holding the data files (default: the config's "
                                                         "data_dir)."),
          resume: bool = typer.Option(False, "--resume", help="Reuse the evaluations of an earlier run into --out."),
@@ -364,12 +367,18 @@ def tune(dataset: str = typer.Argument(..., help="Shipped dataset config name or
         r = _tune(dataset, out_dir, budget=budget, workers=workers, scheduler=scheduler,
                   data=None if data is None else str(data), fix=fix or (),
                   span=None if not span or span[0] is None else span, window=window, folds=folds, method=method,
-                  resume=resume, overwrite=overwrite, progress=progress)
-    t = Table("", "CV mean NLPD", "innovation log-lik./update", "CV median / p90 horizontal max [m]",
-              title=f"{dataset}: {r.runs} filter runs")
-    for name, s in (("as given", r.given), ("tuned", r.tuned)):
-        t.add_row(name, f"{s['nlpd']:.3f}", f"{s['innovation_ll_per_update']:.3f}",
-                  f"{s['cv_median_hmax_m']:.2f} / {s['cv_p90_hmax_m']:.2f}")
+                  criterion=criterion, resume=resume, overwrite=overwrite, progress=progress)
+    if "nlpd" in r.given:
+        t = Table("", "CV mean NLPD", "innovation log-lik./update", "CV median / p90 horizontal max [m]",
+                  title=f"{dataset}: {r.runs} filter runs")
+        for name, s in (("as given", r.given), ("tuned", r.tuned)):
+            t.add_row(name, f"{s['nlpd']:.3f}", f"{s['innovation_ll_per_update']:.3f}",
+                      f"{s['cv_median_hmax_m']:.2f} / {s['cv_p90_hmax_m']:.2f}")
+    else:
+        t = Table("", "criterion (lower is better)", "innovation log-lik./update",
+                  title=f"{dataset}: {r.runs} pipeline runs")
+        for name, s in (("as given", r.given), ("tuned", r.tuned)):
+            t.add_row(name, f"{s['criterion']:.4f}", f"{s['innovation_ll_per_update']:.3f}")
     out.print(t)
     for k, c in r.chosen.items():
         out.print(f"  {k} = {c.get('value', c.get('from_data'))}")

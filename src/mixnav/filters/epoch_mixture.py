@@ -207,6 +207,8 @@ class EpochMixtureEstimator(KalmanEstimator):
         self._t_last = None
         #: running sum of the rows' predictive log densities (:meth:`_predictive_log_density`)
         self.log_likelihood = 0.0
+        #: (time, that epoch's sum, rows) of every update: a tuner scores a span of them
+        self._ll_trace = []
 
     def _predictive_log_density(self, z, r, h, mix, w) -> float:
         """Sum over the rows of the log predictive density of each innovation, alone (the
@@ -239,7 +241,9 @@ class EpochMixtureEstimator(KalmanEstimator):
         h = np.einsum("ij,jk,ik->i", H, P0, H)
         band = self._bands(epoch, len(z))
         w_row = self.w_band[band]
-        self.log_likelihood += self._predictive_log_density(z, r, h, mix, w_row)
+        ll = self._predictive_log_density(z, r, h, mix, w_row)
+        self.log_likelihood += ll
+        self._ll_trace.append((epoch.time, ll, len(z)))
         inflate = np.where(mix, self._correlation_factor(epoch.time), 1.0)
         P_new, x, nis, status, e, g, converged = epoch_em(
             np.ascontiguousarray(P0), np.ascontiguousarray(z, dtype=float), np.ascontiguousarray(H, dtype=float),
@@ -296,12 +300,20 @@ class EpochMixtureEstimator(KalmanEstimator):
             self.s = float(np.clip(self._Q / max(self._G, 1e-9), 0.1, 10.0))
 
     def outputs(self) -> dict:
-        """Per epoch: the mean LOS responsibility and the mixture then in use."""
+        """Per epoch: the mean LOS responsibility and the mixture then in use; and per update
+        (``innovation_log_density_time``) the sum of its rows' predictive log densities
+        (``innovation_log_density``, their sum is ``diagnostics()["innovation_log_likelihood"]``)
+        and its rows (``innovation_rows``)."""
+        out = {}
+        if self._ll_trace:
+            t, ll, m = map(np.array, zip(*self._ll_trace))
+            out.update(innovation_log_density_time=t.astype(float), innovation_log_density=ll.astype(float),
+                       innovation_rows=m.astype(np.int64))
         if not self._trace:
-            return {}
+            return out
         t, g, w, mu, sd, s = map(np.array, zip(*self._trace))
-        return {"epoch_mixture_time": t, "los_share": g, "los_weight": w, "delay_mean_m": mu, "delay_sd_m": sd,
-                "los_scale": s}
+        return {**out, "epoch_mixture_time": t, "los_share": g, "los_weight": w, "delay_mean_m": mu,
+                "delay_sd_m": sd, "los_scale": s}
 
     def diagnostics(self) -> dict:
         return {"los_weight_final": self.w, "delay_mean_m_final": self.mu, "delay_sd_m_final": self.sd,

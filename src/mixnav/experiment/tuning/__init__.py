@@ -26,8 +26,6 @@ there. docs/tuning.md says what is tuned, how, and what is not.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 import os
 from dataclasses import dataclass, field
@@ -39,6 +37,7 @@ import tomlkit
 from ...errors import ArgumentError, ConfigError
 from .criterion import Evaluator, cv_windows, without_reference
 from .parameters import Parameter, get_value, ins_parameters, set_value
+from .scoring import Scorer
 from .search import MIN_GAIN
 
 __all__ = ["tune", "TuneResult", "tunable_keys"]
@@ -67,123 +66,9 @@ class TuneResult:
     out: Path | None = None
 
 
-# ---------------------------------------------------------------- worker side
-
-_EVALUATORS: dict = {}
-
-
-def _evaluator(setup: tuple) -> Evaluator:
-    key = hashlib.sha256(json.dumps(setup, default=str).encode()).hexdigest()
-    if key not in _EVALUATORS:
-        _EVALUATORS.clear()
-        _EVALUATORS[key] = Evaluator(*setup)
-    return _EVALUATORS[key]
-
-
-def _evaluate_task(setup: tuple, text: str) -> tuple[str, dict]:
-    """A candidate file's score, anywhere (the evaluator is built once per process)."""
-    return text, _evaluator(setup).evaluate(text).as_dict()
-
-
-def _worker_init(setup: tuple) -> None:
-    from ..parallel import die_with_parent
-    die_with_parent()
-    _evaluator(setup)
-
-
-# ---------------------------------------------------------------- driver side
-
 def _seconds(value, argument: str) -> float:
     from ..sweep import _seconds as seconds
     return seconds(value, argument)
-
-
-class _Scorer:
-    """Scores candidate files: from the journal, else on the executor; appends to the journal.
-    One progress bar over the budget, and one process pool (or Dask client) for the whole
-    tuning: the workers keep the data they read (:meth:`close` ends them)."""
-
-    def __init__(self, setup, journal: Path, workers, scheduler, progress, budget: int):
-        from ..parallel import Progress
-        self.setup, self.journal, self.workers, self.scheduler = setup, journal, workers, scheduler
-        self.budget, self.runs = budget, 0
-        self.bar = Progress(budget, progress, label="tune")
-        self._pool, self._client = None, None
-        self.cache: dict[str, dict] = {}
-        self.seen: set[str] = set()
-        self.setup_key = hashlib.sha256(json.dumps(setup[1:], default=str).encode()).hexdigest()[:16]
-        if journal.exists():
-            for line in journal.read_text().splitlines():
-                try:
-                    rec = json.loads(line)
-                except json.JSONDecodeError:
-                    continue   # a line cut by an interruption: that candidate runs again
-                if rec.get("setup") == self.setup_key:
-                    self.cache[rec["key"]] = rec["score"]
-
-    @staticmethod
-    def key(text: str) -> str:
-        return hashlib.sha256(text.encode()).hexdigest()
-
-    def left(self) -> int:
-        return self.budget - len(self.seen)
-
-    def score(self, texts: list[str]) -> list[dict]:
-        """Scores of ``texts`` in order. Each distinct candidate counts once against the budget,
-        whether it is run or found in the journal (a resumed search takes the same path and
-        stops at the same place); those beyond the budget get None."""
-        todo = []
-        for t in texts:
-            k = self.key(t)
-            if k not in self.seen:
-                if self.left() <= 0:
-                    continue
-                self.seen.add(k)
-                if k in self.cache:
-                    self.bar.advance()
-            if k not in self.cache and t not in todo:
-                todo.append(t)
-        if todo:
-            results = self._map(todo)
-            with open(self.journal, "a") as fh:
-                for text, sc in results:
-                    self.cache[self.key(text)] = sc
-                    fh.write(json.dumps({"setup": self.setup_key, "key": self.key(text), "score": sc}) + "\n")
-            self.runs += len(todo) * len(self.setup[4])
-        return [self.cache.get(k) if k in self.seen else None for k in map(self.key, texts)]
-
-    def _map(self, texts):
-        from concurrent.futures import ProcessPoolExecutor
-        from ..parallel import dask_client, dask_map, pool_map
-        tasks = [(self.setup, t) for t in texts]
-        if self.scheduler:
-            if self._client is None:
-                self._client = dask_client(self.scheduler.strip())
-            return dask_map(self._client, _evaluate_task, tasks, self.bar)
-        n = self.workers or os.cpu_count() or 1
-        if n <= 1 or len(tasks) == 1 and self._pool is None:
-            out = []
-            for t in tasks:
-                out.append(_evaluate_task(*t))
-                self.bar.advance()
-            return out
-        if self._pool is None:
-            self._pool = ProcessPoolExecutor(max_workers=n, initializer=_worker_init, initargs=(self.setup,))
-        try:
-            return pool_map(_evaluate_task, tasks, n, self.bar, pool=self._pool)
-        except BaseException:
-            self._pool = None     # pool_map ended its workers
-            raise
-
-    def close(self) -> None:
-        """End the workers (or the Dask connection) and the progress bar."""
-        if self._pool is not None:
-            self._pool.shutdown(wait=True)
-            self._pool = None
-        if self._client is not None:
-            self._client.close()
-            self._client = None
-        self.bar.close()
 
 
 def _value_text(p: Parameter, v) -> str:
@@ -205,7 +90,7 @@ def _target_method(ds, method: str | None) -> str:
 
 def tune(dataset, out, *, budget: int = 96, workers: int | None = None, scheduler: str | None = None,
          data: str | None = None, fix=(), span=None, window="30 s", folds: int = 6, method: str | None = None,
-         resume: bool = False, overwrite: bool = False, progress: bool = False, seed: int = 0) -> TuneResult:
+         criterion: str | None = None, resume: bool = False, overwrite: bool = False, progress: bool = False, seed: int = 0) -> TuneResult:
     """Tune a dataset file from its own data (never its reference) and write ``out``.
 
     Parameters
@@ -234,7 +119,11 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
         ``folds`` runs deal them out (at least 4, so that a fold's windows do not overlap and
         leave a window of GNSS between them: with the default 6, 90 s apart).
     method : str, optional
-        The method tuned (default: the one with most aiding).
+        The method tuned (default: the one with most aiding; odometry + pseudoranges: the first
+        epoch mixture).
+    criterion : str, optional
+        Odometry + pseudorange datasets: ``"likelihood"`` (default) or ``"withheld-satellites"``
+        (:mod:`.vehicle`); IMU + GNSS-fixes datasets have one criterion (None).
     resume : bool
         Reuse the evaluations ``out/tune_journal.jsonl`` holds (same file, data and span).
     overwrite : bool
@@ -252,10 +141,6 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
         raise ArgumentError(f"must be a whole number >= 4 (windows start every half window; a fold's must "
                             f"not overlap), got {folds!r}", argument="folds")
     fix = list(fix or ())
-    unknown = [k for k in fix if k not in tunable_keys()]
-    if unknown:
-        raise ArgumentError(f"unknown key(s) {', '.join(unknown)}; tunable: {', '.join(tunable_keys())}",
-                            argument="fix")
     w = _seconds(window, "window")
     if w <= 0:
         raise ArgumentError(f"must be positive, got {window!r}", argument="window")
@@ -264,11 +149,20 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
     text, source = resolve(_dataset_ref(dataset), "datasets", "dataset")
     stripped = without_reference(text)
     ds, _, _ = load_dataset_text(stripped, source)
-    if getattr(ds, "gnss", None) is None or getattr(ds, "imu", None) is None:
-        raise ConfigError("mixnav tune needs an IMU + GNSS-fixes dataset ([imu] and [gnss]); tuning "
-                          "odometry + pseudorange and raw-GNSS datasets is not built yet (docs/tuning.md)",
+    vehicle = ds.dataset.kind == "odometry-gnss"
+    if not vehicle and (getattr(ds, "gnss", None) is None or getattr(ds, "imu", None) is None):
+        raise ConfigError("mixnav tune needs an IMU + GNSS-fixes dataset ([imu] and [gnss]) or an odometry + "
+                          "pseudorange one; tuning raw-GNSS datasets is not built yet (docs/tuning.md)",
                           file=source, key="dataset.kind")
-    target = _target_method(ds, method)
+    if not vehicle and criterion is not None:
+        raise ArgumentError("an IMU + GNSS-fixes dataset is tuned by cross-validation only; --criterion is for "
+                            "odometry + pseudorange datasets", argument="criterion")
+    if not vehicle:
+        unknown = [k for k in fix if k not in tunable_keys()]
+        if unknown:
+            raise ArgumentError(f"unknown key(s) {', '.join(unknown)}; tunable: {', '.join(tunable_keys())}",
+                                argument="fix")
+        target = _target_method(ds, method)
     # the folder is built in place (resumable, like `experiment`): marked incomplete until the end
     from ..data_folder import find_data_dir
     protect = [Path(source)] if Path(source).exists() else []
@@ -280,6 +174,17 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
     out.mkdir(parents=True, exist_ok=True)
     write_marker(out, "tune", False, TUNE_FILES)
     journal = out / "tune_journal.jsonl"
+    if vehicle:
+        from .report import write_outputs
+        from .vehicle import tune_vehicle
+        header = {"dataset": str(dataset), "source": source, "budget": budget, "seed": seed, "fixed": fix}
+        result = tune_vehicle(text=text, stripped=stripped, source=source, ds=ds, out=out, data=data,
+                              data_folder=data_folder, journal=journal, budget=budget, workers=workers,
+                              scheduler=scheduler, fix=fix, method=method, progress=progress, header=header,
+                              criterion=criterion or "likelihood")
+        write_outputs(out, result, header)
+        write_marker(out, "tune", True, TUNE_FILES)
+        return result
 
     # a probe run: where the filter starts and the fixes' span (no window withheld)
     probe = Evaluator(stripped, source, data, target, [[]], (0.0, math.inf))
@@ -298,8 +203,8 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
                             f"cross-validation windows of {w:g} s; at least 2 are needed (a shorter "
                             "window or a longer span)", argument="span")
     windows = [f for f in windows if f]
-    setup = (stripped, source, None if data is None else str(data), target, windows, (t_first, t_last))
-    scorer = _Scorer(setup, journal, workers, scheduler, progress, budget)
+    setup = ("cv", stripped, source, None if data is None else str(data), target, windows, (t_first, t_last))
+    scorer = Scorer(setup, journal, workers, scheduler, progress, budget)
 
     searched_best = None
     try:

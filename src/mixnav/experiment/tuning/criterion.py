@@ -77,7 +77,8 @@ class Score:
 
     def as_dict(self) -> dict:
         h = np.asarray(self.window_hmax, float)
-        return {"nlpd": self.nlpd, "innovation_ll_per_update": self.innovation_ll, "n_withheld_fixes": self.n_fixes,
+        return {"criterion": self.nlpd, "nlpd": self.nlpd, "innovation_ll_per_update": self.innovation_ll,
+                "n_withheld_fixes": self.n_fixes,
                 "n_updates": self.n_updates, "cv_median_hmax_m": float(np.median(h)) if len(h) else None,
                 "cv_p90_hmax_m": float(np.percentile(h, 90)) if len(h) else None,
                 "cv_worst_hmax_m": float(h.max()) if len(h) else None,

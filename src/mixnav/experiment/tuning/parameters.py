@@ -50,6 +50,9 @@ class Parameter:
         missing key is not tuned.
     about : str
         What the parameter is, for the report.
+    plain : bool
+        The key takes a plain number in ``unit`` (the schema's own unit, not written out:
+        e.g. the clock noise in m^2/s).
     """
 
     name: str
@@ -64,11 +67,12 @@ class Parameter:
     index: int | None = None
     default: float | tuple | None = None
     about: str = ""
+    plain: bool = False
 
     @property
     def scale(self) -> float:
         """The unit's size in SI."""
-        return float(u.parse_quantity(f"1 {self.unit}", self.dimension))
+        return 1.0 if self.plain else float(u.parse_quantity(f"1 {self.unit}", self.dimension))
 
 
 _LOG_COARSE, _LOG_FINE = (0.25, 0.5, 2.0, 4.0), (1 / _SQRT2, _SQRT2)
@@ -133,11 +137,18 @@ def get_value(doc, p: Parameter) -> np.ndarray | None:
         return None if p.default is None else np.atleast_1d(np.asarray(p.default, float)).copy()
     v = t[p.path[-1]]
     items = list(v) if isinstance(v, list) else [v]
+    if p.plain:
+        return np.array([float(x) for x in items])
     return np.array([float(u.parse_quantity(str(x), p.dimension)) for x in items])
 
 
 def _text(p: Parameter, value: float) -> str:
     return f"{value / p.scale:.4g} {p.unit}"
+
+
+def _item(p: Parameter, value: float):
+    """The TOML item of one value: a number for a plain key, else text with its unit."""
+    return float(f"{value:.4g}") if p.plain else _text(p, value)
 
 
 def set_value(doc, p: Parameter, value: np.ndarray, comment: str | None = None) -> None:
@@ -150,9 +161,9 @@ def set_value(doc, p: Parameter, value: np.ndarray, comment: str | None = None) 
     value = np.atleast_1d(np.asarray(value, float))
     if had_list or len(value) > 1:
         item = tomlkit.array()
-        item.extend(_text(p, x) for x in value)
+        item.extend(_item(p, x) for x in value)
     else:
-        item = tomlkit.string(_text(p, float(value[0])))
+        item = tomlkit.item(_item(p, float(value[0])))
     if comment:
         item.comment(comment)
     t[key] = item

@@ -17,13 +17,58 @@ def _f(x, fmt=".3f") -> str:
 def write_outputs(out: Path, result, header: dict) -> None:
     from ...io.atomic import atomic_write_text
     atomic_write_text(out / "tuned.toml", result.tuned_text)
-    body = {**header, "criterion": "mean negative log predictive density of the withheld GNSS fixes "
-                                   "(cross-validation); the GNSS innovation log-likelihood per update beside it",
+    kind = header.get("criterion_kind")
+    criterion = (WITHHELD if kind == "withheld-satellites" else LIKELIHOOD if kind == "likelihood" else
+                 "mean negative log predictive density of the withheld GNSS fixes (cross-validation); the GNSS "
+                 "innovation log-likelihood per update beside it")
+    body = {**header, "criterion": criterion,
             "given": result.given, "tuned": result.tuned, "chosen": result.chosen, "not_tuned": result.not_tuned,
             "evaluations": result.evaluations}
     atomic_write_text(out / "tune.json", json.dumps(body, indent=1, default=float) + "\n")
     _figure(out / "tune.png", result)
-    atomic_write_text(out / "report.md", _report(result, header))
+    report = _vehicle_report if kind in ("likelihood", "withheld-satellites") else _report
+    atomic_write_text(out / "report.md", report(result, header))
+
+
+LIKELIHOOD = ("minus the tuned method's innovation log-likelihood per pseudorange row (each row's log predictive "
+              "density before it is used), over the rows from each start + score_after_s, summed over the starts of "
+              "the whole causal pipeline")
+WITHHELD = ("withheld satellites: half the satellites withheld per run (two folds), per epoch the median over them "
+            "of |residual - the epoch's median residual| from the filter's position [m], averaged over the epochs from "
+            "each start + score_after_s, over the starts of the whole causal pipeline; the innovation "
+            "log-likelihood per update of the rows used beside it")
+
+
+def _chosen_lines(result) -> list[str]:
+    lines = ["", "## Chosen values", "", "| key | value | how | spread |", "|---|---|---|---|"]
+    for k, c in result.chosen.items():
+        lines.append(f"| `{k}` | {c.get('value', c.get('from_data', '-'))} | {c.get('how', c.get('data_how', ''))} "
+                     f"| {c.get('spread') or '-'} |")
+    if result.not_tuned:
+        lines += ["", "## Not tuned", ""] + [f"- `{k}`: {v}" for k, v in result.not_tuned.items()]
+    return lines
+
+
+def _vehicle_report(result, h: dict) -> str:
+    g, t = result.given, result.tuned
+    withheld = h["criterion_kind"] == "withheld-satellites"
+    lines = [f"# mixnav tune: {h['dataset']}", "",
+             f"Method tuned: `{h['method']}`; the whole causal pipeline (track alignment, then the filter) run from "
+             f"{len(h['starts_s'])} starts ({', '.join(f'{s:g}' for s in h['starts_s'])} s)"
+             + (", each twice with half the satellites withheld" if withheld else "")
+             + f"; the rows from each start + {h['score_after_s']:g} s scored; {h['evaluations_spent']} evaluations "
+             f"({h['filter_runs']} pipeline runs) of a budget of {h['budget']}. No reference was read.", "",
+             f"Criterion: {WITHHELD if withheld else LIKELIHOOD}.", "",
+             "## The criterion, the file as given against tuned", "",
+             "| | criterion (lower is better) | its standard error | per start | innovation log-lik. per update |",
+             "|---|---|---|---|---|"]
+    for name, s in (("as given", g), ("tuned", t)):
+        per = " ".join(f"{x:.3f}" if withheld else f"{x:.0f}" for x in s.get("per_start") or [])
+        lines.append(f"| {name} | {_f(s['criterion'], '.4f')} | {_f(s['criterion_se'], '.3f')} | {per} | "
+                     f"{_f(s['innovation_ll_per_update'], '.2f')} |")
+    lines += _chosen_lines(result)
+    lines += ["", "![criterion against each key](tune.png)", ""]
+    return "\n".join(lines)
 
 
 def _report(result, h: dict) -> str:
@@ -40,12 +85,7 @@ def _report(result, h: dict) -> str:
         lines.append(f"| {name} | {_f(s['nlpd'])} | {_f(s['innovation_ll_per_update'])} | "
                      f"{_f(s['cv_median_hmax_m'], '.2f')} / {_f(s['cv_p90_hmax_m'], '.2f')} / "
                      f"{_f(s['cv_worst_hmax_m'], '.2f')} |")
-    lines += ["", "## Chosen values", "", "| key | value | how | spread |", "|---|---|---|---|"]
-    for k, c in result.chosen.items():
-        lines.append(f"| `{k}` | {c.get('value', c.get('from_data', '-'))} | {c.get('how', c.get('data_how', ''))} "
-                     f"| {c.get('spread') or '-'} |")
-    if result.not_tuned:
-        lines += ["", "## Not tuned", ""] + [f"- `{k}`: {v}" for k, v in result.not_tuned.items()]
+    lines += _chosen_lines(result)
     lines += ["", "## Where the two criteria disagree", "",
               "Per key, in the search's last visit of it (the other keys the same across its points), the value "
               "each criterion prefers. The search follows the cross-validation: it scores positions after seconds "
@@ -70,6 +110,7 @@ def _figure(path: Path, result) -> None:
     import matplotlib.pyplot as plt
     from ...io.atomic import atomic_savefig
     curves = {k: c["curve"] for k, c in result.chosen.items() if c.get("curve")}
+    ylabel = "criterion" if "per_start" in (result.given or {}) else "CV mean NLPD"
     n = max(len(curves), 1)
     cols = min(3, n)
     rows = int(np.ceil(n / cols))
@@ -82,7 +123,7 @@ def _figure(path: Path, result) -> None:
         ax.set_title(k, fontsize=9)
         if (x[ok] > 0).all():
             ax.set_xscale("log")
-        ax.set_ylabel("CV mean NLPD")
+        ax.set_ylabel(ylabel)
     for ax in axes.ravel()[len(curves):]:
         ax.axis("off")
     fig.tight_layout()

@@ -68,7 +68,7 @@ def _point(curves: dict, p: Parameter, label: str, value, score: dict, new_visit
     """One evaluated point of key ``p`` in ``curves`` (see :func:`coordinate_search`)."""
     pts = curves.setdefault(p.name, [])
     visit = (pts[-1][4] if pts else -1) + (1 if new_visit or not pts else 0)
-    pts.append((label, _shown(p, value), score["nlpd"], score["innovation_ll_per_update"], visit))
+    pts.append((label, _shown(p, value), score["criterion"], score["innovation_ll_per_update"], visit))
 
 
 def _try(doc, cur, p, base, steps, scorer, evaluations, curves, reserve: int = 0):
@@ -89,7 +89,7 @@ def _try(doc, cur, p, base, steps, scorer, evaluations, curves, reserve: int = 0
                             f"{p.name} {s / p.scale:+g} {p.unit}",
                             "score": sc})
         _point(curves, p, f"{s:g}" if p.kind == "log" else f"{s / p.scale:+g}", v, sc)
-        if sc["nlpd"] < (cur["nlpd"] - MIN_GAIN if best is None else best[1]["nlpd"]):
+        if sc["criterion"] < (cur["criterion"] - MIN_GAIN if best is None else best[1]["criterion"]):
             best, best_step = (text, sc), s
     if best is None:
         return doc, cur, None
@@ -115,7 +115,7 @@ def conservative_pass(doc, cur: dict, params: list[Parameter], scorer, evaluatio
     criterion lowest the most overconfident on the other half (correlation -0.93 with the share
     of windows out of the NEES band). Preferring the widest setting inside the criterion's own
     spread is the one-standard-error rule of cross-validation, applied to noise scales."""
-    best = cur["nlpd"]
+    best = cur["criterion"]
     for p in params:
         if p.name not in CONSERVATIVE_KEYS or p.kind != "log":
             continue
@@ -130,7 +130,7 @@ def conservative_pass(doc, cur: dict, params: list[Parameter], scorer, evaluatio
                 return doc, cur
             evaluations.append({"changed": f"{p.name} x{step:g} (conservative pass)", "score": sc})
             _point(curves, p, f"{step:g}", value, sc)
-            if sc["nlpd"] <= best + tolerance:
+            if sc["criterion"] <= best + tolerance:
                 doc, cur = tomlkit.parse(text), sc
                 break
     return doc, cur
