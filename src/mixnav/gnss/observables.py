@@ -75,6 +75,10 @@ class GnssObservations:
     pr_variance : ndarray (m, K) or None
         Per-slot pseudorange variance [m^2] the filters are told instead of ``sigma_pr^2``
         (e.g. elevation-dependent, for recorded data); None: ``sigma_pr^2`` everywhere.
+    system : ndarray of int (m, K) or None
+        System code of each slot (:data:`mixnav.gnss.pseudoranges.SYSTEM_LETTERS`: 1 GPS,
+        4 GLONASS, 8 Galileo, 16 QZSS, 32 BeiDou; 0 in unused slots); ``prn`` then numbers
+        the satellite within its system. None: every satellite is GPS.
     """
 
     time: np.ndarray
@@ -91,6 +95,7 @@ class GnssObservations:
     sigma_cp: float
     clock: np.ndarray
     pr_variance: np.ndarray | None = None
+    system: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.time)
