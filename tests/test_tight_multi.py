@@ -66,8 +66,11 @@ def test_multi_constellation_ids_and_glonass_channels():
     system, number = MultiConstellation.split_ids(ids)
     assert len(set(ids.tolist())) == len(ids) == 30 + 3 * 24
     assert (number[system == 1] == np.arange(1, 31)).all()            # GPS ids are the PRNs
-    for code in (4, 8, 32):
+    for code in (4, 8):
         assert (number[system == code] == np.arange(1, 25)).all()
+    # BeiDou: MEO numbers only (a GEO number would get the GEO rotation in the broadcast orbits)
+    from mixnav.gnss.multi_ephemeris import BEIDOU_GEO_PRNS
+    assert len(number[system == 32]) == 24 and not np.isin(number[system == 32], BEIDOU_GEO_PRNS).any()
     ch = SATS.glonass_channels
     assert set(ch) == set(range(1, 25)) and set(ch.values()) <= set(range(-7, 7))
     # antipodal slots of a plane (4 apart) share a channel, as the ICD's plan has it
@@ -229,3 +232,123 @@ def test_more_systems_keep_the_tight_filter_through_the_three_satellite_window(m
     assert np.sqrt(np.mean(h["tight"] ** 2)) < 2.5
     win = (t >= 300) & (t < 360)
     assert h["tight"][win].max() <= h["loose"][win].max()
+
+
+# --- the export round trip: RINEX 3 of several systems, read back by ``mixnav process`` --------
+
+GEC = """
+systems = ["G", "E", "C"]
+system_offsets = ["12 m", "-20 m"]
+"""
+
+
+@pytest.fixture(scope="module")
+def exported_multi(tmp_path_factory):
+    from mixnav.config.loader import load_dataset
+    from mixnav.experiment.export import export_dataset
+    from mixnav.experiment.process import process
+    from tests.test_rinex_ins import short_scenario
+    root = tmp_path_factory.mktemp("multi_export")
+    p = short_scenario(root)
+    p.write_text(p.read_text().replace('constellation = "gps30"\n', 'constellation = "gps30"' + GEC))
+    sc, source, _ = load_scenario(str(p))
+    ex = export_dataset(sc, root / "data", source=source)
+    ds, dsrc, _ = load_dataset(str(ex.files["dataset"]))
+    with pytest.warns(Warning, match="hole"):     # the 10 s without a fix is said
+        po = process(ds, dsrc)
+    return sc, source, ex, po
+
+
+def test_multi_system_export_writes_mixed_rinex(exported_multi):
+    from mixnav.gnss.multi_ephemeris import MultiEphemeris
+    from mixnav.io.rinex_obs import read_rinex_obs
+    _, _, ex, po = exported_multi
+    head = ex.files["observations"].read_text().splitlines()
+    assert "M: Mixed" in head[0]
+    types = {ln[0]: ln[6:58].split() for ln in head if ln[60:].strip() == "SYS / # / OBS TYPES"}
+    assert types == {"G": ["C1C", "D1C"], "E": ["C1C", "D1C"], "C": ["C2I", "D2I"]}
+    eph = MultiEphemeris.from_rinex([ex.files["navigation"]])
+    assert {s for s in "GEC" if s in eph} == set("GEC")
+    assert po.dataset.raw_gnss.systems == ["G", "E", "C"]
+    c = po.checks["rinex"]
+    assert c["systems"] == ["G", "E", "C"] and c["observations_not_filtered"].get("no ephemeris", 0) == 0
+    assert not c["satellites_skipped_by_system"]
+    # the file read back: every simulated observation of every system, at every epoch
+    obs = read_rinex_obs(ex.files["observations"], systems=("G", "E", "C"))
+    sim = ex.sim.observations
+    assert len(obs.prn) == int(sim.valid.sum())
+
+
+def test_multi_system_pseudoranges_read_back_to_the_millimetre(exported_multi):
+    """Per satellite and epoch, the tight observables rebuilt from the mixed RINEX files equal
+    the simulated ones: pseudoranges to the file's 1 mm rounding (0.5 mm), range rates to
+    1 mHz of Doppler (0.2 mm/s), satellite positions to < 1 cm, velocities to 1 mm/s (the
+    broadcast orbits of every system reproduce the nominal ones), the same satellites."""
+    _, _, ex, po = exported_multi
+    a, b = ex.sim.observations, po.observations
+    np.testing.assert_array_equal(a.time, b.time)
+    worst = np.zeros(4)
+    for k in range(len(a)):
+        ka = list(zip(a.system[k][a.valid[k]].tolist(), a.prn[k][a.valid[k]].tolist()))
+        kb = list(zip(b.system[k][b.valid[k]].tolist(), b.prn[k][b.valid[k]].tolist()))
+        assert sorted(ka) == sorted(kb)
+        for j, key in enumerate(ka):
+            i = kb.index(key)
+            worst = np.maximum(worst, [abs(a.pseudorange[k, j] - b.pseudorange[k, i]),
+                                       abs(a.range_rate[k, j] - b.range_rate[k, i]),
+                                       np.linalg.norm(a.sat_pos[k, j] - b.sat_pos[k, i]),
+                                       np.linalg.norm(a.sat_vel[k, j] - b.sat_vel[k, i])])
+    assert worst[0] <= 0.5e-3 + 1e-7 and worst[1] <= 2e-4 and worst[2] < 0.01 and worst[3] < 1e-3, worst
+
+
+def test_tight_ekf_on_multi_system_rinex_equals_the_in_simulation_one(exported_multi):
+    """Same start (the simulation's initial estimate), same IMU: the tight EKF with its GPS
+    clock and two offset states on the RINEX observables follows the in-simulation one to
+    < 1 cm at every epoch, and so do the offset estimates."""
+    from mixnav.engine.result import FilterResult  # noqa: F401  (what run returns)
+    from mixnav.experiment import methods
+    from mixnav.ins.error_model import ClockModel
+    sc, source, ex, po = exported_multi
+    sim = ex.sim
+    m = next(x for x in sc.methods if x.type == "tight-ekf")
+    s = sc.gnss.satellites
+    clock = ClockModel(q_bias=s.clock_bias_noise ** 2, q_drift=s.clock_drift_noise ** 2)
+    lever = np.asarray(sc.gnss.lever_arm)
+    res = []
+    for obs in (sim.observations, po.observations):
+        f, meas = methods.build(m, sim.imu_model, sim.fixes, lever, source, 1, observations=obs, clock=clock)
+        assert meas[0].layout.block("system_offset").size == 2
+        res.append(f.run(sim.imu, sim.init, meas))
+    np.testing.assert_allclose(res[0].time, res[1].time, atol=1e-9)
+    d = ned_displacement(res[1].nav[:, 7:10], res[0].nav[:, 7:10])
+    assert np.abs(d).max() < 0.01
+    np.testing.assert_allclose(res[1].estimates["system_offset"], res[0].estimates["system_offset"], atol=0.01)
+    # and the offsets found are the simulated ones (Galileo 12 m, BeiDou -20 m) within 3 sigma
+    i = res[1].layout.slice("system_offset")
+    assert (np.abs(res[1].estimates["system_offset"][-1] - [12.0, -20.0]) < 3 * res[1].sigma[-1, i]).all()
+
+
+def test_processed_multi_system_dataset_runs_the_tight_filter_with_offsets(exported_multi):
+    """``mixnav process`` of the export: the tight method's layout has the two offsets, it
+    starts from the SPP's offsets (metres from the truth: one epoch's SPP), and ends near the
+    truth."""
+    _, _, _, po = exported_multi
+    r = po.results["tight"]
+    assert r.layout.block("system_offset").size == 2
+    off0 = po.checks["rinex"]["system_offsets0_m"]
+    assert set(off0) == {"E", "C"}
+    assert abs(off0["E"] - 12.0) < 10 and abs(off0["C"] + 20.0) < 10
+    i = r.layout.slice("system_offset")
+    assert (np.abs(r.estimates["system_offset"][-1] - [12.0, -20.0]) < 3 * r.sigma[-1, i]).all()
+
+
+def test_export_refuses_glonass(tmp_path):
+    from mixnav.errors import ConfigError
+    from mixnav.experiment.export import export_dataset
+    from tests.test_rinex_ins import short_scenario
+    p = short_scenario(tmp_path)
+    p.write_text(p.read_text().replace('constellation = "gps30"\n', 'constellation = "gps30"' + MULTI))
+    sc, source, _ = load_scenario(str(p))
+    with pytest.raises(ConfigError, match="GLONASS") as exc:
+        export_dataset(sc, tmp_path / "x", source=source)
+    assert exc.value.key == "gnss.satellites.systems"

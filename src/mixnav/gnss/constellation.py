@@ -104,10 +104,13 @@ class NominalConstellation:
 
     @classmethod
     def beidou(cls, raan_offset: float = np.radians(40.0), phase_offset: float = 0.0) -> "NominalConstellation":
-        """BeiDou's 24 MEO slots (module docstring; CGCS2000 ``GM``, ``Omega_e``)."""
+        """BeiDou's 24 MEO slots (module docstring; CGCS2000 ``GM``, ``Omega_e``), numbered
+        with BDS-3's MEO PRNs (:data:`BEIDOU_MEO_PRNS`: never a GEO number, which the
+        broadcast orbits would turn by the GEO rotation)."""
         from .orbits import BEIDOU
-        return cls.walker(27_906_100.0, np.radians(55.0), BEIDOU.gm, BEIDOU.omega_e,
-                          raan_offset=raan_offset, phase_offset=phase_offset)
+        c = cls.walker(27_906_100.0, np.radians(55.0), BEIDOU.gm, BEIDOU.omega_e,
+                       raan_offset=raan_offset, phase_offset=phase_offset)
+        return cls(c.raan, c.arg_lat, np.array(BEIDOU_MEO_PRNS), c.semi_major_axis, c.inclination, c.gm, c.omega_e)
 
     @classmethod
     def glonass(cls, raan_offset: float = np.radians(10.0), phase_offset: float = 0.0) -> "NominalConstellation":
@@ -162,7 +165,7 @@ class NominalConstellation:
                                vel_ecef=np.stack([dx, dy, dz], axis=-1),
                                clock_bias=np.zeros(m), clock_drift=np.zeros(m))
 
-    def broadcast_records(self, gps_t0: float, toe) -> dict:
+    def broadcast_records(self, gps_t0: float, toe, time_system: str = "G") -> dict:
         """The constellation as GPS broadcast ephemeris records (the ``records`` of
         :class:`mixnav.gnss.ephemeris.BroadcastEphemeris`, what a RINEX navigation file holds).
 
@@ -175,6 +178,10 @@ class NominalConstellation:
         node longitude is ``OMEGA0 - w_e (t_abs - week 604800)``, ``OMEGA0 = raan + w_e
         (gps_t0 - week 604800)`` (the record's week).
 
+        A BeiDou record (``time_system = "C"``) gives its week, ``t_oe`` and ``t_oc`` in BDT
+        (``GPST - 14 s``, weeks from 2006-01-01), and ``OMEGA0`` counts from the start of that
+        BDT week; Galileo's (``"E"``) are in GST, which RINEX writes on GPS's weeks.
+
         Parameters
         ----------
         gps_t0 : float
@@ -182,6 +189,7 @@ class NominalConstellation:
         toe : array_like (r,)
             Reference times of the records, GPS seconds since 1980-01-06 [s]; one record
             per satellite and time.
+        time_system : "G", "E" or "C"
 
         Returns
         -------
@@ -192,9 +200,17 @@ class NominalConstellation:
         toe = np.atleast_1d(np.asarray(toe, dtype=float))
         n_sat = len(self.prn)
         t_abs = np.repeat(toe, n_sat)
-        week = np.floor(t_abs / 604800.0)
-        tow = t_abs - week * 604800.0
         t_sim = t_abs - gps_t0
+        if time_system == "C":   # BDT: GPST - 14 s, weeks counted from 2006-01-01 (GPS week 1356)
+            from .gnss_time import BDT_OFFSET_S, BDT_WEEK_OFFSET
+            t_own = t_abs - BDT_OFFSET_S - BDT_WEEK_OFFSET * 604800.0
+            week = np.floor(t_own / 604800.0)
+            tow = t_own - week * 604800.0
+            week_start_gps = (week + BDT_WEEK_OFFSET) * 604800.0 + BDT_OFFSET_S
+        else:
+            week = np.floor(t_abs / 604800.0)
+            tow = t_abs - week * 604800.0
+            week_start_gps = week * 604800.0
         wrap = lambda a: np.mod(a + np.pi, 2 * np.pi) - np.pi  # noqa: E731
         raan = np.tile(self.raan, len(toe))
         zeros = np.zeros(len(t_abs))
@@ -204,7 +220,7 @@ class NominalConstellation:
                    toc=tow.copy(), sqrt_a=np.full(len(t_abs), np.sqrt(self.semi_major_axis)),
                    i0=np.full(len(t_abs), self.inclination),
                    m0=wrap(np.tile(self.arg_lat, len(toe)) + self.mean_motion * t_sim),
-                   omega0=wrap(raan + self.omega_e * (gps_t0 - week * 604800.0)))
+                   omega0=wrap(raan + self.omega_e * (gps_t0 - week_start_gps)))
         return rec
 
 
@@ -212,6 +228,9 @@ class NominalConstellation:
 #: one), the plan the GLONASS operator (IAC, glonass-iac.ru) publishes.
 GLONASS_CHANNELS = {1: 1, 2: -4, 3: 5, 4: 6, 5: 1, 6: -4, 7: 5, 8: 6, 9: -2, 10: -7, 11: 0, 12: -1, 13: -2,
                     14: -7, 15: 0, 16: -1, 17: 4, 18: -3, 19: 3, 20: 2, 21: 4, 22: -3, 23: 3, 24: 2}
+
+#: BDS-3 MEO PRNs (C19-C30, C32-C37, C41-C46), the BeiDou nominal constellation's numbers
+BEIDOU_MEO_PRNS = tuple(range(19, 31)) + tuple(range(32, 38)) + tuple(range(41, 47))
 
 #: RINEX letter -> system code (:data:`mixnav.gnss.pseudoranges.SYSTEM_LETTERS`)
 _CODES = {"G": 1, "R": 4, "E": 8, "J": 16, "C": 32}
