@@ -237,9 +237,11 @@ def test_more_systems_keep_the_tight_filter_through_the_three_satellite_window(m
 # --- the export round trip: RINEX 3 of several systems, read back by ``mixnav process`` --------
 
 GEC = """
-systems = ["G", "E", "C"]
-system_offsets = ["12 m", "-20 m"]
+systems = ["G", "E", "C", "R"]
+system_offsets = ["12 m", "-20 m", "35 m"]
 """
+#: the offsets in the filter's order (GLONASS, Galileo, BeiDou: G R E C J)
+GEC_TRUTH = [35.0, 12.0, -20.0]
 
 
 @pytest.fixture(scope="module")
@@ -266,15 +268,18 @@ def test_multi_system_export_writes_mixed_rinex(exported_multi):
     head = ex.files["observations"].read_text().splitlines()
     assert "M: Mixed" in head[0]
     types = {ln[0]: ln[6:58].split() for ln in head if ln[60:].strip() == "SYS / # / OBS TYPES"}
-    assert types == {"G": ["C1C", "D1C"], "E": ["C1C", "D1C"], "C": ["C2I", "D2I"]}
+    assert types == {"G": ["C1C", "D1C"], "R": ["C1C", "D1C"], "E": ["C1C", "D1C"], "C": ["C2I", "D2I"]}
     eph = MultiEphemeris.from_rinex([ex.files["navigation"]])
-    assert {s for s in "GEC" if s in eph} == set("GEC")
-    assert po.dataset.raw_gnss.systems == ["G", "E", "C"]
+    assert {s for s in "GREC" if s in eph} == set("GREC")
+    assert eph["R"].channels() == {p: GLONASS_CHANNELS[p] for p in range(1, 25)}
+    assert po.dataset.raw_gnss.systems == ["G", "E", "C", "R"]
     c = po.checks["rinex"]
-    assert c["systems"] == ["G", "E", "C"] and c["observations_not_filtered"].get("no ephemeris", 0) == 0
+    assert c["systems"] == ["G", "R", "E", "C"] and c["observations_not_filtered"].get("no ephemeris", 0) == 0
     assert not c["satellites_skipped_by_system"]
-    # the file read back: every simulated observation of every system, at every epoch
-    obs = read_rinex_obs(ex.files["observations"], systems=("G", "E", "C"))
+    # the file read back: every simulated observation of every system, at every epoch, and
+    # the header's GLONASS channels
+    obs = read_rinex_obs(ex.files["observations"], systems=("G", "E", "C", "R"))
+    assert obs.glonass_channels == {p: GLONASS_CHANNELS[p] for p in set(obs.prn[obs.systems() == "R"].tolist())}
     sim = ex.sim.observations
     assert len(obs.prn) == int(sim.valid.sum())
 
@@ -303,7 +308,7 @@ def test_multi_system_pseudoranges_read_back_to_the_millimetre(exported_multi):
 
 def test_tight_ekf_on_multi_system_rinex_equals_the_in_simulation_one(exported_multi):
     """Same start (the simulation's initial estimate), same IMU: the tight EKF with its GPS
-    clock and two offset states on the RINEX observables follows the in-simulation one to
+    clock and three offset states on the RINEX observables follows the in-simulation one to
     < 1 cm at every epoch, and so do the offset estimates."""
     from mixnav.engine.result import FilterResult  # noqa: F401  (what run returns)
     from mixnav.experiment import methods
@@ -317,38 +322,26 @@ def test_tight_ekf_on_multi_system_rinex_equals_the_in_simulation_one(exported_m
     res = []
     for obs in (sim.observations, po.observations):
         f, meas = methods.build(m, sim.imu_model, sim.fixes, lever, source, 1, observations=obs, clock=clock)
-        assert meas[0].layout.block("system_offset").size == 2
+        assert meas[0].layout.block("system_offset").size == 3
         res.append(f.run(sim.imu, sim.init, meas))
     np.testing.assert_allclose(res[0].time, res[1].time, atol=1e-9)
     d = ned_displacement(res[1].nav[:, 7:10], res[0].nav[:, 7:10])
     assert np.abs(d).max() < 0.01
     np.testing.assert_allclose(res[1].estimates["system_offset"], res[0].estimates["system_offset"], atol=0.01)
-    # and the offsets found are the simulated ones (Galileo 12 m, BeiDou -20 m) within 3 sigma
+    # and the offsets found are the simulated ones within 3 sigma
     i = res[1].layout.slice("system_offset")
-    assert (np.abs(res[1].estimates["system_offset"][-1] - [12.0, -20.0]) < 3 * res[1].sigma[-1, i]).all()
+    assert (np.abs(res[1].estimates["system_offset"][-1] - GEC_TRUTH) < 3 * res[1].sigma[-1, i]).all()
 
 
 def test_processed_multi_system_dataset_runs_the_tight_filter_with_offsets(exported_multi):
-    """``mixnav process`` of the export: the tight method's layout has the two offsets, it
+    """``mixnav process`` of the export: the tight method's layout has the three offsets, it
     starts from the SPP's offsets (metres from the truth: one epoch's SPP), and ends near the
     truth."""
     _, _, _, po = exported_multi
     r = po.results["tight"]
-    assert r.layout.block("system_offset").size == 2
+    assert r.layout.block("system_offset").size == 3
     off0 = po.checks["rinex"]["system_offsets0_m"]
-    assert set(off0) == {"E", "C"}
-    assert abs(off0["E"] - 12.0) < 10 and abs(off0["C"] + 20.0) < 10
+    assert set(off0) == {"R", "E", "C"}
+    np.testing.assert_allclose([off0["R"], off0["E"], off0["C"]], GEC_TRUTH, atol=10)
     i = r.layout.slice("system_offset")
-    assert (np.abs(r.estimates["system_offset"][-1] - [12.0, -20.0]) < 3 * r.sigma[-1, i]).all()
-
-
-def test_export_refuses_glonass(tmp_path):
-    from mixnav.errors import ConfigError
-    from mixnav.experiment.export import export_dataset
-    from tests.test_rinex_ins import short_scenario
-    p = short_scenario(tmp_path)
-    p.write_text(p.read_text().replace('constellation = "gps30"\n', 'constellation = "gps30"' + MULTI))
-    sc, source, _ = load_scenario(str(p))
-    with pytest.raises(ConfigError, match="GLONASS") as exc:
-        export_dataset(sc, tmp_path / "x", source=source)
-    assert exc.value.key == "gnss.satellites.systems"
+    assert (np.abs(r.estimates["system_offset"][-1] - GEC_TRUTH) < 3 * r.sigma[-1, i]).all()

@@ -19,8 +19,10 @@ One seeded run of a scenario with raw satellites (``[gnss.satellites]``) becomes
   Doppler by the system's wavelength), and ``nav.rnx`` a mixed navigation file of every
   system's nominal constellation (BeiDou's records in BDT); the dataset lists the systems
   (``[raw_gnss] systems``), so ``process`` estimates an inter-system offset per further
-  system. GLONASS is not exported yet (its broadcast records are state vectors, which a
-  Keplerian orbit does not reproduce): a ConfigError;
+  system. GLONASS: the simulator flies its satellites from state vectors every 30 min
+  (:class:`mixnav.gnss.constellation.GlonassBroadcastOrbits`), written as GLONASS records
+  (t_b in UTC, ``LEAP SECONDS`` in the header) with each slot's frequency channel, which
+  the observation header's ``GLONASS SLOT / FRQ #`` lines give too;
 - ``reference.csv``: the true IMU trajectory (position, velocity, attitude) at the GNSS
   epochs, on the IMU's time axis (``[reference] point = "imu"``);
 - ``dataset.toml``: an ``ins-gnss`` dataset with ``[raw_gnss]`` pointing at them, the
@@ -194,10 +196,6 @@ def export_dataset(sc: Scenario, out_dir, seed: int | None = None, start: str = 
     seed = sc.scenario.seed if seed is None else int(seed)
     t_gps0 = gps_seconds(start)
     systems = list(sc.gnss.satellites.systems)
-    if "R" in systems:
-        raise ConfigError("GLONASS cannot be exported yet: its broadcast records are state vectors, which the "
-                          "simulator's Keplerian GLONASS orbits do not reproduce; export G, E and C",
-                          file=source, key="gnss.satellites.systems")
     const = constellation(sc.gnss.satellites.constellation, systems)
     gps = const if systems == ["G"] else const.part("G") if "G" in systems else None
     if gps is not None and gps.prn.max() > 32:
@@ -240,12 +238,15 @@ def export_dataset(sc: Scenario, out_dir, seed: int | None = None, start: str = 
             from ..gnss.pseudoranges import SYSTEM_LETTERS
             from ..gnss.spp import first_frequency
             letters = np.array([SYSTEM_LETTERS[int(c)] for c in obs.system[e, s]])
-            wavelength = C_LIGHT / first_frequency(letters)
+            chan = const.glonass_channels if "R" in systems else {}
+            wavelength = C_LIGHT / first_frequency(letters, [chan.get(int(p), 99) if x == "R" else 99
+                                                             for x, p in zip(letters, obs.prn[e, s])])
         write_rinex_obs(folder / "obs.rnx", wk.astype(int), tow, e, obs.prn[e, s], obs.pseudorange[e, s],
                         doppler=-obs.range_rate[e, s] / (wavelength if multi else LAMBDA_L1),
                         approx_position=lla_to_ecef(sim.truth.lla[0]),
                         marker=sc.scenario.name.upper()[:20], interval=float(np.median(np.diff(obs.time))),
-                        system=letters if multi else None)
+                        system=letters if multi else None,
+                        glonass_channels=const.glonass_channels if "R" in systems else None)
         files["observations"] = "obs.rnx"
         # navigation: records every RECORD_INTERVAL covering the run (toe on whole multiples)
         t_first, t_last = t_gps0 + float(obs.time[0]), t_gps0 + float(obs.time[-1])
@@ -253,8 +254,19 @@ def export_dataset(sc: Scenario, out_dir, seed: int | None = None, start: str = 
         if systems == ["G"]:
             write_rinex_nav(folder / "nav.rnx", const.broadcast_records(t_gps0, toe))
         else:
+            glo, leap = None, None
+            if "R" in systems:   # the state vectors the simulator's GLONASS satellites flew from
+                from ..gnss.gnss_time import leap_seconds
+                orbits = const.part("R")
+                k0 = np.floor(float(obs.time[0]) / orbits.interval) - 1
+                k1 = np.ceil(float(obs.time[-1]) / orbits.interval) + 1
+                glo = orbits.records(np.arange(k0, k1 + 1) * orbits.interval)
+                glo["t_gps"] = t_gps0 + glo.pop("tb")
+                glo["channel"] = np.array([const.glonass_channels[int(p)] for p in glo["prn"]], float)
+                leap = int(leap_seconds(np.array([t_gps0 - 18.0]))[0])
             write_rinex_nav_multi(folder / "nav.rnx", {x: const.part(x).broadcast_records(t_gps0, toe, time_system=x)
-                                                       for x in systems})
+                                                       for x in systems if x != "R"}, glonass=glo,
+                                  leap_seconds=leap)
         files["navigation"] = "nav.rnx"
         # reference: the truth (IMU point) at the GNSS epochs
         tr = sim.truth

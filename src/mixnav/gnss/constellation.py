@@ -29,7 +29,11 @@ BeiDou   27 906 100 m       55 deg      BDS-SIS-ICD-OS 3.0, 3: MEO at 21 528 km
 GLONASS  25 508 000 m       64.8 deg    GLONASS ICD 5.1, 3.1.1: 19 100 km, 64.8 deg
 ======== ================== =========== ==========================================
 
-(BeiDou's GEO and IGSO satellites are not simulated.) :class:`MultiConstellation`
+(BeiDou's GEO and IGSO satellites are not simulated.) GLONASS satellites fly as a receiver
+computes them from the broadcast records (:class:`GlonassBroadcastOrbits`): a state vector
+every 30 min taken from the nominal orbit, integrated (:func:`mixnav.gnss.orbits.glonass_states`,
+J2, RK4) from the nearest one, so RINEX navigation records written from those states give
+back the simulated satellites. :class:`MultiConstellation`
 puts several together: one satellite id per satellite, the GPS PRN for GPS and
 ``1000 * system code + number`` for the others, so GPS PRNs keep their meaning.
 """
@@ -42,7 +46,7 @@ import numpy as np
 
 from .geometry import GM_GPS, OMEGA_E_GPS, SatelliteStates
 
-__all__ = ["NominalConstellation", "MultiConstellation", "SEMI_MAJOR_AXIS", "INCLINATION", "GLONASS_CHANNELS"]
+__all__ = ["NominalConstellation", "MultiConstellation", "GlonassBroadcastOrbits", "SEMI_MAJOR_AXIS", "INCLINATION", "GLONASS_CHANNELS"]
 
 #: Nominal GPS semi-major axis [m] and inclination [rad].
 SEMI_MAJOR_AXIS = 26_559_700.0
@@ -239,6 +243,57 @@ ID_SYSTEM = 1000
 
 
 @dataclass(frozen=True)
+class GlonassBroadcastOrbits:
+    """GLONASS satellites integrated from broadcast-style state vectors (module docstring).
+
+    Parameters
+    ----------
+    nominal : NominalConstellation
+        The orbits the state vectors are taken from (:meth:`NominalConstellation.glonass`).
+    interval : float
+        Time between records [s] (GLONASS's ``t_b`` every 30 min); the records are at
+        whole multiples of it in the simulation's time, and a query at ``t`` integrates from
+        the nearest, ``round(t / interval)``: what the navigation reader picks from records
+        written on the same grid.
+    """
+
+    nominal: NominalConstellation
+    interval: float = 1800.0
+
+    @property
+    def prn(self) -> np.ndarray:
+        return self.nominal.prn
+
+    def records(self, t_b) -> dict:
+        """The state vectors at reference times ``t_b`` (r,) [s of simulation time], one per
+        satellite and time, grouped by time: ``prn``, ``tb``, ``pos``, ``vel`` (ECEF, [m],
+        [m/s]), ``acc`` (zero: no luni-solar term), ``minus_tau_n``, ``gamma_n`` (zero: the
+        simulated satellite clocks are perfect)."""
+        t_b = np.atleast_1d(np.asarray(t_b, float))
+        n = len(self.nominal.prn)
+        tb = np.repeat(t_b, n)
+        st = [self.nominal.states(t) for t in t_b]
+        zeros = np.zeros(len(tb))
+        return {"prn": np.tile(self.nominal.prn, len(t_b)), "tb": tb,
+                "pos": np.vstack([x.pos_ecef for x in st]), "vel": np.vstack([x.vel_ecef for x in st]),
+                "acc": np.zeros((len(tb), 3)), "minus_tau_n": zeros, "gamma_n": zeros.copy()}
+
+    def states(self, t) -> SatelliteStates:
+        """Every satellite at time(s) ``t`` [s] (scalar or one per satellite), integrated from
+        its record nearest ``t``."""
+        from .orbits import glonass_states
+        n = len(self.nominal.prn)
+        t = np.broadcast_to(np.asarray(t, float), (n,)).copy()
+        tb = np.floor(t / self.interval + 0.5) * self.interval
+        start = self.nominal.states(tb)
+        r = {"tb": tb, "pos": start.pos_ecef, "vel": start.vel_ecef, "acc": np.zeros((n, 3)),
+             "minus_tau_n": np.zeros(n), "gamma_n": np.zeros(n)}
+        pos, vel, clk, drift = glonass_states(r, t)
+        return SatelliteStates(prn=self.nominal.prn.copy(), pos_ecef=pos, vel_ecef=vel, clock_bias=clk,
+                               clock_drift=drift)
+
+
+@dataclass(frozen=True)
 class MultiConstellation:
     """Several systems' nominal constellations as one source of satellite states.
 
@@ -264,7 +319,7 @@ class MultiConstellation:
         (default :meth:`NominalConstellation.gps` with 5 slots per plane)."""
         make = {"G": lambda: gps if gps is not None else NominalConstellation.gps(5),
                 "E": NominalConstellation.galileo, "C": NominalConstellation.beidou,
-                "R": NominalConstellation.glonass}
+                "R": lambda: GlonassBroadcastOrbits(NominalConstellation.glonass())}
         bad = [s for s in systems if s not in make]
         if bad:
             raise ValueError(f"no nominal constellation for {bad} (these have one: {', '.join(make)})")
@@ -282,7 +337,7 @@ class MultiConstellation:
         system = np.where(ids < ID_SYSTEM, 1, ids // ID_SYSTEM)
         return system, np.where(ids < ID_SYSTEM, ids, ids % ID_SYSTEM)
 
-    def part(self, letter: str) -> NominalConstellation:
+    def part(self, letter: str):
         """One system's constellation."""
         for s, c in self.parts:
             if s == letter:

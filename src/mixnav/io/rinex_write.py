@@ -87,7 +87,8 @@ def write_rinex_nav(path, records: dict, iono_alpha=None, iono_beta=None, progra
     write_rinex_nav_multi(path, {"G": records}, iono_alpha, iono_beta, program)
 
 
-def write_rinex_nav_multi(path, records: dict, iono_alpha=None, iono_beta=None, program: str = "mixnav") -> None:
+def write_rinex_nav_multi(path, records: dict, iono_alpha=None, iono_beta=None, program: str = "mixnav",
+                          glonass: dict | None = None, leap_seconds: int | None = None) -> None:
     """Write Keplerian broadcast records of one or more systems as a RINEX 3.04 navigation
     file (mixed when more than one).
 
@@ -100,11 +101,20 @@ def write_rinex_nav_multi(path, records: dict, iono_alpha=None, iono_beta=None, 
         BeiDou's TGD1.
     iono_alpha, iono_beta : ndarray (4,) or None
         GPS Klobuchar coefficients (GPSA, GPSB); both or none.
+    glonass : dict of str -> ndarray or None
+        GLONASS records (RINEX 3.04 table A10): ``prn`` (r,), ``t_gps`` (r,) the reference
+        time t_b in GPS seconds since 1980-01-06 (written as UTC, ``t_gps - leap_seconds``,
+        whole seconds), ``pos``, ``vel``, ``acc`` (r, 3) ECEF [m, m/s, m/s^2] (written in
+        km), ``minus_tau_n`` [s], ``gamma_n``, ``channel`` (frequency number k).
+    leap_seconds : int or None
+        GPST - UTC [s] (the ``LEAP SECONDS`` header line); needed with ``glonass``.
     """
     if (iono_alpha is None) != (iono_beta is None):
         raise ArgumentError("give both Klobuchar coefficient sets or neither", argument="iono_alpha")
+    if glonass is not None and leap_seconds is None:
+        raise ArgumentError("GLONASS records are written in UTC: give leap_seconds", argument="leap_seconds")
     bad = [x for x in records if x not in ("G", "E", "C", "J")]
-    if bad or not records:
+    if bad or (not records and glonass is None):
         raise ArgumentError(f"Keplerian records of G, E, C or J, got {bad or 'none'} (GLONASS records are state "
                             "vectors)", argument="records")
     letters = [x for x in _ORDER if x in records]
@@ -124,11 +134,17 @@ def write_rinex_nav_multi(path, records: dict, iono_alpha=None, iono_beta=None, 
         week_cal = r["toc_week"] + (1356 if letter == "C" else 0)
         times = _calendar(week_cal, np.round(toc))
         body += [(t, letter, int(p), _kepler_lines(letter, r, k, t)) for k, (t, p) in enumerate(zip(times, r["prn"]))]
+    if glonass is not None:
+        letters.append("R")
+        body += _glonass_lines(glonass, int(leap_seconds))
+        n += len(glonass["prn"])
     if n == 0:
         raise ArgumentError("no record to write", argument="records")
     sys_label = _NAMES[letters[0]] if len(letters) == 1 else _NAMES["M"]
     lines = [_label(f"{3.04:9.2f}{'':11}{'N: GNSS NAV DATA':<20}{sys_label:<20}", "RINEX VERSION / TYPE"),
              _header_run(program)]
+    if leap_seconds is not None:
+        lines.append(_label(f"{int(leap_seconds):6d}", "LEAP SECONDS"))
     if iono_alpha is not None:
         for tag, coef in (("GPSA", iono_alpha), ("GPSB", iono_beta)):
             c = np.asarray(coef, float).reshape(4)
@@ -141,6 +157,30 @@ def write_rinex_nav_multi(path, records: dict, iono_alpha=None, iono_beta=None, 
     for b in body:
         lines += b[3]
     atomic_write_text(path, "\n".join(lines) + "\n")
+
+
+def _glonass_lines(g: dict, leap: int) -> list:
+    """``(time, "R", slot, lines)`` of each GLONASS record (RINEX 3.04 table A10: epoch in UTC,
+    -tau_n, +gamma_n, message frame time; X, Xdot, Xacc, health; Y..., channel; Z..., age)."""
+    prn = np.asarray(g["prn"], np.int64)
+    lo, hi = PRN_RANGE["R"]
+    if np.any((prn < lo) | (prn > hi)):
+        raise ArgumentError(f"GLONASS slots are {lo}..{hi}", argument="glonass")
+    t_utc = np.asarray(g["t_gps"], float) - leap
+    if np.any(np.abs(t_utc - np.round(t_utc)) > 1e-9):
+        raise ArgumentError("GLONASS t_b must be whole seconds", argument="glonass")
+    times = _calendar(np.zeros(len(prn)), np.round(t_utc))
+    km = 1e-3
+    out = []
+    for k, t in enumerate(times):
+        y, mo, d, hh, mm, ss = _fields(t)
+        head = (f"R{int(prn[k]):02d} {y:04d} {mo:02d} {d:02d} {hh:02d} {mm:02d} {int(round(ss)):02d}"
+                + _d19(float(g["minus_tau_n"][k])) + _d19(float(g["gamma_n"][k]))
+                + _d19(float(np.round(t_utc[k]) % 86400.0)))
+        rows = [(km * g["pos"][k][a], km * g["vel"][k][a], km * g["acc"][k][a], extra)
+                for a, extra in enumerate((0.0, float(g["channel"][k]), 0.0))]
+        out.append((t, "R", int(prn[k]), [head] + ["    " + "".join(_d19(float(x)) for x in row) for row in rows]))
+    return out
 
 
 def _kepler_lines(letter: str, r: dict, k: int, t_cal) -> list:
