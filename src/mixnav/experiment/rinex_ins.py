@@ -5,8 +5,10 @@ Steps:
 
 1. Read the IMU (any IMU format, the installation applied as for fixes), the RINEX
    observation file (the raw-GNSS reader of ``raw_gnss.format``, :func:`mixnav.io.rinex_obs.read_rinex_obs`: GPS C1C and D1C when
-   present), the navigation file (:class:`mixnav.gnss.ephemeris.BroadcastEphemeris`) and
-   the reference.
+   present; every system of ``raw_gnss.systems``, each its first-frequency signal), the
+   navigation file (:class:`mixnav.gnss.ephemeris.BroadcastEphemeris`; with systems beyond
+   GPS every navigation file as one :class:`~mixnav.gnss.multi_ephemeris.MultiEphemeris`,
+   GLONASS channels from its records) and the reference.
 2. One time axis: RINEX epochs are GPS time; the IMU time stamps are GPS seconds of the
    week of the first RINEX epoch or GPS seconds since 1980 (``raw_gnss.imu_time``), after
    ``installation.imu_time_offset``. Times inside the run are seconds since the first IMU
@@ -29,6 +31,10 @@ Steps:
    gyro bias through ``w x l``).
 5. The tight methods start from the alignment with the receiver clock bias and drift of
    the SPP / Doppler solution at the alignment time (17-state layout, ``states = 17``).
+   Several systems: the filter's clock is that of the first of G R E C J present, and its
+   layout gets one inter-system offset state per further system
+   (:func:`mixnav.measurements.tight.tight_layout`), started at the SPP's offsets
+   (:func:`clock_start`).
    Outputs, metrics and report as every INS dataset (:func:`mixnav.experiment.pipelines.ins_fixes.write`).
 """
 
