@@ -51,14 +51,15 @@ from ._tight_kernel import tight_predict_batch, tight_zhr
 #: System codes (:data:`mixnav.gnss.pseudoranges.SYSTEM_LETTERS`) in the order the reference
 #: clock is chosen: GPS, GLONASS, Galileo, BeiDou, QZSS (the SPP's ``G R E C J``).
 SYSTEM_CODE_ORDER = (1, 4, 8, 32, 16)
-#: Initial 1-sigma of an inter-system offset when the start gives none [m]: the SPP's
-#: offsets on urbannav-tst-static span -30..+20 m (benchmarks/results/urbannav_spp.md); a start
-#: from an SPP fix gives its own value and a tighter sigma.
+#: Initial 1-sigma of an inter-system offset [m]: the SPP's median offsets on
+#: urbannav-tst-static are -4.6..+9.4 m (benchmarks/results/urbannav_spp.md), so 100 m (the
+#: constant-velocity and dead-reckoning models' default too) leaves them to the data; a start
+#: from an SPP fix gives the starting value.
 OFFSET_SIGMA0 = 100.0
-#: Random-walk density of an inter-system offset [m/sqrt(s)]: 0.01 m/sqrt(s) is 0.6 m
-#: over an hour, room for the receiver's inter-signal delays drifting with temperature
-#: (decimetres) and the broadcast time offsets' errors (ns); the constant-velocity and
-#: dead-reckoning models use the same (mixnav.motion).
+#: Random-walk density of an inter-system offset [m/sqrt(s)]: 0.01 m/sqrt(s) lets it move
+#: 0.6 m (1 sigma) in an hour, a nearly constant bias; the value the constant-velocity and
+#: dead-reckoning models use (mixnav.motion), not fitted to a recording (none with an IMU
+#: and several systems is in the data).
 OFFSET_WALK = 0.01
 
 
