@@ -43,10 +43,10 @@ def _nav(truth, o, k):
 def test_nominal_orbits_have_each_systems_period_and_radius():
     """Circular orbits: radius = the semi-major axis, speed in the inertial frame = sqrt(GM / a),
     period 2 pi sqrt(a^3 / GM) (Kepler's third law: Galileo 14 h 05 min, BeiDou MEO 12 h 53 min,
-    GLONASS 11 h 16 min, the systems' published periods to a minute)."""
+    GLONASS 11 h 15 min 44 s, the systems' published periods to a minute)."""
     for c, gm, period_min in ((NominalConstellation.galileo(), GALILEO.gm, 14 * 60 + 5),
                               (NominalConstellation.beidou(), BEIDOU.gm, 12 * 60 + 53),
-                              (NominalConstellation.glonass(), GLONASS.gm, 11 * 60 + 16)):
+                              (NominalConstellation.glonass(), GLONASS.gm, 11 * 60 + 15 + 44 / 60)):
         s = c.states(1234.0)
         r = np.linalg.norm(s.pos_ecef, axis=1)
         np.testing.assert_allclose(r, c.semi_major_axis, rtol=1e-12)

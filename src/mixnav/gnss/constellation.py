@@ -24,12 +24,14 @@ its broadcast orbits are evaluated with, :mod:`mixnav.gnss.orbits`):
 ======== ================== =========== ==========================================
 system   semi-major axis    inclination source
 ======== ================== =========== ==========================================
-Galileo  29 600 318 m       56 deg      Galileo OS SIS ICD 2.0, 2.1.1 (nominal orbit)
-BeiDou   27 906 100 m       55 deg      BDS-SIS-ICD-OS 3.0, 3: MEO at 21 528 km
-GLONASS  25 508 000 m       64.8 deg    GLONASS ICD 5.1, 3.1.1: 19 100 km, 64.8 deg
+Galileo  29 600 318 m       56 deg      Galileo OS SIS ICD 2.0 (nominal orbit)
+BeiDou   27 906 100 m       55 deg      BDS-SIS-ICD-OS 3.0: MEO at 21 528 km altitude
+GLONASS  25 508 000 m       64.8 deg    GLONASS ICD 5.1: period 11 h 15 min 44 s, 64.8 deg
 ======== ================== =========== ==========================================
 
-(BeiDou's GEO and IGSO satellites are not simulated.) GLONASS satellites fly as a receiver
+(GLONASS's axis is Kepler's third law of the ICD's period with PZ-90's GM; BeiDou's is the
+altitude plus the WGS-84 equatorial radius. BeiDou's GEO and IGSO satellites are not
+simulated.) GLONASS satellites fly as a receiver
 computes them from the broadcast records (:class:`GlonassBroadcastOrbits`): a state vector
 every 30 min taken from the nominal orbit, integrated (:func:`mixnav.gnss.orbits.glonass_states`,
 J2, RK4) from the nearest one, so RINEX navigation records written from those states give
