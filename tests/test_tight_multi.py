@@ -196,17 +196,47 @@ def multi_scenario(folder, systems_text=MULTI, name="tight-multi"):
 ESTIMATORS = ("ukf", "robust-adaptive", "vb-akf", "student-t")
 
 
+#: a Gaussian-mixture bank and an IMM of two modes, tight on the four systems too
+BANK_AND_IMM = """
+[[methods]]
+name = "tight-gaussian-mixture"
+type = "tight-ekf"
+states = 17
+estimator = "gaussian-mixture"
+[methods.mixture]
+max_components = 4
+measurement.pseudorange = { weights = [0.9, 0.1], scales = [1.0, 9.0] }
+
+[[methods]]
+name = "tight-imm"
+type = "tight-ekf"
+states = 17
+estimator = "imm"
+[methods.imm]
+transition = [[0.95, 0.05], [0.05, 0.95]]
+[[methods.imm.modes]]
+name = "plain"
+estimator = "ekf"
+measurements = ["gnss"]
+[[methods.imm.modes]]
+name = "robust"
+estimator = "robust-adaptive"
+measurements = ["gnss"]
+"""
+
+
 @pytest.fixture(scope="module")
 def multi_run(tmp_path_factory):
     root = tmp_path_factory.mktemp("multi")
     p = multi_scenario(root)
     p.write_text(p.read_text() + "".join(f'\n[[methods]]\nname = "tight-{e}"\ntype = "tight-ekf"\nstates = 17\n'
-                                         f'estimator = "{e}"\ncovariance_interval = "1 s"\n' for e in ESTIMATORS))
+                                         f'estimator = "{e}"\ncovariance_interval = "1 s"\n' for e in ESTIMATORS)
+                 + BANK_AND_IMM)
     sc, source, _ = load_scenario(str(p))
     return run_scenario(sc, source, seed=1)
 
 
-@pytest.mark.parametrize("name", ["tight"] + [f"tight-{e}" for e in ESTIMATORS])
+@pytest.mark.parametrize("name", ["tight"] + [f"tight-{e}" for e in ESTIMATORS + ("gaussian-mixture", "imm")])
 def test_simulated_multi_system_run_estimates_the_offsets(multi_run, name):
     """The tight filters on four systems (GPS clock + three offset states, starting at zero
     with 100 m sigma) find each offset relative to GPS: the final estimates within 3 sigma of
