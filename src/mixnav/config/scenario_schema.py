@@ -164,6 +164,13 @@ class SatellitesConfig(Strict):
     process is given for that observable, the Gaussian noise added."""
 
     constellation: Literal["gps24", "gps30"] = "gps30"
+    #: systems simulated (RINEX letters), GPS's satellites from ``constellation``, the others
+    #: their nominal 24-slot constellations (mixnav.gnss.constellation); the receiver clock is
+    #: the first's, the others' observations carry ``system_offsets`` on top
+    systems: list[Literal["G", "R", "E", "C"]] = Field(default_factory=lambda: ["G"])
+    #: the receiver's true inter-system offset of each system after the first [m] (what a
+    #: receiver's inter-signal hardware delays add; the tight filters estimate them)
+    system_offsets: list[quantity(u.LENGTH)] = Field(default_factory=list)  # type: ignore[valid-type]
     mask: quantity(u.ANGLE, below=(math.pi / 2, "90 deg (the zenith)")) = float(np.radians(10.0))  # type: ignore[valid-type]
     pseudorange_sigma: quantity(u.LENGTH, positive=True)
     range_rate_sigma: quantity(u.VELOCITY, positive=True)
@@ -181,6 +188,11 @@ class SatellitesConfig(Strict):
 
     @model_validator(mode="after")
     def _known_prns(self):
+        if len(set(self.systems)) != len(self.systems) or not self.systems:
+            raise ValueError(f"systems: give distinct systems, got {self.systems}")
+        if len(self.system_offsets) not in (0, len(self.systems) - 1):
+            raise ValueError(f"system_offsets: one per system after the first ({len(self.systems) - 1} for "
+                             f"systems = {self.systems}), got {len(self.system_offsets)}")
         for i, o in enumerate(self.outages):
             bad = [p for p in o.prns if not 1 <= p <= self.n_satellites]
             if bad:

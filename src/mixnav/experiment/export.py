@@ -14,6 +14,15 @@ One seeded run of a scenario with raw satellites (``[gnss.satellites]``) becomes
   as broadcast elements with zero harmonic corrections and zero clocks), a record per
   satellite every 2 h (inside every record's fit interval); no ionosphere coefficients
   (the simulation adds no Klobuchar delay);
+- several systems (``[gnss.satellites] systems``): ``obs.rnx`` is a mixed file, each
+  system's first-frequency code and Doppler (:data:`mixnav.io.rinex_write.OBS_CODES`, the
+  Doppler by the system's wavelength), and ``nav.rnx`` a mixed navigation file of every
+  system's nominal constellation (BeiDou's records in BDT); the dataset lists the systems
+  (``[raw_gnss] systems``), so ``process`` estimates an inter-system offset per further
+  system. GLONASS: the simulator flies its satellites from state vectors every 30 min
+  (:class:`mixnav.gnss.constellation.GlonassBroadcastOrbits`), written as GLONASS records
+  (t_b in UTC, ``LEAP SECONDS`` in the header) with each slot's frequency channel, which
+  the observation header's ``GLONASS SLOT / FRQ #`` lines give too;
 - ``reference.csv``: the true IMU trajectory (position, velocity, attitude) at the GNSS
   epochs, on the IMU's time axis (``[reference] point = "imu"``);
 - ``dataset.toml``: an ``ins-gnss`` dataset with ``[raw_gnss]`` pointing at them, the
@@ -38,10 +47,10 @@ import numpy as np
 from ..attitude import quat_to_euler
 from ..config.scenario_schema import Scenario, StaticSegment
 from ..errors import ArgumentError, ConfigError
-from ..gnss.geometry import LAMBDA_L1, SECONDS_PER_WEEK
+from ..gnss.geometry import C_LIGHT, LAMBDA_L1, SECONDS_PER_WEEK
 from ..io.atomic import atomic_write_text
 from ..io.outdir import staged_output
-from ..io.rinex_write import write_rinex_nav, write_rinex_obs
+from ..io.rinex_write import write_rinex_nav, write_rinex_nav_multi, write_rinex_obs
 from ..sim.scenario import SimulatedRun, constellation, simulate
 
 _GPS_EPOCH = np.datetime64("1980-01-06T00:00:00", "ns")
@@ -111,7 +120,10 @@ def dataset_toml(sc: Scenario, name: str, lever, methods: list, alignment: dict,
         for k, v in imu.errors.items():
             lines.append(f"{k} = " + ("[" + ", ".join(f'"{x}"' for x in v) + "]" if isinstance(v, list) else f'"{v}"'))
     lines += ["", "[raw_gnss]", 'format = "rinex-obs"', 'file = "obs.rnx"', 'navigation = "nav.rnx"',
-              'imu_time = "gps-week-seconds"',
+              'imu_time = "gps-week-seconds"']
+    if list(s.systems) != ["G"]:
+        lines.append("systems = [" + ", ".join(f'"{x}"' for x in s.systems) + "]")
+    lines += [
               f"elevation_mask = {_q(np.degrees(s.mask), 'deg')}",
               "troposphere = false      # the simulation adds no atmosphere",
               "ionosphere = false",
@@ -183,10 +195,12 @@ def export_dataset(sc: Scenario, out_dir, seed: int | None = None, start: str = 
                           file=source, key="gnss.satellites")
     seed = sc.scenario.seed if seed is None else int(seed)
     t_gps0 = gps_seconds(start)
-    sim = simulate(sc, seed, source)
-    const = constellation(sc.gnss.satellites.constellation)
-    if const.prn.max() > 32:
+    systems = list(sc.gnss.satellites.systems)
+    const = constellation(sc.gnss.satellites.constellation, systems)
+    gps = const if systems == ["G"] else const.part("G") if "G" in systems else None
+    if gps is not None and gps.prn.max() > 32:
         raise ConfigError("RINEX GPS PRNs stop at 32", file=source, key="gnss.satellites.constellation")
+    sim = simulate(sc, seed, source)
     obs = sim.observations
     imu = sim.imu
     week0 = np.floor((t_gps0 + float(obs.time[0])) / SECONDS_PER_WEEK)
@@ -219,14 +233,40 @@ def export_dataset(sc: Scenario, out_dir, seed: int | None = None, start: str = 
         wk = np.floor(t_abs / SECONDS_PER_WEEK)
         tow = (t_gps0 - wk * SECONDS_PER_WEEK) + obs.time      # week difference first (float precision)
         from ..geodesy.frames import lla_to_ecef
+        multi = obs.system is not None
+        if multi:   # each slot's system letter and first-frequency wavelength (the SPP's frequencies)
+            from ..gnss.pseudoranges import SYSTEM_LETTERS
+            from ..gnss.spp import first_frequency
+            letters = np.array([SYSTEM_LETTERS[int(c)] for c in obs.system[e, s]])
+            chan = const.glonass_channels if "R" in systems else {}
+            wavelength = C_LIGHT / first_frequency(letters, [chan.get(int(p), 99) if x == "R" else 99
+                                                             for x, p in zip(letters, obs.prn[e, s])])
         write_rinex_obs(folder / "obs.rnx", wk.astype(int), tow, e, obs.prn[e, s], obs.pseudorange[e, s],
-                        doppler=-obs.range_rate[e, s] / LAMBDA_L1, approx_position=lla_to_ecef(sim.truth.lla[0]),
-                        marker=sc.scenario.name.upper()[:20], interval=float(np.median(np.diff(obs.time))))
+                        doppler=-obs.range_rate[e, s] / (wavelength if multi else LAMBDA_L1),
+                        approx_position=lla_to_ecef(sim.truth.lla[0]),
+                        marker=sc.scenario.name.upper()[:20], interval=float(np.median(np.diff(obs.time))),
+                        system=letters if multi else None,
+                        glonass_channels=const.glonass_channels if "R" in systems else None)
         files["observations"] = "obs.rnx"
         # navigation: records every RECORD_INTERVAL covering the run (toe on whole multiples)
         t_first, t_last = t_gps0 + float(obs.time[0]), t_gps0 + float(obs.time[-1])
         toe = np.arange(np.floor(t_first / RECORD_INTERVAL), np.ceil(t_last / RECORD_INTERVAL) + 1) * RECORD_INTERVAL
-        write_rinex_nav(folder / "nav.rnx", const.broadcast_records(t_gps0, toe))
+        if systems == ["G"]:
+            write_rinex_nav(folder / "nav.rnx", const.broadcast_records(t_gps0, toe))
+        else:
+            glo, leap = None, None
+            if "R" in systems:   # the state vectors the simulator's GLONASS satellites flew from
+                from ..gnss.gnss_time import leap_seconds
+                orbits = const.part("R")
+                k0 = np.floor(float(obs.time[0]) / orbits.interval) - 1
+                k1 = np.ceil(float(obs.time[-1]) / orbits.interval) + 1
+                glo = orbits.records(np.arange(k0, k1 + 1) * orbits.interval)
+                glo["t_gps"] = t_gps0 + glo.pop("tb")
+                glo["channel"] = np.array([const.glonass_channels[int(p)] for p in glo["prn"]], float)
+                leap = int(leap_seconds(np.array([t_gps0 - 18.0]))[0])
+            write_rinex_nav_multi(folder / "nav.rnx", {x: const.part(x).broadcast_records(t_gps0, toe, time_system=x)
+                                                       for x in systems if x != "R"}, glonass=glo,
+                                  leap_seconds=leap)
         files["navigation"] = "nav.rnx"
         # reference: the truth (IMU point) at the GNSS epochs
         tr = sim.truth

@@ -175,6 +175,18 @@ def with_withheld(ds: Dataset, windows) -> Dataset:
     return ds.model_copy(update={key: section.model_copy(update={"withhold": held})})
 
 
+def _start_for(init: InitialState, meas) -> InitialState:
+    """``init`` without the auxiliary start values (the inter-system offsets of a multi-system
+    tight start) of blocks the method's layout does not have (a loose method beside it)."""
+    if not init.aux0 or not meas:
+        return init
+    lay = getattr(meas[0], "layout", None)
+    if lay is None:
+        return init
+    kept = {k: v for k, v in init.aux0.items() if lay.has(k)}
+    return init if len(kept) == len(init.aux0) else replace(init, aux0=kept or None)
+
+
 def run_ins_methods(ds: Dataset, imu: ImuData, fixes: GnssFixes, init: InitialState, reference,
                     lever: np.ndarray, source: str, make_aiding, **build) -> tuple[dict, object, float]:
     """Every ``[[methods]]`` entry on the IMU from ``init``: ``(results, aiding,
@@ -198,6 +210,7 @@ def run_ins_methods(ds: Dataset, imu: ImuData, fixes: GnssFixes, init: InitialSt
     results: dict = {}
     for i, m in enumerate(ds.methods):
         filt, meas = methods.build(m, model, fixes, lever, source, i, aiding=aiding, **build)
-        results.update(methods.run_method(m, filt, imu, init, meas, source, i, names, output_times=out_times))
+        results.update(methods.run_method(m, filt, imu, _start_for(init, meas), meas, source, i, names,
+                                          output_times=out_times))
     return results, aiding, _time.perf_counter() - t_filt
 

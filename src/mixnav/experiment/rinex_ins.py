@@ -5,8 +5,10 @@ Steps:
 
 1. Read the IMU (any IMU format, the installation applied as for fixes), the RINEX
    observation file (the raw-GNSS reader of ``raw_gnss.format``, :func:`mixnav.io.rinex_obs.read_rinex_obs`: GPS C1C and D1C when
-   present), the navigation file (:class:`mixnav.gnss.ephemeris.BroadcastEphemeris`) and
-   the reference.
+   present; every system of ``raw_gnss.systems``, each its first-frequency signal), the
+   navigation file (:class:`mixnav.gnss.ephemeris.BroadcastEphemeris`; with systems beyond
+   GPS every navigation file as one :class:`~mixnav.gnss.multi_ephemeris.MultiEphemeris`,
+   GLONASS channels from its records) and the reference.
 2. One time axis: RINEX epochs are GPS time; the IMU time stamps are GPS seconds of the
    week of the first RINEX epoch or GPS seconds since 1980 (``raw_gnss.imu_time``), after
    ``installation.imu_time_offset``. Times inside the run are seconds since the first IMU
@@ -29,6 +31,10 @@ Steps:
    gyro bias through ``w x l``).
 5. The tight methods start from the alignment with the receiver clock bias and drift of
    the SPP / Doppler solution at the alignment time (17-state layout, ``states = 17``).
+   Several systems: the filter's clock is that of the first of G R E C J present, and its
+   layout gets one inter-system offset state per further system
+   (:func:`mixnav.measurements.tight.tight_layout`), started at the SPP's offsets
+   (:func:`clock_start`).
    Outputs, metrics and report as every INS dataset (:func:`mixnav.experiment.pipelines.ins_fixes.write`).
 """
 
@@ -54,13 +60,15 @@ from ..io.imu_checks import DataWarning
 from ..io.readers import ReadOptions, get_reader
 from ..sim.gnss import in_windows
 from .aiding import AidingInputs, installation_check
-from .spp_process import gps_only, gps_rows, options as spp_options
+from .spp_process import _iono_alpha, _systems_of, check_first_frequency, gps_rows, options as spp_options
+from .spp_process import read_navigation as read_navigation_multi
 
 
 def _subset(obs, keep):
     """The epochs ``keep`` (bool (m,)) of GnssObservations."""
     f = {k: getattr(obs, k) for k in ("time", "valid", "prn", "sat_pos", "sat_vel", "pseudorange", "range_rate",
-                                      "carrier", "elevation", "clock", "pr_variance") if getattr(obs, k) is not None}
+                                      "carrier", "elevation", "clock", "pr_variance", "system")
+         if getattr(obs, k) is not None}
     return replace(obs, **{k: v[keep] for k, v in f.items()})
 
 
@@ -143,7 +151,7 @@ class RinexInputs:
 
     imu: object               # ImuData, installation applied, the file's own times
     obs: RawPseudoranges
-    eph: BroadcastEphemeris
+    eph: BroadcastEphemeris   # or a MultiEphemeris (systems beyond GPS)
     obs_files: list
     nav_files: list
     reference: object         # Trajectory or None
@@ -165,16 +173,35 @@ def read_rinex_ins(ds: Dataset, source: str, folder) -> RinexInputs:
     imu = install(read_imu(ds, folder), ds)
     obs_files = [folder / f for f in c.files("file")]
     nav_files = [folder / f for f in c.files("navigation")]
-    gps_only(c, source)
+    multi = several_systems(c)
+    if multi:
+        check_first_frequency(c, source)
+        for i, m in enumerate(ds.methods):   # before any file is read
+            if m.type == "tdcp-ekf":
+                raise ConfigError(f"method '{m.name}': TDCP carries one receiver clock, GPS alone so far; with "
+                                  f"systems = {list(c.systems)} use tight-ekf (an inter-system offset per further "
+                                  "system) or set systems = [\"G\"]", file=source, key=f"methods[{i}].type")
     obs = read_observations(obs_files, get_reader("raw-gnss", c.format, key="raw_gnss.format", file=source),
                             ReadOptions(c, folder))
-    eph = read_navigation(nav_files)
+    if multi:   # every navigation file as one MultiEphemeris; a listed system without records is warned about
+        eph = read_navigation_multi(c, folder, source)
+        if "R" in c.systems and "R" in eph:
+            obs = obs.with_glonass_channels(eph["R"].channels())
+    else:
+        eph = read_navigation(nav_files)
     for i, m in enumerate(ds.methods):   # before any work
         if m.type == "tight-ekf" and m.use_range_rate and obs.doppler is None:
             raise ConfigError(f"method '{m.name}' uses range rates, but {obs.source} has no Doppler (D1C/D1) column: "
                               "set use_range_rate = false", file=source, key=f"methods[{i}].use_range_rate")
     reference = read_reference(ds, folder)
     return RinexInputs(imu, obs, eph, obs_files, nav_files, reference, _time.perf_counter() - t_read)
+
+
+def several_systems(c) -> bool:
+    """Whether a ``[raw_gnss]`` table names systems beyond GPS (then every navigation file is
+    read as one :class:`~mixnav.gnss.multi_ephemeris.MultiEphemeris`; GPS alone keeps the GPS
+    records of :func:`read_navigation`, its results bit for bit)."""
+    return tuple(c.systems) != ("G",)
 
 
 def run_rinex_ins(ds: Dataset, source: str, folder, inputs: RinexInputs):
@@ -184,8 +211,11 @@ def run_rinex_ins(ds: Dataset, source: str, folder, inputs: RinexInputs):
     imu, obs, eph, reference, read_time = inputs.imu, inputs.obs, inputs.eph, inputs.reference, inputs.read_time_s
     obs_files, nav_files = inputs.obs_files, inputs.nav_files
     obs_file = obs_files[0]     # the file an error names (the message lists them all)
-    gps_rows(obs)
-    if c.ionosphere and eph.iono_alpha is None:   # asked for, and impossible: said, not silent
+    multi = hasattr(eph, "states_of")
+    if not multi:
+        gps_rows(obs)
+    system, chan = _systems_of(obs, eph)
+    if c.ionosphere and _iono_alpha(eph) is None:   # asked for, and impossible: said, not silent
         warnings.warn(f"{', '.join(map(str, nav_files))}: the header has no ionosphere (Klobuchar) coefficients, "
                       "so the ionosphere "
                       "correction is skipped and every pseudorange keeps its delay (metrics.json: "
@@ -207,7 +237,8 @@ def run_rinex_ins(ds: Dataset, source: str, folder, inputs: RinexInputs):
 
     opts = spp_options(ds)
     t_spp = _time.perf_counter()
-    track = solve_epochs(eph, obs.week, obs.tow, obs.epoch, obs.prn, obs.pseudorange, opts)
+    track = solve_epochs(eph, obs.week, obs.tow, obs.epoch, obs.prn, obs.pseudorange, opts, system=system,
+                         glonass_channel=chan)
     offset, jumps, spikes = clock_jumps(t_rel, track.clock_bias, track.ok, float(c.clock_jump))
     ok = track.ok
     if not ok.any():
@@ -220,7 +251,8 @@ def run_rinex_ins(ds: Dataset, source: str, folder, inputs: RinexInputs):
     rx = track.pos_ecef[last]
     rho = np.asarray(obs.pseudorange, float) - offset[np.asarray(obs.epoch, int)]
     epochs, skipped = corrected_pseudoranges(eph, obs.week, obs.tow, obs.epoch, obs.prn, rho, rx, opts,
-                                             source=obs.source, doppler=obs.doppler)
+                                             source=obs.source, doppler=obs.doppler, system=system,
+                                             glonass_channel=chan)
     # epochs.time counts from the first RINEX epoch; rows of epoch e came from RINEX epoch j
     j_of = np.searchsorted(t_rel - t_rel[0], epochs.time - 1e-6)
     tight, skipped_rows = tight_observations(epochs, rx[j_of], c.pseudorange_sigma, c.range_rate_sigma,
@@ -246,7 +278,8 @@ def run_rinex_ins(ds: Dataset, source: str, folder, inputs: RinexInputs):
     inst = ds.installation
     lever = np.asarray(inst.antenna_position, float) - np.asarray(inst.imu_position, float)
     init = initial_state(ds, imu, fixes, lever)
-    init = replace(init, **clock_start(init.time, track, t_rel, offset, drift, vcov))
+    letters = tight_system_letters(tight)
+    init = replace(init, **clock_start(init.time, track, t_rel, offset, drift, vcov, letters))
     clock = ClockModel(float(c.clock_q_bias), float(c.clock_q_drift))
     results, aiding, filter_time = run_ins_methods(
         ds, imu, fixes, init, reference, lever, source,
@@ -259,7 +292,7 @@ def run_rinex_ins(ds: Dataset, source: str, folder, inputs: RinexInputs):
         "observation_files": [str(f) for f in obs_files], "navigation_files": [str(f) for f in nav_files],
         "epochs": int(len(obs.tow)),
         "epochs_in_imu_span": int(inside.sum()), "doppler": obs.doppler is not None,
-        "ionosphere": ("klobuchar" if eph.iono_alpha is not None else "skipped") if c.ionosphere else "off",
+        "ionosphere": ("klobuchar" if _iono_alpha(eph) is not None else "skipped") if c.ionosphere else "off",
         "troposphere": bool(c.troposphere),
         "spp_status": track.status_counts(), "spp_time_s": solve_time,
         "satellites_skipped_by_spp": track.skipped_satellites,
@@ -269,6 +302,11 @@ def run_rinex_ins(ds: Dataset, source: str, folder, inputs: RinexInputs):
         "fixes_without_velocity": int(no_velocity),
         "clock_jumps": [list(j) for j in jumps], "clock_spikes_ignored": int(spikes),
         "clock0": [float(v) for v in init.clock0]}
+    if multi:
+        checks["rinex"].update({
+            "systems": list(letters), "satellites_skipped_by_system": dict(getattr(track, "skipped_by_system", {})),
+            "system_offsets0_m": {s: float(v) for s, v in zip(letters[1:], init.aux0["system_offset"])}
+            if init.aux0 else {}})
     return ProcessOutput(ds, source, folder, t0, imu, fixes, all_fixes, reference, lever, results, init,
                          read_time + solve_time, filter_time, aiding.summary(),
                          installation_check(imu, ds.alignment.static_duration, results, aiding.stillness,
@@ -302,13 +340,30 @@ def spp_fixes(track, t_rel, vel_e, vcov, doppler: bool, source) -> tuple[GnssFix
                      vel_sigma=vel_sigma[good], source=source), int((~good).sum())
 
 
-def clock_start(t: float, track, t_rel, offset, drift, dcov) -> dict:
+def tight_system_letters(tight) -> tuple[str, ...]:
+    """The system letters of the tight observables ``tight`` (GnssObservations), the reference
+    clock's first (:func:`mixnav.measurements.tight.observation_systems`)."""
+    from ..gnss.pseudoranges import SYSTEM_LETTERS
+    from ..measurements.tight import observation_systems
+    return tuple(SYSTEM_LETTERS[g] for g in observation_systems(tight))
+
+
+def clock_start(t: float, track, t_rel, offset, drift, dcov, systems=("G",)) -> dict:
     """``clock0`` and ``sigma_clock`` of the filter's start at time ``t``: the SPP clock bias
     (jumps taken off) interpolated to ``t`` with its WLS sigma (at least 1 m), and the drift of
     the Doppler solution ``drift`` (k,) [m/s] with its sigma from ``dcov`` (k, 4, 4) (at least
-    1 cm/s), else the SPP clock's slope with 1 m/s."""
+    1 cm/s), else the SPP clock's slope with 1 m/s.
+
+    Several ``systems`` (letters, the filter's reference clock first; a multi-system track):
+    the clock is the reference system's (the SPP's own clock plus its offset, at the epochs
+    where the SPP used that system), and ``aux0`` holds each further system's offset to it
+    at the solved epoch nearest ``t`` (0 where that epoch did not use it: the block's
+    initial sigma then covers it)."""
     ok = track.ok
-    tb, b = t_rel[ok], (track.clock_bias - offset)[ok]
+    multi = len(systems) > 1 and getattr(track, "offsets", None)
+    bias_all = track.clock_bias + (track.offsets[systems[0]] if multi else 0.0)
+    ok = ok & np.isfinite(bias_all)
+    tb, b = t_rel[ok], (bias_all - offset)[ok]
     j = int(np.argmin(np.abs(tb - t)))
     bias = float(np.interp(t, tb, b))
     s_bias = float(np.sqrt(track.cov[ok][j, 3, 3]))
@@ -320,4 +375,10 @@ def clock_start(t: float, track, t_rel, offset, drift, dcov) -> dict:
     else:
         d = float(np.gradient(b, tb)[j]) if len(tb) > 1 else 0.0
         s_drift = 1.0
-    return {"clock0": np.array([bias, d]), "sigma_clock": np.array([max(s_bias, 1.0), max(s_drift, 0.01)])}
+    out = {"clock0": np.array([bias, d]), "sigma_clock": np.array([max(s_bias, 1.0), max(s_drift, 0.01)])}
+    if multi:
+        e = np.nonzero(ok)[0][j]
+        ref = track.offsets[systems[0]][e]
+        off = [track.offsets[s][e] if s in track.offsets else np.nan for s in systems[1:]]
+        out["aux0"] = {"system_offset": np.array([v - ref if np.isfinite(v) else 0.0 for v in off])}
+    return out

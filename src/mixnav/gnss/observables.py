@@ -7,6 +7,12 @@ bias ``b`` [m] and drift ``d`` [m/s], satellite clock ``dt_s`` [s])::
     range rate   rr  = d|...|/dt + d - c ddt_s + e_rr,  d|...|/dt = u . (v_s (1 - tau') - v_r)
     carrier      phi = |...| + b - c dt_s + lambda N_j + e_phi      [m]
 
+Several systems (``satellites`` a :class:`mixnav.gnss.constellation.MultiConstellation`):
+the pseudorange and carrier of a satellite of system ``g`` also carry the receiver's
+inter-system offset ``o_g`` [m] (``system_offsets``, zero for the others; one receiver
+clock), the ambiguity is in cycles of the system's first-frequency wavelength (GLONASS by
+the satellite's channel), and the observations say each slot's system.
+
 ``R(tau)`` is the Earth rotation during the travel time ``tau`` (Sagnac);
 ``u`` the unit line of sight receiver -> satellite; the receiver velocity
 ``v_r`` includes the lever-arm term ``C_nb (w x l)``. No ionosphere or
@@ -75,6 +81,10 @@ class GnssObservations:
     pr_variance : ndarray (m, K) or None
         Per-slot pseudorange variance [m^2] the filters are told instead of ``sigma_pr^2``
         (e.g. elevation-dependent, for recorded data); None: ``sigma_pr^2`` everywhere.
+    system : ndarray of int (m, K) or None
+        System code of each slot (:data:`mixnav.gnss.pseudoranges.SYSTEM_LETTERS`: 1 GPS,
+        4 GLONASS, 8 Galileo, 16 QZSS, 32 BeiDou; 0 in unused slots); ``prn`` then numbers
+        the satellite within its system. None: every satellite is GPS.
     """
 
     time: np.ndarray
@@ -91,6 +101,7 @@ class GnssObservations:
     sigma_cp: float
     clock: np.ndarray
     pr_variance: np.ndarray | None = None
+    system: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.time)
@@ -117,7 +128,7 @@ def simulate_observables(truth: Trajectory, satellites, rate: float, lever_arm, 
                          clock_q: tuple[float, float], clock0: tuple[float, float],
                          rng: np.random.Generator, *, outages=(), satellite_outages=(),
                          pseudorange_noise=None, range_rate_noise=None, carrier_noise=None,
-                         time_offset: float = 0.0) -> GnssObservations:
+                         time_offset: float = 0.0, system_offsets=None) -> GnssObservations:
     """Observables of the antenna every ``1 / rate`` s on the truth's time grid.
 
     Parameters
@@ -145,6 +156,9 @@ def simulate_observables(truth: Trajectory, satellites, rate: float, lever_arm, 
     outages : sequence of (start, end)
         No observation at all in these windows.
     satellite_outages : sequence of SatelliteOutage
+    system_offsets : dict of int -> float, optional
+        Several systems: the receiver's inter-system offset [m] of a system code (the
+        pseudoranges and carriers of its satellites carry it); absent codes: zero.
     """
     lever = np.asarray(lever_arm, dtype=float)
     step = int(round(1.0 / (rate * np.median(np.diff(truth.time)))))
@@ -235,9 +249,31 @@ def simulate_observables(truth: Trajectory, satellites, rate: float, lever_arm, 
     all_prn = np.unique(prn[valid])
     amb = dict(zip(all_prn.tolist(), rng.integers(-10 ** 6, 10 ** 6, len(all_prn))))
     N = np.where(valid, np.vectorize(lambda q: amb.get(q, 0))(prn), 0) if K else np.zeros((m, 0))
-    cp = geo + clock[:, :1] + LAMBDA_L1 * N + noise(carrier_noise, sigma_cp)
+    system, wavelength = None, LAMBDA_L1
+    if hasattr(satellites, "split_ids"):     # several systems: the ids into systems and numbers
+        system, prn = satellites.split_ids(prn)
+        system = np.where(valid, system, 0)
+        prn = np.where(valid, prn, -1)
+        wavelength = _wavelengths(system, prn, getattr(satellites, "glonass_channels", {}))
+        off = np.zeros((m, K))
+        for code, v in (system_offsets or {}).items():
+            off[system == int(code)] = float(v)
+        pr = pr + off
+        geo = geo + off
+    cp = geo + clock[:, :1] + wavelength * N + noise(carrier_noise, sigma_cp)
     return GnssObservations(time=t, valid=valid, prn=prn, sat_pos=sat_pos, sat_vel=sat_vel,
                             pseudorange=pr, range_rate=rrate, carrier=cp, elevation=elev,
                             sigma_pr=float(sigma_pr), sigma_rr=float(sigma_rr),
-                            sigma_cp=float(sigma_cp), clock=clock)
+                            sigma_cp=float(sigma_cp), clock=clock, system=system)
+
+
+def _wavelengths(system: np.ndarray, prn: np.ndarray, glonass_channels: dict) -> np.ndarray:
+    """First-frequency carrier wavelength [m] of each slot (:func:`mixnav.gnss.spp.first_frequency`;
+    NaN in unused slots)."""
+    from .pseudoranges import SYSTEM_LETTERS
+    from .spp import first_frequency
+    letters = np.array([SYSTEM_LETTERS.get(int(c), "G") for c in system.ravel()])
+    chan = np.array([glonass_channels.get(int(p), 99) for p in prn.ravel()])
+    f = first_frequency(letters, chan).reshape(system.shape)
+    return np.where(system > 0, C_LIGHT / f, np.nan)
 

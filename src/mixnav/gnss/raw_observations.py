@@ -52,7 +52,8 @@ def tight_observations(epochs: PseudorangeEpochs, receiver_ecef, sigma_pr: float
     -------
     obs : GnssObservations
         ``range_rate`` NaN where no Doppler (everywhere without ``epochs.range_rate``);
-        ``carrier`` NaN; ``clock`` NaN (no truth).
+        ``carrier`` NaN; ``clock`` NaN (no truth); ``system`` the rows' system codes when
+        any is not GPS (None for GPS alone, as before systems existed).
     skipped : dict
         Rows left out per reason: ``below elevation mask``, ``no Doppler`` (a row without a
         range rate in a file that has Doppler: the filter takes both observables of a
@@ -84,6 +85,7 @@ def tight_observations(epochs: PseudorangeEpochs, receiver_ecef, sigma_pr: float
     rr = np.full((E, K), np.nan)
     elev = np.full((E, K), np.nan)
     var = np.full((E, K), np.nan) if weights == "elevation" else None
+    system = np.zeros((E, K), dtype=np.int64) if (np.asarray(epochs.system) != 1).any() else None
     for e in range(E):
         sl = epochs.rows_of(e)
         idx = np.arange(sl.start, sl.stop)[use[sl]]
@@ -99,6 +101,8 @@ def tight_observations(epochs: PseudorangeEpochs, receiver_ecef, sigma_pr: float
         elev[e, :n] = el[idx]
         if var is not None:
             var[e, :n] = epochs.variance[idx]
+        if system is not None:
+            system[e, :n] = epochs.system[idx]
         if has_rr:
             sat_vel[e, :n] = earth_rotation_correction(epochs.sat_vel[idx], tau)
             rr[e, :n] = epochs.range_rate[idx]
@@ -106,7 +110,7 @@ def tight_observations(epochs: PseudorangeEpochs, receiver_ecef, sigma_pr: float
                            sat_pos=sat_pos, sat_vel=sat_vel, pseudorange=pr, range_rate=rr,
                            carrier=np.full((E, K), np.nan), elevation=elev, sigma_pr=float(sigma_pr),
                            sigma_rr=float(sigma_rr), sigma_cp=float("nan"), clock=np.full((E, 2), np.nan),
-                           pr_variance=var)
+                           pr_variance=var, system=system)
     return obs, skipped
 
 

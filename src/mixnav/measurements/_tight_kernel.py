@@ -17,7 +17,7 @@ from ..ins._kernels import E2, quat_to_dcm_into, radii
 
 @njit(cache=True)
 def tight_zhr(nav, lever, w_b, clock, sat_pos, sat_vel, pr, rr, valid, sig_pr, sig_rr, use_rr,
-              n, i_bg, i_clk):
+              n, i_bg, i_clk, sys_idx, offsets, i_off):
     """Innovation, Jacobian and noise variances of one epoch.
 
     Parameters
@@ -36,6 +36,13 @@ def tight_zhr(nav, lever, w_b, clock, sat_pos, sat_vel, pr, rr, valid, sig_pr, s
     use_rr : bool
     n, i_bg, i_clk : int
         Number of states and first index of the gyro-bias and clock blocks.
+    sys_idx : ndarray of int (K,)
+        Each slot's system: 0 the clock's reference system, ``g >= 1`` the system of
+        inter-system offset ``offsets[g]``.
+    offsets : ndarray (S,)
+        ``[0, o_1, ..., o_{S-1}]`` [m]: the offset each system adds to the pseudorange.
+    i_off : int
+        First index of the ``system_offset`` block (-1: one system, no offset columns).
 
     Returns
     -------
@@ -83,7 +90,10 @@ def tight_zhr(nav, lever, w_b, clock, sat_pos, sat_vel, pr, rr, valid, sig_pr, s
             us += d[i] * sat_vel[k, i]
         for i in range(3):
             un[i] = cne[i, 0] * d[0] + cne[i, 1] * d[1] + cne[i, 2] * d[2]
-        z[j] = pr[k] - (rho + clock[0])
+        g = sys_idx[k]
+        z[j] = pr[k] - (rho + clock[0] + offsets[g])   # + 0.0 for the reference system: bit for bit
+        if i_off >= 0 and g > 0:
+            H[j, i_off + g - 1] = 1.0
         # u_n^T [l_n x]
         H[j, 0] = un[1] * ln[2] - un[2] * ln[1]
         H[j, 1] = un[2] * ln[0] - un[0] * ln[2]
@@ -175,10 +185,12 @@ def tdcp_rows(z, H, r, row0, ra, cne, ln, clock_bias, sat_now, sat_prev, carrier
 
 
 @njit(cache=True)
-def tight_predict_batch(navs, lever, w_b, clocks, sat_pos, sat_vel, valid, use_rr, Y):
+def tight_predict_batch(navs, lever, w_b, clocks, sat_pos, sat_vel, valid, use_rr, sys_idx, offsets, Y):
     """Predicted pseudoranges (then range rates) of the valid slots at each of N states,
     in one call (see ``TightGnss.predict_batch``): ``navs`` (N, 10), ``w_b`` (N, 3),
-    ``clocks`` (N, 2) bias [m] and drift [m/s]; ``Y`` (N, m) written."""
+    ``clocks`` (N, 2) bias [m] and drift [m/s], ``offsets`` (N, S) each state's
+    inter-system offsets (column 0 zero: the reference system), ``sys_idx`` (K,) each
+    slot's column of it; ``Y`` (N, m) written."""
     K = valid.shape[0]
     d = np.empty(3)
     un = np.empty(3)
@@ -209,7 +221,7 @@ def tight_predict_batch(navs, lever, w_b, clocks, sat_pos, sat_vel, valid, use_r
             for i in range(3):
                 d[i] /= rho
                 us += d[i] * sat_vel[k, i]
-            Y[p, j] = rho + clocks[p, 0]
+            Y[p, j] = rho + clocks[p, 0] + offsets[p, sys_idx[k]]
             if use_rr:
                 for i in range(3):
                     un[i] = cne[i, 0] * d[0] + cne[i, 1] * d[1] + cne[i, 2] * d[2]

@@ -96,6 +96,11 @@ class DifferencedMeasurement(MeasurementModel):
         if getattr(inner, "clone_size", 0) or getattr(inner, "remembers", False):
             raise ArgumentError("measurement differencing cannot wrap a model that remembers its previous "
                                 "epoch (e.g. tdcp-ekf): use tight-ekf or loose-ekf", argument="inner")
+        if isinstance(inner, TightGnss) and len(inner.systems) > 1:
+            # the remembered epoch's rows would need the inter-system offsets too (not passed yet)
+            raise ArgumentError("measurement differencing (the coloured-noise bank) takes one satellite system so "
+                                f"far; this tight model has {len(inner.systems)}: read GPS alone (systems = "
+                                "[\"G\"]) for it", argument="inner")
         if not hasattr(inner, "row_channels"):
             raise ArgumentError(f"{type(inner).__name__} does not name the channel of its rows, "
                                 "which differencing needs", argument="inner")

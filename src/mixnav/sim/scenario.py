@@ -199,10 +199,20 @@ def _without_fixes_below_four(fixes: GnssFixes, obs):
     return out
 
 
-def constellation(name: str):
-    """The nominal constellation a scenario names."""
-    from ..gnss.constellation import NominalConstellation
-    return NominalConstellation.gps({"gps24": 4, "gps30": 5}[name])
+def constellation(name: str, systems=("G",)):
+    """The nominal constellation a scenario names (GPS's ``name``), with the other ``systems``'
+    nominal constellations when it lists more than GPS (a MultiConstellation)."""
+    from ..gnss.constellation import MultiConstellation, NominalConstellation
+    gps = NominalConstellation.gps({"gps24": 4, "gps30": 5}[name])
+    if tuple(systems) == ("G",):
+        return gps
+    return MultiConstellation.of(tuple(systems), gps=gps)
+
+
+def system_offsets(s) -> dict:
+    """``[gnss.satellites]``'s true inter-system offsets as system code -> [m]."""
+    from ..gnss.constellation import _CODES
+    return {_CODES[letter]: float(v) for letter, v in zip(s.systems[1:], s.system_offsets)}
 
 
 def simulate_satellites(sc: Scenario, truth: Trajectory, streams: Streams, source=None):
@@ -219,12 +229,12 @@ def simulate_satellites(sc: Scenario, truth: Trajectory, streams: Streams, sourc
     pr_noise, rr_noise, cp_noise = observable_noise(sc, source)
     outs = [SatelliteOutage(o.window[0], o.window[1], tuple(o.prns), o.keep, o.fraction) for o in s.outages]
     return simulate_observables(
-        truth, constellation(s.constellation), g.rate, np.asarray(g.lever_arm), s.mask,
+        truth, constellation(s.constellation, s.systems), g.rate, np.asarray(g.lever_arm), s.mask,
         s.pseudorange_sigma, s.range_rate_sigma, s.carrier_sigma,
         (s.clock_bias_noise ** 2, s.clock_drift_noise ** 2), tuple(clock0),
         streams.get("satellites"), outages=tuple(tuple(o) for o in g.outages),
         satellite_outages=outs, pseudorange_noise=pr_noise, range_rate_noise=rr_noise,
-        carrier_noise=cp_noise)
+        carrier_noise=cp_noise, system_offsets=system_offsets(s) if len(s.systems) > 1 else None)
 
 
 def initial_estimate(truth: Trajectory, sc: Scenario, rng: np.random.Generator) -> InitialState:

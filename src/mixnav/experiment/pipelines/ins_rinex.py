@@ -1,5 +1,5 @@
 """The ``ins-gnss`` pipeline with a RINEX observation file (``[raw_gnss]``): the tightly
-coupled INS on pseudoranges and Doppler, the loose methods on the SPP fixes
+coupled INS on pseudoranges and Doppler (of every system of ``[raw_gnss] systems``), the loose methods on the SPP fixes
 (:mod:`mixnav.experiment.rinex_ins`, steps in its docstring). Tables, metrics and outputs
 are those of every INS dataset (:mod:`mixnav.experiment.pipelines.ins_fixes`)."""
 
