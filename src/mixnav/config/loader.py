@@ -385,7 +385,12 @@ def load_dataset_text(text: str, source: str):
             if key in data:
                 raise ConfigError(f"not used by dataset.kind = '{kind}' (remove it, or change the kind)",
                                   file=source, key=key)
-        return _validate_data(RawGnssDataset, data, source), source, text
+        ds = _validate_data(RawGnssDataset, data, source)
+        if ds.reference is not None and ds.reference_point is not None:
+            # two truths would score the same epochs twice, differently: one of them is a slip
+            raise ConfigError("give either [reference_point] (a static receiver's surveyed point) or [reference] "
+                              "(a moving receiver's trajectory), not both", file=source, key="reference")
+        return ds, source, text
     ds = _validate(Dataset, text, source)
     _check_kind(ds, source)
     _check_imu_models(ds, source)

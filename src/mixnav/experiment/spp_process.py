@@ -7,9 +7,13 @@ Steps: read the raw measurement log (the raw-GNSS reader of ``raw_gnss.format``,
 navigation files of every system (:class:`mixnav.gnss.multi_ephemeris.MultiEphemeris`; the
 GLONASS frequency numbers taken from them), solve every epoch by WLS (:mod:`mixnav.gnss.spp`:
 one receiver clock plus one offset per extra system in the epoch), and
-score the solutions against the surveyed static point of ``[reference_point]``: north,
-east, down errors, their RMS, maximum and 95th percentile, and the position NEES with
-the WLS covariance. Epochs without a solution are counted by status, never raised.
+score the solutions against the surveyed static point of ``[reference_point]``, or against
+a moving receiver's ``[reference]`` trajectory interpolated at each epoch's GPS time
+(:mod:`mixnav.experiment.raw_reference`: epochs outside its span or in its gaps are not
+scored, counted): north, east, down errors, their RMS, median, maximum and 95th
+percentile, the 3-D RMS, and the position NEES with the WLS covariance, with the
+availability (solved epochs / epochs) beside them. Epochs without a solution are counted
+by status, never raised.
 
 Filter methods (``[[methods]]`` with an estimator other than ``wls``): the observations
 with SPP's broadcast corrections applied (:func:`mixnav.gnss.spp.corrected_pseudoranges`:
@@ -46,6 +50,7 @@ from ..io.readers import read_table
 from ..io.atomic import atomic_write_dataframe, atomic_write_json
 from . import figures
 from .outputs import add_sweeps
+from .raw_reference import EpochReference, errors_ned, reference_at_epochs
 from .report import write_report
 from .webmap import map_html
 
@@ -74,6 +79,7 @@ class SppOutput:
     filter_time_s: float = 0.0
     checks: dict = field(default_factory=dict)
     clock_offset: np.ndarray | None = None   # (k,) clock jumps taken off the filters' pseudoranges [m]
+    reference: EpochReference | None = None  # [reference]: a moving receiver's trajectory at the epochs
 
 
 def options(ds, method=None) -> SppOptions:
@@ -207,6 +213,8 @@ def solve_raw(ds: RawGnssDataset, source: str, folder: Path, obs, eph: Broadcast
     systems with a MultiEphemeris) and the filter methods."""
     system, chan = _systems_of(obs, eph)
     c = ds.raw_gnss
+    # the moving reference first: a file that does not cover the log is refused before the solve
+    moving = None if ds.reference is None else reference_at_epochs(ds.reference, folder, source, obs.week, obs.tow)
     if c.ionosphere and _iono_alpha(eph) is None:   # asked for, and impossible: said, not silent
         import warnings
         from ..io.imu_checks import DataWarning
@@ -219,7 +227,7 @@ def solve_raw(ds: RawGnssDataset, source: str, folder: Path, obs, eph: Broadcast
     t2 = _time.perf_counter()
     rp = ds.reference_point
     ref = None if rp is None else np.array([rp.latitude, rp.longitude, rp.height])
-    po = SppOutput(ds, source, folder, obs, eph, track, ref, read_time_s, t2 - t1)
+    po = SppOutput(ds, source, folder, obs, eph, track, ref, read_time_s, t2 - t1, reference=moving)
     for m in ds.run_methods():
         if m.estimator == "wls" and m.robust is not None:
             t3 = _time.perf_counter()
@@ -370,6 +378,21 @@ def solution_table(po: SppOutput, track: SppTrack | None = None) -> pd.DataFrame
         if ok.any():
             nees[ok] = np.einsum("ki,ki->k", err[ok], np.linalg.solve(cov_ned[ok], err[ok][..., None])[..., 0])
         df["nees_pos"] = nees
+    elif po.reference is not None:
+        # estimate minus the reference interpolated at the epoch, in NED there; NaN where not scored
+        ref = po.reference.lla
+        err = errors_ned(tr.pos_ecef, ref)
+        C_ne = dcm_ecef_to_ned(ref[:, 0], ref[:, 1])
+        cov_ned = np.einsum("kij,kjl,kml->kim", C_ne, tr.cov[:, :3, :3], C_ne)
+        for j, ax in enumerate("ned"):
+            df[f"err_{ax}_m"] = err[:, j]
+        for j, ax in enumerate("ned"):
+            df[f"sig_{ax}_m"] = np.sqrt(cov_ned[:, j, j])
+        nees = np.full(len(tr.tow), np.nan)
+        sc = ok & po.reference.scored
+        if sc.any():
+            nees[sc] = np.einsum("ki,ki->k", err[sc], np.linalg.solve(cov_ned[sc], err[sc][..., None])[..., 0])
+        df["nees_pos"] = nees
     return df
 
 
@@ -411,11 +434,16 @@ def filter_table(po: SppOutput, res) -> pd.DataFrame:
         err[idx] = (lla_to_ecef(lla) - lla_to_ecef(ref)) @ dcm_ecef_to_ned(ref[0], ref[1]).T
         for j, ax in enumerate("ned"):
             df[f"err_{ax}_m"] = err[:, j]
+    elif po.reference is not None:
+        err = np.full((k, 3), np.nan)
+        err[idx] = errors_ned(lla_to_ecef(lla), po.reference.lla[idx])   # as the SPP table's
+        for j, ax in enumerate("ned"):
+            df[f"err_{ax}_m"] = err[:, j]
     for j, ax in enumerate("ned"):
         df[f"sig_{ax}_m"] = col(res.sigma[:, lay.pos][:, j])
     for j, ax in enumerate(("vn", "ve", "vd")):
         df[f"sig_{ax}_mps"] = col(res.sigma[:, lay.vel][:, j])
-    if po.reference_lla is not None:
+    if po.reference_lla is not None or po.reference is not None:
         from .metrics import nees
         df["nees_pos"] = col(nees(err[idx], res.pv_cov[:, 3:, 3:]))
     return df
@@ -442,26 +470,34 @@ def raw_tables(po: SppOutput) -> dict[str, pd.DataFrame]:
 
 
 def spp_metrics(table: pd.DataFrame, solve_time_s: float) -> dict:
-    """Accuracy of the solved epochs against the reference point (keys in docs/outputs.md);
-    a filter's table adds its speed (``horizontal_speed_rms_mps``, ``vertical_speed_rms_mps``:
-    the velocity error of a static receiver)."""
+    """Accuracy of the solved epochs against the reference (keys in docs/outputs.md): the
+    static point, or a moving reference at the solved epochs it covers (``n_scored``; the
+    others have NaN errors); ``availability``: solved epochs / epochs of the table. A
+    filter's table adds its speed (``horizontal_speed_rms_mps``, ``vertical_speed_rms_mps``:
+    the velocity error of a static receiver; with a moving reference, its speed)."""
     ok = (table["status"] == "ok").to_numpy()
     m: dict = {"n_epochs": int(ok.sum()),
+               "availability": float(ok.sum() / max(len(table), 1)),
                "epoch_time_mean_us": 1e6 * solve_time_s / max(len(table), 1),
                "n_sat_mean": float(table["n_sat"][ok].mean()) if ok.any() else float("nan")}
     if "pdop" in table:
         m["pdop_median"] = float(table["pdop"][ok].median()) if ok.any() else float("nan")
         m["residual_rms_median_m"] = float(table["rms_residual_m"][ok].median()) if ok.any() else float("nan")
-    if "err_n_m" in table and ok.any():
-        e = table.loc[ok, ["err_n_m", "err_e_m", "err_d_m"]].to_numpy(dtype=float)
+    # scored: solved, and (a moving reference) covered by the reference; every solved epoch of a static one
+    sc = ok & np.isfinite(table["err_n_m"].to_numpy(dtype=float)) if "err_n_m" in table else ok
+    if "err_n_m" in table:
+        m["n_scored"] = int(sc.sum())
+    if "err_n_m" in table and sc.any():
+        e = table.loc[sc, ["err_n_m", "err_e_m", "err_d_m"]].to_numpy(dtype=float)
         h = np.hypot(e[:, 0], e[:, 1])
         v = np.abs(e[:, 2])
         m.update({"horizontal_rmse_m": float(np.sqrt(np.mean(h**2))), "horizontal_max_m": float(h.max()),
-                  "horizontal_p95_m": float(np.percentile(h, 95)),
+                  "horizontal_p95_m": float(np.percentile(h, 95)), "horizontal_median_m": float(np.median(h)),
                   "vertical_rmse_m": float(np.sqrt(np.mean(v**2))), "vertical_max_m": float(v.max()),
                   "vertical_p95_m": float(np.percentile(v, 95)),
+                  "error_3d_rmse_m": float(np.sqrt(np.mean(np.sum(e**2, 1)))),
                   "mean_error_ned_m": [float(x) for x in e.mean(0)],
-                  "nees_pos_mean": float(table["nees_pos"][ok].mean())})
+                  "nees_pos_mean": float(table["nees_pos"][sc].mean())})
     if "vn_mps" in table and ok.any():
         v = table.loc[ok, ["vn_mps", "ve_mps", "vd_mps"]].to_numpy(dtype=float)
         m["horizontal_speed_rms_mps"] = float(np.sqrt(np.mean(v[:, 0] ** 2 + v[:, 1] ** 2)))
@@ -520,6 +556,9 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None, sweeps=())
         "reference_point": None if po.reference_lla is None else
         {"lat_deg": float(np.degrees(po.reference_lla[0])), "lon_deg": float(np.degrees(po.reference_lla[1])),
          "height_m": float(po.reference_lla[2])},
+        **({"reference": {"file": po.reference.file, "format": po.dataset.reference.format,
+                          "max_gap_s": float(po.dataset.reference.max_gap),
+                          "reference_epochs": dict(po.reference.counts)}} if po.reference is not None else {}),
         "ionosphere": ionosphere_applied(po),
         "systems": list(po.dataset.raw_gnss.systems),
         **({"satellites_skipped_by_system": dict(tr.skipped_by_system),
@@ -539,6 +578,11 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None, sweeps=())
     if po.reference_lla is not None:
         ref = pd.DataFrame({"time_s": [0.0], "lat_deg": [np.degrees(po.reference_lla[0])],
                             "lon_deg": [np.degrees(po.reference_lla[1])], "height_m": [po.reference_lla[2]]})
+    elif po.reference is not None:   # the reference's samples over the log's span
+        rt = po.reference.trajectory
+        keep = (rt.time >= table["time_s"].iloc[0] - 1.0) & (rt.time <= table["time_s"].iloc[-1] + 1.0)
+        ref = pd.DataFrame({"time_s": rt.time[keep], "lat_deg": np.degrees(rt.lla[keep, 0]),
+                            "lon_deg": np.degrees(rt.lla[keep, 1]), "height_m": rt.lla[keep, 2]})
     if any(len(o) for o in oks.values()):
         figs["trajectory"] = figures.trajectory_figure({n: o for n, o in oks.items() if len(o)}, ref)
     opts = options(po.dataset)
@@ -553,7 +597,14 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None, sweeps=())
              f"Elevation mask {np.degrees(opts.elevation_mask):.1f} deg; sigma = sqrt({opts.sigma_a:g}^2 + "
              f"{opts.sigma_b:g}^2 / sin^2(el)) m; troposphere: {'Saastamoinen' if opts.troposphere else 'none'}; "
              f"ionosphere: {iono}.",
-             "Errors are estimate minus the surveyed point, in NED at that point; times are seconds since "
+             ("Errors are estimate minus the surveyed point, in NED at that point; " if po.reference is None else
+              f"Errors are estimate minus the reference trajectory ({po.reference.file}) interpolated at the epoch, "
+              f"in NED there; scored epochs: {po.reference.counts['scored']} of {len(table)} (not scored: "
+              f"{po.reference.counts['before_reference']} before the reference, "
+              f"{po.reference.counts['after_reference']} after it, {po.reference.counts['in_reference_gaps']} in "
+              f"{po.reference.counts['reference_gaps']} gap(s) longer than "
+              f"{float(po.dataset.reference.max_gap):g} s); availability counts every solved epoch; ") +
+             "times are seconds since "
              f"the first epoch (GPS week {int(tr.week[0])}, {float(tr.tow[0]):.3f} s of week).",
              f"Measurements rejected by the reader: {po.observations.rejected or 'none'}; satellites "
              f"left out: {tr.skipped_satellites or 'none'}."]
