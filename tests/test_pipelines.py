@@ -31,7 +31,8 @@ SCHEMA_FORMATS = {
     "raw-gnss": _literal(dataset_schema.RawGnss) | _literal(dataset_schema.InsRawGnss),
     "corrected-pseudoranges": _literal(vehicle_schema.Pseudoranges),
     "odometry": _literal(vehicle_schema.OdometryFile),
-    "reference": _literal(dataset_schema.ReferenceFile) | _literal(vehicle_schema.VehicleReference),
+    "reference": _literal(dataset_schema.ReferenceFile) | _literal(vehicle_schema.VehicleReference)
+    | _literal(raw_gnss_schema.RawReference),
 }
 
 
