@@ -262,3 +262,40 @@ def test_bad_reference_configs_name_the_file_and_key(drive):
         with pytest.raises(ConfigError, match=message) as ei:
             _dataset(folder, ref)
         assert ei.value.key == key, (ref, ei.value.key)
+
+
+def test_a_still_trajectory_scores_as_the_surveyed_point(tmp_path):
+    """Invariant on real data (android-static): the surveyed point written as a trajectory
+    that stands still (a sample every second over the log) scores every SPP epoch as
+    ``[reference_point]`` does: the same errors to 1e-6 m (the interpolation's
+    ``a (1 - w) + a w`` may differ from ``a`` in the last bit: 1e-9 m), the same metrics,
+    every epoch scored."""
+    from .conftest import data_file
+    import re
+    log = data_file("android-static", "pseudoranges_log_2016_06_30_21_26_07.txt")
+    ds, src, text = load_dataset("android-static")
+    folder = log.parent
+    po_point = process_raw(ds, src, folder)
+    rp = ds.reference_point
+    t0 = po_point.track.week[0] * WEEK + po_point.track.tow[0]
+    t = np.arange(np.floor(t0) - 1, t0 + len(po_point.track.tow) * 1.2 + 2)
+    week = np.floor(t / WEEK).astype(int)
+    write_gps_week_csv(tmp_path / "still.csv", week, t - week * WEEK,
+                       np.tile([rp.latitude, rp.longitude, rp.height], (len(t), 1)))
+    moving = re.sub(r"\[reference_point\].*", f'[reference]\nformat = "gps-week-csv"\nfile = "{tmp_path / "still.csv"}"\n',
+                    text, flags=re.S)
+    (tmp_path / "moving.toml").write_text(moving.replace('data_dir = "../shared/data/android-static"',
+                                                         f'data_dir = "{folder}"'))
+    ds2, src2, _ = load_dataset(str(tmp_path / "moving.toml"))
+    assert ds2.reference_point is None and ds2.reference is not None
+    po_traj = process_raw(ds2, src2, folder)
+    a, b = solution_table(po_point), solution_table(po_traj)
+    assert po_traj.reference.counts["scored"] == len(a)
+    cols = ["err_n_m", "err_e_m", "err_d_m", "sig_n_m", "sig_e_m", "sig_d_m"]
+    np.testing.assert_allclose(b[cols].to_numpy(), a[cols].to_numpy(), rtol=0, atol=1e-6)
+    ma, mb = method_metrics(po_point, "spp", a), method_metrics(po_traj, "spp", b)
+    for key in ("n_epochs", "availability", "n_scored"):
+        assert ma[key] == mb[key], key
+    for key in ("horizontal_rmse_m", "horizontal_median_m", "horizontal_p95_m", "horizontal_max_m",
+                "error_3d_rmse_m", "vertical_rmse_m", "nees_pos_mean"):
+        assert mb[key] == pytest.approx(ma[key], rel=1e-9, abs=1e-6), key
