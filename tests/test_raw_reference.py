@@ -299,3 +299,31 @@ def test_a_still_trajectory_scores_as_the_surveyed_point(tmp_path):
     for key in ("horizontal_rmse_m", "horizontal_median_m", "horizontal_p95_m", "horizontal_max_m",
                 "error_3d_rmse_m", "vertical_rmse_m", "nees_pos_mean"):
         assert mb[key] == pytest.approx(ma[key], rel=1e-9, abs=1e-6), key
+
+
+def test_mixnav_process_of_a_moving_receiver(drive, tmp_path):
+    """``mixnav process`` end to end: metrics.json names the reference and its epoch counts,
+    the map draws the reference (its samples over the log) beside each method's track, the
+    API's truth is the reference on the tables' time axis."""
+    from typer.testing import CliRunner
+    from mixnav.cli import app
+    from mixnav.experiment.pipelines import gnss_raw
+    from .test_webmap import polylines
+    folder, ex, ant, week, tow = drive
+    on = slice(0, None, 10)
+    write_gps_week_csv(folder / "ref.csv", week[on], tow[on], ant[on])
+    _dataset(folder, 'format = "gps-week-csv"\nfile = "ref.csv"')
+    out = tmp_path / "out"
+    res = CliRunner().invoke(app, ["process", str(folder / "sim.toml"), "--out", str(out), "--no-sweeps"])
+    assert res.exit_code == 0, res.output
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["reference"]["format"] == "gps-week-csv" and m["reference"]["reference_epochs"]["scored"] == 85
+    # the filter from the epoch after the first fix (1 s) on, through the 3-satellite epochs
+    assert set(m["methods"]) == {"spp", "ekf"} and m["methods"]["ekf"]["n_scored"] == 84
+    lines = polylines((out / "map.html").read_text())
+    ref_line = [ln for ln in lines if len(ln) > 200]      # the 10 Hz reference over 85 s; the tracks have <= 85 points
+    assert len(ref_line) == 1 and len(lines) == 3
+    po = process_raw(*load_dataset(str(folder / "sim.toml"))[:2], folder)
+    truth = gnss_raw.truth(po)
+    # the samples from simulation time 0 s to 85 s; the first epoch, time_s = 0, is at 1 s
+    np.testing.assert_allclose(truth.time_s.to_numpy()[[0, -1]], [-1.0, 84.0], atol=1e-6)

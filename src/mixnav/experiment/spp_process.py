@@ -618,6 +618,7 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None, sweeps=())
     sections = add_sweeps(out_dir, metrics, figs, sweeps)
     title = f"mixnav process: {po.dataset.dataset.name}"
     write_report(out_dir, title, metrics, figs, notes=notes, config_text=config_text, sections=sections,
-                 web_map=map_html({n: o for n, o in oks.items() if len(o)}, title=title))
+                 web_map=map_html({n: o for n, o in oks.items() if len(o)},
+                                  reference=ref if po.reference is not None else None, title=title))
     atomic_write_json(out_dir / "metrics.json", metrics)       # last: marks a complete folder
     return metrics
