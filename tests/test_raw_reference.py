@@ -187,10 +187,12 @@ def test_reference_csv_gives_the_errors_from_the_truth(drive, tmp_path):
     assert 1e-3 < np.abs(d).max() < 3.5e-3, np.abs(d).max()
 
 
-def test_generic_csv_on_gps_seconds_of_week(drive):
+def test_other_reference_formats_on_the_same_time_axis(drive):
     """The same truth as mixnav's generic reference CSV (time[s] = GPS seconds of the first
-    epoch's week, ``time = "gps-week-seconds"``, the default) or in GPS seconds since 1980
-    (``time = "gps-seconds"``): the same errors as the GPS week CSV, to 1e-6 m."""
+    epoch's week, ``time = "gps-week-seconds"``, the default, or GPS seconds since 1980,
+    ``time = "gps-seconds"``) and as an RTKLIB solution (GPST week and time of week, read on
+    the Unix scale, 0.24 us steps): the same errors as the GPS week CSV, to 1e-6 m (the
+    epochs fall on the samples within the 1 us snap, so they take them exactly)."""
     folder, ex, ant, week, tow = drive
     on = slice(0, None, 10)
     write_gps_week_csv(folder / "ref.csv", week[on], tow[on], ant[on])
@@ -202,8 +204,15 @@ def test_generic_csv_on_gps_seconds_of_week(drive):
     rows = [f"{t:.9f},{math.degrees(p[0]):.12f},{math.degrees(p[1]):.12f},{p[2]:.6f}"
             for t, p in zip(week[on] * WEEK + tow[on], ant[on])]
     (folder / "ref_1980.csv").write_text("time[s],lat[deg],lon[deg],height[m]\n" + "\n".join(rows) + "\n")
+    # an RTKLIB solution in GPST, week and time of week (Q = 1, fixed: the default qualities)
+    pos = ["%  GPST                      latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)"
+           "  sdne(m)  sdeu(m)  sdun(m) age(s)  ratio"]
+    pos += [f"{w} {t:.3f} {math.degrees(p[0]):.12f} {math.degrees(p[1]):.12f} {p[2]:.6f} 1 9 0.01 0.01 0.01 "
+            "0.0 0.0 0.0 0.0 0.0" for w, t, p in zip(week[on], tow[on], ant[on])]
+    (folder / "ref.pos").write_text("\n".join(pos) + "\n")
     for ref in ('format = "csv"\nfile = "ref_generic.csv"',
-                'format = "csv"\nfile = "ref_1980.csv"\ntime = "gps-seconds"'):
+                'format = "csv"\nfile = "ref_1980.csv"\ntime = "gps-seconds"',
+                'format = "rtklib-pos"\nfile = "ref.pos"'):
         t = solution_table(process_raw(*_dataset(folder, ref, methods=False)[:2], folder))
         np.testing.assert_allclose(t[["err_n_m", "err_e_m", "err_d_m"]].to_numpy(),
                                    base[["err_n_m", "err_e_m", "err_d_m"]].to_numpy(), rtol=0, atol=1e-6)
