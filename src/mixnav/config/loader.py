@@ -390,6 +390,12 @@ def load_dataset_text(text: str, source: str):
             # two truths would score the same epochs twice, differently: one of them is a slip
             raise ConfigError("give either [reference_point] (a static receiver's surveyed point) or [reference] "
                               "(a moving receiver's trajectory), not both", file=source, key="reference")
+        if ds.reference is not None and (ds.reference.format == "smartloc") != (ds.raw_gnss.format == "smartloc"):
+            # a smartLoc log and its ground truth count seconds from the log's start; every other file GPS time
+            raise ConfigError(f"a reference in format \"{ds.reference.format}\" cannot score raw_gnss format "
+                              f"\"{ds.raw_gnss.format}\": smartLoc files (log and ground truth) count seconds from the "
+                              "start of the log, every other format GPS time; use the smartLoc ground truth with "
+                              "a smartLoc log only", file=source, key="reference.format")
         return ds, source, text
     ds = _validate(Dataset, text, source)
     _check_kind(ds, source)

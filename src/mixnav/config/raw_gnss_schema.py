@@ -113,7 +113,7 @@ class ConstantVelocityConfig(Strict):
 
 
 #: reference formats whose time stamps are GPS time with the week (nothing to say about them)
-ABSOLUTE_TIME_FORMATS = ("gps-week-csv", "rtklib-pos")
+ABSOLUTE_TIME_FORMATS = ("gps-week-csv", "rtklib-pos", "smartloc")
 
 
 class RawReference(Strict):
@@ -123,8 +123,9 @@ class RawReference(Strict):
     ``format``: ``"gps-week-csv"`` (GPS week, time of week, latitude, longitude, ellipsoidal
     height: :mod:`mixnav.io.gps_week_csv`), ``"rtklib-pos"`` (an RTKLIB solution in GPST,
     e.g. an RTK fix; ``qualities``: the quality flags kept, default ``[1]``, fixed),
-    ``"csv"`` (mixnav's generic reference CSV, :mod:`mixnav.io.generic_csv`) or
-    ``"kf-gins-nav"``. ``time`` (``"csv"`` and ``"kf-gins-nav"`` only, whose time column is a
+    ``"csv"`` (mixnav's generic reference CSV, :mod:`mixnav.io.generic_csv`),
+    ``"kf-gins-nav"``, or ``"smartloc"`` (a smartLoc ``*_GT.txt``, on the log's own seconds:
+    only with ``[raw_gnss] format = "smartloc"``, whose log has no GPS time either). ``time`` (``"csv"`` and ``"kf-gins-nav"`` only, whose time column is a
     bare number of seconds): ``"gps-week-seconds"`` (default: GPS seconds of the week of the
     first observation epoch, going on past 604800 s across a roll-over, as KF-GINS files and
     ``[raw_gnss] imu_time`` of the INS datasets) or ``"gps-seconds"`` (GPS seconds since
@@ -134,7 +135,7 @@ class RawReference(Strict):
     straight-line interpolation within a*T^2/8 = 0.375 m of a car accelerating or turning at
     3 m/s^2 (0.3 g)."""
 
-    format: Literal["gps-week-csv", "rtklib-pos", "csv", "kf-gins-nav"]
+    format: Literal["gps-week-csv", "rtklib-pos", "csv", "kf-gins-nav", "smartloc"]
     file: str
     time: Literal["gps-week-seconds", "gps-seconds"] = "gps-week-seconds"
     qualities: list[int] = Field(default_factory=lambda: [1])
@@ -143,7 +144,7 @@ class RawReference(Strict):
     @model_validator(mode="after")
     def _keys_of_format(self):
         if "time" in self.model_fields_set and self.format in ABSOLUTE_TIME_FORMATS:
-            raise ValueError(f"time: format \"{self.format}\" carries its GPS week in every line (the key is for "
+            raise ValueError(f"time: format \"{self.format}\" says its own time axis (the key is for "
                              "\"csv\" and \"kf-gins-nav\", whose time column is bare seconds)")
         if "qualities" in self.model_fields_set and self.format != "rtklib-pos":
             raise ValueError(f"qualities: format \"{self.format}\" has no quality flags (only \"rtklib-pos\")")

@@ -9,6 +9,8 @@ seconds since 1980). Each reference format's time stamps are brought onto it:
 - ``gps-week-csv``: GPS week and time of week per line (:mod:`mixnav.io.gps_week_csv`);
 - ``rtklib-pos``: GPST (calendar or week/tow), read as GPS seconds in the Unix scale
   (:mod:`mixnav.io.rtklib`);
+- ``smartloc``: seconds since the start of the log, as a smartLoc log's pseudoranges
+  (``[raw_gnss] format = "smartloc"``, solved with week 0 and the log's seconds);
 - ``csv``, ``kf-gins-nav``: bare seconds, GPS seconds of the week of the first epoch
   (``time = "gps-week-seconds"``, the default) or since 1980 (``"gps-seconds"``): the
   convention of the INS datasets with RINEX (``[raw_gnss] imu_time``).
@@ -81,6 +83,8 @@ def reference_times(traj: Trajectory, fmt: str, time: str, week0: int, tow0: flo
     if fmt == "gps-week-csv":
         return (np.asarray(traj.extra["gps_week"], np.int64) - week0) * SECONDS_PER_WEEK + (
             np.asarray(traj.extra["gps_tow_s"], float) - tow0)
+    if fmt == "smartloc":     # the log's own seconds, as the smartLoc pseudoranges' (week 0)
+        return np.asarray(traj.time, float) - tow0
     if fmt == "rtklib-pos":
         return (np.asarray(traj.time, float) - GPS_EPOCH_UNIX - week0 * SECONDS_PER_WEEK) - tow0
     if time == "gps-seconds":
@@ -105,7 +109,7 @@ def reference_at_epochs(c, folder: Path, source: str, week, tow) -> EpochReferen
     t_ep = epoch_axis(week, tow)
     span = f"{_gps(week0, tow0, t_ref[0])} .. {_gps(week0, tow0, t_ref[-1])}"
     obs_span = f"{_gps(week0, tow0, t_ep[0])} .. {_gps(week0, tow0, t_ep[-1])}"
-    how = "" if c.format in ("gps-week-csv", "rtklib-pos") else (
+    how = "" if c.format in ("gps-week-csv", "rtklib-pos", "smartloc") else (
         f" (its time column read as reference.time = \"{c.time}\")")
     if t_ref[-1] < t_ep[0] - SNAP_S or t_ref[0] > t_ep[-1] + SNAP_S:
         raise ConfigError(f"the reference {path} ({span}){how} and the observations ({obs_span}) do not overlap: "

@@ -26,6 +26,12 @@ and run from the next epoch on, one engine per method
 (:func:`mixnav.experiment.model_methods.run_methods`, the code the odometry datasets
 run).
 
+Corrected pseudoranges (``[raw_gnss] format = "smartloc"``: satellite clock and atmosphere
+removed in the file, satellite positions and variances given, no navigation file, no GPS
+time): the SPP of :mod:`mixnav.gnss.corrected_spp` (the file's variances as weights), the
+filters on the file's rows (clock jumps taken off), times the log's own seconds (GPS week 0
+in the table and metrics.json), the reference the data set's ground truth on those seconds.
+
 Times in the solution table are seconds since the first epoch; the first
 epoch's GPS week and seconds of week are in metrics.json.
 """
@@ -65,8 +71,8 @@ class SppOutput:
     dataset: RawGnssDataset
     source: str
     data_dir: Path
-    observations: RawPseudoranges      # what the raw-GNSS reader of the format gave
-    ephemeris: BroadcastEphemeris      # or a MultiEphemeris (systems beyond GPS)
+    observations: RawPseudoranges      # what the raw-GNSS reader of the format gave (smartloc: CorrectedObservations)
+    ephemeris: BroadcastEphemeris      # or a MultiEphemeris (systems beyond GPS); None (smartloc)
     track: SppTrack
     reference_lla: np.ndarray | None   # (3,) rad, rad, m
     read_time_s: float
@@ -88,6 +94,9 @@ def options(ds, method=None) -> SppOptions:
     too (the robust SPP)."""
     c = ds.raw_gnss
     robust = None if method is None or method.robust is None else (method.robust.k0, method.robust.k1)
+    if c.format == "smartloc":   # the file's variances as the weights, its atmosphere removed already
+        return SppOptions(elevation_mask=c.elevation_mask, sigma_a=1.0, sigma_b=0.0, troposphere=False,
+                          ionosphere=False, robust=robust)
     return SppOptions(elevation_mask=c.elevation_mask, sigma_a=c.sigma_a, sigma_b=c.sigma_b,
                       troposphere=c.troposphere, ionosphere=c.ionosphere, robust=robust)
 
@@ -175,6 +184,8 @@ def read_raw(ds: RawGnssDataset, source: str, folder: Path) -> tuple[RawPseudora
     and the time it took [s]. With several systems the GLONASS frequency numbers of the
     navigation records are attached to the observations."""
     c = ds.raw_gnss
+    if c.format == "smartloc":
+        return read_corrected(c, folder, source)
     if multi_system(c):
         check_first_frequency(c, source)
     t0 = _time.perf_counter()
@@ -185,8 +196,50 @@ def read_raw(ds: RawGnssDataset, source: str, folder: Path) -> tuple[RawPseudora
     return obs, eph, _time.perf_counter() - t0
 
 
+def read_corrected(c, folder: Path, source: str) -> tuple:
+    """``[raw_gnss] format = "smartloc"``: the corrected pseudoranges (the reader of the
+    ``corrected-pseudoranges`` kind) of the systems of ``systems``; rows of other systems are
+    left out and counted (``rejected``, by ``system not read: <letter>``). Returns
+    ``(epochs, None, read time [s])``: no navigation data."""
+    from ..gnss.pseudoranges import SYSTEM_LETTERS, PseudorangeEpochs
+    t0 = _time.perf_counter()
+    pe = read_table("corrected-pseudoranges", c, folder, "raw_gnss", source)
+    letters = np.array([SYSTEM_LETTERS.get(int(k), "?") for k in pe.system])
+    keep = np.isin(letters, list(c.systems))
+    rejected = {f"system not read: {s}": int(n) for s, n in zip(*np.unique(letters[~keep], return_counts=True))}
+    if not keep.all():
+        e = np.repeat(np.arange(len(pe)), pe.counts())
+        pe = PseudorangeEpochs.from_rows(pe.time[e][keep], pe.pseudorange[keep], pe.variance[keep],
+                                         pe.sat_ecef[keep], pe.sat_id[keep], pe.system[keep], pe.elevation[keep],
+                                         pe.cn0[keep], source=pe.source)
+    if not len(pe):
+        raise ConfigError(f"no pseudorange of the systems {list(c.systems)} in {folder / c.file}", file=source,
+                          key="raw_gnss.systems")
+    return CorrectedObservations(pe, rejected), None, _time.perf_counter() - t0
+
+
+@dataclass
+class CorrectedObservations:
+    """Corrected pseudoranges (``epochs``) as the SPP output's ``observations``: what the
+    pipeline's steps ask of a raw log (``source``, ``rejected``)."""
+
+    epochs: object          # PseudorangeEpochs
+    rejected: dict
+
+    @property
+    def source(self):
+        return self.epochs.source
+
+
+def corrected(po) -> bool:
+    """Whether ``po`` solved corrected pseudoranges (``format = "smartloc"``)."""
+    return isinstance(po.observations, CorrectedObservations)
+
+
 def _iono_alpha(eph):
     """The Klobuchar alpha the SPP uses (GPS's: a MultiEphemeris's GPS header), or None."""
+    if eph is None:
+        return None
     if hasattr(eph, "states_of"):
         return eph["G"].iono_alpha if "G" in eph else None
     return eph.iono_alpha
@@ -210,7 +263,9 @@ def _systems_of(obs, eph):
 def solve_raw(ds: RawGnssDataset, source: str, folder: Path, obs, eph: BroadcastEphemeris, read_time_s: float = 0.0,
               seed: int = 0) -> SppOutput:
     """SPP of every epoch of ``obs`` (read observations: GPS with a BroadcastEphemeris, any
-    systems with a MultiEphemeris) and the filter methods."""
+    systems with a MultiEphemeris; corrected pseudoranges without one) and the filter methods."""
+    if isinstance(obs, CorrectedObservations):
+        return _solve_corrected(ds, source, folder, obs, read_time_s, seed)
     system, chan = _systems_of(obs, eph)
     c = ds.raw_gnss
     # the moving reference first: a file that does not cover the log is refused before the solve
@@ -233,6 +288,29 @@ def solve_raw(ds: RawGnssDataset, source: str, folder: Path, obs, eph: Broadcast
             t3 = _time.perf_counter()
             po.robust_tracks[m.name] = solve_epochs(eph, obs.week, obs.tow, obs.epoch, obs.prn, obs.pseudorange,
                                                     options(ds, m), system=system, glonass_channel=chan)
+            po.robust_time_s[m.name] = _time.perf_counter() - t3
+    filters = [(k, m) for k, m in enumerate(ds.run_methods()) if m.estimator != "wls"]
+    if filters:
+        run_filters(po, filters, seed)
+    return po
+
+
+def _solve_corrected(ds, source: str, folder: Path, obs: "CorrectedObservations", read_time_s: float,
+                     seed: int) -> SppOutput:
+    """:func:`solve_raw` of corrected pseudoranges (:mod:`mixnav.gnss.corrected_spp`): times
+    are the log's own seconds (week 0)."""
+    from ..gnss.corrected_spp import solve_corrected
+    pe = obs.epochs
+    week = np.zeros(len(pe), int)
+    moving = None if ds.reference is None else reference_at_epochs(ds.reference, folder, source, week, pe.time)
+    t1 = _time.perf_counter()
+    track = solve_corrected(pe, options(ds))
+    po = SppOutput(ds, source, folder, obs, None, track, None, read_time_s, _time.perf_counter() - t1,
+                   reference=moving)
+    for m in ds.run_methods():
+        if m.estimator == "wls" and m.robust is not None:
+            t3 = _time.perf_counter()
+            po.robust_tracks[m.name] = solve_corrected(pe, options(ds, m))
             po.robust_time_s[m.name] = _time.perf_counter() - t3
     filters = [(k, m) for k, m in enumerate(ds.run_methods()) if m.estimator != "wls"]
     if filters:
@@ -314,11 +392,16 @@ def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
     # a receiver clock that jumps (millisecond steps) would throw every filter off: the
     # jumps seen by the SPP come off the pseudoranges first (the first fix has none)
     offset, jumps, spikes = clock_jumps(times, tr.clock_bias, tr.ok, float(mc.clock_jump))
-    rho = np.asarray(obs.pseudorange, float) - offset[np.asarray(obs.epoch, int)]
-    system, chan = _systems_of(obs, po.ephemeris)
-    epochs, skipped = corrected_pseudoranges(po.ephemeris, obs.week, obs.tow, obs.epoch, obs.prn, rho,
-                                             rx, opts, cn0=getattr(obs, "cn0", None), source=obs.source,
-                                             system=system, glonass_channel=chan)
+    if corrected(po):   # the file's pseudoranges, clock jumps off; the rows' own variances
+        from dataclasses import replace
+        pe = obs.epochs
+        epochs, skipped = replace(pe, pseudorange=pe.pseudorange - np.repeat(offset, pe.counts())), {}
+    else:
+        rho = np.asarray(obs.pseudorange, float) - offset[np.asarray(obs.epoch, int)]
+        system, chan = _systems_of(obs, po.ephemeris)
+        epochs, skipped = corrected_pseudoranges(po.ephemeris, obs.week, obs.tow, obs.epoch, obs.prn, rho,
+                                                 rx, opts, cn0=getattr(obs, "cn0", None), source=obs.source,
+                                                 system=system, glonass_channel=chan)
     end = float(times[-1])
     if not end > init.time:
         raise DataError("the first SPP fix is at the last epoch: nothing left to filter", file=obs.source)
@@ -345,8 +428,11 @@ def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
 
 
 def ionosphere_applied(po: SppOutput) -> str:
-    """``"klobuchar"`` (applied), ``"off"`` (``raw_gnss.ionosphere = false``) or ``"skipped"``
-    (asked for, but the navigation header has no Klobuchar coefficients; warned)."""
+    """``"klobuchar"`` (applied), ``"off"`` (``raw_gnss.ionosphere = false``), ``"skipped"``
+    (asked for, but the navigation header has no Klobuchar coefficients; warned) or
+    ``"removed in the file"`` (corrected pseudoranges, ``format = "smartloc"``)."""
+    if corrected(po):
+        return "removed in the file"
     if not po.dataset.raw_gnss.ionosphere:
         return "off"
     return "klobuchar" if _iono_alpha(po.ephemeris) is not None else "skipped"
@@ -587,16 +673,24 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None, sweeps=())
         figs["trajectory"] = figures.trajectory_figure({n: o for n, o in oks.items() if len(o)}, ref)
     opts = options(po.dataset)
     iono = {"klobuchar": "Klobuchar (broadcast coefficients)", "off": "none (switched off)",
-            "skipped": "none: the navigation header has no coefficients"}[ionosphere_applied(po)]
+            "skipped": "none: the navigation header has no coefficients",
+            "removed in the file": "removed in the file"}[ionosphere_applied(po)]
     from ..gnss.signals import SYSTEMS
     sysnames = "+".join(SYSTEMS[s] for s in po.dataset.raw_gnss.systems)
     what = "GPS L1 C/A pseudoranges" if sysnames == "GPS" else (
         f"{sysnames} first-frequency pseudoranges (one receiver clock, one offset per extra system in the epoch)")
+    if corrected(po):
+        what = (f"{sysnames} pseudoranges corrected in the file (satellite clock and atmosphere removed, satellite "
+                "positions given; one receiver clock, one offset per extra system in the epoch)")
+        weights = (f"Elevation mask {np.degrees(opts.elevation_mask):.1f} deg; sigma: the file's variances; "
+                   "troposphere and ionosphere: removed in the file.")
+    else:
+        weights = (f"Elevation mask {np.degrees(opts.elevation_mask):.1f} deg; sigma = sqrt({opts.sigma_a:g}^2 + "
+                   f"{opts.sigma_b:g}^2 / sin^2(el)) m; troposphere: {'Saastamoinen' if opts.troposphere else 'none'}; "
+                   f"ionosphere: {iono}.")
     notes = [f"Single-point positioning, {what}, {used} of {len(table)} epochs solved "
              f"(status counts: {counts}).",
-             f"Elevation mask {np.degrees(opts.elevation_mask):.1f} deg; sigma = sqrt({opts.sigma_a:g}^2 + "
-             f"{opts.sigma_b:g}^2 / sin^2(el)) m; troposphere: {'Saastamoinen' if opts.troposphere else 'none'}; "
-             f"ionosphere: {iono}.",
+             weights,
              ("Errors are estimate minus the surveyed point, in NED at that point; " if po.reference is None else
               f"Errors are estimate minus the reference trajectory ({po.reference.file}) interpolated at the epoch, "
               f"in NED there; scored epochs: {po.reference.counts['scored']} of {len(table)} (not scored: "
@@ -605,7 +699,8 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None, sweeps=())
               f"{po.reference.counts['reference_gaps']} gap(s) longer than "
               f"{float(po.dataset.reference.max_gap):g} s); availability counts every solved epoch; ") +
              "times are seconds since "
-             f"the first epoch (GPS week {int(tr.week[0])}, {float(tr.tow[0]):.3f} s of week).",
+             + (f"the first epoch ({float(tr.tow[0]):.3f} s of the log: the file has no GPS time)." if corrected(po)
+                else f"the first epoch (GPS week {int(tr.week[0])}, {float(tr.tow[0]):.3f} s of week)."),
              f"Measurements rejected by the reader: {po.observations.rejected or 'none'}; satellites "
              f"left out: {tr.skipped_satellites or 'none'}."]
     if po.results:
