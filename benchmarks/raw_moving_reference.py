@@ -2,10 +2,10 @@
 static urbannav log scored through a still trajectory.
 
 Why a simulated drive: the data folder holds no moving receiver's raw GNSS with a broadcast
-navigation file. smartLoc (Berlin, a car) gives pseudoranges already corrected, with the
-satellite positions, on seconds since the start of the log and without a navigation file or
-GPS time, so the gnss-raw SPP (orbits and clocks from broadcast records at GPS time) cannot
-read it (docs/data_formats.md, "Scoring a moving receiver").
+navigation file (RINEX or u-blox); the one real drive, smartLoc (Berlin, a car), comes with
+its pseudoranges already corrected and is scored through ``[raw_gnss] format = "smartloc"``
+in benchmarks/results/smartloc_gnss.md. The simulated drive exercises the RINEX path
+against a truth known exactly.
 
 A. ``tight-demo`` (the simulator's drive with raw pseudoranges, 3 m sigma, GPS 30-satellite
    constellation, 1 Hz; 60 s with only 3 satellites) exported by ``mixnav export`` as RINEX
@@ -177,10 +177,10 @@ def main() -> None:
              "was chosen by its error against the reference (the module docstring says where each setting "
              "comes from).", "",
              "## A. A simulated drive (tight-demo exported as RINEX, true antenna track as `gps-week-csv`)", "",
-             "No moving receiver's raw GNSS with a navigation file is in the data folder (smartLoc's "
-             "pseudoranges are already corrected, with no GPS time: the module docstring), so this drive "
-             "is simulated: GPS, 30 satellites, 3 m pseudorange sigma, 1 Hz, 60 s with only 3 satellites "
-             "(unsolved by the SPP; the filters predict through them).", ""]
+             "No moving receiver's raw GNSS with a navigation file (RINEX, u-blox) is in the data folder "
+             "(the real drive, smartLoc, has corrected pseudoranges: smartloc_gnss.md), so this drive is "
+             "simulated, with its truth known exactly: GPS, 30 satellites, 3 m pseudorange sigma, 1 Hz, "
+             "60 s with only 3 satellites (unsolved by the SPP; the filters predict through them).", ""]
     head = ["| method | solved | avail. | scored | h RMSE | median | p95 | max | 3-D RMSE |",
             "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for label, title in (("full", "Reference over the whole drive"),
