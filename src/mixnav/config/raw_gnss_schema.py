@@ -1,5 +1,6 @@
-"""The strict schema of raw-GNSS datasets (``kind = "gnss-raw"``: a phone log or a RINEX
-observation file with its navigation file).
+"""The strict schema of raw-GNSS datasets (``kind = "gnss-raw"``: a phone log, a RINEX
+observation file or a u-blox log with its navigation file, or a smartLoc log of corrected
+pseudoranges), scored against a static ``[reference_point]`` or a moving ``[reference]``.
 
 Every epoch is solved by weighted least squares (single-point positioning, SPP); the
 ``[[methods]]`` may add filters on the GNSS-only constant-velocity model
