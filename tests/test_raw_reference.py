@@ -441,3 +441,20 @@ def test_smartloc_gnss_alone_against_an_independent_wls_and_its_ground_truth():
     assert m["availability"] == 1.0 and m["n_scored"] == 1372
     # an urban canyon: tens of metres (NLOS), not hundreds (a frame or clock slip)
     assert 10.0 < m["horizontal_rmse_m"] < 60.0
+
+
+def test_one_sample_reference_scores_only_its_epoch(drive):
+    """A reference of one sample (at the epoch of 30 s): that epoch is scored, with the
+    error from the truth there; the others are before or after it, counted."""
+    folder, ex, ant, week, tow = drive
+    k = int(np.searchsorted(ex.sim.truth.time, 30.0 - 1e-9))
+    write_gps_week_csv(folder / "ref_one.csv", week[k:k + 1], tow[k:k + 1], ant[k:k + 1])
+    ds, src, _ = _dataset(folder, 'format = "gps-week-csv"\nfile = "ref_one.csv"', methods=False)
+    po = process_raw(ds, src, folder)
+    assert po.reference.counts == {"scored": 1, "before_reference": 29, "after_reference": 55,
+                                   "in_reference_gaps": 0, "reference_gaps": 0}
+    table = solution_table(po)
+    e = np.nonzero(np.isfinite(table.err_n_m.to_numpy()))[0]
+    assert list(e) == [29]
+    np.testing.assert_allclose(table.loc[29, ["err_n_m", "err_e_m", "err_d_m"]].to_numpy(float),
+                               _direct_errors(ex, ant, po.track.pos_ecef[29:30], np.array([29]))[0], atol=1e-6)

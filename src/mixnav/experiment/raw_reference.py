@@ -132,7 +132,10 @@ def reference_at_epochs(c, folder: Path, source: str, week, tow) -> EpochReferen
                           f"outside its gaps (samples further apart than reference.max_gap = {float(c.max_gap):g} s): "
                           f"nothing to score ({counts})", file=source, key="reference.file")
     lla = np.full((len(t), 3), np.nan)
-    lla[scored] = truth_at(Trajectory(time=t_ref, lla=traj.lla, v_n=None, q_nb=None), t[scored]).lla
+    lla[on_sample] = traj.lla[near[on_sample]]              # the sample itself, bit for bit
+    between = scored & ~on_sample
+    if between.any():
+        lla[between] = truth_at(Trajectory(time=t_ref, lla=traj.lla, v_n=None, q_nb=None), t[between]).lla
     return EpochReference(lla, scored, counts, Trajectory(time=t_ref, lla=traj.lla, v_n=None, q_nb=None), str(path))
 
 
