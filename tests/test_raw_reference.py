@@ -235,6 +235,8 @@ def test_epochs_outside_the_reference_or_in_its_gaps_are_counted_not_scored(driv
     obs_t = ex.sim.observations.time
     scored = (obs_t >= 10) & (obs_t <= 70) & ~((obs_t > 30) & (obs_t < 40))
     np.testing.assert_array_equal(np.isfinite(table.err_n_m.to_numpy()), scored & (table.status == "ok").to_numpy())
+    # the solution's sigmas do not depend on the reference: kept where it is not scored
+    np.testing.assert_array_equal(np.isfinite(table.sig_n_m.to_numpy()), (table.status == "ok").to_numpy())
     out = tmp_path / "out"
     m = write_raw(out, po)
     saved = json.loads((out / "metrics.json").read_text())

@@ -468,7 +468,9 @@ def solution_table(po: SppOutput, track: SppTrack | None = None) -> pd.DataFrame
         # estimate minus the reference interpolated at the epoch, in NED there; NaN where not scored
         ref = po.reference.lla
         err = errors_ned(tr.pos_ecef, ref)
-        C_ne = dcm_ecef_to_ned(ref[:, 0], ref[:, 1])
+        # the sigmas in NED at the reference point, or at the solution where the reference is not
+        at = np.where(np.isfinite(ref[:, :1]), ref, lla)
+        C_ne = dcm_ecef_to_ned(at[:, 0], at[:, 1])
         cov_ned = np.einsum("kij,kjl,kml->kim", C_ne, tr.cov[:, :3, :3], C_ne)
         for j, ax in enumerate("ned"):
             df[f"err_{ax}_m"] = err[:, j]
