@@ -20,8 +20,9 @@ One line per sample, five comma-separated numbers::
 
 Every failure is a :class:`~mixnav.errors.DataError` naming the file and the 1-based line:
 a wrong number of fields, a field that is not a finite number, a week that is not a whole
-number in 0..9999, a time of week outside [0, 604800), a position off the Earth's surface
-(the checks of :func:`mixnav.config.fields.check_position`), time not increasing.
+number in 0..9999, a time of week outside [0, 604800), a latitude outside +-90 deg, a
+longitude outside +-360 deg or a height outside -1..100 km (the fix readers' rule,
+:func:`mixnav.io.tables.check_fix_values`), time not increasing.
 
 The trajectory's ``time`` is GPS seconds since 1980-01-06 (one float: 0.24 us steps,
 far below any scoring need); ``extra`` keeps the exact ``gps_week`` and ``gps_tow_s``.
@@ -33,12 +34,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config.fields import check_position
 from ..data import Trajectory
 from ..errors import DataError
 from .atomic import atomic_write_text
 from .registry import ReadOptions, register_reader
-from .tables import check_times, read_numeric
+from .tables import check_fix_values, check_times, read_numeric
 
 #: the header's names, in order (the same names as the solution tables' columns)
 COLUMNS = ("gps_week", "gps_tow_s", "lat_deg", "lon_deg", "height_m")
@@ -88,11 +88,7 @@ def read_gps_week_csv(path) -> Trajectory:
         raise DataError(f"time of week {tow[bad[0]]!r} s is outside 0..604800 s", file=str(path),
                         line=int(tab.lines[bad[0]]))
     lla = np.column_stack([np.radians(lat), np.radians(lon), h])
-    for i in range(len(lla)):    # the config's plausibility rule, per line (cheap: a few comparisons)
-        try:
-            check_position(*lla[i])
-        except ValueError as exc:
-            raise DataError(str(exc), file=str(path), line=int(tab.lines[i])) from None
+    check_fix_values(lla, np.zeros((len(lla), 3)), tab.lines, str(path))   # the fix readers' position rule
     week = week.astype(np.int64)
     t = week * SECONDS_PER_WEEK + tow
     check_times(t, tab.lines, str(path), what="reference")
