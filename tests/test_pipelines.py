@@ -28,10 +28,12 @@ def _literal(model, field="format") -> set:
 SCHEMA_FORMATS = {
     "imu": _literal(dataset_schema.ImuFile),
     "gnss-fixes": _literal(dataset_schema.GnssFile),
-    "raw-gnss": _literal(dataset_schema.RawGnss) | _literal(dataset_schema.InsRawGnss),
-    "corrected-pseudoranges": _literal(vehicle_schema.Pseudoranges),
+    # a gnss-raw [raw_gnss] in format "smartloc" reads corrected pseudoranges
+    "raw-gnss": (_literal(dataset_schema.RawGnss) | _literal(dataset_schema.InsRawGnss)) - {"smartloc"},
+    "corrected-pseudoranges": _literal(vehicle_schema.Pseudoranges) | ({"smartloc"} & _literal(dataset_schema.RawGnss)),
     "odometry": _literal(vehicle_schema.OdometryFile),
-    "reference": _literal(dataset_schema.ReferenceFile) | _literal(vehicle_schema.VehicleReference),
+    "reference": _literal(dataset_schema.ReferenceFile) | _literal(vehicle_schema.VehicleReference)
+    | _literal(raw_gnss_schema.RawReference),
 }
 
 

@@ -51,6 +51,7 @@ CASES = [
     ("android-static", "dataset", "android-static", None, None, False),
     ("android-static-filters", "dataset", "android-static-filters", None, None, False),
     ("smartloc-berlin", "dataset", "smartloc-berlin", None, None, False),
+    ("smartloc-berlin-gnss", "dataset", "smartloc-berlin-gnss", None, None, False),
 ]
 
 #: metric keys that measure compute time (not reproducible, not compared)

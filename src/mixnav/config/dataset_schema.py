@@ -155,12 +155,18 @@ class RawGnss(Strict):
     named takes :data:`mixnav.gnss.signals.DEFAULT_SIGNALS`) choose what is read.
     ``format = "ubx"``: a binary u-blox log's RXM-RAWX messages (:mod:`mixnav.io.ubx`), with
     the same ``systems`` and ``signals`` (RINEX 3 codes). The phone-log format reads GPS
-    alone, so it takes neither key.
+    alone, so it takes neither key. ``format = "smartloc"`` (gnss-raw only): a smartLoc
+    ``*_Input.txt`` log (:mod:`mixnav.io.smartloc`), pseudoranges already corrected (satellite
+    clock and atmosphere removed) with the satellites' positions and variances: no
+    ``navigation``; the file's variances weigh the pseudoranges and the file has no
+    atmosphere left, so ``sigma_a``, ``sigma_b``, ``troposphere``, ``ionosphere``,
+    ``max_sv_time_uncertainty`` and ``signals`` are refused; ``systems``: the letters of the
+    file's systems to use (``G``, ``R``...).
     """
 
-    format: Literal["android-gnsslogger", "rinex-obs", "ubx"]
+    format: Literal["android-gnsslogger", "rinex-obs", "ubx", "smartloc"]
     file: str
-    navigation: str | list[str]
+    navigation: str | list[str] | None = None
     elevation_mask: ElevationMask = 10.0 * u.DEG  # type: ignore[valid-type]
     sigma_a: quantity(u.LENGTH, nonnegative=True) = 3.0  # type: ignore[valid-type]
     sigma_b: quantity(u.LENGTH, nonnegative=True) = 3.0  # type: ignore[valid-type]
@@ -194,9 +200,28 @@ class RawGnss(Strict):
         return v
 
     def files(self, key: str) -> list[str]:
-        """``file`` or ``navigation`` as a list."""
+        """``file`` or ``navigation`` as a list (empty: no navigation, ``smartloc``)."""
         v = getattr(self, key)
-        return [v] if isinstance(v, str) else list(v)
+        return [] if v is None else [v] if isinstance(v, str) else list(v)
+
+    @model_validator(mode="after")
+    def _smartloc_keys(self):
+        if self.format != "smartloc":
+            if self.navigation is None:
+                raise ValueError("navigation: required: the broadcast navigation file(s) of the raw measurements")
+            return self
+        if self.navigation is not None:
+            raise ValueError("navigation: a smartLoc log gives the satellites' positions and corrected "
+                             "pseudoranges: it takes no navigation file")
+        for key, why in (("sigma_a", "the file's variances weigh the pseudoranges"),
+                         ("sigma_b", "the file's variances weigh the pseudoranges"),
+                         ("troposphere", "the file's pseudoranges have their atmosphere removed"),
+                         ("ionosphere", "the file's pseudoranges have their atmosphere removed"),
+                         ("max_sv_time_uncertainty", "a phone log's key"),
+                         ("signals", "the file has one pseudorange per satellite")):
+            if key in self.model_fields_set:
+                raise ValueError(f"{key}: not used with format = \"smartloc\" ({why})")
+        return self
 
     @model_validator(mode="after")
     def _rinex_keys(self):
@@ -205,7 +230,7 @@ class RawGnss(Strict):
                              f"(several files: format = \"rinex-obs\" or \"ubx\")")
         if self.format not in ("rinex-obs", "ubx"):
             for key in ("systems", "signals"):
-                if key in self.model_fields_set:
+                if key in self.model_fields_set and not (key == "systems" and self.format == "smartloc"):
                     raise ValueError(f"{key}: only format = \"rinex-obs\" or \"ubx\" reads other systems or signals "
                                      f"(\"{self.format}\" reads GPS L1 C/A)")
         if self.format == "ubx":

@@ -385,7 +385,18 @@ def load_dataset_text(text: str, source: str):
             if key in data:
                 raise ConfigError(f"not used by dataset.kind = '{kind}' (remove it, or change the kind)",
                                   file=source, key=key)
-        return _validate_data(RawGnssDataset, data, source), source, text
+        ds = _validate_data(RawGnssDataset, data, source)
+        if ds.reference is not None and ds.reference_point is not None:
+            # two truths would score the same epochs twice, differently: one of them is a slip
+            raise ConfigError("give either [reference_point] (a static receiver's surveyed point) or [reference] "
+                              "(a moving receiver's trajectory), not both", file=source, key="reference")
+        if ds.reference is not None and (ds.reference.format == "smartloc") != (ds.raw_gnss.format == "smartloc"):
+            # a smartLoc log and its ground truth count seconds from the log's start; every other file GPS time
+            raise ConfigError(f"a reference in format \"{ds.reference.format}\" cannot score raw_gnss format "
+                              f"\"{ds.raw_gnss.format}\": smartLoc files (log and ground truth) count seconds from the "
+                              "start of the log, every other format GPS time; use the smartLoc ground truth with "
+                              "a smartLoc log only", file=source, key="reference.format")
+        return ds, source, text
     ds = _validate(Dataset, text, source)
     _check_kind(ds, source)
     _check_imu_models(ds, source)

@@ -1,5 +1,6 @@
-"""The strict schema of raw-GNSS datasets (``kind = "gnss-raw"``: a phone log or a RINEX
-observation file with its navigation file).
+"""The strict schema of raw-GNSS datasets (``kind = "gnss-raw"``: a phone log, a RINEX
+observation file or a u-blox log with its navigation file, or a smartLoc log of corrected
+pseudoranges), scored against a static ``[reference_point]`` or a moving ``[reference]``.
 
 Every epoch is solved by weighted least squares (single-point positioning, SPP); the
 ``[[methods]]`` may add filters on the GNSS-only constant-velocity model
@@ -24,8 +25,7 @@ from .method_schema import registered_estimator
 from .vehicle_schema import VehicleMethod, unique_method_names
 
 #: sections of an IMU dataset that a raw-GNSS one must not have (a config error naming them)
-FOREIGN_SECTIONS = ("imu", "gnss", "alignment", "reference", "installation", "aiding", "odometry",
-                    "pseudoranges")
+FOREIGN_SECTIONS = ("imu", "gnss", "alignment", "installation", "aiding", "odometry", "pseudoranges")
 
 AccelDensity = quantity(u.VELOCITY_RANDOM_WALK, nonnegative=True)
 
@@ -113,14 +113,55 @@ class ConstantVelocityConfig(Strict):
         return v
 
 
+#: reference formats whose time stamps are GPS time with the week (nothing to say about them)
+ABSOLUTE_TIME_FORMATS = ("gps-week-csv", "rtklib-pos", "smartloc")
+
+
+class RawReference(Strict):
+    """``[reference]`` of a raw-GNSS dataset: the trajectory of a moving receiver's antenna,
+    every epoch scored against it at the epoch's time (:mod:`mixnav.experiment.spp_process`).
+
+    ``format``: ``"gps-week-csv"`` (GPS week, time of week, latitude, longitude, ellipsoidal
+    height: :mod:`mixnav.io.gps_week_csv`), ``"rtklib-pos"`` (an RTKLIB solution in GPST,
+    e.g. an RTK fix; ``qualities``: the quality flags kept, default ``[1]``, fixed),
+    ``"csv"`` (mixnav's generic reference CSV, :mod:`mixnav.io.generic_csv`),
+    ``"kf-gins-nav"``, or ``"smartloc"`` (a smartLoc ``*_GT.txt``, on the log's own seconds:
+    only with ``[raw_gnss] format = "smartloc"``, whose log has no GPS time either). ``time`` (``"csv"`` and ``"kf-gins-nav"`` only, whose time column is a
+    bare number of seconds): ``"gps-week-seconds"`` (default: GPS seconds of the week of the
+    first observation epoch, going on past 604800 s across a roll-over, as KF-GINS files and
+    ``[raw_gnss] imu_time`` of the INS datasets) or ``"gps-seconds"`` (GPS seconds since
+    1980-01-06). ``max_gap``: two reference samples further apart than this bound a gap;
+    epochs inside a gap are not scored (counted: ``reference_epochs`` in metrics.json), as
+    are epochs before the first or after the last sample; the default 1 s keeps the
+    straight-line interpolation within a*T^2/8 = 0.375 m of a car accelerating or turning at
+    3 m/s^2 (0.3 g)."""
+
+    format: Literal["gps-week-csv", "rtklib-pos", "csv", "kf-gins-nav", "smartloc"]
+    file: str
+    time: Literal["gps-week-seconds", "gps-seconds"] = "gps-week-seconds"
+    qualities: list[int] = Field(default_factory=lambda: [1])
+    max_gap: quantity(u.TIME, positive=True) = 1.0  # type: ignore[valid-type]
+
+    @model_validator(mode="after")
+    def _keys_of_format(self):
+        if "time" in self.model_fields_set and self.format in ABSOLUTE_TIME_FORMATS:
+            raise ValueError(f"time: format \"{self.format}\" says its own time axis (the key is for "
+                             "\"csv\" and \"kf-gins-nav\", whose time column is bare seconds)")
+        if "qualities" in self.model_fields_set and self.format != "rtklib-pos":
+            raise ValueError(f"qualities: format \"{self.format}\" has no quality flags (only \"rtklib-pos\")")
+        return self
+
+
 class RawGnssDataset(Strict):
-    """``kind = "gnss-raw"``: ``[raw_gnss]``, an optional ``[reference_point]``, the
+    """``kind = "gnss-raw"``: ``[raw_gnss]``, at most one of ``[reference_point]`` (a static
+    receiver's surveyed point) and ``[reference]`` (a moving receiver's trajectory), the
     ``[motion]`` of the filters and the ``[[methods]]`` (default: one ``wls`` method named
     ``spp``)."""
 
     dataset: DatasetInfo
     raw_gnss: RawGnss
     reference_point: ReferencePoint | None = None
+    reference: RawReference | None = None
     motion: ConstantVelocityConfig = ConstantVelocityConfig()
     methods: list[RawMethod] | None = Field(default=None, min_length=1)
     evaluation: Evaluation | None = None

@@ -7,9 +7,13 @@ Steps: read the raw measurement log (the raw-GNSS reader of ``raw_gnss.format``,
 navigation files of every system (:class:`mixnav.gnss.multi_ephemeris.MultiEphemeris`; the
 GLONASS frequency numbers taken from them), solve every epoch by WLS (:mod:`mixnav.gnss.spp`:
 one receiver clock plus one offset per extra system in the epoch), and
-score the solutions against the surveyed static point of ``[reference_point]``: north,
-east, down errors, their RMS, maximum and 95th percentile, and the position NEES with
-the WLS covariance. Epochs without a solution are counted by status, never raised.
+score the solutions against the surveyed static point of ``[reference_point]``, or against
+a moving receiver's ``[reference]`` trajectory interpolated at each epoch's GPS time
+(:mod:`mixnav.experiment.raw_reference`: epochs outside its span or in its gaps are not
+scored, counted): north, east, down errors, their RMS, median, maximum and 95th
+percentile, the 3-D RMS, and the position NEES with the WLS covariance, with the
+availability (solved epochs / epochs) beside them. Epochs without a solution are counted
+by status, never raised.
 
 Filter methods (``[[methods]]`` with an estimator other than ``wls``): the observations
 with SPP's broadcast corrections applied (:func:`mixnav.gnss.spp.corrected_pseudoranges`:
@@ -21,6 +25,12 @@ fix (its position, clock bias and their WLS covariance; velocity and clock drift
 and run from the next epoch on, one engine per method
 (:func:`mixnav.experiment.model_methods.run_methods`, the code the odometry datasets
 run).
+
+Corrected pseudoranges (``[raw_gnss] format = "smartloc"``: satellite clock and atmosphere
+removed in the file, satellite positions and variances given, no navigation file, no GPS
+time): the SPP of :mod:`mixnav.gnss.corrected_spp` (the file's variances as weights), the
+filters on the file's rows (clock jumps taken off), times the log's own seconds (GPS week 0
+in the table and metrics.json), the reference the data set's ground truth on those seconds.
 
 Times in the solution table are seconds since the first epoch; the first
 epoch's GPS week and seconds of week are in metrics.json.
@@ -46,6 +56,7 @@ from ..io.readers import read_table
 from ..io.atomic import atomic_write_dataframe, atomic_write_json
 from . import figures
 from .outputs import add_sweeps
+from .raw_reference import EpochReference, errors_ned, reference_at_epochs
 from .report import write_report
 from .webmap import map_html
 
@@ -60,8 +71,8 @@ class SppOutput:
     dataset: RawGnssDataset
     source: str
     data_dir: Path
-    observations: RawPseudoranges      # what the raw-GNSS reader of the format gave
-    ephemeris: BroadcastEphemeris      # or a MultiEphemeris (systems beyond GPS)
+    observations: RawPseudoranges      # what the raw-GNSS reader of the format gave (smartloc: CorrectedObservations)
+    ephemeris: BroadcastEphemeris      # or a MultiEphemeris (systems beyond GPS); None (smartloc)
     track: SppTrack
     reference_lla: np.ndarray | None   # (3,) rad, rad, m
     read_time_s: float
@@ -74,6 +85,7 @@ class SppOutput:
     filter_time_s: float = 0.0
     checks: dict = field(default_factory=dict)
     clock_offset: np.ndarray | None = None   # (k,) clock jumps taken off the filters' pseudoranges [m]
+    reference: EpochReference | None = None  # [reference]: a moving receiver's trajectory at the epochs
 
 
 def options(ds, method=None) -> SppOptions:
@@ -82,6 +94,9 @@ def options(ds, method=None) -> SppOptions:
     too (the robust SPP)."""
     c = ds.raw_gnss
     robust = None if method is None or method.robust is None else (method.robust.k0, method.robust.k1)
+    if c.format == "smartloc":   # the file's variances as the weights, its atmosphere removed already
+        return SppOptions(elevation_mask=c.elevation_mask, sigma_a=1.0, sigma_b=0.0, troposphere=False,
+                          ionosphere=False, robust=robust)
     return SppOptions(elevation_mask=c.elevation_mask, sigma_a=c.sigma_a, sigma_b=c.sigma_b,
                       troposphere=c.troposphere, ionosphere=c.ionosphere, robust=robust)
 
@@ -169,6 +184,8 @@ def read_raw(ds: RawGnssDataset, source: str, folder: Path) -> tuple[RawPseudora
     and the time it took [s]. With several systems the GLONASS frequency numbers of the
     navigation records are attached to the observations."""
     c = ds.raw_gnss
+    if c.format == "smartloc":
+        return read_corrected(c, folder, source)
     if multi_system(c):
         check_first_frequency(c, source)
     t0 = _time.perf_counter()
@@ -179,8 +196,50 @@ def read_raw(ds: RawGnssDataset, source: str, folder: Path) -> tuple[RawPseudora
     return obs, eph, _time.perf_counter() - t0
 
 
+def read_corrected(c, folder: Path, source: str) -> tuple:
+    """``[raw_gnss] format = "smartloc"``: the corrected pseudoranges (the reader of the
+    ``corrected-pseudoranges`` kind) of the systems of ``systems``; rows of other systems are
+    left out and counted (``rejected``, by ``system not read: <letter>``). Returns
+    ``(epochs, None, read time [s])``: no navigation data."""
+    from ..gnss.pseudoranges import SYSTEM_LETTERS, PseudorangeEpochs
+    t0 = _time.perf_counter()
+    pe = read_table("corrected-pseudoranges", c, folder, "raw_gnss", source)
+    letters = np.array([SYSTEM_LETTERS.get(int(k), "?") for k in pe.system])
+    keep = np.isin(letters, list(c.systems))
+    rejected = {f"system not read: {s}": int(n) for s, n in zip(*np.unique(letters[~keep], return_counts=True))}
+    if not keep.all():
+        e = np.repeat(np.arange(len(pe)), pe.counts())
+        pe = PseudorangeEpochs.from_rows(pe.time[e][keep], pe.pseudorange[keep], pe.variance[keep],
+                                         pe.sat_ecef[keep], pe.sat_id[keep], pe.system[keep], pe.elevation[keep],
+                                         pe.cn0[keep], source=pe.source)
+    if not len(pe):
+        raise ConfigError(f"no pseudorange of the systems {list(c.systems)} in {folder / c.file}", file=source,
+                          key="raw_gnss.systems")
+    return CorrectedObservations(pe, rejected), None, _time.perf_counter() - t0
+
+
+@dataclass
+class CorrectedObservations:
+    """Corrected pseudoranges (``epochs``) as the SPP output's ``observations``: what the
+    pipeline's steps ask of a raw log (``source``, ``rejected``)."""
+
+    epochs: object          # PseudorangeEpochs
+    rejected: dict
+
+    @property
+    def source(self):
+        return self.epochs.source
+
+
+def corrected(po) -> bool:
+    """Whether ``po`` solved corrected pseudoranges (``format = "smartloc"``)."""
+    return isinstance(po.observations, CorrectedObservations)
+
+
 def _iono_alpha(eph):
     """The Klobuchar alpha the SPP uses (GPS's: a MultiEphemeris's GPS header), or None."""
+    if eph is None:
+        return None
     if hasattr(eph, "states_of"):
         return eph["G"].iono_alpha if "G" in eph else None
     return eph.iono_alpha
@@ -204,9 +263,13 @@ def _systems_of(obs, eph):
 def solve_raw(ds: RawGnssDataset, source: str, folder: Path, obs, eph: BroadcastEphemeris, read_time_s: float = 0.0,
               seed: int = 0) -> SppOutput:
     """SPP of every epoch of ``obs`` (read observations: GPS with a BroadcastEphemeris, any
-    systems with a MultiEphemeris) and the filter methods."""
+    systems with a MultiEphemeris; corrected pseudoranges without one) and the filter methods."""
+    if isinstance(obs, CorrectedObservations):
+        return _solve_corrected(ds, source, folder, obs, read_time_s, seed)
     system, chan = _systems_of(obs, eph)
     c = ds.raw_gnss
+    # the moving reference first: a file that does not cover the log is refused before the solve
+    moving = None if ds.reference is None else reference_at_epochs(ds.reference, folder, source, obs.week, obs.tow)
     if c.ionosphere and _iono_alpha(eph) is None:   # asked for, and impossible: said, not silent
         import warnings
         from ..io.imu_checks import DataWarning
@@ -219,12 +282,35 @@ def solve_raw(ds: RawGnssDataset, source: str, folder: Path, obs, eph: Broadcast
     t2 = _time.perf_counter()
     rp = ds.reference_point
     ref = None if rp is None else np.array([rp.latitude, rp.longitude, rp.height])
-    po = SppOutput(ds, source, folder, obs, eph, track, ref, read_time_s, t2 - t1)
+    po = SppOutput(ds, source, folder, obs, eph, track, ref, read_time_s, t2 - t1, reference=moving)
     for m in ds.run_methods():
         if m.estimator == "wls" and m.robust is not None:
             t3 = _time.perf_counter()
             po.robust_tracks[m.name] = solve_epochs(eph, obs.week, obs.tow, obs.epoch, obs.prn, obs.pseudorange,
                                                     options(ds, m), system=system, glonass_channel=chan)
+            po.robust_time_s[m.name] = _time.perf_counter() - t3
+    filters = [(k, m) for k, m in enumerate(ds.run_methods()) if m.estimator != "wls"]
+    if filters:
+        run_filters(po, filters, seed)
+    return po
+
+
+def _solve_corrected(ds, source: str, folder: Path, obs: "CorrectedObservations", read_time_s: float,
+                     seed: int) -> SppOutput:
+    """:func:`solve_raw` of corrected pseudoranges (:mod:`mixnav.gnss.corrected_spp`): times
+    are the log's own seconds (week 0)."""
+    from ..gnss.corrected_spp import solve_corrected
+    pe = obs.epochs
+    week = np.zeros(len(pe), int)
+    moving = None if ds.reference is None else reference_at_epochs(ds.reference, folder, source, week, pe.time)
+    t1 = _time.perf_counter()
+    track = solve_corrected(pe, options(ds))
+    po = SppOutput(ds, source, folder, obs, None, track, None, read_time_s, _time.perf_counter() - t1,
+                   reference=moving)
+    for m in ds.run_methods():
+        if m.estimator == "wls" and m.robust is not None:
+            t3 = _time.perf_counter()
+            po.robust_tracks[m.name] = solve_corrected(pe, options(ds, m))
             po.robust_time_s[m.name] = _time.perf_counter() - t3
     filters = [(k, m) for k, m in enumerate(ds.run_methods()) if m.estimator != "wls"]
     if filters:
@@ -306,11 +392,16 @@ def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
     # a receiver clock that jumps (millisecond steps) would throw every filter off: the
     # jumps seen by the SPP come off the pseudoranges first (the first fix has none)
     offset, jumps, spikes = clock_jumps(times, tr.clock_bias, tr.ok, float(mc.clock_jump))
-    rho = np.asarray(obs.pseudorange, float) - offset[np.asarray(obs.epoch, int)]
-    system, chan = _systems_of(obs, po.ephemeris)
-    epochs, skipped = corrected_pseudoranges(po.ephemeris, obs.week, obs.tow, obs.epoch, obs.prn, rho,
-                                             rx, opts, cn0=getattr(obs, "cn0", None), source=obs.source,
-                                             system=system, glonass_channel=chan)
+    if corrected(po):   # the file's pseudoranges, clock jumps off; the rows' own variances
+        from dataclasses import replace
+        pe = obs.epochs
+        epochs, skipped = replace(pe, pseudorange=pe.pseudorange - np.repeat(offset, pe.counts())), {}
+    else:
+        rho = np.asarray(obs.pseudorange, float) - offset[np.asarray(obs.epoch, int)]
+        system, chan = _systems_of(obs, po.ephemeris)
+        epochs, skipped = corrected_pseudoranges(po.ephemeris, obs.week, obs.tow, obs.epoch, obs.prn, rho,
+                                                 rx, opts, cn0=getattr(obs, "cn0", None), source=obs.source,
+                                                 system=system, glonass_channel=chan)
     end = float(times[-1])
     if not end > init.time:
         raise DataError("the first SPP fix is at the last epoch: nothing left to filter", file=obs.source)
@@ -337,8 +428,11 @@ def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
 
 
 def ionosphere_applied(po: SppOutput) -> str:
-    """``"klobuchar"`` (applied), ``"off"`` (``raw_gnss.ionosphere = false``) or ``"skipped"``
-    (asked for, but the navigation header has no Klobuchar coefficients; warned)."""
+    """``"klobuchar"`` (applied), ``"off"`` (``raw_gnss.ionosphere = false``), ``"skipped"``
+    (asked for, but the navigation header has no Klobuchar coefficients; warned) or
+    ``"removed in the file"`` (corrected pseudoranges, ``format = "smartloc"``)."""
+    if corrected(po):
+        return "removed in the file"
     if not po.dataset.raw_gnss.ionosphere:
         return "off"
     return "klobuchar" if _iono_alpha(po.ephemeris) is not None else "skipped"
@@ -369,6 +463,23 @@ def solution_table(po: SppOutput, track: SppTrack | None = None) -> pd.DataFrame
         nees = np.full(len(tr.tow), np.nan)
         if ok.any():
             nees[ok] = np.einsum("ki,ki->k", err[ok], np.linalg.solve(cov_ned[ok], err[ok][..., None])[..., 0])
+        df["nees_pos"] = nees
+    elif po.reference is not None:
+        # estimate minus the reference interpolated at the epoch, in NED there; NaN where not scored
+        ref = po.reference.lla
+        err = errors_ned(tr.pos_ecef, ref)
+        # the sigmas in NED at the reference point, or at the solution where the reference is not
+        at = np.where(np.isfinite(ref[:, :1]), ref, lla)
+        C_ne = dcm_ecef_to_ned(at[:, 0], at[:, 1])
+        cov_ned = np.einsum("kij,kjl,kml->kim", C_ne, tr.cov[:, :3, :3], C_ne)
+        for j, ax in enumerate("ned"):
+            df[f"err_{ax}_m"] = err[:, j]
+        for j, ax in enumerate("ned"):
+            df[f"sig_{ax}_m"] = np.sqrt(cov_ned[:, j, j])
+        nees = np.full(len(tr.tow), np.nan)
+        sc = ok & po.reference.scored
+        if sc.any():
+            nees[sc] = np.einsum("ki,ki->k", err[sc], np.linalg.solve(cov_ned[sc], err[sc][..., None])[..., 0])
         df["nees_pos"] = nees
     return df
 
@@ -411,11 +522,16 @@ def filter_table(po: SppOutput, res) -> pd.DataFrame:
         err[idx] = (lla_to_ecef(lla) - lla_to_ecef(ref)) @ dcm_ecef_to_ned(ref[0], ref[1]).T
         for j, ax in enumerate("ned"):
             df[f"err_{ax}_m"] = err[:, j]
+    elif po.reference is not None:
+        err = np.full((k, 3), np.nan)
+        err[idx] = errors_ned(lla_to_ecef(lla), po.reference.lla[idx])   # as the SPP table's
+        for j, ax in enumerate("ned"):
+            df[f"err_{ax}_m"] = err[:, j]
     for j, ax in enumerate("ned"):
         df[f"sig_{ax}_m"] = col(res.sigma[:, lay.pos][:, j])
     for j, ax in enumerate(("vn", "ve", "vd")):
         df[f"sig_{ax}_mps"] = col(res.sigma[:, lay.vel][:, j])
-    if po.reference_lla is not None:
+    if po.reference_lla is not None or po.reference is not None:
         from .metrics import nees
         df["nees_pos"] = col(nees(err[idx], res.pv_cov[:, 3:, 3:]))
     return df
@@ -442,26 +558,34 @@ def raw_tables(po: SppOutput) -> dict[str, pd.DataFrame]:
 
 
 def spp_metrics(table: pd.DataFrame, solve_time_s: float) -> dict:
-    """Accuracy of the solved epochs against the reference point (keys in docs/outputs.md);
-    a filter's table adds its speed (``horizontal_speed_rms_mps``, ``vertical_speed_rms_mps``:
-    the velocity error of a static receiver)."""
+    """Accuracy of the solved epochs against the reference (keys in docs/outputs.md): the
+    static point, or a moving reference at the solved epochs it covers (``n_scored``; the
+    others have NaN errors); ``availability``: solved epochs / epochs of the table. A
+    filter's table adds its speed (``horizontal_speed_rms_mps``, ``vertical_speed_rms_mps``:
+    the velocity error of a static receiver; with a moving reference, its speed)."""
     ok = (table["status"] == "ok").to_numpy()
     m: dict = {"n_epochs": int(ok.sum()),
+               "availability": float(ok.sum() / max(len(table), 1)),
                "epoch_time_mean_us": 1e6 * solve_time_s / max(len(table), 1),
                "n_sat_mean": float(table["n_sat"][ok].mean()) if ok.any() else float("nan")}
     if "pdop" in table:
         m["pdop_median"] = float(table["pdop"][ok].median()) if ok.any() else float("nan")
         m["residual_rms_median_m"] = float(table["rms_residual_m"][ok].median()) if ok.any() else float("nan")
-    if "err_n_m" in table and ok.any():
-        e = table.loc[ok, ["err_n_m", "err_e_m", "err_d_m"]].to_numpy(dtype=float)
+    # scored: solved, and (a moving reference) covered by the reference; every solved epoch of a static one
+    sc = ok & np.isfinite(table["err_n_m"].to_numpy(dtype=float)) if "err_n_m" in table else ok
+    if "err_n_m" in table:
+        m["n_scored"] = int(sc.sum())
+    if "err_n_m" in table and sc.any():
+        e = table.loc[sc, ["err_n_m", "err_e_m", "err_d_m"]].to_numpy(dtype=float)
         h = np.hypot(e[:, 0], e[:, 1])
         v = np.abs(e[:, 2])
         m.update({"horizontal_rmse_m": float(np.sqrt(np.mean(h**2))), "horizontal_max_m": float(h.max()),
-                  "horizontal_p95_m": float(np.percentile(h, 95)),
+                  "horizontal_p95_m": float(np.percentile(h, 95)), "horizontal_median_m": float(np.median(h)),
                   "vertical_rmse_m": float(np.sqrt(np.mean(v**2))), "vertical_max_m": float(v.max()),
                   "vertical_p95_m": float(np.percentile(v, 95)),
+                  "error_3d_rmse_m": float(np.sqrt(np.mean(np.sum(e**2, 1)))),
                   "mean_error_ned_m": [float(x) for x in e.mean(0)],
-                  "nees_pos_mean": float(table["nees_pos"][ok].mean())})
+                  "nees_pos_mean": float(table["nees_pos"][sc].mean())})
     if "vn_mps" in table and ok.any():
         v = table.loc[ok, ["vn_mps", "ve_mps", "vd_mps"]].to_numpy(dtype=float)
         m["horizontal_speed_rms_mps"] = float(np.sqrt(np.mean(v[:, 0] ** 2 + v[:, 1] ** 2)))
@@ -520,6 +644,9 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None, sweeps=())
         "reference_point": None if po.reference_lla is None else
         {"lat_deg": float(np.degrees(po.reference_lla[0])), "lon_deg": float(np.degrees(po.reference_lla[1])),
          "height_m": float(po.reference_lla[2])},
+        **({"reference": {"file": po.reference.file, "format": po.dataset.reference.format,
+                          "max_gap_s": float(po.dataset.reference.max_gap),
+                          "reference_epochs": dict(po.reference.counts)}} if po.reference is not None else {}),
         "ionosphere": ionosphere_applied(po),
         "systems": list(po.dataset.raw_gnss.systems),
         **({"satellites_skipped_by_system": dict(tr.skipped_by_system),
@@ -539,22 +666,43 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None, sweeps=())
     if po.reference_lla is not None:
         ref = pd.DataFrame({"time_s": [0.0], "lat_deg": [np.degrees(po.reference_lla[0])],
                             "lon_deg": [np.degrees(po.reference_lla[1])], "height_m": [po.reference_lla[2]]})
+    elif po.reference is not None:   # the reference's samples over the log's span
+        rt = po.reference.trajectory
+        keep = (rt.time >= table["time_s"].iloc[0] - 1.0) & (rt.time <= table["time_s"].iloc[-1] + 1.0)
+        ref = pd.DataFrame({"time_s": rt.time[keep], "lat_deg": np.degrees(rt.lla[keep, 0]),
+                            "lon_deg": np.degrees(rt.lla[keep, 1]), "height_m": rt.lla[keep, 2]})
     if any(len(o) for o in oks.values()):
         figs["trajectory"] = figures.trajectory_figure({n: o for n, o in oks.items() if len(o)}, ref)
     opts = options(po.dataset)
     iono = {"klobuchar": "Klobuchar (broadcast coefficients)", "off": "none (switched off)",
-            "skipped": "none: the navigation header has no coefficients"}[ionosphere_applied(po)]
+            "skipped": "none: the navigation header has no coefficients",
+            "removed in the file": "removed in the file"}[ionosphere_applied(po)]
     from ..gnss.signals import SYSTEMS
     sysnames = "+".join(SYSTEMS[s] for s in po.dataset.raw_gnss.systems)
     what = "GPS L1 C/A pseudoranges" if sysnames == "GPS" else (
         f"{sysnames} first-frequency pseudoranges (one receiver clock, one offset per extra system in the epoch)")
+    if corrected(po):
+        what = (f"{sysnames} pseudoranges corrected in the file (satellite clock and atmosphere removed, satellite "
+                "positions given; one receiver clock, one offset per extra system in the epoch)")
+        weights = (f"Elevation mask {np.degrees(opts.elevation_mask):.1f} deg; sigma: the file's variances; "
+                   "troposphere and ionosphere: removed in the file.")
+    else:
+        weights = (f"Elevation mask {np.degrees(opts.elevation_mask):.1f} deg; sigma = sqrt({opts.sigma_a:g}^2 + "
+                   f"{opts.sigma_b:g}^2 / sin^2(el)) m; troposphere: {'Saastamoinen' if opts.troposphere else 'none'}; "
+                   f"ionosphere: {iono}.")
     notes = [f"Single-point positioning, {what}, {used} of {len(table)} epochs solved "
              f"(status counts: {counts}).",
-             f"Elevation mask {np.degrees(opts.elevation_mask):.1f} deg; sigma = sqrt({opts.sigma_a:g}^2 + "
-             f"{opts.sigma_b:g}^2 / sin^2(el)) m; troposphere: {'Saastamoinen' if opts.troposphere else 'none'}; "
-             f"ionosphere: {iono}.",
-             "Errors are estimate minus the surveyed point, in NED at that point; times are seconds since "
-             f"the first epoch (GPS week {int(tr.week[0])}, {float(tr.tow[0]):.3f} s of week).",
+             weights,
+             ("Errors are estimate minus the surveyed point, in NED at that point; " if po.reference is None else
+              f"Errors are estimate minus the reference trajectory ({po.reference.file}) interpolated at the epoch, "
+              f"in NED there; scored epochs: {po.reference.counts['scored']} of {len(table)} (not scored: "
+              f"{po.reference.counts['before_reference']} before the reference, "
+              f"{po.reference.counts['after_reference']} after it, {po.reference.counts['in_reference_gaps']} in "
+              f"{po.reference.counts['reference_gaps']} gap(s) longer than "
+              f"{float(po.dataset.reference.max_gap):g} s); availability counts every solved epoch; ") +
+             "times are seconds since "
+             + (f"the first epoch ({float(tr.tow[0]):.3f} s of the log: the file has no GPS time)." if corrected(po)
+                else f"the first epoch (GPS week {int(tr.week[0])}, {float(tr.tow[0]):.3f} s of week)."),
              f"Measurements rejected by the reader: {po.observations.rejected or 'none'}; satellites "
              f"left out: {tr.skipped_satellites or 'none'}."]
     if po.results:
@@ -567,6 +715,7 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None, sweeps=())
     sections = add_sweeps(out_dir, metrics, figs, sweeps)
     title = f"mixnav process: {po.dataset.dataset.name}"
     write_report(out_dir, title, metrics, figs, notes=notes, config_text=config_text, sections=sections,
-                 web_map=map_html({n: o for n, o in oks.items() if len(o)}, title=title))
+                 web_map=map_html({n: o for n, o in oks.items() if len(o)},
+                                  reference=ref if po.reference is not None else None, title=title))
     atomic_write_json(out_dir / "metrics.json", metrics)       # last: marks a complete folder
     return metrics

@@ -1,6 +1,7 @@
 """The ``gnss-raw`` pipeline: epoch-by-epoch SPP of raw GNSS (an Android log or a RINEX
 observation file) and the constant-velocity filters started from it
-(:mod:`mixnav.experiment.spp_process`, steps in its docstring)."""
+(:mod:`mixnav.experiment.spp_process`, steps in its docstring), scored against a surveyed
+point or a moving reference (:mod:`mixnav.experiment.raw_reference`)."""
 
 from __future__ import annotations
 
@@ -31,13 +32,17 @@ def tables(po: SppOutput) -> dict[str, pd.DataFrame]:
 
 
 def metrics(po: SppOutput, tables: dict[str, pd.DataFrame]) -> dict[str, dict]:
-    """Every method's metrics against the reference point."""
+    """Every method's metrics against the reference point or the moving reference."""
     return {name: method_metrics(po, name, t) for name, t in tables.items()}
 
 
-def truth(po: SppOutput) -> None:
-    """None: the reference is one surveyed point, in the tables' error columns."""
-    return None
+def truth(po: SppOutput) -> pd.DataFrame | None:
+    """The moving reference (``[reference]``: time_s on the tables' axis, lat_deg, lon_deg,
+    height_m), or None (a surveyed point, in the tables' error columns, or no reference)."""
+    if po.reference is None:
+        return None
+    from ..outputs import lla_frame
+    return lla_frame(po.reference.trajectory.time, po.reference.trajectory.lla)
 
 
 write = write_raw
