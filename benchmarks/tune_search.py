@@ -92,7 +92,8 @@ def prepare(window: float = 30.0, folds: int = 6) -> dict:
     t_last = min(_seconds(TUNE_SPAN[1], "span"), t_last)
     own = [tuple(map(float, x)) for x in ds.gnss.withhold]
     windows = [f for f in cv_windows(t_first, t_last, window, folds, avoid=own, step=window / 2.0) if f]
-    setup = ("cv", stripped, source, None, target, windows, (t_first, t_last))
+    setup = ("mixnav.experiment.tuning.criterion:Evaluator", stripped, source, None, target, windows,
+             (t_first, t_last))
 
     doc = tomlkit.parse(stripped)
     start_doc = tomlkit.parse(tomlkit.dumps(doc))
@@ -153,7 +154,7 @@ def recording_scorer(prep: dict, journal: Path, workers: int, budget: int):
 
     if journal.exists():
         journal.unlink()
-    return Recording(prep["setup"], journal, workers, None, False, budget)
+    return Recording(prep["setup"], journal, workers, None, False, budget, len(prep["setup"][5]))
 
 
 # ---------------------------------------------------------------- the common coordinates

@@ -203,8 +203,9 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
                             f"cross-validation windows of {w:g} s; at least 2 are needed (a shorter "
                             "window or a longer span)", argument="span")
     windows = [f for f in windows if f]
-    setup = ("cv", stripped, source, None if data is None else str(data), target, windows, (t_first, t_last))
-    scorer = Scorer(setup, journal, workers, scheduler, progress, budget)
+    setup = ("mixnav.experiment.tuning.criterion:Evaluator", stripped, source, None if data is None else str(data),
+             target, windows, (t_first, t_last))
+    scorer = Scorer(setup, journal, workers, scheduler, progress, budget, len(windows))
 
     searched_best = None
     try:

@@ -2,21 +2,21 @@
 Dask cluster), each built once per process and keeping the data it read, and the driver's
 :class:`Scorer` (the journal, the budget, one progress bar, one pool).
 
-A *setup* names the evaluator and its arguments: ``(criterion, text, source, data, method,
-groups, extra)`` with criterion ``"cv"`` (:class:`.criterion.Evaluator`: ``groups`` the folds'
-windows, ``extra`` the span) or ``"vehicle"`` (:class:`.vehicle.VehicleEvaluator`: ``groups`` the starts, ``extra`` how
-long after each start the rows are scored, then its criterion). One candidate costs one
-filter run per fold (cv), or per start and fold (vehicle).
+A *setup* names the evaluator class and its arguments: ``("module:Class", text, source, data,
+method, ...)``: :class:`.criterion.Evaluator` (IMU + fixes: the folds' windows, the span) or
+:class:`.vehicle.VehicleEvaluator` (odometry + pseudoranges: the starts, how long after each
+start the rows are scored, the criterion). The class is imported by name in the worker, so
+this module depends on neither.
 """
 
 from __future__ import annotations
 
 import hashlib
+import importlib
 import json
 import os
 from pathlib import Path
 
-from .vehicle import RUNS_PER_START
 
 _EVALUATORS: dict = {}
 
@@ -25,14 +25,8 @@ def _evaluator(setup: tuple):
     key = hashlib.sha256(json.dumps(setup, default=str).encode()).hexdigest()
     if key not in _EVALUATORS:
         _EVALUATORS.clear()
-        if setup[0] == "cv":
-            from .criterion import Evaluator
-            _EVALUATORS[key] = Evaluator(*setup[1:])
-        elif setup[0] == "vehicle":
-            from .vehicle import VehicleEvaluator
-            _EVALUATORS[key] = VehicleEvaluator(*setup[1:])
-        else:
-            raise ValueError(f"unknown criterion {setup[0]!r}")
+        module, name = setup[0].split(":")
+        _EVALUATORS[key] = getattr(importlib.import_module(module), name)(*setup[1:])
     return _EVALUATORS[key]
 
 
@@ -54,10 +48,10 @@ class Scorer:
     One progress bar over the budget, and one process pool (or Dask client) for the whole
     tuning: the workers keep the data they read (:meth:`close` ends them)."""
 
-    def __init__(self, setup, journal: Path, workers, scheduler, progress, budget: int):
+    def __init__(self, setup, journal: Path, workers, scheduler, progress, budget: int, runs_per_candidate: int):
         from ..parallel import Progress
         self.setup, self.journal, self.workers, self.scheduler = setup, journal, workers, scheduler
-        self.budget, self.runs = budget, 0
+        self.budget, self.runs, self.runs_per_candidate = budget, 0, runs_per_candidate
         self.bar = Progress(budget, progress, label="tune")
         self._pool, self._client = None, None
         self.cache: dict[str, dict] = {}
@@ -101,8 +95,7 @@ class Scorer:
                 for text, sc in results:
                     self.cache[self.key(text)] = sc
                     fh.write(json.dumps({"setup": self.setup_key, "key": self.key(text), "score": sc}) + "\n")
-            per = RUNS_PER_START[self.setup[7]] if self.setup[0] == "vehicle" else 1
-            self.runs += len(todo) * len(self.setup[5]) * per
+            self.runs += len(todo) * self.runs_per_candidate
         return [self.cache.get(k) if k in self.seen else None for k in map(self.key, texts)]
 
     def _map(self, texts):

@@ -366,8 +366,10 @@ def tune_vehicle(*, text: str, stripped: str, source: str, ds, out, data, data_f
         raise ArgumentError(f"the recording has {duration:.0f} s of odometry; tuning needs at least "
                             f"{SCORE_AFTER + MIN_SCORED:g} s ({SCORE_AFTER:g} s for the longest alignment window, "
                             f"{MIN_SCORED:g} s scored after it)", argument="dataset")
-    setup = ("vehicle", stripped, source, None if data is None else str(data), target, starts, SCORE_AFTER, criterion)
-    scorer = Scorer(setup, journal, workers, scheduler, progress, budget)
+    setup = ("mixnav.experiment.tuning.vehicle:VehicleEvaluator", stripped, source,
+             None if data is None else str(data), target, starts, SCORE_AFTER, criterion)
+    scorer = Scorer(setup, journal, workers, scheduler, progress, budget,
+                    len(starts) * RUNS_PER_START[criterion])
     n_blocks = _blocks(starts, duration, SCORE_AFTER)
     chosen, not_tuned, evaluations, curves = {}, {}, [], {}
     params = vehicle_parameters()
