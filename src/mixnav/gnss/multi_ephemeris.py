@@ -336,27 +336,56 @@ class MultiEphemeris:
             prns = np.array([int(s[1:]) for s in ids], dtype=int)
         except ValueError as exc:
             raise ArgumentError(f"satellite ids must look like 'G05' ({exc})", "sat_ids") from exc
-        n = len(ids)
+        pos, vel, clk, drift, reason = self.states_by_system(letters, prns, week, tow, apply_group_delay)
+        keep = reason == ""
+        skips = {letter: EphemerisSkips(prns[(letters == letter) & ~keep],
+                                        tuple(reason[(letters == letter) & ~keep].tolist()))
+                 for letter in dict.fromkeys(letters.tolist())}
+        st = SatelliteStates(prns[keep], pos[keep], vel[keep], clk[keep], drift[keep])
+        return st, letters[keep], keep, skips
+
+    def states_by_system(self, letters, prns, week, tow, apply_group_delay: bool = True, chunk: int = 8192):
+        """:meth:`states_of` for arrays of system letters and PRNs (n,), any number of rows
+        (e.g. every observation of a file at once, each at its own time).
+
+        The record choice is made ``chunk`` rows at a time (its table is rows x records).
+
+        Returns
+        -------
+        pos, vel : ndarray (n, 3)
+        clk, drift : ndarray (n,)
+            NaN where no record was used.
+        reason : ndarray of str (n,)
+            ``""`` where a record was used, else why not (the reasons of
+            :meth:`states_and_skips`).
+        """
+        letters = np.asarray(letters).astype(str)
+        prns = np.asarray(prns, dtype=int)
+        n = len(letters)
         tow_n = np.broadcast_to(np.asarray(tow, float), (n,))
         week_n = np.broadcast_to(np.asarray(week), (n,))
         pos, vel = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
         clk, drift = np.full(n, np.nan), np.full(n, np.nan)
-        keep = np.zeros(n, bool)
-        skips = {}
-        for letter in dict.fromkeys(letters):
+        reason = np.full(n, "", dtype=object)
+        for letter in dict.fromkeys(letters.tolist()):
             rows = np.flatnonzero(letters == letter)
             eph = self.systems.get(letter)
             if eph is None:
-                skips[letter] = self.states_and_skips(letter, prns[rows], None, None)[1]
+                self.states_and_skips(letter, prns[rows[:1]], None, None)   # an unknown letter raises
+                reason[rows] = NO_SYSTEM_DATA
                 continue
-            idx, t, skips[letter] = eph._select(week_n[rows], tow_n[rows], prns[rows])
+            idx = np.empty(len(rows), int)
+            t = np.empty(len(rows))
+            for c0 in range(0, len(rows), chunk):
+                part = rows[c0:c0 + chunk]
+                i, tt, sk = eph._select(week_n[part], tow_n[part], prns[part])
+                idx[c0:c0 + chunk], t[c0:c0 + chunk] = i, tt
+                reason[part[i < 0]] = sk.reason
             ok = idx >= 0
             p, v, c, d = eph._compute(idx[ok], t[ok], apply_group_delay)
             rows = rows[ok]
             pos[rows], vel[rows], clk[rows], drift[rows] = p, v, c, d
-            keep[rows] = True
-        st = SatelliteStates(prns[keep], pos[keep], vel[keep], clk[keep], drift[keep])
-        return st, letters[keep], keep, skips
+        return pos, vel, clk, drift, reason.astype(str)
 
     def skip_counts(self, skips: dict) -> dict[str, dict[str, int]]:
         """Per system name, the satellites left out per reason (from :meth:`states_of`'s ``skips``)."""

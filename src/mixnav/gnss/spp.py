@@ -116,6 +116,12 @@ class SppOptions:
     robust : tuple (k0, k1) or None
         IGG-III thresholds on standardised residuals: the robust solution
         (module docstring, "Robust solution"); None: plain WLS.
+    engine : {"compiled", "numpy"}
+        :func:`solve_epochs`'s plain WLS: satellite states of all epochs in one batched
+        call and one compiled loop over the epochs (:mod:`mixnav.gnss._spp_kernel`), or
+        the numpy solution epoch by epoch (:func:`wls_position`), kept as the reference
+        the compiled one is tested against (equal within 1e-6 m). The robust solution
+        always takes the numpy path.
     """
 
     elevation_mask: float = np.deg2rad(10.0)
@@ -126,8 +132,11 @@ class SppOptions:
     max_iter: int = 15
     tol: float = 1e-4
     robust: tuple[float, float] | None = None
+    engine: str = "compiled"
 
     def __post_init__(self):
+        if self.engine not in ("compiled", "numpy"):
+            raise ValueError(f"engine: must be 'compiled' or 'numpy', not {self.engine!r}")
         if self.robust is not None:
             k0, k1 = self.robust
             if not 0.0 < k0 < k1:
@@ -763,11 +772,17 @@ def solve_epochs(ephemeris, week, tow_rx, epoch, prn, pseudorange, options: SppO
         Each epoch starts from the previous solution (the Earth's centre for
         the first and after a failed one).
     """
+    compiled = options.engine == "compiled" and options.robust is None
     if system is not None or hasattr(ephemeris, "states_of"):
         sysarr = np.full(len(np.asarray(prn)), "G") if system is None else np.asarray(system).astype(str)
         if hasattr(ephemeris, "states_of") or (sysarr != "G").any():
+            if compiled:
+                return _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, sigma_scale,
+                                       sysarr, glonass_channel)
             return _solve_epochs_multi(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, sigma_scale,
                                        sysarr, glonass_channel)
+    if compiled:
+        return _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, sigma_scale, None, None)
     week = np.asarray(week)
     tow_rx = np.asarray(tow_rx, float)
     epoch = np.asarray(epoch, int)
@@ -882,7 +897,8 @@ def _solve_epochs_multi(ephemeris, week, tow_rx, epoch, prn, pseudorange, option
         if not _record(out, j, sol, options):
             x0 = None
             continue
-        sys_used = letters if sol.system is None else sol.system
+        # one system in the epoch: the solution names no systems; its used satellites are all of it
+        sys_used = np.full(sol.n_sat, letters[0]) if sol.system is None else sol.system
         for s in present:
             out.n_sat_system[s][j] = int(np.sum(sys_used == s))
         if sol.offsets:
@@ -898,6 +914,165 @@ def _solve_epochs_multi(ephemeris, week, tow_rx, epoch, prn, pseudorange, option
     out.skipped_satellites = skipped
     out.skipped_by_system = by_system
     return out
+
+
+def _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, sigma_scale, system,
+                    glonass_channel) -> SppTrack:
+    """:func:`solve_epochs`'s plain WLS through the compiled loop (``options.engine``):
+    the satellites of all observations at their transmit times in one batched call, then
+    :func:`mixnav.gnss._spp_kernel.spp_epochs`, then the same bookkeeping as the numpy
+    paths (:func:`_solve_epochs_multi` with ``system``, one system without)."""
+    from ._spp_kernel import CODE_FEW, CODE_NOT_CONVERGED, CODE_OK, spp_epochs
+    from .multi_ephemeris import SYSTEM_NAMES
+    multi = system is not None
+    if multi and not hasattr(ephemeris, "states_of"):
+        others = sorted(set(system.tolist()) - {"G"})
+        raise ValueError(f"observations of systems {', '.join(others)} need a MultiEphemeris "
+                         "(mixnav.gnss.multi_ephemeris), not GPS records alone")
+    week = np.asarray(week)
+    tow_rx = np.asarray(tow_rx, float)
+    epoch = np.asarray(epoch, int)
+    prn = np.asarray(prn, int)
+    rho = np.asarray(pseudorange, float)
+    m = len(rho)
+    k = len(tow_rx)
+    if multi and system.shape != (m,):
+        raise ValueError(f"system has shape {system.shape}, expected ({m},) (one per observation)")
+    scale = np.ones(m) if sigma_scale is None else np.asarray(sigma_scale, float)
+    skipped: dict[str, int] = {}
+    by_system: dict[str, dict[str, int]] = {}
+
+    def count(letters, reasons):
+        """Add the (letter, reason) pairs to both tallies, in first-seen order."""
+        if len(reasons) == 0:
+            return
+        pairs, counts = np.unique(np.char.add(np.char.add(letters.astype(str), "|"), reasons.astype(str)),
+                                  return_counts=True)
+        for pair, c in zip(pairs.tolist(), counts.tolist()):
+            letter, reason = pair.split("|", 1)
+            skipped[reason] = skipped.get(reason, 0) + int(c)
+            if multi:
+                d = by_system.setdefault(SYSTEM_NAMES.get(letter, letter), {})
+                d[reason] = d.get(reason, 0) + int(c)
+
+    order = np.argsort(epoch, kind="stable")
+    sysarr = system if multi else np.full(m, "G")
+    if multi:
+        if glonass_channel is None:
+            table = ephemeris["R"].channels() if "R" in ephemeris else {}
+            glonass_channel = np.array([table.get(int(p), 99) if s == "R" else 99 for s, p in zip(system, prn)])
+        freq = first_frequency(system, glonass_channel)
+        iono_on = options.ionosphere and "G" in ephemeris and ephemeris["G"].iono_alpha is not None
+        alpha = ephemeris["G"].iono_alpha if iono_on else None
+        beta = ephemeris["G"].iono_beta if iono_on else None
+        no_freq = ~np.isfinite(freq) if iono_on else np.zeros(m, bool)
+        count(system[order][no_freq[order]], np.full(int(no_freq.sum()), NO_GLONASS_CHANNEL))
+        order = order[~no_freq[order]]
+        iono_scale = iono_scale_factors(np.where(np.isfinite(freq), freq, F_L1))
+    else:
+        iono_on = options.ionosphere and ephemeris.iono_alpha is not None and ephemeris.iono_beta is not None
+        alpha, beta = ephemeris.iono_alpha, ephemeris.iono_beta
+        iono_scale = np.ones(m)
+    # every observation's satellite at its transmit time: one batched call, then one more
+    # with the satellite clock taken off (as satellites_at_transmit, epoch by epoch)
+    ep = epoch[order]
+    wk = week[ep]
+    t_tx = tow_rx[ep] - rho[order] / C_LIGHT
+    _, _, clk, _, reason = _states_batched(ephemeris, sysarr[order], prn[order], wk, t_tx, multi)
+    keep = reason == ""
+    count(sysarr[order][~keep], reason[~keep])
+    sat, _, clk2, _, again = _states_batched(ephemeris, sysarr[order][keep], prn[order][keep], wk[keep],
+                                             t_tx[keep] - clk[keep], multi)
+    flipped = again != ""          # a record choice flipped within the travel time: left out with it
+    rows = order[keep][~flipped]
+    sat, clk2 = sat[~flipped], clk2[~flipped]
+    bounds = np.searchsorted(epoch[rows], np.arange(k + 1))
+    letters_used, inverse = np.unique(sysarr[rows], return_inverse=True)
+    sys_idx = np.array([SYSTEM_ORDER.index(s) for s in letters_used.tolist()], np.int64)[inverse.ravel()]
+    params = np.array([options.elevation_mask, options.sigma_a, options.sigma_b, float(options.troposphere),
+                       float(iono_on), float(options.max_iter), options.tol])
+    pos, clock = np.full((k, 3), np.nan), np.full(k, np.nan)
+    cov, offsets = np.full((k, 4, 4), np.nan), np.full((k, len(SYSTEM_ORDER)), np.nan)
+    clock_sys, status = np.full(k, -1, np.int64), np.zeros(k, np.int64)
+    n_used, dops, rms = np.zeros(k, np.int64), np.full((k, 3), np.nan), np.full(k, np.nan)
+    n_rejected = np.full(k, -1, np.int64)
+    used, below = np.zeros(len(rows), bool), np.zeros(len(rows), bool)
+    spp_epochs(np.ascontiguousarray(sat), rho[rows] + C_LIGHT * clk2, scale[rows], iono_scale[rows], sys_idx, bounds,
+               tow_rx, params, np.zeros(4) if alpha is None else np.asarray(alpha, float),
+               np.zeros(4) if beta is None else np.asarray(beta, float), pos, clock, cov, offsets, clock_sys, status,
+               n_used, dops, rms, n_rejected, used, below)
+    names = np.array([STATUS_OK, STATUS_FEW, STATUS_NOT_CONVERGED], dtype=object)
+    out = SppTrack(week=week.copy(), tow=tow_rx.copy(), pos_ecef=pos, clock_bias=clock, cov=cov, n_sat=n_used.astype(int),
+                   pdop=dops[:, 0].copy(), hdop=dops[:, 1].copy(), vdop=dops[:, 2].copy(), rms_residual=rms,
+                   status=names[status].astype(str))
+    # the mask's count: per satellite seen from the final position where the mask left a row
+    # out (several systems), the rows left out (one system; every solved epoch adds its count)
+    solved = n_rejected >= 0
+    if multi:
+        row_epoch = epoch[rows]
+        flag = below & (n_rejected[row_epoch] > 0)
+        count(sysarr[rows][flag], np.full(int(flag.sum()), "below elevation mask"))
+    elif solved.any():
+        skipped["below elevation mask"] = skipped.get("below elevation mask", 0) + int(n_rejected[solved].sum())
+    out.skipped_satellites = skipped
+    if not multi:
+        return out
+    present = [s for s in SYSTEM_ORDER if s in set(system.tolist())]
+    ok = status == CODE_OK
+    out.offsets = {s: np.where(ok, offsets[:, SYSTEM_ORDER.index(s)], np.nan) for s in present}
+    letters = np.array(SYSTEM_ORDER + ("",))
+    out.clock_system = np.where(ok, letters[clock_sys], "").astype(str)
+    out.n_sat_system = {}
+    for s in present:
+        c = np.bincount(epoch[rows][used & (sysarr[rows] == s)], minlength=k)
+        out.n_sat_system[s] = np.where(ok, c, 0).astype(int)
+    out.skipped_by_system = by_system
+    return out
+
+
+def _states_batched(ephemeris, letters, prn, week, tow, multi: bool):
+    """Satellite states of many observations at their own times: ``(pos, vel, clk, drift,
+    reason)`` (n,) as :meth:`MultiEphemeris.states_by_system` (one system: the GPS
+    records' selection and orbits, the same functions their ``states`` call)."""
+    if multi and hasattr(ephemeris, "states_by_system"):
+        return ephemeris.states_by_system(letters, prn, week, tow)
+    n = len(prn)
+    if multi:
+        # any object with MultiEphemeris's states_of (a test's stand-in): one row at a time
+        ids = np.char.add(letters.astype(str), np.char.zfill(prn.astype(str), 2))
+        pos, vel = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
+        clk, drift = np.full(n, np.nan), np.full(n, np.nan)
+        reason = np.full(n, "", dtype=object)
+        for i in range(n):
+            st, _, keep, skips = ephemeris.states_of(ids[i:i + 1], week[i], tow[i:i + 1])
+            if keep[0]:
+                pos[i], vel[i], clk[i], drift[i] = st.pos_ecef[0], st.vel_ecef[0], st.clock_bias[0], st.clock_drift[0]
+            else:
+                reason[i] = next(sk.reason[0] for sk in skips.values() if len(sk))
+        return pos, vel, clk, drift, reason.astype(str)
+    pos, vel = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
+    clk, drift = np.full(n, np.nan), np.full(n, np.nan)
+    reason = np.full(n, "", dtype=object)
+    if not hasattr(ephemeris, "_select"):
+        # any object with BroadcastEphemeris's public interface: one row at a time
+        for i in range(n):
+            st, sk = ephemeris.states_and_skips(week[i], tow[i:i + 1], prn[i:i + 1])
+            if len(sk):
+                reason[i] = sk.reason[0]
+            else:
+                pos[i], vel[i], clk[i], drift[i] = st.pos_ecef[0], st.vel_ecef[0], st.clock_bias[0], st.clock_drift[0]
+        return pos, vel, clk, drift, reason.astype(str)
+    idx = np.empty(n, int)
+    t = np.empty(n)
+    for c0 in range(0, n, 8192):       # the record choice's table is rows x records
+        part = slice(c0, c0 + 8192)
+        i, tt, sk = ephemeris._select(week[part], tow[part], prn[part])
+        idx[part], t[part] = i, tt
+        reason[c0 + np.flatnonzero(i < 0)] = sk.reason
+    ok = idx >= 0
+    p, v, c, d = ephemeris._compute(idx[ok], t[ok], True)
+    pos[ok], vel[ok], clk[ok], drift[ok] = p, v, c, d
+    return pos, vel, clk, drift, reason.astype(str)
 
 
 def _below_mask(sol: SppSolution, sats, options: SppOptions) -> np.ndarray:
