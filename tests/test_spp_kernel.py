@@ -182,3 +182,66 @@ def test_android_static_gps_compiled_equals_numpy():
 def test_engine_is_checked():
     with pytest.raises(ValueError, match="engine"):
         SppOptions(engine="fast")
+
+
+# ------------------------------------------------------------ RTKLIB's weights
+def test_rtklib_variance_closed_form():
+    """RTKLIB pntpos's variance of one row, by hand: GPS at 30 deg, URA 2.4 m, a 4 m
+    ionosphere delay, Saastamoinen: 0.9^2 (1 + 1/sin 30) + 2.4^2 + 0.3^2 + (0.5 x 4)^2 +
+    (0.3 / (sin 30 + 0.1))^2 = 2.43 + 5.76 + 0.09 + 4 + 0.25 = 12.53 m^2; GLONASS's code
+    term 1.5^2 times; below 5 deg the code term is held at 5 deg's."""
+    from mixnav.gnss.spp import _sigma
+    opts = SppOptions(weights="rtklib")
+    el = np.deg2rad([30.0, 30.0, 2.0, 5.0])
+    atm = (None,) * 7 + ((np.array([1.0, 1.5, 1.0, 1.0]), np.full(4, 2.4**2)),)
+    iono = np.array([4.0, 4.0, 0.0, 0.0])
+    var = _sigma(opts, el, np.ones(4), atm, iono) ** 2
+    assert var[0] == pytest.approx(12.53, abs=1e-12)
+    assert var[1] - var[0] == pytest.approx((1.5**2 - 1) * 2.43, abs=1e-12)
+    code = lambda e: 0.81 * (1 + 1 / np.sin(e))  # noqa: E731
+    trop = lambda e: (0.3 / (np.sin(e) + 0.1)) ** 2  # noqa: E731
+    assert var[2] - trop(el[2]) == pytest.approx(var[3] - trop(el[3]), abs=1e-12)
+    assert var[3] == pytest.approx(code(el[3]) + 5.76 + 0.09 + trop(el[3]), abs=1e-12)
+    # without the ionosphere model: its 5 m instead
+    assert (_sigma(opts, el, np.ones(4), atm, None) ** 2 - var)[2] == pytest.approx(25.0, abs=1e-12)
+
+
+def test_ephemeris_variance_from_the_accuracy_field():
+    from mixnav.gnss.multi_ephemeris import ephemeris_variance
+    # GPS / BeiDou URA [m] -> the table entry at or above it (IS-GPS-200 20.3.3.3.1.1)
+    sig = np.sqrt(ephemeris_variance("G", [0.0, 2.0, 2.4, 2.41, 6144.0, 1e4, np.nan]))
+    assert sig.tolist() == pytest.approx([2.4, 2.4, 2.4, 3.4, 6144.0, 6144.0, 6144.0])
+    # Galileo SISA [m]: its encoding's steps; beyond 6 m, negative or blank: NAPA 500 m
+    sig = np.sqrt(ephemeris_variance("E", [0.3, 0.51, 1.0, 3.12, 6.5, -1.0, np.nan]))
+    assert sig.tolist() == pytest.approx([0.3, 0.52, 1.0, 3.12, 500.0, 500.0, 500.0])
+    assert ephemeris_variance("R", [1.0]).tolist() == [25.0]
+
+
+def test_urbannav_ura_read(urban):
+    _, eph = urban
+    for s in "GEC":
+        assert np.isfinite(eph[s].rec["ura"]).all() and (eph[s].rec["ura"] > 0).all()
+    assert set(np.unique(eph["G"].rec["ura"]).tolist()) == {2.0, 2.8}
+
+
+def test_rtklib_weights_compiled_equals_numpy(urban):
+    obs, eph = urban
+    m = obs.epoch < 200
+    a, b = _both(eph, obs.week[:200], obs.tow[:200], obs.epoch[m], obs.prn[m], obs.pseudorange[m],
+                 options=SppOptions(elevation_mask=np.deg2rad(15.0), weights="rtklib"), system=obs.system[m],
+                 glonass_channel=obs.glonass_channel()[m])
+    _assert_same(a, b)
+    # the weights change the solution: metres, not rounding
+    c = solve_epochs(eph, obs.week[:200], obs.tow[:200], obs.epoch[m], obs.prn[m], obs.pseudorange[m],
+                     SppOptions(elevation_mask=np.deg2rad(15.0)), system=obs.system[m],
+                     glonass_channel=obs.glonass_channel()[m])
+    assert np.linalg.norm(c.pos_ecef - b.pos_ecef, axis=1).mean() > 1.0
+
+
+def test_rtklib_weights_need_the_accuracy():
+    sats, _, _ = _constellation(n=6)
+    with pytest.raises(ValueError, match="ephemeris_var"):
+        from mixnav.gnss.spp import wls_position
+        wls_position(np.full(6, 2.2e7), sats, SppOptions(weights="rtklib"))
+    with pytest.raises(ValueError, match="weights"):
+        SppOptions(weights="rtk")

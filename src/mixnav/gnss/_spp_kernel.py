@@ -20,6 +20,8 @@ from numba import njit
 
 from ..geodesy.earth import A_WGS84, E2_WGS84
 from .geometry import C_LIGHT, OMEGA_E_GPS
+from .spp import (RTKLIB_CODE_BIAS_SIGMA, RTKLIB_CODE_SIGMA, RTKLIB_IONO_FACTOR, RTKLIB_IONO_OFF_SIGMA,
+                  RTKLIB_MIN_ELEVATION, RTKLIB_TROPO_OFF_SIGMA, RTKLIB_TROPO_SIGMA)
 
 N_SYSTEMS = 5
 #: status codes of :func:`spp_epochs` (mapped to spp.STATUS_* by the caller)
@@ -131,9 +133,10 @@ def _chol_inverse(L, inv, n):
 
 @njit(cache=True)
 def _linearise(x, sat, rho_corr, col, iono_scale, e0, e1, with_atm, tow, tropo, iono, alpha, beta,
-               H, dz, el_out, az_out):
+               H, dz, el_out, az_out, iono_out):
     """Rows ``e0:e1`` at ``x``: ``H`` (-u, 1, offset columns by ``col``), ``dz`` (measured
-    minus modelled), elevation and azimuth (pi/2, 0 without ``with_atm``)."""
+    minus modelled), elevation and azimuth (pi/2, 0 without ``with_atm``), the ionosphere
+    delay in the model (0 without)."""
     n_off = x.shape[0] - 4
     lat = lon = hgt = 0.0
     sl = cl = so = co = 0.0
@@ -159,6 +162,7 @@ def _linearise(x, sat, rho_corr, col, iono_scale, e0, e1, with_atm, tow, tropo, 
         for k in range(n_off):
             H[r, 4 + k] = 1.0 if col[i] == k else 0.0
         el, az = math.pi / 2, 0.0
+        iono_out[r] = 0.0
         if with_atm:
             un = -sl * co * ux - sl * so * uy + cl * uz
             ue = -so * ux + co * uy
@@ -171,10 +175,32 @@ def _linearise(x, sat, rho_corr, col, iono_scale, e0, e1, with_atm, tow, tropo, 
             if tropo:
                 d += _saastamoinen(lat, hgt, max(el, 1e-3))
             if iono:
-                d += _klobuchar(lat, lon, el, az, tow, alpha, beta) * iono_scale[i]
+                iono_out[r] = _klobuchar(lat, lon, el, az, tow, alpha, beta) * iono_scale[i]
+                d += iono_out[r]
             model += d
         el_out[r], az_out[r] = el, az
         dz[r] = rho_corr[i] - model
+
+
+@njit(cache=True)
+def _weights(p, el, iono_d, scale, fact, var_eph, e0, n, w):
+    """``w[:n]``: 1 / variance of rows ``e0:e0 + n`` (spp._sigma): mixnav's elevation model
+    (``p[7]`` 0) or RTKLIB's (1)."""
+    for r in range(n):
+        i = e0 + r
+        if p[7] == 0.0:
+            s = math.sin(max(el[r], 1e-3))
+            sig = scale[i] * math.sqrt(p[1] ** 2 + p[2] ** 2 / s ** 2)
+            w[r] = 1.0 / sig ** 2
+        else:
+            code = (scale[i] * fact[i] * RTKLIB_CODE_SIGMA) ** 2 * (1.0 + 1.0 / math.sin(max(el[r],
+                                                                                            RTKLIB_MIN_ELEVATION)))
+            ion = (RTKLIB_IONO_FACTOR * iono_d[r]) ** 2 if p[4] > 0 else RTKLIB_IONO_OFF_SIGMA ** 2
+            if p[3] > 0:
+                trop = (RTKLIB_TROPO_SIGMA / (math.sin(max(el[r], 0.0)) + 0.1)) ** 2
+            else:
+                trop = RTKLIB_TROPO_OFF_SIGMA ** 2
+            w[r] = 1.0 / (code + var_eph[i] + RTKLIB_CODE_BIAS_SIGMA ** 2 + ion + trop)
 
 
 @njit(cache=True)
@@ -235,18 +261,18 @@ def _normal(H, dz, w, sel, act, n_rows, n_unk, N, b):
 
 
 @njit(cache=True)
-def _gauss_newton(x, sat, rho_corr, col, scale, iono_scale, e0, e1, use, mask_on, p, alpha, beta, tow,
-                  H, dz, el, az, w, sel, act, N, L, b, dx):
+def _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, use, mask_on, p, alpha, beta,
+                  tow, H, dz, el, az, iono_d, w, sel, act, N, L, b, dx):
     """As spp._gauss_newton: ``(status, iterations)``, status 1 converged, 0 not, -1 too few
     rows; ``sel`` the last step's rows."""
-    elevation_mask, sigma_a, sigma_b, tropo, iono, max_iter, tol = p[0], p[1], p[2], p[3], p[4], p[5], p[6]
+    elevation_mask, tropo, iono, max_iter, tol = p[0], p[3], p[4], p[5], p[6]
     n = e1 - e0
     n_off = x.shape[0] - 4
     it = 0
     for it in range(1, int(max_iter) + 1):
         near = _near_surface(x)
         _linearise(x, sat, rho_corr, col, iono_scale, e0, e1, near, tow, tropo > 0, iono > 0, alpha, beta,
-                   H, dz, el, az)
+                   H, dz, el, az, iono_d)
         n_sel = 0
         for r in range(n):
             sel[r] = use[r] and not (near and mask_on and el[r] < elevation_mask)
@@ -255,10 +281,7 @@ def _gauss_newton(x, sat, rho_corr, col, scale, iono_scale, e0, e1, use, mask_on
         n_unk = _active(sel, col, e0, e1, n_off, act)
         if n_sel < n_unk:
             return -1, it
-        for r in range(n):
-            s = math.sin(max(el[r], 1e-3))
-            sig = scale[e0 + r] * math.sqrt(sigma_a ** 2 + sigma_b ** 2 / s ** 2)
-            w[r] = 1.0 / sig ** 2
+        _weights(p, el, iono_d, scale, fact, var_eph, e0, n, w)
         _normal(H, dz, w, sel, act, n, n_unk, N, b)
         if not _cholesky(N, L, n_unk):
             return -1, it
@@ -274,12 +297,13 @@ def _gauss_newton(x, sat, rho_corr, col, scale, iono_scale, e0, e1, use, mask_on
 
 
 @njit(cache=True)
-def spp_epochs(sat, rho_corr, scale, iono_scale, sys_idx, bounds, tow, params, alpha, beta,
+def spp_epochs(sat, rho_corr, scale, fact, var_eph, iono_scale, sys_idx, bounds, tow, params, alpha, beta,
                pos, clock, cov, offsets, clock_sys, status, n_used, dops, rms, n_rejected, used, below):
     """Plain WLS SPP at every epoch (module docstring); outputs filled in place.
 
     ``params``: elevation mask [rad], sigma_a, sigma_b [m], troposphere, ionosphere (1/0),
-    max_iter, tol [m]. Per epoch: ``pos`` (k, 3), ``clock`` (k,), ``cov`` (k, 4, 4) position
+    max_iter, tol [m], weights (0 elevation, 1 RTKLIB's: per row ``fact`` its system factor
+    and ``var_eph`` its ephemeris variance [m^2]). Per epoch: ``pos`` (k, 3), ``clock`` (k,), ``cov`` (k, 4, 4) position
     and clock, ``offsets`` (k, 5) per system in ``G R E C J`` (0 for the clock's, NaN for
     a system without a used row), ``clock_sys`` (k,) the clock's system (-1 none),
     ``status`` (k,) a CODE_*, ``n_used``, ``dops`` (k, 3) PDOP, HDOP, VDOP, ``rms`` residual
@@ -291,7 +315,7 @@ def spp_epochs(sat, rho_corr, scale, iono_scale, sys_idx, bounds, tow, params, a
     for j in range(k):
         mmax = max(mmax, bounds[j + 1] - bounds[j])
     H = np.zeros((mmax, 4 + N_SYSTEMS))
-    dz, el, az = np.zeros(mmax), np.zeros(mmax), np.zeros(mmax)
+    dz, el, az, iono_d = np.zeros(mmax), np.zeros(mmax), np.zeros(mmax), np.zeros(mmax)
     w = np.zeros(mmax)
     sel = np.zeros(mmax, np.bool_)
     use = np.zeros(mmax, np.bool_)
@@ -337,26 +361,23 @@ def spp_epochs(sat, rho_corr, scale, iono_scale, sys_idx, bounds, tow, params, a
             x[:4] = x0
         for r in range(n):
             use[r] = True
-        st, _ = _gauss_newton(x, sat, rho_corr, col, scale, iono_scale, e0, e1, use, True, params, alpha, beta,
-                              tow[j], H, dz, el, az, w, sel, act, N, L, b, dx)
+        st, _ = _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, use, True, params,
+                              alpha, beta, tow[j], H, dz, el, az, iono_d, w, sel, act, N, L, b, dx)
         if st == 0 and _near_surface(x):
             # a satellite at the mask entering and leaving: keep the last set, iterate on
             for r in range(n):
                 use[r] = sel[r]
-            st, _ = _gauss_newton(x, sat, rho_corr, col, scale, iono_scale, e0, e1, use, False, params, alpha,
-                                  beta, tow[j], H, dz, el, az, w, sel, act, N, L, b, dx)
+            st, _ = _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, use, False,
+                                  params, alpha, beta, tow[j], H, dz, el, az, iono_d, w, sel, act, N, L, b, dx)
         if st < 0:
             status[j] = CODE_FEW
             have_x0 = False
             continue
         # post-fit: the final estimate's rows, covariance and DOPs
         _linearise(x, sat, rho_corr, col, iono_scale, e0, e1, True, tow[j], params[3] > 0, params[4] > 0,
-                   alpha, beta, H, dz, el, az)
+                   alpha, beta, H, dz, el, az, iono_d)
         n_unk = _active(sel, col, e0, e1, n_off, act)
-        for r in range(n):
-            s = math.sin(max(el[r], 1e-3))
-            sig = scale[e0 + r] * math.sqrt(params[1] ** 2 + params[2] ** 2 / s ** 2)
-            w[r] = 1.0 / sig ** 2
+        _weights(params, el, iono_d, scale, fact, var_eph, e0, n, w)
         _normal(H, dz, w, sel, act, n, n_unk, N, b)
         if not _cholesky(N, L, n_unk):
             status[j] = CODE_FEW

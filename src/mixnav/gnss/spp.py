@@ -77,6 +77,7 @@ settled by keeping the last set fixed and iterating on from there.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -89,6 +90,19 @@ from .geometry import C_LIGHT, F_L1, LAMBDA_L1, SatelliteStates, earth_rotation_
 #: row's by this many standard deviations of their difference (module docstring, "Robust
 #: solution")
 SEPARATION_SIGMAS = 3.0
+
+#: RTKLIB pntpos's pseudorange variance (``SppOptions.weights = "rtklib"``, module docstring):
+#: code sigma 0.9 m = its default error ratio 300 x 0.003 m (prcopt_default err[1], err[2],
+#: eratio[0]) for both the constant and the 1/sin(el) term, elevation floored at 5 deg
+#: (MIN_EL); per-system factors (EFACT_*); code bias 0.3 m (ERR_CBIAS); broadcast ionosphere
+#: half its delay (ERR_BRDCI), 5 m without (ERR_ION); Saastamoinen 0.3 m / (sin el + 0.1)
+#: (ERR_SAAS), 3 m without (ERR_TROP). RTKLIB demo5 EX 2.5.1 src/pntpos.c, src/rtklib.h.
+RTKLIB_CODE_SIGMA = 0.9
+RTKLIB_MIN_ELEVATION = np.deg2rad(5.0)
+RTKLIB_SYSTEM_FACTOR = {"G": 1.0, "R": 1.5, "E": 1.0, "C": 1.0, "J": 1.0}
+RTKLIB_CODE_BIAS_SIGMA = 0.3
+RTKLIB_IONO_FACTOR, RTKLIB_IONO_OFF_SIGMA = 0.5, 5.0
+RTKLIB_TROPO_SIGMA, RTKLIB_TROPO_OFF_SIGMA = 0.3, 3.0
 
 #: Epoch status codes of :func:`solve_epochs`.
 STATUS_OK = "ok"
@@ -116,6 +130,11 @@ class SppOptions:
     robust : tuple (k0, k1) or None
         IGG-III thresholds on standardised residuals: the robust solution
         (module docstring, "Robust solution"); None: plain WLS.
+    weights : {"elevation", "rtklib"}
+        The pseudorange variance: ``"elevation"`` mixnav's ``sigma_a^2 + sigma_b^2 /
+        sin^2(el)`` (module docstring); ``"rtklib"`` RTKLIB pntpos's (module docstring,
+        "RTKLIB's weights"; ``sigma_a``, ``sigma_b`` not used), which needs each
+        satellite's broadcast accuracy (a MultiEphemeris).
     engine : {"compiled", "numpy"}
         :func:`solve_epochs`'s plain WLS: satellite states of all epochs in one batched
         call and one compiled loop over the epochs (:mod:`mixnav.gnss._spp_kernel`), or
@@ -132,9 +151,12 @@ class SppOptions:
     max_iter: int = 15
     tol: float = 1e-4
     robust: tuple[float, float] | None = None
+    weights: str = "elevation"
     engine: str = "compiled"
 
     def __post_init__(self):
+        if self.weights not in ("elevation", "rtklib"):
+            raise ValueError(f"weights: must be 'elevation' or 'rtklib', not {self.weights!r}")
         if self.engine not in ("compiled", "numpy"):
             raise ValueError(f"engine: must be 'compiled' or 'numpy', not {self.engine!r}")
         if self.robust is not None:
@@ -276,7 +298,7 @@ def _dops(H: np.ndarray, pos_ecef: np.ndarray) -> dict:
 
 def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOptions(), x0=None,
                  sigma_scale=None, iono_alpha=None, iono_beta=None, tow: float = 0.0, system=None,
-                 iono_scale=None) -> SppSolution:
+                 iono_scale=None, ephemeris_var=None) -> SppSolution:
     """WLS position and clock of one epoch (one or several systems).
 
     Several systems (``system`` naming more than one): the unknowns are position, the
@@ -309,6 +331,10 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
     iono_scale : ndarray (n,) or None
         Factor on the Klobuchar (L1) delay per satellite, ``(f_L1 / f)^2`` for a signal
         on frequency ``f`` (:func:`iono_scale_factors`); None: 1.
+    ephemeris_var : ndarray (n,) or None
+        Orbit + clock variance [m^2] of each satellite's record
+        (:meth:`~mixnav.gnss.multi_ephemeris.MultiEphemeris.ephemeris_variances`): needed by
+        ``options.weights = "rtklib"``, not used otherwise.
 
     Raises
     ------
@@ -336,7 +362,14 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
         if iono_scale.shape != (n,):
             raise ValueError(f"iono_scale has shape {iono_scale.shape}, expected ({n},)")
     rho_corr = rho + C_LIGHT * sats.clock_bias                      # satellite clock removed
-    atm = (options, iono_alpha, iono_beta, tow, iono_scale, sys_col, n_off)
+    rtk = None
+    if options.weights == "rtklib":
+        if ephemeris_var is None:
+            raise ValueError("weights = 'rtklib' needs ephemeris_var (each satellite's broadcast accuracy)")
+        letters_n = np.full(n, "G") if system is None else np.asarray(system).astype(str)
+        fact = np.array([RTKLIB_SYSTEM_FACTOR.get(c, 1.0) for c in letters_n.tolist()])
+        rtk = (fact, np.asarray(ephemeris_var, float))
+    atm = (options, iono_alpha, iono_beta, tow, iono_scale, sys_col, n_off, rtk)
     x, sel, it, converged = _gauss_newton(rho_corr, sats, x, scale, np.ones(n, bool), atm)
     if not converged and abs(np.linalg.norm(x[:3]) - 6.371e6) < 5e5:
         # a satellite at the mask can enter and leave from one step to the next, so the steps
@@ -349,8 +382,8 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
         it += k
     # post-fit quantities at the final estimate (the last step is below tol)
     used = sel & (gamma > 0)
-    H, model, el = _linearise(x, sats, atm, always=True)
-    sigma = _sigma(options, el, scale)[used] / np.sqrt(gamma[used])
+    H, model, el, iono = _linearise(x, sats, atm, always=True)
+    sigma = _sigma(options, el, scale, atm, iono)[used] / np.sqrt(gamma[used])
     act = _active(used, sys_col, n_off)
     H = H[used] if act is None else H[used][:, act]
     N = H.T @ (H / sigma[:, None] ** 2)
@@ -415,16 +448,26 @@ def _active(rows, sys_col, n_off: int):
     return act
 
 
-def _sigma(options: SppOptions, el, scale):
-    """The elevation-dependent pseudorange sigma [m] (module docstring)."""
-    return scale * np.sqrt(options.sigma_a**2 + options.sigma_b**2 / np.sin(np.maximum(el, 1e-3)) ** 2)
+def _sigma(options: SppOptions, el, scale, atm=None, iono=None):
+    """The pseudorange sigma [m] (module docstring): mixnav's elevation model, or RTKLIB's
+    (``atm``'s per-row system factors and ephemeris variances, ``iono`` the ionosphere
+    delays applied, None when not)."""
+    if options.weights == "elevation":
+        return scale * np.sqrt(options.sigma_a**2 + options.sigma_b**2 / np.sin(np.maximum(el, 1e-3)) ** 2)
+    fact, var_eph = atm[7]
+    code = (scale * fact * RTKLIB_CODE_SIGMA) ** 2 * (1.0 + 1.0 / np.sin(np.maximum(el, RTKLIB_MIN_ELEVATION)))
+    ion = RTKLIB_IONO_OFF_SIGMA**2 if iono is None else (RTKLIB_IONO_FACTOR * iono) ** 2
+    trop = ((RTKLIB_TROPO_SIGMA / (np.sin(np.maximum(el, 0.0)) + 0.1)) ** 2 if options.troposphere
+            else RTKLIB_TROPO_OFF_SIGMA**2)
+    return np.sqrt(code + var_eph + RTKLIB_CODE_BIAS_SIGMA**2 + ion + trop)
 
 
 def _linearise(x, sats, atm, always: bool = False):
-    """Design matrix (n, 4), modelled pseudoranges (n,) and elevations (n,) at ``x``; the
-    atmosphere (and true elevations) once ``x`` is within 500 km of the surface, or
-    ``always``."""
-    options, iono_alpha, iono_beta, tow, iono_scale, sys_col, n_off = atm
+    """Design matrix (n, 4), modelled pseudoranges (n,), elevations (n,) at ``x`` and the
+    ionosphere delays in the model (n,) (None when the ionosphere is not applied; zeros
+    before the atmosphere is); the atmosphere (and true elevations) once ``x`` is within
+    500 km of the surface, or ``always``."""
+    options, iono_alpha, iono_beta, tow, iono_scale, sys_col, n_off, rtk = atm
     r_geo = np.linalg.norm(sats.pos_ecef - x[:3], axis=1)
     sat_rx = earth_rotation_correction(sats.pos_ecef, r_geo / C_LIGHT)
     rng = np.linalg.norm(sat_rx - x[:3], axis=1)
@@ -433,27 +476,38 @@ def _linearise(x, sats, atm, always: bool = False):
     if sys_col is not None:
         model = model + np.append(x[4:], 0.0)[sys_col]             # index -1: the clock's system
     el = np.full(len(rng), np.pi / 2)
+    iono_on = options.ionosphere and iono_alpha is not None and iono_beta is not None
+    iono = np.zeros(len(rng)) if iono_on else None
     if always or abs(np.linalg.norm(x[:3]) - 6.371e6) < 5e5:
         el, az = elevation_azimuth(x[:3], sat_rx)
-        model = model + atmosphere_delay(ecef_to_lla(x[:3]), el, az, tow, options, iono_alpha, iono_beta,
-                                         iono_scale=iono_scale)
+        lla = ecef_to_lla(x[:3])
+        if rtk is None:
+            model = model + atmosphere_delay(lla, el, az, tow, options, iono_alpha, iono_beta,
+                                             iono_scale=iono_scale)
+        else:   # RTKLIB's weights need the ionosphere part apart
+            if iono_on:
+                iono = atmosphere_delay(lla, el, az, tow, dataclasses.replace(options, troposphere=False),
+                                        iono_alpha, iono_beta, iono_scale=iono_scale)
+            model = model + atmosphere_delay(lla, el, az, tow, dataclasses.replace(options, ionosphere=False))
+            if iono_on:
+                model = model + iono
     H = np.column_stack([-u, np.ones(len(rng))])
     if sys_col is not None:
         H = np.hstack([H, (sys_col[:, None] == np.arange(n_off)[None, :]).astype(float)])
-    return H, model, el
+    return H, model, el, iono
 
 
-def _gauss_newton(rho_corr, sats, x, scale, use, atm, mask: bool = True):
+def _gauss_newton(rho_corr, sats, x, scale, use, atm, mask: bool = True, gamma=None):
     """WLS iterations from ``x`` on the rows ``use`` above the elevation mask (``mask``
     False: on the rows ``use`` as they are): ``(x, sel, iterations, converged)``, ``sel``
-    the rows of the last step."""
+    the rows of the last step; ``gamma`` (n,) weight factors (the robust solution's)."""
     options = atm[0]
     sel = use.copy()
     converged = False
     it = 0
     for it in range(1, options.max_iter + 1):
         near_surface = abs(np.linalg.norm(x[:3]) - 6.371e6) < 5e5
-        H, model, el = _linearise(x, sats, atm)
+        H, model, el, iono = _linearise(x, sats, atm)
         sel = use.copy()
         if near_surface and mask:
             # the rows below the mask are left out of the solution: what is added to them is moot
@@ -463,7 +517,9 @@ def _gauss_newton(rho_corr, sats, x, scale, use, atm, mask: bool = True):
         if sel.sum() < need:
             raise ValueError(f"{int(sel.sum())} satellites above the elevation mask "
                              f"({np.rad2deg(options.elevation_mask):.1f} deg): at least {need} are needed")
-        sigma = _sigma(options, el, scale)
+        sigma = _sigma(options, el, scale, atm, iono)
+        if gamma is not None:
+            sigma = sigma / np.sqrt(gamma)
         Hs = H[sel] if act is None else H[sel][:, act]
         w = 1.0 / sigma[sel] ** 2
         dz = (rho_corr - model)[sel]
@@ -499,8 +555,8 @@ def _igg3_solution(rho_corr, sats, x_plain, scale, sel, atm):
         # one more row out would leave nothing to check it by (two rows beyond the unknowns)
         if int(keep.sum()) < (4 if act is None else int(act.sum())) + 2:
             break
-        H, model, el = _linearise(x, sats, atm)
-        sigma = _sigma(options, el, scale)[keep] / np.sqrt(gamma[keep])
+        H, model, el, iono = _linearise(x, sats, atm)
+        sigma = _sigma(options, el, scale, atm, iono)[keep] / np.sqrt(gamma[keep])
         Hs = H[keep] if act is None else H[keep][:, act]
         N_inv = np.linalg.inv(Hs.T @ (Hs / sigma[:, None] ** 2))
         # each residual's own variance in this solution, sigma^2 - h N^-1 h^T: the standardisation
@@ -531,8 +587,11 @@ def _igg3_solution(rho_corr, sats, x_plain, scale, sel, atm):
         gamma[worst] = igg3_factors(t[j:j + 1], k0, k1)[0]
         touched[worst] = True
         keep = sel & (gamma > 0)
-        eff = np.where(keep, scale / np.sqrt(np.where(keep, gamma, 1.0)), scale)
-        x, _, k, _ = _gauss_newton(rho_corr, sats, x, eff, keep, atm)
+        if options.weights == "elevation":
+            eff = np.where(keep, scale / np.sqrt(np.where(keep, gamma, 1.0)), scale)
+            x, _, k, _ = _gauss_newton(rho_corr, sats, x, eff, keep, atm)
+        else:   # the factor on the whole variance, not on its code part
+            x, _, k, _ = _gauss_newton(rho_corr, sats, x, scale, keep, atm, gamma=np.where(keep, gamma, 1.0))
         iterations += k
     return x, gamma, status, iterations
 
@@ -772,6 +831,9 @@ def solve_epochs(ephemeris, week, tow_rx, epoch, prn, pseudorange, options: SppO
         Each epoch starts from the previous solution (the Earth's centre for
         the first and after a failed one).
     """
+    if options.weights == "rtklib" and not hasattr(ephemeris, "ephemeris_variances"):
+        raise ValueError("weights = 'rtklib' needs each satellite's broadcast accuracy: a MultiEphemeris "
+                         "(mixnav.gnss.multi_ephemeris), not GPS records read by georinex")
     compiled = options.engine == "compiled" and options.robust is None
     if system is not None or hasattr(ephemeris, "states_of"):
         sysarr = np.full(len(np.asarray(prn)), "G") if system is None else np.asarray(system).astype(str)
@@ -883,10 +945,13 @@ def _solve_epochs_multi(ephemeris, week, tow_rx, epoch, prn, pseudorange, option
             out.status[j] = STATUS_FEW
             continue
         used_rows = rows[keep]
+        var_eph = None
+        if options.weights == "rtklib":
+            var_eph = ephemeris.ephemeris_variances(letters, sats.prn, week[j], tow_rx[j] - rho[used_rows] / C_LIGHT)
         try:
             sol = wls_position(rho[used_rows], sats, options, x0=x0, sigma_scale=scale[used_rows],
                                iono_alpha=alpha, iono_beta=beta, tow=tow_rx[j], system=letters,
-                               iono_scale=iono_scale[used_rows])
+                               iono_scale=iono_scale[used_rows], ephemeris_var=var_eph)
         except ValueError:
             out.status[j] = STATUS_FEW
             x0 = None
@@ -990,14 +1055,21 @@ def _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, s
     letters_used, inverse = np.unique(sysarr[rows], return_inverse=True)
     sys_idx = np.array([SYSTEM_ORDER.index(s) for s in letters_used.tolist()], np.int64)[inverse.ravel()]
     params = np.array([options.elevation_mask, options.sigma_a, options.sigma_b, float(options.troposphere),
-                       float(iono_on), float(options.max_iter), options.tol])
+                       float(iono_on), float(options.max_iter), options.tol, float(options.weights == "rtklib")])
+    if options.weights == "rtklib":
+        fact = np.array([RTKLIB_SYSTEM_FACTOR.get(c, 1.0) for c in SYSTEM_ORDER])[sys_idx]
+        var_eph = ephemeris.ephemeris_variances(sysarr[rows], prn[rows], week[epoch[rows]],
+                                                tow_rx[epoch[rows]] - rho[rows] / C_LIGHT)
+    else:
+        fact, var_eph = np.ones(len(rows)), np.zeros(len(rows))
     pos, clock = np.full((k, 3), np.nan), np.full(k, np.nan)
     cov, offsets = np.full((k, 4, 4), np.nan), np.full((k, len(SYSTEM_ORDER)), np.nan)
     clock_sys, status = np.full(k, -1, np.int64), np.zeros(k, np.int64)
     n_used, dops, rms = np.zeros(k, np.int64), np.full((k, 3), np.nan), np.full(k, np.nan)
     n_rejected = np.full(k, -1, np.int64)
     used, below = np.zeros(len(rows), bool), np.zeros(len(rows), bool)
-    spp_epochs(np.ascontiguousarray(sat), rho[rows] + C_LIGHT * clk2, scale[rows], iono_scale[rows], sys_idx, bounds,
+    spp_epochs(np.ascontiguousarray(sat), rho[rows] + C_LIGHT * clk2, scale[rows], fact, var_eph, iono_scale[rows],
+               sys_idx, bounds,
                tow_rx, params, np.zeros(4) if alpha is None else np.asarray(alpha, float),
                np.zeros(4) if beta is None else np.asarray(beta, float), pos, clock, cov, offsets, clock_sys, status,
                n_used, dops, rms, n_rejected, used, below)
