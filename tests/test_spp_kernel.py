@@ -245,3 +245,42 @@ def test_rtklib_weights_need_the_accuracy():
         wls_position(np.full(6, 2.2e7), sats, SppOptions(weights="rtklib"))
     with pytest.raises(ValueError, match="weights"):
         SppOptions(weights="rtk")
+
+
+# ------------------------------------------------------------ the robust solution compiled
+def test_robust_compiled_equals_numpy_and_removes_an_outlier():
+    """IGG-III data snooping in the compiled loop: an 80 m error on one of 10 satellites is
+    excluded (the solution back at the true point, the counts say so), and every epoch
+    equals the numpy path's; with 5 rows of one system the error cannot be located
+    (untestable below 2 spare rows)."""
+    sats, _, _ = _constellation(n=10, el_deg=[20, 30, 40, 50, 60, 70, 80, 25, 45, 65])
+    system = np.array(["G"] * 6 + ["C"] * 4)
+    opts = SppOptions(elevation_mask=np.deg2rad(10.0), ionosphere=False, robust=(2.5, 6.0))
+    rho = _pseudoranges(sats, system, opts)
+    bad = rho.copy()
+    bad[2] += 80.0
+    plan = [(rho, range(10)), (bad, range(10)), (bad, range(5))]
+    ep = np.concatenate([np.full(len(p), j) for j, (_, p) in enumerate(plan)])
+    idx = np.concatenate([list(p) for _, p in plan])
+    pr = np.concatenate([r[list(p)] for r, p in plan])
+    a, b = _both(_Fixed(sats, system), np.full(3, 2100), 3e5 + np.arange(3), ep, sats.prn[idx], pr, options=opts,
+                 system=system[idx])
+    _assert_same(a, b)
+    assert a.robust == b.robust == {"rows_downweighted": 0, "rows_excluded": 1, "epochs_ok": 2,
+                                    "epochs_untestable": 1}
+    assert np.linalg.norm(b.pos_ecef[:2] - RX, axis=1).max() < 1e-3
+    assert b.n_sat.tolist() == [10, 9, 5]
+    assert np.linalg.norm(b.pos_ecef[2] - RX) > 1.0           # untestable: the error stays
+
+
+@pytest.mark.parametrize("weights", ["elevation", "rtklib"])
+def test_urbannav_robust_compiled_equals_numpy(urban, weights):
+    obs, eph = urban
+    k = 250
+    m = np.isin(obs.system, ["G", "C", "E"]) & (obs.epoch < k)
+    opts = SppOptions(elevation_mask=np.deg2rad(15.0), robust=(2.5, 6.0), weights=weights)
+    a, b = _both(eph, obs.week[:k], obs.tow[:k], obs.epoch[m], obs.prn[m], obs.pseudorange[m], options=opts,
+                 system=obs.system[m])
+    _assert_same(a, b)
+    assert a.robust == b.robust
+    assert b.robust["rows_excluded"] > 0 and b.robust.get("epochs_not_separable", 0) > 0

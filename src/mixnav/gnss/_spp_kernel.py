@@ -20,12 +20,14 @@ from numba import njit
 
 from ..geodesy.earth import A_WGS84, E2_WGS84
 from .geometry import C_LIGHT, OMEGA_E_GPS
-from .spp import (RTKLIB_CODE_BIAS_SIGMA, RTKLIB_CODE_SIGMA, RTKLIB_IONO_FACTOR, RTKLIB_IONO_OFF_SIGMA,
+from .spp import (SEPARATION_SIGMAS, RTKLIB_CODE_BIAS_SIGMA, RTKLIB_CODE_SIGMA, RTKLIB_IONO_FACTOR, RTKLIB_IONO_OFF_SIGMA,
                   RTKLIB_MIN_ELEVATION, RTKLIB_TROPO_OFF_SIGMA, RTKLIB_TROPO_SIGMA)
 
 N_SYSTEMS = 5
 #: status codes of :func:`spp_epochs` (mapped to spp.STATUS_* by the caller)
 CODE_OK, CODE_FEW, CODE_NOT_CONVERGED = 0, 1, 2
+#: robust status codes (spp.SppSolution.robust_status: off, ok, untestable, not_separable)
+ROBUST_OFF, ROBUST_OK, ROBUST_UNTESTABLE, ROBUST_NOT_SEPARABLE = 0, 1, 2, 3
 #: the mask and atmosphere apply within this of the Earth's mean radius [m] (as spp.py)
 _R_MEAN, _NEAR = 6.371e6, 5e5
 
@@ -183,9 +185,9 @@ def _linearise(x, sat, rho_corr, col, iono_scale, e0, e1, with_atm, tow, tropo, 
 
 
 @njit(cache=True)
-def _weights(p, el, iono_d, scale, fact, var_eph, e0, n, w):
-    """``w[:n]``: 1 / variance of rows ``e0:e0 + n`` (spp._sigma): mixnav's elevation model
-    (``p[7]`` 0) or RTKLIB's (1)."""
+def _weights(p, el, iono_d, scale, fact, var_eph, e0, n, w, gamma):
+    """``w[:n]``: ``gamma`` / variance of rows ``e0:e0 + n`` (spp._sigma; ``gamma`` the
+    robust solution's factors): mixnav's elevation model (``p[7]`` 0) or RTKLIB's (1)."""
     for r in range(n):
         i = e0 + r
         if p[7] == 0.0:
@@ -201,6 +203,8 @@ def _weights(p, el, iono_d, scale, fact, var_eph, e0, n, w):
             else:
                 trop = RTKLIB_TROPO_OFF_SIGMA ** 2
             w[r] = 1.0 / (code + var_eph[i] + RTKLIB_CODE_BIAS_SIGMA ** 2 + ion + trop)
+        if gamma[r] != 1.0:
+            w[r] *= gamma[r]
 
 
 @njit(cache=True)
@@ -262,7 +266,7 @@ def _normal(H, dz, w, sel, act, n_rows, n_unk, N, b):
 
 @njit(cache=True)
 def _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, use, mask_on, p, alpha, beta,
-                  tow, H, dz, el, az, iono_d, w, sel, act, N, L, b, dx):
+                  tow, H, dz, el, az, iono_d, w, sel, act, N, L, b, dx, gamma):
     """As spp._gauss_newton: ``(status, iterations)``, status 1 converged, 0 not, -1 too few
     rows; ``sel`` the last step's rows."""
     elevation_mask, tropo, iono, max_iter, tol = p[0], p[3], p[4], p[5], p[6]
@@ -281,7 +285,7 @@ def _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e
         n_unk = _active(sel, col, e0, e1, n_off, act)
         if n_sel < n_unk:
             return -1, it
-        _weights(p, el, iono_d, scale, fact, var_eph, e0, n, w)
+        _weights(p, el, iono_d, scale, fact, var_eph, e0, n, w, gamma)
         _normal(H, dz, w, sel, act, n, n_unk, N, b)
         if not _cholesky(N, L, n_unk):
             return -1, it
@@ -297,13 +301,108 @@ def _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e
 
 
 @njit(cache=True)
+def _igg3(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, sel, p, alpha, beta, tow, H, dz, el, az,
+          iono_d, w, act, N, L, b, dx, gamma, touched, keep, sel2, Hc, s2, Ninv, idx, qv, t_all, t_ok):
+    """As spp._igg3_solution from the converged plain solution ``x`` (changed in place):
+    ``gamma`` the factors; returns the robust status code (ROBUST_*) or -1 when a step finds
+    too few rows or a singular normal matrix (spp raises: too few satellites)."""
+    n = e1 - e0
+    n_off = x.shape[0] - 4
+    k0, k1 = p[9], p[10]
+    n_sel = 0
+    for r in range(n):
+        gamma[r] = 1.0
+        touched[r] = not sel[r]
+        if sel[r]:
+            n_sel += 1
+    if n_sel < _active(sel, col, e0, e1, n_off, act) + 2:
+        return ROBUST_UNTESTABLE
+    while True:
+        n_keep = 0
+        for r in range(n):
+            keep[r] = sel[r] and gamma[r] > 0.0
+            if keep[r]:
+                n_keep += 1
+        n_unk = _active(keep, col, e0, e1, n_off, act)
+        if n_keep < n_unk + 2:          # one more row out would leave nothing to check it by
+            break
+        _linearise(x, sat, rho_corr, col, iono_scale, e0, e1, _near_surface(x), tow, p[3] > 0, p[4] > 0, alpha,
+                   beta, H, dz, el, az, iono_d)
+        _weights(p, el, iono_d, scale, fact, var_eph, e0, n, w, gamma)
+        m = 0
+        for r in range(n):
+            if keep[r]:
+                idx[m] = r
+                a = 0
+                for c in range(4 + n_off):
+                    if act[c]:
+                        Hc[m, a] = H[r, c]
+                        a += 1
+                s2[m] = 1.0 / w[r]
+                m += 1
+        for a in range(n_unk):
+            for c in range(n_unk):
+                t = 0.0
+                for i in range(m):
+                    t += Hc[i, a] * Hc[i, c] / s2[i]
+                N[a, c] = t
+        if not _cholesky(N, L, n_unk):
+            return -1
+        _chol_inverse(L, Ninv, n_unk)
+        any_ok = False
+        for i in range(m):
+            hnh = 0.0
+            for a in range(n_unk):
+                for c in range(n_unk):
+                    hnh += Hc[i, a] * Ninv[a, c] * Hc[i, c]
+            qv[i] = s2[i] - hnh          # the residual's own variance in this solution
+            t_all[i] = abs(dz[idx[i]]) / math.sqrt(max(qv[i], 1e-300))
+            ok = qv[i] > 0.05 * s2[i] and not touched[idx[i]]
+            t_ok[i] = t_all[i] if ok else 0.0
+            any_ok = any_ok or ok
+        if not any_ok:
+            break
+        j = 0
+        for i in range(1, m):
+            if t_ok[i] > t_ok[j]:
+                j = i
+        if t_ok[j] <= k0:
+            break
+        # blame row j only if it stands out from every other row (spp._igg3_solution)
+        for i in range(m):
+            if i == j:
+                continue
+            q_ji = 0.0
+            for a in range(n_unk):
+                for c in range(n_unk):
+                    q_ji -= Hc[j, a] * Ninv[a, c] * Hc[i, c]
+            rr = abs(q_ji) / math.sqrt(max(qv[j] * qv[i], 1e-300))
+            sd = math.sqrt(2.0 * max(1.0 - rr, 0.0))
+            if rr > 0.999 or t_ok[j] - t_all[i] < SEPARATION_SIGMAS * sd:
+                return ROBUST_NOT_SEPARABLE
+        tj = t_ok[j]
+        worst = idx[j]
+        gamma[worst] = 0.0 if tj > k1 else (k0 / tj) * ((k1 - tj) / (k1 - k0)) ** 2
+        touched[worst] = True
+        for r in range(n):
+            keep[r] = sel[r] and gamma[r] > 0.0
+        st, _ = _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, keep, True, p, alpha,
+                              beta, tow, H, dz, el, az, iono_d, w, sel2, act, N, L, b, dx, gamma)
+        if st < 0:
+            return -1
+    return ROBUST_OK
+
+
+@njit(cache=True)
 def spp_epochs(sat, rho_corr, scale, fact, var_eph, iono_scale, sys_idx, bounds, tow, params, alpha, beta,
-               pos, clock, cov, offsets, clock_sys, status, n_used, dops, rms, n_rejected, used, below):
+               pos, clock, cov, offsets, clock_sys, status, n_used, dops, rms, n_rejected, used, below, robust_code,
+               n_down, n_excl):
     """Plain WLS SPP at every epoch (module docstring); outputs filled in place.
 
     ``params``: elevation mask [rad], sigma_a, sigma_b [m], troposphere, ionosphere (1/0),
     max_iter, tol [m], weights (0 elevation, 1 RTKLIB's: per row ``fact`` its system factor
-    and ``var_eph`` its ephemeris variance [m^2]). Per epoch: ``pos`` (k, 3), ``clock`` (k,), ``cov`` (k, 4, 4) position
+    and ``var_eph`` its ephemeris variance [m^2]), robust (1/0), k0, k1 (IGG-III); per epoch
+    the robust status code, rows down-weighted and excluded. Per epoch: ``pos`` (k, 3), ``clock`` (k,), ``cov`` (k, 4, 4) position
     and clock, ``offsets`` (k, 5) per system in ``G R E C J`` (0 for the clock's, NaN for
     a system without a used row), ``clock_sys`` (k,) the clock's system (-1 none),
     ``status`` (k,) a CODE_*, ``n_used``, ``dops`` (k, 3) PDOP, HDOP, VDOP, ``rms`` residual
@@ -333,6 +432,15 @@ def spp_epochs(sat, rho_corr, scale, fact, var_eph, iono_scale, sys_idx, bounds,
     sys_of_col = np.zeros(N_SYSTEMS, np.int64)
     x0 = np.zeros(4)
     have_x0 = False
+    gamma = np.ones(mmax)
+    touched = np.zeros(mmax, np.bool_)
+    keep = np.zeros(mmax, np.bool_)
+    sel2 = np.zeros(mmax, np.bool_)
+    usedr = np.zeros(mmax, np.bool_)
+    Hc = np.zeros((mmax, 4 + N_SYSTEMS))
+    s2, qv, t_all, t_ok = np.zeros(mmax), np.zeros(mmax), np.zeros(mmax), np.zeros(mmax)
+    idx = np.zeros(mmax, np.int64)
+    Ninv = np.zeros_like(N)
     for j in range(k):
         e0, e1 = bounds[j], bounds[j + 1]
         n = e1 - e0
@@ -361,24 +469,37 @@ def spp_epochs(sat, rho_corr, scale, fact, var_eph, iono_scale, sys_idx, bounds,
             x[:4] = x0
         for r in range(n):
             use[r] = True
+            gamma[r] = 1.0
         st, _ = _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, use, True, params,
-                              alpha, beta, tow[j], H, dz, el, az, iono_d, w, sel, act, N, L, b, dx)
+                              alpha, beta, tow[j], H, dz, el, az, iono_d, w, sel, act, N, L, b, dx, gamma)
         if st == 0 and _near_surface(x):
             # a satellite at the mask entering and leaving: keep the last set, iterate on
             for r in range(n):
                 use[r] = sel[r]
             st, _ = _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, use, False,
-                                  params, alpha, beta, tow[j], H, dz, el, az, iono_d, w, sel, act, N, L, b, dx)
+                                  params, alpha, beta, tow[j], H, dz, el, az, iono_d, w, sel, act, N, L, b, dx, gamma)
         if st < 0:
             status[j] = CODE_FEW
             have_x0 = False
             continue
+        rcode = ROBUST_OFF
+        if params[8] > 0 and st == 1:
+            rcode = _igg3(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, sel, params, alpha, beta,
+                          tow[j], H, dz, el, az, iono_d, w, act, N, L, b, dx, gamma, touched, keep, sel2, Hc, s2,
+                          Ninv, idx, qv, t_all, t_ok)
+            if rcode < 0:
+                status[j] = CODE_FEW
+                have_x0 = False
+                continue
+        # the rows of the solution: above the mask and not excluded by the robust weights
+        for r in range(n):
+            usedr[r] = sel[r] and gamma[r] > 0.0
         # post-fit: the final estimate's rows, covariance and DOPs
         _linearise(x, sat, rho_corr, col, iono_scale, e0, e1, True, tow[j], params[3] > 0, params[4] > 0,
                    alpha, beta, H, dz, el, az, iono_d)
-        n_unk = _active(sel, col, e0, e1, n_off, act)
-        _weights(params, el, iono_d, scale, fact, var_eph, e0, n, w)
-        _normal(H, dz, w, sel, act, n, n_unk, N, b)
+        n_unk = _active(usedr, col, e0, e1, n_off, act)
+        _weights(params, el, iono_d, scale, fact, var_eph, e0, n, w, gamma)
+        _normal(H, dz, w, usedr, act, n, n_unk, N, b)
         if not _cholesky(N, L, n_unk):
             status[j] = CODE_FEW
             have_x0 = False
@@ -395,7 +516,7 @@ def spp_epochs(sat, rho_corr, scale, fact, var_eph, iono_scale, sys_idx, bounds,
             for q in range(3, 4 + n_off):
                 G[r, q] = H[r, q]
             w[r] = 1.0
-        _normal(G, dz, w, sel, act, n, n_unk, NG, b)
+        _normal(G, dz, w, usedr, act, n, n_unk, NG, b)
         if not _cholesky(NG, L, n_unk):
             status[j] = CODE_FEW
             have_x0 = False
@@ -403,12 +524,24 @@ def spp_epochs(sat, rho_corr, scale, fact, var_eph, iono_scale, sys_idx, bounds,
         _chol_inverse(L, Q, n_unk)
         # the rows under the mask seen from the final position (spp._below_mask's count)
         n_sel = 0
+        n_use = 0
+        nd = 0
+        ne = 0
         for r in range(n):
             below[e0 + r] = el[r] < params[0]
-            used[e0 + r] = sel[r]
+            used[e0 + r] = usedr[r]
             if sel[r]:
                 n_sel += 1
+            if usedr[r]:
+                n_use += 1
+            if gamma[r] == 0.0:
+                ne += 1
+            elif gamma[r] < 1.0:
+                nd += 1
         n_rejected[j] = n - n_sel
+        robust_code[j] = rcode
+        n_down[j] = nd
+        n_excl[j] = ne
         if st == 0:
             status[j] = CODE_NOT_CONVERGED
             have_x0 = False
@@ -425,14 +558,14 @@ def spp_epochs(sat, rho_corr, scale, fact, var_eph, iono_scale, sys_idx, bounds,
         dops[j, 2] = math.sqrt(Q[2, 2])
         ss = 0.0
         for r in range(n):
-            if sel[r]:
+            if usedr[r]:
                 ss += dz[r] * dz[r]
-        rms[j] = math.sqrt(ss / n_sel)
-        n_used[j] = n_sel
+        rms[j] = math.sqrt(ss / n_use)
+        n_used[j] = n_use
         # the clock's system: the first present with a used row (spp.wls_position's offsets)
         clock_rows = False
         for i in range(e0, e1):
-            if sel[i - e0] and col[i] < 0:
+            if usedr[i - e0] and col[i] < 0:
                 clock_rows = True
         ref = first if clock_rows else -1
         a = 4
@@ -441,7 +574,7 @@ def spp_epochs(sat, rho_corr, scale, fact, var_eph, iono_scale, sys_idx, bounds,
                 offsets[j, sys_of_col[c]] = x[4 + c]
             elif ref < 0:
                 for i in range(e0, e1):
-                    if sel[i - e0] and col[i] == c:
+                    if usedr[i - e0] and col[i] == c:
                         ref = sys_of_col[c]
                         break
         if ref >= 0:

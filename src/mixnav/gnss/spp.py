@@ -68,6 +68,27 @@ in the broadcast ones); ``I_i`` is Klobuchar's L1 delay times ``(f_L1 / f_i)^2``
 redundancy thresholds are then "2 rows beyond the unknowns" (6 for one system). One
 system is exactly the single-system solution.
 
+RTKLIB's weights (``SppOptions.weights = "rtklib"``): RTKLIB pntpos's variance of a
+first-frequency pseudorange (demo5 EX 2.5.1 src/pntpos.c varerr and its caller, written
+anew here), ``sigma_i^2 = f_s^2 0.9^2 (1 + 1/sin(max(el, 5 deg))) + sigma_eph^2 + 0.3^2 +
+(0.5 I_i)^2 + (0.3 / (sin el + 0.1))^2``: the code term (RTKLIB's default error ratio 300
+times 0.003 m, its ``1/sin`` not squared) with the system factor ``f_s`` (1.5 for GLONASS,
+else 1), the broadcast record's orbit + clock variance (URA, SISA, 5 m for GLONASS:
+:func:`mixnav.gnss.multi_ephemeris.ephemeris_variance`), the code bias, half the ionosphere
+delay applied (5 m without the model) and the Saastamoinen error (3 m without). It
+needs a MultiEphemeris; ``sigma_a``, ``sigma_b`` are not used; ``sigma_scale`` scales the
+code term. On urbannav-tst-static it reproduces RTKLIB demo5's single-point results
+(tests/test_spp_multi.py). RTKLIB's rejection of records with URA beyond 300 m is not
+copied (the record choice stays mixnav's).
+
+Speed (``SppOptions.engine``): :func:`solve_epochs`' plain WLS goes by default through one
+compiled loop over all epochs (:mod:`mixnav.gnss._spp_kernel`) after one batched satellite
+computation for every observation (transmit time from its pseudorange, then once more with
+the satellite clock off); ``engine = "numpy"`` is the epoch-by-epoch path through
+:func:`wls_position`, the reference the compiled one equals within 1e-8 m (statuses and
+counts equal; tests/test_spp_kernel.py), the robust solution included (the same data
+snooping compiled).
+
 A single epoch with fewer usable satellites than unknowns (4, plus one per extra
 system) raises ``ValueError`` in :func:`wls_position`; :func:`solve_epochs` counts such
 epochs as skipped (status ``"too few satellites"``) instead. A satellite at the mask
@@ -139,8 +160,8 @@ class SppOptions:
         :func:`solve_epochs`'s plain WLS: satellite states of all epochs in one batched
         call and one compiled loop over the epochs (:mod:`mixnav.gnss._spp_kernel`), or
         the numpy solution epoch by epoch (:func:`wls_position`), kept as the reference
-        the compiled one is tested against (equal within 1e-6 m). The robust solution
-        always takes the numpy path.
+        the compiled one is tested against (equal within 1e-6 m), the robust solution
+        included.
     """
 
     elevation_mask: float = np.deg2rad(10.0)
@@ -834,7 +855,7 @@ def solve_epochs(ephemeris, week, tow_rx, epoch, prn, pseudorange, options: SppO
     if options.weights == "rtklib" and not hasattr(ephemeris, "ephemeris_variances"):
         raise ValueError("weights = 'rtklib' needs each satellite's broadcast accuracy: a MultiEphemeris "
                          "(mixnav.gnss.multi_ephemeris), not GPS records read by georinex")
-    compiled = options.engine == "compiled" and options.robust is None
+    compiled = options.engine == "compiled"
     if system is not None or hasattr(ephemeris, "states_of"):
         sysarr = np.full(len(np.asarray(prn)), "G") if system is None else np.asarray(system).astype(str)
         if hasattr(ephemeris, "states_of") or (sysarr != "G").any():
@@ -983,7 +1004,7 @@ def _solve_epochs_multi(ephemeris, week, tow_rx, epoch, prn, pseudorange, option
 
 def _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, sigma_scale, system,
                     glonass_channel) -> SppTrack:
-    """:func:`solve_epochs`'s plain WLS through the compiled loop (``options.engine``):
+    """:func:`solve_epochs` (plain or robust WLS) through the compiled loop (``options.engine``):
     the satellites of all observations at their transmit times in one batched call, then
     :func:`mixnav.gnss._spp_kernel.spp_epochs`, then the same bookkeeping as the numpy
     paths (:func:`_solve_epochs_multi` with ``system``, one system without)."""
@@ -1055,7 +1076,8 @@ def _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, s
     letters_used, inverse = np.unique(sysarr[rows], return_inverse=True)
     sys_idx = np.array([SYSTEM_ORDER.index(s) for s in letters_used.tolist()], np.int64)[inverse.ravel()]
     params = np.array([options.elevation_mask, options.sigma_a, options.sigma_b, float(options.troposphere),
-                       float(iono_on), float(options.max_iter), options.tol, float(options.weights == "rtklib")])
+                       float(iono_on), float(options.max_iter), options.tol, float(options.weights == "rtklib"),
+                       float(options.robust is not None), *(options.robust or (0.0, 0.0))])
     if options.weights == "rtklib":
         fact = np.array([RTKLIB_SYSTEM_FACTOR.get(c, 1.0) for c in SYSTEM_ORDER])[sys_idx]
         var_eph = ephemeris.ephemeris_variances(sysarr[rows], prn[rows], week[epoch[rows]],
@@ -1068,11 +1090,12 @@ def _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, s
     n_used, dops, rms = np.zeros(k, np.int64), np.full((k, 3), np.nan), np.full(k, np.nan)
     n_rejected = np.full(k, -1, np.int64)
     used, below = np.zeros(len(rows), bool), np.zeros(len(rows), bool)
+    robust_code, n_down, n_excl = np.zeros(k, np.int64), np.zeros(k, np.int64), np.zeros(k, np.int64)
     spp_epochs(np.ascontiguousarray(sat), rho[rows] + C_LIGHT * clk2, scale[rows], fact, var_eph, iono_scale[rows],
                sys_idx, bounds,
                tow_rx, params, np.zeros(4) if alpha is None else np.asarray(alpha, float),
                np.zeros(4) if beta is None else np.asarray(beta, float), pos, clock, cov, offsets, clock_sys, status,
-               n_used, dops, rms, n_rejected, used, below)
+               n_used, dops, rms, n_rejected, used, below, robust_code, n_down, n_excl)
     names = np.array([STATUS_OK, STATUS_FEW, STATUS_NOT_CONVERGED], dtype=object)
     out = SppTrack(week=week.copy(), tow=tow_rx.copy(), pos_ecef=pos, clock_bias=clock, cov=cov, n_sat=n_used.astype(int),
                    pdop=dops[:, 0].copy(), hdop=dops[:, 1].copy(), vdop=dops[:, 2].copy(), rms_residual=rms,
@@ -1080,6 +1103,12 @@ def _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, s
     # the mask's count: per satellite seen from the final position where the mask left a row
     # out (several systems), the rows left out (one system; every solved epoch adds its count)
     solved = n_rejected >= 0
+    if options.robust is not None:      # over the epochs with a solution, converged or not (as _record)
+        names_r = ("off", "ok", "untestable", "not_separable")
+        out.robust = {"rows_downweighted": int(n_down[solved].sum()), "rows_excluded": int(n_excl[solved].sum())}
+        codes = robust_code[solved]
+        for c in dict.fromkeys(codes.tolist()):
+            out.robust[f"epochs_{names_r[c]}"] = int(np.sum(codes == c))
     if multi:
         row_epoch = epoch[rows]
         flag = below & (n_rejected[row_epoch] > 0)
