@@ -568,7 +568,6 @@ def spp_epochs(sat, rho_corr, scale, fact, var_eph, iono_scale, sys_idx, bounds,
             if usedr[i - e0] and col[i] < 0:
                 clock_rows = True
         ref = first if clock_rows else -1
-        a = 4
         for c in range(n_off):
             if act[4 + c]:
                 offsets[j, sys_of_col[c]] = x[4 + c]

@@ -1096,7 +1096,8 @@ def _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, s
                tow_rx, params, np.zeros(4) if alpha is None else np.asarray(alpha, float),
                np.zeros(4) if beta is None else np.asarray(beta, float), pos, clock, cov, offsets, clock_sys, status,
                n_used, dops, rms, n_rejected, used, below, robust_code, n_down, n_excl)
-    names = np.array([STATUS_OK, STATUS_FEW, STATUS_NOT_CONVERGED], dtype=object)
+    names = np.empty(3, dtype=object)
+    names[CODE_OK], names[CODE_FEW], names[CODE_NOT_CONVERGED] = STATUS_OK, STATUS_FEW, STATUS_NOT_CONVERGED
     out = SppTrack(week=week.copy(), tow=tow_rx.copy(), pos_ecef=pos, clock_bias=clock, cov=cov, n_sat=n_used.astype(int),
                    pdop=dops[:, 0].copy(), hdop=dops[:, 1].copy(), vdop=dops[:, 2].copy(), rms_residual=rms,
                    status=names[status].astype(str))
