@@ -20,8 +20,23 @@ from numba import njit
 
 from ..geodesy.earth import A_WGS84, E2_WGS84
 from .geometry import C_LIGHT, OMEGA_E_GPS
-from .spp import (SEPARATION_SIGMAS, RTKLIB_CODE_BIAS_SIGMA, RTKLIB_CODE_SIGMA, RTKLIB_IONO_FACTOR, RTKLIB_IONO_OFF_SIGMA,
-                  RTKLIB_MIN_ELEVATION, RTKLIB_TROPO_OFF_SIGMA, RTKLIB_TROPO_SIGMA)
+
+#: the robust solution blames a row only if its standardised residual exceeds every other
+#: row's by this many standard deviations of their difference (spp's module docstring,
+#: "Robust solution"; re-exported by spp)
+SEPARATION_SIGMAS = 3.0
+#: RTKLIB pntpos's pseudorange variance (``SppOptions.weights = "rtklib"``, spp's docstring):
+#: code sigma 0.9 m = its default error ratio 300 x 0.003 m (prcopt_default err[1], err[2],
+#: eratio[0]) for both the constant and the 1/sin(el) term, elevation floored at 5 deg
+#: (MIN_EL); per-system factors (EFACT_*); code bias 0.3 m (ERR_CBIAS); broadcast ionosphere
+#: half its delay (ERR_BRDCI), 5 m without (ERR_ION); Saastamoinen 0.3 m / (sin el + 0.1)
+#: (ERR_SAAS), 3 m without (ERR_TROP). RTKLIB demo5 EX 2.5.1 src/pntpos.c, src/rtklib.h.
+RTKLIB_CODE_SIGMA = 0.9
+RTKLIB_MIN_ELEVATION = np.deg2rad(5.0)
+RTKLIB_SYSTEM_FACTOR = {"G": 1.0, "R": 1.5, "E": 1.0, "C": 1.0, "J": 1.0}
+RTKLIB_CODE_BIAS_SIGMA = 0.3
+RTKLIB_IONO_FACTOR, RTKLIB_IONO_OFF_SIGMA = 0.5, 5.0
+RTKLIB_TROPO_SIGMA, RTKLIB_TROPO_OFF_SIGMA = 0.3, 3.0
 
 N_SYSTEMS = 5
 #: status codes of :func:`spp_epochs` (mapped to spp.STATUS_* by the caller)

@@ -105,25 +105,13 @@ import numpy as np
 
 from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla
 from ..noise.igg3 import igg3_factors
+# the compiled loop, and the constants it shares with this module (defined there, so that
+# the import goes one way)
+from ._spp_kernel import (CODE_FEW, CODE_NOT_CONVERGED, CODE_OK, RTKLIB_CODE_BIAS_SIGMA,  # noqa: F401
+                          RTKLIB_CODE_SIGMA, RTKLIB_IONO_FACTOR, RTKLIB_IONO_OFF_SIGMA, RTKLIB_MIN_ELEVATION,
+                          RTKLIB_SYSTEM_FACTOR, RTKLIB_TROPO_OFF_SIGMA, RTKLIB_TROPO_SIGMA, SEPARATION_SIGMAS,
+                          spp_epochs)
 from .geometry import C_LIGHT, F_L1, LAMBDA_L1, SatelliteStates, earth_rotation_correction, elevation_azimuth
-
-#: the robust solution blames a row only if its standardised residual exceeds every other
-#: row's by this many standard deviations of their difference (module docstring, "Robust
-#: solution")
-SEPARATION_SIGMAS = 3.0
-
-#: RTKLIB pntpos's pseudorange variance (``SppOptions.weights = "rtklib"``, module docstring):
-#: code sigma 0.9 m = its default error ratio 300 x 0.003 m (prcopt_default err[1], err[2],
-#: eratio[0]) for both the constant and the 1/sin(el) term, elevation floored at 5 deg
-#: (MIN_EL); per-system factors (EFACT_*); code bias 0.3 m (ERR_CBIAS); broadcast ionosphere
-#: half its delay (ERR_BRDCI), 5 m without (ERR_ION); Saastamoinen 0.3 m / (sin el + 0.1)
-#: (ERR_SAAS), 3 m without (ERR_TROP). RTKLIB demo5 EX 2.5.1 src/pntpos.c, src/rtklib.h.
-RTKLIB_CODE_SIGMA = 0.9
-RTKLIB_MIN_ELEVATION = np.deg2rad(5.0)
-RTKLIB_SYSTEM_FACTOR = {"G": 1.0, "R": 1.5, "E": 1.0, "C": 1.0, "J": 1.0}
-RTKLIB_CODE_BIAS_SIGMA = 0.3
-RTKLIB_IONO_FACTOR, RTKLIB_IONO_OFF_SIGMA = 0.5, 5.0
-RTKLIB_TROPO_SIGMA, RTKLIB_TROPO_OFF_SIGMA = 0.3, 3.0
 
 #: Epoch status codes of :func:`solve_epochs`.
 STATUS_OK = "ok"
@@ -1008,7 +996,6 @@ def _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, s
     the satellites of all observations at their transmit times in one batched call, then
     :func:`mixnav.gnss._spp_kernel.spp_epochs`, then the same bookkeeping as the numpy
     paths (:func:`_solve_epochs_multi` with ``system``, one system without)."""
-    from ._spp_kernel import CODE_FEW, CODE_NOT_CONVERGED, CODE_OK, spp_epochs
     from .multi_ephemeris import SYSTEM_NAMES
     multi = system is not None
     if multi and not hasattr(ephemeris, "states_of"):
