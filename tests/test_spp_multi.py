@@ -219,6 +219,22 @@ def test_urbannav_plain_spp_against_rtklib(urban, systems):
         assert abs(np.nanmedian(tr.offsets["C"])) < 10.0
 
 
+@pytest.mark.parametrize("systems", ["G", "GC", "GREC"])
+def test_urbannav_rtklib_weights_reproduce_rtklib(urban, systems):
+    """With RTKLIB pntpos's weights (SppOptions.weights = "rtklib") the plain SPP is within
+    1 % of RTKLIB demo5's horizontal RMSE (the issue's "within 10 % with the same models";
+    RTKLIB's numbers to 0.1 m, rerun in benchmarks/results/rtklib_urbannav.md). Seen: 50.32,
+    25.10, 18.84 m against 50.3, 25.1, 18.85."""
+    obs, eph = urban
+    m = np.isin(obs.system, list(systems))
+    tr = solve_epochs(eph, obs.week, obs.tow, obs.epoch[m], obs.prn[m], obs.pseudorange[m],
+                      SppOptions(elevation_mask=np.deg2rad(15.0), weights="rtklib"), system=obs.system[m],
+                      glonass_channel=obs.glonass_channel()[m])
+    assert tr.ok.sum() == 986
+    demo5 = {"G": 50.3, "GC": 25.1, "GREC": 18.85}[systems]
+    assert abs(_h_rmse(tr) / demo5 - 1.0) < 0.01
+
+
 # ---------------------------------------------------------------- bad input
 def test_system_without_navigation_data_counted_warned_named(urban, tmp_path):
     from mixnav.config.loader import load_dataset

@@ -79,6 +79,43 @@ _INAV_BITS, _FNAV_BITS, _CLOCK_E5A, _CLOCK_E5B = 0b101, 0b010, 1 << 8, 1 << 9
 _E1B_HEALTH_BITS = 0b111
 
 
+#: GPS URA values [m] by index (IS-GPS-200 20.3.3.3.1.1; also QZSS and BeiDou's URA)
+URA_TABLE = np.array([2.4, 3.4, 4.85, 6.85, 9.65, 13.65, 24.0, 48.0, 96.0, 192.0, 384.0, 768.0, 1536.0, 3072.0,
+                      6144.0])
+#: GLONASS broadcasts no accuracy in RINEX: a 5 m orbit + clock sigma (RTKLIB's ERREPH_GLO)
+GLONASS_EPHEMERIS_SIGMA = 5.0
+#: Galileo SISA "no accurate prediction available" sigma [m] (RTKLIB's STD_GAL_NAPA)
+SISA_NAPA_SIGMA = 500.0
+
+
+def ephemeris_variance(system: str, accuracy) -> np.ndarray:
+    """Orbit + clock variance [m^2] of broadcast records from their accuracy field [m], the way
+    RTKLIB's single point weighs them (written from the ICDs, following RTKLIB's rounding):
+
+    - GPS, QZSS, BeiDou: the URA the field names is the first entry of :data:`URA_TABLE` at or
+      above it (the index the receiver decoded); its square; beyond the table or blank, 6144^2;
+    - Galileo: SISA [m] to its index (OS SIS ICD 5.1.12: 1 cm steps to 0.49 m, 2 cm to
+      0.98 m, 4 cm to 1.96 m, 16 cm to 6 m) and back, squared; negative, beyond 6 m or blank
+      (NAPA): :data:`SISA_NAPA_SIGMA`^2;
+    - GLONASS: :data:`GLONASS_EPHEMERIS_SIGMA`^2.
+    """
+    a = np.atleast_1d(np.asarray(accuracy, float))
+    if system == "R":
+        return np.full(a.shape, GLONASS_EPHEMERIS_SIGMA ** 2)
+    if system == "E":
+        v = np.where(np.isfinite(a), a, -1.0)
+        sig = np.full(a.shape, SISA_NAPA_SIGMA)
+        # index steps as the SISA encoding; the value back from the rounded index
+        for lo, hi, step, base, first in ((0.0, 0.49, 0.01, 0.0, 0), (0.49, 0.98, 0.02, 0.5, 50),
+                                          (0.98, 1.96, 0.04, 1.0, 75), (1.96, 6.0, 0.16, 2.0, 100)):
+            m = (v > lo if first else v >= lo) & (v <= hi)
+            idx = np.round((v[m] - base) / step)
+            sig[m] = base + idx * step
+        return sig ** 2
+    idx = np.searchsorted(URA_TABLE, np.where(np.isfinite(a), a, np.inf), side="left")
+    return np.append(URA_TABLE, 6144.0)[np.minimum(idx, len(URA_TABLE))] ** 2
+
+
 class KeplerEphemeris(BroadcastEphemeris):
     """Keplerian broadcast records of one system (G, J, E or C): BroadcastEphemeris's
     selection and interface with the system's constants and time scale.
@@ -336,27 +373,79 @@ class MultiEphemeris:
             prns = np.array([int(s[1:]) for s in ids], dtype=int)
         except ValueError as exc:
             raise ArgumentError(f"satellite ids must look like 'G05' ({exc})", "sat_ids") from exc
-        n = len(ids)
+        pos, vel, clk, drift, reason = self.states_by_system(letters, prns, week, tow, apply_group_delay)
+        keep = reason == ""
+        skips = {letter: EphemerisSkips(prns[(letters == letter) & ~keep],
+                                        tuple(reason[(letters == letter) & ~keep].tolist()))
+                 for letter in dict.fromkeys(letters.tolist())}
+        st = SatelliteStates(prns[keep], pos[keep], vel[keep], clk[keep], drift[keep])
+        return st, letters[keep], keep, skips
+
+    def states_by_system(self, letters, prns, week, tow, apply_group_delay: bool = True, chunk: int = 8192):
+        """:meth:`states_of` for arrays of system letters and PRNs (n,), any number of rows
+        (e.g. every observation of a file at once, each at its own time).
+
+        The record choice is made ``chunk`` rows at a time (its table is rows x records).
+
+        Returns
+        -------
+        pos, vel : ndarray (n, 3)
+        clk, drift : ndarray (n,)
+            NaN where no record was used.
+        reason : ndarray of str (n,)
+            ``""`` where a record was used, else why not (the reasons of
+            :meth:`states_and_skips`).
+        """
+        letters = np.asarray(letters).astype(str)
+        prns = np.asarray(prns, dtype=int)
+        n = len(letters)
         tow_n = np.broadcast_to(np.asarray(tow, float), (n,))
         week_n = np.broadcast_to(np.asarray(week), (n,))
         pos, vel = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
         clk, drift = np.full(n, np.nan), np.full(n, np.nan)
-        keep = np.zeros(n, bool)
-        skips = {}
-        for letter in dict.fromkeys(letters):
+        reason = np.full(n, "", dtype=object)
+        for letter in dict.fromkeys(letters.tolist()):
             rows = np.flatnonzero(letters == letter)
             eph = self.systems.get(letter)
             if eph is None:
-                skips[letter] = self.states_and_skips(letter, prns[rows], None, None)[1]
+                self.states_and_skips(letter, prns[rows[:1]], None, None)   # an unknown letter raises
+                reason[rows] = NO_SYSTEM_DATA
                 continue
-            idx, t, skips[letter] = eph._select(week_n[rows], tow_n[rows], prns[rows])
+            idx = np.empty(len(rows), int)
+            t = np.empty(len(rows))
+            for c0 in range(0, len(rows), chunk):
+                part = rows[c0:c0 + chunk]
+                i, tt, sk = eph._select(week_n[part], tow_n[part], prns[part])
+                idx[c0:c0 + chunk], t[c0:c0 + chunk] = i, tt
+                reason[part[i < 0]] = sk.reason
             ok = idx >= 0
             p, v, c, d = eph._compute(idx[ok], t[ok], apply_group_delay)
             rows = rows[ok]
             pos[rows], vel[rows], clk[rows], drift[rows] = p, v, c, d
-            keep[rows] = True
-        st = SatelliteStates(prns[keep], pos[keep], vel[keep], clk[keep], drift[keep])
-        return st, letters[keep], keep, skips
+        return pos, vel, clk, drift, reason.astype(str)
+
+    def ephemeris_variances(self, letters, prns, week, tow) -> np.ndarray:
+        """Orbit + clock variance [m^2] (n,) of the record each observation uses
+        (:func:`ephemeris_variance` of its accuracy field; NaN where no record is used),
+        the record chosen as :meth:`states_by_system` chooses it."""
+        letters = np.asarray(letters).astype(str)
+        prns = np.asarray(prns, dtype=int)
+        n = len(letters)
+        tow_n = np.broadcast_to(np.asarray(tow, float), (n,))
+        week_n = np.broadcast_to(np.asarray(week), (n,))
+        out = np.full(n, np.nan)
+        for letter in dict.fromkeys(letters.tolist()):
+            eph = self.systems.get(letter)
+            if eph is None:
+                continue
+            rows = np.flatnonzero(letters == letter)
+            for c0 in range(0, len(rows), 8192):
+                part = rows[c0:c0 + 8192]
+                idx = eph._select(week_n[part], tow_n[part], prns[part])[0]
+                ok = idx >= 0
+                acc = eph.rec["ura"][idx[ok]] if "ura" in eph.rec else np.full(int(ok.sum()), np.nan)
+                out[part[ok]] = ephemeris_variance(letter, acc)
+        return out
 
     def skip_counts(self, skips: dict) -> dict[str, dict[str, int]]:
         """Per system name, the satellites left out per reason (from :meth:`states_of`'s ``skips``)."""
@@ -529,6 +618,7 @@ def _parse_header(lines: list, source: str) -> dict:
 _KEPLER_INDEX = {"af0": 0, "af1": 1, "af2": 2, "crs": 4, "delta_n": 5, "m0": 6, "cuc": 7, "e": 8,
                  "cus": 9, "sqrt_a": 10, "toe": 11, "cic": 12, "omega0": 13, "cis": 14, "i0": 15,
                  "crc": 16, "omega": 17, "omega_dot": 18, "idot": 19, "week": 21, "health": 24}
+_URA_INDEX = 23
 _KEPLER_EXTRA = {"G": {"tgd": 25}, "J": {"tgd": 25}, "C": {"tgd": 25},
                  "E": {"data_source": 20, "bgd_e5a": 25, "bgd_e5b": 26}}
 _GLONASS_INDEX = {"minus_tau_n": 0, "gamma_n": 1, "x": 3, "vx": 4, "ax": 5, "health": 6,
@@ -568,6 +658,9 @@ def _check(raw: dict, letter: str, ok: np.ndarray, what: str) -> None:
 def _kepler_records(raw: dict, letter: str, galileo_nav: str):
     """Records of one Keplerian system, times in its own scale; (None, 0) if none."""
     rec = _take(raw, {**_KEPLER_INDEX, **_KEPLER_EXTRA[letter]}, letter)
+    vals = raw["values"]
+    # SV accuracy (GPS, QZSS, BeiDou URA) or SISA (Galileo) [m]; a blank field reads NaN
+    rec["ura"] = vals[:, _URA_INDEX] if vals.shape[1] > _URA_INDEX else np.full(len(vals), np.nan)
     _check(raw, letter, (rec["e"] >= 0) & (rec["e"] < 1) & (rec["sqrt_a"] > 0),
            "eccentricity outside [0, 1) or sqrt(A) <= 0")
     origin = _BDT_EPOCH if letter == "C" else _GPS_EPOCH

@@ -68,6 +68,27 @@ in the broadcast ones); ``I_i`` is Klobuchar's L1 delay times ``(f_L1 / f_i)^2``
 redundancy thresholds are then "2 rows beyond the unknowns" (6 for one system). One
 system is exactly the single-system solution.
 
+RTKLIB's weights (``SppOptions.weights = "rtklib"``): RTKLIB pntpos's variance of a
+first-frequency pseudorange (demo5 EX 2.5.1 src/pntpos.c varerr and its caller, written
+anew here), ``sigma_i^2 = f_s^2 0.9^2 (1 + 1/sin(max(el, 5 deg))) + sigma_eph^2 + 0.3^2 +
+(0.5 I_i)^2 + (0.3 / (sin el + 0.1))^2``: the code term (RTKLIB's default error ratio 300
+times 0.003 m, its ``1/sin`` not squared) with the system factor ``f_s`` (1.5 for GLONASS,
+else 1), the broadcast record's orbit + clock variance (URA, SISA, 5 m for GLONASS:
+:func:`mixnav.gnss.multi_ephemeris.ephemeris_variance`), the code bias, half the ionosphere
+delay applied (5 m without the model) and the Saastamoinen error (3 m without). It
+needs a MultiEphemeris; ``sigma_a``, ``sigma_b`` are not used; ``sigma_scale`` scales the
+code term. On urbannav-tst-static it reproduces RTKLIB demo5's single-point results
+(tests/test_spp_multi.py). RTKLIB's rejection of records with URA beyond 300 m is not
+copied (the record choice stays mixnav's).
+
+Speed (``SppOptions.engine``): :func:`solve_epochs`' plain WLS goes by default through one
+compiled loop over all epochs (:mod:`mixnav.gnss._spp_kernel`) after one batched satellite
+computation for every observation (transmit time from its pseudorange, then once more with
+the satellite clock off); ``engine = "numpy"`` is the epoch-by-epoch path through
+:func:`wls_position`, the reference the compiled one equals within 1e-8 m (statuses and
+counts equal; tests/test_spp_kernel.py), the robust solution included (the same data
+snooping compiled).
+
 A single epoch with fewer usable satellites than unknowns (4, plus one per extra
 system) raises ``ValueError`` in :func:`wls_position`; :func:`solve_epochs` counts such
 epochs as skipped (status ``"too few satellites"``) instead. A satellite at the mask
@@ -77,18 +98,20 @@ settled by keeping the last set fixed and iterating on from there.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla
 from ..noise.igg3 import igg3_factors
+# the compiled loop, and the constants it shares with this module (defined there, so that
+# the import goes one way)
+from ._spp_kernel import (CODE_FEW, CODE_NOT_CONVERGED, CODE_OK, RTKLIB_CODE_BIAS_SIGMA,  # noqa: F401
+                          RTKLIB_CODE_SIGMA, RTKLIB_IONO_FACTOR, RTKLIB_IONO_OFF_SIGMA, RTKLIB_MIN_ELEVATION,
+                          RTKLIB_SYSTEM_FACTOR, RTKLIB_TROPO_OFF_SIGMA, RTKLIB_TROPO_SIGMA, SEPARATION_SIGMAS,
+                          spp_epochs)
 from .geometry import C_LIGHT, F_L1, LAMBDA_L1, SatelliteStates, earth_rotation_correction, elevation_azimuth
-
-#: the robust solution blames a row only if its standardised residual exceeds every other
-#: row's by this many standard deviations of their difference (module docstring, "Robust
-#: solution")
-SEPARATION_SIGMAS = 3.0
 
 #: Epoch status codes of :func:`solve_epochs`.
 STATUS_OK = "ok"
@@ -116,6 +139,17 @@ class SppOptions:
     robust : tuple (k0, k1) or None
         IGG-III thresholds on standardised residuals: the robust solution
         (module docstring, "Robust solution"); None: plain WLS.
+    weights : {"elevation", "rtklib"}
+        The pseudorange variance: ``"elevation"`` mixnav's ``sigma_a^2 + sigma_b^2 /
+        sin^2(el)`` (module docstring); ``"rtklib"`` RTKLIB pntpos's (module docstring,
+        "RTKLIB's weights"; ``sigma_a``, ``sigma_b`` not used), which needs each
+        satellite's broadcast accuracy (a MultiEphemeris).
+    engine : {"compiled", "numpy"}
+        :func:`solve_epochs`'s plain WLS: satellite states of all epochs in one batched
+        call and one compiled loop over the epochs (:mod:`mixnav.gnss._spp_kernel`), or
+        the numpy solution epoch by epoch (:func:`wls_position`), kept as the reference
+        the compiled one is tested against (equal within 1e-6 m), the robust solution
+        included.
     """
 
     elevation_mask: float = np.deg2rad(10.0)
@@ -126,8 +160,14 @@ class SppOptions:
     max_iter: int = 15
     tol: float = 1e-4
     robust: tuple[float, float] | None = None
+    weights: str = "elevation"
+    engine: str = "compiled"
 
     def __post_init__(self):
+        if self.weights not in ("elevation", "rtklib"):
+            raise ValueError(f"weights: must be 'elevation' or 'rtklib', not {self.weights!r}")
+        if self.engine not in ("compiled", "numpy"):
+            raise ValueError(f"engine: must be 'compiled' or 'numpy', not {self.engine!r}")
         if self.robust is not None:
             k0, k1 = self.robust
             if not 0.0 < k0 < k1:
@@ -267,7 +307,7 @@ def _dops(H: np.ndarray, pos_ecef: np.ndarray) -> dict:
 
 def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOptions(), x0=None,
                  sigma_scale=None, iono_alpha=None, iono_beta=None, tow: float = 0.0, system=None,
-                 iono_scale=None) -> SppSolution:
+                 iono_scale=None, ephemeris_var=None) -> SppSolution:
     """WLS position and clock of one epoch (one or several systems).
 
     Several systems (``system`` naming more than one): the unknowns are position, the
@@ -300,6 +340,10 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
     iono_scale : ndarray (n,) or None
         Factor on the Klobuchar (L1) delay per satellite, ``(f_L1 / f)^2`` for a signal
         on frequency ``f`` (:func:`iono_scale_factors`); None: 1.
+    ephemeris_var : ndarray (n,) or None
+        Orbit + clock variance [m^2] of each satellite's record
+        (:meth:`~mixnav.gnss.multi_ephemeris.MultiEphemeris.ephemeris_variances`): needed by
+        ``options.weights = "rtklib"``, not used otherwise.
 
     Raises
     ------
@@ -327,7 +371,14 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
         if iono_scale.shape != (n,):
             raise ValueError(f"iono_scale has shape {iono_scale.shape}, expected ({n},)")
     rho_corr = rho + C_LIGHT * sats.clock_bias                      # satellite clock removed
-    atm = (options, iono_alpha, iono_beta, tow, iono_scale, sys_col, n_off)
+    rtk = None
+    if options.weights == "rtklib":
+        if ephemeris_var is None:
+            raise ValueError("weights = 'rtklib' needs ephemeris_var (each satellite's broadcast accuracy)")
+        letters_n = np.full(n, "G") if system is None else np.asarray(system).astype(str)
+        fact = np.array([RTKLIB_SYSTEM_FACTOR.get(c, 1.0) for c in letters_n.tolist()])
+        rtk = (fact, np.asarray(ephemeris_var, float))
+    atm = (options, iono_alpha, iono_beta, tow, iono_scale, sys_col, n_off, rtk)
     x, sel, it, converged = _gauss_newton(rho_corr, sats, x, scale, np.ones(n, bool), atm)
     if not converged and abs(np.linalg.norm(x[:3]) - 6.371e6) < 5e5:
         # a satellite at the mask can enter and leave from one step to the next, so the steps
@@ -340,8 +391,8 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
         it += k
     # post-fit quantities at the final estimate (the last step is below tol)
     used = sel & (gamma > 0)
-    H, model, el = _linearise(x, sats, atm, always=True)
-    sigma = _sigma(options, el, scale)[used] / np.sqrt(gamma[used])
+    H, model, el, iono = _linearise(x, sats, atm, always=True)
+    sigma = _sigma(options, el, scale, atm, iono)[used] / np.sqrt(gamma[used])
     act = _active(used, sys_col, n_off)
     H = H[used] if act is None else H[used][:, act]
     N = H.T @ (H / sigma[:, None] ** 2)
@@ -406,16 +457,26 @@ def _active(rows, sys_col, n_off: int):
     return act
 
 
-def _sigma(options: SppOptions, el, scale):
-    """The elevation-dependent pseudorange sigma [m] (module docstring)."""
-    return scale * np.sqrt(options.sigma_a**2 + options.sigma_b**2 / np.sin(np.maximum(el, 1e-3)) ** 2)
+def _sigma(options: SppOptions, el, scale, atm=None, iono=None):
+    """The pseudorange sigma [m] (module docstring): mixnav's elevation model, or RTKLIB's
+    (``atm``'s per-row system factors and ephemeris variances, ``iono`` the ionosphere
+    delays applied, None when not)."""
+    if options.weights == "elevation":
+        return scale * np.sqrt(options.sigma_a**2 + options.sigma_b**2 / np.sin(np.maximum(el, 1e-3)) ** 2)
+    fact, var_eph = atm[7]
+    code = (scale * fact * RTKLIB_CODE_SIGMA) ** 2 * (1.0 + 1.0 / np.sin(np.maximum(el, RTKLIB_MIN_ELEVATION)))
+    ion = RTKLIB_IONO_OFF_SIGMA**2 if iono is None else (RTKLIB_IONO_FACTOR * iono) ** 2
+    trop = ((RTKLIB_TROPO_SIGMA / (np.sin(np.maximum(el, 0.0)) + 0.1)) ** 2 if options.troposphere
+            else RTKLIB_TROPO_OFF_SIGMA**2)
+    return np.sqrt(code + var_eph + RTKLIB_CODE_BIAS_SIGMA**2 + ion + trop)
 
 
 def _linearise(x, sats, atm, always: bool = False):
-    """Design matrix (n, 4), modelled pseudoranges (n,) and elevations (n,) at ``x``; the
-    atmosphere (and true elevations) once ``x`` is within 500 km of the surface, or
-    ``always``."""
-    options, iono_alpha, iono_beta, tow, iono_scale, sys_col, n_off = atm
+    """Design matrix (n, 4), modelled pseudoranges (n,), elevations (n,) at ``x`` and the
+    ionosphere delays in the model (n,) (None when the ionosphere is not applied; zeros
+    before the atmosphere is); the atmosphere (and true elevations) once ``x`` is within
+    500 km of the surface, or ``always``."""
+    options, iono_alpha, iono_beta, tow, iono_scale, sys_col, n_off, rtk = atm
     r_geo = np.linalg.norm(sats.pos_ecef - x[:3], axis=1)
     sat_rx = earth_rotation_correction(sats.pos_ecef, r_geo / C_LIGHT)
     rng = np.linalg.norm(sat_rx - x[:3], axis=1)
@@ -424,27 +485,38 @@ def _linearise(x, sats, atm, always: bool = False):
     if sys_col is not None:
         model = model + np.append(x[4:], 0.0)[sys_col]             # index -1: the clock's system
     el = np.full(len(rng), np.pi / 2)
+    iono_on = options.ionosphere and iono_alpha is not None and iono_beta is not None
+    iono = np.zeros(len(rng)) if iono_on else None
     if always or abs(np.linalg.norm(x[:3]) - 6.371e6) < 5e5:
         el, az = elevation_azimuth(x[:3], sat_rx)
-        model = model + atmosphere_delay(ecef_to_lla(x[:3]), el, az, tow, options, iono_alpha, iono_beta,
-                                         iono_scale=iono_scale)
+        lla = ecef_to_lla(x[:3])
+        if rtk is None:
+            model = model + atmosphere_delay(lla, el, az, tow, options, iono_alpha, iono_beta,
+                                             iono_scale=iono_scale)
+        else:   # RTKLIB's weights need the ionosphere part apart
+            if iono_on:
+                iono = atmosphere_delay(lla, el, az, tow, dataclasses.replace(options, troposphere=False),
+                                        iono_alpha, iono_beta, iono_scale=iono_scale)
+            model = model + atmosphere_delay(lla, el, az, tow, dataclasses.replace(options, ionosphere=False))
+            if iono_on:
+                model = model + iono
     H = np.column_stack([-u, np.ones(len(rng))])
     if sys_col is not None:
         H = np.hstack([H, (sys_col[:, None] == np.arange(n_off)[None, :]).astype(float)])
-    return H, model, el
+    return H, model, el, iono
 
 
-def _gauss_newton(rho_corr, sats, x, scale, use, atm, mask: bool = True):
+def _gauss_newton(rho_corr, sats, x, scale, use, atm, mask: bool = True, gamma=None):
     """WLS iterations from ``x`` on the rows ``use`` above the elevation mask (``mask``
     False: on the rows ``use`` as they are): ``(x, sel, iterations, converged)``, ``sel``
-    the rows of the last step."""
+    the rows of the last step; ``gamma`` (n,) weight factors (the robust solution's)."""
     options = atm[0]
     sel = use.copy()
     converged = False
     it = 0
     for it in range(1, options.max_iter + 1):
         near_surface = abs(np.linalg.norm(x[:3]) - 6.371e6) < 5e5
-        H, model, el = _linearise(x, sats, atm)
+        H, model, el, iono = _linearise(x, sats, atm)
         sel = use.copy()
         if near_surface and mask:
             # the rows below the mask are left out of the solution: what is added to them is moot
@@ -454,7 +526,9 @@ def _gauss_newton(rho_corr, sats, x, scale, use, atm, mask: bool = True):
         if sel.sum() < need:
             raise ValueError(f"{int(sel.sum())} satellites above the elevation mask "
                              f"({np.rad2deg(options.elevation_mask):.1f} deg): at least {need} are needed")
-        sigma = _sigma(options, el, scale)
+        sigma = _sigma(options, el, scale, atm, iono)
+        if gamma is not None:
+            sigma = sigma / np.sqrt(gamma)
         Hs = H[sel] if act is None else H[sel][:, act]
         w = 1.0 / sigma[sel] ** 2
         dz = (rho_corr - model)[sel]
@@ -490,8 +564,8 @@ def _igg3_solution(rho_corr, sats, x_plain, scale, sel, atm):
         # one more row out would leave nothing to check it by (two rows beyond the unknowns)
         if int(keep.sum()) < (4 if act is None else int(act.sum())) + 2:
             break
-        H, model, el = _linearise(x, sats, atm)
-        sigma = _sigma(options, el, scale)[keep] / np.sqrt(gamma[keep])
+        H, model, el, iono = _linearise(x, sats, atm)
+        sigma = _sigma(options, el, scale, atm, iono)[keep] / np.sqrt(gamma[keep])
         Hs = H[keep] if act is None else H[keep][:, act]
         N_inv = np.linalg.inv(Hs.T @ (Hs / sigma[:, None] ** 2))
         # each residual's own variance in this solution, sigma^2 - h N^-1 h^T: the standardisation
@@ -522,8 +596,11 @@ def _igg3_solution(rho_corr, sats, x_plain, scale, sel, atm):
         gamma[worst] = igg3_factors(t[j:j + 1], k0, k1)[0]
         touched[worst] = True
         keep = sel & (gamma > 0)
-        eff = np.where(keep, scale / np.sqrt(np.where(keep, gamma, 1.0)), scale)
-        x, _, k, _ = _gauss_newton(rho_corr, sats, x, eff, keep, atm)
+        if options.weights == "elevation":
+            eff = np.where(keep, scale / np.sqrt(np.where(keep, gamma, 1.0)), scale)
+            x, _, k, _ = _gauss_newton(rho_corr, sats, x, eff, keep, atm)
+        else:   # the factor on the whole variance, not on its code part
+            x, _, k, _ = _gauss_newton(rho_corr, sats, x, scale, keep, atm, gamma=np.where(keep, gamma, 1.0))
         iterations += k
     return x, gamma, status, iterations
 
@@ -763,11 +840,20 @@ def solve_epochs(ephemeris, week, tow_rx, epoch, prn, pseudorange, options: SppO
         Each epoch starts from the previous solution (the Earth's centre for
         the first and after a failed one).
     """
+    if options.weights == "rtklib" and not hasattr(ephemeris, "ephemeris_variances"):
+        raise ValueError("weights = 'rtklib' needs each satellite's broadcast accuracy: a MultiEphemeris "
+                         "(mixnav.gnss.multi_ephemeris), not GPS records read by georinex")
+    compiled = options.engine == "compiled"
     if system is not None or hasattr(ephemeris, "states_of"):
         sysarr = np.full(len(np.asarray(prn)), "G") if system is None else np.asarray(system).astype(str)
         if hasattr(ephemeris, "states_of") or (sysarr != "G").any():
+            if compiled:
+                return _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, sigma_scale,
+                                       sysarr, glonass_channel)
             return _solve_epochs_multi(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, sigma_scale,
                                        sysarr, glonass_channel)
+    if compiled:
+        return _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, sigma_scale, None, None)
     week = np.asarray(week)
     tow_rx = np.asarray(tow_rx, float)
     epoch = np.asarray(epoch, int)
@@ -868,10 +954,13 @@ def _solve_epochs_multi(ephemeris, week, tow_rx, epoch, prn, pseudorange, option
             out.status[j] = STATUS_FEW
             continue
         used_rows = rows[keep]
+        var_eph = None
+        if options.weights == "rtklib":
+            var_eph = ephemeris.ephemeris_variances(letters, sats.prn, week[j], tow_rx[j] - rho[used_rows] / C_LIGHT)
         try:
             sol = wls_position(rho[used_rows], sats, options, x0=x0, sigma_scale=scale[used_rows],
                                iono_alpha=alpha, iono_beta=beta, tow=tow_rx[j], system=letters,
-                               iono_scale=iono_scale[used_rows])
+                               iono_scale=iono_scale[used_rows], ephemeris_var=var_eph)
         except ValueError:
             out.status[j] = STATUS_FEW
             x0 = None
@@ -882,7 +971,8 @@ def _solve_epochs_multi(ephemeris, week, tow_rx, epoch, prn, pseudorange, option
         if not _record(out, j, sol, options):
             x0 = None
             continue
-        sys_used = letters if sol.system is None else sol.system
+        # one system in the epoch: the solution names no systems; its used satellites are all of it
+        sys_used = np.full(sol.n_sat, letters[0]) if sol.system is None else sol.system
         for s in present:
             out.n_sat_system[s][j] = int(np.sum(sys_used == s))
         if sol.offsets:
@@ -898,6 +988,180 @@ def _solve_epochs_multi(ephemeris, week, tow_rx, epoch, prn, pseudorange, option
     out.skipped_satellites = skipped
     out.skipped_by_system = by_system
     return out
+
+
+def _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, sigma_scale, system,
+                    glonass_channel) -> SppTrack:
+    """:func:`solve_epochs` (plain or robust WLS) through the compiled loop (``options.engine``):
+    the satellites of all observations at their transmit times in one batched call, then
+    :func:`mixnav.gnss._spp_kernel.spp_epochs`, then the same bookkeeping as the numpy
+    paths (:func:`_solve_epochs_multi` with ``system``, one system without)."""
+    from .multi_ephemeris import SYSTEM_NAMES
+    multi = system is not None
+    if multi and not hasattr(ephemeris, "states_of"):
+        others = sorted(set(system.tolist()) - {"G"})
+        raise ValueError(f"observations of systems {', '.join(others)} need a MultiEphemeris "
+                         "(mixnav.gnss.multi_ephemeris), not GPS records alone")
+    week = np.asarray(week)
+    tow_rx = np.asarray(tow_rx, float)
+    epoch = np.asarray(epoch, int)
+    prn = np.asarray(prn, int)
+    rho = np.asarray(pseudorange, float)
+    m = len(rho)
+    k = len(tow_rx)
+    if multi and system.shape != (m,):
+        raise ValueError(f"system has shape {system.shape}, expected ({m},) (one per observation)")
+    scale = np.ones(m) if sigma_scale is None else np.asarray(sigma_scale, float)
+    skipped: dict[str, int] = {}
+    by_system: dict[str, dict[str, int]] = {}
+
+    def count(letters, reasons):
+        """Add the (letter, reason) pairs to both tallies, in first-seen order."""
+        if len(reasons) == 0:
+            return
+        pairs, counts = np.unique(np.char.add(np.char.add(letters.astype(str), "|"), reasons.astype(str)),
+                                  return_counts=True)
+        for pair, c in zip(pairs.tolist(), counts.tolist()):
+            letter, reason = pair.split("|", 1)
+            skipped[reason] = skipped.get(reason, 0) + int(c)
+            if multi:
+                d = by_system.setdefault(SYSTEM_NAMES.get(letter, letter), {})
+                d[reason] = d.get(reason, 0) + int(c)
+
+    order = np.argsort(epoch, kind="stable")
+    sysarr = system if multi else np.full(m, "G")
+    if multi:
+        if glonass_channel is None:
+            table = ephemeris["R"].channels() if "R" in ephemeris else {}
+            glonass_channel = np.array([table.get(int(p), 99) if s == "R" else 99 for s, p in zip(system, prn)])
+        freq = first_frequency(system, glonass_channel)
+        iono_on = options.ionosphere and "G" in ephemeris and ephemeris["G"].iono_alpha is not None
+        alpha = ephemeris["G"].iono_alpha if iono_on else None
+        beta = ephemeris["G"].iono_beta if iono_on else None
+        no_freq = ~np.isfinite(freq) if iono_on else np.zeros(m, bool)
+        count(system[order][no_freq[order]], np.full(int(no_freq.sum()), NO_GLONASS_CHANNEL))
+        order = order[~no_freq[order]]
+        iono_scale = iono_scale_factors(np.where(np.isfinite(freq), freq, F_L1))
+    else:
+        iono_on = options.ionosphere and ephemeris.iono_alpha is not None and ephemeris.iono_beta is not None
+        alpha, beta = ephemeris.iono_alpha, ephemeris.iono_beta
+        iono_scale = np.ones(m)
+    # every observation's satellite at its transmit time: one batched call, then one more
+    # with the satellite clock taken off (as satellites_at_transmit, epoch by epoch)
+    ep = epoch[order]
+    wk = week[ep]
+    t_tx = tow_rx[ep] - rho[order] / C_LIGHT
+    _, _, clk, _, reason = _states_batched(ephemeris, sysarr[order], prn[order], wk, t_tx, multi)
+    keep = reason == ""
+    count(sysarr[order][~keep], reason[~keep])
+    sat, _, clk2, _, again = _states_batched(ephemeris, sysarr[order][keep], prn[order][keep], wk[keep],
+                                             t_tx[keep] - clk[keep], multi)
+    flipped = again != ""          # a record choice flipped within the travel time: left out with it
+    rows = order[keep][~flipped]
+    sat, clk2 = sat[~flipped], clk2[~flipped]
+    bounds = np.searchsorted(epoch[rows], np.arange(k + 1))
+    letters_used, inverse = np.unique(sysarr[rows], return_inverse=True)
+    sys_idx = np.array([SYSTEM_ORDER.index(s) for s in letters_used.tolist()], np.int64)[inverse.ravel()]
+    params = np.array([options.elevation_mask, options.sigma_a, options.sigma_b, float(options.troposphere),
+                       float(iono_on), float(options.max_iter), options.tol, float(options.weights == "rtklib"),
+                       float(options.robust is not None), *(options.robust or (0.0, 0.0))])
+    if options.weights == "rtklib":
+        fact = np.array([RTKLIB_SYSTEM_FACTOR.get(c, 1.0) for c in SYSTEM_ORDER])[sys_idx]
+        var_eph = ephemeris.ephemeris_variances(sysarr[rows], prn[rows], week[epoch[rows]],
+                                                tow_rx[epoch[rows]] - rho[rows] / C_LIGHT)
+    else:
+        fact, var_eph = np.ones(len(rows)), np.zeros(len(rows))
+    pos, clock = np.full((k, 3), np.nan), np.full(k, np.nan)
+    cov, offsets = np.full((k, 4, 4), np.nan), np.full((k, len(SYSTEM_ORDER)), np.nan)
+    clock_sys, status = np.full(k, -1, np.int64), np.zeros(k, np.int64)
+    n_used, dops, rms = np.zeros(k, np.int64), np.full((k, 3), np.nan), np.full(k, np.nan)
+    n_rejected = np.full(k, -1, np.int64)
+    used, below = np.zeros(len(rows), bool), np.zeros(len(rows), bool)
+    robust_code, n_down, n_excl = np.zeros(k, np.int64), np.zeros(k, np.int64), np.zeros(k, np.int64)
+    spp_epochs(np.ascontiguousarray(sat), rho[rows] + C_LIGHT * clk2, scale[rows], fact, var_eph, iono_scale[rows],
+               sys_idx, bounds,
+               tow_rx, params, np.zeros(4) if alpha is None else np.asarray(alpha, float),
+               np.zeros(4) if beta is None else np.asarray(beta, float), pos, clock, cov, offsets, clock_sys, status,
+               n_used, dops, rms, n_rejected, used, below, robust_code, n_down, n_excl)
+    names = np.empty(3, dtype=object)
+    names[CODE_OK], names[CODE_FEW], names[CODE_NOT_CONVERGED] = STATUS_OK, STATUS_FEW, STATUS_NOT_CONVERGED
+    out = SppTrack(week=week.copy(), tow=tow_rx.copy(), pos_ecef=pos, clock_bias=clock, cov=cov, n_sat=n_used.astype(int),
+                   pdop=dops[:, 0].copy(), hdop=dops[:, 1].copy(), vdop=dops[:, 2].copy(), rms_residual=rms,
+                   status=names[status].astype(str))
+    # the mask's count: per satellite seen from the final position where the mask left a row
+    # out (several systems), the rows left out (one system; every solved epoch adds its count)
+    solved = n_rejected >= 0
+    if options.robust is not None:      # over the epochs with a solution, converged or not (as _record)
+        names_r = ("off", "ok", "untestable", "not_separable")
+        out.robust = {"rows_downweighted": int(n_down[solved].sum()), "rows_excluded": int(n_excl[solved].sum())}
+        codes = robust_code[solved]
+        for c in dict.fromkeys(codes.tolist()):
+            out.robust[f"epochs_{names_r[c]}"] = int(np.sum(codes == c))
+    if multi:
+        row_epoch = epoch[rows]
+        flag = below & (n_rejected[row_epoch] > 0)
+        count(sysarr[rows][flag], np.full(int(flag.sum()), "below elevation mask"))
+    elif solved.any():
+        skipped["below elevation mask"] = skipped.get("below elevation mask", 0) + int(n_rejected[solved].sum())
+    out.skipped_satellites = skipped
+    if not multi:
+        return out
+    present = [s for s in SYSTEM_ORDER if s in set(system.tolist())]
+    ok = status == CODE_OK
+    out.offsets = {s: np.where(ok, offsets[:, SYSTEM_ORDER.index(s)], np.nan) for s in present}
+    letters = np.array(SYSTEM_ORDER + ("",))
+    out.clock_system = np.where(ok, letters[clock_sys], "").astype(str)
+    out.n_sat_system = {}
+    for s in present:
+        c = np.bincount(epoch[rows][used & (sysarr[rows] == s)], minlength=k)
+        out.n_sat_system[s] = np.where(ok, c, 0).astype(int)
+    out.skipped_by_system = by_system
+    return out
+
+
+def _states_batched(ephemeris, letters, prn, week, tow, multi: bool):
+    """Satellite states of many observations at their own times: ``(pos, vel, clk, drift,
+    reason)`` (n,) as :meth:`MultiEphemeris.states_by_system` (one system: the GPS
+    records' selection and orbits, the same functions their ``states`` call)."""
+    if multi and hasattr(ephemeris, "states_by_system"):
+        return ephemeris.states_by_system(letters, prn, week, tow)
+    n = len(prn)
+    if multi:
+        # any object with MultiEphemeris's states_of (a test's stand-in): one row at a time
+        ids = np.char.add(letters.astype(str), np.char.zfill(prn.astype(str), 2))
+        pos, vel = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
+        clk, drift = np.full(n, np.nan), np.full(n, np.nan)
+        reason = np.full(n, "", dtype=object)
+        for i in range(n):
+            st, _, keep, skips = ephemeris.states_of(ids[i:i + 1], week[i], tow[i:i + 1])
+            if keep[0]:
+                pos[i], vel[i], clk[i], drift[i] = st.pos_ecef[0], st.vel_ecef[0], st.clock_bias[0], st.clock_drift[0]
+            else:
+                reason[i] = next(sk.reason[0] for sk in skips.values() if len(sk))
+        return pos, vel, clk, drift, reason.astype(str)
+    pos, vel = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
+    clk, drift = np.full(n, np.nan), np.full(n, np.nan)
+    reason = np.full(n, "", dtype=object)
+    if not hasattr(ephemeris, "_select"):
+        # any object with BroadcastEphemeris's public interface: one row at a time
+        for i in range(n):
+            st, sk = ephemeris.states_and_skips(week[i], tow[i:i + 1], prn[i:i + 1])
+            if len(sk):
+                reason[i] = sk.reason[0]
+            else:
+                pos[i], vel[i], clk[i], drift[i] = st.pos_ecef[0], st.vel_ecef[0], st.clock_bias[0], st.clock_drift[0]
+        return pos, vel, clk, drift, reason.astype(str)
+    idx = np.empty(n, int)
+    t = np.empty(n)
+    for c0 in range(0, n, 8192):       # the record choice's table is rows x records
+        part = slice(c0, c0 + 8192)
+        i, tt, sk = ephemeris._select(week[part], tow[part], prn[part])
+        idx[part], t[part] = i, tt
+        reason[c0 + np.flatnonzero(i < 0)] = sk.reason
+    ok = idx >= 0
+    p, v, c, d = ephemeris._compute(idx[ok], t[ok], True)
+    pos[ok], vel[ok], clk[ok], drift[ok] = p, v, c, d
+    return pos, vel, clk, drift, reason.astype(str)
 
 
 def _below_mask(sol: SppSolution, sats, options: SppOptions) -> np.ndarray:
