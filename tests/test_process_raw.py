@@ -293,3 +293,21 @@ def test_robust_spp_method_on_the_phone(tmp_path):
         with pytest.raises(ConfigError) as ei:
             load_dataset(_cfg(tmp_path, SHIPPED + ROBUST_SPP.replace(edit, key), "bad.toml"))
         assert ei.value.key.startswith("methods[1]"), ei.value.key
+
+
+def test_the_weights_key_reaches_the_spp_and_is_refused_for_smartloc():
+    """`[raw_gnss] weights = "rtklib"` is the SppOptions the SPP runs with; a smartLoc log (its
+    own variances weigh the rows) refuses it by name."""
+    from mixnav.config.loader import load_dataset_text
+    from mixnav.errors import ConfigError
+    from mixnav.experiment.spp_process import options
+    root = Path(__file__).resolve().parents[1] / "src" / "mixnav" / "config" / "datasets"
+    text = (root / "urbannav-tst-static.toml").read_text()
+    ds, _, _ = load_dataset_text(text.replace("[raw_gnss]\n", "[raw_gnss]\nweights = \"rtklib\"\n", 1), "u.toml")
+    assert options(ds).weights == "rtklib"
+    ds, _, _ = load_dataset_text(text, "u.toml")
+    assert options(ds).weights == "elevation"
+    sl = (root / "smartloc-berlin-gnss.toml").read_text().replace("[raw_gnss]\n", "[raw_gnss]\nweights = \"rtklib\"\n", 1)
+    with pytest.raises(ConfigError) as e:
+        load_dataset_text(sl, "s.toml")
+    assert "weights" in str(e.value)

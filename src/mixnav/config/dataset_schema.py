@@ -144,8 +144,9 @@ class RawGnss(Strict):
     ``format = "rinex-obs"`` a list of them (e.g. one per system and hour: every system of
     ``systems`` other than GPS needs its broadcast records; both relative to the data folder). ``elevation_mask``, ``sigma_a``,
     ``sigma_b`` (pseudorange sigma ``sqrt(a^2 + b^2 / sin^2(el))``),
-    ``troposphere`` (Saastamoinen) and ``ionosphere`` (Klobuchar, when the
-    navigation header has its coefficients) set the solver
+    ``troposphere`` (Saastamoinen), ``ionosphere`` (Klobuchar, when the
+    navigation header has its coefficients) and ``weights`` (``"elevation"``: the sigma above;
+    ``"rtklib"``: RTKLIB pntpos's variance model, the SPP only) set the solver
     (:class:`mixnav.gnss.spp.SppOptions`); ``max_sv_time_uncertainty``
     rejects measurements the receiver reports as worse than it (Android logs).
     ``format = "rinex-obs"``: a RINEX 2.x/3.x observation file (:mod:`mixnav.io.rinex_obs`):
@@ -172,6 +173,9 @@ class RawGnss(Strict):
     sigma_b: quantity(u.LENGTH, nonnegative=True) = 3.0  # type: ignore[valid-type]
     troposphere: bool = True
     ionosphere: bool = True
+    #: the SPP's pseudorange weights: "elevation" (sigma_a, sigma_b) or "rtklib" (RTKLIB pntpos's
+    #: variance model: code, broadcast accuracy, ionosphere, troposphere; gnss/spp.py)
+    weights: Literal["elevation", "rtklib"] = "elevation"
     max_sv_time_uncertainty: quantity(u.TIME, positive=True) = 500e-9  # type: ignore[valid-type]
     systems: list[str] = Field(default_factory=lambda: list(DEFAULT_SYSTEMS))
     signals: dict[str, str | list[str]] = Field(default_factory=dict)
@@ -217,6 +221,7 @@ class RawGnss(Strict):
                          ("sigma_b", "the file's variances weigh the pseudoranges"),
                          ("troposphere", "the file's pseudoranges have their atmosphere removed"),
                          ("ionosphere", "the file's pseudoranges have their atmosphere removed"),
+                         ("weights", "the file's variances weigh the pseudoranges"),
                          ("max_sv_time_uncertainty", "a phone log's key"),
                          ("signals", "the file has one pseudorange per satellite")):
             if key in self.model_fields_set:
