@@ -107,16 +107,6 @@ def process_raw(ds: RawGnssDataset, source: str, folder: Path, seed: int = 0) ->
     return solve_raw(ds, source, folder, *read_raw(ds, source, folder), seed=seed)
 
 
-def gps_only(c, source: str) -> None:
-    """The SPP and the filters solve GPS alone so far (GPS broadcast orbits and clocks): a
-    ``[raw_gnss]`` table ``c`` whose ``systems`` name another is a ConfigError naming the
-    key, before any file is read (the reader reads them: :mod:`mixnav.io.rinex_obs`)."""
-    if tuple(c.systems) != ("G",):
-        raise ConfigError(f"systems = {list(c.systems)}: positioning uses GPS alone so far (the other systems' "
-                          "broadcast orbits are not read yet); set systems = [\"G\"] or leave the key out",
-                          file=source, key="raw_gnss.systems")
-
-
 def gps_rows(obs: RawPseudoranges) -> None:
     """Observations handed to the SPP or the filters directly (library use) must be GPS: a
     row of another system is an ArgumentError (its number would be taken for a GPS PRN)."""
