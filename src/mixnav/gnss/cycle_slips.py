@@ -31,6 +31,15 @@ observation ``a`` with a carrier (times ``t_a < t_b``, ``dt = t_b - t_a``), the 
   less than one false alarm expected in a million pairs of clean data; a slip of one cycle
   is seen when ``sigma_r < 0.2`` cycles (u-blox F9P at 1 Hz on urbannav: 0.11-0.13).
   Pairs without both Doppler values are not tested by it (counted ``no Doppler check``).
+  The receiver clock enters the carrier as its phase and the Doppler as its frequency: its
+  phase noise beyond the integrated frequency (a clock random walk; a clock step) is the
+  same at every satellite of the epoch, so ``common_mode`` (default) takes off each
+  residual the median of the epoch's other residuals (3 or more pairs); one satellite's
+  slip does not move a median of several. Leaving the satellite itself out keeps its
+  residual independent of the median (with it, the median pins one or two residuals of
+  every epoch near zero and the measured sigma comes out low); the median of ``n - 1``
+  Gaussian residuals has variance about ``pi sigma_r^2 / (2 (n - 1))``, by which a given
+  ``doppler_sigma``'s ``sigma_r`` is widened (the measured one contains it).
 - ``geometry-free``: with a second frequency, the geometry-free combination
   ``gf = lambda_1 phi_1 - lambda_2 phi_2`` [m] keeps only the ionosphere (times
   ``1 - f_1^2 / f_2^2``), the ambiguities and noise; a jump
@@ -55,8 +64,8 @@ import numpy as np
 from ..errors import ArgumentError
 from .geometry import C_LIGHT
 
-__all__ = ["REASONS", "CycleSlips", "detect_cycle_slips", "slips_of_observations", "carrier_frequency",
-           "carrier_wavelength"]
+__all__ = ["REASONS", "CycleSlips", "detect_cycle_slips", "slips_of_observations", "mark_carrier_arcs",
+           "carrier_frequency", "carrier_wavelength"]
 
 #: reason name -> bit of :attr:`CycleSlips.flags`
 REASONS: dict[str, int] = {"loss of lock": 1, "half-cycle change": 2, "gap": 4, "Doppler": 8,
@@ -159,6 +168,22 @@ class CycleSlips:
         return (self.flags & bits) != 0
 
 
+def _leave_one_out_median(x: np.ndarray) -> np.ndarray:
+    """``median(x without x_i)`` for every ``i`` ((n,), n >= 2), from one sort."""
+    n = len(x)
+    order = np.argsort(x)
+    srt = x[order]
+    p = np.empty(n, np.int64)
+    p[order] = np.arange(n)            # rank of each element
+
+    def rest(q):                        # element q of the sorted array without rank p
+        return np.where(q < p, srt[np.minimum(q, n - 1)], srt[np.minimum(q + 1, n - 1)])
+    m = n - 1
+    if m % 2:
+        return rest(np.full(n, m // 2))
+    return 0.5 * (rest(np.full(n, m // 2 - 1)) + rest(np.full(n, m // 2)))
+
+
 def _as(name, a, m, dtype=float):
     if a is None:
         return None
@@ -171,7 +196,8 @@ def _as(name, a, m, dtype=float):
 def detect_cycle_slips(time, epoch, satellite, carrier, *, doppler=None, lli=None, system=None,
                        carrier2=None, lli2=None, wavelength=None, wavelength2=None, interval=None,
                        max_gap: float = 1.5, doppler_sigma=None, carrier_sigma: float = 0.02,
-                       n_sigma: float = 5.0, gf_sigma: float = 0.003, gf_rate: float = 0.01) -> CycleSlips:
+                       n_sigma: float = 5.0, gf_sigma: float = 0.003, gf_rate: float = 0.01,
+                       common_mode: bool = True) -> CycleSlips:
     """Cycle slips of every satellite's carrier (module docstring).
 
     Parameters
@@ -210,6 +236,9 @@ def detect_cycle_slips(time, epoch, satellite, carrier, *, doppler=None, lli=Non
         Carrier noise [m] of each frequency in the geometry-free test.
     gf_rate : float
         Geometry-free change allowed per second [m/s] (the ionosphere).
+    common_mode : bool
+        Take each epoch's median Doppler residual (over its tested pairs, at least 3) off its
+        residuals: the part every satellite shares (module docstring).
     """
     t = np.asarray(time, float)
     ep = np.asarray(epoch, np.int64)
@@ -275,6 +304,14 @@ def detect_cycle_slips(time, epoch, satellite, carrier, *, doppler=None, lli=Non
     if dop is not None:
         r = (phi[b] - phi[a]) + 0.5 * (dop[a] + dop[b]) * dt
         tested = np.isfinite(r) & (dt <= max_gap * interval)
+        inflate = np.ones(len(b))
+        if common_mode:   # the receiver clock's phase noise, the same at every satellite: off
+            eb = ep[b]
+            for e in np.unique(eb[tested]):
+                at = np.nonzero(tested & (eb == e))[0]
+                if len(at) >= 3:
+                    r[at] -= _leave_one_out_median(r[at])
+                    inflate[at] = np.sqrt(1.0 + np.pi / (2.0 * (len(at) - 1)))
         no_check[b[~tested & (dt <= max_gap * interval)]] = True
         resid[b[tested]] = r[tested]
         quiet = tested & ((flags[b] & (REASONS["loss of lock"] | REASONS["half-cycle change"])) == 0)
@@ -290,7 +327,7 @@ def detect_cycle_slips(time, epoch, satellite, carrier, *, doppler=None, lli=Non
                 sig = sig1 * dt[mine] / interval
             else:
                 sig1 = float(np.sqrt(interval ** 2 * doppler_sigma ** 2 / 2 + 2 * carrier_sigma ** 2))
-                sig = np.sqrt(dt[mine] ** 2 * doppler_sigma ** 2 / 2 + 2 * carrier_sigma ** 2)
+                sig = np.sqrt(dt[mine] ** 2 * doppler_sigma ** 2 / 2 + 2 * carrier_sigma ** 2) * inflate[mine]
             sigma_of[str(s)] = sig1
             bad = tested[mine] & (np.abs(r[mine]) > n_sigma * sig)
             flags[b[mine][bad]] |= REASONS["Doppler"]
@@ -363,3 +400,27 @@ def slips_of_observations(obs, second=None, **options) -> CycleSlips:
                   wavelength2=np.where(hit, _wavelengths(second)[j], np.nan))
     kw.update(options)
     return detect_cycle_slips(t_ep, obs.epoch, sat, obs.carrier, **kw)
+
+
+def mark_carrier_arcs(obs, wavelength: float | None = None, **options):
+    """The padded observables (:class:`mixnav.gnss.observables.GnssObservations`, carrier [m],
+    range rate [m/s]) with ``carrier_continuous`` from :func:`detect_cycle_slips` (the range
+    rate as Doppler ``-rr / lambda``), and the :class:`CycleSlips` found.
+
+    Parameters
+    ----------
+    obs : GnssObservations
+    wavelength : float or None
+        [m] of every slot's carrier; None: GPS L1.
+    **options
+        Passed on (``doppler_sigma`` [Hz], ``n_sigma``, ...).
+    """
+    from dataclasses import replace
+    from .geometry import LAMBDA_L1
+    lam = LAMBDA_L1 if wavelength is None else float(wavelength)
+    e, k = np.nonzero(obs.valid)
+    cs = detect_cycle_slips(obs.time, e, obs.prn[e, k], obs.carrier[e, k] / lam,
+                            doppler=-obs.range_rate[e, k] / lam, **options)
+    cont = np.zeros(obs.valid.shape, bool)
+    cont[e, k] = cs.continuous
+    return replace(obs, carrier_continuous=cont), cs

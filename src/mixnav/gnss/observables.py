@@ -75,6 +75,10 @@ class GnssObservations:
     pr_variance : ndarray (m, K) or None
         Per-slot pseudorange variance [m^2] the filters are told instead of ``sigma_pr^2``
         (e.g. elevation-dependent, for recorded data); None: ``sigma_pr^2`` everywhere.
+    carrier_continuous : ndarray of bool (m, K) or None
+        True where the slot's carrier continues its satellite's carrier of the previous epoch
+        without a cycle slip (:mod:`mixnav.gnss.cycle_slips`: recorded carriers); a TDCP is
+        formed only there. None: every carrier is one arc per satellite (the simulator's).
     """
 
     time: np.ndarray
@@ -91,6 +95,7 @@ class GnssObservations:
     sigma_cp: float
     clock: np.ndarray
     pr_variance: np.ndarray | None = None
+    carrier_continuous: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.time)
