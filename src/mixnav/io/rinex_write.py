@@ -1,4 +1,5 @@
-"""RINEX 3.04 writers: a GPS observation file (C1C, optionally D1C) and a GPS navigation file.
+"""RINEX 3.04 writers: a GPS observation file (C1C, optionally L1C with its loss-of-lock
+indicator and D1C) and a GPS navigation file.
 
 What a receiver converted by RTKLIB's ``convbin`` would give, written from arrays: the
 simulator's export (:mod:`mixnav.experiment.export`) writes its pseudoranges, Doppler and
@@ -6,7 +7,8 @@ constellation with these, and the readers (:mod:`mixnav.io.rinex_obs`,
 :class:`mixnav.gnss.ephemeris.BroadcastEphemeris`, georinex) read them back.
 
 Formats (RINEX 3.04, IGS/RTCM): observations ``F14.3`` plus two blank flag columns
-(pseudorange to the millimetre, Doppler to the mHz: 0.2 mm/s), epoch records
+(pseudorange to the millimetre, carrier to the milli-cycle: 0.2 mm, Doppler to the mHz:
+0.2 mm/s; the carrier's loss-of-lock indicator in its first flag column), epoch records
 ``> yyyy mm dd hh mm ss.sssssss  f nnn`` in GPS time; navigation records in ``D19.12``
 (13 significant digits: a circular orbit's position to about 0.1 mm). Files are
 written atomically (:mod:`mixnav.io.atomic`). Values that do not fit the format are
@@ -111,9 +113,10 @@ def write_rinex_nav(path, records: dict, iono_alpha=None, iono_beta=None, progra
 
 
 def write_rinex_obs(path, week, tow, epoch, prn, pseudorange, doppler=None, approx_position=(0.0, 0.0, 0.0),
-                    marker: str = "MIXNAV", program: str = "mixnav", interval: float | None = None) -> None:
-    """Write GPS L1 C/A pseudoranges (``C1C``) and, when given, Doppler (``D1C``) as a RINEX
-    3.04 observation file, epoch times in GPS time.
+                    marker: str = "MIXNAV", program: str = "mixnav", interval: float | None = None,
+                    carrier=None, lli=None) -> None:
+    """Write GPS L1 C/A pseudoranges (``C1C``) and, when given, carrier phases (``L1C``) and
+    Doppler (``D1C``) as a RINEX 3.04 observation file, epoch times in GPS time.
 
     Parameters
     ----------
@@ -128,6 +131,11 @@ def write_rinex_obs(path, week, tow, epoch, prn, pseudorange, doppler=None, appr
         [m] (written to the millimetre; NaN: blank).
     doppler : ndarray (m,) or None
         [Hz] (written to the mHz; NaN: blank); None: no ``D1C`` column.
+    carrier : ndarray (m,) or None
+        L1 carrier phase [cycles] (written to the milli-cycle; NaN: blank); None: no ``L1C``.
+    lli : ndarray of int (m,) or None
+        The carrier's loss-of-lock indicator (0-7: bit 0 lost lock, bit 1 half-cycle
+        ambiguity; 0 written blank); needs ``carrier``.
     approx_position : (3,)
         ECEF [m] for the ``APPROX POSITION XYZ`` line.
     marker : str
@@ -148,6 +156,15 @@ def write_rinex_obs(path, week, tow, epoch, prn, pseudorange, doppler=None, appr
     dop = None if doppler is None else np.asarray(doppler, float)
     if dop is not None and dop.shape != (m,):
         raise ArgumentError(f"doppler has shape {dop.shape}, expected ({m},)", argument="doppler")
+    cp = None if carrier is None else np.asarray(carrier, float)
+    if cp is not None and cp.shape != (m,):
+        raise ArgumentError(f"carrier has shape {cp.shape}, expected ({m},)", argument="carrier")
+    flag = None if lli is None else np.asarray(lli)
+    if flag is not None:
+        if cp is None:
+            raise ArgumentError("loss-of-lock indicators belong to a carrier: give carrier too", argument="lli")
+        if flag.shape != (m,) or not np.issubdtype(flag.dtype, np.integer) or np.any((flag < 0) | (flag > 7)):
+            raise ArgumentError(f"must be ({m},) integers 0..7", argument="lli")
     if m and (epoch.min() < 0 or epoch.max() >= k):
         raise ArgumentError(f"epoch indices must lie in 0..{k - 1}", argument="epoch")
     if np.any((prn < 1) | (prn > 32)):
@@ -155,10 +172,10 @@ def write_rinex_obs(path, week, tow, epoch, prn, pseudorange, doppler=None, appr
     times = _calendar(week, tow)
     if k > 1 and np.any(np.diff(times) <= np.timedelta64(0, "ns")):
         raise ArgumentError("epoch times must increase strictly", argument="tow")
-    for name, a, lim in (("pseudorange", rho, 1e10), ("doppler", dop, 1e10)):
+    for name, a, lim in (("pseudorange", rho, 1e10), ("doppler", dop, 1e10), ("carrier", cp, 1e10)):
         if a is not None and np.any(np.isfinite(a) & (np.abs(a) >= lim)):
             raise ArgumentError(f"a {name} does not fit the F14.3 field", argument=name)
-    types = ["C1C"] + (["D1C"] if dop is not None else [])
+    types = ["C1C"] + (["L1C"] if cp is not None else []) + (["D1C"] if dop is not None else [])
     x, y, z = (float(v) for v in approx_position)
     lines = [_label(f"{3.04:9.2f}{'':11}{'OBSERVATION DATA':<20}{'G: GPS':<20}", "RINEX VERSION / TYPE"),
              _header_run(program),
@@ -187,6 +204,9 @@ def write_rinex_obs(path, week, tow, epoch, prn, pseudorange, doppler=None, appr
         lines.append(f"> {y0:04d} {mo:02d} {d:02d} {hh:02d} {mm:02d}{ss:11.7f}  0{len(rows):3d}")
         for i in rows:
             s = f"G{int(prn[i]):02d}" + value(rho[i])
+            if cp is not None:
+                s += value(cp[i]) if flag is None or not flag[i] or not np.isfinite(cp[i]) else \
+                    f"{cp[i]:14.3f}{int(flag[i]):1d} "
             if dop is not None:
                 s += value(dop[i])
             lines.append(s.rstrip())
