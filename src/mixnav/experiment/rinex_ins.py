@@ -60,7 +60,8 @@ from .spp_process import gps_only, gps_rows, options as spp_options
 def _subset(obs, keep):
     """The epochs ``keep`` (bool (m,)) of GnssObservations."""
     f = {k: getattr(obs, k) for k in ("time", "valid", "prn", "sat_pos", "sat_vel", "pseudorange", "range_rate",
-                                      "carrier", "elevation", "clock", "pr_variance") if getattr(obs, k) is not None}
+                                      "carrier", "elevation", "clock", "pr_variance", "carrier_continuous")
+         if getattr(obs, k) is not None}
     return replace(obs, **{k: v[keep] for k, v in f.items()})
 
 
@@ -173,6 +174,9 @@ def read_rinex_ins(ds: Dataset, source: str, folder) -> RinexInputs:
         if m.type == "tight-ekf" and m.use_range_rate and obs.doppler is None:
             raise ConfigError(f"method '{m.name}' uses range rates, but {obs.source} has no Doppler (D1C/D1) column: "
                               "set use_range_rate = false", file=source, key=f"methods[{i}].use_range_rate")
+        if m.type == "tdcp-ekf" and obs.carrier is None:
+            raise ConfigError(f"method '{m.name}' is TDCP, but {obs.source} has no carrier phase (L1C/L1) of the "
+                              "signals read: use type = \"tight-ekf\"", file=source, key=f"methods[{i}].type")
     reference = read_reference(ds, folder)
     return RinexInputs(imu, obs, eph, obs_files, nav_files, reference, _time.perf_counter() - t_read)
 
@@ -226,6 +230,9 @@ def run_rinex_ins(ds: Dataset, source: str, folder, inputs: RinexInputs):
     tight, skipped_rows = tight_observations(epochs, rx[j_of], c.pseudorange_sigma, c.range_rate_sigma,
                                              opts.elevation_mask, weights=c.pseudorange_weights)
     tight = replace(tight, time=t_rel[j_of])   # the epochs' own times on the run's axis
+    slips = None
+    if any(m.type == "tdcp-ekf" for m in ds.methods):
+        tight, slips = carrier_observations(obs, epochs, tight, j_of, rho, float(c.carrier_sigma))
     # receiver velocity and clock drift of each RINEX epoch from its Doppler (NaN without)
     vel_e = np.full((len(t_rel), 3), np.nan)
     drift = np.full(len(t_rel), np.nan)
@@ -269,12 +276,71 @@ def run_rinex_ins(ds: Dataset, source: str, folder, inputs: RinexInputs):
         "fixes_without_velocity": int(no_velocity),
         "clock_jumps": [list(j) for j in jumps], "clock_spikes_ignored": int(spikes),
         "clock0": [float(v) for v in init.clock0]}
+    if slips is not None:
+        checks["rinex"]["cycle_slips"] = slips.counts
+        checks["rinex"]["doppler_slip_sigma_cycles"] = slips.doppler_sigma
     return ProcessOutput(ds, source, folder, t0, imu, fixes, all_fixes, reference, lever, results, init,
                          read_time + solve_time, filter_time, aiding.summary(),
                          installation_check(imu, ds.alignment.static_duration, results, aiding.stillness,
                                             configured={"antenna_position": inst.antenna_position,
                                                         "imu_time_offset": inst.imu_time_offset}),
                          checks=checks, observations=tight)
+
+
+def carrier_observations(obs: RawPseudoranges, epochs, tight, j_of, rho, sigma_cp: float):
+    """The tight observables with the RINEX carrier as TDCP needs it, and the cycle slips.
+
+    Each slot's carrier [m] is ``lambda phi`` (its signal's wavelength, GLONASS by channel:
+    :func:`mixnav.gnss.cycle_slips.observation_wavelengths`) with the clock-jump offset and
+    the broadcast corrections of its pseudorange applied (``epochs.pseudorange - rho`` of
+    the same observation: satellite clock, group delay, troposphere, ionosphere). In a time
+    difference the constant parts cancel; the ionosphere enters with the code's sign where
+    the carrier's is opposite, an error of twice its change over an epoch (the Klobuchar
+    model's: below a millimetre per second). ``carrier_continuous``: the observation's
+    carrier continues its satellite's previous one
+    (:func:`mixnav.gnss.cycle_slips.slips_of_observations`: loss of lock, gaps, Doppler).
+
+    Parameters
+    ----------
+    obs : RawPseudoranges
+        The RINEX observations (``carrier`` [cycles]).
+    epochs : PseudorangeEpochs
+        ``corrected_pseudoranges`` of ``obs``; epoch ``e`` from RINEX epoch ``j_of[e]``.
+    tight : GnssObservations
+        ``tight_observations`` of ``epochs`` (slots: a subset of the epoch's rows).
+    rho : ndarray (m,)
+        ``obs``'s pseudoranges with the clock-jump offset taken off [m] (what was corrected).
+    sigma_cp : float
+        Carrier 1-sigma the filter is told [m].
+
+    Returns
+    -------
+    tight : GnssObservations
+        With ``carrier`` (NaN where the observation has none), ``carrier_continuous``, ``sigma_cp``.
+    slips : CycleSlips
+    """
+    from ..gnss.cycle_slips import observation_wavelengths, slips_of_observations
+    from ..gnss.pseudoranges import SYSTEM_LETTERS
+    if obs.carrier is None:
+        raise DataError("TDCP needs carrier phases, and the file has none of the signals read (L1C/L1 ...)",
+                        file=obs.source)
+    slips = slips_of_observations(obs)
+    lam = observation_wavelengths(obs)
+    sys_obs = obs.systems().astype(str)
+    row_of = {(int(j), s, int(p)): i for i, (j, s, p) in enumerate(zip(obs.epoch, sys_obs, obs.prn))}
+    E, K = tight.valid.shape
+    carrier = np.full((E, K), np.nan)
+    cont = np.zeros((E, K), bool)
+    for e in range(E):
+        sl = epochs.rows_of(e)
+        ids, prs, syss = epochs.sat_id[sl], epochs.pseudorange[sl], epochs.system[sl]
+        for k in np.nonzero(tight.valid[e])[0]:
+            # the slot's row: its satellite with its (copied, so bit-equal) pseudorange
+            r = np.nonzero((ids == tight.prn[e, k]) & (prs == tight.pseudorange[e, k]))[0][0]
+            i = row_of[(int(j_of[e]), SYSTEM_LETTERS[int(syss[r])], int(ids[r]))]
+            carrier[e, k] = lam[i] * obs.carrier[i] + (prs[r] - rho[i])
+            cont[e, k] = slips.continuous[i]
+    return replace(tight, carrier=carrier, carrier_continuous=cont, sigma_cp=float(sigma_cp)), slips
 
 
 def _select(f: GnssFixes, keep) -> GnssFixes:

@@ -65,7 +65,7 @@ from ..errors import ArgumentError
 from .geometry import C_LIGHT
 
 __all__ = ["REASONS", "CycleSlips", "detect_cycle_slips", "slips_of_observations", "mark_carrier_arcs",
-           "carrier_frequency", "carrier_wavelength"]
+           "carrier_frequency", "carrier_wavelength", "observation_wavelengths"]
 
 #: reason name -> bit of :attr:`CycleSlips.flags`
 REASONS: dict[str, int] = {"loss of lock": 1, "half-cycle change": 2, "gap": 4, "Doppler": 8,
@@ -354,7 +354,7 @@ def detect_cycle_slips(time, epoch, satellite, carrier, *, doppler=None, lli=Non
                       doppler_sigma=sigma_of, gf_jump=gf_jump, counts=counts, interval=float(interval))
 
 
-def _wavelengths(obs) -> np.ndarray:
+def observation_wavelengths(obs) -> np.ndarray:
     """[m] (m,) of each row's signal (GLONASS by its channel; NaN without one)."""
     from ..data import NO_CHANNEL
     ch = obs.glonass_channel().astype(float)
@@ -396,8 +396,8 @@ def slips_of_observations(obs, second=None, **options) -> CycleSlips:
         j = order[pos]
         phi2 = np.where(hit, second.carrier[j], np.nan)
         lli2 = np.where(hit, 0 if second.lli is None else second.lli[j, col], 0)
-        kw.update(carrier2=phi2, lli2=lli2, wavelength=_wavelengths(obs),
-                  wavelength2=np.where(hit, _wavelengths(second)[j], np.nan))
+        kw.update(carrier2=phi2, lli2=lli2, wavelength=observation_wavelengths(obs),
+                  wavelength2=np.where(hit, observation_wavelengths(second)[j], np.nan))
     kw.update(options)
     return detect_cycle_slips(t_ep, obs.epoch, sat, obs.carrier, **kw)
 
