@@ -290,15 +290,14 @@ def run_rinex_ins(ds: Dataset, source: str, folder, inputs: RinexInputs):
 def carrier_observations(obs: RawPseudoranges, epochs, tight, j_of, rho, sigma_cp: float):
     """The tight observables with the RINEX carrier as TDCP needs it, and the cycle slips.
 
-    Each slot's carrier [m] is ``lambda phi`` (its signal's wavelength, GLONASS by channel:
-    :func:`mixnav.gnss.cycle_slips.observation_wavelengths`) with the clock-jump offset and
-    the broadcast corrections of its pseudorange applied (``epochs.pseudorange - rho`` of
-    the same observation: satellite clock, group delay, troposphere, ionosphere). In a time
-    difference the constant parts cancel; the ionosphere enters with the code's sign where
-    the carrier's is opposite, an error of twice its change over an epoch (the Klobuchar
-    model's: below a millimetre per second). ``carrier_continuous``: the observation's
-    carrier continues its satellite's previous one
-    (:func:`mixnav.gnss.cycle_slips.slips_of_observations`: loss of lock, gaps, Doppler).
+    Each slot's carrier [m] is ``lambda phi`` (its signal's wavelength, GLONASS by channel)
+    with the clock-jump offset and the broadcast corrections of its pseudorange applied
+    (:func:`mixnav.gnss.cycle_slips.carrier_of_rows`: constant parts cancel in a time
+    difference; the ionosphere enters with the code's sign where the carrier's is
+    opposite, an error of twice its change over an epoch, below a millimetre per second
+    for the Klobuchar model). ``carrier_continuous``: the observation's carrier continues
+    its satellite's previous one (:func:`mixnav.gnss.cycle_slips.slips_of_observations`:
+    loss of lock, gaps, Doppler).
 
     Parameters
     ----------
@@ -319,27 +318,22 @@ def carrier_observations(obs: RawPseudoranges, epochs, tight, j_of, rho, sigma_c
         With ``carrier`` (NaN where the observation has none), ``carrier_continuous``, ``sigma_cp``.
     slips : CycleSlips
     """
-    from ..gnss.cycle_slips import observation_wavelengths, slips_of_observations
-    from ..gnss.pseudoranges import SYSTEM_LETTERS
+    from ..gnss.cycle_slips import carrier_of_rows, slips_of_observations
     if obs.carrier is None:
         raise DataError("TDCP needs carrier phases, and the file has none of the signals read (L1C/L1 ...)",
                         file=obs.source)
     slips = slips_of_observations(obs)
-    lam = observation_wavelengths(obs)
-    sys_obs = obs.systems().astype(str)
-    row_of = {(int(j), s, int(p)): i for i, (j, s, p) in enumerate(zip(obs.epoch, sys_obs, obs.prn))}
+    row_carrier, row_cont, _ = carrier_of_rows(obs, epochs, rho, j_of, slips)
     E, K = tight.valid.shape
     carrier = np.full((E, K), np.nan)
     cont = np.zeros((E, K), bool)
     for e in range(E):
         sl = epochs.rows_of(e)
-        ids, prs, syss = epochs.sat_id[sl], epochs.pseudorange[sl], epochs.system[sl]
+        ids, prs = epochs.sat_id[sl], epochs.pseudorange[sl]
         for k in np.nonzero(tight.valid[e])[0]:
             # the slot's row: its satellite with its (copied, so bit-equal) pseudorange
-            r = np.nonzero((ids == tight.prn[e, k]) & (prs == tight.pseudorange[e, k]))[0][0]
-            i = row_of[(int(j_of[e]), SYSTEM_LETTERS[int(syss[r])], int(ids[r]))]
-            carrier[e, k] = lam[i] * obs.carrier[i] + (prs[r] - rho[i])
-            cont[e, k] = slips.continuous[i]
+            r = sl.start + np.nonzero((ids == tight.prn[e, k]) & (prs == tight.pseudorange[e, k]))[0][0]
+            carrier[e, k], cont[e, k] = row_carrier[r], row_cont[r]
     return replace(tight, carrier=carrier, carrier_continuous=cont, sigma_cp=float(sigma_cp)), slips
 
 

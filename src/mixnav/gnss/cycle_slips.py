@@ -65,7 +65,7 @@ from ..errors import ArgumentError
 from .geometry import C_LIGHT
 
 __all__ = ["REASONS", "CycleSlips", "detect_cycle_slips", "slips_of_observations", "mark_carrier_arcs",
-           "carrier_frequency", "carrier_wavelength", "observation_wavelengths"]
+           "carrier_frequency", "carrier_wavelength", "observation_wavelengths", "carrier_of_rows"]
 
 #: reason name -> bit of :attr:`CycleSlips.flags`
 REASONS: dict[str, int] = {"loss of lock": 1, "half-cycle change": 2, "gap": 4, "Doppler": 8,
@@ -424,3 +424,48 @@ def mark_carrier_arcs(obs, wavelength: float | None = None, **options):
     cont = np.zeros(obs.valid.shape, bool)
     cont[e, k] = cs.continuous
     return replace(obs, carrier_continuous=cont), cs
+
+
+def carrier_of_rows(obs, epochs, rho, epoch_of, slips: CycleSlips | None = None):
+    """Each corrected pseudorange row's carrier [m] with the same corrections, and whether it
+    continues its satellite's arc.
+
+    Parameters
+    ----------
+    obs : RawPseudoranges
+        With ``carrier`` [cycles].
+    epochs : PseudorangeEpochs
+        :func:`mixnav.gnss.spp.corrected_pseudoranges` of ``obs``.
+    rho : ndarray (m,)
+        ``obs``'s pseudoranges as corrected (clock-jump offset off) [m].
+    epoch_of : ndarray of int (E,)
+        The ``obs`` epoch of each of ``epochs``' epochs.
+    slips : CycleSlips or None
+        Of ``obs`` (default: :func:`slips_of_observations` with its defaults).
+
+    Returns
+    -------
+    carrier : ndarray (M,)
+        ``lambda phi + (corrected - raw pseudorange)`` [m]: the satellite clock, group delay
+        and atmosphere of the row's pseudorange (constant parts cancel in a time
+        difference; the ionosphere's change over an epoch enters twice, below a millimetre
+        per second for the broadcast model); NaN where the observation has no carrier.
+    continuous : ndarray of bool (M,)
+    source : ndarray of int (M,)
+        The ``obs`` row of each row.
+    """
+    from .pseudoranges import SYSTEM_LETTERS
+    if slips is None:
+        slips = slips_of_observations(obs)
+    lam = observation_wavelengths(obs)
+    letters = obs.systems().astype(str)
+    row_of = {(int(j), s, int(p)): i for i, (j, s, p) in enumerate(zip(obs.epoch, letters, obs.prn))}
+    M = len(epochs.pseudorange)
+    src = np.empty(M, np.int64)
+    for e in range(len(epochs)):
+        sl = epochs.rows_of(e)
+        j = int(epoch_of[e])
+        for r in range(sl.start, sl.stop):
+            src[r] = row_of[(j, SYSTEM_LETTERS[int(epochs.system[r])], int(epochs.sat_id[r]))]
+    carrier = lam[src] * obs.carrier[src] + (epochs.pseudorange - np.asarray(rho, float)[src])
+    return carrier, slips.continuous[src], src
