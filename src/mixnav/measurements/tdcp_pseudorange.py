@@ -177,7 +177,3 @@ class PseudorangeTdcp(PseudorangeGnss):
         H_pr[:, :self.layout.n] = pr.H
         return Rows(np.concatenate([pr.z, z]), np.vstack([H_pr, H]), np.concatenate([pr.R, r]),
                     np.concatenate([pr.kinds, kinds]), np.concatenate([pr.channels, self._tdcp_channels[cur]]))
-
-    def predict_batch(self, *args, **kwargs):
-        raise ArgumentError("TDCP needs a stochastic clone, which the ensemble estimators do not carry",
-                            argument="estimator")
