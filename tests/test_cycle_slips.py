@@ -197,3 +197,9 @@ def test_leave_one_out_median(n):
     x = np.random.default_rng(n).standard_normal(n)
     x[1] = x[2]                                   # a tie
     np.testing.assert_array_equal(_leave_one_out_median(x), [np.median(np.delete(x, i)) for i in range(n)])
+
+
+def test_without_doppler_every_pair_is_counted_untested():
+    t = np.arange(5.0)
+    cs = detect_cycle_slips(t, np.arange(5), np.zeros(5, int), np.full(5, 3.0))
+    assert cs.counts["G"]["no Doppler check"] == 4 and cs.counts["G"]["continuous"] == 4

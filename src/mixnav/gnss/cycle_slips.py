@@ -331,6 +331,8 @@ def detect_cycle_slips(time, epoch, satellite, carrier, *, doppler=None, lli=Non
             sigma_of[str(s)] = sig1
             bad = tested[mine] & (np.abs(r[mine]) > n_sigma * sig)
             flags[b[mine][bad]] |= REASONS["Doppler"]
+    else:   # no Doppler at all: every pair within the gap rule goes untested by it (said, not silent)
+        no_check[b[dt <= max_gap * interval]] = True
 
     gf_jump = np.full(m, np.nan)
     if phi2 is not None:
