@@ -209,3 +209,49 @@ def test_tdcp_keeps_the_constant_velocity_filter_consistent_and_sharpens_velocit
     print("NEES per dof", nees, "velocity RMS [m/s]", v_rms)
     assert 0.3 < nees["pr"] < 1.3 and 0.3 < nees["tdcp"] < 1.3, nees
     assert v_rms["tdcp"] < v_rms["pr"] / 2.5, v_rms
+
+
+# ------------------------------------------------------------------ the real carrier
+
+URBANNAV = __import__("pathlib").Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "urbannav-tst-static"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (URBANNAV / "2020_06_03_TST_03.obs").exists(), reason="urbannav data not present")
+def test_urbannav_carrier_agrees_with_the_surveyed_point():
+    """The F9P's carrier through the filters' path (corrected rows, wavelengths per system and
+    GLONASS channel, slips): TDCP less the range change from the surveyed antenna and the
+    epoch's clock change is millimetres on every continuous pair of every system (measured
+    1.6-3.6 mm robust sigma, max 45 mm: multipath), so no slip of half a cycle (9.5 cm) or
+    more is left in them; the pairs the loss-of-lock flag cut carry real slips (most of them
+    half a cycle, some metres)."""
+    from mixnav.config.loader import load_dataset
+    from mixnav.experiment.spp_process import _epoch_times, _systems_of, options, read_raw, solve_raw
+    from mixnav.gnss.cycle_slips import REASONS, carrier_of_rows, slips_of_observations, static_tdcp_residuals
+    from mixnav.gnss.pseudoranges import SYSTEM_LETTERS
+    from mixnav.gnss.spp import clock_jumps, corrected_pseudoranges
+    ds, source, _ = load_dataset("urbannav-tst-static")
+    ds = ds.model_copy(update={"methods": [m for m in ds.methods if m.name == "spp"]})
+    folder = (URBANNAV).resolve()
+    obs, eph, _ = read_raw(ds, source, folder)
+    tr = solve_raw(ds, source, folder, obs, eph).track
+    times = _epoch_times(tr)
+    rp = ds.reference_point
+    point = lla_to_ecef(np.array([rp.latitude, rp.longitude, rp.height]))
+    offset, _, _ = clock_jumps(times, tr.clock_bias, tr.ok, 1000.0)
+    rho = obs.pseudorange - offset[obs.epoch]
+    system, chan = _systems_of(obs, eph)
+    epochs, _ = corrected_pseudoranges(eph, obs.week, obs.tow, obs.epoch, obs.prn, rho,
+                                       np.tile(point, (len(times), 1)), options(ds), system=system,
+                                       glonass_channel=chan)
+    slips = slips_of_observations(obs)
+    carrier, cont, src = carrier_of_rows(obs, epochs, rho, np.searchsorted(times, epochs.time - 1e-6), slips)
+    rows, _, d = static_tdcp_residuals(epochs, carrier, point, cont)
+    letters = np.array([SYSTEM_LETTERS[int(c)] for c in epochs.system[rows]])
+    good = cont[rows]
+    for s in "GREC":
+        v = np.abs(d[good & (letters == s)])
+        assert len(v) > 2000
+        assert 1.4826 * np.median(v) < 0.005 and v.max() < 0.06, (s, np.median(v), v.max())
+    lost = ~good & ((slips.flags[src[rows]] & REASONS["loss of lock"]) != 0)
+    assert (np.abs(d[lost]) > 0.07).sum() >= 15    # 19 of the 25 above 9 cm (benchmarks/results/tdcp_urbannav.md)

@@ -65,7 +65,8 @@ from ..errors import ArgumentError
 from .geometry import C_LIGHT
 
 __all__ = ["REASONS", "CycleSlips", "detect_cycle_slips", "slips_of_observations", "mark_carrier_arcs",
-           "carrier_frequency", "carrier_wavelength", "observation_wavelengths", "carrier_of_rows"]
+           "carrier_frequency", "carrier_wavelength", "observation_wavelengths", "carrier_of_rows",
+           "static_tdcp_residuals"]
 
 #: reason name -> bit of :attr:`CycleSlips.flags`
 REASONS: dict[str, int] = {"loss of lock": 1, "half-cycle change": 2, "gap": 4, "Doppler": 8,
@@ -471,3 +472,61 @@ def carrier_of_rows(obs, epochs, rho, epoch_of, slips: CycleSlips | None = None)
             src[r] = row_of[(j, SYSTEM_LETTERS[int(epochs.system[r])], int(epochs.sat_id[r]))]
     carrier = lam[src] * obs.carrier[src] + (epochs.pseudorange - np.asarray(rho, float)[src])
     return carrier, slips.continuous[src], src
+
+
+def static_tdcp_residuals(epochs, carrier, point_ecef, trusted, max_gap: float = 1.5):
+    """TDCP of consecutive epochs less the range change seen from a known static antenna,
+    less each epoch's receiver clock change (the median over its ``trusted`` pairs): what is
+    left of a carrier's time difference is its noise and multipath, plus any cycle slip it
+    carries. A check of recorded carriers and of the slip flags that needs no filter.
+
+    Parameters
+    ----------
+    epochs : PseudorangeEpochs
+        Corrected pseudorange rows (satellites at transmit time).
+    carrier : ndarray (M,)
+        Carrier of each row [m] (:func:`carrier_of_rows`).
+    point_ecef : ndarray (3,)
+        The antenna [m].
+    trusted : ndarray of bool (M,)
+        Rows whose pair sets the epoch's clock change (e.g. ``continuous``); an epoch with
+        fewer than 3 trusted pairs is left out.
+    max_gap : float
+        Epochs further apart than ``max_gap`` median intervals are not differenced.
+
+    Returns
+    -------
+    rows, previous : ndarray of int (P,)
+        The row at each epoch and the same satellite's row at the epoch before (every pair
+        with a carrier at both).
+    residual : ndarray (P,)
+        [m].
+    """
+    from .geometry import earth_rotation_correction
+    x = np.asarray(point_ecef, float)
+    s = epochs.sat_ecef
+    tau = np.linalg.norm(s - x, axis=1) / C_LIGHT
+    geo = np.linalg.norm(earth_rotation_correction(s, tau) - x, axis=1)
+    key = epochs.system.astype(np.int64) * 1000 + epochs.sat_id
+    dt = np.diff(epochs.time)
+    limit = max_gap * (float(np.median(dt)) if len(dt) else 1.0)
+    out_r, out_p, out_d = [], [], []
+    for e in range(1, len(epochs)):
+        if epochs.time[e] - epochs.time[e - 1] > limit:
+            continue
+        a, b = epochs.rows_of(e - 1), epochs.rows_of(e)
+        ra, rb = np.arange(a.start, a.stop), np.arange(b.start, b.stop)
+        _, ib, ia = np.intersect1d(key[rb], key[ra], assume_unique=True, return_indices=True)
+        r, p = rb[ib], ra[ia]
+        d = (carrier[r] - carrier[p]) - (geo[r] - geo[p])
+        ok = np.isfinite(d)
+        r, p, d = r[ok], p[ok], d[ok]
+        good = np.asarray(trusted)[r]
+        if good.sum() < 3:
+            continue
+        out_r.append(r)
+        out_p.append(p)
+        out_d.append(d - np.median(d[good]))
+    if not out_r:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
+    return np.concatenate(out_r), np.concatenate(out_p), np.concatenate(out_d)
