@@ -27,6 +27,9 @@ Steps:
    travel time applied): :class:`mixnav.measurements.tight.TightGnss` applies the antenna
    lever arm to the range and to the range rate (its Jacobians cover attitude, and the
    gyro bias through ``w x l``).
+   With a ``tdcp-ekf`` method the carrier (``L1C``) of each slot comes too, in metres
+   with its pseudorange's corrections, and whether it continues its satellite's arc
+   (:func:`carrier_observations`, :mod:`mixnav.gnss.cycle_slips`: TDCP rows only there).
 5. The tight methods start from the alignment with the receiver clock bias and drift of
    the SPP / Doppler solution at the alignment time (17-state layout, ``states = 17``).
    Outputs, metrics and report as every INS dataset (:func:`mixnav.experiment.pipelines.ins_fixes.write`).
