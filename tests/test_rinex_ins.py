@@ -323,14 +323,14 @@ def test_missing_navigation_missing_ephemeris_and_klobuchar(exported, tmp_path):
 
 
 def test_dataset_sections_and_methods_are_checked(exported, tmp_path):
-    """Config errors naming the key: fixes and RINEX together, neither, TDCP (no carrier is
-    read), a tight method without the clock states, a phone log format, no navigation file
+    """Config errors naming the key: fixes and RINEX together, neither, a TDCP or tight
+    method without the clock states, a phone log format, no navigation file
     named, an empty file list."""
     _, _, ex, _ = exported
     d = ex.files["dataset"]
     cases = [
         ({"[raw_gnss]": '[gnss]\nformat = "csv"\nfile = "x.csv"\n\n[raw_gnss]'}, "raw_gnss", "not both"),
-        ({'type = "tight-ekf"\nstates = 17': 'type = "tdcp-ekf"\nstates = 17'}, "methods[1].type", "carrier"),
+        ({'type = "tight-ekf"\nstates = 17': 'type = "tdcp-ekf"\nstates = 15'}, "methods[1].states", "clock"),
         ({'type = "tight-ekf"\nstates = 17': 'type = "tight-ekf"\nstates = 15'}, "methods[1].states", "clock"),
         ({'format = "rinex-obs"': 'format = "android-gnsslogger"'}, "raw_gnss.format", None),
         ({'navigation = "nav.rnx"': ''}, "raw_gnss.navigation", None),

@@ -307,7 +307,8 @@ def test_multi_system_export_writes_mixed_rinex(exported_multi):
     head = ex.files["observations"].read_text().splitlines()
     assert "M: Mixed" in head[0]
     types = {ln[0]: ln[6:58].split() for ln in head if ln[60:].strip() == "SYS / # / OBS TYPES"}
-    assert types == {"G": ["C1C", "D1C"], "R": ["C1C", "D1C"], "E": ["C1C", "D1C"], "C": ["C2I", "D2I"]}
+    assert types == {"G": ["C1C", "L1C", "D1C"], "R": ["C1C", "L1C", "D1C"], "E": ["C1C", "L1C", "D1C"],
+                     "C": ["C2I", "L2I", "D2I"]}
     eph = MultiEphemeris.from_rinex([ex.files["navigation"]])
     assert {s for s in "GREC" if s in eph} == set("GREC")
     assert eph["R"].channels() == {p: GLONASS_CHANNELS[p] for p in range(1, 25)}

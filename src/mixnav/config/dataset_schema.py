@@ -261,7 +261,9 @@ class InsRawGnss(RawGnss):
     roll-over) or ``"gps-seconds"`` (GPS seconds since 1980-01-06 00:00); ``pseudorange_sigma``,
     ``range_rate_sigma``: what the tight filter is told (one sigma for every satellite), or
     with ``pseudorange_weights = "elevation"`` the SPP's ``sqrt(sigma_a^2 + sigma_b^2 / sin^2 el)``
-    per pseudorange (the range rates keep ``range_rate_sigma``);
+    per pseudorange (the range rates keep ``range_rate_sigma``); ``carrier_sigma``: the carrier
+    1-sigma a ``tdcp-ekf`` is told (its TDCP rows ``2 carrier_sigma^2``; the carrier is the
+    file's, TDCP rows only between epochs without a cycle slip: :mod:`mixnav.gnss.cycle_slips`);
     ``clock_q_bias`` [m^2/s], ``clock_q_drift`` [m^2/s^3]: the receiver clock's noise
     densities in the filter; ``clock_jump``: SPP clock jumps beyond this come off the
     pseudoranges (millisecond steps of a steered clock; :func:`mixnav.gnss.spp.clock_jumps`);
@@ -275,6 +277,8 @@ class InsRawGnss(RawGnss):
     pseudorange_sigma: quantity(u.LENGTH, positive=True) = 3.0  # type: ignore[valid-type]
     pseudorange_weights: Literal["constant", "elevation"] = "constant"
     range_rate_sigma: quantity(u.VELOCITY, positive=True) = 0.1  # type: ignore[valid-type]
+    #: tdcp-ekf's carrier sigma [m]; 3 mm as the scenarios' [gnss.satellites] carrier_sigma
+    carrier_sigma: quantity(u.LENGTH, positive=True) = 0.003  # type: ignore[valid-type]
     clock_q_bias: float = Field(default=0.1, ge=0, le=1e8)
     clock_q_drift: float = Field(default=0.01, ge=0, le=1e6)
     clock_jump: quantity(u.LENGTH, positive=True) = 1000.0  # type: ignore[valid-type]

@@ -436,10 +436,7 @@ def _check_kind(ds, source):
                           "not both", file=source, key="raw_gnss")
     if ds.raw_gnss is not None:
         for i, m in enumerate(ds.methods or []):
-            if m.type == "tdcp-ekf":
-                raise ConfigError("TDCP needs carrier phases, which [raw_gnss] does not read (pseudoranges and "
-                                  "Doppler only): use type = \"tight-ekf\"", file=source, key=f"methods[{i}].type")
-            if m.type == "tight-ekf" and m.states in (15, 21):
+            if m.type in ("tight-ekf", "tdcp-ekf") and m.states in (15, 21):
                 raise ConfigError(f"method '{m.name}' is tightly coupled: it needs the receiver clock states "
                                   "(states = 17, or 23 with the scale factors)", file=source, key=f"methods[{i}].states")
 

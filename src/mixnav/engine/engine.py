@@ -34,7 +34,8 @@ results never silently carry NaN.
 
 Stochastic cloning and memory. A measurement model with ``remembers`` gets,
 at each of its epochs, the memory it returned (``model.remember``) after the
-updates of its previous epoch; the engine holds it, so models keep no state.
+updates of its previous epoch; the engine holds it, so models keep no state
+(a model with ``remembers_aux = True`` also gets the auxiliary estimates, ``aux=``).
 A model with ``clone_size = c > 0`` also asks for a stochastic clone
 ``x_c = J x`` of the error state at that epoch (``J = model.clone_rows(nav)``,
 (c, n)): the estimator carries the augmented covariance::
@@ -308,7 +309,10 @@ class Engine:
             if model.remembers:
                 if model is self.cloner:  # replace the clone by the current state
                     est.replace_clone(model.clone_rows(nav))
-                self.memory[mi] = model.remember(i, nav, w_b, clock)
+                if getattr(model, "remembers_aux", False):   # e.g. inter-system offsets at the clone
+                    self.memory[mi] = model.remember(i, nav, w_b, clock, aux=self.aux)
+                else:
+                    self.memory[mi] = model.remember(i, nav, w_b, clock)
             self._update_time += perf() - tu
             self._n_updates += 1
         if self._is_out[ti]:

@@ -7,7 +7,8 @@ One seeded run of a scenario with raw satellites (``[gnss.satellites]``) becomes
   seconds of the week of the first epoch (the first row holds the start time and zero
   increments: each row's increments are over the interval ending at its time);
 - ``obs.rnx``: a RINEX 3.04 observation file of the simulated pseudoranges (``C1C``,
-  satellite clocks zero) and Doppler (``D1C = -range rate / lambda_L1``), epochs in GPS time
+  satellite clocks zero), carrier phases (``L1C = carrier / lambda_L1`` [cycles], no loss of
+  lock) and Doppler (``D1C = -range rate / lambda_L1``), epochs in GPS time
   (:func:`mixnav.io.rinex_write.write_rinex_obs`);
 - ``nav.rnx``: a RINEX 3.04 GPS navigation file of the scenario's nominal constellation
   (:meth:`mixnav.gnss.constellation.NominalConstellation.broadcast_records`: circular orbits
@@ -29,7 +30,7 @@ One seeded run of a scenario with raw satellites (``[gnss.satellites]``) becomes
   scenario's lever arm as ``installation.antenna_position``, its IMU model, receiver clock
   noise and observable sigmas, troposphere and ionosphere corrections off (the simulation
   has no atmosphere), an alignment (``level-then-gnss`` when the run starts at rest for at
-  least 10 s, else ``gnss-velocity``), and the scenario's loose and tight EKF methods.
+  least 10 s, else ``gnss-velocity``), and the scenario's loose, tight and TDCP EKF methods.
 
 The simulation time ``t`` maps to GPS time ``start + t`` (``start``: a GPS calendar time).
 ``mixnav process <folder>/dataset.toml`` then runs the data through the RINEX path
@@ -129,6 +130,7 @@ def dataset_toml(sc: Scenario, name: str, lever, methods: list, alignment: dict,
               "ionosphere = false",
               f"pseudorange_sigma = {_q(s.pseudorange_sigma, 'm')}",
               f"range_rate_sigma = {_q(s.range_rate_sigma, 'm/s')}",
+              f"carrier_sigma = {_q(s.carrier_sigma, 'm')}",
               f"clock_q_bias = {s.clock_bias_noise ** 2:.10g}",
               f"clock_q_drift = {s.clock_drift_noise ** 2:.10g}",
               "", "[reference]", 'format = "csv"', 'file = "reference.csv"', 'point = "imu"',
@@ -145,6 +147,8 @@ def dataset_toml(sc: Scenario, name: str, lever, methods: list, alignment: dict,
                   f'estimator = "{m.estimator}"', f"covariance_interval = {_q(m.covariance_interval, 's')}"]
         if m.type == "tight-ekf":
             lines.append(f"use_range_rate = {'true' if m.use_range_rate else 'false'}")
+        if m.type == "tdcp-ekf":
+            lines.append(f'tdcp_previous = "{m.tdcp_previous}"')
     return "\n".join(lines) + "\n"
 
 
@@ -158,8 +162,8 @@ def _alignment(sc: Scenario) -> dict:
 
 def _plain(m) -> str | None:
     """Why a method cannot be copied into the exported dataset (None: it can)."""
-    if m.type not in ("loose-ekf", "tight-ekf"):
-        return f"type '{m.type}' (the export copies loose-ekf and tight-ekf)"
+    if m.type not in ("loose-ekf", "tight-ekf", "tdcp-ekf"):
+        return f"type '{m.type}' (the export copies loose-ekf, tight-ekf and tdcp-ekf)"
     extra = [k for k in ("robust", "mixture", "imm", "aiding", "imu_grade", "imu_errors", "options")
              if getattr(m, k, None)]
     if extra or m.smooth:
@@ -243,6 +247,7 @@ def export_dataset(sc: Scenario, out_dir, seed: int | None = None, start: str = 
                                                              for x, p in zip(letters, obs.prn[e, s])])
         write_rinex_obs(folder / "obs.rnx", wk.astype(int), tow, e, obs.prn[e, s], obs.pseudorange[e, s],
                         doppler=-obs.range_rate[e, s] / (wavelength if multi else LAMBDA_L1),
+                        carrier=obs.carrier[e, s] / (wavelength if multi else LAMBDA_L1),
                         approx_position=lla_to_ecef(sim.truth.lla[0]),
                         marker=sc.scenario.name.upper()[:20], interval=float(np.median(np.diff(obs.time))),
                         system=letters if multi else None,

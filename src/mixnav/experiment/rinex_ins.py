@@ -29,6 +29,9 @@ Steps:
    travel time applied): :class:`mixnav.measurements.tight.TightGnss` applies the antenna
    lever arm to the range and to the range rate (its Jacobians cover attitude, and the
    gyro bias through ``w x l``).
+   With a ``tdcp-ekf`` method the carrier (``L1C``) of each slot comes too, in metres
+   with its pseudorange's corrections, and whether it continues its satellite's arc
+   (:func:`carrier_observations`, :mod:`mixnav.gnss.cycle_slips`: TDCP rows only there).
 5. The tight methods start from the alignment with the receiver clock bias and drift of
    the SPP / Doppler solution at the alignment time (17-state layout, ``states = 17``).
    Several systems: the filter's clock is that of the first of G R E C J present, and its
@@ -67,7 +70,8 @@ from .spp_process import read_navigation as read_navigation_multi
 def _subset(obs, keep):
     """The epochs ``keep`` (bool (m,)) of GnssObservations."""
     f = {k: getattr(obs, k) for k in ("time", "valid", "prn", "sat_pos", "sat_vel", "pseudorange", "range_rate",
-                                      "carrier", "elevation", "clock", "pr_variance", "system")
+                                      "carrier", "elevation", "clock", "pr_variance", "system",
+                                      "carrier_continuous")
          if getattr(obs, k) is not None}
     return replace(obs, **{k: v[keep] for k, v in f.items()})
 
@@ -193,6 +197,9 @@ def read_rinex_ins(ds: Dataset, source: str, folder) -> RinexInputs:
         if m.type == "tight-ekf" and m.use_range_rate and obs.doppler is None:
             raise ConfigError(f"method '{m.name}' uses range rates, but {obs.source} has no Doppler (D1C/D1) column: "
                               "set use_range_rate = false", file=source, key=f"methods[{i}].use_range_rate")
+        if m.type == "tdcp-ekf" and obs.carrier is None:
+            raise ConfigError(f"method '{m.name}' is TDCP, but {obs.source} has no carrier phase (L1C/L1) of the "
+                              "signals read: use type = \"tight-ekf\"", file=source, key=f"methods[{i}].type")
     reference = read_reference(ds, folder)
     return RinexInputs(imu, obs, eph, obs_files, nav_files, reference, _time.perf_counter() - t_read)
 
@@ -258,6 +265,9 @@ def run_rinex_ins(ds: Dataset, source: str, folder, inputs: RinexInputs):
     tight, skipped_rows = tight_observations(epochs, rx[j_of], c.pseudorange_sigma, c.range_rate_sigma,
                                              opts.elevation_mask, weights=c.pseudorange_weights)
     tight = replace(tight, time=t_rel[j_of])   # the epochs' own times on the run's axis
+    slips = None
+    if any(m.type == "tdcp-ekf" for m in ds.methods):
+        tight, slips = carrier_observations(obs, epochs, tight, j_of, rho, float(c.carrier_sigma))
     # receiver velocity and clock drift of each RINEX epoch from its Doppler (NaN without)
     vel_e = np.full((len(t_rel), 3), np.nan)
     drift = np.full(len(t_rel), np.nan)
@@ -307,12 +317,65 @@ def run_rinex_ins(ds: Dataset, source: str, folder, inputs: RinexInputs):
             "systems": list(letters), "satellites_skipped_by_system": dict(getattr(track, "skipped_by_system", {})),
             "system_offsets0_m": {s: float(v) for s, v in zip(letters[1:], init.aux0["system_offset"])}
             if init.aux0 else {}})
+    if slips is not None:
+        checks["rinex"]["cycle_slips"] = slips.counts
+        checks["rinex"]["doppler_slip_sigma_cycles"] = slips.doppler_sigma
     return ProcessOutput(ds, source, folder, t0, imu, fixes, all_fixes, reference, lever, results, init,
                          read_time + solve_time, filter_time, aiding.summary(),
                          installation_check(imu, ds.alignment.static_duration, results, aiding.stillness,
                                             configured={"antenna_position": inst.antenna_position,
                                                         "imu_time_offset": inst.imu_time_offset}),
                          checks=checks, observations=tight)
+
+
+def carrier_observations(obs: RawPseudoranges, epochs, tight, j_of, rho, sigma_cp: float):
+    """The tight observables with the RINEX carrier as TDCP needs it, and the cycle slips.
+
+    Each slot's carrier [m] is ``lambda phi`` (its signal's wavelength, GLONASS by channel)
+    with the clock-jump offset and the broadcast corrections of its pseudorange applied
+    (:func:`mixnav.gnss.cycle_slips.carrier_of_rows`: constant parts cancel in a time
+    difference; the ionosphere enters with the code's sign where the carrier's is
+    opposite, an error of twice its change over an epoch, below a millimetre per second
+    for the Klobuchar model). ``carrier_continuous``: the observation's carrier continues
+    its satellite's previous one (:func:`mixnav.gnss.cycle_slips.slips_of_observations`:
+    loss of lock, gaps, Doppler).
+
+    Parameters
+    ----------
+    obs : RawPseudoranges
+        The RINEX observations (``carrier`` [cycles]).
+    epochs : PseudorangeEpochs
+        ``corrected_pseudoranges`` of ``obs``; epoch ``e`` from RINEX epoch ``j_of[e]``.
+    tight : GnssObservations
+        ``tight_observations`` of ``epochs`` (slots: a subset of the epoch's rows).
+    rho : ndarray (m,)
+        ``obs``'s pseudoranges with the clock-jump offset taken off [m] (what was corrected).
+    sigma_cp : float
+        Carrier 1-sigma the filter is told [m].
+
+    Returns
+    -------
+    tight : GnssObservations
+        With ``carrier`` (NaN where the observation has none), ``carrier_continuous``, ``sigma_cp``.
+    slips : CycleSlips
+    """
+    from ..gnss.cycle_slips import carrier_of_rows, slips_of_observations
+    if obs.carrier is None:
+        raise DataError("TDCP needs carrier phases, and the file has none of the signals read (L1C/L1 ...)",
+                        file=obs.source)
+    slips = slips_of_observations(obs)
+    row_carrier, row_cont, _ = carrier_of_rows(obs, epochs, rho, j_of, slips)
+    E, K = tight.valid.shape
+    carrier = np.full((E, K), np.nan)
+    cont = np.zeros((E, K), bool)
+    for e in range(E):
+        sl = epochs.rows_of(e)
+        ids, prs = epochs.sat_id[sl], epochs.pseudorange[sl]
+        for k in np.nonzero(tight.valid[e])[0]:
+            # the slot's row: its satellite with its (copied, so bit-equal) pseudorange
+            r = sl.start + np.nonzero((ids == tight.prn[e, k]) & (prs == tight.pseudorange[e, k]))[0][0]
+            carrier[e, k], cont[e, k] = row_carrier[r], row_cont[r]
+    return replace(tight, carrier=carrier, carrier_continuous=cont, sigma_cp=float(sigma_cp)), slips
 
 
 def _select(f: GnssFixes, keep) -> GnssFixes:

@@ -85,6 +85,10 @@ class GnssObservations:
         System code of each slot (:data:`mixnav.gnss.pseudoranges.SYSTEM_LETTERS`: 1 GPS,
         4 GLONASS, 8 Galileo, 16 QZSS, 32 BeiDou; 0 in unused slots); ``prn`` then numbers
         the satellite within its system. None: every satellite is GPS.
+    carrier_continuous : ndarray of bool (m, K) or None
+        True where the slot's carrier continues its satellite's carrier of the previous epoch
+        without a cycle slip (:mod:`mixnav.gnss.cycle_slips`: recorded carriers); a TDCP is
+        formed only there. None: every carrier is one arc per satellite (the simulator's).
     """
 
     time: np.ndarray
@@ -102,6 +106,7 @@ class GnssObservations:
     clock: np.ndarray
     pr_variance: np.ndarray | None = None
     system: np.ndarray | None = None
+    carrier_continuous: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.time)

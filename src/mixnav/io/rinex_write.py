@@ -1,6 +1,6 @@
-"""RINEX 3.04 writers: observation files (first-frequency code, optionally Doppler) and
-navigation files, GPS alone or mixed (GPS, Galileo, BeiDou, QZSS Keplerian records; GLONASS
-slots and channels in the observation header).
+"""RINEX 3.04 writers: observation files (first-frequency code, optionally the carrier phase
+with its loss-of-lock indicator, and Doppler) and navigation files, GPS alone or mixed (GPS,
+Galileo, BeiDou, QZSS Keplerian records; GLONASS slots and channels in the observation header).
 
 What a receiver converted by RTKLIB's ``convbin`` would give, written from arrays: the
 simulator's export (:mod:`mixnav.experiment.export`) writes its pseudoranges, Doppler and
@@ -8,7 +8,8 @@ constellation with these, and the readers (:mod:`mixnav.io.rinex_obs`,
 :class:`mixnav.gnss.ephemeris.BroadcastEphemeris`, georinex) read them back.
 
 Formats (RINEX 3.04, IGS/RTCM): observations ``F14.3`` plus two blank flag columns
-(pseudorange to the millimetre, Doppler to the mHz: 0.2 mm/s), epoch records
+(pseudorange to the millimetre, carrier to the milli-cycle: 0.2 mm, Doppler to the mHz:
+0.2 mm/s; the carrier's loss-of-lock indicator in its first flag column), epoch records
 ``> yyyy mm dd hh mm ss.sssssss  f nnn`` in GPS time; navigation records in ``D19.12``
 (13 significant digits: a circular orbit's position to about 0.1 mm). Files are
 written atomically (:mod:`mixnav.io.atomic`). Values that do not fit the format are
@@ -208,10 +209,11 @@ def _kepler_lines(letter: str, r: dict, k: int, t_cal) -> list:
 
 def write_rinex_obs(path, week, tow, epoch, prn, pseudorange, doppler=None, approx_position=(0.0, 0.0, 0.0),
                     marker: str = "MIXNAV", program: str = "mixnav", interval: float | None = None,
-                    system=None, glonass_channels=None) -> None:
-    """Write GPS L1 C/A pseudoranges (``C1C``) and, when given, Doppler (``D1C``) as a RINEX
-    3.04 observation file, epoch times in GPS time; with ``system``, the satellites of several
-    systems, each with its :data:`OBS_CODES` code and Doppler (a mixed file).
+                    system=None, glonass_channels=None, carrier=None, lli=None) -> None:
+    """Write GPS L1 C/A pseudoranges (``C1C``) and, when given, carrier phases (``L1C``) and
+    Doppler (``D1C``) as a RINEX 3.04 observation file, epoch times in GPS time; with
+    ``system``, the satellites of several systems, each with its :data:`OBS_CODES` code (and
+    the carrier and Doppler of that signal: a mixed file).
 
     Parameters
     ----------
@@ -226,6 +228,12 @@ def write_rinex_obs(path, week, tow, epoch, prn, pseudorange, doppler=None, appr
         [m] (written to the millimetre; NaN: blank).
     doppler : ndarray (m,) or None
         [Hz] (written to the mHz; NaN: blank); None: no ``D1C`` column.
+    carrier : ndarray (m,) or None
+        Carrier phase of the same signal [cycles] (written to the milli-cycle; NaN: blank);
+        None: no ``L1C`` (or the system's ``L`` code).
+    lli : ndarray of int (m,) or None
+        The carrier's loss-of-lock indicator (0-7: bit 0 lost lock, bit 1 half-cycle
+        ambiguity; 0 written blank); needs ``carrier``.
     approx_position : (3,)
         ECEF [m] for the ``APPROX POSITION XYZ`` line.
     marker : str
@@ -251,6 +259,15 @@ def write_rinex_obs(path, week, tow, epoch, prn, pseudorange, doppler=None, appr
     dop = None if doppler is None else np.asarray(doppler, float)
     if dop is not None and dop.shape != (m,):
         raise ArgumentError(f"doppler has shape {dop.shape}, expected ({m},)", argument="doppler")
+    cp = None if carrier is None else np.asarray(carrier, float)
+    if cp is not None and cp.shape != (m,):
+        raise ArgumentError(f"carrier has shape {cp.shape}, expected ({m},)", argument="carrier")
+    flag = None if lli is None else np.asarray(lli)
+    if flag is not None:
+        if cp is None:
+            raise ArgumentError("loss-of-lock indicators belong to a carrier: give carrier too", argument="lli")
+        if flag.shape != (m,) or not np.issubdtype(flag.dtype, np.integer) or np.any((flag < 0) | (flag > 7)):
+            raise ArgumentError(f"must be ({m},) integers 0..7", argument="lli")
     if m and (epoch.min() < 0 or epoch.max() >= k):
         raise ArgumentError(f"epoch indices must lie in 0..{k - 1}", argument="epoch")
     letters = np.full(m, "G") if system is None else np.asarray(system).astype(str)
@@ -273,7 +290,7 @@ def write_rinex_obs(path, week, tow, epoch, prn, pseudorange, doppler=None, appr
     times = _calendar(week, tow)
     if k > 1 and np.any(np.diff(times) <= np.timedelta64(0, "ns")):
         raise ArgumentError("epoch times must increase strictly", argument="tow")
-    for name, a, lim in (("pseudorange", rho, 1e10), ("doppler", dop, 1e10)):
+    for name, a, lim in (("pseudorange", rho, 1e10), ("doppler", dop, 1e10), ("carrier", cp, 1e10)):
         if a is not None and np.any(np.isfinite(a) & (np.abs(a) >= lim)):
             raise ArgumentError(f"a {name} does not fit the F14.3 field", argument=name)
     x, y, z = (float(v) for v in approx_position)
@@ -287,7 +304,8 @@ def write_rinex_obs(path, week, tow, epoch, prn, pseudorange, doppler=None, appr
              _label(f"{x:14.4f}{y:14.4f}{z:14.4f}", "APPROX POSITION XYZ"),
              _label(f"{0.0:14.4f}{0.0:14.4f}{0.0:14.4f}", "ANTENNA: DELTA H/E/N")]
     for x_ in present:
-        types = [OBS_CODES[x_]] + (["D" + OBS_CODES[x_][1:]] if dop is not None else [])
+        types = ([OBS_CODES[x_]] + (["L" + OBS_CODES[x_][1:]] if cp is not None else [])
+                 + (["D" + OBS_CODES[x_][1:]] if dop is not None else []))
         lines.append(_label(f"{x_}{len(types):5d}" + "".join(f" {t}" for t in types), "SYS / # / OBS TYPES"))
     if interval is not None:
         lines.append(_label(f"{interval:10.3f}", "INTERVAL"))
@@ -313,6 +331,9 @@ def write_rinex_obs(path, week, tow, epoch, prn, pseudorange, doppler=None, appr
         lines.append(f"> {y0:04d} {mo:02d} {d:02d} {hh:02d} {mm:02d}{ss:11.7f}  0{len(rows):3d}")
         for i in rows:
             s = f"{letters[i]}{int(prn[i]):02d}" + value(rho[i])
+            if cp is not None:
+                s += value(cp[i]) if flag is None or not flag[i] or not np.isfinite(cp[i]) else \
+                    f"{cp[i]:14.3f}{int(flag[i]):1d} "
             if dop is not None:
                 s += value(dop[i])
             lines.append(s.rstrip())

@@ -34,8 +34,11 @@ previous epoch, no clone, ``H`` on the current states only). It ignores the
 previous epoch's uncertainty, so the filter becomes overconfident: tests and
 benchmarks/results/tight.md show what this costs in NEES.
 
-TDCP rows are formed only for satellites tracked at both epochs when the
-epochs are at most ``1.5 / rate`` apart (a longer gap means loss of lock).
+TDCP rows are formed only for satellites tracked, with a carrier, at both epochs
+when the epochs are at most ``1.5 / rate`` apart (a longer gap means loss of lock),
+and, for recorded carriers, only where the carrier is one arc between the two epochs
+(``GnssObservations.carrier_continuous``, from :mod:`mixnav.gnss.cycle_slips`: loss-of-lock
+flags, gaps, Doppler and geometry-free checks).
 """
 
 from __future__ import annotations
@@ -133,9 +136,17 @@ class TdcpGnss(TightGnss):
         return self._common_slots(p, i)
 
     def _common_slots(self, p: int, i: int):
+        """Slots of the satellites with a carrier at epochs ``p`` and ``i``; with recorded
+        carriers (``obs.carrier_continuous``) only those whose carrier is one arc from ``p``
+        to ``i`` (no cycle slip at any epoch after ``p`` up to ``i``)."""
         o = self.obs
-        a = np.nonzero(o.valid[i])[0]
-        b = np.nonzero(o.valid[p])[0]
+        a = np.nonzero(o.valid[i] & np.isfinite(o.carrier[i]))[0]
+        b = np.nonzero(o.valid[p] & np.isfinite(o.carrier[p]))[0]
+        cont = o.carrier_continuous
+        if cont is not None:
+            a = a[cont[i, a]]
+            for q in range(p + 1, i):     # an epoch in between: the arc must run through it too
+                a = a[np.isin(o.prn[i, a], o.prn[q][o.valid[q] & cont[q]])]
         _, ia, ib = np.intersect1d(o.prn[i, a], o.prn[p, b], assume_unique=True, return_indices=True)
         if not len(ia):
             return None
