@@ -131,3 +131,30 @@ def test_urbannav_validation_compiled_equals_numpy(urban, weights, robust):  # n
     _assert_same(a, b)
     assert a.validation == b.validation and a.robust == b.robust
     assert sum(v for key, v in b.validation.items() if key != "epochs_passed") > 0
+
+
+def test_the_validate_and_fde_keys_reach_the_spp():
+    """`[raw_gnss] validate`, `fde` are the SppOptions the SPP runs with (the robust method's
+    too); off by default; fde alone and a smartLoc log are refused by key."""
+    from pathlib import Path
+
+    from mixnav.config.loader import load_dataset_text
+    from mixnav.errors import ConfigError
+    from mixnav.experiment.spp_process import options
+    root = Path(__file__).resolve().parents[1] / "src" / "mixnav" / "config" / "datasets"
+    text = (root / "urbannav-tst-static.toml").read_text()
+    ds, _, _ = load_dataset_text(text, "u.toml")
+    assert not options(ds).validate and not options(ds).fde
+    ds, _, _ = load_dataset_text(text.replace("[raw_gnss]\n", "[raw_gnss]\nvalidate = true\nfde = true\n", 1),
+                                 "u.toml")
+    robust = next(m for m in ds.methods if m.robust is not None)
+    for o in (options(ds), options(ds, robust)):
+        assert o.validate and o.fde
+    assert options(ds, robust).robust is not None
+    with pytest.raises(ConfigError) as e:
+        load_dataset_text(text.replace("[raw_gnss]\n", "[raw_gnss]\nfde = true\n", 1), "u.toml")
+    assert "fde" in str(e.value)
+    sl = (root / "smartloc-berlin-gnss.toml").read_text().replace("[raw_gnss]\n", "[raw_gnss]\nvalidate = true\n", 1)
+    with pytest.raises(ConfigError) as e:
+        load_dataset_text(sl, "s.toml")
+    assert "validate" in str(e.value)
