@@ -74,6 +74,12 @@ def test_gdop_limit():
     above = wls_position(rho, sats, dataclasses.replace(opts, max_gdop=gdop * 1.001), system=SYSTEM)
     below = wls_position(rho, sats, dataclasses.replace(opts, max_gdop=gdop * 0.999), system=SYSTEM)
     assert above.validation == "passed" and below.validation == "gdop"
+    # the compiled loop's GDOP: the same verdicts
+    args = (_Fixed(sats, SYSTEM), np.full(1, 2100), 3e5 + np.zeros(1), np.zeros(10, int), sats.prn, rho)
+    for factor, status, key in ((1.001, STATUS_OK, "epochs_passed"), (0.999, STATUS_REJECTED, "epochs_rejected_gdop")):
+        a, b = _both(*args, options=dataclasses.replace(opts, max_gdop=gdop * factor), system=SYSTEM)
+        _assert_same(a, b)
+        assert b.status.tolist() == [status] and a.validation == b.validation == {key: 1}
 
 
 @pytest.mark.parametrize("robust", [None, (2.5, 6.0)])
@@ -130,7 +136,9 @@ def test_urbannav_validation_compiled_equals_numpy(urban, weights, robust):  # n
                  system=obs.system[m])
     _assert_same(a, b)
     assert a.validation == b.validation and a.robust == b.robust
-    assert sum(v for key, v in b.validation.items() if key != "epochs_passed") > 0
+    assert b.validation.get("epochs_passed_after_exclusion", 0) > 0
+    if robust is None:      # plain WLS with mixnav's weights: some epochs no exclusion repairs
+        assert b.status_counts().get(STATUS_REJECTED, 0) > 0
 
 
 def test_the_validate_and_fde_keys_reach_the_spp():
@@ -158,3 +166,21 @@ def test_the_validate_and_fde_keys_reach_the_spp():
     with pytest.raises(ConfigError) as e:
         load_dataset_text(sl, "s.toml")
     assert "validate" in str(e.value)
+
+
+def test_android_static_gps_validation_compiled_equals_numpy():
+    """The one-system path (GPS records, BroadcastEphemeris: the mask's count summed per epoch)
+    with validation and FDE on the phone log: both engines equal."""
+    from mixnav.config.loader import load_dataset
+    from mixnav.experiment.data_folder import find_data_dir
+    from mixnav.experiment.spp_process import options, read_raw
+
+    from .conftest import data_file
+    data_file("android-static")
+    ds, source, _ = load_dataset("android-static")
+    obs, eph, _ = read_raw(ds, source, find_data_dir(ds, None, source))
+    opts = dataclasses.replace(options(ds), validate=True, fde=True)
+    a, b = _both(eph, obs.week, obs.tow, obs.epoch, obs.prn, obs.pseudorange, options=opts)
+    _assert_same(a, b)
+    assert a.validation == b.validation and b.clock_system is None
+    assert sum(b.validation.values()) == len(b.status)
