@@ -145,8 +145,9 @@ class RawGnss(Strict):
     ``systems`` other than GPS needs its broadcast records; both relative to the data folder). ``elevation_mask``, ``sigma_a``,
     ``sigma_b`` (pseudorange sigma ``sqrt(a^2 + b^2 / sin^2(el))``),
     ``troposphere`` (Saastamoinen), ``ionosphere`` (Klobuchar, when the
-    navigation header has its coefficients) and ``weights`` (``"elevation"``: the sigma above;
-    ``"rtklib"``: RTKLIB pntpos's variance model, the SPP only) set the solver
+    navigation header has its coefficients), ``weights`` (``"elevation"``: the sigma above;
+    ``"rtklib"``: RTKLIB pntpos's variance model, the SPP only), ``validate`` and ``fde``
+    (RTKLIB-style validation of each epoch and RAIM FDE, default off) set the solver
     (:class:`mixnav.gnss.spp.SppOptions`); ``max_sv_time_uncertainty``
     rejects measurements the receiver reports as worse than it (Android logs).
     ``format = "rinex-obs"``: a RINEX 2.x/3.x observation file (:mod:`mixnav.io.rinex_obs`):
@@ -176,6 +177,12 @@ class RawGnss(Strict):
     #: the SPP's pseudorange weights: "elevation" (sigma_a, sigma_b) or "rtklib" (RTKLIB pntpos's
     #: variance model: code, broadcast accuracy, ionosphere, troposphere; gnss/spp.py)
     weights: Literal["elevation", "rtklib"] = "elevation"
+    #: validate each SPP epoch as RTKLIB pntpos does (chi-square of the weighted residuals at
+    #: 99.9 %, GDOP <= 30; a failing epoch is no solution), and with ``fde`` try leaving out
+    #: each satellite (RAIM FDE); off by default (gnss/spp.py, "Validation"). The key is
+    #: ``validate`` (the field's own name would shadow pydantic's ``validate``)
+    validate_epochs: bool = Field(default=False, alias="validate")
+    fde: bool = False
     max_sv_time_uncertainty: quantity(u.TIME, positive=True) = 500e-9  # type: ignore[valid-type]
     systems: list[str] = Field(default_factory=lambda: list(DEFAULT_SYSTEMS))
     signals: dict[str, str | list[str]] = Field(default_factory=dict)
@@ -209,6 +216,12 @@ class RawGnss(Strict):
         return [] if v is None else [v] if isinstance(v, str) else list(v)
 
     @model_validator(mode="after")
+    def _fde_needs_validation(self):
+        if self.fde and not self.validate_epochs:
+            raise ValueError("fde: needs validate = true (a satellite is left out when an epoch fails validation)")
+        return self
+
+    @model_validator(mode="after")
     def _smartloc_keys(self):
         if self.format != "smartloc":
             if self.navigation is None:
@@ -222,9 +235,12 @@ class RawGnss(Strict):
                          ("troposphere", "the file's pseudoranges have their atmosphere removed"),
                          ("ionosphere", "the file's pseudoranges have their atmosphere removed"),
                          ("weights", "the file's variances weigh the pseudoranges"),
+                         ("validate_epochs", "the corrected-pseudorange SPP does not validate its epochs"),
+                         ("fde", "the corrected-pseudorange SPP does not validate its epochs"),
                          ("max_sv_time_uncertainty", "a phone log's key"),
                          ("signals", "the file has one pseudorange per satellite")):
             if key in self.model_fields_set:
+                key = type(self).model_fields[key].alias or key
                 raise ValueError(f"{key}: not used with format = \"smartloc\" ({why})")
         return self
 

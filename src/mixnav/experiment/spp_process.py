@@ -98,7 +98,8 @@ def options(ds, method=None) -> SppOptions:
         return SppOptions(elevation_mask=c.elevation_mask, sigma_a=1.0, sigma_b=0.0, troposphere=False,
                           ionosphere=False, robust=robust)
     return SppOptions(elevation_mask=c.elevation_mask, sigma_a=c.sigma_a, sigma_b=c.sigma_b,
-                      troposphere=c.troposphere, ionosphere=c.ionosphere, robust=robust, weights=c.weights)
+                      troposphere=c.troposphere, ionosphere=c.ionosphere, robust=robust, weights=c.weights,
+                      validate=c.validate_epochs, fde=c.fde)
 
 
 def process_raw(ds: RawGnssDataset, source: str, folder: Path, seed: int = 0) -> SppOutput:

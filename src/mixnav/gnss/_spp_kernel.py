@@ -37,12 +37,18 @@ RTKLIB_SYSTEM_FACTOR = {"G": 1.0, "R": 1.5, "E": 1.0, "C": 1.0, "J": 1.0}
 RTKLIB_CODE_BIAS_SIGMA = 0.3
 RTKLIB_IONO_FACTOR, RTKLIB_IONO_OFF_SIGMA = 0.5, 5.0
 RTKLIB_TROPO_SIGMA, RTKLIB_TROPO_OFF_SIGMA = 0.3, 3.0
+#: validation's GDOP limit: RTKLIB's default maxgdop (prcopt_default, 30)
+RTKLIB_MAX_GDOP = 30.0
 
 N_SYSTEMS = 5
 #: status codes of :func:`spp_epochs` (mapped to spp.STATUS_* by the caller)
 CODE_OK, CODE_FEW, CODE_NOT_CONVERGED = 0, 1, 2
 #: robust status codes (spp.SppSolution.robust_status: off, ok, untestable, not_separable)
 ROBUST_OFF, ROBUST_OK, ROBUST_UNTESTABLE, ROBUST_NOT_SEPARABLE = 0, 1, 2, 3
+#: status of an epoch that validation rejected
+CODE_REJECTED = 3
+#: validation codes: off, passed, passed after FDE's exclusion, failed chi-square, failed GDOP
+VALID_OFF, VALID_PASSED, VALID_FDE, VALID_CHI2, VALID_GDOP = 0, 1, 2, 3, 4
 #: the mask and atmosphere apply within this of the Earth's mean radius [m] (as spp.py)
 _R_MEAN, _NEAR = 6.371e6, 5e5
 
@@ -409,9 +415,97 @@ def _igg3(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, sel, 
 
 
 @njit(cache=True)
+def _solve_rows(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, use0, use, p, alpha, beta, tow, H,
+                dz, el, az, iono_d, w, sel, act, N, L, b, dx, gamma, touched, keep, sel2, Hc, s2, Ninv, idx, qv,
+                t_all, t_ok):
+    """One epoch's solution on the rows ``use0`` from ``x`` (changed in place), as
+    spp.wls_position: WLS, the fixed-set retry when the steps never settle, the robust
+    solution when asked. ``(status, robust code)``, status 1 converged, 0 not, -1 too few
+    rows or a singular step; ``sel`` and ``gamma`` the solution's rows and weight factors."""
+    n = e1 - e0
+    for r in range(n):
+        use[r] = use0[r]
+        gamma[r] = 1.0
+    st, _ = _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, use, True, p,
+                          alpha, beta, tow, H, dz, el, az, iono_d, w, sel, act, N, L, b, dx, gamma)
+    if st == 0 and _near_surface(x):
+        # a satellite at the mask entering and leaving: keep the last set, iterate on
+        for r in range(n):
+            use[r] = sel[r]
+        st, _ = _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, use, False,
+                              p, alpha, beta, tow, H, dz, el, az, iono_d, w, sel, act, N, L, b, dx, gamma)
+    if st < 0:
+        return -1, ROBUST_OFF
+    rcode = ROBUST_OFF
+    if p[8] > 0 and st == 1:
+        rcode = _igg3(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, sel, p, alpha, beta,
+                      tow, H, dz, el, az, iono_d, w, act, N, L, b, dx, gamma, touched, keep, sel2, Hc, s2,
+                      Ninv, idx, qv, t_all, t_ok)
+        if rcode < 0:
+            return -1, ROBUST_OFF
+    return st, rcode
+
+
+@njit(cache=True)
+def _postfit(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, p, alpha, beta, tow, H, dz, el, az,
+             iono_d, w, sel, gamma, usedr, act, N, L, b, inv, G, NG, Q):
+    """The solution's quantities at ``x``: ``usedr`` (above the mask, not excluded by the
+    robust weights), ``H``, ``dz``, ``el`` of every row, ``inv`` the covariance and ``Q`` the
+    unweighted east-north-up cofactor (DOPs). ``(ok, unknowns, rows used, chi2)``, chi2 the
+    squared residuals over their variances (robust factors included); ok False when a normal
+    matrix is singular."""
+    n = e1 - e0
+    n_off = x.shape[0] - 4
+    for r in range(n):
+        usedr[r] = sel[r] and gamma[r] > 0.0
+    _linearise(x, sat, rho_corr, col, iono_scale, e0, e1, True, tow, p[3] > 0, p[4] > 0, alpha, beta, H, dz, el,
+               az, iono_d)
+    n_unk = _active(usedr, col, e0, e1, n_off, act)
+    _weights(p, el, iono_d, scale, fact, var_eph, e0, n, w, gamma)
+    chi2 = 0.0
+    n_use = 0
+    for r in range(n):
+        if usedr[r]:
+            chi2 += dz[r] * dz[r] * w[r]
+            n_use += 1
+    _normal(H, dz, w, usedr, act, n, n_unk, N, b)
+    if not _cholesky(N, L, n_unk):
+        return False, n_unk, n_use, chi2
+    _chol_inverse(L, inv, n_unk)
+    # DOPs: unweighted, position in east-north-up
+    lat, lon, _ = _ecef_to_lla(x[0], x[1], x[2])
+    sl, cl, so, co = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
+    for r in range(n):
+        hx, hy, hz = H[r, 0], H[r, 1], H[r, 2]
+        G[r, 0] = -so * hx + co * hy
+        G[r, 1] = -sl * co * hx - sl * so * hy + cl * hz
+        G[r, 2] = cl * co * hx + cl * so * hy + sl * hz
+        for q in range(3, 4 + n_off):
+            G[r, q] = H[r, q]
+        w[r] = 1.0
+    _normal(G, dz, w, usedr, act, n, n_unk, NG, b)
+    if not _cholesky(NG, L, n_unk):
+        return False, n_unk, n_use, chi2
+    _chol_inverse(L, Q, n_unk)
+    return True, n_unk, n_use, chi2
+
+
+@njit(cache=True)
+def _verdict(chi2, dof, Q, max_gdop, chi2_table):
+    """As spp._validation_failure: VALID_CHI2 when ``chi2`` is beyond its quantile (tested
+    with a spare row), VALID_GDOP when the position + clock GDOP is beyond ``max_gdop``,
+    else VALID_PASSED."""
+    if dof >= 1 and chi2 > chi2_table[min(dof, chi2_table.shape[0]) - 1]:
+        return VALID_CHI2
+    if math.sqrt(Q[0, 0] + Q[1, 1] + Q[2, 2] + Q[3, 3]) > max_gdop:
+        return VALID_GDOP
+    return VALID_PASSED
+
+
+@njit(cache=True)
 def spp_epochs(sat, rho_corr, scale, fact, var_eph, iono_scale, sys_idx, bounds, tow, params, alpha, beta,
                pos, clock, cov, offsets, clock_sys, status, n_used, dops, rms, n_rejected, used, below, robust_code,
-               n_down, n_excl):
+               n_down, n_excl, chi2_table, valid_code, excluded):
     """Plain WLS SPP at every epoch (module docstring); outputs filled in place.
 
     ``params``: elevation mask [rad], sigma_a, sigma_b [m], troposphere, ionosphere (1/0),
@@ -423,6 +517,11 @@ def spp_epochs(sat, rho_corr, scale, fact, var_eph, iono_scale, sys_idx, bounds,
     ``status`` (k,) a CODE_*, ``n_used``, ``dops`` (k, 3) PDOP, HDOP, VDOP, ``rms`` residual
     RMS, ``n_rejected`` rows left out by the mask; per observation ``used`` and ``below``
     (under the mask seen from the final position, as spp._below_mask).
+
+    Validation (``params[11]`` 1; spp's module docstring, "Validation"): ``chi2_table`` the
+    chi-square quantiles for 1, 2, ... degrees of freedom, ``params[13]`` the GDOP limit;
+    ``params[12]`` 1: FDE. Per epoch ``valid_code`` a VALID_* and ``excluded`` the row (within
+    the epoch) FDE left out, -1 none.
     """
     k = tow.shape[0]
     mmax = 0
@@ -456,6 +555,9 @@ def spp_epochs(sat, rho_corr, scale, fact, var_eph, iono_scale, sys_idx, bounds,
     s2, qv, t_all, t_ok = np.zeros(mmax), np.zeros(mmax), np.zeros(mmax), np.zeros(mmax)
     idx = np.zeros(mmax, np.int64)
     Ninv = np.zeros_like(N)
+    use0 = np.zeros(mmax, np.bool_)
+    cand = np.zeros(mmax, np.bool_)
+    xs = np.zeros(4)
     for j in range(k):
         e0, e1 = bounds[j], bounds[j + 1]
         n = e1 - e0
@@ -483,60 +585,80 @@ def spp_epochs(sat, rho_corr, scale, fact, var_eph, iono_scale, sys_idx, bounds,
         if have_x0:
             x[:4] = x0
         for r in range(n):
-            use[r] = True
-            gamma[r] = 1.0
-        st, _ = _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, use, True, params,
-                              alpha, beta, tow[j], H, dz, el, az, iono_d, w, sel, act, N, L, b, dx, gamma)
-        if st == 0 and _near_surface(x):
-            # a satellite at the mask entering and leaving: keep the last set, iterate on
-            for r in range(n):
-                use[r] = sel[r]
-            st, _ = _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, use, False,
-                                  params, alpha, beta, tow[j], H, dz, el, az, iono_d, w, sel, act, N, L, b, dx, gamma)
+            use0[r] = True
+        st, rcode = _solve_rows(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, use0, use, params,
+                                alpha, beta, tow[j], H, dz, el, az, iono_d, w, sel, act, N, L, b, dx, gamma, touched,
+                                keep, sel2, Hc, s2, Ninv, idx, qv, t_all, t_ok)
         if st < 0:
             status[j] = CODE_FEW
             have_x0 = False
             continue
-        rcode = ROBUST_OFF
-        if params[8] > 0 and st == 1:
-            rcode = _igg3(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, sel, params, alpha, beta,
-                          tow[j], H, dz, el, az, iono_d, w, act, N, L, b, dx, gamma, touched, keep, sel2, Hc, s2,
-                          Ninv, idx, qv, t_all, t_ok)
-            if rcode < 0:
-                status[j] = CODE_FEW
-                have_x0 = False
-                continue
-        # the rows of the solution: above the mask and not excluded by the robust weights
-        for r in range(n):
-            usedr[r] = sel[r] and gamma[r] > 0.0
-        # post-fit: the final estimate's rows, covariance and DOPs
-        _linearise(x, sat, rho_corr, col, iono_scale, e0, e1, True, tow[j], params[3] > 0, params[4] > 0,
-                   alpha, beta, H, dz, el, az, iono_d)
-        n_unk = _active(usedr, col, e0, e1, n_off, act)
-        _weights(params, el, iono_d, scale, fact, var_eph, e0, n, w, gamma)
-        _normal(H, dz, w, usedr, act, n, n_unk, N, b)
-        if not _cholesky(N, L, n_unk):
+        ok, n_unk, n_use, chi2 = _postfit(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, params,
+                                          alpha, beta, tow[j], H, dz, el, az, iono_d, w, sel, gamma, usedr, act, N, L,
+                                          b, inv, G, NG, Q)
+        if not ok:
             status[j] = CODE_FEW
             have_x0 = False
             continue
-        _chol_inverse(L, inv, n_unk)
-        # DOPs: unweighted, position in east-north-up
-        lat, lon, _ = _ecef_to_lla(x[0], x[1], x[2])
-        sl, cl, so, co = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
-        for r in range(n):
-            hx, hy, hz = H[r, 0], H[r, 1], H[r, 2]
-            G[r, 0] = -so * hx + co * hy
-            G[r, 1] = -sl * co * hx - sl * so * hy + cl * hz
-            G[r, 2] = cl * co * hx + cl * so * hy + sl * hz
-            for q in range(3, 4 + n_off):
-                G[r, q] = H[r, q]
-            w[r] = 1.0
-        _normal(G, dz, w, usedr, act, n, n_unk, NG, b)
-        if not _cholesky(NG, L, n_unk):
-            status[j] = CODE_FEW
-            have_x0 = False
-            continue
-        _chol_inverse(L, Q, n_unk)
+        vcode = VALID_OFF
+        excl = -1
+        if params[11] > 0 and st == 1:
+            vcode = _verdict(chi2, n_use - n_unk, Q, params[13], chi2_table)
+            if vcode != VALID_PASSED and params[12] > 0:
+                # FDE: each used row left out in turn, from this solution's position and
+                # clock; the passing solution of the smallest mean squared weighted residual
+                for r in range(n):
+                    cand[r] = usedr[r]
+                xs[:] = x[:4]
+                best, best_score = -1, np.inf
+                for c in range(n):
+                    if not cand[c]:
+                        continue
+                    xt = np.zeros(4 + n_off)
+                    xt[:4] = xs
+                    for r in range(n):
+                        use0[r] = r != c
+                    st2, _ = _solve_rows(xt, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, use0, use,
+                                         params, alpha, beta, tow[j], H, dz, el, az, iono_d, w, sel, act, N, L, b, dx,
+                                         gamma, touched, keep, sel2, Hc, s2, Ninv, idx, qv, t_all, t_ok)
+                    if st2 != 1:
+                        continue
+                    ok2, nu2, nuse2, chi2b = _postfit(xt, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0,
+                                                      e1, params, alpha, beta, tow[j], H, dz, el, az, iono_d, w, sel,
+                                                      gamma, usedr, act, N, L, b, inv, G, NG, Q)
+                    # a candidate with no spare row has nothing to check it by
+                    if not ok2 or nuse2 - nu2 < 1:
+                        continue
+                    if _verdict(chi2b, nuse2 - nu2, Q, params[13], chi2_table) != VALID_PASSED:
+                        continue
+                    if chi2b / nuse2 < best_score:
+                        best, best_score = c, chi2b / nuse2
+                if best >= 0:      # solved again: its quantities into the buffers
+                    x = np.zeros(4 + n_off)
+                    x[:4] = xs
+                    for r in range(n):
+                        use0[r] = r != best
+                    st, rcode = _solve_rows(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, use0,
+                                            use, params, alpha, beta, tow[j], H, dz, el, az, iono_d, w, sel, act, N,
+                                            L, b, dx, gamma, touched, keep, sel2, Hc, s2, Ninv, idx, qv, t_all, t_ok)
+                    ok, n_unk, n_use, chi2 = _postfit(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0,
+                                                      e1, params, alpha, beta, tow[j], H, dz, el, az, iono_d, w, sel,
+                                                      gamma, usedr, act, N, L, b, inv, G, NG, Q)
+                    vcode = VALID_FDE
+                    excl = best
+                else:
+                    # the buffers hold the last candidate's: the epoch's own solution again
+                    x = np.zeros(4 + n_off)
+                    if have_x0:
+                        x[:4] = x0
+                    for r in range(n):
+                        use0[r] = True
+                    st, rcode = _solve_rows(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, use0,
+                                            use, params, alpha, beta, tow[j], H, dz, el, az, iono_d, w, sel, act, N,
+                                            L, b, dx, gamma, touched, keep, sel2, Hc, s2, Ninv, idx, qv, t_all, t_ok)
+                    ok, n_unk, n_use, chi2 = _postfit(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0,
+                                                      e1, params, alpha, beta, tow[j], H, dz, el, az, iono_d, w, sel,
+                                                      gamma, usedr, act, N, L, b, inv, G, NG, Q)
         # the rows under the mask seen from the final position (spp._below_mask's count)
         n_sel = 0
         n_use = 0
@@ -553,12 +675,18 @@ def spp_epochs(sat, rho_corr, scale, fact, var_eph, iono_scale, sys_idx, bounds,
                 ne += 1
             elif gamma[r] < 1.0:
                 nd += 1
-        n_rejected[j] = n - n_sel
+        n_rejected[j] = n - n_sel - (1 if excl >= 0 else 0)     # the row FDE left out is not the mask's
         robust_code[j] = rcode
         n_down[j] = nd
         n_excl[j] = ne
+        valid_code[j] = vcode
+        excluded[j] = excl
         if st == 0:
             status[j] = CODE_NOT_CONVERGED
+            have_x0 = False
+            continue
+        if vcode >= VALID_CHI2:
+            status[j] = CODE_REJECTED
             have_x0 = False
             continue
         status[j] = CODE_OK

@@ -81,6 +81,22 @@ code term. On urbannav-tst-static it reproduces RTKLIB demo5's single-point resu
 (tests/test_spp_multi.py). RTKLIB's rejection of records with URA beyond 300 m is not
 copied (the record choice stays mixnav's).
 
+Validation (``SppOptions.validate``, off by default), RTKLIB pntpos's valsol rule written
+anew: a converged epoch's solution fails when the chi-square of its post-fit residuals,
+``sum v_i^2 / sigma_i^2`` over the rows of the solution with their variances in it (a robust
+solution: the rows it kept, at full or IGG-III-reduced weight, ``sigma_i^2 / gamma_i``; the
+rows it excluded are not in it), exceeds the 99.9 % quantile of chi-square with
+``rows - unknowns`` degrees of freedom (no test without a spare row), or when its GDOP
+(``sqrt(PDOP^2 + TDOP^2)``: position and receiver clock of the unweighted cofactor with the
+offsets' columns in the model) exceeds ``max_gdop`` (RTKLIB's 30). A failing epoch has status
+:data:`STATUS_REJECTED`: no position, not a filter start, the next epoch starts from the
+Earth's centre; ``SppTrack.validation`` counts the epochs by outcome. FDE (``SppOptions.fde``,
+RTKLIB raim_fde's rule): a failing epoch is solved again (plain or robust, as the epoch) from
+its failed solution's position and clock with each used satellite left out in turn; among
+the solutions that pass validation with at least one spare row, the one of the smallest
+mean squared weighted residual ``chi2 / rows`` is kept (the first in row order on a tie);
+none passing: rejected.
+
 Speed (``SppOptions.engine``): :func:`solve_epochs`' plain WLS goes by default through one
 compiled loop over all epochs (:mod:`mixnav.gnss._spp_kernel`) after one batched satellite
 computation for every observation (transmit time from its pseudorange, then once more with
@@ -107,16 +123,20 @@ from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla
 from ..noise.igg3 import igg3_factors
 # the compiled loop, and the constants it shares with this module (defined there, so that
 # the import goes one way)
-from ._spp_kernel import (CODE_FEW, CODE_NOT_CONVERGED, CODE_OK, RTKLIB_CODE_BIAS_SIGMA,  # noqa: F401
+from ._spp_kernel import (CODE_FEW, CODE_NOT_CONVERGED, CODE_OK, CODE_REJECTED, VALID_CHI2, VALID_FDE,
+                          VALID_GDOP, VALID_PASSED, RTKLIB_CODE_BIAS_SIGMA,  # noqa: F401
                           RTKLIB_CODE_SIGMA, RTKLIB_IONO_FACTOR, RTKLIB_IONO_OFF_SIGMA, RTKLIB_MIN_ELEVATION,
-                          RTKLIB_SYSTEM_FACTOR, RTKLIB_TROPO_OFF_SIGMA, RTKLIB_TROPO_SIGMA, SEPARATION_SIGMAS,
-                          spp_epochs)
+                          RTKLIB_MAX_GDOP, RTKLIB_SYSTEM_FACTOR, RTKLIB_TROPO_OFF_SIGMA, RTKLIB_TROPO_SIGMA,
+                          SEPARATION_SIGMAS, spp_epochs)
 from .geometry import C_LIGHT, F_L1, LAMBDA_L1, SatelliteStates, earth_rotation_correction, elevation_azimuth
 
 #: Epoch status codes of :func:`solve_epochs`.
 STATUS_OK = "ok"
 STATUS_FEW = "too few satellites"
 STATUS_NOT_CONVERGED = "not converged"
+STATUS_REJECTED = "rejected by validation"
+#: validation's chi-square test: the solution fails beyond this quantile (RTKLIB valsol's)
+VALIDATION_PROBABILITY = 0.999
 
 
 @dataclass(frozen=True)
@@ -150,6 +170,16 @@ class SppOptions:
         the numpy solution epoch by epoch (:func:`wls_position`), kept as the reference
         the compiled one is tested against (equal within 1e-6 m), the robust solution
         included.
+    validate : bool
+        Validate each converged solution as RTKLIB pntpos does (module docstring,
+        "Validation"): chi-square of the weighted post-fit residuals and GDOP; a failing
+        epoch is not a solution (status :data:`STATUS_REJECTED`). Off: no epoch is tested.
+    fde : bool
+        With ``validate``: a failing epoch is solved again with each used satellite left out
+        in turn; the passing solution of the smallest weighted residual is kept (module
+        docstring, "Validation").
+    max_gdop : float
+        Validation's GDOP limit (RTKLIB's default 30).
     """
 
     elevation_mask: float = np.deg2rad(10.0)
@@ -162,8 +192,15 @@ class SppOptions:
     robust: tuple[float, float] | None = None
     weights: str = "elevation"
     engine: str = "compiled"
+    validate: bool = False
+    fde: bool = False
+    max_gdop: float = RTKLIB_MAX_GDOP
 
     def __post_init__(self):
+        if self.fde and not self.validate:
+            raise ValueError("fde: needs validate (an exclusion is tried when an epoch fails validation)")
+        if not self.max_gdop > 0.0:
+            raise ValueError(f"max_gdop: must be > 0, got {self.max_gdop}")
         if self.weights not in ("elevation", "rtklib"):
             raise ValueError(f"weights: must be 'elevation' or 'rtklib', not {self.weights!r}")
         if self.engine not in ("compiled", "numpy"):
@@ -205,6 +242,17 @@ class SppSolution:
         ``"untestable"`` (fewer than 2 rows beyond the unknowns, 6 for one system: plain
         WLS) or ``"not_separable"`` (the suspect row's residual moves with another's: left
         as it was). Module docstring.
+    chi2, dof : float, int
+        Sum of the squared post-fit residuals over their variances in the solution (a
+        robust solution's kept rows with their IGG-III-reduced weights), and rows minus
+        unknowns.
+    validation : str
+        ``"off"`` (not validated), ``"passed"``, ``"fde"`` (passed once satellite
+        ``excluded`` was left out), or why it failed: ``"chi-square"``, ``"gdop"``.
+    excluded : int
+        Index in the input satellites of the one FDE left out (-1 none).
+    used_index : ndarray of int (k,)
+        Index in the input satellites of each satellite used.
     system : ndarray of str (k,) or None
         System letter of each satellite used (None: one system, no ``system`` given).
     offsets : dict of str -> float
@@ -230,10 +278,20 @@ class SppSolution:
     robust_status: str = "off"
     system: np.ndarray | None = None
     offsets: dict = field(default_factory=dict)
+    chi2: float = float("nan")
+    dof: int = 0
+    validation: str = "off"
+    excluded: int = -1
+    used_index: np.ndarray | None = None
 
     @property
     def n_sat(self) -> int:
         return len(self.prn)
+
+    @property
+    def valid(self) -> bool:
+        """False when validation rejected the epoch (``validation`` a failure reason)."""
+        return self.validation in ("off", "passed", "fde")
 
 
 # ---------------------------------------------------------------- atmosphere
@@ -414,11 +472,78 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
                 ref = letter                                     # the clock took this system
         if ref is not None:
             offsets = {ref: 0.0, **offsets}
-    return SppSolution(pos_ecef=x[:3].copy(), clock_bias=float(x[3]), cov=cov, residuals=(rho_corr - model)[used],
-                       prn=np.asarray(sats.prn)[used], elevation=el[used], dop=_dops(H, x[:3]), iterations=it,
-                       converged=converged, n_rejected_mask=int(n - sel.sum()),
-                       n_downweighted=int(np.sum((gamma > 0) & (gamma < 1))), n_excluded=int(np.sum(gamma == 0)),
-                       robust_status=status, system=sys_used, offsets=offsets)
+    residuals = (rho_corr - model)[used]
+    sol = SppSolution(pos_ecef=x[:3].copy(), clock_bias=float(x[3]), cov=cov, residuals=residuals,
+                      prn=np.asarray(sats.prn)[used], elevation=el[used], dop=_dops(H, x[:3]), iterations=it,
+                      converged=converged, n_rejected_mask=int(n - sel.sum()),
+                      n_downweighted=int(np.sum((gamma > 0) & (gamma < 1))), n_excluded=int(np.sum(gamma == 0)),
+                      robust_status=status, system=sys_used, offsets=offsets,
+                      chi2=float(np.sum((residuals / sigma) ** 2)), dof=int(H.shape[0] - H.shape[1]),
+                      used_index=np.flatnonzero(used))
+    if not (options.validate and converged):
+        return sol
+    why = _validation_failure(sol, options)
+    if why is None:
+        return dataclasses.replace(sol, validation="passed")
+    if not options.fde:
+        return dataclasses.replace(sol, validation=why)
+    # FDE: each used satellite left out in turn, from this solution's position and clock;
+    # the passing solution of the smallest mean squared weighted residual (RTKLIB raim_fde)
+    inner = dataclasses.replace(options, validate=False, fde=False)
+    start = np.append(sol.pos_ecef, sol.clock_bias)
+    best, best_score = None, np.inf
+    for i in sol.used_index.tolist():
+        others = np.arange(n) != i
+        try:
+            cand = wls_position(rho[others], sats.select(others), inner, x0=start, sigma_scale=scale[others],
+                                iono_alpha=iono_alpha, iono_beta=iono_beta, tow=tow,
+                                system=None if system is None else np.asarray(system)[others],
+                                iono_scale=None if iono_scale is None else iono_scale[others],
+                                ephemeris_var=None if ephemeris_var is None else np.asarray(ephemeris_var)[others])
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        # a candidate with no spare row has nothing to check it by: not a validated solution
+        if not cand.converged or cand.dof < 1 or _validation_failure(cand, options) is not None:
+            continue
+        score = cand.chi2 / cand.n_sat
+        if score < best_score:
+            best, best_score = (i, cand), score
+    if best is None:
+        return dataclasses.replace(sol, validation=why)
+    i, cand = best
+    keep = np.flatnonzero(np.arange(n) != i)
+    return dataclasses.replace(cand, validation="fde", excluded=int(i), used_index=keep[cand.used_index],
+                               iterations=sol.iterations + cand.iterations)
+
+
+def chi2_limit(dof: int) -> float:
+    """The chi-square quantile of :data:`VALIDATION_PROBABILITY` for ``dof`` >= 1 degrees of
+    freedom (the table the compiled loop uses too)."""
+    return float(_chi2_table()[dof - 1])
+
+
+_CHI2_TABLE = None
+
+
+def _chi2_table() -> np.ndarray:
+    """Quantiles for 1..256 degrees of freedom (more rows than any epoch has)."""
+    global _CHI2_TABLE
+    if _CHI2_TABLE is None:
+        from scipy.stats import chi2
+        _CHI2_TABLE = chi2.ppf(VALIDATION_PROBABILITY, np.arange(1, 257))
+    return _CHI2_TABLE
+
+
+def _validation_failure(sol: SppSolution, options: SppOptions):
+    """Why ``sol`` fails validation (``"chi-square"``, ``"gdop"``), None when it passes: the
+    chi-square of its weighted residuals beyond :func:`chi2_limit` of its spare rows (not
+    tested without a spare row), then its GDOP (position and receiver clock) beyond
+    ``options.max_gdop``."""
+    if sol.dof >= 1 and sol.chi2 > chi2_limit(sol.dof):
+        return "chi-square"
+    if np.hypot(sol.dop["pdop"], sol.dop["tdop"]) > options.max_gdop:
+        return "gdop"
+    return None
 
 
 #: the order in which systems take the receiver clock (the first present) and their offsets
@@ -727,7 +852,7 @@ class SppTrack:
     rms_residual : ndarray (k,)
         [m].
     status : ndarray of str (k,)
-        ``ok``, ``too few satellites`` or ``not converged``.
+        ``ok``, ``too few satellites``, ``not converged`` or ``rejected by validation``.
     skipped_satellites : dict
         Satellite observations left out over all epochs, per reason
         (ephemeris reasons and ``below elevation mask``).
@@ -746,6 +871,10 @@ class SppTrack:
     skipped_by_system : dict of str -> dict
         Several systems: per system name (``GPS``, ``BeiDou``...) the satellite
         observations left out per reason (the ones in ``skipped_satellites``).
+    validation : dict
+        ``SppOptions.validate``: over the converged epochs, ``epochs_passed``,
+        ``epochs_passed_after_exclusion`` (FDE) and ``epochs_rejected_chi-square``,
+        ``epochs_rejected_gdop`` (status :data:`STATUS_REJECTED`); empty when off.
     """
 
     week: np.ndarray
@@ -765,6 +894,7 @@ class SppTrack:
     clock_system: np.ndarray | None = None
     n_sat_system: dict = field(default_factory=dict)
     skipped_by_system: dict = field(default_factory=dict)
+    validation: dict = field(default_factory=dict)
 
     @property
     def ok(self) -> np.ndarray:
@@ -788,6 +918,13 @@ def _record(out: "SppTrack", j: int, sol, options: SppOptions) -> bool:
     if not sol.converged:
         out.status[j] = STATUS_NOT_CONVERGED
         return False
+    if options.validate:
+        key = {"passed": "epochs_passed", "fde": "epochs_passed_after_exclusion"}.get(
+            sol.validation, f"epochs_rejected_{sol.validation}")
+        out.validation[key] = out.validation.get(key, 0) + 1
+        if not sol.valid:
+            out.status[j] = STATUS_REJECTED
+            return False
     out.pos_ecef[j] = sol.pos_ecef
     out.clock_bias[j] = sol.clock_bias
     out.cov[j] = sol.cov[:4, :4]
@@ -1064,7 +1201,8 @@ def _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, s
     sys_idx = np.array([SYSTEM_ORDER.index(s) for s in letters_used.tolist()], np.int64)[inverse.ravel()]
     params = np.array([options.elevation_mask, options.sigma_a, options.sigma_b, float(options.troposphere),
                        float(iono_on), float(options.max_iter), options.tol, float(options.weights == "rtklib"),
-                       float(options.robust is not None), *(options.robust or (0.0, 0.0))])
+                       float(options.robust is not None), *(options.robust or (0.0, 0.0)), float(options.validate),
+                       float(options.fde), options.max_gdop])
     if options.weights == "rtklib":
         fact = np.array([RTKLIB_SYSTEM_FACTOR.get(c, 1.0) for c in SYSTEM_ORDER])[sys_idx]
         var_eph = ephemeris.ephemeris_variances(sysarr[rows], prn[rows], week[epoch[rows]],
@@ -1078,13 +1216,16 @@ def _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, s
     n_rejected = np.full(k, -1, np.int64)
     used, below = np.zeros(len(rows), bool), np.zeros(len(rows), bool)
     robust_code, n_down, n_excl = np.zeros(k, np.int64), np.zeros(k, np.int64), np.zeros(k, np.int64)
+    valid_code, excluded = np.zeros(k, np.int64), np.full(k, -1, np.int64)
+    table = _chi2_table() if options.validate else np.ones(1)
     spp_epochs(np.ascontiguousarray(sat), rho[rows] + C_LIGHT * clk2, scale[rows], fact, var_eph, iono_scale[rows],
                sys_idx, bounds,
                tow_rx, params, np.zeros(4) if alpha is None else np.asarray(alpha, float),
                np.zeros(4) if beta is None else np.asarray(beta, float), pos, clock, cov, offsets, clock_sys, status,
-               n_used, dops, rms, n_rejected, used, below, robust_code, n_down, n_excl)
-    names = np.empty(3, dtype=object)
+               n_used, dops, rms, n_rejected, used, below, robust_code, n_down, n_excl, table, valid_code, excluded)
+    names = np.empty(4, dtype=object)
     names[CODE_OK], names[CODE_FEW], names[CODE_NOT_CONVERGED] = STATUS_OK, STATUS_FEW, STATUS_NOT_CONVERGED
+    names[CODE_REJECTED] = STATUS_REJECTED
     out = SppTrack(week=week.copy(), tow=tow_rx.copy(), pos_ecef=pos, clock_bias=clock, cov=cov, n_sat=n_used.astype(int),
                    pdop=dops[:, 0].copy(), hdop=dops[:, 1].copy(), vdop=dops[:, 2].copy(), rms_residual=rms,
                    status=names[status].astype(str))
@@ -1104,6 +1245,12 @@ def _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, s
     elif solved.any():
         skipped["below elevation mask"] = skipped.get("below elevation mask", 0) + int(n_rejected[solved].sum())
     out.skipped_satellites = skipped
+    if options.validate:       # over the converged epochs (as _record)
+        keys = {VALID_PASSED: "epochs_passed", VALID_FDE: "epochs_passed_after_exclusion",
+                VALID_CHI2: "epochs_rejected_chi-square", VALID_GDOP: "epochs_rejected_gdop"}
+        for c, key in keys.items():
+            if np.any(valid_code == c):
+                out.validation[key] = int(np.sum(valid_code == c))
     if not multi:
         return out
     present = [s for s in SYSTEM_ORDER if s in set(system.tolist())]
