@@ -19,6 +19,7 @@ import numpy as np
 from numba import njit
 
 from ..geodesy.earth import A_WGS84, E2_WGS84
+from ..linalg import cholesky_lower
 from .geometry import C_LIGHT, OMEGA_E_GPS
 
 #: the robust solution blames a row only if its standardised residual exceeds every other
@@ -104,27 +105,6 @@ def _klobuchar(lat, lon, el, az, tow, alpha, beta):
     if abs(x) < 1.57:
         return C_LIGHT * f * (5.0e-9 + amp * (1.0 - x * x / 2.0 + x ** 4 / 24.0))
     return C_LIGHT * f * 5.0e-9
-
-
-@njit(cache=True)
-def _cholesky(N, L, n):
-    """Lower Cholesky factor of ``N[:n, :n]`` into ``L``; False when not positive definite."""
-    for j in range(n):
-        s = N[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if not s > 0.0:
-            return False
-        d = math.sqrt(s)
-        L[j, j] = d
-        for i in range(j + 1, n):
-            t = N[i, j]
-            for k in range(j):
-                t -= L[i, k] * L[j, k]
-            L[i, j] = t / d
-        for i in range(j):
-            L[i, j] = 0.0
-    return True
 
 
 @njit(cache=True)
@@ -308,7 +288,7 @@ def _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e
             return -1, it
         _weights(p, el, iono_d, scale, fact, var_eph, e0, n, w, gamma)
         _normal(H, dz, w, sel, act, n, n_unk, N, b)
-        if not _cholesky(N, L, n_unk):
+        if not cholesky_lower(N[:n_unk, :n_unk], L[:n_unk, :n_unk]):
             return -1, it
         _chol_solve(L, b, dx, n_unk)
         a = 0
@@ -367,7 +347,7 @@ def _igg3(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, sel, 
                 for i in range(m):
                     t += Hc[i, a] * Hc[i, c] / s2[i]
                 N[a, c] = t
-        if not _cholesky(N, L, n_unk):
+        if not cholesky_lower(N[:n_unk, :n_unk], L[:n_unk, :n_unk]):
             return -1
         _chol_inverse(L, Ninv, n_unk)
         any_ok = False
@@ -469,7 +449,7 @@ def _postfit(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, p,
             chi2 += dz[r] * dz[r] * w[r]
             n_use += 1
     _normal(H, dz, w, usedr, act, n, n_unk, N, b)
-    if not _cholesky(N, L, n_unk):
+    if not cholesky_lower(N[:n_unk, :n_unk], L[:n_unk, :n_unk]):
         return False, n_unk, n_use, chi2
     _chol_inverse(L, inv, n_unk)
     # DOPs: unweighted, position in east-north-up
@@ -484,7 +464,7 @@ def _postfit(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, p,
             G[r, q] = H[r, q]
         w[r] = 1.0
     _normal(G, dz, w, usedr, act, n, n_unk, NG, b)
-    if not _cholesky(NG, L, n_unk):
+    if not cholesky_lower(NG[:n_unk, :n_unk], L[:n_unk, :n_unk]):
         return False, n_unk, n_use, chi2
     _chol_inverse(L, Q, n_unk)
     return True, n_unk, n_use, chi2
