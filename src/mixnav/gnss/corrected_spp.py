@@ -18,7 +18,8 @@ import numpy as np
 
 from .geometry import SatelliteStates
 from .pseudoranges import SYSTEM_LETTERS, PseudorangeEpochs
-from .spp import STATUS_FEW, STATUS_NOT_CONVERGED, STATUS_OK, SYSTEM_ORDER, SppOptions, SppTrack, wls_position
+from .spp import (STATUS_FEW, STATUS_OK, SYSTEM_ORDER, SppOptions, SppTrack, _record, _record_systems,
+                  wls_position)
 
 
 def solve_corrected(epochs: PseudorangeEpochs, options: SppOptions) -> SppTrack:
@@ -37,7 +38,6 @@ def solve_corrected(epochs: PseudorangeEpochs, options: SppOptions) -> SppTrack:
                    clock_system=np.full(k, "", dtype=object) if multi else None,
                    n_sat_system={s: np.zeros(k, int) for s in present} if multi else {})
     below = 0
-    rb = out.robust
     x0 = None
     for j in range(k):
         rows = epochs.rows_of(j)
@@ -56,29 +56,11 @@ def solve_corrected(epochs: PseudorangeEpochs, options: SppOptions) -> SppTrack:
             x0 = None
             continue
         below += sol.n_rejected_mask
-        if options.robust is not None:
-            rb["rows_downweighted"] = rb.get("rows_downweighted", 0) + sol.n_downweighted
-            rb["rows_excluded"] = rb.get("rows_excluded", 0) + sol.n_excluded
-            rb[f"epochs_{sol.robust_status}"] = rb.get(f"epochs_{sol.robust_status}", 0) + 1
-        if not sol.converged:
-            out.status[j] = STATUS_NOT_CONVERGED
+        if not _record(out, j, sol, options):      # robust counts; False: not converged
             x0 = None
             continue
-        out.pos_ecef[j], out.clock_bias[j], out.cov[j] = sol.pos_ecef, sol.clock_bias, sol.cov[:4, :4]
-        out.n_sat[j] = sol.n_sat
-        out.pdop[j], out.hdop[j], out.vdop[j] = sol.dop["pdop"], sol.dop["hdop"], sol.dop["vdop"]
-        out.rms_residual[j] = float(np.sqrt(np.mean(sol.residuals ** 2)))
         if multi:
-            sys_used = letters[rows] if sol.system is None else sol.system
-            for s in present:
-                out.n_sat_system[s][j] = int(np.sum(sys_used == s))
-            if sol.offsets:
-                for s, v in sol.offsets.items():
-                    out.offsets[s][j] = v
-                out.clock_system[j] = next(iter(sol.offsets))
-            else:
-                out.clock_system[j] = str(sys_used[0])
-                out.offsets[out.clock_system[j]][j] = 0.0
+            _record_systems(out, j, sol, letters[rows], present)
         x0 = np.append(sol.pos_ecef, sol.clock_bias)
     out.status = out.status.astype(str)
     if multi:

@@ -934,6 +934,23 @@ def _record(out: "SppTrack", j: int, sol, options: SppOptions) -> bool:
     return True
 
 
+def _record_systems(out: "SppTrack", j: int, sol, letters, present) -> None:
+    """Book a recorded multi-system epoch ``j``: satellites used per system of ``present``,
+    each system's offset to the receiver clock and the system whose time the clock is.
+    ``letters``: the system letter of each satellite given to the solver."""
+    # one system in the epoch: the solution names no systems; its used satellites are all of it
+    sys_used = np.full(sol.n_sat, letters[0]) if sol.system is None else sol.system
+    for s in present:
+        out.n_sat_system[s][j] = int(np.sum(sys_used == s))
+    if sol.offsets:
+        for s, v in sol.offsets.items():
+            out.offsets[s][j] = v
+        out.clock_system[j] = next(iter(sol.offsets))
+    else:
+        out.clock_system[j] = str(sys_used[0]) if len(sys_used) else ""
+        out.offsets[out.clock_system[j]][j] = 0.0
+
+
 def solve_epochs(ephemeris, week, tow_rx, epoch, prn, pseudorange, options: SppOptions = SppOptions(),
                  sigma_scale=None, system=None, glonass_channel=None) -> SppTrack:
     """SPP at every epoch; epochs without a solution are counted, not raised.
@@ -1108,17 +1125,7 @@ def _solve_epochs_multi(ephemeris, week, tow_rx, epoch, prn, pseudorange, option
         if not _record(out, j, sol, options):
             x0 = None
             continue
-        # one system in the epoch: the solution names no systems; its used satellites are all of it
-        sys_used = np.full(sol.n_sat, letters[0]) if sol.system is None else sol.system
-        for s in present:
-            out.n_sat_system[s][j] = int(np.sum(sys_used == s))
-        if sol.offsets:
-            for s, v in sol.offsets.items():
-                out.offsets[s][j] = v
-            out.clock_system[j] = next(iter(sol.offsets))
-        else:
-            out.clock_system[j] = str(sys_used[0]) if len(sys_used) else ""
-            out.offsets[out.clock_system[j]][j] = 0.0
+        _record_systems(out, j, sol, letters, present)
         x0 = np.append(sol.pos_ecef, sol.clock_bias)     # the offsets start from 0 (linear: one step)
     out.status = out.status.astype(str)
     out.clock_system = out.clock_system.astype(str)
