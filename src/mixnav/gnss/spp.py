@@ -998,22 +998,26 @@ def solve_epochs(ephemeris, week, tow_rx, epoch, prn, pseudorange, options: SppO
         raise ValueError("weights = 'rtklib' needs each satellite's broadcast accuracy: a MultiEphemeris "
                          "(mixnav.gnss.multi_ephemeris), not GPS records read by georinex")
     compiled = options.engine == "compiled"
-    if system is not None or hasattr(ephemeris, "states_of"):
-        sysarr = np.full(len(np.asarray(prn)), "G") if system is None else np.asarray(system).astype(str)
-        if hasattr(ephemeris, "states_of") or (sysarr != "G").any():
-            if compiled:
-                return _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, sigma_scale,
-                                       sysarr, glonass_channel)
-            return _solve_epochs_multi(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, sigma_scale,
-                                       sysarr, glonass_channel)
-    if compiled:
-        return _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, sigma_scale, None, None)
     week = np.asarray(week)
     tow_rx = np.asarray(tow_rx, float)
     epoch = np.asarray(epoch, int)
     prn = np.asarray(prn, int)
     rho = np.asarray(pseudorange, float)
-    scale = np.ones(len(rho)) if sigma_scale is None else np.asarray(sigma_scale, float)
+    m = len(rho)
+    scale = np.ones(m) if sigma_scale is None else np.asarray(sigma_scale, float)
+    if system is not None or hasattr(ephemeris, "states_of"):
+        sysarr = np.full(m, "G") if system is None else np.asarray(system).astype(str)
+        if hasattr(ephemeris, "states_of") or (sysarr != "G").any():
+            if not hasattr(ephemeris, "states_of"):
+                others = sorted(set(sysarr.tolist()) - {"G"})
+                raise ValueError(f"observations of systems {', '.join(others)} need a MultiEphemeris "
+                                 "(mixnav.gnss.multi_ephemeris), not GPS records alone")
+            if sysarr.shape != (m,):
+                raise ValueError(f"system has shape {sysarr.shape}, expected ({m},) (one per observation)")
+            solve = _solve_compiled if compiled else _solve_epochs_multi
+            return solve(ephemeris, week, tow_rx, epoch, prn, rho, options, scale, sysarr, glonass_channel)
+    if compiled:
+        return _solve_compiled(ephemeris, week, tow_rx, epoch, prn, rho, options, scale, None, None)
     k = len(tow_rx)
     nan3 = np.full((k, 3), np.nan)
     out = SppTrack(week=week.copy(), tow=tow_rx.copy(), pos_ecef=nan3, clock_bias=np.full(k, np.nan),
@@ -1049,33 +1053,29 @@ def solve_epochs(ephemeris, week, tow_rx, epoch, prn, pseudorange, options: SppO
     return out
 
 
-def _solve_epochs_multi(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, sigma_scale, system,
-                        glonass_channel) -> SppTrack:
-    """:func:`solve_epochs` over several systems (its docstring)."""
-    from .multi_ephemeris import SYSTEM_NAMES
-    if not hasattr(ephemeris, "states_of"):
-        others = sorted(set(system.tolist()) - {"G"})
-        raise ValueError(f"observations of systems {', '.join(others)} need a MultiEphemeris "
-                         "(mixnav.gnss.multi_ephemeris), not GPS records alone")
-    week = np.asarray(week)
-    tow_rx = np.asarray(tow_rx, float)
-    epoch = np.asarray(epoch, int)
-    prn = np.asarray(prn, int)
-    rho = np.asarray(pseudorange, float)
-    m = len(rho)
-    if system.shape != (m,):
-        raise ValueError(f"system has shape {system.shape}, expected ({m},) (one per observation)")
-    scale = np.ones(m) if sigma_scale is None else np.asarray(sigma_scale, float)
-    ids = np.char.add(system, np.char.zfill(prn.astype(str), 2))
+def _multi_ionosphere(ephemeris, options, system, prn, glonass_channel):
+    """Several systems' ionosphere settings: ``(iono_on, alpha, beta, no_freq, iono_scale)``:
+    the GPS Klobuchar coefficients (None when not applied), which observations have no
+    first frequency (a GLONASS satellite without a channel: left out when the ionosphere is
+    applied) and each observation's factor ``(f_L1 / f)^2`` (:func:`first_frequency`; the
+    channels from the GLONASS records when ``glonass_channel`` is None)."""
     if glonass_channel is None:
         table = ephemeris["R"].channels() if "R" in ephemeris else {}
         glonass_channel = np.array([table.get(int(p), 99) if s == "R" else 99 for s, p in zip(system, prn)])
     freq = first_frequency(system, glonass_channel)
-    iono_on = options.ionosphere and "G" in ephemeris and ephemeris["G"].iono_alpha is not None
+    iono_on = bool(options.ionosphere and "G" in ephemeris and ephemeris["G"].iono_alpha is not None)
     alpha = ephemeris["G"].iono_alpha if iono_on else None
     beta = ephemeris["G"].iono_beta if iono_on else None
-    no_freq = ~np.isfinite(freq) if iono_on else np.zeros(m, bool)
-    iono_scale = iono_scale_factors(np.where(np.isfinite(freq), freq, F_L1))
+    no_freq = ~np.isfinite(freq) if iono_on else np.zeros(len(prn), bool)
+    return iono_on, alpha, beta, no_freq, iono_scale_factors(np.where(np.isfinite(freq), freq, F_L1))
+
+
+def _solve_epochs_multi(ephemeris, week, tow_rx, epoch, prn, rho, options, scale, system,
+                        glonass_channel) -> SppTrack:
+    """:func:`solve_epochs` over several systems (its docstring; the arrays as it checked them)."""
+    from .multi_ephemeris import SYSTEM_NAMES
+    ids = np.char.add(system, np.char.zfill(prn.astype(str), 2))
+    _, alpha, beta, no_freq, iono_scale = _multi_ionosphere(ephemeris, options, system, prn, glonass_channel)
     k = len(tow_rx)
     present = [s for s in SYSTEM_ORDER if s in set(system.tolist())]
     out = SppTrack(week=week.copy(), tow=tow_rx.copy(), pos_ecef=np.full((k, 3), np.nan),
@@ -1134,7 +1134,7 @@ def _solve_epochs_multi(ephemeris, week, tow_rx, epoch, prn, pseudorange, option
     return out
 
 
-def _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, sigma_scale, system,
+def _solve_compiled(ephemeris, week, tow_rx, epoch, prn, rho, options, scale, system,
                     glonass_channel) -> SppTrack:
     """:func:`solve_epochs` (plain or robust WLS) through the compiled loop (``options.engine``):
     the satellites of all observations at their transmit times in one batched call, then
@@ -1142,20 +1142,7 @@ def _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, s
     paths (:func:`_solve_epochs_multi` with ``system``, one system without)."""
     from .multi_ephemeris import SYSTEM_NAMES
     multi = system is not None
-    if multi and not hasattr(ephemeris, "states_of"):
-        others = sorted(set(system.tolist()) - {"G"})
-        raise ValueError(f"observations of systems {', '.join(others)} need a MultiEphemeris "
-                         "(mixnav.gnss.multi_ephemeris), not GPS records alone")
-    week = np.asarray(week)
-    tow_rx = np.asarray(tow_rx, float)
-    epoch = np.asarray(epoch, int)
-    prn = np.asarray(prn, int)
-    rho = np.asarray(pseudorange, float)
-    m = len(rho)
-    k = len(tow_rx)
-    if multi and system.shape != (m,):
-        raise ValueError(f"system has shape {system.shape}, expected ({m},) (one per observation)")
-    scale = np.ones(m) if sigma_scale is None else np.asarray(sigma_scale, float)
+    m, k = len(rho), len(tow_rx)
     skipped: dict[str, int] = {}
     by_system: dict[str, dict[str, int]] = {}
 
@@ -1175,17 +1162,10 @@ def _solve_compiled(ephemeris, week, tow_rx, epoch, prn, pseudorange, options, s
     order = np.argsort(epoch, kind="stable")
     sysarr = system if multi else np.full(m, "G")
     if multi:
-        if glonass_channel is None:
-            table = ephemeris["R"].channels() if "R" in ephemeris else {}
-            glonass_channel = np.array([table.get(int(p), 99) if s == "R" else 99 for s, p in zip(system, prn)])
-        freq = first_frequency(system, glonass_channel)
-        iono_on = options.ionosphere and "G" in ephemeris and ephemeris["G"].iono_alpha is not None
-        alpha = ephemeris["G"].iono_alpha if iono_on else None
-        beta = ephemeris["G"].iono_beta if iono_on else None
-        no_freq = ~np.isfinite(freq) if iono_on else np.zeros(m, bool)
+        iono_on, alpha, beta, no_freq, iono_scale = _multi_ionosphere(ephemeris, options, system, prn,
+                                                                      glonass_channel)
         count(system[order][no_freq[order]], np.full(int(no_freq.sum()), NO_GLONASS_CHANNEL))
         order = order[~no_freq[order]]
-        iono_scale = iono_scale_factors(np.where(np.isfinite(freq), freq, F_L1))
     else:
         iono_on = options.ionosphere and ephemeris.iono_alpha is not None and ephemeris.iono_beta is not None
         alpha, beta = ephemeris.iono_alpha, ephemeris.iono_beta
