@@ -98,7 +98,7 @@ def withheld_criterion(path_or_name, options=None, motion=None) -> dict:
             doc["motion"][k] = f"{v} m/s"
     stripped = tomlkit.dumps(doc)
     ev = VehicleEvaluator(stripped, source, None, METHOD, [], SCORE_AFTER, "withheld-satellites")
-    ev.starts = starts_for(ev._duration(), "withheld-satellites")
+    ev.starts = starts_for(ev.duration_s, "withheld-satellites")
     return ev.evaluate(stripped).as_dict()
 
 

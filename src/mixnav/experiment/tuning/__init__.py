@@ -18,6 +18,10 @@ before anything is loaded, and then, for an IMU + GNSS-fixes dataset (``ins-gnss
    was found and its spread), ``tune.json`` (every evaluation, the chosen values, the
    criteria of the file as given and as tuned) and ``report.md`` with ``tune.png``.
 
+An ``odometry-gnss`` dataset (wheel odometry + pseudoranges) is tuned by :mod:`.vehicle`
+instead: the whole causal pipeline from several starts, scored by the innovation
+log-likelihood (or withheld satellites).
+
 Deterministic (no random draw: ``seed`` is recorded only), and resumable: every evaluation
 is appended to ``tune_journal.jsonl`` in the output folder as it finishes, keyed by the
 candidate file's hash, and a rerun into the same folder (``resume=True``) takes them from
@@ -96,13 +100,14 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
     Parameters
     ----------
     dataset : str or Path
-        A shipped dataset name or a dataset file; ``ins-gnss`` with ``[gnss]`` fixes.
+        A shipped dataset name or a dataset file; ``ins-gnss`` with ``[gnss]`` fixes, or
+        ``odometry-gnss`` (:mod:`.vehicle`).
     out : str or Path
         Output folder: ``tuned.toml``, ``tune.json``, ``report.md``, ``tune.png``,
         ``tune_journal.jsonl``.
     budget : int
         Largest number of candidate settings evaluated by the criterion (each is ``folds``
-        filter runs); at least 1.
+        filter runs; odometry + pseudoranges: six pipeline runs); at least 1.
     workers : int, optional
         Local worker processes (default: all cores); ``scheduler``: a Dask scheduler
         address instead.

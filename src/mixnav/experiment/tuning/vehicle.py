@@ -35,7 +35,6 @@ over all.
 
 from __future__ import annotations
 
-import json
 import math
 import warnings
 
@@ -230,13 +229,15 @@ class VehicleEvaluator:
             return VehicleScore(math.inf, math.inf, -math.inf, per_start, 0, error="a score was not finite")
         # the standard error of the mean over roughly independent 10 s blocks (neighbouring
         # epochs share the state's error and the satellites' multipath)
-        per_block = max(1, int(round(len(allv) / max(_blocks(self.starts, self._duration(), self.score_after)
+        per_block = max(1, int(round(len(allv) / max(_blocks(self.starts, self.duration_s, self.score_after)
                                                      * len(self.folds), 1))))
         n_blocks = max(2, len(allv) // per_block)
         se = float(np.std(allv) / math.sqrt(n_blocks))
         return VehicleScore(float(allv.mean()), se, ll_total / max(updates, 1), per_start, len(allv))
 
-    def _duration(self) -> float:
+    @property
+    def duration_s(self) -> float:
+        """The odometry's span [s], from its first sample's start."""
         return float(self.inputs.inc.time[-1]) - self.t0
 
 
@@ -324,9 +325,6 @@ def target_method(ds, method: str | None) -> str:
     return names[0]
 
 
-def setup_json(setup) -> str:
-    return json.dumps(setup, default=str)
-
 
 def _blocks(starts, duration: float, score_after: float) -> int:
     """Roughly independent 10 s blocks the criterion sums over (the spread's unit): the rows
@@ -359,8 +357,7 @@ def tune_vehicle(*, text: str, stripped: str, source: str, ds, out, data, data_f
                             f"{criterion!r}", argument="criterion")
     target = target_method(ds, method)
     local = VehicleEvaluator(stripped, source, data, target, [], SCORE_AFTER)
-    inc = local.inputs.inc
-    duration = float(inc.time[-1]) - local.t0
+    duration = local.duration_s
     starts = starts_for(duration, criterion)
     if not starts:
         raise ArgumentError(f"the recording has {duration:.0f} s of odometry; tuning needs at least "
