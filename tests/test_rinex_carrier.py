@@ -60,15 +60,8 @@ def test_carrier_and_lli_read_back_by_the_reader_and_georinex(tmp_path):
 def exported_tdcp(tmp_path_factory):
     """tdcp-demo exported (IMU CSV, RINEX with L1C) and processed back (SPP, alignment, the
     tight and tdcp-ekf methods on the file's carrier with cycle-slip detection)."""
-    from mixnav.config.loader import load_dataset, load_scenario
-    from mixnav.experiment.export import export_dataset
-    from mixnav.experiment.process import process
-    root = tmp_path_factory.mktemp("tdcprinex")
-    sc, source, _ = load_scenario("tdcp-demo")
-    ex = export_dataset(sc, root / "data", source=source)
-    ds, dsrc, _ = load_dataset(str(ex.files["dataset"]))
-    po = process(ds, dsrc)
-    return sc, source, ex, po
+    from tests.test_rinex_ins import export_and_process
+    return export_and_process("tdcp-demo", tmp_path_factory.mktemp("tdcprinex"), hole=False)
 
 
 def test_export_carries_the_tdcp_methods_and_carrier(exported_tdcp):
@@ -109,20 +102,10 @@ def test_tdcp_ekf_on_rinex_equals_the_in_simulation_one(exported_tdcp):
     """Same start, same IMU: the tdcp-ekf (clone) on the RINEX observables follows the
     in-simulation one to < 1 cm at every epoch (pseudoranges agree to 0.5 mm, TDCPs to 0.2 mm,
     satellite positions to a few mm: test_rinex_ins)."""
-    from mixnav.experiment import methods
     from mixnav.geodesy.frames import ned_displacement
-    from mixnav.ins.error_model import ClockModel
-    sc, source, ex, po = exported_tdcp
-    sim = ex.sim
-    m = next(x for x in sc.methods if x.type == "tdcp-ekf" and x.tdcp_previous == "clone")
-    s = sc.gnss.satellites
-    clock = ClockModel(q_bias=s.clock_bias_noise ** 2, q_drift=s.clock_drift_noise ** 2)
-    lever = np.asarray(sc.gnss.lever_arm)
-    res = []
-    for obs in (sim.observations, po.observations):
-        f, meas = methods.build(m, sim.imu_model, sim.fixes, lever, source, 1, observations=obs, clock=clock)
-        res.append(f.run(sim.imu, sim.init, meas))
-    np.testing.assert_allclose(res[0].time, res[1].time, atol=1e-9)
+    from tests.test_rinex_ins import simulated_and_read_back_runs
+    res, _ = simulated_and_read_back_runs(exported_tdcp,
+                                          lambda x: x.type == "tdcp-ekf" and x.tdcp_previous == "clone")
     d = ned_displacement(res[1].nav[:, 7:10], res[0].nav[:, 7:10])
     print("tdcp-ekf RINEX vs simulation: max position difference [m]", np.abs(d).max(),
           "velocity", np.abs(res[1].nav[:, 4:7] - res[0].nav[:, 4:7]).max())

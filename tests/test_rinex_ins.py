@@ -131,15 +131,42 @@ def short_scenario(folder):
     return p
 
 
+def export_and_process(scenario, root, hole: bool = True):
+    """``scenario`` (a name or a file) exported into ``root / "data"`` and the written dataset
+    processed back: ``(scenario, its source, the export, the processed output)``. ``hole``:
+    the run has a 10 s stretch without a fix, which processing must say (a warning)."""
+    sc, source, _ = load_scenario(str(scenario))
+    ex = export_dataset(sc, root / "data", source=source)
+    ds, dsrc, _ = load_dataset(str(ex.files["dataset"]))
+    if hole:
+        with pytest.warns(Warning, match="hole"):     # the 10 s without a fix is said
+            return sc, source, ex, process(ds, dsrc)
+    return sc, source, ex, process(ds, dsrc)
+
+
+def simulated_and_read_back_runs(exported, pick):
+    """The scenario's method chosen by ``pick`` (a predicate on the method) built twice, on the
+    simulated observables and on those read back from the RINEX files, and run from the
+    simulation's start on its IMU: ``(results, measurement lists)``, simulated first."""
+    sc, source, ex, po = exported
+    sim = ex.sim
+    m = next(x for x in sc.methods if pick(x))
+    s = sc.gnss.satellites
+    clock = ClockModel(q_bias=s.clock_bias_noise ** 2, q_drift=s.clock_drift_noise ** 2)
+    lever = np.asarray(sc.gnss.lever_arm)
+    res, meas_used = [], []
+    for obs in (sim.observations, po.observations):
+        f, meas = methods.build(m, sim.imu_model, sim.fixes, lever, source, 1, observations=obs, clock=clock)
+        res.append(f.run(sim.imu, sim.init, meas))
+        meas_used.append(meas)
+    np.testing.assert_allclose(res[0].time, res[1].time, atol=1e-9)
+    return res, meas_used
+
+
 @pytest.fixture(scope="module")
 def exported(tmp_path_factory):
     root = tmp_path_factory.mktemp("rinexins")
-    sc, source, _ = load_scenario(str(short_scenario(root)))
-    ex = export_dataset(sc, root / "data", source=source)
-    ds, dsrc, _ = load_dataset(str(ex.files["dataset"]))
-    with pytest.warns(Warning, match="hole"):     # the 10 s without a fix is said
-        po = process(ds, dsrc)
-    return sc, source, ex, po
+    return export_and_process(short_scenario(root), root)
 
 
 def test_export_writes_a_dataset_of_the_run(exported):
@@ -186,17 +213,7 @@ def test_tight_ekf_on_rinex_equals_the_in_simulation_one(exported):
     """Same start (the simulation's initial estimate), same IMU: the tight EKF on the RINEX
     observables follows the in-simulation tight EKF to < 1 cm at every epoch (the
     observables agree to millimetres, above)."""
-    sc, source, ex, po = exported
-    sim = ex.sim
-    m = next(x for x in sc.methods if x.type == "tight-ekf")
-    s = sc.gnss.satellites
-    clock = ClockModel(q_bias=s.clock_bias_noise ** 2, q_drift=s.clock_drift_noise ** 2)
-    lever = np.asarray(sc.gnss.lever_arm)
-    res = []
-    for obs in (sim.observations, po.observations):
-        f, meas = methods.build(m, sim.imu_model, sim.fixes, lever, source, 1, observations=obs, clock=clock)
-        res.append(f.run(sim.imu, sim.init, meas))
-    np.testing.assert_allclose(res[0].time, res[1].time, atol=1e-9)
+    res, _ = simulated_and_read_back_runs(exported, lambda x: x.type == "tight-ekf")
     d = ned_displacement(res[1].nav[:, 7:10], res[0].nav[:, 7:10])
     assert np.abs(d).max() < 0.01
 

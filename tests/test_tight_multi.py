@@ -285,19 +285,11 @@ GEC_TRUTH = [35.0, 12.0, -20.0]
 
 @pytest.fixture(scope="module")
 def exported_multi(tmp_path_factory):
-    from mixnav.config.loader import load_dataset
-    from mixnav.experiment.export import export_dataset
-    from mixnav.experiment.process import process
-    from tests.test_rinex_ins import short_scenario
+    from tests.test_rinex_ins import export_and_process, short_scenario
     root = tmp_path_factory.mktemp("multi_export")
     p = short_scenario(root)
     p.write_text(p.read_text().replace('constellation = "gps30"\n', 'constellation = "gps30"' + GEC))
-    sc, source, _ = load_scenario(str(p))
-    ex = export_dataset(sc, root / "data", source=source)
-    ds, dsrc, _ = load_dataset(str(ex.files["dataset"]))
-    with pytest.warns(Warning, match="hole"):     # the 10 s without a fix is said
-        po = process(ds, dsrc)
-    return sc, source, ex, po
+    return export_and_process(p, root)
 
 
 def test_multi_system_export_writes_mixed_rinex(exported_multi):
@@ -350,21 +342,10 @@ def test_tight_ekf_on_multi_system_rinex_equals_the_in_simulation_one(exported_m
     """Same start (the simulation's initial estimate), same IMU: the tight EKF with its GPS
     clock and three offset states on the RINEX observables follows the in-simulation one to
     < 1 cm at every epoch, and so do the offset estimates."""
-    from mixnav.engine.result import FilterResult  # noqa: F401  (what run returns)
-    from mixnav.experiment import methods
-    from mixnav.ins.error_model import ClockModel
-    sc, source, ex, po = exported_multi
-    sim = ex.sim
-    m = next(x for x in sc.methods if x.type == "tight-ekf")
-    s = sc.gnss.satellites
-    clock = ClockModel(q_bias=s.clock_bias_noise ** 2, q_drift=s.clock_drift_noise ** 2)
-    lever = np.asarray(sc.gnss.lever_arm)
-    res = []
-    for obs in (sim.observations, po.observations):
-        f, meas = methods.build(m, sim.imu_model, sim.fixes, lever, source, 1, observations=obs, clock=clock)
+    from tests.test_rinex_ins import simulated_and_read_back_runs
+    res, meas_used = simulated_and_read_back_runs(exported_multi, lambda x: x.type == "tight-ekf")
+    for meas in meas_used:
         assert meas[0].layout.block("system_offset").size == 3
-        res.append(f.run(sim.imu, sim.init, meas))
-    np.testing.assert_allclose(res[0].time, res[1].time, atol=1e-9)
     d = ned_displacement(res[1].nav[:, 7:10], res[0].nav[:, 7:10])
     assert np.abs(d).max() < 0.01
     np.testing.assert_allclose(res[1].estimates["system_offset"], res[0].estimates["system_offset"], atol=0.01)
