@@ -2,6 +2,9 @@
 
     python benchmarks/bench_estimator_cost.py --old DIR/src [--rounds 3]   # drives both, writes results
     python benchmarks/bench_estimator_cost.py --one                       # times the mixnav on the path
+    python benchmarks/bench_estimator_cost.py --old DIR/src --only drive-0708-multipath smartloc-berlin
+                                                  # only these cases (names as in CASES), results under
+                                                  # estimator_cost_<first case>... .md/.json
 
 Made for issue 33 (the registry, pipelines and motion-seam redesign must keep every
 estimator's cost within 5 %). Only the public API is called (``mixnav.run_scenario``,
@@ -48,10 +51,14 @@ ROUNDS = 3
 REPEAT = 3
 
 
-def one() -> dict:
+def _cases(only=None):
+    return [(k, n) for k, n in CASES if not only or Path(n).stem in only]
+
+
+def one(only=None) -> dict:
     import mixnav
     out = {}
-    for kind, name in CASES:
+    for kind, name in _cases(only):
         run = (lambda: mixnav.run_scenario(name, seed=1)) if kind == "scenario" else \
             (lambda: mixnav.process_dataset(name))
         run()                                             # compile, caches
@@ -65,18 +72,26 @@ def one() -> dict:
     return out
 
 
-def _run_one(src: str | None) -> dict:
+def _run_one(src: str | None, only=()) -> dict:
     env = dict(os.environ)
     if src is not None:
         env["PYTHONPATH"] = src
-    done = subprocess.run([sys.executable, __file__, "--one"], env=env, capture_output=True, text=True,
-                          check=True)
+    done = subprocess.run([sys.executable, __file__, "--one", *(["--only", *only] if only else [])], env=env,
+                          capture_output=True, text=True, check=True)
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def main(argv) -> None:
+    only = []
+    if "--only" in argv:   # the names after --only, up to the next option
+        for a in argv[argv.index("--only") + 1:]:
+            if a.startswith("--"):
+                break
+            only.append(a)
+    if only and not _cases(only):
+        raise SystemExit(f"--only: no case named {only}; the cases: {[Path(n).stem for _, n in CASES]}")
     if "--one" in argv:
-        print(json.dumps(one()))
+        print(json.dumps(one(only)))
         return
     old = argv[argv.index("--old") + 1]
     new = str(HERE.parent / "src")
@@ -84,7 +99,7 @@ def main(argv) -> None:
     runs = {"old": [], "new": []}
     for r in range(rounds):
         for which, src in (("old", old), ("new", new)) if r % 2 == 0 else (("new", new), ("old", old)):
-            runs[which].append(_run_one(src))
+            runs[which].append(_run_one(src, only))
             print(f"round {r + 1}: {which} done", flush=True)
     best = {w: {k: min(d[k] for d in ds if k in d) for k in set().union(*ds)} for w, ds in runs.items()}
     keys = sorted(set(best["old"]) & set(best["new"]))
@@ -98,11 +113,14 @@ def main(argv) -> None:
              f"load average at the end {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} (2 cores, shared).",
              "", "| case:method | old [us/epoch] | new [us/epoch] | new / old |", "|---|---|---|---|"]
     lines += [f"| {k} | {a:.1f} | {b:.1f} | {q:.3f} |" for k, a, b, q in rows]
-    only = sorted(set(best["old"]) ^ set(best["new"]))
+    one_side = sorted(set(best["old"]) ^ set(best["new"]))
+    if one_side:
+        lines += ["", "In one version only: " + ", ".join(one_side)]
     if only:
-        lines += ["", "In one version only: " + ", ".join(only)]
-    (HERE / "results" / "estimator_cost.md").write_text("\n".join(lines) + "\n")
-    (HERE / "results" / "estimator_cost.json").write_text(json.dumps({"old": runs["old"], "new": runs["new"],
+        lines[2] = lines[2].replace("--rounds", "--only " + " ".join(only) + " --rounds")
+    stem = "estimator_cost" + ("_" + "_".join(only) if only else "")
+    (HERE / "results" / f"{stem}.md").write_text("\n".join(lines) + "\n")
+    (HERE / "results" / f"{stem}.json").write_text(json.dumps({"old": runs["old"], "new": runs["new"],
                                                                       "old_src": old}, indent=1))
     print("\n".join(lines))
 
