@@ -21,6 +21,9 @@ that markdown does not show::
   ``*K`` to scale first (``.0f*100`` writes a share as a percentage); for a ``.md`` cell
   the cell's text is used as it is when ``FORMAT`` is ``s``.
 
+Inside a markdown table, write ``\\|`` for each ``|`` of the marker (a bare one would split the
+cell): ``<!--r smartloc.json\\|causal/epoch-mixture/rmse_m\\|.2f-->6.59<!--/r-->``.
+
 A doc that cites one file many times names it once, anywhere in the doc:
 ``<!--r-def sl tune_smartloc.json|against_reference-->``; then ``<!--r @sl/shipped/worst_own_m|.1f-->``
 stands for ``<!--r tune_smartloc.json|against_reference/shipped/worst_own_m|.1f-->``.
@@ -124,8 +127,8 @@ def _json_value(path: Path, where: str):
 
 def render(spec: str) -> str:
     """The text of one marker ``FILE|PATH|FORMAT``, from its results file."""
-    try:
-        name, where, fmt = (s.strip() for s in spec.split("|"))
+    try:   # "\|" in a marker inside a markdown table cell, where a bare "|" would split the cell
+        name, where, fmt = (s.strip() for s in spec.replace("\\|", "|").split("|"))
     except ValueError:
         raise MarkerError(f"a marker is 'FILE|PATH|FORMAT', got '{spec}'") from None
     fmt, _, scale = fmt.partition("*")

@@ -48,6 +48,12 @@ def test_a_wrong_number_is_found_and_rewritten(results):
     assert docs_numbers.fill(new, "doc.md") == (new, [])                # written once, stable
 
 
+def test_a_marker_in_a_table_cell_escapes_its_bars(results):
+    text = "| ekf | <!--r r.json\\|a/rmse_m\\|.2f-->0<!--/r--> m |"
+    new, diffs = docs_numbers.fill(text, "doc.md")
+    assert new == text.replace("-->0<", "-->6.59<") and len(diffs) == 1
+
+
 def test_a_doc_names_its_file_once(results):
     text = "<!--r-def a r.json|a-->\nRMSE <!--r @a/rmse_m|.2f-->0<!--/r--> and <!--r @a/runs/0|.0f-->1<!--/r-->"
     new, diffs = docs_numbers.fill(text, "doc.md")

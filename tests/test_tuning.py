@@ -14,7 +14,7 @@ import pytest
 import tomlkit
 
 from mixnav.data import ImuData
-from mixnav.errors import ArgumentError, ConfigError
+from mixnav.errors import ArgumentError
 from mixnav.experiment.tuning import tunable_keys, tune
 from mixnav.experiment.tuning.allan import overlapping_adev, still_noise
 from mixnav.experiment.tuning.criterion import cv_windows, without_reference
@@ -198,10 +198,12 @@ def test_bad_arguments_are_named(tmp_path, kwargs, argument):
     assert e.value.argument == argument
 
 
-def test_a_dataset_without_gnss_fixes_is_refused_by_name(tmp_path):
-    with pytest.raises(ConfigError) as e:
+def test_a_raw_gnss_dataset_without_a_filter_is_refused_by_name(tmp_path):
+    """android-static solves epoch by epoch only (estimator 'wls'): nothing to tune
+    (raw-GNSS tuning itself: tests/test_tuning_raw.py)."""
+    with pytest.raises(ArgumentError) as e:
         tune("android-static", tmp_path / "out", budget=2)
-    assert e.value.key == "dataset.kind" and "not built yet" in str(e.value)
+    assert e.value.argument == "method" and "no filter method" in str(e.value)
 
 
 @need_data

@@ -336,7 +336,7 @@ def experiment(scenario: str = typer.Argument(..., help="Shipped scenario name o
 
 @app.command()
 def tune(dataset: str = typer.Argument(..., help="Shipped dataset config name or path of a .toml file "
-                                               "(IMU + GNSS fixes, or odometry + pseudoranges)."),
+                                               "(IMU + GNSS fixes, odometry + pseudoranges, or raw GNSS)."),
          out_dir: Path = typer.Option(..., "--out", help="Folder for tuned.toml, tune.json, report.md, tune.png."),
          budget: int = typer.Option(96, "--budget", help="Candidate settings scored at most (each is --folds "
                                                          "filter runs; at least 1)."),
@@ -352,7 +352,7 @@ def tune(dataset: str = typer.Argument(..., help="Shipped dataset config name or
          folds: int = typer.Option(6, "--folds", help="Runs the cross-validation windows (one every half window) "
                                                    "are dealt to (>= 4)."),
          method: str = typer.Option(None, "--method", help="The method tuned (default: the most aided; odometry + "
-                                                           "pseudoranges: the first epoch mixture)."),
+                                                           "pseudoranges and raw GNSS: the first epoch mixture)."),
          criterion: str = typer.Option(None, "--criterion", help="Odometry + pseudoranges only: 'likelihood' "
                                                                  "(default) or 'withheld-satellites' (docs/tuning.md)."),
          data: Path = typer.Option(None, "--data", help="Folder holding the data files (default: the config's "

@@ -20,7 +20,9 @@ before anything is loaded, and then, for an IMU + GNSS-fixes dataset (``ins-gnss
 
 An ``odometry-gnss`` dataset (wheel odometry + pseudoranges) is tuned by :mod:`.vehicle`
 instead: the whole causal pipeline from several starts, scored by the innovation
-log-likelihood (or withheld satellites).
+log-likelihood (or withheld satellites); a ``gnss-raw`` dataset (a phone log, RINEX, u-blox)
+by :mod:`.raw_gnss`: the SPP and the constant-velocity filter from several starts, scored by
+the innovation log-likelihood.
 
 Deterministic (no random draw: ``seed`` is recorded only), and resumable: every evaluation
 is appended to ``tune_journal.jsonl`` in the output folder as it finishes, keyed by the
@@ -100,8 +102,8 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
     Parameters
     ----------
     dataset : str or Path
-        A shipped dataset name or a dataset file; ``ins-gnss`` with ``[gnss]`` fixes, or
-        ``odometry-gnss`` (:mod:`.vehicle`).
+        A shipped dataset name or a dataset file; ``ins-gnss`` with ``[gnss]`` fixes,
+        ``odometry-gnss`` (:mod:`.vehicle`) or ``gnss-raw`` (:mod:`.raw_gnss`).
     out : str or Path
         Output folder: ``tuned.toml``, ``tune.json``, ``report.md``, ``tune.png``,
         ``tune_journal.jsonl``.
@@ -155,14 +157,16 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
     stripped = without_reference(text)
     ds, _, _ = load_dataset_text(stripped, source)
     vehicle = ds.dataset.kind == "odometry-gnss"
-    if not vehicle and (getattr(ds, "gnss", None) is None or getattr(ds, "imu", None) is None):
-        raise ConfigError("mixnav tune needs an IMU + GNSS-fixes dataset ([imu] and [gnss]) or an odometry + "
-                          "pseudorange one; tuning raw-GNSS datasets is not built yet (docs/tuning.md)",
-                          file=source, key="dataset.kind")
-    if not vehicle and criterion is not None:
-        raise ArgumentError("an IMU + GNSS-fixes dataset is tuned by cross-validation only; --criterion is for "
-                            "odometry + pseudorange datasets", argument="criterion")
-    if not vehicle:
+    raw = ds.dataset.kind == "gnss-raw"
+    if not (vehicle or raw) and (getattr(ds, "gnss", None) is None or getattr(ds, "imu", None) is None):
+        raise ConfigError("mixnav tune needs an IMU + GNSS-fixes dataset ([imu] and [gnss]), an odometry + "
+                          "pseudorange one or a raw-GNSS one; tuning an IMU with raw GNSS (RINEX) is not built yet "
+                          "(docs/tuning.md)", file=source, key="dataset.kind")
+    if not vehicle and criterion is not None and not (raw and criterion == "likelihood"):
+        raise ArgumentError("an IMU + GNSS-fixes dataset is tuned by cross-validation only, a raw-GNSS one by the "
+                            "innovation likelihood only; --criterion chooses for odometry + pseudorange datasets",
+                            argument="criterion")
+    if not (vehicle or raw):
         unknown = [k for k in fix if k not in tunable_keys()]
         if unknown:
             raise ArgumentError(f"unknown key(s) {', '.join(unknown)}; tunable: {', '.join(tunable_keys())}",
@@ -179,14 +183,18 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
     out.mkdir(parents=True, exist_ok=True)
     write_marker(out, "tune", False, TUNE_FILES)
     journal = out / "tune_journal.jsonl"
-    if vehicle:
+    if vehicle or raw:
         from .report import write_outputs
-        from .vehicle import tune_vehicle
         header = {"dataset": str(dataset), "source": source, "budget": budget, "seed": seed, "fixed": fix}
-        result = tune_vehicle(text=text, stripped=stripped, source=source, ds=ds, out=out, data=data,
-                              data_folder=data_folder, journal=journal, budget=budget, workers=workers,
-                              scheduler=scheduler, fix=fix, method=method, progress=progress, header=header,
-                              criterion=criterion or "likelihood")
+        common = dict(text=text, stripped=stripped, source=source, ds=ds, out=out, data=data, data_folder=data_folder,
+                      journal=journal, budget=budget, workers=workers, scheduler=scheduler, fix=fix, method=method,
+                      progress=progress, header=header)
+        if vehicle:
+            from .vehicle import tune_vehicle
+            result = tune_vehicle(**common, criterion=criterion or "likelihood")
+        else:
+            from .raw_gnss import tune_raw
+            result = tune_raw(**common)
         write_outputs(out, result, header)
         write_marker(out, "tune", True, TUNE_FILES)
         return result

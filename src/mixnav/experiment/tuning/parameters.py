@@ -121,6 +121,9 @@ def _node(doc, path, create: bool = False):
     """The table holding the last key of ``path`` (None when absent and not ``create``)."""
     t = doc
     for k in path[:-1]:
+        if isinstance(k, int):       # an element of an array of tables ([[methods]]): never created
+            t = t[k]
+            continue
         if k not in t:
             if not create:
                 return None

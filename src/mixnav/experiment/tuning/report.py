@@ -53,7 +53,8 @@ def _vehicle_report(result, h: dict) -> str:
     g, t = result.given, result.tuned
     withheld = h["criterion_kind"] == "withheld-satellites"
     lines = [f"# mixnav tune: {h['dataset']}", "",
-             f"Method tuned: `{h['method']}`; the whole causal pipeline (track alignment, then the filter) run from "
+             f"Method tuned: `{h['method']}`; "
+             f"{h.get('pipeline', 'the whole causal pipeline (track alignment, then the filter)')} run from "
              f"{len(h['starts_s'])} starts ({', '.join(f'{s:g}' for s in h['starts_s'])} s)"
              + (", each twice with half the satellites withheld" if withheld else "")
              + f"; the rows from each start + {h['score_after_s']:g} s scored; {h['evaluations_spent']} evaluations "
