@@ -7,7 +7,8 @@ The epoch-by-epoch SPP (`spp`, and `robust-spp`) and the GNSS-only constant-velo
 of the shipped config on the same 223 epochs, through the public API
 (:func:`mixnav.process_dataset`). Errors: estimate minus the surveyed point, in NED there.
 Beside the accuracy, what a static receiver's filter should show: the EKF's horizontal speed
-after its first 30 s (RMS, and the median of its own 1-sigma per axis). Writes
+after its first 30 s (RMS, and the median of its own 1-sigma per axis); and from the log itself,
+the hardware-clock segments (``HardwareClockDiscontinuityCount`` changes between epochs). Writes
 ``android_static.json`` and ``android_static.md`` into ``--out``.
 """
 
@@ -27,6 +28,22 @@ DATASET = "android-static-filters"
 #: the filters run causally on the SPP's corrected pseudoranges (the SPP rows and the smoother apart)
 CAUSAL_FILTERS = ("ekf", "robust", "mixture", "epoch-mixture", "vb-akf")
 SETTLED_AFTER_S = 30.0
+LOG = "pseudoranges_log_2016_06_30_21_26_07.txt"
+
+
+def clock_segments(log: Path) -> dict:
+    """Epochs (distinct ``TimeNanos`` of the ``Raw`` rows) and hardware-clock segments of a
+    GnssLogger file (a segment ends where ``HardwareClockDiscontinuityCount`` changes)."""
+    columns, epochs = None, []
+    for line in log.read_text().splitlines():
+        if line.startswith("# Raw,"):
+            columns = line[2:].split(",")
+        elif line.startswith("Raw,") and columns:
+            row = dict(zip(columns, line.split(",")))
+            if not epochs or epochs[-1][0] != row["TimeNanos"]:
+                epochs.append((row["TimeNanos"], row["HardwareClockDiscontinuityCount"]))
+    changes = sum(a[1] != b[1] for a, b in zip(epochs, epochs[1:]))
+    return {"epochs": len(epochs), "segments": changes + 1 if epochs else 0}
 
 
 def measure(data: Path) -> dict:
@@ -45,6 +62,7 @@ def measure(data: Path) -> dict:
         "machine": platform.machine(), "python": platform.python_version(),
         "mixnav_version": mixnav.__version__,
         "wall_time_s": wall,
+        "log_clock": clock_segments(data / "android-static" / LOG),
         "methods": methods,
         "filters": {"names": list(CAUSAL_FILTERS),
                     "min_horizontal_rmse_m": min(filtered), "max_horizontal_rmse_m": max(filtered)},
@@ -69,6 +87,9 @@ def markdown(r: dict) -> str:
         lines.append(f"| {name} | {m['n_epochs']} | {m['horizontal_rmse_m']:.2f} | {m['horizontal_p95_m']:.2f} | "
                      f"{m['horizontal_max_m']:.2f} | {m['vertical_rmse_m']:.2f} |")
     f, e = r["filters"], r["ekf_after_30s"]
+    c = r["log_clock"]
+    lines += ["", f"The log: {c['epochs']} epochs in {c['segments']} hardware-clock segments "
+              "(`HardwareClockDiscontinuityCount` changes between epochs: a duty-cycled chip)."]
     lines += ["", f"Causal filters ({', '.join(f['names'])}): horizontal RMSE {f['min_horizontal_rmse_m']:.2f}"
               f"-{f['max_horizontal_rmse_m']:.2f} m.", "",
               f"The EKF after {SETTLED_AFTER_S:g} s ({e['epochs']} epochs): horizontal speed RMS "
