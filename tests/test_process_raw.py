@@ -99,6 +99,13 @@ def test_android_static_end_to_end(tmp_path):
     ok = csv[csv["status"] == "ok"]
     assert len(line) == len(ok)
     np.testing.assert_allclose(line, ok[["lat_deg", "lon_deg"]].to_numpy(), rtol=0, atol=6e-8)
+    # and the surveyed point the errors are measured from, with its coordinates in the popup
+    from .test_webmap import surveyed_points
+    (where, text), = surveyed_points((out / "map.html").read_text())
+    rp = load_dataset("android-static")[0].reference_point
+    lat, lon = np.degrees([rp.latitude, rp.longitude])
+    np.testing.assert_allclose(where, [lat, lon], rtol=0, atol=6e-8)
+    assert f"latitude {lat:.7f} deg, longitude {lon:.7f} deg, height {rp.height:.3f} m" in text
     # every metrics key is documented
     doc = (DOCS / "outputs.md").read_text()
     for key in list(m) + list(s):

@@ -13,7 +13,7 @@ from matplotlib.patches import Rectangle, Polygon
 
 from mixnav.experiment import figures
 from mixnav.experiment.report import write_report
-from mixnav.experiment.webmap import DECIMALS, decimation_index, map_html, map_layers
+from mixnav.experiment.webmap import DECIMALS, POINT_NAME, decimation_index, map_html, map_layers
 
 from .test_report import OUTAGES, synthetic_solution
 
@@ -85,6 +85,40 @@ def test_highlighted_spans_are_the_outage_windows():
             assert f"{name}: GNSS outage {a:g} - {b:g} s" in page
     spans = [ln for ln in polylines(page) if len(ln) < 1000]
     assert len(spans) == 4     # two windows on two tracks
+
+
+def surveyed_points(page: str) -> list[tuple[list[float], str]]:
+    """``([lat, lon], popup text)`` of every circle marker with a Leaflet popup in a folium page."""
+    found = re.findall(r"var (circle_marker_\w+) = L\.circleMarker\(\s*(\[[^\]]*\])", page)
+    out = []
+    for name, where in found:
+        popup = re.search(re.escape(name) + r'\.bindPopup\(("(?:[^"\\]|\\.)*")', page)
+        if popup:
+            out.append((json.loads(where), json.loads(popup.group(1))))
+    return out
+
+
+def test_a_static_receivers_surveyed_point_is_a_marker_with_its_coordinates():
+    # fixes scattered 10-20 m around a point (a static receiver): the point is not one of them
+    rng = np.random.default_rng(3)
+    fixes = pd.DataFrame({"time_s": np.arange(200.0), "lat_deg": 22.3 + 1e-4 * rng.standard_normal(200),
+                          "lon_deg": 114.18 + 1e-4 * rng.standard_normal(200), "height_m": np.zeros(200)})
+    point = (22.30431234567, 114.18512345678, 3.25)      # ~500 m north-east: widens the view
+    layers = map_layers({"spp": fixes}, reference_point=point)
+    assert layers.point == (22.3043123, 114.1851235, 3.25)
+    (south, west), (north, east) = layers.bounds()
+    assert north == 22.3043123 and east == 114.1851235 and south < 22.3 and west < 114.18
+    page = map_html({"spp": fixes}, reference_point=point)
+    (where, text), = surveyed_points(page)
+    assert where == [22.3043123, 114.1851235]
+    assert text == f"{POINT_NAME}: latitude 22.3043123 deg, longitude 114.1851235 deg, height 3.250 m"
+    assert re.search(re.escape(f'"{POINT_NAME}" : feature_group_'), page)   # its own layer in the control
+    # without it, no marker; a point alone is still a map
+    assert surveyed_points(map_html({"spp": fixes})) == []
+    alone = map_html({}, reference_point=point)
+    assert alone is not None and len(surveyed_points(alone)) == 1
+    with pytest.raises(ValueError, match="reference_point must be finite"):
+        map_layers({"spp": fixes}, reference_point=(np.nan, 114.0, 0.0))
 
 
 def test_nothing_to_draw_gives_no_map():

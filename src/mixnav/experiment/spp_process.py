@@ -707,6 +707,8 @@ def _write_raw(out_dir: Path, po: SppOutput, config_text: str | None, sweeps=())
     title = f"mixnav process: {po.dataset.dataset.name}"
     write_report(out_dir, title, metrics, figs, notes=notes, config_text=config_text, sections=sections,
                  web_map=map_html({n: o for n, o in oks.items() if len(o)},
-                                  reference=ref if po.reference is not None else None, title=title))
+                                  reference=ref if po.reference is not None else None, title=title,
+                                  reference_point=None if po.reference_lla is None else
+                                  (*np.degrees(po.reference_lla[:2]), po.reference_lla[2])))
     atomic_write_json(out_dir / "metrics.json", metrics)       # last: marks a complete folder
     return metrics

@@ -1,6 +1,7 @@
 """An interactive map of the trajectories (folium, i.e. Leaflet): ``map.html`` of a report.
 
-Each method's track, the reference and the GNSS fixes on OpenStreetMap tiles, the
+Each method's track, the reference (a trajectory, or a static receiver's surveyed point:
+a marker whose popup gives its coordinates) and the GNSS fixes on OpenStreetMap tiles, the
 stretches inside the GNSS outage (withheld) windows highlighted on each track, and a layer
 control to switch each on or off. The page loads Leaflet and the tiles from the web when it
 is viewed; nothing is fetched when it is written, and a viewer offline sees an empty map
@@ -31,6 +32,8 @@ DECIMALS = 7
 _OUTAGE_COLOUR = "#ff8c00"
 _REFERENCE_COLOUR = "#000000"
 _GNSS_COLOUR = "#7f7f7f"
+#: the popup's and the layer's name for a static receiver's surveyed point
+POINT_NAME = "surveyed point ([reference_point])"
 
 
 @dataclass
@@ -48,11 +51,15 @@ class Track:
 class MapLayers:
     tracks: list[Track]
     gnss: np.ndarray | None      # (K, 2) [deg]
+    #: a static receiver's surveyed point: latitude, longitude [deg] (rounded), height [m]
+    point: tuple[float, float, float] | None = None
 
     def bounds(self) -> list[list[float]]:
         pts = [t.latlon for t in self.tracks if len(t.latlon)]
         if self.gnss is not None and len(self.gnss):
             pts.append(self.gnss)
+        if self.point is not None:
+            pts.append(np.array([self.point[:2]]))
         allp = np.vstack(pts)
         return [[float(allp[:, 0].min()), float(allp[:, 1].min())],
                 [float(allp[:, 0].max()), float(allp[:, 1].max())]]
@@ -96,10 +103,12 @@ def _track(name: str, colour: str, df: pd.DataFrame, outages, max_points: int) -
 
 def map_layers(solutions: dict[str, pd.DataFrame], reference: pd.DataFrame | None = None,
                gnss: pd.DataFrame | None = None, outages: Sequence[tuple[float, float]] = (),
-               max_points: int = MAX_POINTS) -> MapLayers:
+               max_points: int = MAX_POINTS,
+               reference_point: tuple[float, float, float] | None = None) -> MapLayers:
     """What the map draws: the reference (black) and each method's track (matplotlib's
-    ``C0``, ``C1``, ... as in the figures) with their outage spans, and the GNSS fixes.
-    Rows with a non-finite position are left out."""
+    ``C0``, ``C1``, ... as in the figures) with their outage spans, the GNSS fixes, and
+    ``reference_point`` (latitude, longitude [deg], height [m]: a static receiver's
+    surveyed point). Rows with a non-finite position are left out."""
     from matplotlib.colors import to_hex
 
     outages = [(float(a), float(b)) for a, b in outages]
@@ -113,21 +122,51 @@ def map_layers(solutions: dict[str, pd.DataFrame], reference: pd.DataFrame | Non
     if gnss is not None and len(gnss):
         _, ll = _finite(gnss)
         fixes = np.round(ll[decimation_index(np.zeros(len(ll)), max_points)], DECIMALS)
-    return MapLayers(tracks, fixes)
+    point = None
+    if reference_point is not None:
+        lat, lon, h = (float(v) for v in reference_point)
+        if not np.isfinite([lat, lon, h]).all():
+            raise ValueError(f"reference_point must be finite (latitude, longitude [deg], height [m]), got "
+                             f"{tuple(reference_point)}")
+        point = (round(lat, DECIMALS), round(lon, DECIMALS), h)
+    return MapLayers(tracks, fixes, point)
+
+
+def point_popup(point: tuple[float, float, float]) -> str:
+    """The text of the surveyed point's popup: its name and coordinates."""
+    lat, lon, h = point
+    return f"{POINT_NAME}: latitude {lat:.{DECIMALS}f} deg, longitude {lon:.{DECIMALS}f} deg, height {h:.3f} m"
+
+
+def _leaflet_popup(text_html: str):
+    """A popup bound to its parent by Leaflet alone: folium's ``Popup`` builds its content with
+    jQuery, which this page does not load."""
+    from branca.element import MacroElement
+    from jinja2 import Template
+
+    popup = MacroElement()
+    popup._name = "LeafletPopup"
+    # a JavaScript string literal ('</' split so that no '</script>' can end the page's script)
+    popup.content_js = json.dumps(text_html).replace("</", "<\\/")
+    popup._template = Template("{% macro script(this, kwargs) %}{{ this._parent.get_name() }}.bindPopup("
+                               "{{ this.content_js }}, {maxWidth: 360});{% endmacro %}")
+    return popup
 
 
 def map_html(solutions: dict[str, pd.DataFrame], reference: pd.DataFrame | None = None,
              gnss: pd.DataFrame | None = None, outages: Sequence[tuple[float, float]] = (),
-             title: str = "trajectories", max_points: int = MAX_POINTS) -> str | None:
+             title: str = "trajectories", max_points: int = MAX_POINTS,
+             reference_point: tuple[float, float, float] | None = None) -> str | None:
     """The map page (a whole HTML document), or None when there is no position to draw."""
-    layers = map_layers(solutions, reference, gnss, outages, max_points)
-    if not layers.tracks and (layers.gnss is None or not len(layers.gnss)):
+    layers = map_layers(solutions, reference, gnss, outages, max_points, reference_point)
+    if not layers.tracks and (layers.gnss is None or not len(layers.gnss)) and layers.point is None:
         return None
     import folium
 
     m = folium.Map(tiles=None, prefer_canvas=True, control_scale=True)
-    # Leaflet alone: folium's other defaults (jQuery, Bootstrap, icon fonts) serve markers
-    # and popups this page does not use, and each is one more host to reach
+    # Leaflet alone: folium's other defaults (jQuery, Bootstrap, icon fonts) serve its icon
+    # markers and popups, which this page does not use (its one popup is Leaflet's own), and
+    # each is one more host to reach
     m.default_js = [(k, v) for k, v in m.default_js if k == "leaflet"]
     m.default_css = [(k, v) for k, v in m.default_css if k == "leaflet_css"]
     folium.TileLayer("OpenStreetMap", name="OpenStreetMap", control=False).add_to(m)
@@ -151,6 +190,15 @@ def map_html(solutions: dict[str, pd.DataFrame], reference: pd.DataFrame | None 
         g = folium.FeatureGroup(name=html.escape(tr.name))
         folium.PolyLine(tr.latlon.tolist(), color=tr.colour, weight=3 if tr.name == "reference" else 2,
                         opacity=0.9, tooltip=html.escape(tr.name)).add_to(g)
+        g.add_to(m)
+    if layers.point is not None:
+        # a circle marker (drawn by Leaflet, no icon images to fetch), on top of the fixes
+        g = folium.FeatureGroup(name=html.escape(POINT_NAME))
+        text = html.escape(point_popup(layers.point))
+        marker = folium.CircleMarker(list(layers.point[:2]), radius=7, color="#ffffff", weight=2, fill=True,
+                                     fill_color=_REFERENCE_COLOUR, fill_opacity=1.0,
+                                     tooltip=html.escape(POINT_NAME)).add_to(g)
+        _leaflet_popup(text).add_to(marker)
         g.add_to(m)
     control = folium.LayerControl(collapsed=False).add_to(m)
     bounds = layers.bounds()
