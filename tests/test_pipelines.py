@@ -28,9 +28,9 @@ def _literal(model, field="format") -> set:
 SCHEMA_FORMATS = {
     "imu": _literal(dataset_schema.ImuFile),
     "gnss-fixes": _literal(dataset_schema.GnssFile),
-    # a gnss-raw [raw_gnss] in format "smartloc" reads corrected pseudoranges
-    "raw-gnss": (_literal(dataset_schema.RawGnss) | _literal(dataset_schema.InsRawGnss)) - {"smartloc"},
-    "corrected-pseudoranges": _literal(vehicle_schema.Pseudoranges) | ({"smartloc"} & _literal(dataset_schema.RawGnss)),
+    # every raw-GNSS reader, smartLoc's corrected pseudoranges (the odometry datasets' too) included
+    "raw-gnss": (_literal(dataset_schema.RawGnss) | _literal(dataset_schema.InsRawGnss)
+                 | _literal(vehicle_schema.Pseudoranges)),
     "odometry": _literal(vehicle_schema.OdometryFile),
     "reference": _literal(dataset_schema.ReferenceFile) | _literal(vehicle_schema.VehicleReference)
     | _literal(raw_gnss_schema.RawReference),

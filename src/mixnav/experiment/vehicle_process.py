@@ -94,7 +94,7 @@ class VehicleInputs:
 
     odometry: object          # WheelOdometry
     inc: object               # OdometryIncrements
-    epochs: object            # PseudorangeEpochs
+    epochs: object            # PseudorangeEpochs, from the reader's RawPseudoranges
     reference: Trajectory | None
     read_time_s: float
 
@@ -175,11 +175,14 @@ def process_vehicle(ds: VehicleDataset, source: str, data: str | None = None, se
 
 def read_vehicle(ds: VehicleDataset, source: str, d: Path) -> VehicleInputs:
     """The odometry, pseudorange and reference files of data folder ``d`` (the readers
-    registered for their formats)."""
+    registered for their formats); the pseudoranges (corrected RawPseudoranges, every system
+    of the file: the model skips rows of systems it does not estimate) grouped into the
+    PseudorangeEpochs the alignment and the filters read."""
+    from ..gnss.pseudoranges import PseudorangeEpochs
     t_read = _time.perf_counter()
     oc, pc = ds.odometry, ds.pseudoranges
     odo = read_table("odometry", oc, d, "odometry", source)
-    epochs = read_table("corrected-pseudoranges", pc, d, "pseudoranges", source)
+    epochs = PseudorangeEpochs.from_raw(read_table("raw-gnss", pc, d, "pseudoranges", source))
     truth = None if ds.reference is None else read_table("reference", ds.reference, d, "reference", source)
     sign = 1.0 if oc.yaw_rate_axis == "down" else -1.0      # the engine's heading turns about down
     inc = odometry_increments(odo.time, odo.speed, sign * odo.yaw_rate, source=str(d / oc.file))
