@@ -23,7 +23,7 @@ elevation weights and mask) on the constant-velocity model
 (:class:`mixnav.motion.ConstantVelocityMotion`, ``[motion]``), started at the first SPP
 fix (its position, clock bias and their WLS covariance; velocity and clock drift zero)
 and run from the next epoch on, one engine per method
-(:func:`mixnav.experiment.model_methods.run_methods`, the code the odometry datasets
+(:func:`mixnav.experiment.methods.run_methods`, the code the odometry datasets
 run).
 
 Corrected pseudoranges (``[raw_gnss] format = "smartloc"``: satellite clock and atmosphere
@@ -349,7 +349,7 @@ def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
     from ..measurements.pseudorange import PseudorangeGnss
     from ..motion.constant_velocity import (ConstantVelocityMotion, ConstantVelocityNoise, clock_ticks,
                                             constant_velocity_layout)
-    from .model_methods import run_methods
+    from .methods import run_methods
     ds, tr, obs = po.dataset, po.track, po.observations
     mc = ds.motion
     t_prep = _time.perf_counter()
@@ -390,7 +390,7 @@ def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
     prep = _time.perf_counter() - t_prep
     t_filter = _time.perf_counter()
     po.results = run_methods(methods, lambda: ConstantVelocityMotion(lay, noise, clock), [model], ticks, init, out_t,
-                             po.source, seed, "the constant-velocity model")
+                             po.source, seed, motion="constant-velocity")
     po.filter_time_s = prep + _time.perf_counter() - t_filter
     po.epochs, po.init, po.clock_offset = epochs, init, offset
     po.checks = {"filter_start_s": init.time, "clock_jumps": [list(j) for j in jumps],

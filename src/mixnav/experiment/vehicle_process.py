@@ -35,11 +35,11 @@ from ..io.readers import read_table
 from ..measurements.pseudorange import PseudorangeGnss
 from ..motion.dead_reckoning import (DeadReckoningMotion, DeadReckoningNoise, dead_reckoning_layout,
                                      odometry_increments, set_heading)
-from .model_methods import make_estimator, run_methods
+from .methods import run_methods
 from .data_folder import find_data_dir
 from .outputs import lla_frame, solution_table, write_outputs
 
-__all__ = ["VehicleOutput", "discard_before", "process_vehicle", "vehicle_tables", "write_vehicle", "make_estimator"]
+__all__ = ["VehicleOutput", "discard_before", "process_vehicle", "vehicle_tables", "write_vehicle"]
 
 
 @dataclass
@@ -235,8 +235,7 @@ def run_vehicle(ds: VehicleDataset, source: str, d: Path, inputs: VehicleInputs,
     out_t = out_t[(out_t > init.time) & (out_t <= inc.time[-1])]
     t_filter = _time.perf_counter()
     results = run_methods(list(enumerate(ds.methods)), lambda: DeadReckoningMotion(lay, noise, clock), [model], inc,
-                          init, out_t, source, seed, "the dead-reckoning model",
-                          mixture_start=start)
+                          init, out_t, source, seed, motion="dead-reckoning", mixture_start=start)
     filter_time = _time.perf_counter() - t_filter
     checks = {"pseudorange_rows_skipped": model.skipped_rows, "odometry_rows": len(odo),
               "pseudorange_epochs": len(epochs), **coverage}
