@@ -8,7 +8,8 @@ pseudoranges; causal start from the 20 s track alignment) and ``android-static-f
 (GNSS-only constant velocity, GPS pseudoranges corrected by the SPP's atmosphere; start at
 the first SPP fix). Each estimator runs through the dataset's own pipeline
 (``mixnav.experiment.vehicle_process`` / ``spp_process``): the shipped config's ``ekf``
-method alone, with :func:`mixnav.experiment.model_methods.make_estimator` answering with the
+method alone, with :func:`mixnav.experiment.methods.estimator_for` (what
+:func:`mixnav.experiment.methods.run_methods` asks) answering with the
 estimator under test. So the motion model, its noise, the pseudorange model, the initial
 state, the engine, the output epochs and the scoring are the EKF method's, and only the
 estimator differs. The estimators take their defaults; the particle counts (``--particles``,
@@ -31,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from mixnav.config.loader import load_dataset
-from mixnav.experiment import model_methods
+from mixnav.experiment import methods
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -60,11 +61,11 @@ def ekf_only(ds):
 
 def run_with(ds, source, data, factory, seed=0):
     """The pipeline with the ekf method's estimator replaced by ``factory()``."""
-    original = model_methods.make_estimator
+    original = methods.estimator_for
 
     def swapped(method, *args, **kwargs):
         return original(method, *args, **kwargs) if factory is None else factory()
-    model_methods.make_estimator = swapped
+    methods.estimator_for = swapped
     try:
         if ds.dataset.kind == "odometry-gnss":
             from mixnav.experiment.vehicle_process import process_vehicle, vehicle_tables
@@ -81,7 +82,7 @@ def run_with(ds, source, data, factory, seed=0):
             err = table.loc[ok, ["err_n_m", "err_e_m"]].to_numpy(dtype=float)
             time = table.loc[ok, "time_s"].to_numpy()
     finally:
-        model_methods.make_estimator = original
+        methods.estimator_for = original
     return out.results["ekf"], err, time
 
 

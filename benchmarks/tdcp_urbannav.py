@@ -32,7 +32,7 @@ import numpy as np
 
 from mixnav.config.loader import load_dataset
 from mixnav.errors import ArgumentError
-from mixnav.experiment.model_methods import run_methods
+from mixnav.experiment.methods import run_methods
 from mixnav.experiment.spp_process import (_epoch_times, filter_systems, filter_table, options,
                                            read_raw, solve_raw)
 from mixnav.geodesy.frames import lla_to_ecef
@@ -86,7 +86,7 @@ def main() -> None:
         plain = m.model_copy(update={"smooth": False})
         try:
             res = run_methods([(k, plain)], lambda: ConstantVelocityMotion(lay, noise, clock), [model], ticks, init,
-                              out_t, source, 0, "the constant-velocity model")[m.name]
+                              out_t, source, 0, motion="constant-velocity")[m.name]
             with_tdcp[m.name] = res
         except ArgumentError as exc:
             not_run[m.name] = str(exc)

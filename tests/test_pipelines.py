@@ -28,9 +28,9 @@ def _literal(model, field="format") -> set:
 SCHEMA_FORMATS = {
     "imu": _literal(dataset_schema.ImuFile),
     "gnss-fixes": _literal(dataset_schema.GnssFile),
-    # a gnss-raw [raw_gnss] in format "smartloc" reads corrected pseudoranges
-    "raw-gnss": (_literal(dataset_schema.RawGnss) | _literal(dataset_schema.InsRawGnss)) - {"smartloc"},
-    "corrected-pseudoranges": _literal(vehicle_schema.Pseudoranges) | ({"smartloc"} & _literal(dataset_schema.RawGnss)),
+    # every raw-GNSS reader, smartLoc's corrected pseudoranges (the odometry datasets' too) included
+    "raw-gnss": (_literal(dataset_schema.RawGnss) | _literal(dataset_schema.InsRawGnss)
+                 | _literal(vehicle_schema.Pseudoranges)),
     "odometry": _literal(vehicle_schema.OdometryFile),
     "reference": _literal(dataset_schema.ReferenceFile) | _literal(vehicle_schema.VehicleReference)
     | _literal(raw_gnss_schema.RawReference),
@@ -133,3 +133,132 @@ def test_unknown_kind_names_the_key():
     with pytest.raises(ConfigError) as exc:
         pipelines.pipeline(SimpleNamespace(dataset=SimpleNamespace(kind="sonar-gnss"), raw_gnss=None))
     assert exc.value.key == "dataset.kind" and "odometry-gnss" in str(exc.value)
+
+
+# ---------------------------------------------------------------------------
+# a new dataset kind from outside mixnav: its pipeline object and schema, one call
+# ---------------------------------------------------------------------------
+def _toy_kind():
+    """A toy dataset kind written here alone: files of one number a line; the one method
+    ``running-mean`` is the mean of the numbers so far, scored against ``truth``."""
+    import json
+    from typing import Literal
+
+    import pandas as pd
+    from pydantic import BaseModel, ConfigDict
+
+    class Info(BaseModel):
+        model_config = ConfigDict(extra="forbid")
+        name: str
+        kind: Literal["toy-numbers"]
+        description: str = ""
+        data_dir: str = "."
+
+    class Numbers(BaseModel):
+        model_config = ConfigDict(extra="forbid")
+        file: str
+        truth: float
+
+    class ToyDataset(BaseModel):
+        model_config = ConfigDict(extra="forbid")
+        dataset: Info
+        numbers: Numbers
+
+    def load(ds, source, folder):
+        return np.loadtxt(folder / ds.numbers.file, ndmin=1)
+
+    def run(ds, source, folder, values, seed=0):
+        mean = np.cumsum(values) / np.arange(1, len(values) + 1)
+        return SimpleNamespace(dataset=ds, source=source, results={"running-mean": mean}, values=values)
+
+    def tables(out):
+        m = out.results["running-mean"]
+        return {"running-mean": pd.DataFrame({"time_s": np.arange(len(m), dtype=float), "value": m,
+                                              "error": m - out.dataset.numbers.truth})}
+
+    def metrics(out, tables):
+        e = tables["running-mean"]["error"].to_numpy()
+        return {"running-mean": {"n_epochs": len(e), "final": float(tables["running-mean"]["value"].iloc[-1]),
+                                 "horizontal_rmse_m": float(np.sqrt(np.mean(e ** 2))),
+                                 "horizontal_max_m": float(np.abs(e).max())}}
+
+    def write(out_dir, out, config_text=None, overwrite=False, sweeps=()):
+        from mixnav.io.outdir import staged_output
+        t = tables(out)
+        m = {"dataset": out.dataset.dataset.name, "duration_s": float(len(out.values) - 1), "read_time_s": 0.0,
+             "filter_time_s": 1e-3, "real_time_factor": 1.0, "methods": metrics(out, t)}
+        with staged_output(Path(out_dir), "process", overwrite, [out.source]) as folder:
+            (folder.path / "metrics.json").write_text(json.dumps(m))
+        return m
+
+    module = SimpleNamespace(load=load, run=run, tables=tables, metrics=metrics, truth=lambda out: None, write=write)
+    return module, ToyDataset
+
+
+@pytest.fixture
+def toy_kind(monkeypatch, tmp_path):
+    """The toy kind registered on copies of the registries (undone after the test), and a
+    dataset file of it with its data."""
+    from mixnav.config import loader
+    monkeypatch.setattr(pipelines, "PIPELINES", dict(pipelines.PIPELINES))
+    monkeypatch.setattr(loader, "_DATASET_SCHEMAS", dict(loader._DATASET_SCHEMAS))
+    values = np.array([3.0, 5.0, 4.0, 8.0])
+    (tmp_path / "n.txt").write_text("".join(f"{v!r}\n" for v in values.tolist()))
+    cfg = tmp_path / "toy.toml"
+    cfg.write_text(f'[dataset]\nname = "toy"\nkind = "toy-numbers"\ndata_dir = "{tmp_path.as_posix()}"\n\n'
+                   '[numbers]\nfile = "n.txt"\ntruth = 4.5\n')
+    return (*_toy_kind(), cfg, values)
+
+
+def test_a_new_dataset_kind_is_one_registration_from_outside(toy_kind, tmp_path):
+    """A kind this module defines alone (pipeline object and schema) is refused before it is
+    registered, and after register_pipeline runs through the public API and the CLI
+    (``mixnav process``), its numbers those of the closed form: the running mean of the
+    file's numbers and its error against the file's truth."""
+    import json
+
+    from typer.testing import CliRunner
+
+    import mixnav
+    from mixnav.cli import app
+    module, schema, cfg, values = toy_kind
+    with pytest.raises(ConfigError) as exc:
+        mixnav.process_dataset(str(cfg))
+    assert exc.value.key == "dataset.kind"
+    pipelines.register_pipeline("toy-numbers", module, schema)
+    res = mixnav.process_dataset(str(cfg))
+    mean = np.array([3.0, 4.0, 4.0, 5.0])                   # 3, (3+5)/2, (3+5+4)/3, 20/4
+    np.testing.assert_array_equal(res.solutions["running-mean"]["value"], mean)
+    assert res.metrics.loc["running-mean", "final"] == values.mean() == 5.0
+    assert res.metrics.loc["running-mean", "horizontal_max_m"] == 1.5
+    out = tmp_path / "out"
+    done = CliRunner().invoke(app, ["process", str(cfg), "--out", str(out)])
+    assert done.exit_code == 0, done.output
+    written = json.loads((out / "metrics.json").read_text())
+    assert written["methods"]["running-mean"]["final"] == 5.0 and "running-mean" in done.output
+    np.testing.assert_allclose(written["methods"]["running-mean"]["horizontal_rmse_m"],
+                               np.sqrt(np.mean((mean - 4.5) ** 2)), rtol=1e-15)
+
+
+def test_the_new_kinds_schema_names_the_key_and_registrations_are_checked(toy_kind):
+    """The registered schema's errors name the file and the key, as the built-in schemas' do;
+    a kind that has a pipeline or a schema already, and a pipeline missing a function, are
+    refused when registered."""
+    import mixnav
+    module, schema, cfg, _ = toy_kind
+    pipelines.register_pipeline("toy-numbers", module, schema)
+    cfg.write_text(cfg.read_text().replace("truth = 4.5", "truth = 4.5\ntruht = 4.5"))
+    with pytest.raises(ConfigError, match="unknown key") as exc:
+        mixnav.process_dataset(str(cfg))
+    assert exc.value.key == "numbers.truht" and exc.value.file == str(cfg)
+    with pytest.raises(ValueError, match="'toy-numbers' has a pipeline already"):
+        pipelines.register_pipeline("toy-numbers", module, schema)
+    with pytest.raises(ValueError, match="'gnss-raw' has a pipeline already"):
+        pipelines.register_pipeline("gnss-raw", module)
+    from mixnav.config.loader import register_dataset_schema
+    with pytest.raises(ValueError, match="'odometry-gnss' has a schema already"):
+        register_dataset_schema("odometry-gnss", schema)
+    partial = SimpleNamespace(**{k: v for k, v in vars(module).items() if k not in ("write", "truth")})
+    with pytest.raises(TypeError, match="has no truth, write"):
+        pipelines.register_pipeline("toy-other", partial, schema)
+    assert "toy-other" not in pipelines.PIPELINES

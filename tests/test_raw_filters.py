@@ -82,7 +82,7 @@ def test_estimator_options_and_coloured_bank_are_refused_by_key(tmp_path):
     """An option the estimator's registered model does not have is refused when the file is
     loaded; what only the builder can judge (the coloured bank that needs an INS layout) when
     the method is built; both under the method's own key."""
-    from mixnav.experiment.model_methods import make_estimator
+    from mixnav.experiment.methods import estimator_for
     with pytest.raises(ConfigError, match="estimator 'epoch-mixture' has no option 'los_wieght'.*los_weight") as ei:
         load_dataset(_cfg(tmp_path, _methods(SHIPPED, '[[methods]]\nname = "a"\nestimator = "wls"\n\n'
                                                       '[[methods]]\nname = "em"\nestimator = "epoch-mixture"\n'
@@ -92,7 +92,7 @@ def test_estimator_options_and_coloured_bank_are_refused_by_key(tmp_path):
                                                       '[[methods]]\nname = "gm"\nestimator = "gaussian-mixture"\n'
                                                       '[methods.mixture.colored]\nprocess = 0.5\n')))
     with pytest.raises(ConfigError, match="constant-velocity") as ei:
-        make_estimator(ds.methods[1], src, 1, model_name="the constant-velocity model")
+        estimator_for(ds.methods[1], src, 1, motion="constant-velocity")
     assert ei.value.key == "methods[1].mixture.colored"
 
 

@@ -421,7 +421,9 @@ def test_smartloc_gnss_alone_against_an_independent_wls_and_its_ground_truth():
     from mixnav.experiment.data_folder import find_data_dir
     folder = find_data_dir(ds, None, src)
     po = process_raw(ds, src, folder)
-    pe = po.observations.epochs
+    from mixnav.gnss.pseudoranges import PseudorangeEpochs
+    assert po.observations.corrected
+    pe = PseudorangeEpochs.from_raw(po.observations)
     assert po.track.ok.all() and len(pe) == 1372
     letters = np.where(pe.system == 1, "G", "R")
     for e in (0, 1, 500, 1000, 1371):

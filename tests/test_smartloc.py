@@ -337,3 +337,107 @@ def test_real_residuals_need_the_earth_rotation(berlin):
     res = pseudorange_residuals(pr, gt)
     g12 = res.channels()[:, res.channel_names.index("G12")]
     assert 1.4826 * np.nanmedian(np.abs(g12 - np.nanmedian(g12))) < 0.5 * spread[True]
+
+
+# ---------------------------------------------------------------------------
+# one raw-GNSS type: the registered reader gives corrected RawPseudoranges
+# ---------------------------------------------------------------------------
+def _reader_output(tmp_path, rows=None):
+    from mixnav.io.readers import ReadOptions, get_reader
+    rows = make_synthetic()[0] if rows is None else rows
+    inp, _ = write_files(tmp_path, rows, make_synthetic()[1])
+    return read_pseudoranges(inp), get_reader("raw-gnss", "smartloc")(inp, ReadOptions())
+
+
+def test_the_registered_reader_gives_corrected_raw_pseudoranges(tmp_path):
+    """The raw-GNSS reader of format ``smartloc`` returns the one raw type with the file's rows
+    (corrected, satellites and variances given, week 0, the log's seconds), and its epochs
+    are, byte for byte, those the file's rows grouped directly give (what the reader of the
+    old ``corrected-pseudoranges`` kind returned)."""
+    from mixnav.data import RawPseudoranges
+    from mixnav.gnss.pseudoranges import PseudorangeEpochs
+    pr, raw = _reader_output(tmp_path)
+    assert isinstance(raw, RawPseudoranges) and raw.corrected
+    assert (raw.week == 0).all() and np.array_equal(raw.tow, np.unique(pr.time))
+    assert np.array_equal(raw.tow[raw.epoch], pr.time) and np.array_equal(raw.line, pr.line)
+    assert raw.satellite_ids()[:2].tolist() == ["G02", "G05"] and set(raw.system.tolist()) == {"G", "R"}
+    direct = PseudorangeEpochs.from_rows(pr.time, pr.pseudorange, pr.variance, pr.sat_ecef, pr.sat_id, pr.system,
+                                         pr.elevation, pr.cn0, source=pr.path)
+    derived = PseudorangeEpochs.from_raw(raw)
+    for name in ("time", "start", "pseudorange", "variance", "sat_ecef", "sat_id", "system", "elevation", "cn0"):
+        a, b = getattr(direct, name), getattr(derived, name)
+        assert a.dtype == b.dtype and a.tobytes() == b.tobytes(), name
+    assert derived.source == direct.source
+
+
+def test_keeping_systems_counts_the_rows_and_the_emptied_epochs(tmp_path):
+    """``keep_systems`` leaves out and counts the other systems' rows, drops an epoch left
+    without any (counted in epochs_all_rejected) and renumbers the rest; its epochs equal the
+    kept rows grouped directly."""
+    from mixnav.gnss.pseudoranges import PseudorangeEpochs
+    rows = make_synthetic(n_epochs=3)[0]
+    rows = [r for r in rows if not (r[0] == rows[0][0] and r[7] == 1)]   # epoch 0: GLONASS rows alone
+    pr, raw = _reader_output(tmp_path, rows)
+    gps = raw.keep_systems(["G"])
+    n_glo = int((pr.system == 4).sum())
+    assert gps.rejected == {"system not read: R": n_glo} and gps.epochs_all_rejected == 1
+    assert len(gps.tow) == 2 and gps.epoch.tolist() == [0] * 5 + [1] * 5 and set(gps.system.tolist()) == {"G"}
+    keep = pr.system == 1
+    direct = PseudorangeEpochs.from_rows(pr.time[keep], pr.pseudorange[keep], pr.variance[keep], pr.sat_ecef[keep],
+                                         pr.sat_id[keep], pr.system[keep], pr.elevation[keep], pr.cn0[keep])
+    derived = PseudorangeEpochs.from_raw(gps)
+    assert np.array_equal(direct.time, derived.time) and np.array_equal(direct.pseudorange, derived.pseudorange)
+    assert np.array_equal(gps.line, pr.line[keep])
+    assert raw.keep_systems(["G", "R"]) is raw
+
+
+def test_corrected_and_broadcast_pseudoranges_are_told_apart():
+    """A corrected log needs its satellites and variances; a broadcast one may not carry them;
+    SBAS (``S``) is a corrected log's letter only; broadcast ranges cannot be grouped as
+    corrected epochs (their satellite states come from a navigation file)."""
+    from mixnav.data import RawPseudoranges
+    from mixnav.errors import ArgumentError
+    from mixnav.gnss.pseudoranges import PseudorangeEpochs
+    base = dict(week=np.zeros(1, int), tow=np.zeros(1), epoch=np.zeros(2, int), prn=np.array([3, 120]),
+                pseudorange=np.full(2, 2.1e7), source="x.txt", system=np.array(["G", "S"]))
+    sat = dict(sat_ecef=np.full((2, 3), 1.5e7), variance=np.full(2, 25.0))
+    ok = RawPseudoranges(**base, corrected=True, **sat)
+    assert PseudorangeEpochs.from_raw(ok).system.tolist() == [1, 2]
+    with pytest.raises(DataError, match="need each row's satellite position"):
+        RawPseudoranges(**base, corrected=True)
+    with pytest.raises(DataError, match="sat_ecef, variance given for broadcast"):
+        RawPseudoranges(**base, **sat)
+    with pytest.raises(DataError, match=r"\['S'\] are not among"):
+        RawPseudoranges(**base)
+    with pytest.raises(DataError, match="variances must be positive"):
+        RawPseudoranges(**base, corrected=True, sat_ecef=sat["sat_ecef"], variance=np.array([25.0, 0.0]))
+    broadcast = RawPseudoranges(**{**base, "system": np.array(["G", "G"])})
+    with pytest.raises(ArgumentError, match="broadcast pseudoranges have no satellite positions"):
+        PseudorangeEpochs.from_raw(broadcast)
+
+
+def test_the_old_corrected_pseudoranges_kind_is_deprecated(tmp_path):
+    """``corrected-pseudoranges`` still names the smartLoc reader (now ``raw-gnss``) with a
+    DeprecationWarning, and a reader registered under it may still return PseudorangeEpochs:
+    they come back as corrected RawPseudoranges that group into the same epochs."""
+    from mixnav.data import RawPseudoranges
+    from mixnav.gnss.pseudoranges import PseudorangeEpochs
+    from mixnav.io import registry
+    from mixnav.io.smartloc import to_pseudorange_epochs
+    pr, raw = _reader_output(tmp_path)
+    with pytest.warns(DeprecationWarning, match="'corrected-pseudoranges' is deprecated: use 'raw-gnss'"):
+        assert registry.get_reader("corrected-pseudoranges", "smartloc") is registry.get_reader("raw-gnss", "smartloc")
+    with pytest.warns(DeprecationWarning):
+        assert "smartloc" in registry.formats("corrected-pseudoranges")
+    epochs = to_pseudorange_epochs(pr)
+    try:
+        with pytest.warns(DeprecationWarning):
+            plugin = registry.register_reader("corrected-pseudoranges", "old-plugin")(lambda path, options: epochs)
+        out = registry.get_reader("raw-gnss", "old-plugin")(tmp_path / "any.txt")
+        assert plugin(None, None) is epochs                      # the decorator gives the function back
+        assert isinstance(out, RawPseudoranges) and out.corrected
+        back = PseudorangeEpochs.from_raw(out)
+        for name in ("time", "start", "pseudorange", "variance", "sat_ecef", "sat_id", "system", "elevation", "cn0"):
+            assert np.array_equal(getattr(back, name), getattr(epochs, name), equal_nan=True), name
+    finally:
+        registry._READERS.pop(("raw-gnss", "old-plugin"), None)

@@ -312,6 +312,9 @@ class OdometerData:
 
 #: RINEX system letters a raw-GNSS record may hold (mixnav.gnss.signals.SYSTEMS names them)
 GNSS_SYSTEMS = ("G", "R", "E", "C", "J")
+#: the letters corrected pseudoranges may hold besides: ``S`` SBAS (a smartLoc log's system 2),
+#: positioned from the satellite positions the source gives, so no broadcast orbit is needed
+CORRECTED_SYSTEMS = GNSS_SYSTEMS + ("S",)
 #: columns of RawPseudoranges.lli: the observation each loss-of-lock indicator belongs to
 LLI_COLUMNS = ("pseudorange", "carrier", "doppler", "cn0")
 #: GLONASS frequency channel numbers (inclusive), and the value of a row without one
@@ -321,9 +324,17 @@ NO_CHANNEL = -128
 
 @dataclass(frozen=True, eq=False)
 class RawPseudoranges:
-    """Receiver pseudoranges grouped by epoch, the broadcast corrections (satellite clock,
-    atmosphere) still to apply: what every raw-GNSS reader returns (Android GnssLogger
-    logs, RINEX observation files, u-blox logs), and what :func:`mixnav.gnss.spp.solve_epochs` reads.
+    """Receiver pseudoranges grouped by epoch: what every raw-GNSS reader returns (Android
+    GnssLogger logs, RINEX observation files, u-blox logs, smartLoc logs).
+
+    Two forms, told apart by ``corrected``: broadcast pseudoranges (``corrected = False``), the
+    satellite clock and atmosphere still to apply from a navigation file, what
+    :func:`mixnav.gnss.spp.solve_epochs` reads; and corrected ones (``corrected = True``: a
+    smartLoc log), the satellite clock and atmosphere already removed by the source and each
+    row's satellite position (``sat_ecef``) and variance given, so the satellite-state and
+    correction step is skipped (:meth:`mixnav.gnss.pseudoranges.PseudorangeEpochs.from_raw`
+    groups them for :mod:`mixnav.gnss.corrected_spp` and the filters). Corrected logs have no
+    GPS time: ``week`` is 0 and ``tow`` the log's own seconds.
 
     Attributes
     ----------
@@ -381,6 +392,17 @@ class RawPseudoranges:
     leap_seconds : ndarray (k,) or None
         GPS - UTC [s] the receiver gave at each epoch (u-blox RXM-RAWX ``leapS``; NaN where
         the receiver had not determined it yet), when the format gives it.
+    corrected : bool
+        The pseudoranges have the satellite clock and atmosphere removed already and
+        ``sat_ecef`` and ``variance`` are given (a smartLoc log); then ``system`` may also
+        hold ``S`` (SBAS, :data:`CORRECTED_SYSTEMS`).
+    sat_ecef : ndarray (m, 3) or None
+        Satellite position at the transmit time, in the ECEF frame of that time [m], as the
+        source gives it (corrected pseudoranges only).
+    variance : ndarray (m,) or None
+        The source's pseudorange variance [m^2] (> 0; corrected pseudoranges only).
+    elevation : ndarray (m,) or None
+        Satellite elevation [rad] as the source gives it (corrected pseudoranges only).
     """
 
     week: np.ndarray
@@ -405,9 +427,26 @@ class RawPseudoranges:
     line: np.ndarray | None = None
     glonass_channels: dict = field(default_factory=dict)
     leap_seconds: np.ndarray | None = None
+    corrected: bool = False
+    sat_ecef: np.ndarray | None = None
+    variance: np.ndarray | None = None
+    elevation: np.ndarray | None = None
 
     def __post_init__(self):
         m = len(self.prn)
+        if self.corrected:
+            _check(self.sat_ecef is not None and self.variance is not None,
+                   "corrected pseudoranges need each row's satellite position (sat_ecef) and variance", self.source)
+        else:
+            given = [n for n in ("sat_ecef", "variance", "elevation") if getattr(self, n) is not None]
+            _check(not given, f"{', '.join(given)} given for broadcast pseudoranges: only corrected ones "
+                   "(corrected=True) carry them", self.source)
+        _check(self.sat_ecef is None or np.shape(self.sat_ecef) == (m, 3),
+               f"sat_ecef has shape {np.shape(self.sat_ecef)}, expected ({m}, 3)", self.source)
+        for name in ("variance", "elevation"):
+            a = getattr(self, name)
+            _check(a is None or np.shape(a) == (m,), f"{name} has shape {np.shape(a)}, expected ({m},)", self.source)
+        _check(self.variance is None or bool(np.all(self.variance > 0)), "variances must be positive", self.source)
         _check(self.leap_seconds is None or np.shape(self.leap_seconds) == (len(self.tow),),
                f"leap_seconds has shape {np.shape(self.leap_seconds)}, expected ({len(self.tow)},)", self.source)
         for name in ("system", "signal", "carrier", "line"):
@@ -416,8 +455,9 @@ class RawPseudoranges:
         _check(self.lli is None or np.shape(self.lli) == (m, len(LLI_COLUMNS)),
                f"lli has shape {np.shape(self.lli)}, expected ({m}, {len(LLI_COLUMNS)})", self.source)
         if self.system is not None and m:
-            bad = sorted(set(np.unique(self.system).tolist()) - set(GNSS_SYSTEMS))
-            _check(not bad, f"system letters {bad} are not among {', '.join(GNSS_SYSTEMS)}", self.source)
+            allowed = CORRECTED_SYSTEMS if self.corrected else GNSS_SYSTEMS
+            bad = sorted(set(np.unique(self.system).tolist()) - set(allowed))
+            _check(not bad, f"system letters {bad} are not among {', '.join(allowed)}", self.source)
         for slot, k in self.glonass_channels.items():
             _check(GLONASS_CHANNELS[0] <= int(k) <= GLONASS_CHANNELS[1],
                    f"GLONASS slot {slot}: frequency channel {k} is outside {GLONASS_CHANNELS[0]}..{GLONASS_CHANNELS[1]}",
@@ -434,6 +474,28 @@ class RawPseudoranges:
     def satellite_ids(self) -> np.ndarray:
         """RINEX satellite names of the measurements ((m,) str: ``G05``, ``R12``)."""
         return np.char.add(self.systems().astype("<U1"), np.char.zfill(np.asarray(self.prn).astype(str), 2))
+
+    def keep_systems(self, systems) -> RawPseudoranges:
+        """A copy with the measurements of the system letters ``systems`` alone; the others are
+        left out and counted in ``rejected`` (``system not read: <letter>``, as the RINEX
+        reader counts them), and epochs left without a measurement are dropped and counted in
+        ``epochs_all_rejected``. ``self`` when every row is kept."""
+        from dataclasses import replace
+        letters = self.systems()
+        keep = np.isin(letters, list(systems))
+        if keep.all():
+            return self
+        rejected = dict(self.rejected)
+        for s, n in zip(*np.unique(letters[~keep], return_counts=True)):
+            rejected[f"system not read: {s}"] = rejected.get(f"system not read: {s}", 0) + int(n)
+        used, epoch = np.unique(np.asarray(self.epoch)[keep], return_inverse=True)
+        per_row = {n: getattr(self, n)[keep] for n in ("prn", "pseudorange", "cn0", "doppler", "sigma", "system",
+                                                        "signal", "carrier", "lli", "line", "sat_ecef", "variance",
+                                                        "elevation") if getattr(self, n) is not None}
+        per_epoch = {n: getattr(self, n)[used] for n in ("week", "tow", "time_nanos", "leap_seconds")
+                     if getattr(self, n) is not None}
+        return replace(self, epoch=epoch.astype(np.int64), rejected=rejected,
+                       epochs_all_rejected=self.epochs_all_rejected + len(self.tow) - len(used), **per_row, **per_epoch)
 
     def with_glonass_channels(self, channels: dict) -> RawPseudoranges:
         """A copy with the GLONASS frequency channels ``channels`` (slot -> k, e.g. from the

@@ -368,12 +368,30 @@ def load_dataset(name_or_path: str):
     return load_dataset_text(text, source)
 
 
+#: the dataset kinds whose schemas this module knows itself (the others: register_dataset_schema)
+BUILT_IN_DATASET_KINDS = ("ins-gnss", "gnss-raw", "odometry-gnss")
+#: dataset kind -> the pydantic model its files validate against (kinds added from outside)
+_DATASET_SCHEMAS: dict = {}
+
+
+def register_dataset_schema(kind: str, schema) -> None:
+    """Validate dataset files whose ``dataset.kind`` is ``kind`` with the pydantic model
+    ``schema`` (a new kind's; its errors name the file and key as the built-in schemas' do).
+    :func:`mixnav.experiment.pipelines.register_pipeline` calls it with the kind's pipeline.
+    A built-in kind, or a kind registered already, is a ValueError."""
+    if kind in BUILT_IN_DATASET_KINDS or kind in _DATASET_SCHEMAS:
+        raise ValueError(f"dataset kind '{kind}' has a schema already")
+    _DATASET_SCHEMAS[kind] = schema
+
+
 def load_dataset_text(text: str, source: str):
     """:func:`load_dataset` of a dataset file's text (``source``: the file it stands for:
     its relative ``data_dir`` resolves from there, and errors name it). Returns
     ``(dataset, source, text)``."""
     from .dataset_schema import Dataset
     kind = _declared_kind(text)
+    if kind in _DATASET_SCHEMAS:   # a kind added by register_dataset_schema
+        return _validate(_DATASET_SCHEMAS[kind], text, source), source, text
     if kind == "odometry-gnss":   # its own schema (config/vehicle_schema.py)
         from .vehicle_schema import VehicleDataset
         return _validate(VehicleDataset, text, source), source, text

@@ -321,3 +321,38 @@ def mixtures_from_config(cfg: MixtureConfig):
 def _spec(s):
     from ..noise.mixture import StandardMixture
     return StandardMixture(tuple(s.weights), tuple(s.means or [0.0] * len(s.weights)), tuple(s.scales))
+
+
+def run_methods(methods, make_motion, models, inputs, init, output_times, source: str, seed: int = 0, *,
+                motion: str, mixture_start: dict | None = None) -> dict:
+    """Run each ``(index, method)`` of ``methods`` on a motion model other than the strapdown
+    INS (the odometry datasets' dead reckoning, the raw-GNSS datasets' constant velocity): a
+    fresh motion model from ``make_motion()``, the method's estimator from
+    :func:`estimator_for` on the registry's ``motion`` model (``"dead-reckoning"``,
+    ``"constant-velocity"``), the measurement ``models``, driven by ``inputs`` from ``init``,
+    solutions at ``output_times``; one :class:`~mixnav.engine.Engine` each.
+    ``method.smooth`` adds ``<name>-smoothed`` (the RTS smoother; an estimator whose
+    registration says it cannot be smoothed is a ConfigError naming ``methods[k].smooth``).
+    The engine's random stream is ``seed`` for every method (the estimators that draw, draw
+    from their own). ``mixture_start``: the LOS/NLOS mixture a track alignment learned
+    (:func:`mixnav.experiment.vehicle_process.mixture_handover`), the epoch mixture's starting
+    values unless the method's options set them. A method entry is anything with ``name``,
+    ``estimator``, ``robust``, ``mixture``, ``options`` and ``smooth``
+    (:class:`mixnav.config.vehicle_schema.VehicleMethod` and its raw-GNSS subclass).
+    Returns ``{name: FilterResult}``."""
+    from ..engine.engine import Engine
+    from ..engine.smoother import rts_smooth
+    from ..filters.registry import estimator_spec
+    results = {}
+    for k, method in methods:
+        motion_model = make_motion()
+        est = estimator_for(method, source, k, seed, motion, mixture_start=mixture_start, motion_model=motion_model)
+        if method.smooth and not estimator_spec(method.estimator).can_smooth:
+            raise ConfigError(f"estimator '{method.estimator}' cannot be smoothed (its registration says the RTS "
+                              "smoother does not apply)", file=source, key=f"methods[{k}].smooth")
+        res = Engine(motion_model, est, list(models), covariance_interval=1.0, rng=seed,
+                     history=method.smooth).run(inputs, init, output_times=output_times)
+        results[method.name] = res
+        if method.smooth:
+            results[f"{method.name}-smoothed"] = rts_smooth(res)
+    return results

@@ -23,7 +23,7 @@ elevation weights and mask) on the constant-velocity model
 (:class:`mixnav.motion.ConstantVelocityMotion`, ``[motion]``), started at the first SPP
 fix (its position, clock bias and their WLS covariance; velocity and clock drift zero)
 and run from the next epoch on, one engine per method
-(:func:`mixnav.experiment.model_methods.run_methods`, the code the odometry datasets
+(:func:`mixnav.experiment.methods.run_methods`, the code the odometry datasets
 run).
 
 Corrected pseudoranges (``[raw_gnss] format = "smartloc"``: satellite clock and atmosphere
@@ -71,7 +71,7 @@ class SppOutput:
     dataset: RawGnssDataset
     source: str
     data_dir: Path
-    observations: RawPseudoranges      # what the raw-GNSS reader of the format gave (smartloc: CorrectedObservations)
+    observations: RawPseudoranges      # what the raw-GNSS reader of the format gave (smartloc: corrected=True)
     ephemeris: BroadcastEphemeris      # or a MultiEphemeris (systems beyond GPS); None (smartloc)
     track: SppTrack
     reference_lla: np.ndarray | None   # (3,) rad, rad, m
@@ -188,43 +188,21 @@ def read_raw(ds: RawGnssDataset, source: str, folder: Path) -> tuple[RawPseudora
 
 
 def read_corrected(c, folder: Path, source: str) -> tuple:
-    """``[raw_gnss] format = "smartloc"``: the corrected pseudoranges (the reader of the
-    ``corrected-pseudoranges`` kind) of the systems of ``systems``; rows of other systems are
-    left out and counted (``rejected``, by ``system not read: <letter>``). Returns
-    ``(epochs, None, read time [s])``: no navigation data."""
-    from ..gnss.pseudoranges import SYSTEM_LETTERS, PseudorangeEpochs
+    """``[raw_gnss] format = "smartloc"``: the corrected pseudoranges (the raw-GNSS reader of the
+    format: RawPseudoranges with ``corrected = True``) of the systems of ``systems``; rows of
+    other systems are left out and counted (``rejected``, by ``system not read: <letter>``).
+    Returns ``(observations, None, read time [s])``: no navigation data."""
     t0 = _time.perf_counter()
-    pe = read_table("corrected-pseudoranges", c, folder, "raw_gnss", source)
-    letters = np.array([SYSTEM_LETTERS.get(int(k), "?") for k in pe.system])
-    keep = np.isin(letters, list(c.systems))
-    rejected = {f"system not read: {s}": int(n) for s, n in zip(*np.unique(letters[~keep], return_counts=True))}
-    if not keep.all():
-        e = np.repeat(np.arange(len(pe)), pe.counts())
-        pe = PseudorangeEpochs.from_rows(pe.time[e][keep], pe.pseudorange[keep], pe.variance[keep],
-                                         pe.sat_ecef[keep], pe.sat_id[keep], pe.system[keep], pe.elevation[keep],
-                                         pe.cn0[keep], source=pe.source)
-    if not len(pe):
+    obs = read_table("raw-gnss", c, folder, "raw_gnss", source).keep_systems(c.systems)
+    if not len(obs.prn):
         raise ConfigError(f"no pseudorange of the systems {list(c.systems)} in {folder / c.file}", file=source,
                           key="raw_gnss.systems")
-    return CorrectedObservations(pe, rejected), None, _time.perf_counter() - t0
-
-
-@dataclass
-class CorrectedObservations:
-    """Corrected pseudoranges (``epochs``) as the SPP output's ``observations``: what the
-    pipeline's steps ask of a raw log (``source``, ``rejected``)."""
-
-    epochs: object          # PseudorangeEpochs
-    rejected: dict
-
-    @property
-    def source(self):
-        return self.epochs.source
+    return obs, None, _time.perf_counter() - t0
 
 
 def corrected(po) -> bool:
     """Whether ``po`` solved corrected pseudoranges (``format = "smartloc"``)."""
-    return isinstance(po.observations, CorrectedObservations)
+    return po.observations.corrected
 
 
 def _iono_alpha(eph):
@@ -255,7 +233,7 @@ def solve_raw(ds: RawGnssDataset, source: str, folder: Path, obs, eph: Broadcast
               seed: int = 0) -> SppOutput:
     """SPP of every epoch of ``obs`` (read observations: GPS with a BroadcastEphemeris, any
     systems with a MultiEphemeris; corrected pseudoranges without one) and the filter methods."""
-    if isinstance(obs, CorrectedObservations):
+    if obs.corrected:
         return _solve_corrected(ds, source, folder, obs, read_time_s, seed)
     system, chan = _systems_of(obs, eph)
     c = ds.raw_gnss
@@ -286,12 +264,14 @@ def solve_raw(ds: RawGnssDataset, source: str, folder: Path, obs, eph: Broadcast
     return po
 
 
-def _solve_corrected(ds, source: str, folder: Path, obs: "CorrectedObservations", read_time_s: float,
+def _solve_corrected(ds, source: str, folder: Path, obs: RawPseudoranges, read_time_s: float,
                      seed: int) -> SppOutput:
-    """:func:`solve_raw` of corrected pseudoranges (:mod:`mixnav.gnss.corrected_spp`): times
+    """:func:`solve_raw` of corrected pseudoranges (:mod:`mixnav.gnss.corrected_spp`, on their
+    epochs grouped by :meth:`~mixnav.gnss.pseudoranges.PseudorangeEpochs.from_raw`): times
     are the log's own seconds (week 0)."""
     from ..gnss.corrected_spp import solve_corrected
-    pe = obs.epochs
+    from ..gnss.pseudoranges import PseudorangeEpochs
+    pe = PseudorangeEpochs.from_raw(obs)
     week = np.zeros(len(pe), int)
     moving = None if ds.reference is None else reference_at_epochs(ds.reference, folder, source, week, pe.time)
     t1 = _time.perf_counter()
@@ -369,7 +349,7 @@ def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
     from ..measurements.pseudorange import PseudorangeGnss
     from ..motion.constant_velocity import (ConstantVelocityMotion, ConstantVelocityNoise, clock_ticks,
                                             constant_velocity_layout)
-    from .model_methods import run_methods
+    from .methods import run_methods
     ds, tr, obs = po.dataset, po.track, po.observations
     mc = ds.motion
     t_prep = _time.perf_counter()
@@ -385,7 +365,8 @@ def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
     offset, jumps, spikes = clock_jumps(times, tr.clock_bias, tr.ok, float(mc.clock_jump))
     if corrected(po):   # the file's pseudoranges, clock jumps off; the rows' own variances
         from dataclasses import replace
-        pe = obs.epochs
+        from ..gnss.pseudoranges import PseudorangeEpochs
+        pe = PseudorangeEpochs.from_raw(obs)
         epochs, skipped = replace(pe, pseudorange=pe.pseudorange - np.repeat(offset, pe.counts())), {}
     else:
         rho = np.asarray(obs.pseudorange, float) - offset[np.asarray(obs.epoch, int)]
@@ -409,7 +390,7 @@ def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
     prep = _time.perf_counter() - t_prep
     t_filter = _time.perf_counter()
     po.results = run_methods(methods, lambda: ConstantVelocityMotion(lay, noise, clock), [model], ticks, init, out_t,
-                             po.source, seed, "the constant-velocity model")
+                             po.source, seed, motion="constant-velocity")
     po.filter_time_s = prep + _time.perf_counter() - t_filter
     po.epochs, po.init, po.clock_offset = epochs, init, offset
     po.checks = {"filter_start_s": init.time, "clock_jumps": [list(j) for j in jumps],

@@ -35,11 +35,11 @@ from ..io.readers import read_table
 from ..measurements.pseudorange import PseudorangeGnss
 from ..motion.dead_reckoning import (DeadReckoningMotion, DeadReckoningNoise, dead_reckoning_layout,
                                      odometry_increments, set_heading)
-from .model_methods import make_estimator, run_methods
+from .methods import run_methods
 from .data_folder import find_data_dir
 from .outputs import lla_frame, solution_table, write_outputs
 
-__all__ = ["VehicleOutput", "discard_before", "process_vehicle", "vehicle_tables", "write_vehicle", "make_estimator"]
+__all__ = ["VehicleOutput", "discard_before", "process_vehicle", "vehicle_tables", "write_vehicle"]
 
 
 @dataclass
@@ -94,7 +94,7 @@ class VehicleInputs:
 
     odometry: object          # WheelOdometry
     inc: object               # OdometryIncrements
-    epochs: object            # PseudorangeEpochs
+    epochs: object            # PseudorangeEpochs, from the reader's RawPseudoranges
     reference: Trajectory | None
     read_time_s: float
 
@@ -175,11 +175,14 @@ def process_vehicle(ds: VehicleDataset, source: str, data: str | None = None, se
 
 def read_vehicle(ds: VehicleDataset, source: str, d: Path) -> VehicleInputs:
     """The odometry, pseudorange and reference files of data folder ``d`` (the readers
-    registered for their formats)."""
+    registered for their formats); the pseudoranges (corrected RawPseudoranges, every system
+    of the file: the model skips rows of systems it does not estimate) grouped into the
+    PseudorangeEpochs the alignment and the filters read."""
+    from ..gnss.pseudoranges import PseudorangeEpochs
     t_read = _time.perf_counter()
     oc, pc = ds.odometry, ds.pseudoranges
     odo = read_table("odometry", oc, d, "odometry", source)
-    epochs = read_table("corrected-pseudoranges", pc, d, "pseudoranges", source)
+    epochs = PseudorangeEpochs.from_raw(read_table("raw-gnss", pc, d, "pseudoranges", source))
     truth = None if ds.reference is None else read_table("reference", ds.reference, d, "reference", source)
     sign = 1.0 if oc.yaw_rate_axis == "down" else -1.0      # the engine's heading turns about down
     inc = odometry_increments(odo.time, odo.speed, sign * odo.yaw_rate, source=str(d / oc.file))
@@ -232,8 +235,7 @@ def run_vehicle(ds: VehicleDataset, source: str, d: Path, inputs: VehicleInputs,
     out_t = out_t[(out_t > init.time) & (out_t <= inc.time[-1])]
     t_filter = _time.perf_counter()
     results = run_methods(list(enumerate(ds.methods)), lambda: DeadReckoningMotion(lay, noise, clock), [model], inc,
-                          init, out_t, source, seed, "the dead-reckoning model",
-                          mixture_start=start)
+                          init, out_t, source, seed, motion="dead-reckoning", mixture_start=start)
     filter_time = _time.perf_counter() - t_filter
     checks = {"pseudorange_rows_skipped": model.skipped_rows, "odometry_rows": len(odo),
               "pseudorange_epochs": len(epochs), **coverage}

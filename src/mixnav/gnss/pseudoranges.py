@@ -1,10 +1,11 @@
 """Pseudorange epochs of any number of systems, held flat (one row per measurement).
 
-The raw-GNSS container the pseudorange measurement model
-(:class:`mixnav.measurements.pseudorange.PseudorangeGnss`) reads: what smartLoc
-gives (satellite clock and atmosphere removed; satellite position at the
-transmit time in the ECEF frame of that time), and what a receiver's
-observations become once the broadcast corrections are applied.
+The processed form the pseudorange measurement model
+(:class:`mixnav.measurements.pseudorange.PseudorangeGnss`) reads, derived from a reader's
+:class:`mixnav.data.RawPseudoranges`: corrected ones (a smartLoc log: satellite clock and
+atmosphere removed, satellite position at the transmit time in the ECEF frame of that time)
+grouped by :meth:`PseudorangeEpochs.from_raw`, broadcast ones once the broadcast corrections
+are applied (:func:`mixnav.gnss.spp.corrected_pseudoranges`). No reader returns it.
 """
 
 from __future__ import annotations
@@ -105,6 +106,23 @@ class PseudorangeEpochs:
                    elevation=pick(elevation), cn0=pick(cn0), source=source,
                    sat_vel=None if sat_vel is None else np.asarray(sat_vel, dtype=float)[order],
                    range_rate=None if range_rate is None else np.asarray(range_rate, dtype=float)[order])
+
+    @classmethod
+    def from_raw(cls, raw) -> "PseudorangeEpochs":
+        """The corrected pseudoranges of a reader's :class:`~mixnav.data.RawPseudoranges`
+        (``corrected = True``: satellite positions and variances given) grouped by epoch, file
+        order kept inside an epoch; times are the epochs' ``tow`` (a smartLoc log's seconds).
+        Broadcast pseudoranges are an ArgumentError: their satellite states and corrections
+        come from a navigation file (:func:`mixnav.gnss.spp.corrected_pseudoranges`)."""
+        if not raw.corrected:
+            raise ArgumentError(f"{raw.source or 'pseudoranges'}: broadcast pseudoranges have no satellite "
+                                "positions yet: apply the navigation file's corrections "
+                                "(mixnav.gnss.spp.corrected_pseudoranges)", argument="raw")
+        codes = {letter: code for code, letter in SYSTEM_LETTERS.items()}
+        system = np.array([codes[s] for s in raw.systems()], dtype=np.int64)
+        epoch = np.asarray(raw.epoch, dtype=np.int64)
+        return cls.from_rows(np.asarray(raw.tow, dtype=float)[epoch], raw.pseudorange, raw.variance, raw.sat_ecef,
+                             raw.prn, system, raw.elevation, raw.cn0, source=raw.source)
 
     def __len__(self) -> int:
         return len(self.time)

@@ -8,7 +8,16 @@ A reader declares the kind of data it gives and the format name a dataset file u
 
 It registers itself in its own module; :mod:`mixnav.io.readers` imports every reader
 module (one line each), and :func:`mixnav.io.readers.read` is how a pipeline reads a
-file. Each kind returns one data type (:data:`KIND_TYPES`), checked on return.
+file. Each kind returns one data type (:data:`KIND_TYPES`), checked on return: every raw-GNSS
+reader (RINEX, Android, u-blox, smartLoc) returns :class:`~mixnav.data.RawPseudoranges`, its
+``corrected`` flag saying whether the broadcast corrections are still to apply; the processed
+forms (:class:`~mixnav.gnss.pseudoranges.PseudorangeEpochs`,
+:class:`~mixnav.gnss.observables.GnssObservations`) are what the pipelines derive from it.
+
+Deprecated: the kind ``corrected-pseudoranges`` (smartLoc's reader, which returned
+PseudorangeEpochs) is ``raw-gnss`` now; :func:`register_reader`, :func:`formats` and
+:func:`get_reader` still take the old name with a DeprecationWarning (a reader registered
+under it may return PseudorangeEpochs: they become corrected RawPseudoranges).
 """
 
 from __future__ import annotations
@@ -20,17 +29,43 @@ from typing import Any
 
 from ..data import GnssFixes, ImuData, RawPseudoranges, Trajectory, WheelOdometry
 from ..errors import ConfigError
-from ..gnss.pseudoranges import PseudorangeEpochs
 
 #: kind -> the one type its readers return
 KIND_TYPES: dict[str, type] = {
     "imu": ImuData,
     "gnss-fixes": GnssFixes,
-    "raw-gnss": RawPseudoranges,                   # receiver pseudoranges: the broadcast corrections still to apply
-    "corrected-pseudoranges": PseudorangeEpochs,   # satellite clock and atmosphere already removed (smartLoc)
+    "raw-gnss": RawPseudoranges,   # broadcast (corrections to apply) or corrected (smartLoc: corrected=True)
     "odometry": WheelOdometry,
     "reference": Trajectory,
 }
+
+#: deprecated kind names -> the kind they are now
+DEPRECATED_KINDS = {"corrected-pseudoranges": "raw-gnss"}
+
+
+def _current_kind(kind: str) -> str:
+    """``kind``, or the kind a deprecated name stands for now (with a DeprecationWarning)."""
+    if kind in DEPRECATED_KINDS:
+        import warnings
+        warnings.warn(f"the reader kind '{kind}' is deprecated: use '{DEPRECATED_KINDS[kind]}' (every raw-GNSS "
+                      "reader returns RawPseudoranges; corrected ones have corrected=True)", DeprecationWarning,
+                      stacklevel=3)
+        return DEPRECATED_KINDS[kind]
+    return kind
+
+
+def raw_from_epochs(epochs) -> RawPseudoranges:
+    """Corrected :class:`~mixnav.data.RawPseudoranges` holding ``epochs`` (a
+    :class:`~mixnav.gnss.pseudoranges.PseudorangeEpochs`: what a reader of the deprecated
+    ``corrected-pseudoranges`` kind returned); ``PseudorangeEpochs.from_raw`` gives it back."""
+    import numpy as np
+    from ..gnss.pseudoranges import SYSTEM_LETTERS
+    return RawPseudoranges(week=np.zeros(len(epochs), dtype=np.int64), tow=np.asarray(epochs.time, dtype=float),
+                           epoch=np.repeat(np.arange(len(epochs), dtype=np.int64), epochs.counts()),
+                           prn=epochs.sat_id, pseudorange=epochs.pseudorange, source=epochs.source or "",
+                           cn0=epochs.cn0, system=np.array([SYSTEM_LETTERS[int(k)] for k in epochs.system]),
+                           corrected=True, sat_ecef=epochs.sat_ecef, variance=epochs.variance,
+                           elevation=epochs.elevation)
 
 
 @dataclass(frozen=True)
@@ -73,26 +108,36 @@ _READERS: dict[tuple[str, str], Reader] = {}
 
 def register_reader(kind: str, format: str):
     """Decorator: register ``function(path, options)`` as the reader of ``kind`` files in
-    ``format``; a second reader for the same pair is an error."""
+    ``format``; a second reader for the same pair is an error. The deprecated kind
+    ``corrected-pseudoranges`` registers a ``raw-gnss`` reader (module docstring)."""
+    old_kind = kind
+    kind = _current_kind(kind)
     if kind not in KIND_TYPES:
         raise ValueError(f"unknown data kind '{kind}' (kinds: {', '.join(KIND_TYPES)})")
 
     def add(function):
+        read = function
+        if old_kind != kind:   # the old kind's readers returned PseudorangeEpochs
+            def read(path, options):
+                out = function(path, options)
+                return out if isinstance(out, RawPseudoranges) else raw_from_epochs(out)
         if (kind, format) in _READERS:
             raise ValueError(f"a {kind} reader for format '{format}' is registered already")
-        _READERS[(kind, format)] = Reader(kind, format, function)
+        _READERS[(kind, format)] = Reader(kind, format, read)
         return function
     return add
 
 
 def formats(kind: str) -> tuple[str, ...]:
     """The registered formats of ``kind``, in registration order."""
+    kind = _current_kind(kind)
     return tuple(f for k, f in _READERS if k == kind)
 
 
 def get_reader(kind: str, format: str, key: str | None = None, file: str | None = None) -> Reader:
     """The reader of ``kind`` files in ``format``; an unknown format is a ConfigError naming
     the config ``key`` (e.g. ``imu.format``) and the registered formats."""
+    kind = _current_kind(kind)
     try:
         return _READERS[(kind, format)]
     except KeyError:

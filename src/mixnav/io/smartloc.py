@@ -87,7 +87,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..data import Trajectory, WheelOdometry
+from ..data import RawPseudoranges, Trajectory, WheelOdometry
 from ..errors import DataError
 from ..gnss.geometry import C_LIGHT, earth_rotation_correction
 from .registry import ReadOptions, register_reader
@@ -95,7 +95,8 @@ from .tables import check_times
 
 __all__ = [
     "SYSTEMS", "SmartlocPseudoranges", "SmartlocTruth", "SmartlocResiduals", "read_pseudoranges",
-    "read_ground_truth", "read_smartloc", "SmartlocOdometry", "read_odometry", "to_pseudorange_epochs", "geometric_range", "clock_per_epoch", "pseudorange_residuals",
+    "read_ground_truth", "read_smartloc", "SmartlocOdometry", "read_odometry", "to_raw_pseudoranges",
+    "to_pseudorange_epochs", "geometric_range", "clock_per_epoch", "pseudorange_residuals",
 ]
 
 #: smartLoc system code -> one-letter RINEX system identifier
@@ -340,12 +341,25 @@ def read_odometry(path) -> SmartlocOdometry:
                             yaw_rate_var=a[:, 12], line=lines, path=str(path))
 
 
+def to_raw_pseudoranges(pr: SmartlocPseudoranges) -> RawPseudoranges:
+    """The pseudoranges as the one raw-GNSS type, :class:`~mixnav.data.RawPseudoranges`,
+    corrected (``corrected = True``: satellite clock and atmosphere removed, each row's
+    satellite position, variance and elevation given), in file order; the log has no GPS
+    time, so ``week`` is 0 and ``tow`` the log's seconds; system letters from
+    :data:`SYSTEMS`, ``prn`` the file's satellite id, ``line`` each row's line."""
+    tow, epoch = np.unique(pr.time, return_inverse=True)
+    return RawPseudoranges(week=np.zeros(len(tow), dtype=np.int64), tow=tow, epoch=epoch.astype(np.int64),
+                           prn=pr.sat_id, pseudorange=pr.pseudorange, source=pr.path, cn0=pr.cn0,
+                           system=np.array([SYSTEMS[int(k)] for k in pr.system]), line=pr.line, corrected=True,
+                           sat_ecef=pr.sat_ecef, variance=pr.variance, elevation=pr.elevation)
+
+
 def to_pseudorange_epochs(pr: SmartlocPseudoranges):
     """The pseudoranges as :class:`~mixnav.gnss.pseudoranges.PseudorangeEpochs` (rows grouped
-    by time, file order kept inside an epoch)."""
+    by time, file order kept inside an epoch): ``PseudorangeEpochs.from_raw`` of
+    :func:`to_raw_pseudoranges`."""
     from ..gnss.pseudoranges import PseudorangeEpochs
-    return PseudorangeEpochs.from_rows(pr.time, pr.pseudorange, pr.variance, pr.sat_ecef, pr.sat_id, pr.system,
-                                       pr.elevation, pr.cn0, source=pr.path)
+    return PseudorangeEpochs.from_raw(to_raw_pseudoranges(pr))
 
 
 def read_ground_truth(path) -> SmartlocTruth:
@@ -639,10 +653,11 @@ def pseudorange_residuals(pr: SmartlocPseudoranges, truth: SmartlocTruth, *, ear
                   "leave_one_out": bool(leave_one_out)})
 
 
-@register_reader("corrected-pseudoranges", "smartloc")
-def _read_pseudoranges(path: Path, options: ReadOptions):
-    """The registered reader: the ``pseudorange3`` rows as PseudorangeEpochs (no options)."""
-    return to_pseudorange_epochs(read_pseudoranges(path))
+@register_reader("raw-gnss", "smartloc")
+def _read_pseudoranges(path: Path, options: ReadOptions) -> RawPseudoranges:
+    """The registered reader: the ``pseudorange3`` rows as corrected RawPseudoranges (no
+    options: every system is read; a pipeline keeps those it uses)."""
+    return to_raw_pseudoranges(read_pseudoranges(path))
 
 
 @register_reader("odometry", "smartloc")

@@ -16,7 +16,11 @@ A pipeline is a module with
 
 The CLI (``mixnav process``), the API (:func:`mixnav.process_dataset`,
 ``RunResult.write``) and :mod:`mixnav.experiment.process` find the pipeline here. A new
-dataset kind is its pipeline module plus one line in :data:`PIPELINES` (and its schema).
+dataset kind inside mixnav is its pipeline module plus one line in :data:`PIPELINES` (and its
+schema in :mod:`mixnav.config`); from outside mixnav (a plug-in, a notebook, a test) it is
+one call, :func:`register_pipeline` (kind, module, schema), and nothing in mixnav is edited
+(tests/test_pipelines.py adds a toy kind that way and processes it through the API and the
+CLI).
 """
 
 from __future__ import annotations
@@ -34,6 +38,29 @@ PIPELINES: dict[str, ModuleType] = {
     "gnss-raw": gnss_raw,
     "odometry-gnss": odometry_gnss,
 }
+
+
+#: what a pipeline module must have (``with_start`` is optional)
+PIPELINE_FUNCTIONS = ("load", "run", "tables", "metrics", "truth", "write")
+
+
+def register_pipeline(kind: str, module, schema=None) -> None:
+    """Add the dataset kind ``kind``: ``module`` (a module or any object with the functions of
+    this package's docstring) as its pipeline, and ``schema`` (a pydantic model whose
+    ``dataset`` has ``name``, ``kind`` and ``data_dir``) as what its files validate against
+    (:func:`mixnav.config.loader.register_dataset_schema`; None: the kind's files are validated
+    by a schema mixnav has already). A kind with a pipeline already is a ValueError; a
+    module without one of :data:`PIPELINE_FUNCTIONS` is a TypeError naming them."""
+    if kind in PIPELINES:
+        raise ValueError(f"dataset kind '{kind}' has a pipeline already ({', '.join(PIPELINES)})")
+    missing = [f for f in PIPELINE_FUNCTIONS if not callable(getattr(module, f, None))]
+    if missing:
+        raise TypeError(f"the pipeline of '{kind}' has no {', '.join(missing)} (a pipeline has "
+                        f"{', '.join(PIPELINE_FUNCTIONS)}: mixnav.experiment.pipelines)")
+    if schema is not None:
+        from ...config.loader import register_dataset_schema
+        register_dataset_schema(kind, schema)
+    PIPELINES[kind] = module
 
 
 def pipeline_key(ds) -> str:
