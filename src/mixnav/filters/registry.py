@@ -266,17 +266,6 @@ class NoOptions(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
 
-def from_context(key: str, make: Callable, table: str):
-    """A ``build`` for an estimator whose settings are objects a pipeline makes from the method's
-    own ``table`` (mixtures, modes): ``make(**context.extra[key], absurd_sigma=...)``."""
-    def build(options, absurd_sigma: float, context: BuildContext):
-        if key not in context.extra:
-            raise ArgumentError(f"this estimator is built from the method's [{table}] table (its objects in "
-                                f"BuildContext.extra['{key}'])", argument=table)
-        return make(**context.extra[key], absurd_sigma=absurd_sigma)
-    return build
-
-
 def validate_options(model: type, values: dict, name: str):
     """``model(**values)``; a bad value or an unknown key is an :class:`ArgumentError` whose
     argument is the option (the config layer turns it into ``methods[i].options.<key>``)."""
