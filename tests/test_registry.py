@@ -56,8 +56,9 @@ def test_each_builtin_registers_itself_in_its_own_module(name):
     spec = registry.estimator_spec(name)
     module = registry.builtin_modules()[name]
     assert spec.name == name and spec.cls.__module__ == module
-    # the options live beside the estimator (the shared gate base excepted), never in the config
-    assert spec.options.__module__ in (module, "mixnav.filters.registry")
+    # the options live beside the estimator (its own module, or its light sibling <module>_options;
+    # the shared gate base excepted), never in the config
+    assert spec.options.__module__ in (module, f"{module}_options", "mixnav.filters.registry")
     assert not spec.options.__module__.startswith("mixnav.config")
     assert spec.description and "\n" not in spec.description
     # the motion models each ran on before the registry
@@ -267,3 +268,28 @@ def test_the_builtins_are_found_in_their_modules_without_a_list(tmp_path):
     assert registry.find_registrations(tmp_path, "pkg") == {"called": "pkg.notes", "new-one": "pkg.newfilter"}
     with pytest.raises(ArgumentError, match="unknown estimator 'not-yet'"):
         registry.estimator_spec("not-yet")
+
+
+# --- the estimator tables, validated by the models their estimators registered ----------------------
+
+def test_a_table_is_validated_by_its_owners_registered_model(tmp_path):
+    """[robust] is robust-adaptive's RobustOptions, so its absurd_sigma is now readable from the
+    file and reaches the estimator; the robust SPP (wls), which has neither prediction nor gate,
+    refuses it and c, naming them; a table on an estimator it does not belong to names its owner."""
+    from mixnav.experiment.methods import estimator_for
+    from mixnav.filters.robust_adaptive import RobustOptions
+    sc = load_scenario(_scenario(tmp_path, 'estimator = "robust-adaptive"\n[methods.robust]\nk0 = 2.0\n'
+                                           'absurd_sigma = 50.0\n'))[0]
+    assert isinstance(sc.methods[0].robust, RobustOptions) and sc.methods[0].robust.k0 == 2.0
+    est = estimator_for(sc.methods[0], "sc.toml", 0)
+    assert (est.k0, est.absurd_sigma) == (2.0, 50.0)
+    for key in ("c", "absurd_sigma"):
+        with pytest.raises(ConfigError, match=f"robust.{key}: the robust SPP has no prediction") as e:
+            load_dataset(_raw(tmp_path, f'[[methods]]\nname = "a"\nestimator = "wls"\n[methods.robust]\n{key} = 3.0\n'))
+        assert e.value.key == "methods[0]"
+    with pytest.raises(ConfigError, match=r'a \[robust\] table needs estimator = "robust-adaptive"') as e:
+        load_scenario(_scenario(tmp_path, '[methods.robust]\nk0 = 2.0\n'))
+    assert e.value.key == "methods[0]"
+    with pytest.raises(ConfigError, match=r'estimator = "imm" and an \[imm\] table go together') as e:
+        load_scenario(_scenario(tmp_path, 'estimator = "imm"\n'))
+    assert e.value.key == "methods[0]"

@@ -57,6 +57,9 @@ class RawMethod(VehicleMethod):
             if self.robust is not None and "c" in self.robust.model_fields_set:
                 raise ValueError("robust.c: the robust SPP has no prediction to adapt (only k0, k1: "
                                  "IGG-III thresholds on standardised residuals)")
+            if self.robust is not None and "absurd_sigma" in self.robust.model_fields_set:
+                raise ValueError("robust.absurd_sigma: the robust SPP has no prediction to gate (only k0, k1: "
+                                 "IGG-III thresholds on standardised residuals)")
             if self.options:
                 raise ValueError("options: the 'wls' method (epoch-by-epoch SPP) takes no options")
             if self.smooth:

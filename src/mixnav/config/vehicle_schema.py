@@ -14,7 +14,7 @@ from .evaluation_schema import Evaluation
 from .dataset_schema import DatasetInfo
 from .fields import (Duration, ElevationMask, NonNegLength, NonNegRate, NonNegSpeed, PosAngle, PosLength, PosRate,
                      PosSpeed, Strict, Time)
-from .method_schema import MixtureConfig, RobustConfig, method_file_name, registered_estimator, registered_options
+from .method_schema import method_file_name, registered_estimator, registered_options, registered_table
 
 
 def unique_method_names(methods):
@@ -134,8 +134,9 @@ class VehicleMethod(Strict):
 
     name: str
     estimator: str = "ekf"
-    robust: RobustConfig | None = None
-    mixture: MixtureConfig | None = None
+    #: the estimator tables, each validated by its owner's registered model (method_schema)
+    robust: Any = None
+    mixture: Any = None
     options: dict[str, Any] = Field(default_factory=dict)
     smooth: bool = False
 
@@ -148,6 +149,11 @@ class VehicleMethod(Strict):
     @classmethod
     def _known(cls, v):
         return registered_estimator(v, cls.motion_model)
+
+    @field_validator("robust", "mixture")
+    @classmethod
+    def _estimator_table(cls, v, info):
+        return registered_table(info.field_name, info.data.get("estimator"), v)
 
     @field_validator("options")
     @classmethod

@@ -47,11 +47,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..errors import ArgumentError
+from ..errors import ArgumentError, ConfigError
 from ..measurements.kinds import MAX_KINDS, kind_code
 from .facade import Filter
-from .gmekf import BankEstimator
-from .registry import ABSURD_SIGMA
+from .gmekf import BankEstimator, learn_bank_mixtures, mixtures_from_options
+from .registry import ABSURD_SIGMA, register_variant
 
 #: Error states the coloured process noise lives on (attitude, velocity, position).
 N_W = 9
@@ -292,3 +292,80 @@ def fit_coefficient(series: np.ndarray) -> float:
     from ..noise.ar import fit_ar1
     fit = fit_ar1(np.asarray(series, dtype=float))
     return float(np.clip(np.median(fit.psi), -0.999, 0.999))
+
+
+def colored_filter(options, context):
+    """M6 from a method's ``[mixture]`` table with ``[mixture.colored]``: the coloured-noise
+    mixture EKF and the method's measurement models differenced (the bank's build_filter,
+    :mod:`mixnav.filters.gmekf`, hands it over).
+
+    Coefficients given as ``"fit"`` are fitted to the training series; learned
+    mixtures are learned from the training series *whitened* with the
+    coefficients (``e_k - psi e_{k-1}``, the driving noise of P2 eqs. 6-7).
+    """
+    import time
+    from ..measurements.differenced import DifferencedMeasurement
+    from ..noise.ar import whiten_ar1
+    mc, cc, source, method = options, options.colored, context.source, context.method
+    prefix = context.entry_key
+    key = f"{prefix}.mixture.colored"
+    if mc.learn is not None and mc.learn.online is not None:
+        raise ConfigError("online re-learning of the mixtures is not available with the coloured-noise "
+                          "mixture EKF (M6)", file=source, key=f"{prefix}.mixture.learn.online")
+    if getattr(method, "type", None) == "tdcp-ekf":
+        raise ConfigError("the coloured-noise mixture EKF differences pseudoranges and range rates; TDCP "
+                          "already differences the carrier: use type = \"tight-ekf\"", file=source,
+                          key=f"{prefix}.type")
+    series = (context.training or {}).get("series", {})
+
+    def coefficient(v, kind, k):
+        if v != "fit":
+            return float(v)
+        if kind not in series:
+            raise ConfigError("'fit' needs a training stretch (simulated scenarios only)", file=source,
+                              key=f"{key}.{k}")
+        return fit_coefficient(series[kind])
+
+    t_fit = time.perf_counter()
+    psi_m = {k: coefficient(v, k, f"measurement.{k}") for k, v in cc.measurement.items()}
+    psi_p = coefficient(cc.process, "process", "process")
+    channels = {}
+    for k, v in cc.channels.items():
+        name, _, cid = k.partition(":")
+        if name not in ("pseudorange", "range_rate", "position", "velocity") or not cid.isdigit():
+            raise ConfigError(f"a channel is '<observable>:<id>' (e.g. 'pseudorange:12', the PRN), got '{k}'",
+                              file=source, key=f"{key}.channels.{k}")
+        channels[(name, int(cid))] = v
+    learning_time = time.perf_counter() - t_fit  # the AR(1) fits count as learning
+    if mc.learn is not None:
+        if not series:
+            raise ConfigError(f"method '{getattr(method, 'name', 'gaussian-mixture')}' learns its mixtures from "
+                              "a training stretch, which only simulated scenarios provide", file=source,
+                              key=f"{prefix}.mixture.learn")
+        t0 = time.perf_counter()
+        white = {k: np.ravel(whiten_ar1(series[k], psi_m.get(k, 0.0))[1:]) for k in mc.learn.observables
+                 if k in series}
+        if mc.learn.learn_process and "process" in series:
+            white["process"] = np.ravel(whiten_ar1(series["process"], psi_p)[1:])
+        missing = [k for k in mc.learn.observables if k not in white]
+        if missing:
+            raise ConfigError(f"the coloured-noise filter learns pseudorange and range-rate mixtures, not {missing}",
+                              file=source, key=f"{prefix}.mixture.learn.observables")
+        learned = learn_bank_mixtures(mc, white, seed=context.seed)
+        mixtures, failed = learned.mixtures, learned.not_converged
+        learning_time += time.perf_counter() - t0
+    else:
+        mixtures, failed = mixtures_from_options(mc), 0
+    meas = list(context.measurements)
+    if any(v != 0.0 for v in psi_m.values()) or channels:  # all white: nothing to difference (exact)
+        meas = [DifferencedMeasurement(m, context.layout, psi_m, channels) for m in meas]
+    filt = ColoredMixtureEkf(context.layout, context.imu_model, mixtures, psi_process=psi_p, psi_measurement=psi_m,
+                             process_interval=cc.process_interval, max_components=mc.max_components,
+                             learning_time_s=learning_time, learner_not_converged=failed, gate=mc.gate,
+                             outlier_mean=mc.outlier_mean, divergence_window=mc.divergence_window,
+                             divergence_nis=mc.divergence_nis, covariance_interval=context.covariance_interval,
+                             clock=context.clock)
+    return filt, meas
+
+
+register_variant("gaussian-mixture", key="colored", build_filter=colored_filter)

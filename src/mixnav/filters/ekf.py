@@ -73,7 +73,9 @@ class EkfOptions(GateOptions):
 
 
 @register_estimator("ekf", options=EkfOptions, description="M1 extended Kalman filter (the default)",
-                    imm_mode=True, build=lambda options, absurd_sigma, context: KalmanEstimator(absurd_sigma))
+                    build=lambda options, absurd_sigma, context: KalmanEstimator(absurd_sigma),
+                    imm_child=lambda options, absurd_sigma, context: lambda: KalmanEstimator(absurd_sigma,
+                                                                                             carry_mean=True))
 class KalmanEstimator:
     """One Gaussian about the nominal state: ``P``, and the stochastic-clone blocks.
 

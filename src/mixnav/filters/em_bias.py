@@ -61,8 +61,11 @@ import numpy as np
 from ..errors import ArgumentError
 from ..measurements.base import Rows
 from ..measurements.kinds import POSITION
+from pydantic import BaseModel, Field
+
 from .ekf import KalmanEstimator
-from .registry import NoOptions, from_context, register_estimator
+from .option_fields import STRICT, Duration, PosLength
+from .registry import register_estimator
 from .registry import ABSURD_SIGMA
 
 
@@ -172,8 +175,60 @@ def fit_bias(Y: np.ndarray, settings: EmBiasSettings, rng: np.random.Generator, 
                    bool(em.converged_))
 
 
-@register_estimator("em-bias", options=NoOptions, table="em", motions=("strapdown",), imm_mode=True,
-                    standalone=False, build=from_context("em", lambda **kw: EmBiasKalman(**kw), "em"),
+class EmBiasOptions(BaseModel):
+    """The EM multipath-bias removal of an EM-IMM mode (``[methods.imm.modes.em]``): the sliding
+    ``window`` [s], ``min_samples`` in it before a fit (at least the two components),
+    ``min_separation`` [m] (also at least ``min_separation_sigmas`` of the biased component's
+    spread) and ``min_weight`` of the biased component before a bias is declared,
+    ``max_state_sigma`` [m] (innovations enter the window only while the state's position
+    sigma is at most this; default a third of ``min_separation``) and ``gate`` (chi-square
+    probability above which position rows the current noise model cannot explain are kept out
+    of the update), ``refit_every`` (epochs between EM fits, each warm-started from the last).
+    :meth:`settings` gives the :class:`EmBiasSettings` the estimator takes."""
+
+    model_config = STRICT
+
+    window: Duration = 60.0  # type: ignore[valid-type]
+    min_samples: int = Field(default=20, ge=2, description="at least one sample per component")
+    min_separation: PosLength = 3.0  # type: ignore[valid-type]
+    min_weight: float = Field(default=0.05, ge=0.0, lt=0.5)
+    min_separation_sigmas: float = Field(default=2.0, ge=0.0)
+    max_state_sigma: PosLength | None = None  # type: ignore[valid-type]
+    gate: float = Field(default=0.9999, gt=0.5, lt=1.0)
+    refit_every: int = Field(default=5, ge=1)
+
+    def settings(self) -> EmBiasSettings:
+        return EmBiasSettings(window=float(self.window), min_samples=self.min_samples,
+                              min_separation=float(self.min_separation), min_weight=self.min_weight,
+                              min_separation_sigmas=self.min_separation_sigmas,
+                              max_state_sigma=None if self.max_state_sigma is None else float(self.max_state_sigma),
+                              gate=self.gate, refit_every=self.refit_every)
+
+
+def _gnss_models(context) -> set:
+    """The models whose position rows the bias removal checks: the method's GNSS model."""
+    gnss = context.named_measurements.get("gnss")
+    if gnss is None:
+        raise ArgumentError("the EM bias removal needs the method's GNSS model (BuildContext.named_measurements"
+                            "['gnss'])", argument="measurements")
+    return {gnss}
+
+
+def _em_mode(options: EmBiasOptions, absurd_sigma: float, context):
+    """The registration's imm_child: fresh mean-carrying EM-bias EKFs on the method's GNSS rows."""
+    settings, models = options.settings(), _gnss_models(context)
+    return lambda: EmBiasKalman(models, settings, absurd_sigma, carry_mean=True)
+
+
+def _check_em_entry(options: EmBiasOptions, measurements, mode: bool) -> None:
+    if "gnss" not in measurements:
+        raise ValueError("an em-bias mode removes a bias from the GNSS: list \"gnss\" in its measurements")
+
+
+@register_estimator("em-bias", options=EmBiasOptions, table="em", motions=("strapdown",), imm_child=_em_mode,
+                    standalone=False, check=_check_em_entry,
+                    build=lambda o, absurd_sigma, context: EmBiasKalman(_gnss_models(context), o.settings(),
+                                                                        absurd_sigma),
                     description="the EM-IMM's GNSS mode: the EKF with the EM multipath-bias removal on its "
                     "GNSS rows (a mode of an IMM only)")
 class EmBiasKalman(KalmanEstimator):

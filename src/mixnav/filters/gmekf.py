@@ -49,7 +49,7 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from ..engine.protocols import Correction, Epoch, Transition
-from ..errors import ArgumentError
+from ..errors import ArgumentError, ConfigError
 from ..ins._error_kernels import covariance_predict, discrete_noise
 from ..ins.error_model import ClockModel, StateLayout
 from ..ins.imu_model import ImuErrorModel
@@ -60,8 +60,9 @@ from ._bank_kernels import (bank_epoch, bank_epoch_collect, bank_epoch_guarded, 
                             bank_propagate, bank_reduce, bank_split, bank_update, predicted_nis)
 from ._ekf_kernels import NEEDS_REPAIR, OK
 from .ekf import repair_covariance
+from .gmekf_options import MixtureOptions, MixtureSpec
 from .facade import Filter
-from .registry import NoOptions, from_context, register_estimator
+from .registry import BuildContext, register_estimator
 from .registry import ABSURD_SIGMA
 
 
@@ -91,8 +92,109 @@ def _padded(tables):
 _BANK_WARM = []
 
 
-@register_estimator("gaussian-mixture", options=NoOptions, table="mixture", imm_mode=True,
-                    build=from_context("bank", lambda **kw: BankEstimator(**kw), "mixture"),
+# --- the bank built from a file's [mixture] table ----------------------------------------------------
+
+def mixtures_from_options(options: MixtureOptions) -> BankMixtures:
+    """The given (not learned) mixtures of a ``[mixture]`` table (Gaussian where not given)."""
+    def standard(s: MixtureSpec) -> StandardMixture:
+        return StandardMixture(tuple(s.weights), tuple(s.means or [0.0] * len(s.weights)), tuple(s.scales))
+    return BankMixtures({k: standard(v) for k, v in options.measurement.items()},
+                        standard(options.process) if options.process is not None else StandardMixture.gaussian(),
+                        standard(options.prior) if options.prior is not None else StandardMixture.gaussian())
+
+
+def learn_bank_mixtures(options: MixtureOptions, training: dict, seed: int):
+    """The mixtures of ``options.learn`` from training residuals (given ones kept):
+    :func:`mixnav.noise.learn.offline.learn_mixtures`."""
+    from ..noise.learn.offline import learn_mixtures
+    lc = options.learn
+    return learn_mixtures(training, lc.observables, lc.method, mixtures_from_options(options),
+                          n_components=lc.n_components, gibbs_samples=lc.gibbs_samples, prune=lc.prune,
+                          training_samples=lc.training_samples, learn_process=lc.learn_process, seed=seed)
+
+
+def bank_parts(options: MixtureOptions, training, seed: int, name: str, source, key: str):
+    """A ``[mixture]`` table's bank: ``(mixtures, online settings or None, learning time [s],
+    fits not converged)``, the mixtures given or learned offline from ``training``; ``name``
+    and the table's file ``key`` for the error when there is no training stretch."""
+    from ..noise.learn.online import OnlineSettings
+    online = None
+    if options.learn is not None and options.learn.online is not None:
+        oc = options.learn.online
+        online = OnlineSettings(tuple(options.learn.observables), window=oc.window, every=oc.every, gate=oc.gate,
+                                n_components=options.learn.n_components, prune=options.learn.prune)
+    if options.learn is not None and options.learn.offline:
+        if training is None:
+            raise ConfigError(f"'{name}' learns its mixtures from a training stretch, which only simulated "
+                              "scenarios provide", file=source, key=f"{key}.learn")
+        learned = learn_bank_mixtures(options, training, seed)
+        return learned.mixtures, online, learned.learning_time_s, learned.not_converged
+    return mixtures_from_options(options), online, 0.0, 0
+
+
+def _guards(options: MixtureOptions) -> dict:
+    return dict(gate=options.gate, outlier_mean=options.outlier_mean, divergence_window=options.divergence_window,
+                divergence_nis=options.divergence_nis)
+
+
+def _method_name(context: BuildContext) -> str:
+    return getattr(context.method, "name", None) or "gaussian-mixture"
+
+
+def _bank_estimator(options: MixtureOptions, absurd_sigma: float, context: BuildContext):
+    """The registration's build: the bank on any motion model (not the coloured variant, which
+    differences the measurements of an INS layout)."""
+    key = context.entry_key
+    if options.colored is not None:
+        raise ConfigError("the coloured-noise bank (M6) differences measurements of an INS layout; not "
+                          f"available on the {context.motion_name} model", file=context.source,
+                          key=f"{key}.mixture.colored")
+    mixtures, online, _, _ = bank_parts(options, context.training, context.seed, _method_name(context),
+                                        context.source, f"{key}.mixture")
+    return BankEstimator(mixtures=mixtures, max_components=options.max_components, online=online,
+                         absurd_sigma=absurd_sigma, **_guards(options))
+
+
+def _bank_filter(options: MixtureOptions, context: BuildContext):
+    """The registration's build_filter: M3-M5 on the strapdown INS (mixtures learned once per
+    method; M6, with a ``[mixture.colored]`` table, is the variant mixnav.filters.colored registers)."""
+    mixtures, online, learning_time, failed = bank_parts(options, context.training, context.seed,
+                                                         _method_name(context), context.source,
+                                                         f"{context.entry_key}.mixture")
+    filt = GaussianMixtureEkf(context.layout, context.imu_model, mixtures, max_components=options.max_components,
+                              learning_time_s=learning_time, online=online, learner_not_converged=failed,
+                              covariance_interval=context.covariance_interval, clock=context.clock,
+                              **_guards(options))
+    return filt, list(context.measurements)
+
+
+def _bank_mode(options: MixtureOptions, absurd_sigma: float, context: BuildContext):
+    """The registration's imm_child: fresh mean-carrying banks of one mixture set, learned once."""
+    name = f"mode '{context.mode.name}' of '{_method_name(context)}'"
+    mixtures, online, _, _ = bank_parts(options, context.training, context.seed, name, context.source,
+                                        f"{context.entry_key}.mixture")
+    return lambda: BankEstimator(mixtures, options.max_components, absurd_sigma, online=online, carry_mean=True,
+                                 **_guards(options))
+
+
+def _check_bank_entry(options: MixtureOptions, measurements, mode: bool) -> None:
+    if mode and options.colored is not None:
+        raise ValueError("a mode cannot be the coloured-noise bank (M6: it differences the measurements "
+                         "and carries AR(1) states the other modes do not have)")
+
+
+#: argument names of the bank's builders -> the method's file keys
+BANK_KEYS = {"max_components": "mixture.max_components", "psi": "mixture.colored.measurement",
+             "psi_channels": "mixture.colored.channels", "psi_process": "mixture.colored.process",
+             "psi_measurement": "mixture.colored.measurement",
+             "process_interval": "mixture.colored.process_interval", "kinds": "mixture.learn.observables",
+             "mixtures": "mixture", "observables": "mixture.learn.observables", "process": "mixture.process",
+             "prior": "mixture.prior", "window": "mixture.learn.online.window",
+             "every": "mixture.learn.online.every", "gate": "mixture.learn.online.gate"}
+
+
+@register_estimator("gaussian-mixture", options=MixtureOptions, table="mixture", build=_bank_estimator,
+                    build_filter=_bank_filter, imm_child=_bank_mode, check=_check_bank_entry, keys=BANK_KEYS,
                     description="M3 Gaussian-mixture EKF (bank of components); M4/M5 when [mixture.learn] uses "
                     "vb/gibbs; M4 re-learned online with mixture.learn.online; M6 (coloured noise, paper P2, "
                     "strapdown only) with [mixture.colored]")

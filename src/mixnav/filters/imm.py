@@ -51,13 +51,14 @@ import numpy as np
 
 from ..engine.protocols import Correction, Epoch, Transition
 from ._imm_kernels import imm_combine, imm_epoch, imm_mix_score, imm_predict, imm_probabilities
-from ..errors import ArgumentError
+from ..errors import ArgumentError, ConfigError
 from ..ins.error_model import ClockModel, StateLayout
 from ..ins.imu_model import ImuErrorModel
 from ..markov import check_transition
 from .ekf import KalmanEstimator
 from .facade import Filter
-from .registry import NoOptions, from_context, register_estimator
+from .imm_options import ImmOptions, check_imm_entry
+from .registry import BuildContext, entry_options, estimator_spec, register_estimator
 from ..engine.status import ABSURD, NEEDS_REPAIR, NON_FINITE, OK
 from .registry import ABSURD_SIGMA
 
@@ -146,10 +147,58 @@ def log_likelihood(x: np.ndarray, P: np.ndarray, z: np.ndarray, H: np.ndarray, R
     return float(-0.5 * (w @ w + 2.0 * np.log(np.diag(L)).sum() + len(z) * _LOG_2PI))
 
 
-@register_estimator("imm", options=NoOptions, table="imm", motions=("strapdown",), can_smooth=False,
-                    build=from_context("imm", lambda absurd_sigma, **kw: ImmEstimator(**kw), "imm"),
-                    description="M9 interacting multiple models (paper P4): EKF or robust modes with their own "
-                    "measurement sets ([methods.imm])")
+def mode_factories(options: ImmOptions, context: BuildContext) -> list:
+    """One factory of fresh mean-carrying estimators per mode of ``options``, each asked of the
+    mode estimator's registration (its ``imm_child`` hook) with the mode's entry, measurement
+    models and file key in the context; a bad argument is a ConfigError under the mode's key."""
+    from dataclasses import replace
+    makers = []
+    for k, mode in enumerate(options.modes):
+        key, spec = f"{context.entry_key}.imm.modes[{k}]", None
+        try:
+            spec = estimator_spec(mode.estimator)
+            child = replace(context, key=key, mode=mode,
+                            measurements=[context.named_measurements[x] for x in mode.measurements])
+            makers.append(spec.mode_factory(entry_options(mode, spec), child))
+        except ArgumentError as exc:
+            where = exc.argument or ""
+            if where != "estimator" and spec is not None and spec.table is not None:
+                where = f"{spec.table}.{where}" if where else spec.table
+            raise ConfigError(exc.message, file=context.source, key=f"{key}.{where}" if where else key) from None
+    return makers
+
+
+def _imm_parts(options: ImmOptions, context: BuildContext):
+    sets = [[context.named_measurements[x] for x in mode.measurements] for mode in options.modes]
+    interval = None if options.transition_interval == "epoch" else float(options.transition_interval)
+    return sets, interval, [m.name for m in options.modes], mode_factories(options, context)
+
+
+def _imm_filter(options: ImmOptions, context: BuildContext):
+    """The registration's build_filter (M9): the IMM of the method's modes, each updated by the
+    measurements it lists, the modes' settings learned once per method."""
+    sets, interval, names, makers = _imm_parts(options, context)
+    try:
+        filt = ImmEkf(context.layout, context.imu_model, sets, options.transition, options.initial_probabilities,
+                      interval, names, makers, output=options.output, covariance_interval=context.covariance_interval,
+                      clock=context.clock)
+    except ArgumentError as exc:   # under the method's [imm] table
+        key = f"{context.entry_key}.imm" + (f".{exc.argument}" if exc.argument else "")
+        raise ConfigError(exc.message, file=context.source, key=key) from None
+    return filt, list(context.measurements)
+
+
+def _imm_estimator(options: ImmOptions, absurd_sigma: float, context: BuildContext):
+    sets, interval, names, makers = _imm_parts(options, context)
+    return ImmEstimator([make() for make in makers], sets, options.transition, options.initial_probabilities,
+                        interval, names, options.output)
+
+
+@register_estimator("imm", options=ImmOptions, table="imm", motions=("strapdown",), can_smooth=False,
+                    build=_imm_estimator, build_filter=_imm_filter, check=check_imm_entry,
+                    description="M9 interacting multiple models (paper P4): modes of any registered mode estimator "
+                    "(ekf, robust-adaptive, em-bias, gaussian-mixture, ...) with their own measurement sets "
+                    "([methods.imm])")
 class ImmEstimator:
     """Interacting multiple models of mode-conditioned error-state estimators (module docstring).
 

@@ -34,11 +34,34 @@ Keywords of :func:`register_estimator`:
     training data, ...).
 ``table``
     Where a file gives its settings when not in ``[methods.options]`` (``"robust"``,
-    ``"mixture"``, ``"imm"``: the method's own table; ``options`` is then empty).
-``imm_mode``
-    Whether it can be a mode of an IMM (a mean-carrying child).
+    ``"mixture"``, ``"imm"``, ``"em"``: a table of the method, or of an IMM mode, named so);
+    ``options`` is then the model of that table, and the config validates the table with
+    it (:func:`validate_table`). A table whose model has required keys must be given
+    (``estimator = "imm"`` needs ``[imm]``).
+``build_filter``
+    For an estimator whose filter on the strapdown INS is more than ``Filter(name, ...)``
+    (settings learned once per method, measurement models of its own, what callers read
+    on the filter): ``build_filter(options, context) -> (filter, measurement models)``,
+    called once per method with the method's models in ``context.measurements``.
+``imm_child``
+    What makes it a mode of an IMM: ``imm_child(options, absurd_sigma, context)`` returns
+    a factory of fresh mean-carrying estimators (one per run; ``carry_mean=True``),
+    ``context.mode`` the mode's entry and ``context.key`` its file key
+    (``methods[i].imm.modes[k]``). ``imm_mode`` defaults to whether it is given.
+``check``
+    Optional ``check(options, measurements, mode)``: a ValueError when these settings
+    cannot be used with these measurement names (a method's: ``"gnss"`` and its aiding; a
+    mode's: those it lists; ``mode``: whether it is an IMM mode), checked as the file is read.
+``keys``
+    Argument names of its build's :class:`ArgumentError` -> the method's file keys where
+    they differ (``{"k0": "robust.k0"}``).
 ``standalone``
     False for an estimator that is only a mode of an IMM (``em-bias``).
+
+A variant of an estimator in another module (the coloured-noise bank, selected by the
+``[mixture.colored]`` table of the bank's options) registers its own ``build_filter`` with
+:func:`register_variant`; it is found like a registration, by reading the source, and
+imported with the estimator.
 
 Lookup is lazy: :func:`estimator_names` lists the built-in names from a small table
 of name -> module (a module named there but absent is skipped: ``student-t`` is listed
@@ -81,6 +104,8 @@ BUILTIN_PACKAGE = "mixnav.filters"
 
 #: a module-level registration, ``register_estimator("name", ...)`` or its decorator form
 _REGISTRATION = re.compile(r'^@?register_estimator\(\s*"([^"]+)"', re.M)
+#: a module-level variant registration, ``register_variant("name", ...)``
+_VARIANT = re.compile(r'^register_variant\(\s*"([^"]+)"', re.M)
 
 
 def find_registrations(folder, package: str) -> dict[str, str]:
@@ -93,6 +118,16 @@ def find_registrations(folder, package: str) -> dict[str, str]:
         for name in _REGISTRATION.findall(path.read_text(encoding="utf-8")):
             found.setdefault(name, f"{package}.{path.stem}")
     return dict(sorted(found.items(), key=lambda item: (item[0] != "ekf", item[0])))
+
+
+@lru_cache(maxsize=1)
+def variant_modules() -> dict[str, list[str]]:
+    """Built-in estimator name -> the modules that register variants of it (read from the source)."""
+    found: dict[str, list[str]] = {}
+    for path in sorted(Path(__file__).resolve().parent.glob("*.py")):
+        for name in _VARIANT.findall(path.read_text(encoding="utf-8")):
+            found.setdefault(name, []).append(f"{BUILTIN_PACKAGE}.{path.stem}")
+    return found
 
 
 @lru_cache(maxsize=1)
@@ -115,11 +150,15 @@ METHOD_TYPES = {
 class BuildContext:
     """What an estimator's ``build`` may need beyond its options (all optional).
 
-    ``motion``: the motion model of the run; ``method``: the config's method entry;
-    ``training``: training residuals (simulated scenarios); ``seed``; ``measurements``:
-    the method's measurement models; ``source``, ``index``: the file and the method's
-    index (for errors); ``extra``: anything a pipeline hands over (e.g. the epoch
-    mixture's start from a track alignment)."""
+    ``motion``: the motion model of the run, ``motion_name`` its name (:data:`MOTIONS`);
+    ``method``: the config's method entry; ``training``: training residuals (simulated
+    scenarios); ``seed``; ``measurements``: the method's measurement models,
+    ``named_measurements`` the same by the names a file uses (``"gnss"``, each aiding);
+    ``source``, ``index``: the file and the method's index, ``key`` the file key of the
+    entry being built (``methods[i]``, or ``methods[i].imm.modes[k]`` for a mode, whose
+    entry is ``mode``): for errors; on the strapdown INS, ``layout``, ``imu_model``,
+    ``covariance_interval`` and ``clock`` of the filter; ``extra``: anything a pipeline
+    hands over (e.g. the epoch mixture's start from a track alignment)."""
 
     motion: Any = None
     method: Any = None
@@ -129,6 +168,19 @@ class BuildContext:
     source: str | None = None
     index: int = 0
     extra: dict = field(default_factory=dict)
+    motion_name: str | None = None
+    named_measurements: dict = field(default_factory=dict)
+    key: str | None = None
+    mode: Any = None
+    layout: Any = None
+    imu_model: Any = None
+    covariance_interval: float = 1.0
+    clock: Any = None
+
+    @property
+    def entry_key(self) -> str:
+        """``key``, or ``methods[index]`` when not set."""
+        return self.key or f"methods[{self.index}]"
 
 
 @dataclass(frozen=True)
@@ -146,6 +198,10 @@ class EstimatorSpec:
     table: str | None = None
     imm_mode: bool = False
     standalone: bool = True
+    build_filter: Callable | None = None
+    imm_child: Callable | None = None
+    check: Callable | None = None
+    keys: dict = field(default_factory=dict)
 
     def parse_options(self, values=None):
         """``values`` (a dict, or an instance of the options model) validated: an instance
@@ -163,8 +219,36 @@ class EstimatorSpec:
             return self.cls(opts, absurd_sigma)
         return self.build(opts, absurd_sigma, context or BuildContext())
 
+    def mode_factory(self, options=None, context: BuildContext | None = None):
+        """The factory of fresh mean-carrying estimators of this estimator as a mode of an IMM
+        (its ``imm_child`` hook); an estimator without one: an :class:`ArgumentError`
+        (argument ``estimator``) listing those that can be a mode."""
+        if self.imm_child is None:
+            raise ArgumentError(f"estimator '{self.name}' cannot be a mode of an IMM (these can: "
+                                f"{', '.join(imm_mode_names())})", argument="estimator")
+        opts = self.parse_options(options)
+        absurd_sigma = opts.absurd_sigma if "absurd_sigma" in opts.model_fields_set else ABSURD_SIGMA
+        return self.imm_child(opts, absurd_sigma, context or BuildContext())
+
+    def default_options(self):
+        """The options model with every default, or None when it has required keys (a table
+        that must be given)."""
+        from pydantic import ValidationError
+        try:
+            return self.options()
+        except ValidationError:
+            return None
+
     def runs_on(self, motion: str) -> bool:
         return motion in self.motions
+
+    def filter_builder(self, options):
+        """The ``build_filter`` for these ``options``: a registered variant's when its options key
+        is set (:func:`register_variant`), else the estimator's own (None: ``Filter(name, ...)``)."""
+        for key, build_filter in _VARIANTS.get(self.name, {}).items():
+            if getattr(options, key, None) is not None:
+                return build_filter
+        return self.build_filter
 
 
 class GateOptions(BaseModel):
@@ -180,17 +264,6 @@ class NoOptions(BaseModel):
     """Settings of an estimator that takes them from its own table of the method, not [options]."""
 
     model_config = ConfigDict(extra="forbid")
-
-
-def from_context(key: str, make: Callable, table: str):
-    """A ``build`` for an estimator whose settings are objects a pipeline makes from the method's
-    own ``table`` (mixtures, modes): ``make(**context.extra[key], absurd_sigma=...)``."""
-    def build(options, absurd_sigma: float, context: BuildContext):
-        if key not in context.extra:
-            raise ArgumentError(f"this estimator is built from the method's [{table}] table (its objects in "
-                                f"BuildContext.extra['{key}'])", argument=table)
-        return make(**context.extra[key], absurd_sigma=absurd_sigma)
-    return build
 
 
 def validate_options(model: type, values: dict, name: str):
@@ -213,13 +286,28 @@ def validate_options(model: type, values: dict, name: str):
 
 
 _SPECS: dict[str, EstimatorSpec] = {}
+_VARIANTS: dict[str, dict[str, Callable]] = {}
+
+
+def register_variant(estimator: str, *, key: str, build_filter: Callable) -> None:
+    """Register a variant of ``estimator`` (at module level, in the variant's own module): when
+    the estimator's options have ``key`` set (not None), its filter on the strapdown INS is
+    ``build_filter(options, context)`` (as the registration's keyword) instead of the estimator's."""
+    _VARIANTS.setdefault(estimator, {})[key] = build_filter
 
 
 def register_estimator(name: str, *, options: type, motions=MOTIONS, description: str,
                        measurements=None, can_smooth: bool = True, build: Callable | None = None,
-                       table: str | None = None, imm_mode: bool = False, standalone: bool = True):
+                       table: str | None = None, imm_mode: bool | None = None, standalone: bool = True,
+                       build_filter: Callable | None = None, imm_child: Callable | None = None,
+                       check: Callable | None = None, keys: dict | None = None):
     """Class decorator: register the estimator as ``name`` (module docstring). Returns the
     class unchanged; one class may be registered under several names (``ukf``, ``vb-aukf``)."""
+    if imm_mode is None:
+        imm_mode = imm_child is not None
+    if imm_mode and imm_child is None:
+        raise ArgumentError(f"estimator '{name}' is an IMM mode but gives no imm_child hook (the factory of "
+                            "its mean-carrying estimator)", argument="imm_child")
     if not (isinstance(options, type) and issubclass(options, BaseModel)):
         raise ArgumentError(f"options of estimator '{name}' must be a pydantic model class, got {options!r}",
                             argument="options")
@@ -239,7 +327,8 @@ def register_estimator(name: str, *, options: type, motions=MOTIONS, description
                                 argument="name")
         _SPECS[name] = EstimatorSpec(name, cls, options, motions, description,
                                      None if measurements is None else tuple(measurements), bool(can_smooth),
-                                     build, table, bool(imm_mode), bool(standalone))
+                                     build, table, bool(imm_mode), bool(standalone), build_filter,
+                                     imm_child if imm_mode else None, check, dict(keys or {}))
         return cls
     return decorate
 
@@ -272,10 +361,13 @@ def estimator_spec(name: str) -> EstimatorSpec:
             if ep is not None:
                 ep.load()
     try:
-        return _SPECS[name]
+        spec = _SPECS[name]
     except KeyError:
         raise ArgumentError(f"unknown estimator '{name}' (known: {', '.join(estimator_names())})",
                             argument="estimator") from None
+    for variant in variant_modules().get(name, ()):   # however the estimator's module was imported
+        import_module(variant)
+    return spec
 
 
 def check_motion(name: str, motion: str) -> EstimatorSpec:
@@ -289,3 +381,107 @@ def check_motion(name: str, motion: str) -> EstimatorSpec:
         raise ArgumentError(f"estimator '{name}' does not run on the {motion} motion model (it runs on: "
                             f"{', '.join(spec.motions)})", argument="estimator")
     return spec
+
+
+def imm_mode_names() -> list[str]:
+    """The registered estimators that can be a mode of an IMM (imports every estimator module)."""
+    return [n for n in estimator_names(standalone_only=False) if estimator_spec(n).imm_mode]
+
+
+def table_owners(table: str) -> list[str]:
+    """The registered estimators whose settings are the method's (or a mode's) ``[table]``
+    (imports every estimator module: asked when a file puts a table where it does not belong)."""
+    return [n for n in estimator_names(standalone_only=False) if estimator_spec(n).table == table]
+
+
+def validate_table(table: str, estimator: str | None, values):
+    """A method's (or an IMM mode's) ``[table]``, validated by the options model of the
+    estimator it belongs to: the entry's ``estimator`` if its settings are that table,
+    otherwise the table's first owner (the entry is then refused by
+    :func:`table_problem`; its content is checked first, as a file is read top-down).
+    Nested errors keep their keys (pydantic's ValidationError, raised as is)."""
+    spec = None
+    if estimator is not None:
+        try:
+            spec = estimator_spec(estimator)
+        except ArgumentError:
+            spec = None
+    if spec is None or spec.table != table:
+        owners = table_owners(table)
+        if not owners:
+            raise ValueError(f"no registered estimator takes a [{table}] table")
+        spec = estimator_spec(owners[0])
+    return spec.options.model_validate(values)
+
+
+def table_problem(entry, estimator: str, tables) -> str | None:
+    """What is wrong with the estimator ``tables`` (field names) of ``entry`` for its
+    ``estimator``: a table of another estimator, or a required table missing; None if
+    nothing."""
+    try:
+        spec = estimator_spec(estimator)
+    except ArgumentError:
+        return None                     # the estimator's own check says it
+    for table in tables:
+        if getattr(entry, table, None) is not None and spec.table != table:
+            owners = table_owners(table)
+            if len(owners) == 1 and estimator_spec(owners[0]).default_options() is None:
+                return _go_together(owners[0], table)
+            need = " or ".join(f'estimator = "{n}"' for n in owners)
+            return f"{_article(table)} [{table}] table needs {need}"
+    if spec.table in tables and getattr(entry, spec.table, None) is None and spec.default_options() is None:
+        return _go_together(estimator, spec.table)
+    return None
+
+
+def _article(word: str) -> str:
+    return "an" if word[:1] in "aeiou" else "a"
+
+
+def _go_together(estimator: str, table: str) -> str:
+    return f'estimator = "{estimator}" and {_article(table)} [{table}] table go together'
+
+
+def entry_options(entry, spec: EstimatorSpec):
+    """The settings ``spec`` is built from for a method's (or mode's) ``entry``: its own table
+    (validated, or every default when absent) or its ``[options]``."""
+    if spec.table is not None:
+        table = getattr(entry, spec.table, None)
+        return table if table is not None else spec.options()
+    return dict(getattr(entry, "options", None) or {})
+
+
+def checked_options(name: str | None, options: dict) -> dict:
+    """An entry's ``[options]`` checked against the options model the estimator ``name``
+    registered: the same keys, validated values. A ValueError whose message starts with the
+    option's key (``options.<key>: ...``), which the config's loader makes the error's key;
+    an estimator whose settings are a table of its own takes no ``[options]``."""
+    if name is None or not options:
+        return options
+    try:
+        spec = estimator_spec(name)
+    except ArgumentError:
+        return options          # the estimator's own check says it
+    if spec.table is not None:
+        raise ValueError(f"estimator \"{name}\" takes its settings from its own table ([{spec.table}]), "
+                         "not [options]")
+    try:
+        checked = spec.parse_options(options)
+    except ArgumentError as exc:
+        raise ValueError(f"options.{exc.argument}: {exc.message}") from None
+    return {k: getattr(checked, k) for k in options}
+
+
+def check_entry(entry, estimator: str, tables, measurements, mode: bool) -> None:
+    """The whole-entry checks of a method's or a mode's ``estimator``: its tables
+    (:func:`table_problem`), then the registration's ``check`` with the ``measurements``
+    names the entry can use; a ValueError saying what is wrong."""
+    problem = table_problem(entry, estimator, tables)
+    if problem:
+        raise ValueError(problem)
+    try:
+        spec = estimator_spec(estimator)
+    except ArgumentError:
+        return
+    if spec.check is not None:
+        spec.check(entry_options(entry, spec), list(measurements), mode)

@@ -72,9 +72,12 @@ class RobustOptions(GateOptions):
         return self
 
 
-@register_estimator("robust-adaptive", options=RobustOptions, table="robust", imm_mode=True,
+@register_estimator("robust-adaptive", options=RobustOptions, table="robust",
                     description="M2 robust adaptive EKF: IGG-III equivalent weights + Yang's adaptive factor",
-                    build=lambda o, absurd_sigma, context: RobustEstimator(o.k0, o.k1, o.c, absurd_sigma))
+                    build=lambda o, absurd_sigma, context: RobustEstimator(o.k0, o.k1, o.c, absurd_sigma),
+                    imm_child=lambda o, absurd_sigma, context: lambda: RobustEstimator(o.k0, o.k1, o.c, absurd_sigma,
+                                                                                       carry_mean=True),
+                    keys={"k0": "robust.k0", "k1": "robust.k1", "c": "robust.c"})
 class RobustEstimator(KalmanEstimator):
     """The EKF's Gaussian with the robust, adaptive correction (module docstring).
 
