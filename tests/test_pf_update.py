@@ -1,4 +1,5 @@
-"""The particle filter's fused loose GNSS update (pf_loose_update) against the generic path.
+"""The particle filter's fused loose GNSS update (the loose model's member_update:
+measurements/_loose_members.pf_loose_update) against the generic path.
 
 The generic path builds every particle's full state (pf_member_navs), asks the loose
 model's predict_batch for the predictions and weighs them (pf_log_weights, pf_moments).
@@ -19,6 +20,7 @@ from mixnav.config import load_scenario
 from mixnav.data import GnssFixes
 from mixnav.filters import _pf_kernels as K
 from mixnav.ins import _particle_kernels as PK
+from mixnav.measurements import _loose_members as LM
 from mixnav.filters.particle import ParticleFilter, linear_gaussian_particles
 from mixnav.ins.error_model import get_layout
 from mixnav.measurements.loose import LooseGnss
@@ -59,15 +61,17 @@ def _generic(lay, D, nav, model, logw0, w0, w_b):
     return dict(Y=Y, logw=logw, w=w, x=x, P=P, best=best, ess=ess, nis=nis)
 
 
-def _fused(kernel, lay, D, nav, model, logw0, w0, w_b):
+def _fused(parallel, lay, D, nav, model, logw0, w0, w_b, threshold=1e30, w=None):
+    """The model's fused member update (serial or parallel twin) called as the estimator does."""
     N, n = D.shape
-    fix, lever = model.batch_fix(0)
-    m = 6 if model.use_velocity else 3
-    out = dict(Y=np.empty((m, N)), logw=np.empty(N), w=np.empty(N), x=np.empty(n), P=np.empty((n, n)))
-    out["best"], out["ess"], out["nis"] = kernel(
-        D, lay.as_array(), nav, w_b, lever, fix, logw0, w0, 1e30, out["Y"], out["logw"], out["w"], np.empty(m),
-        np.empty((m, m)), out["x"], out["P"], np.empty((K.CHUNKS, 44)), np.empty((K.CHUNKS, 2 + n)),
-        np.empty((K.CHUNKS, n + n * n)), np.empty((n + 1, N)))
+    u = model.member_update(0, lay, parallel)
+    m = u.rows
+    out = dict(Y=np.empty((m, N)), logw=np.empty(N), w=np.empty(N) if w is None else w, x=np.empty(n),
+               P=np.empty((n, n)))
+    out["best"], out["ess"], out["nis"] = u.kernel(
+        D, nav, w_b, logw0, w0, threshold, out["Y"], out["logw"], out["w"], np.empty(m), np.empty((m, m)), out["x"],
+        out["P"], np.empty((K.CHUNKS, 2 + m + m * m)), np.empty((K.CHUNKS, 2 + n)), np.empty((K.CHUNKS, n + n * n)),
+        np.empty((n + 1, N)), *u.constants)
     out["Y"] = out["Y"].T
     return out
 
@@ -93,19 +97,20 @@ def test_the_fused_loose_update_equals_the_generic_path(att_sigma, pos_sigma, le
     if pos_sigma > 1000:
         assert np.abs(case[1][:, 6]).max() > 6.4e3 > np.abs(case[1][:, 6]).min()
     g = _generic(*case)
-    f = _fused(PK.pf_loose_update_serial, *case)
+    f = _fused(False, *case)
     for key in ("Y", "logw", "x", "P"):
         scale = np.abs(g[key]).max(axis=0) if key == "Y" else np.abs(g[key]).max()
         assert (np.abs(f[key] - g[key]) <= 1e-12 * scale).all(), (key, np.abs(f[key] - g[key]).max() / scale)
     assert np.abs(f["w"] - g["w"]).max() <= 1e-12 * g["w"].max()
     for key in ("best", "ess", "nis"):
         assert f[key] == pytest.approx(g[key], rel=1e-12), key
-    p = _fused(PK.pf_loose_update, *case)
+    p = _fused(True, *case)
     for key in f:
         np.testing.assert_array_equal(np.asarray(p[key]), np.asarray(f[key]))
     lay, D, nav, model, _, _, w_b = case
     YT = np.empty_like(f["Y"].T)
-    PK.pf_loose_predict(D, lay.as_array(), nav, w_b, *model.batch_fix(0)[::-1], YT)   # the predictions alone
+    la, lev, fix = model.member_update(0, lay).constants
+    LM.pf_loose_predict(D, la, nav, w_b, lev, fix, YT)   # the predictions alone
     np.testing.assert_array_equal(YT.T, f["Y"])
 
 
@@ -116,13 +121,9 @@ def test_the_fused_update_detects_a_degenerate_epoch_like_the_generic_one():
     lay, D, nav, model, logw0, w0, w_b = _case(500, 1e-3, 2.0, np.array([0.5, 0.2, -1.0]), True)
     model._rows[0, 0] += 1e4 / 6.4e6
     g = _generic(lay, D, nav, model, logw0, w0, w_b)
-    N, n = D.shape
-    fix, lever = model.batch_fix(0)
-    w = np.full(N, -1.0)
-    best, ess, nis = PK.pf_loose_update_serial(
-        D, lay.as_array(), nav, w_b, lever, fix, logw0, w0, 6 * 1e4 ** 2 / 1e3, np.empty((6, N)), np.empty(N), w,
-        np.empty(6), np.empty((6, 6)), np.empty(n), np.empty((n, n)), np.empty((K.CHUNKS, 44)),
-        np.empty((K.CHUNKS, 2 + n)), np.empty((K.CHUNKS, n + n * n)), np.empty((n + 1, N)))
+    w = np.full(D.shape[0], -1.0)
+    f = _fused(False, lay, D, nav, model, logw0, w0, w_b, threshold=6 * 1e4 ** 2 / 1e3, w=w)
+    best, ess = f["best"], f["ess"]
     assert best == pytest.approx(g["best"], rel=1e-12) and best > 6 * 1e4 ** 2 / 1e3
     assert ess == 0.0 and (w == -1.0).all()
 
@@ -216,8 +217,8 @@ def test_a_non_finite_particle_weighs_nothing_and_leaves_the_moments_finite():
     D = D.copy()
     D[7] = np.nan
     D[300, 4] = np.inf
-    for kernel in (PK.pf_loose_update_serial, PK.pf_loose_update):
-        f = _fused(kernel, lay, D, nav, model, logw0, w0, w_b)
+    for parallel in (False, True):
+        f = _fused(parallel, lay, D, nav, model, logw0, w0, w_b)
         assert f["w"][7] == 0.0 and f["w"][300] == 0.0 and np.isfinite(f["w"]).all()
         ok = np.isfinite(D).all(axis=1)
         xm = np.average(D[ok], axis=0, weights=f["w"][ok])
