@@ -230,3 +230,89 @@ def test_a_non_finite_particle_weighs_nothing_and_leaves_the_moments_finite():
             moments(D, f["w"], x, P, np.empty((K.CHUNKS, D.shape[1] * (D.shape[1] + 1))))
             np.testing.assert_allclose(x, xm, rtol=1e-12, atol=1e-15)
             np.testing.assert_allclose(P, Pm, rtol=1e-10, atol=1e-14 * np.abs(Pm).max())
+
+
+def test_the_one_loose_prediction_agrees_across_its_trig_modes_and_wraps_the_longitude():
+    """_loose_kernel.antenna_from_fix, the per-state loose prediction the EKF rows, predict_batch
+    and the fused update share: with the latitudes' sines by series about a reference
+    (TRIG_SERIES, TRIG_NEAR) it equals the library-function mode (TRIG_PLAIN) to 1e-9 m
+    (round-off on Earth-radius products); a fix 30 m north-east and 2 m above the antenna
+    gives (-30, -30, 2) m to 0.05 m (the NED frame's curvature over 30 m); beyond
+    SMALL_DLAT from the reference TRIG_SERIES says it did not hold and TRIG_NEAR still equals
+    TRIG_PLAIN; across the antimeridian the east offset is the short way round (~2 m, not
+    40000 km) in TRIG_PLAIN and TRIG_NEAR, and TRIG_SERIES says it did not hold."""
+    from mixnav.geodesy.earth import radii
+    from mixnav.measurements._loose_kernel import TRIG_NEAR, TRIG_PLAIN, TRIG_SERIES, antenna_from_fix
+
+    lat0 = 0.6
+    s0, c0 = np.sin(lat0), np.cos(lat0)
+    lat, lon, h = lat0 + 2e-5, 0.2, 100.0
+    cl = (0.5, -0.3, 1.2)
+    rm, rn = radii(lat)
+    a_lat, a_lon, a_h = lat + cl[0] / (rm + h), lon + cl[1] / ((rn + h) * np.cos(lat)), h - cl[2]
+    ra_m, ra_n = radii(a_lat)
+    fix = (a_lat + 30.0 / (ra_m + a_h), a_lon + 30.0 / ((ra_n + a_h) * np.cos(a_lat)), a_h + 2.0)
+    plain = antenna_from_fix(lat, lon, h, *cl, *fix, TRIG_PLAIN, 0.0, 0.0, 0.0)
+    np.testing.assert_allclose(plain[:3], (-30.0, -30.0, 2.0), atol=0.05)
+    for mode in (TRIG_SERIES, TRIG_NEAR):
+        y = antenna_from_fix(lat, lon, h, *cl, *fix, mode, lat0, s0, c0)
+        assert y[3]
+        np.testing.assert_allclose(y[:3], plain[:3], rtol=0, atol=1e-9)
+    far = lat0 + 3e-3      # beyond SMALL_DLAT (1e-3) from the reference
+    plain = antenna_from_fix(far, lon, h, *cl, *fix, TRIG_PLAIN, 0.0, 0.0, 0.0)
+    assert not antenna_from_fix(far, lon, h, *cl, *fix, TRIG_SERIES, lat0, s0, c0)[3]
+    near = antenna_from_fix(far, lon, h, *cl, *fix, TRIG_NEAR, lat0, s0, c0)
+    assert not near[3]
+    np.testing.assert_allclose(near[:3], plain[:3], rtol=1e-12)
+    # the antimeridian: the state just west of it, the fix just east
+    e = 1e-7
+    plain = antenna_from_fix(lat, np.pi - e, h, 0.0, 0.0, 0.0, lat, -np.pi + e, h, TRIG_PLAIN, 0.0, 0.0, 0.0)
+    near = antenna_from_fix(lat, np.pi - e, h, 0.0, 0.0, 0.0, lat, -np.pi + e, h, TRIG_NEAR, lat0, s0, c0)
+    short = -2 * e * (rn + h) * np.cos(lat)        # the antenna is west of the fix: east offset < 0
+    assert plain[1] == pytest.approx(short, rel=1e-6) and near[1] == pytest.approx(short, rel=1e-6)
+    assert not antenna_from_fix(lat, np.pi - e, h, 0.0, 0.0, 0.0, lat, -np.pi + e, h, TRIG_SERIES, lat0, s0,
+                                c0)[3]
+
+
+def test_member_update_is_offered_only_for_members_the_model_can_read():
+    """member_update is a capability: the protocol's default answers None (the tight model
+    today), the loose model answers None for a layout other than its own INS one and for an
+    estimated lever arm, and hands out the serial or the parallel twin as asked."""
+    from mixnav.ins.error_model import StateLayout
+    from mixnav.measurements.base import MeasurementModel
+    from mixnav.measurements.loose import gnss_lever_block
+
+    lay, D, nav, model, logw0, w0, w_b = _case(50, 1e-3, 2.0, np.array([0.5, 0.2, -1.0]), True)
+    assert MeasurementModel().member_update(0, lay) is None
+    assert model.member_update(0, get_layout(17)) is None
+    u = model.member_update(0, lay)
+    assert u.rows == 6 and u.kernel is LM.pf_loose_update_serial and model.member_update(0, lay, True).kernel is \
+        LM.pf_loose_update
+    lever_lay = StateLayout("lever", [gnss_lever_block(0.1)])
+    assert LooseGnss(model.fixes, model.lever, lever_lay).member_update(0, lever_lay) is None
+
+
+def test_the_estimators_warm_up_reaches_every_model_class_that_offers_a_member_update():
+    """warm_member_updates walks the measurement-model classes (subclasses of subclasses too)
+    and calls each one's own warm_up_members once, with the layout and the twin asked: the
+    particle filter's warm-up compiles the loose model's kernel without naming it."""
+    from mixnav.measurements.base import MeasurementModel, warm_member_updates
+
+    calls = []
+
+    class Offering(MeasurementModel):
+        @classmethod
+        def warm_up_members(cls, layout, parallel=False):
+            calls.append((cls.__name__, layout, parallel))
+
+    class Inheriting(Offering):      # inherits the warm-up: not called twice
+        pass
+
+    class Deeper(Inheriting):
+        @classmethod
+        def warm_up_members(cls, layout, parallel=False):
+            calls.append((cls.__name__, layout, parallel))
+
+    warm_member_updates("L", True)
+    assert [c for c in calls if c[0] in ("Offering", "Inheriting", "Deeper")] == [("Offering", "L", True),
+                                                                                ("Deeper", "L", True)]

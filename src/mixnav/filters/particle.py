@@ -64,6 +64,7 @@ from ..engine.protocols import Correction, Epoch, Transition
 from ..engine.status import ABSURD, OK
 from ..errors import ArgumentError
 from ..linalg import cholesky_lower
+from ..measurements.base import warm_member_updates
 from ._no_clone import NoCloneEstimator
 from ._pf_kernels import CHUNKS, PARALLEL, SERIAL, pf_log_weights, pf_systematic
 from pydantic import Field
@@ -225,7 +226,6 @@ class ParticleEstimator(NoCloneEstimator):
         threads = self.parallel and threading.current_thread() is threading.main_thread()
         self._k = PARALLEL if threads else SERIAL
         self._threads = threads
-        self._warm_members = set()    # (model id, threads) whose fused member update is compiled
         self._sk = motion.particle_kernels(threads) if lay.is_ins else None
         N = self.N
         self.D = np.ascontiguousarray(self.rng.standard_normal((N, n)) @ _sqrt_psd(np.asarray(P0, float)).T)
@@ -334,19 +334,9 @@ class ParticleEstimator(NoCloneEstimator):
 
     def _member_update(self, epoch: Epoch):
         """The epoch's model's fused member update (:class:`~mixnav.measurements.base.MemberUpdate`)
-        for this filter's particles, or None (no such capability: the generic path). A model
-        offering one compiles its kernel on the first ask (``warm_up_members``; the engine warms
-        the estimator before it knows the models)."""
+        for this filter's particles, or None (no such capability: the generic path)."""
         ask = getattr(epoch.model, "member_update", None)
-        if ask is None:
-            return None
-        key = (id(epoch.model), self._threads)
-        if key not in self._warm_members:
-            self._warm_members.add(key)
-            warm = getattr(epoch.model, "warm_up_members", None)
-            if warm is not None:
-                warm(self.motion.layout, self._threads)
-        return ask(epoch.index, self.motion.layout, self._threads)
+        return None if ask is None else ask(epoch.index, self.motion.layout, self._threads)
 
     def _update_fused(self, epoch: Epoch, fused) -> Correction:
         """The update in the model's one fused kernel (``fused``, a ``MemberUpdate``):
@@ -483,6 +473,7 @@ class ParticleEstimator(NoCloneEstimator):
                        D.T.copy(), np.empty((N, n)))
         k.linear_step_drawn(D, np.eye(n), np.eye(n), np.zeros(CHUNKS, np.uint64), np.empty((N, n)), np.empty((N, n)))
         cholesky_lower(np.eye(n), np.empty((n, n)))
+        warm_member_updates(lay, self.parallel)    # the fused updates the models offer (loose GNSS)
         _WARM.add(key)
 
 

@@ -96,6 +96,21 @@ class MemberUpdate(NamedTuple):
     constants: tuple
 
 
+def warm_member_updates(layout, parallel: bool = False) -> None:
+    """Compile (or load from numba's cache) the fused member updates of every measurement-model
+    class defined so far (each subclass's own :meth:`MeasurementModel.warm_up_members`) for
+    members over ``layout``: an ensemble estimator's warm-up, outside the timed loop, naming
+    no model (a model class defined later compiles on its first epoch)."""
+    seen, todo = set(), [MeasurementModel]
+    while todo:
+        for sub in todo.pop().__subclasses__():
+            if sub not in seen:
+                seen.add(sub)
+                todo.append(sub)
+                if "warm_up_members" in vars(sub):
+                    sub.warm_up_members(layout, parallel)
+
+
 class MeasurementModel:
     """Base class of the measurement models (see the module docstring).
 
@@ -173,9 +188,11 @@ class MeasurementModel:
         estimator takes :meth:`predict_batch`. None here; the loose model has one."""
         return None
 
-    def warm_up_members(self, layout, parallel: bool = False) -> None:
-        """Compile (or load) the kernels :meth:`member_update` hands out for ``layout``, for an
-        estimator that will ask for them (none here)."""
+    @classmethod
+    def warm_up_members(cls, layout, parallel: bool = False) -> None:
+        """Compile (or load) the kernels :meth:`member_update` hands out for members over
+        ``layout`` (none here). A class method: an estimator's warm-up runs before it sees
+        the models (:func:`warm_member_updates`)."""
 
     def warm_up(self, nav: np.ndarray, aux: dict | None = None) -> None:
         """Compile (or load from numba's cache) the model's kernels outside the timed loop."""

@@ -246,11 +246,12 @@ class LooseGnss(MeasurementModel):
         self._members_for = (layout, arr)
         return arr
 
-    def warm_up_members(self, layout, parallel: bool = False) -> None:
-        """Compile (or load) the fused update's kernel for both row counts (3, 6)."""
-        if self._member_layout(layout) is None:
-            return
-        warm_loose_update(layout.as_array(), layout.n, parallel)
+    @classmethod
+    def warm_up_members(cls, layout, parallel: bool = False) -> None:
+        """Compile (or load) the fused update's kernel (``parallel``: its parallel twin) for both
+        row counts (3, 6), for members over an INS ``layout``."""
+        if getattr(layout, "is_ins", False):
+            warm_loose_update(layout.as_array(), layout.n, parallel)
 
     def predict_batch(self, i: int, navs: np.ndarray, w_b: np.ndarray, clocks=None):
         """``h`` at a batch of full states, for the ensemble estimators.
