@@ -8,6 +8,13 @@ lever arm, the velocity rows' lever term). Three callers inline them:
 batch of full states: the UKF, DD2, GMPF and the particle filter's generic path) and the
 particle filter's fused update (:mod:`mixnav.measurements._loose_members`), which takes
 the latitudes' sines and cosines by series about the nominal's (``trig``).
+
+What stays per caller, and why: the lever arm's rotation (the DCM of each state's
+quaternion in the EKF rows and the batch; Rodrigues on the nominal's rotated lever arm in
+the fused update, which builds no member state: a DCM per particle would cost it its
+vector loop) and the velocity rows' order of addition (batch ``((v + C00 w0) + C01 w1) +
+C02 w2``, EKF ``v + (C w)``, fused ``(v0 + dv) + exp(phi) (C0 w)``): one expression
+for all would change the bits of the EKF or of the UKF/DD2/GMPF runs.
 """
 
 from __future__ import annotations
