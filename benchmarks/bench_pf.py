@@ -238,10 +238,16 @@ def update_split(sim, lever, N=5000, n_epochs=12, seconds=360.0, repeats=15):
                               "cloud_moments_not_recomputed", "jitter_with_its_normals")}
     for c in caps:
         ep = c[0]
-        fix, lev = ep.model.batch_fix(ep.index)
         wb = np.asarray(ep.w_b, dtype=float)
-        calls = {"kernel": lambda: PK.pf_loose_update_serial(c[1], la, ep.nav, wb, lev, fix, c[2], c[3], 1e30, YT, logw,
-                                                             w, ym, Pyy, x, P, yp, pa, part, work),
+        if hasattr(ep.model, "member_update"):     # issue 33: the model's fused update, through the seam
+            u = ep.model.member_update(ep.index, lay)
+            kernel = (lambda c=c, ep=ep, wb=wb, u=u: u.kernel(c[1], ep.nav, wb, c[2], c[3], 1e30, YT, logw, w, ym, Pyy,
+                                                              x, P, yp, pa, part, work, *u.constants))
+        else:                                       # before: the motion model's kernel, the model's fix row
+            fix, lev = ep.model.batch_fix(ep.index)
+            kernel = (lambda c=c, ep=ep, wb=wb, fix=fix, lev=lev: PK.pf_loose_update_serial(
+                c[1], la, ep.nav, wb, lev, fix, c[2], c[3], 1e30, YT, logw, w, ym, Pyy, x, P, yp, pa, part, work))
+        calls = {"kernel": kernel,
                  "systematic": lambda: K.pf_systematic(w, 0.5, idx),
                  "cholesky": lambda: cholesky_lower(P, L),
                  "normals": lambda: rng.standard_normal(out=ZT),

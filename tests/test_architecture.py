@@ -173,8 +173,9 @@ def test_the_graph_reader_sees_imports(probe):
 
 #: the ensemble estimators reach the strapdown kernels only through the motion model's
 #: seam (engine/protocols.py MotionModel: member_states, propagate_members, ...), so they run
-#: on every motion model; the particle filter's fused strapdown step and loose update are the
-#: strapdown motion's too (StrapdownMotion.particle_kernels, ins/_particle_kernels.py).
+#: on every motion model; the particle filter's fused strapdown step is the strapdown
+#: motion's too (StrapdownMotion.particle_kernels, ins/_particle_kernels.py), its fused loose
+#: update the loose model's (member_update: test_no_filter_knows_a_concrete_measurement_model).
 ENSEMBLE_MODULES = ("mixnav.filters.ukf", "mixnav.filters.dd2", "mixnav.filters.gmpf",
                     "mixnav.filters._ukf_kernels", "mixnav.filters.particle", "mixnav.filters._pf_kernels")
 
@@ -211,3 +212,74 @@ def test_the_config_import_check_sees_a_forbidden_import():
             "mixnav.experiment.run": [("mixnav.io.outdir", 3)]}
     assert _config_reaches_beyond(fake) == ["mixnav.config.method_schema:7 imports mixnav.filters.imm",
                                             "mixnav.config.vehicle_schema:9 imports mixnav.io.outdir"]
+
+
+def _concrete_measurement_models() -> dict:
+    """Every measurement-model class mixnav defines (a subclass of ``MeasurementModel``, the
+    protocol itself left out), by name, found by importing each module of ``measurements``."""
+    import importlib
+    import pkgutil
+
+    import mixnav.measurements as pkg
+    from mixnav.measurements.base import MeasurementModel
+
+    found = {}
+    for info in pkgutil.walk_packages(pkg.__path__, pkg.__name__ + "."):
+        mod = importlib.import_module(info.name)
+        for name, obj in vars(mod).items():
+            if isinstance(obj, type) and issubclass(obj, MeasurementModel) and obj is not MeasurementModel:
+                found[name] = obj
+    return found
+
+
+def _concrete_model_uses(source: str, module: str, concrete: dict) -> list[str]:
+    """Where the code of ``module`` (its ``source``) imports a concrete measurement model from
+    ``mixnav.measurements`` (at any depth of the code) or
+    names one (an identifier or an attribute such as ``tight.TightGnss``; docstrings and
+    strings are prose)."""
+    import importlib
+
+    pkg = module.rpartition(".")[0]
+    bad = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.ImportFrom):
+            base = pkg.split(".")[:len(pkg.split(".")) - node.level + 1] if node.level else []
+            target = ".".join(base + ([node.module] if node.module else []))
+            if not target.startswith("mixnav.measurements"):
+                continue
+            for a in node.names:   # a module imported whole is seen where it is used (attributes)
+                if not _exists(f"{target}.{a.name}") and getattr(importlib.import_module(target), a.name,
+                                                                 None) in concrete.values():
+                    bad.append(f"{module}:{node.lineno} imports {a.name} from {target}")
+        elif isinstance(node, ast.Name) and node.id in concrete:
+            bad.append(f"{module}:{node.lineno} names {node.id}")
+        elif isinstance(node, ast.Attribute) and node.attr in concrete:
+            bad.append(f"{module}:{node.lineno} names {node.attr}")
+    return sorted(set(bad))
+
+
+def test_no_filter_knows_a_concrete_measurement_model():
+    """An estimator sees a measurement model only through its protocol (measurements/base.py:
+    rows, predict_batch, the optional member_update capability): no module of filters/ imports
+    or names a concrete model class (the particle filter once tested type(epoch.model) is
+    LooseGnss to pick its fused update; issue 33)."""
+    concrete = _concrete_measurement_models()
+    assert {"LooseGnss", "TightGnss", "PseudorangeGnss"} <= set(concrete)   # the search finds them
+    bad, paths = [], sorted((SRC / "filters").rglob("*.py"))
+    assert len(paths) > 10
+    for path in paths:
+        bad += _concrete_model_uses(path.read_text(), _module_name(path), concrete)
+    assert not bad, "\n".join(bad)
+
+
+def test_the_concrete_model_check_sees_an_import_and_a_name():
+    concrete = _concrete_measurement_models()
+    src = ("from ..measurements.kinds import POSITION\n"
+           "def f(epoch):\n"
+           "    from ..measurements.loose import LooseGnss, antenna_lla\n"
+           "    from ..measurements import tight\n"
+           "    return type(epoch.model) is LooseGnss or isinstance(epoch.model, tight.TightGnss)\n")
+    assert _concrete_model_uses(src, "mixnav.filters.fake", concrete) == [
+        "mixnav.filters.fake:3 imports LooseGnss from mixnav.measurements.loose",
+        "mixnav.filters.fake:5 names LooseGnss",
+        "mixnav.filters.fake:5 names TightGnss"]

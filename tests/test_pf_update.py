@@ -1,4 +1,5 @@
-"""The particle filter's fused loose GNSS update (pf_loose_update) against the generic path.
+"""The particle filter's fused loose GNSS update (the loose model's member_update:
+measurements/_loose_members.pf_loose_update) against the generic path.
 
 The generic path builds every particle's full state (pf_member_navs), asks the loose
 model's predict_batch for the predictions and weighs them (pf_log_weights, pf_moments).
@@ -19,6 +20,7 @@ from mixnav.config import load_scenario
 from mixnav.data import GnssFixes
 from mixnav.filters import _pf_kernels as K
 from mixnav.ins import _particle_kernels as PK
+from mixnav.measurements import _loose_members as LM
 from mixnav.filters.particle import ParticleFilter, linear_gaussian_particles
 from mixnav.ins.error_model import get_layout
 from mixnav.measurements.loose import LooseGnss
@@ -59,15 +61,17 @@ def _generic(lay, D, nav, model, logw0, w0, w_b):
     return dict(Y=Y, logw=logw, w=w, x=x, P=P, best=best, ess=ess, nis=nis)
 
 
-def _fused(kernel, lay, D, nav, model, logw0, w0, w_b):
+def _fused(parallel, lay, D, nav, model, logw0, w0, w_b, threshold=1e30, w=None):
+    """The model's fused member update (serial or parallel twin) called as the estimator does."""
     N, n = D.shape
-    fix, lever = model.batch_fix(0)
-    m = 6 if model.use_velocity else 3
-    out = dict(Y=np.empty((m, N)), logw=np.empty(N), w=np.empty(N), x=np.empty(n), P=np.empty((n, n)))
-    out["best"], out["ess"], out["nis"] = kernel(
-        D, lay.as_array(), nav, w_b, lever, fix, logw0, w0, 1e30, out["Y"], out["logw"], out["w"], np.empty(m),
-        np.empty((m, m)), out["x"], out["P"], np.empty((K.CHUNKS, 44)), np.empty((K.CHUNKS, 2 + n)),
-        np.empty((K.CHUNKS, n + n * n)), np.empty((n + 1, N)))
+    u = model.member_update(0, lay, parallel)
+    m = u.rows
+    out = dict(Y=np.empty((m, N)), logw=np.empty(N), w=np.empty(N) if w is None else w, x=np.empty(n),
+               P=np.empty((n, n)))
+    out["best"], out["ess"], out["nis"] = u.kernel(
+        D, nav, w_b, logw0, w0, threshold, out["Y"], out["logw"], out["w"], np.empty(m), np.empty((m, m)), out["x"],
+        out["P"], np.empty((K.CHUNKS, 2 + m + m * m)), np.empty((K.CHUNKS, 2 + n)), np.empty((K.CHUNKS, n + n * n)),
+        np.empty((n + 1, N)), *u.constants)
     out["Y"] = out["Y"].T
     return out
 
@@ -93,19 +97,20 @@ def test_the_fused_loose_update_equals_the_generic_path(att_sigma, pos_sigma, le
     if pos_sigma > 1000:
         assert np.abs(case[1][:, 6]).max() > 6.4e3 > np.abs(case[1][:, 6]).min()
     g = _generic(*case)
-    f = _fused(PK.pf_loose_update_serial, *case)
+    f = _fused(False, *case)
     for key in ("Y", "logw", "x", "P"):
         scale = np.abs(g[key]).max(axis=0) if key == "Y" else np.abs(g[key]).max()
         assert (np.abs(f[key] - g[key]) <= 1e-12 * scale).all(), (key, np.abs(f[key] - g[key]).max() / scale)
     assert np.abs(f["w"] - g["w"]).max() <= 1e-12 * g["w"].max()
     for key in ("best", "ess", "nis"):
         assert f[key] == pytest.approx(g[key], rel=1e-12), key
-    p = _fused(PK.pf_loose_update, *case)
+    p = _fused(True, *case)
     for key in f:
         np.testing.assert_array_equal(np.asarray(p[key]), np.asarray(f[key]))
     lay, D, nav, model, _, _, w_b = case
     YT = np.empty_like(f["Y"].T)
-    PK.pf_loose_predict(D, lay.as_array(), nav, w_b, *model.batch_fix(0)[::-1], YT)   # the predictions alone
+    la, lev, fix = model.member_update(0, lay).constants
+    LM.pf_loose_predict(D, la, nav, w_b, lev, fix, YT)   # the predictions alone
     np.testing.assert_array_equal(YT.T, f["Y"])
 
 
@@ -116,13 +121,9 @@ def test_the_fused_update_detects_a_degenerate_epoch_like_the_generic_one():
     lay, D, nav, model, logw0, w0, w_b = _case(500, 1e-3, 2.0, np.array([0.5, 0.2, -1.0]), True)
     model._rows[0, 0] += 1e4 / 6.4e6
     g = _generic(lay, D, nav, model, logw0, w0, w_b)
-    N, n = D.shape
-    fix, lever = model.batch_fix(0)
-    w = np.full(N, -1.0)
-    best, ess, nis = PK.pf_loose_update_serial(
-        D, lay.as_array(), nav, w_b, lever, fix, logw0, w0, 6 * 1e4 ** 2 / 1e3, np.empty((6, N)), np.empty(N), w,
-        np.empty(6), np.empty((6, 6)), np.empty(n), np.empty((n, n)), np.empty((K.CHUNKS, 44)),
-        np.empty((K.CHUNKS, 2 + n)), np.empty((K.CHUNKS, n + n * n)), np.empty((n + 1, N)))
+    w = np.full(D.shape[0], -1.0)
+    f = _fused(False, lay, D, nav, model, logw0, w0, w_b, threshold=6 * 1e4 ** 2 / 1e3, w=w)
+    best, ess = f["best"], f["ess"]
     assert best == pytest.approx(g["best"], rel=1e-12) and best > 6 * 1e4 ** 2 / 1e3
     assert ess == 0.0 and (w == -1.0).all()
 
@@ -216,8 +217,8 @@ def test_a_non_finite_particle_weighs_nothing_and_leaves_the_moments_finite():
     D = D.copy()
     D[7] = np.nan
     D[300, 4] = np.inf
-    for kernel in (PK.pf_loose_update_serial, PK.pf_loose_update):
-        f = _fused(kernel, lay, D, nav, model, logw0, w0, w_b)
+    for parallel in (False, True):
+        f = _fused(parallel, lay, D, nav, model, logw0, w0, w_b)
         assert f["w"][7] == 0.0 and f["w"][300] == 0.0 and np.isfinite(f["w"]).all()
         ok = np.isfinite(D).all(axis=1)
         xm = np.average(D[ok], axis=0, weights=f["w"][ok])
@@ -229,3 +230,89 @@ def test_a_non_finite_particle_weighs_nothing_and_leaves_the_moments_finite():
             moments(D, f["w"], x, P, np.empty((K.CHUNKS, D.shape[1] * (D.shape[1] + 1))))
             np.testing.assert_allclose(x, xm, rtol=1e-12, atol=1e-15)
             np.testing.assert_allclose(P, Pm, rtol=1e-10, atol=1e-14 * np.abs(Pm).max())
+
+
+def test_the_one_loose_prediction_agrees_across_its_trig_modes_and_wraps_the_longitude():
+    """_loose_kernel.antenna_from_fix, the per-state loose prediction the EKF rows, predict_batch
+    and the fused update share: with the latitudes' sines by series about a reference
+    (TRIG_SERIES, TRIG_NEAR) it equals the library-function mode (TRIG_PLAIN) to 1e-9 m
+    (round-off on Earth-radius products); a fix 30 m north-east and 2 m above the antenna
+    gives (-30, -30, 2) m to 0.05 m (the NED frame's curvature over 30 m); beyond
+    SMALL_DLAT from the reference TRIG_SERIES says it did not hold and TRIG_NEAR still equals
+    TRIG_PLAIN; across the antimeridian the east offset is the short way round (~2 m, not
+    40000 km) in TRIG_PLAIN and TRIG_NEAR, and TRIG_SERIES says it did not hold."""
+    from mixnav.geodesy.earth import radii
+    from mixnav.measurements._loose_kernel import TRIG_NEAR, TRIG_PLAIN, TRIG_SERIES, antenna_from_fix
+
+    lat0 = 0.6
+    s0, c0 = np.sin(lat0), np.cos(lat0)
+    lat, lon, h = lat0 + 2e-5, 0.2, 100.0
+    cl = (0.5, -0.3, 1.2)
+    rm, rn = radii(lat)
+    a_lat, a_lon, a_h = lat + cl[0] / (rm + h), lon + cl[1] / ((rn + h) * np.cos(lat)), h - cl[2]
+    ra_m, ra_n = radii(a_lat)
+    fix = (a_lat + 30.0 / (ra_m + a_h), a_lon + 30.0 / ((ra_n + a_h) * np.cos(a_lat)), a_h + 2.0)
+    plain = antenna_from_fix(lat, lon, h, *cl, *fix, TRIG_PLAIN, 0.0, 0.0, 0.0)
+    np.testing.assert_allclose(plain[:3], (-30.0, -30.0, 2.0), atol=0.05)
+    for mode in (TRIG_SERIES, TRIG_NEAR):
+        y = antenna_from_fix(lat, lon, h, *cl, *fix, mode, lat0, s0, c0)
+        assert y[3]
+        np.testing.assert_allclose(y[:3], plain[:3], rtol=0, atol=1e-9)
+    far = lat0 + 3e-3      # beyond SMALL_DLAT (1e-3) from the reference
+    plain = antenna_from_fix(far, lon, h, *cl, *fix, TRIG_PLAIN, 0.0, 0.0, 0.0)
+    assert not antenna_from_fix(far, lon, h, *cl, *fix, TRIG_SERIES, lat0, s0, c0)[3]
+    near = antenna_from_fix(far, lon, h, *cl, *fix, TRIG_NEAR, lat0, s0, c0)
+    assert not near[3]
+    np.testing.assert_allclose(near[:3], plain[:3], rtol=1e-12)
+    # the antimeridian: the state just west of it, the fix just east
+    e = 1e-7
+    plain = antenna_from_fix(lat, np.pi - e, h, 0.0, 0.0, 0.0, lat, -np.pi + e, h, TRIG_PLAIN, 0.0, 0.0, 0.0)
+    near = antenna_from_fix(lat, np.pi - e, h, 0.0, 0.0, 0.0, lat, -np.pi + e, h, TRIG_NEAR, lat0, s0, c0)
+    short = -2 * e * (rn + h) * np.cos(lat)        # the antenna is west of the fix: east offset < 0
+    assert plain[1] == pytest.approx(short, rel=1e-6) and near[1] == pytest.approx(short, rel=1e-6)
+    assert not antenna_from_fix(lat, np.pi - e, h, 0.0, 0.0, 0.0, lat, -np.pi + e, h, TRIG_SERIES, lat0, s0,
+                                c0)[3]
+
+
+def test_member_update_is_offered_only_for_members_the_model_can_read():
+    """member_update is a capability: the protocol's default answers None (the tight model
+    today), the loose model answers None for a layout other than its own INS one and for an
+    estimated lever arm, and hands out the serial or the parallel twin as asked."""
+    from mixnav.ins.error_model import StateLayout
+    from mixnav.measurements.base import MeasurementModel
+    from mixnav.measurements.loose import gnss_lever_block
+
+    lay, D, nav, model, logw0, w0, w_b = _case(50, 1e-3, 2.0, np.array([0.5, 0.2, -1.0]), True)
+    assert MeasurementModel().member_update(0, lay) is None
+    assert model.member_update(0, get_layout(17)) is None
+    u = model.member_update(0, lay)
+    assert u.rows == 6 and u.kernel is LM.pf_loose_update_serial and model.member_update(0, lay, True).kernel is \
+        LM.pf_loose_update
+    lever_lay = StateLayout("lever", [gnss_lever_block(0.1)])
+    assert LooseGnss(model.fixes, model.lever, lever_lay).member_update(0, lever_lay) is None
+
+
+def test_the_estimators_warm_up_reaches_every_model_class_that_offers_a_member_update():
+    """warm_member_updates walks the measurement-model classes (subclasses of subclasses too)
+    and calls each one's own warm_up_members once, with the layout and the twin asked: the
+    particle filter's warm-up compiles the loose model's kernel without naming it."""
+    from mixnav.measurements.base import MeasurementModel, warm_member_updates
+
+    calls = []
+
+    class Offering(MeasurementModel):
+        @classmethod
+        def warm_up_members(cls, layout, parallel=False):
+            calls.append((cls.__name__, layout, parallel))
+
+    class Inheriting(Offering):      # inherits the warm-up: not called twice
+        pass
+
+    class Deeper(Inheriting):
+        @classmethod
+        def warm_up_members(cls, layout, parallel=False):
+            calls.append((cls.__name__, layout, parallel))
+
+    warm_member_updates("L", True)
+    assert [c for c in calls if c[0] in ("Offering", "Inheriting", "Deeper")] == [("Offering", "L", True),
+                                                                                ("Deeper", "L", True)]

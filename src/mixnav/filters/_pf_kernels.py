@@ -1,9 +1,10 @@
 """Compiled kernels of the particle filters (numba, ``cache=True``).
 
-- the strapdown kernels (the fused propagation step, the particles as full states, the
-  fused loose GNSS update) live in :mod:`mixnav.ins._particle_kernels`, reached through the
-  motion model (:meth:`~mixnav.ins.strapdown.StrapdownMotion.particle_kernels`): this module
-  knows nothing of the strapdown INS.
+- the strapdown kernels (the fused propagation step, the particles as full states) live
+  in :mod:`mixnav.ins._particle_kernels`, reached through the motion model
+  (:meth:`~mixnav.ins.strapdown.StrapdownMotion.particle_kernels`); a fused measurement
+  update is the measurement model's (``member_update``: the loose model's in
+  :mod:`mixnav.measurements._loose_members`): this module knows neither.
 - :func:`pf_log_weights`: the Gaussian log-likelihood of each particle's
   prediction added to its log-weight, normalised (weights, ESS), and the predictions'
   prior-weighted moments and the NIS, in one pass.
@@ -217,7 +218,7 @@ def _jitter_chunk(c, D, idx, a, h, x, hL, ZT, Dn):
             for i in range(n):
                 Dn[t, i] = D[k, i]
         return
-    k = j1 - j0         # zero-based loops over row slices (vectorised: _loose_predict_soa)
+    k = j1 - j0         # zero-based loops over row slices (vectorised: measurements._loose_members)
     B = np.empty((n, k))
     for t in range(k):          # the drawn rows, read whole, into columns
         r = idx[j0 + t]
@@ -318,8 +319,9 @@ pf_linear_step_drawn_serial, pf_linear_step_drawn = serial_and_parallel(_pf_line
 
 class Kernels:
     """The kernels an estimator calls, serial or parallel (the same arithmetic); the strapdown
-    ones (propagation, full states, the loose update) are the motion model's
-    (:meth:`~mixnav.ins.strapdown.StrapdownMotion.particle_kernels`)."""
+    ones (propagation, full states) are the motion model's
+    (:meth:`~mixnav.ins.strapdown.StrapdownMotion.particle_kernels`), a fused update the
+    measurement model's (``member_update``)."""
 
     def __init__(self, parallel: bool):
         self.parallel = bool(parallel)

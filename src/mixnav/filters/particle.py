@@ -22,11 +22,12 @@ and give bitwise the same particles (docs/particle.md, "Speed").
 At a measurement epoch the particles are made full states about the current
 nominal, ``epoch.model.predict_batch`` gives ``(y, Y, R)``, and each log-weight
 gains the Gaussian log-likelihood ``-1/2 sum (y - Y_j)^2 / R`` (normalised in
-log space: subtract the maximum, exponentiate, divide by the sum). On a loose GNSS
-epoch (:class:`~mixnav.measurements.loose.LooseGnss`) one fused kernel
-(the motion model's ``particle_kernels().loose_update``) does all of it from the particle
-array, with the weighted mean and covariance: the generic path's numbers to round-off (tested;
-``fused=False`` keeps the generic path). The
+log space: subtract the maximum, exponentiate, divide by the sum). Where the epoch's model
+offers a fused member update (``epoch.model.member_update``, a
+:class:`~mixnav.measurements.base.MemberUpdate`: the loose GNSS model does) its one kernel
+does all of it from the particle array, with the weighted mean and covariance: the generic
+path's numbers to round-off (tested; ``fused=False`` keeps the generic path). The estimator
+asks for the capability and never names a measurement model. The
 effective sample size ``1 / sum w^2`` decides a systematic resampling (ESS <
 ``resample_threshold`` N); with ``roughening = h > 0`` (on by default, 0.9: plain SIR
 diverges on loose-demo, docs/particle.md) the Liu-West kernel jitter then
@@ -43,7 +44,7 @@ On a motion model other than the strapdown INS (dead reckoning, constant velocit
 particles go through the model's ensemble seam (:class:`~mixnav.engine.protocols.MotionModel`:
 ``propagate_members``, then the same noise step with ``F = I``; ``member_states`` and
 ``member_rates`` at an epoch) and every update takes the generic path; the fused
-strapdown step and loose update are the INS's fast path.
+strapdown step and a model's fused member update are the INS's fast path.
 
 Degeneracy: when no particle can explain the measurement (every log-likelihood
 non-finite, or the best particle's squared normalised innovation beyond
@@ -63,7 +64,7 @@ from ..engine.protocols import Correction, Epoch, Transition
 from ..engine.status import ABSURD, OK
 from ..errors import ArgumentError
 from ..linalg import cholesky_lower
-from ..measurements.loose import LooseGnss
+from ..measurements.base import warm_member_updates
 from ._no_clone import NoCloneEstimator
 from ._pf_kernels import CHUNKS, PARALLEL, SERIAL, pf_log_weights, pf_systematic
 from pydantic import Field
@@ -181,9 +182,10 @@ class ParticleEstimator(NoCloneEstimator):
         descheduled thread; only used from the main thread (numba's threading layers
         do not all allow concurrent use).
     fused : bool
-        Update on loose GNSS epochs with the fused kernel (``pf_loose_update``: no full
-        states, no ``predict_batch``; the generic path's numbers to round-off, tested).
-        False: every epoch through ``predict_batch`` (the reference, for tests and timing).
+        Update with the model's fused kernel where it offers one (``member_update``; the
+        loose model's ``pf_loose_update``: no full states, no ``predict_batch``; the generic
+        path's numbers to round-off, tested). False: every epoch through ``predict_batch``
+        (the reference, for tests and timing).
     """
 
     needs_step_inputs = True
@@ -213,7 +215,7 @@ class ParticleEstimator(NoCloneEstimator):
         n = lay.n
         self.n = n
         self.motion = motion
-        # the strapdown INS: the fused compiled step and loose update; any other motion
+        # the strapdown INS: the fused compiled step and member updates; any other motion
         # model: its ensemble seam (propagate_members, member_states), the noise added after
         self.layout_array = lay.as_array() if lay.is_ins else None
         self._clk = lay.clk
@@ -223,6 +225,7 @@ class ParticleEstimator(NoCloneEstimator):
         self.rng = rng
         threads = self.parallel and threading.current_thread() is threading.main_thread()
         self._k = PARALLEL if threads else SERIAL
+        self._threads = threads
         self._sk = motion.particle_kernels(threads) if lay.is_ins else None
         N = self.N
         self.D = np.ascontiguousarray(self.rng.standard_normal((N, n)) @ _sqrt_psd(np.asarray(P0, float)).T)
@@ -243,8 +246,7 @@ class ParticleEstimator(NoCloneEstimator):
         self._fdec = np.empty(4)
         self._part = np.empty((CHUNKS, n + n * n))
         self._pa = np.empty((CHUNKS, 2 + n))
-        self._yp = np.empty((CHUNKS, 2 + 6 + 36))     # loose: at most 6 rows
-        self._Yl = {}                                # the loose predictions and their moments, by m
+        self._Yl = {}                                # a fused update's predictions, moments, sums, by m
         self._work = np.empty((n + 1, N))        # the fused update's state-major scratch
         self._L = np.zeros((n, n))
         self._scratch = np.zeros((n, n))
@@ -320,10 +322,9 @@ class ParticleEstimator(NoCloneEstimator):
             self.motion.member_states(epoch.nav, self._sensor, self.D, navs)
             out = predict_members(epoch, self.D, navs, self._clk, "the particle filter needs", self.motion)
         else:
-            if self.fused and type(epoch.model) is LooseGnss:   # an INS layout: gyro bias at 9
-                fx = epoch.model.batch_fix(epoch.index)
-                if fx is not None:
-                    return self._update_loose(epoch, *fx)
+            fused = self._member_update(epoch) if self.fused else None
+            if fused is not None:
+                return self._update_fused(epoch, fused)
             self._sk.member_navs(epoch.nav, self.D, self.layout_array, navs, self._sensors, self._scr)
             out = predict_members(epoch, self.D, navs, self._clk, "the particle filter needs")
         if out is None:
@@ -331,19 +332,25 @@ class ParticleEstimator(NoCloneEstimator):
         y, Y, r = out
         return self.weigh(np.asarray(y, float), np.ascontiguousarray(Y, dtype=float), np.asarray(r, float))
 
-    def _update_loose(self, epoch: Epoch, fix: np.ndarray, lever: np.ndarray) -> Correction:
-        """The loose GNSS update in one fused kernel (``pf_loose_update``): predictions,
-        log-weights, NIS, weights, ESS, mean and covariance from the particle array."""
-        m = 6 if epoch.model.use_velocity else 3
+    def _member_update(self, epoch: Epoch):
+        """The epoch's model's fused member update (:class:`~mixnav.measurements.base.MemberUpdate`)
+        for this filter's particles, or None (no such capability: the generic path)."""
+        ask = getattr(epoch.model, "member_update", None)
+        return None if ask is None else ask(epoch.index, self.motion.layout, self._threads)
+
+    def _update_fused(self, epoch: Epoch, fused) -> Correction:
+        """The update in the model's one fused kernel (``fused``, a ``MemberUpdate``):
+        predictions, log-weights, NIS, weights, ESS, mean and covariance from the particle array."""
+        m = fused.rows
         bufs = self._Yl.get(m)
-        if bufs is None:    # allocated once per row count (3 or 6)
-            bufs = self._Yl[m] = (np.empty((m, self.N)), np.empty(m), np.empty((m, m)))
-        YT, ym, Pyy = bufs
+        if bufs is None:    # allocated once per row count
+            bufs = self._Yl[m] = (np.empty((m, self.N)), np.empty(m), np.empty((m, m)),
+                                  np.empty((CHUNKS, 2 + m + m * m)))
+        YT, ym, Pyy, yp = bufs
         logw, w = self._logw_new, self._w_new
-        best, ess, nis = self._sk.loose_update(self.D, self.layout_array, epoch.nav,
-                                               np.asarray(epoch.w_b, dtype=float), lever, fix, self.logw, self.w,
-                                               m * self.absurd_sigma ** 2, YT, logw, w, ym, Pyy, self._x, self._P,
-                                               self._yp, self._pa, self._part, self._work)
+        best, ess, nis = fused.kernel(self.D, epoch.nav, np.asarray(epoch.w_b, dtype=float), self.logw, self.w,
+                                      m * self.absurd_sigma ** 2, YT, logw, w, ym, Pyy, self._x, self._P, yp,
+                                      self._pa, self._part, self._work, *fused.constants)
         return self._weighed(best, ess, nis, m, logw, w, moments=False)
 
     def weigh(self, y: np.ndarray, Y: np.ndarray, r: np.ndarray) -> Correction:
@@ -465,13 +472,8 @@ class ParticleEstimator(NoCloneEstimator):
         k.jitter_drawn(D, np.zeros(N, dtype=np.int64), 0.5, 0.5, np.zeros(n), np.eye(n), np.zeros(CHUNKS, np.uint64),
                        D.T.copy(), np.empty((N, n)))
         k.linear_step_drawn(D, np.eye(n), np.eye(n), np.zeros(CHUNKS, np.uint64), np.empty((N, n)), np.empty((N, n)))
-        fix = np.r_[nav[7:10], np.ones(3), np.zeros(3), np.ones(3)]
-        for m in (3, 6):
-            sk.loose_update(D, lay.as_array(), nav, np.zeros(3), np.zeros(3), fix, np.zeros(N), w, 1e8,
-                            np.empty((m, N)), np.empty(N), np.empty(N), np.empty(m), np.empty((m, m)), np.empty(n),
-                            np.empty((n, n)), np.empty((CHUNKS, 2 + 6 + 36)), np.empty((CHUNKS, 2 + n)),
-                            np.empty((CHUNKS, n + n * n)), np.empty((n + 1, N)))
         cholesky_lower(np.eye(n), np.empty((n, n)))
+        warm_member_updates(lay, self.parallel)    # the fused updates the models offer (loose GNSS)
         _WARM.add(key)
 
 

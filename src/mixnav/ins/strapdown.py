@@ -155,8 +155,8 @@ class StrapdownMotion:
         """The particle filter's compiled strapdown kernels, serial or parallel (the same
         arithmetic, :mod:`mixnav.ins._particle_kernels`), each one compiled call per use:
         ``step`` (the particles propagated over an IMU block, fused per particle, plus their
-        process noise), ``member_navs`` (the particles as full states), ``loose_update`` (a
-        loose GNSS update straight from the particle array); ``scratch`` the width of their
+        process noise), ``member_navs`` (the particles as full states; a fused measurement
+        update is the measurement model's, ``member_update``); ``scratch`` the width of their
         per-particle scratch rows. A static method: the estimator's warm-up needs the set
         before it has a motion model."""
         return _PARTICLES_PARALLEL if parallel else _PARTICLES_SERIAL

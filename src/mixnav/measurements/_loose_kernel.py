@@ -1,4 +1,21 @@
-"""Compiled loose-coupling measurement model (see :class:`LooseGnss` for the maths)."""
+"""Compiled loose-coupling measurement model (see :class:`LooseGnss` for the maths).
+
+The per-state loose prediction is written once here: :func:`antenna_from_fix` (the
+antenna at a lever arm already rotated to NED, and its position relative to the fix in
+NED metres, the longitude wrapped) and :func:`lever_rate` (the body rate crossed with the
+lever arm, the velocity rows' lever term). Three callers inline them:
+:func:`loose_zhr` (the EKF's rows, ``z = -Y``), :func:`loose_predict_batch` (``h`` at a
+batch of full states: the UKF, DD2, GMPF and the particle filter's generic path) and the
+particle filter's fused update (:mod:`mixnav.measurements._loose_members`), which takes
+the latitudes' sines and cosines by series about the nominal's (``trig``).
+
+What stays per caller, and why: the lever arm's rotation (the DCM of each state's
+quaternion in the EKF rows and the batch; Rodrigues on the nominal's rotated lever arm in
+the fused update, which builds no member state: a DCM per particle would cost it its
+vector loop) and the velocity rows' order of addition (batch ``((v + C00 w0) + C01 w1) +
+C02 w2``, EKF ``v + (C w)``, fused ``(v0 + dv) + exp(phi) (C0 w)``): one expression
+for all would change the bits of the EKF or of the UKF/DD2/GMPF runs.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +24,75 @@ import math
 import numpy as np
 from numba import njit
 
-from ..ins._kernels import quat_to_dcm_into, radii
+from ..geodesy.earth import A_WGS84, E2_WGS84
+from ..ins._kernels import SMALL_DLAT, quat_to_dcm_into, radii
+from ..ins._kernels import sincos_near as _sincos_near
+from ..ins._kernels import sincos_series as _sincos_series
+
+#: how :func:`antenna_from_fix` takes the sines and cosines of the state's and the
+#: antenna's latitudes: the library functions and ``radii`` (the EKF rows, the batch
+#: prediction); the series about a reference latitude, straight-line code that
+#: vectorises, flagging where it did not hold (the particle filter's fused update);
+#: ``sincos_near`` about it, exact where the series would not hold (its redo)
+TRIG_PLAIN, TRIG_SERIES, TRIG_NEAR = 0, 1, 2
+
+
+@njit(cache=True, inline="always")
+def _radii_near(s):
+    """Meridian and prime-vertical radii from ``s = sin(lat)`` with one division
+    (``ins._kernels.radii`` to round-off; the fused update's, vectorised)."""
+    iw = 1.0 / (1.0 - E2_WGS84 * (s * s))
+    rn = A_WGS84 * math.sqrt(iw)
+    return rn * (1.0 - E2_WGS84) * iw, rn
+
+
+@njit(cache=True, inline="always")
+def antenna_from_fix(lat, lon, h, cln, cle, cld, fix_lat, fix_lon, fix_h, trig, lat0, s0, c0):
+    """The antenna of a state at ``lat, lon, h`` [rad, rad, m] whose lever arm rotated to
+    NED is ``cln, cle, cld`` [m], relative to the fix ``fix_lat, fix_lon, fix_h``:
+    ``(north, east, down, held)`` [m], NED metres with the radii at the antenna, the
+    longitude difference wrapped to [-pi, pi). ``trig`` (:data:`TRIG_PLAIN`,
+    :data:`TRIG_SERIES`, :data:`TRIG_NEAR`) says how the latitudes' sines and cosines are
+    taken; ``lat0, s0, c0`` the reference latitude and its sine and cosine (unused with
+    TRIG_PLAIN). ``held``: both latitudes within ``SMALL_DLAT`` of ``lat0`` and the
+    longitude inside its wrap (with TRIG_SERIES the numbers are good only where it is
+    True: no modulo there, so the loop vectorises). The modes differ in round-off only."""
+    if trig == TRIG_PLAIN:
+        rm, rn = radii(lat)
+        cl = math.cos(lat)
+    else:
+        if trig == TRIG_SERIES:
+            sl, cl = _sincos_series(lat - lat0, s0, c0)
+        else:
+            sl, cl = _sincos_near(lat, lat0, s0, c0)
+        rm, rn = _radii_near(sl)
+    a_lat = lat + cln / (rm + h)
+    a_lon = lon + cle / ((rn + h) * cl)
+    a_h = h - cld
+    if trig == TRIG_PLAIN:
+        rm_a, rn_a = radii(a_lat)
+        ca = math.cos(a_lat)
+    else:
+        if trig == TRIG_SERIES:
+            sa, ca = _sincos_series(a_lat - lat0, s0, c0)
+        else:
+            sa, ca = _sincos_near(a_lat, lat0, s0, c0)
+        rm_a, rn_a = _radii_near(sa)
+    t = fix_lon - a_lon + math.pi
+    inside = (0.0 <= t) & (t < 2.0 * math.pi)
+    if trig == TRIG_SERIES or inside:   # the wrap's own arithmetic, without the modulo
+        dlon = t - math.pi
+    else:
+        dlon = t % (2.0 * math.pi) - math.pi
+    held = (abs(lat - lat0) < SMALL_DLAT) & (abs(a_lat - lat0) < SMALL_DLAT) & inside
+    return -(fix_lat - a_lat) * (rm_a + a_h), -dlon * (rn_a + a_h) * ca, fix_h - a_h, held
+
+
+@njit(cache=True, inline="always")
+def lever_rate(wx, wy, wz, l0, l1, l2):
+    """``w x l``: the body rate ``w`` [rad/s] crossed with the lever arm ``l`` [m] (body
+    frame [m/s]; rotated to NED it is the antenna's velocity relative to the IMU)."""
+    return wy * l2 - wz * l1, wz * l0 - wx * l2, wx * l1 - wy * l0
 
 
 @njit(cache=True)
@@ -27,22 +112,14 @@ def loose_zhr(nav, lever, fix, w_b, use_vel, n, i_bg):
     cl = np.empty(3)
     for i in range(3):
         cl[i] = c[i, 0] * lever[0] + c[i, 1] * lever[1] + c[i, 2] * lever[2]
-    lat, lon, h = nav[7], nav[8], nav[9]
-    rm, rn = radii(lat)
-    ant_lat = lat + cl[0] / (rm + h)
-    ant_lon = lon + cl[1] / ((rn + h) * math.cos(lat))
-    ant_h = h - cl[2]
     m = 6 if use_vel else 3
     z = np.empty(m)
     H = np.zeros((m, n))
     r = np.empty(m)
-    # NED displacement fix - antenna, radii at the antenna estimate
-    rm_a, rn_a = radii(ant_lat)
-    dlon = lla_fix[1] - ant_lon
-    dlon = (dlon + math.pi) % (2.0 * math.pi) - math.pi
-    z[0] = (lla_fix[0] - ant_lat) * (rm_a + ant_h)
-    z[1] = dlon * (rn_a + ant_h) * math.cos(ant_lat)
-    z[2] = -(lla_fix[2] - ant_h)
+    # NED displacement fix - antenna, radii at the antenna estimate: minus the prediction
+    y0, y1, y2, _ = antenna_from_fix(nav[7], nav[8], nav[9], cl[0], cl[1], cl[2], lla_fix[0], lla_fix[1],
+                                     lla_fix[2], TRIG_PLAIN, 0.0, 0.0, 0.0)
+    z[0], z[1], z[2] = -y0, -y1, -y2
     # H_pos = [-[(C l) x], 0, I]
     H[0, 1], H[0, 2] = cl[2], -cl[1]
     H[1, 0], H[1, 2] = -cl[2], cl[0]
@@ -51,9 +128,7 @@ def loose_zhr(nav, lever, fix, w_b, use_vel, n, i_bg):
         H[i, 6 + i] = 1.0
         r[i] = pos_sig[i] * pos_sig[i]
     if use_vel:
-        wl0 = w_b[1] * lever[2] - w_b[2] * lever[1]
-        wl1 = w_b[2] * lever[0] - w_b[0] * lever[2]
-        wl2 = w_b[0] * lever[1] - w_b[1] * lever[0]
+        wl0, wl1, wl2 = lever_rate(w_b[0], w_b[1], w_b[2], lever[0], lever[1], lever[2])
         cw = np.empty(3)
         for i in range(3):
             cw[i] = c[i, 0] * wl0 + c[i, 1] * wl1 + c[i, 2] * wl2
@@ -89,20 +164,10 @@ def loose_predict_batch(navs, lever, fix, w_b, use_vel, Y):
         quat_to_dcm_into(nav[0:4], c)
         for i in range(3):
             cl[i] = c[i, 0] * lever[0] + c[i, 1] * lever[1] + c[i, 2] * lever[2]
-        lat, lon, h = nav[7], nav[8], nav[9]
-        rm, rn = radii(lat)
-        a_lat = lat + cl[0] / (rm + h)
-        a_lon = lon + cl[1] / ((rn + h) * math.cos(lat))
-        a_h = h - cl[2]
-        rm_a, rn_a = radii(a_lat)
-        dlon = (fix[1] - a_lon + math.pi) % (2.0 * math.pi) - math.pi
-        Y[j, 0] = -(fix[0] - a_lat) * (rm_a + a_h)
-        Y[j, 1] = -dlon * (rn_a + a_h) * math.cos(a_lat)
-        Y[j, 2] = fix[2] - a_h
+        Y[j, 0], Y[j, 1], Y[j, 2], _ = antenna_from_fix(nav[7], nav[8], nav[9], cl[0], cl[1], cl[2], fix[0],
+                                                        fix[1], fix[2], TRIG_PLAIN, 0.0, 0.0, 0.0)
         if use_vel:
             w = w_b[j]
-            wl0 = w[1] * lever[2] - w[2] * lever[1]
-            wl1 = w[2] * lever[0] - w[0] * lever[2]
-            wl2 = w[0] * lever[1] - w[1] * lever[0]
+            wl0, wl1, wl2 = lever_rate(w[0], w[1], w[2], lever[0], lever[1], lever[2])
             for i in range(3):
                 Y[j, 3 + i] = nav[4 + i] + c[i, 0] * wl0 + c[i, 1] * wl1 + c[i, 2] * wl2

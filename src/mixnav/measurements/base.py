@@ -23,11 +23,16 @@ and the clone part of each correction is handed to
 The ensemble family (UKF, particle filters) evaluates ``h`` on a batch of
 full states instead of linearising: :meth:`predict_batch` (the loose, tight
 and multi-system pseudorange models have it; a model that reads auxiliary
-states sets ``batch_aux`` and is given each member's).
+states sets ``batch_aux`` and is given each member's). A model may also offer
+a fused update of a weighted ensemble straight from the members' error states
+(:meth:`MeasurementModel.member_update`, a :class:`MemberUpdate`; the loose
+model does, for the particle filter): the estimator asks for it and falls back
+on :meth:`predict_batch` where the answer is None, and never names the model.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -56,6 +61,54 @@ class Rows(NamedTuple):
     R: np.ndarray
     kinds: np.ndarray
     channels: np.ndarray | None = None
+
+
+class MemberUpdate(NamedTuple):
+    """A model's fused update of a weighted ensemble at one epoch
+    (:meth:`MeasurementModel.member_update`): the members' predictions, log-weights,
+    weights and moments in one compiled call, with no full state built.
+
+    The estimator calls ``kernel(D, nav, w_b, logw0, w0, threshold, YT, logw, w, ym, Pyy, x,
+    P, yp, pa, part, work, *constants)`` with the members ``D`` (N, n) (error states about
+    the nominal ``nav`` (10,), body rate ``w_b`` (3,) [rad/s]), their prior log-weights
+    ``logw0`` and weights ``w0`` (N,) and the degeneracy bound ``threshold`` on the smallest
+    squared normalised innovation; it receives the predictions ``YT`` (m, N), the new
+    log-weights ``logw`` and normalised weights ``w`` (N,), the prior-weighted mean ``ym``
+    (m,) and covariance ``Pyy`` (m, m) of the predictions, the weighted mean ``x`` (n,) and
+    covariance ``P`` (n, n) of the members; scratch ``yp`` (CHUNKS, >= 2 + m + m m), ``pa``
+    (CHUNKS, >= 2 + n), ``part`` (CHUNKS, >= n + n n), ``work`` (n + 1, N)
+    (``mixnav.linalg.CHUNKS``). It returns ``(best, ess, nis)``: the smallest squared
+    normalised innovation, the effective sample size (0 when degenerate: ``w``, ``x``,
+    ``P`` then unset) and the NIS of the prior-weighted mean prediction.
+
+    Attributes
+    ----------
+    rows : int
+        ``m``, the epoch's measurement rows.
+    kernel : callable
+        The compiled update (serial or parallel twin, as asked).
+    constants : tuple
+        The model's own arguments for this epoch, passed last.
+    """
+
+    rows: int
+    kernel: Callable
+    constants: tuple
+
+
+def warm_member_updates(layout, parallel: bool = False) -> None:
+    """Compile (or load from numba's cache) the fused member updates of every measurement-model
+    class defined so far (each subclass's own :meth:`MeasurementModel.warm_up_members`) for
+    members over ``layout``: an ensemble estimator's warm-up, outside the timed loop, naming
+    no model (a model class defined later compiles on its first epoch)."""
+    seen, todo = set(), [MeasurementModel]
+    while todo:
+        for sub in todo.pop().__subclasses__():
+            if sub not in seen:
+                seen.add(sub)
+                todo.append(sub)
+                if "warm_up_members" in vars(sub):
+                    sub.warm_up_members(layout, parallel)
 
 
 class MeasurementModel:
@@ -127,6 +180,19 @@ class MeasurementModel:
         differenced models add it with the particle-filter issue. A model with
         :attr:`batch_aux` also takes ``aux=`` (name -> (N, size) per member)."""
         raise NotImplementedError(f"{type(self).__name__} does not evaluate h on a batch of states yet")
+
+    def member_update(self, i: int, layout, parallel: bool = False) -> MemberUpdate | None:
+        """The fused ensemble update of epoch ``i`` (:class:`MemberUpdate`) for members that
+        are error states over ``layout`` (a ``StateLayout``; ``parallel``: the kernel twin on
+        numba's threads), or None: the model has none for that layout or that epoch, and the
+        estimator takes :meth:`predict_batch`. None here; the loose model has one."""
+        return None
+
+    @classmethod
+    def warm_up_members(cls, layout, parallel: bool = False) -> None:
+        """Compile (or load) the kernels :meth:`member_update` hands out for members over
+        ``layout`` (none here). A class method: an estimator's warm-up runs before it sees
+        the models (:func:`warm_member_updates`)."""
 
     def warm_up(self, nav: np.ndarray, aux: dict | None = None) -> None:
         """Compile (or load from numba's cache) the model's kernels outside the timed loop."""

@@ -36,7 +36,8 @@ from ..data import GnssFixes
 from ..errors import ArgumentError
 from ..ins.error_model import StateBlock, StateLayout
 from ._loose_kernel import loose_predict_batch, loose_zhr
-from .base import MeasurementModel, Rows
+from ._loose_members import pf_loose_update, pf_loose_update_serial, warm_loose_update
+from .base import MeasurementModel, MemberUpdate, Rows
 from .kinds import POSITION, VELOCITY, channel_id
 from ..geodesy.frames import displace
 
@@ -163,6 +164,7 @@ class LooseGnss(MeasurementModel):
         self._dt_col = layout.slice(TIME_OFFSET).start if layout.has(TIME_OFFSET) else -1
         self._acc, self._acc_sigma = (fix_accelerations(fixes.time, fixes.vel_n, fixes.vel_sigma)
                                       if self._dt_col >= 0 and self.use_velocity else (None, None))
+        self._members_for = None   # (layout, its offset table or None): member_update's last answer
 
     kinds = ("position", "velocity")
 
@@ -215,15 +217,41 @@ class LooseGnss(MeasurementModel):
         if len(self.times) and self._lever_sl is None and self._dt_col < 0:
             self.predict_batch(0, np.array(nav, dtype=float)[None], np.zeros(3))
 
-    def batch_fix(self, i: int):
-        """``(fix, lever)`` for a fused ensemble update of fix ``i`` (the particle filter's,
-        ``ins._particle_kernels.pf_loose_update``): the fix's row (12,: lat, lon, h [rad, rad, m],
+    def member_update(self, i: int, layout, parallel: bool = False) -> MemberUpdate | None:
+        """The fused update of fix ``i`` for an ensemble of error states over ``layout``
+        (:class:`~mixnav.measurements.base.MemberUpdate`; the particle filter's):
+        :func:`~mixnav.measurements._loose_members.pf_loose_update` with the constants
+        ``(layout array, lever arm (3,) [m], the fix's row (12,): lat, lon, h [rad, rad, m],
         position sigmas N, E, D [m], velocity NED and its sigmas [m/s]; the velocity part
-        unused when ``use_velocity`` is off) and the lever arm (3,) [m]; None where
-        :meth:`predict_batch` refuses (an estimated lever arm or time offset)."""
+        unused when use_velocity is off)``. None where :meth:`predict_batch` refuses (an
+        estimated lever arm or time offset) or the members are not the INS error states
+        of this model's layout (their attitude, velocity, position and gyro bias are read
+        at the INS offsets)."""
         if self._lever_sl is not None or self._dt_col >= 0:
             return None
-        return self._rows[i], self.lever
+        arr = self._member_layout(layout)
+        if arr is None:
+            return None
+        kernel = pf_loose_update if parallel else pf_loose_update_serial
+        return MemberUpdate(6 if self.use_velocity else 3, kernel, (arr, self.lever, self._rows[i]))
+
+    def _member_layout(self, layout):
+        """The offset table of ``layout`` when its members can be read by the fused update (an
+        INS layout of this model's size), else None; kept for the last layout asked."""
+        last = self._members_for
+        if last is not None and last[0] is layout:
+            return last[1]
+        ok = getattr(layout, "is_ins", False) and layout.n == self._n and layout.bg.start == self._i_bg
+        arr = layout.as_array() if ok else None
+        self._members_for = (layout, arr)
+        return arr
+
+    @classmethod
+    def warm_up_members(cls, layout, parallel: bool = False) -> None:
+        """Compile (or load) the fused update's kernel (``parallel``: its parallel twin) for both
+        row counts (3, 6), for members over an INS ``layout``."""
+        if getattr(layout, "is_ins", False):
+            warm_loose_update(layout.as_array(), layout.n, parallel)
 
     def predict_batch(self, i: int, navs: np.ndarray, w_b: np.ndarray, clocks=None):
         """``h`` at a batch of full states, for the ensemble estimators.
