@@ -180,11 +180,6 @@ def read_rinex_ins(ds: Dataset, source: str, folder) -> RinexInputs:
     multi = several_systems(c)
     if multi:
         check_first_frequency(c, source)
-        for i, m in enumerate(ds.methods):   # before any file is read
-            if m.type == "tdcp-ekf":
-                raise ConfigError(f"method '{m.name}': TDCP carries one receiver clock, GPS alone so far; with "
-                                  f"systems = {list(c.systems)} use tight-ekf (an inter-system offset per further "
-                                  "system) or set systems = [\"G\"]", file=source, key=f"methods[{i}].type")
     obs = read_observations(obs_files, get_reader("raw-gnss", c.format, key="raw_gnss.format", file=source),
                             ReadOptions(c, folder))
     if multi:   # every navigation file as one MultiEphemeris; a listed system without records is warned about
