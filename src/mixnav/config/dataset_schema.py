@@ -146,7 +146,7 @@ class RawGnss(Strict):
     ``sigma_b`` (pseudorange sigma ``sqrt(a^2 + b^2 / sin^2(el))``),
     ``troposphere`` (Saastamoinen), ``ionosphere`` (Klobuchar, when the
     navigation header has its coefficients), ``weights`` (``"elevation"``: the sigma above;
-    ``"rtklib"``: RTKLIB pntpos's variance model, the SPP only), ``validate`` and ``fde``
+    ``"rtklib"`` / ``"rtklib-2.4.3"``: RTKLIB demo5's / 2.4.3's pntpos variance model, the SPP only), ``validate`` and ``fde``
     (RTKLIB-style validation of each epoch and RAIM FDE, default off) set the solver
     (:class:`mixnav.gnss.spp.SppOptions`); ``max_sv_time_uncertainty``
     rejects measurements the receiver reports as worse than it (Android logs).
@@ -174,9 +174,10 @@ class RawGnss(Strict):
     sigma_b: quantity(u.LENGTH, nonnegative=True) = 3.0  # type: ignore[valid-type]
     troposphere: bool = True
     ionosphere: bool = True
-    #: the SPP's pseudorange weights: "elevation" (sigma_a, sigma_b) or "rtklib" (RTKLIB pntpos's
-    #: variance model: code, broadcast accuracy, ionosphere, troposphere; gnss/spp.py)
-    weights: Literal["elevation", "rtklib"] = "elevation"
+    #: the SPP's pseudorange weights: "elevation" (sigma_a, sigma_b) or "rtklib" / "rtklib-2.4.3"
+    #: (RTKLIB demo5's / 2.4.3 b34's pntpos variance model: code, broadcast accuracy, ionosphere,
+    #: troposphere; gnss/spp.py)
+    weights: Literal["elevation", "rtklib", "rtklib-2.4.3"] = "elevation"
     #: validate each SPP epoch as RTKLIB pntpos does (chi-square of the weighted residuals at
     #: 99.9 %, GDOP <= 30; a failing epoch is no solution), and with ``fde`` try leaving out
     #: each satellite (RAIM FDE); off by default (gnss/spp.py, "Validation"). The key is
