@@ -17,7 +17,10 @@ epochs in the file), times each run (wall time, best of 5, ``time.perf_counter``
 ``subprocess.run``, and the child's CPU time), times process start and reading alone, runs
 the variants that could explain a difference from the numbers quoted in issue 36 (one option
 changed at a time), and writes ``rtklib_urbannav.md`` and ``.json`` into ``--out`` with the
-option files inlined. About 1 min.
+option files inlined, and 2.4.3 b34's per-epoch RAIM solutions as ``rtklib_urbannav_b34_epochs.csv``
+(:func:`write_b34_epochs`: what benchmarks/urbannav_spp.py scores mixnav on, epoch by epoch, and
+tests/test_spp_validation.py checks mixnav's rewrite of b34's procedure against). About 1 min
+on a quiet machine.
 
 The binaries are not part of this project. Build them under /tmp (nothing of RTKLIB goes
 into the repository)::
@@ -240,6 +243,31 @@ def run_all(args, bins: dict, work: Path, obs: Path, navs: list[Path], n_epochs:
                       f"{row['epochs_solved']:4d}/{n_epochs}  hRMSE {row.get('h_rmse_m', float('nan')):7.2f} m"
                       f"  {best:.3f} s", flush=True)
     return rows
+
+
+#: the per-epoch file of 2.4.3 b34's RAIM runs (module docstring)
+B34_EPOCHS = "rtklib_urbannav_b34_epochs.csv"
+
+
+def gps_seconds_of_week(stamp: str) -> float:
+    """GPS seconds of week of a ``.pos`` time stamp (``YYYY/MM/DD HH:MM:SS.sss``, GPST)."""
+    import datetime as dt
+    t = dt.datetime.strptime(stamp, "%Y/%m/%d %H:%M:%S.%f") - dt.datetime(1980, 1, 6)
+    return t.total_seconds() % 604800.0
+
+
+def write_b34_epochs(path: Path, work: Path) -> int:
+    """2.4.3 b34's RAIM solutions of every system set, one line per solved epoch: the set's
+    letters, GPS seconds of week of the solution (RTKLIB stamps the receiver-clock-corrected
+    time: the observation's second to the millisecond), latitude, longitude [deg],
+    ellipsoidal height [m] as the ``.pos`` file gives them. Returns the lines written."""
+    lines = ["systems,gps_tow_s,lat_deg,lon_deg,height_m"]
+    for systems in SYSTEM_SETS.values():
+        times, llh, _ = read_pos(work / f"b34_{systems}_raim.pos")
+        lines += [f"{systems},{gps_seconds_of_week(t):.3f},{a[0]:.9f},{a[1]:.9f},{a[2]:.4f}"
+                  for t, a in zip(times, llh)]
+    path.write_text("\n".join(lines) + "\n")
+    return len(lines) - 1
 
 
 def overheads(args, bins: dict, work: Path, obs: Path, navs: list[Path]) -> dict:
@@ -531,6 +559,7 @@ def main() -> None:
            "quoted_in_issue": [{"version": k[0], "systems": k[1], "raim": k[2], "h_rmse_m": v[0], "epochs": v[1]}
                                for k, v in QUOTED.items()]}
     (args.out / "rtklib_urbannav.json").write_text(json.dumps(doc, indent=1) + "\n")
+    write_b34_epochs(args.out / B34_EPOCHS, work)
     print(f"wrote {args.out / 'rtklib_urbannav.md'} and .json; work folder {work}")
 
 

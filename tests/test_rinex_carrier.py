@@ -129,3 +129,71 @@ def test_tdcp_on_a_file_without_carrier_is_refused(exported_tdcp, tmp_path):
     with pytest.raises(ConfigError) as exc:
         process(ds, src)
     assert exc.value.key == f"methods[{i}].type" and "carrier" in str(exc.value)
+
+
+#: GPS L2 / L1 frequency ratio (1227.60 / 1575.42 MHz = 60 / 77)
+F2_OVER_F1 = 60.0 / 77.0
+
+
+def _with_l2(src, dst, slip_prn: int, slip_epoch: int, slip_cycles: float):
+    """``src`` (the export's GPS RINEX 3: C1C L1C D1C) with C2L and L2L added: C2L = C1C, L2L
+    = L1C f2/f1 (so lambda1 phi1 - lambda2 phi2 = 0), plus ``slip_cycles`` on L2 alone of
+    satellite ``slip_prn`` from the ``slip_epoch``-th epoch record on (a slip the L1 carrier
+    and Doppler know nothing of)."""
+    out, epoch = [], -1
+    for line in src.read_text().splitlines():
+        if line.endswith("SYS / # / OBS TYPES"):
+            line = f"{'G    5 C1C L1C D1C C2L L2L':<60}SYS / # / OBS TYPES"
+        elif line.startswith(">"):
+            epoch += 1
+        elif line.startswith("G") and epoch >= 0:
+            f = line[3:].ljust(48)
+            c1, l1 = float(f[0:14]), float(f[16:30])
+            l2 = l1 * F2_OVER_F1 + (slip_cycles if int(line[1:3]) == slip_prn and epoch >= slip_epoch else 0.0)
+            line = f"{line[:3]}{f}{c1:14.3f}  {l2:14.3f}"
+        out.append(line)
+    dst.write_text("\n".join(out) + "\n")
+
+
+def test_second_signal_adds_the_geometry_free_check(exported_tdcp, tmp_path):
+    """``[raw_gnss] second_signals = { G = "C2L" }``: the file is read again for C2L/L2L and the
+    geometry-free check runs on the tdcp-ekf's carrier arcs. A 7-cycle slip on L2 alone (one
+    satellite, one epoch on) is found there and only there (lambda_2 7 = 1.7 m against the
+    4 cm threshold; the L1 carrier, Doppler and loss-of-lock flags see nothing), counted
+    under the system and reason, and the TDCP arc is cut at that one slot."""
+    from mixnav.config.loader import load_dataset
+    from mixnav.experiment.process import process
+    _, _, ex, po0 = exported_tdcp
+    folder = ex.files["dataset"].parent
+    _with_l2(folder / "obs.rnx", tmp_path / "obs2.rnx", slip_prn=7, slip_epoch=150, slip_cycles=7.0)
+    text = ex.files["dataset"].read_text().replace('file = "obs.rnx"', f'file = "{tmp_path / "obs2.rnx"}"')
+    text = text.replace('carrier_sigma = ', 'second_signals = { G = "C2L" }\ncarrier_sigma = ')
+    (tmp_path / "d.toml").write_text(text)
+    ds, src, _ = load_dataset(str(tmp_path / "d.toml"))
+    po = process(ds, src)
+    rinex = po.checks["rinex"]
+    assert "C2L" in rinex["second_signals"] and po0.checks["rinex"]["second_signals"] is None
+    c, c0 = rinex["cycle_slips"]["G"], po0.checks["rinex"]["cycle_slips"]["G"]
+    assert c["geometry-free"] == 1 and c0.get("geometry-free", 0) == 0
+    assert c["loss of lock"] == c["gap"] == c["Doppler"] == 0
+    assert c["continuous"] == c0["continuous"] - 1 and c["observations"] == c0["observations"]
+    # the one slot whose arc is cut: satellite 7, beside the arc starts both runs have
+    o, o0 = po.observations, po0.observations
+    cut = o.valid & np.isfinite(o.carrier) & ~o.carrier_continuous
+    cut0 = o0.valid & np.isfinite(o0.carrier) & ~o0.carrier_continuous
+    extra = cut & ~cut0
+    assert extra.sum() == 1 and o.prn[extra].tolist() == [7] and not (cut0 & ~cut).any()
+
+
+def test_second_signals_are_checked(exported_tdcp, tmp_path):
+    """A second signal on the first one's band, or of a system not read: a ConfigError on the
+    [raw_gnss] table whose message starts with the key (as the table's other cross-key checks)."""
+    from mixnav.config.loader import load_dataset
+    from mixnav.errors import ConfigError
+    _, _, ex, _ = exported_tdcp
+    for value, why in (('{ G = "C1W" }', "band"), ('{ E = "C7Q" }', "systems")):
+        text = ex.files["dataset"].read_text().replace('carrier_sigma = ', f'second_signals = {value}\ncarrier_sigma = ')
+        (tmp_path / "d.toml").write_text(text)
+        with pytest.raises(ConfigError, match=why) as exc:
+            load_dataset(str(tmp_path / "d.toml"))
+        assert exc.value.key == "raw_gnss" and "second_signals: " in str(exc.value)

@@ -124,7 +124,8 @@ def test_validation_off_changes_nothing():
     assert tr.ok.all() and tr.validation == {}
 
 
-@pytest.mark.parametrize("weights,robust", [("rtklib", (2.5, 6.0)), ("elevation", None)])
+@pytest.mark.parametrize("weights,robust", [("rtklib", (2.5, 6.0)), ("elevation", None), ("rtklib-2.4.3", None),
+                                            ("rtklib-2.4.3", (2.5, 6.0))])
 def test_urbannav_validation_compiled_equals_numpy(urban, weights, robust):  # noqa: F811
     """250 epochs of urbannav (GPS + BeiDou + Galileo) with validation and FDE: both engines
     give the same statuses, counts and positions; some epochs are rejected or recovered."""
@@ -184,3 +185,106 @@ def test_android_static_gps_validation_compiled_equals_numpy():
     _assert_same(a, b)
     assert a.validation == b.validation and b.clock_system is None
     assert sum(b.validation.values()) == len(b.status)
+
+
+def _two_errors(scale=1.0):
+    """10 satellites G + C, mixnav's weights at ``scale`` x 1 m, errors of 7 and 11 m (times
+    ``scale``) on the 80 deg and 20 deg rows: all rows together fail the chi-square; several
+    single exclusions pass it, and the one of the smallest weighted residual is not the one of
+    the smallest residual RMS (the setup is asserted where used)."""
+    sats, rho, _ = _epochs()
+    opts = SppOptions(elevation_mask=np.deg2rad(10.0), ionosphere=False, sigma_a=scale, sigma_b=scale,
+                      validate=True)
+    bad = rho.copy()
+    bad[6] += 7.0 * scale
+    bad[0] += 11.0 * scale
+    return sats, bad, opts
+
+
+def _exclusions(sats, rho, opts):
+    """Every single exclusion solved without FDE: ``{row: (passes validation, chi2 / rows,
+    residual RMS [m])}``; an independent loop over wls_position, the oracle of FDE's choice."""
+    out = {}
+    for i in range(len(rho)):
+        keep = np.arange(len(rho)) != i
+        c = wls_position(rho[keep], sats.select(keep), opts, system=SYSTEM[keep])
+        out[i] = (c.validation == "passed", c.chi2 / c.n_sat, float(np.sqrt(np.mean(c.residuals ** 2))))
+    return out
+
+
+def test_fde_keeps_the_exclusion_of_the_smallest_residual_rms_in_both_engines():
+    """RTKLIB raim_fde's choice among the exclusions that pass: the smallest post-fit residual
+    RMS [m] (not the smallest weighted residual), in wls_position and the compiled loop."""
+    sats, bad, opts = _two_errors()
+    assert wls_position(bad, sats, opts, system=SYSTEM).validation == "chi-square"
+    cands = {i: v for i, v in _exclusions(sats, bad, opts).items() if v[0]}
+    by_rms = min(cands, key=lambda i: cands[i][2])
+    by_weighted = min(cands, key=lambda i: cands[i][1])
+    assert len(cands) >= 2 and by_rms != by_weighted, cands        # the two rules differ here
+    fixed = wls_position(bad, sats, dataclasses.replace(opts, fde=True), system=SYSTEM)
+    assert fixed.validation == "fde" and fixed.excluded == by_rms
+    args = (_Fixed(sats, SYSTEM), np.full(1, 2100), 3e5 + np.zeros(1), np.zeros(10, int), sats.prn, bad)
+    a, b = _both(*args, options=dataclasses.replace(opts, fde=True), system=SYSTEM)
+    _assert_same(a, b)
+    assert b.validation == {"epochs_passed_after_exclusion": 1} and b.n_sat.tolist() == [9]
+    assert np.linalg.norm(b.pos_ecef[0] - fixed.pos_ecef) < 1e-6
+
+
+def test_fde_refuses_exclusions_whose_residual_rms_exceeds_100_m():
+    """The same epoch at 100 x the sigmas and errors: the chi-squares are the same (a scale
+    cancels in them), so the same exclusions pass validation, but their residual RMS is
+    100 x as large, beyond RTKLIB raim_fde's 100 m: none is kept, the epoch stays rejected."""
+    sats, bad, opts = _two_errors(scale=100.0)
+    cands = {i: v for i, v in _exclusions(sats, bad, opts).items() if v[0]}
+    assert len(cands) >= 2 and min(v[2] for v in cands.values()) > 100.0, cands
+    fixed = wls_position(bad, sats, dataclasses.replace(opts, fde=True), system=SYSTEM)
+    assert fixed.validation == "chi-square" and fixed.excluded == -1
+    args = (_Fixed(sats, SYSTEM), np.full(1, 2100), 3e5 + np.zeros(1), np.zeros(10, int), sats.prn, bad)
+    a, b = _both(*args, options=dataclasses.replace(opts, fde=True), system=SYSTEM)
+    _assert_same(a, b)
+    assert b.status.tolist() == [STATUS_REJECTED]
+
+
+def test_rtklib_243_weights_are_demo5s_with_a_third_of_the_code_sigma():
+    """weights = "rtklib-2.4.3": b34's pntpos variance, demo5's with the code term 0.3 m
+    (err[0] 100 x 0.003 m) instead of 0.9 m: the two variances differ by exactly
+    (0.9^2 - 0.3^2) f^2 (1 + 1/sin(max(el, 5 deg))), the other terms equal."""
+    el = np.radians([3.0, 15.0, 30.0, 60.0, 90.0])
+    fact, var_eph = np.array([1.0, 1.5, 1.0, 1.0, 1.5]), np.array([4.0, 25.0, 5.8, 0.0, 2.0])
+    atm = (None,) * 7 + ((fact, var_eph),)
+    iono = np.array([1.0, 3.0, 5.0, 2.0, 0.5])
+    s_ex = _sigma(SppOptions(weights="rtklib"), el, np.ones(5), atm, iono)
+    s_b34 = _sigma(SppOptions(weights="rtklib-2.4.3"), el, np.ones(5), atm, iono)
+    code = fact ** 2 * (1.0 + 1.0 / np.sin(np.maximum(el, np.radians(5.0))))
+    np.testing.assert_allclose(s_ex ** 2 - s_b34 ** 2, (0.81 - 0.09) * code, rtol=1e-12)
+    # b34's whole variance written out (pntpos.c varerr + rescode's terms)
+    trop = (0.3 / (np.sin(el) + 0.1)) ** 2
+    np.testing.assert_allclose(s_b34 ** 2, 0.09 * code + var_eph + 0.3 ** 2 + (0.5 * iono) ** 2 + trop, rtol=1e-12)
+    with pytest.raises(ValueError, match="rtklib-2.4.3"):
+        SppOptions(weights="rtklib-2.4")
+
+
+def test_rtklib_243_procedure_solves_the_epochs_rtklib_243_solved(urban):  # noqa: F811
+    """RTKLIB 2.4.3 b34's single-point procedure written anew (plain WLS with b34's variances,
+    valsol, raim_fde: weights = "rtklib-2.4.3", validate, fde) on urbannav GPS + BeiDou, 15 deg
+    mask, against b34's own per-epoch output (rnx2rtkp of commit 180043e,
+    benchmarks/results/rtklib_urbannav_b34_epochs.csv): the same 802 epochs solved, and
+    all but one within 0.2 m of b34's positions (the median difference is ~0.1 m of model
+    detail; one epoch takes another exclusion)."""
+    from pathlib import Path
+    from mixnav.geodesy.frames import lla_to_ecef
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "results" / "rtklib_urbannav_b34_epochs.csv"
+    rows = [ln.split(",") for ln in path.read_text().splitlines()[1:] if ln.startswith("GC,")]
+    b34_tow = np.round([float(r[1]) for r in rows])
+    b34_pos = np.array([lla_to_ecef(np.array([np.radians(float(r[2])), np.radians(float(r[3])), float(r[4])]))
+                        for r in rows])
+    obs, eph = urban
+    m = np.isin(obs.system, ["G", "C"])
+    opts = SppOptions(elevation_mask=np.deg2rad(15.0), weights="rtklib-2.4.3", validate=True, fde=True)
+    tr = solve_epochs(eph, obs.week, obs.tow, obs.epoch[m], obs.prn[m], obs.pseudorange[m], opts,
+                      system=obs.system[m])
+    solved = np.round(tr.tow[tr.ok])
+    assert len(b34_tow) == 802 and set(solved.tolist()) == set(b34_tow.tolist())
+    order = np.argsort(b34_tow)
+    d = np.linalg.norm(tr.pos_ecef[tr.ok] - b34_pos[order][np.searchsorted(b34_tow[order], solved)], axis=1)
+    assert (d < 0.2).sum() >= 801 and np.median(d) < 0.15, (np.median(d), np.sort(d)[-3:])

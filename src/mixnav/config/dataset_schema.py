@@ -146,7 +146,7 @@ class RawGnss(Strict):
     ``sigma_b`` (pseudorange sigma ``sqrt(a^2 + b^2 / sin^2(el))``),
     ``troposphere`` (Saastamoinen), ``ionosphere`` (Klobuchar, when the
     navigation header has its coefficients), ``weights`` (``"elevation"``: the sigma above;
-    ``"rtklib"``: RTKLIB pntpos's variance model, the SPP only), ``validate`` and ``fde``
+    ``"rtklib"`` / ``"rtklib-2.4.3"``: RTKLIB demo5's / 2.4.3's pntpos variance model, the SPP only), ``validate`` and ``fde``
     (RTKLIB-style validation of each epoch and RAIM FDE, default off) set the solver
     (:class:`mixnav.gnss.spp.SppOptions`); ``max_sv_time_uncertainty``
     rejects measurements the receiver reports as worse than it (Android logs).
@@ -174,9 +174,10 @@ class RawGnss(Strict):
     sigma_b: quantity(u.LENGTH, nonnegative=True) = 3.0  # type: ignore[valid-type]
     troposphere: bool = True
     ionosphere: bool = True
-    #: the SPP's pseudorange weights: "elevation" (sigma_a, sigma_b) or "rtklib" (RTKLIB pntpos's
-    #: variance model: code, broadcast accuracy, ionosphere, troposphere; gnss/spp.py)
-    weights: Literal["elevation", "rtklib"] = "elevation"
+    #: the SPP's pseudorange weights: "elevation" (sigma_a, sigma_b) or "rtklib" / "rtklib-2.4.3"
+    #: (RTKLIB demo5's / 2.4.3 b34's pntpos variance model: code, broadcast accuracy, ionosphere,
+    #: troposphere; gnss/spp.py)
+    weights: Literal["elevation", "rtklib", "rtklib-2.4.3"] = "elevation"
     #: validate each SPP epoch as RTKLIB pntpos does (chi-square of the weighted residuals at
     #: 99.9 %, GDOP <= 30; a failing epoch is no solution), and with ``fde`` try leaving out
     #: each satellite (RAIM FDE); off by default (gnss/spp.py, "Validation"). The key is
@@ -295,6 +296,10 @@ class InsRawGnss(RawGnss):
     range_rate_sigma: quantity(u.VELOCITY, positive=True) = 0.1  # type: ignore[valid-type]
     #: tdcp-ekf's carrier sigma [m]; 3 mm as the scenarios' [gnss.satellites] carrier_sigma
     carrier_sigma: quantity(u.LENGTH, positive=True) = 0.003  # type: ignore[valid-type]
+    #: tdcp-ekf: a second signal per system (letter -> pseudorange code(s), as ``signals``) whose
+    #: carrier the geometry-free cycle-slip check sets against the first's (gnss/cycle_slips.py);
+    #: none named: no geometry-free check
+    second_signals: dict[str, str | list[str]] = Field(default_factory=dict)
     clock_q_bias: float = Field(default=0.1, ge=0, le=1e8)
     clock_q_drift: float = Field(default=0.01, ge=0, le=1e6)
     clock_jump: quantity(u.LENGTH, positive=True) = 1000.0  # type: ignore[valid-type]
@@ -308,6 +313,30 @@ class InsRawGnss(RawGnss):
         if isinstance(v, list) and not v:
             raise ValueError("give at least one file")
         return v
+
+    @field_validator("second_signals")
+    @classmethod
+    def _second_signals(cls, v):
+        try:
+            return {k: list(c) for k, c in check_signals(v, "second_signals").items()}
+        except ArgumentError as exc:   # argument "second_signals.<letter>"
+            raise ValueError(f"{exc.argument.split('.', 1)[-1]}: {exc.message}") from None
+
+    @model_validator(mode="after")
+    def _second_on_another_band(self):
+        """A second signal of a system read, on another band than its first signal's (on the
+        same band the geometry-free combination has no ionosphere and no second carrier)."""
+        from ..gnss.signals import DEFAULT_SIGNALS
+        for s, codes in self.second_signals.items():
+            if s not in self.systems:
+                raise ValueError(f"second_signals: {s}: not one of systems = {list(self.systems)}")
+            first = self.signals.get(s) or DEFAULT_SIGNALS[3][s] + DEFAULT_SIGNALS[2][s]
+            bands = {c[1] for c in first}
+            same = [c for c in codes if c[1] in bands]
+            if same:
+                raise ValueError(f"second_signals: {s}: {', '.join(same)} is on the band of the first signal "
+                                 f"({', '.join(first)}): name a signal of another frequency (e.g. C2L, C7I)")
+        return self
 
 
 class ReferencePoint(Strict):

@@ -109,7 +109,7 @@ def run_method(method: MethodConfig, filt, imu, init, meas, source=None, index: 
 def _build(method, spec, default_imu, fixes, lever_arm, source, index, observations, clock, training, seed, aiding):
     from .aiding import aiding_models, method_layout
     layout = method_layout(method, aiding, source, index)
-    if method.type == "tight-ekf" and observations is not None:   # an inter-system offset per further system
+    if method.type in ("tight-ekf", "tdcp-ekf") and observations is not None:   # an offset per further system
         from ..measurements.tight import observation_systems, tight_layout
         layout = tight_layout(layout, observation_systems(observations))
     aids = aiding_models(method, layout, aiding, source, index)

@@ -31,7 +31,9 @@ Steps:
    gyro bias through ``w x l``).
    With a ``tdcp-ekf`` method the carrier (``L1C``) of each slot comes too, in metres
    with its pseudorange's corrections, and whether it continues its satellite's arc
-   (:func:`carrier_observations`, :mod:`mixnav.gnss.cycle_slips`: TDCP rows only there).
+   (:func:`carrier_observations`, :mod:`mixnav.gnss.cycle_slips`: TDCP rows only there);
+   with ``[raw_gnss] second_signals`` the files are read once more for those signals, and
+   their carrier adds the geometry-free check (:func:`read_second_signals`).
 5. The tight methods start from the alignment with the receiver clock bias and drift of
    the SPP / Doppler solution at the alignment time (17-state layout, ``states = 17``).
    Several systems: the filter's clock is that of the first of G R E C J present, and its
@@ -160,6 +162,7 @@ class RinexInputs:
     nav_files: list
     reference: object         # Trajectory or None
     read_time_s: float
+    second: RawPseudoranges | None = None   # the second signals (tdcp-ekf's geometry-free check)
 
 
 def process_rinex_ins(ds: Dataset, source: str, folder):
@@ -180,11 +183,6 @@ def read_rinex_ins(ds: Dataset, source: str, folder) -> RinexInputs:
     multi = several_systems(c)
     if multi:
         check_first_frequency(c, source)
-        for i, m in enumerate(ds.methods):   # before any file is read
-            if m.type == "tdcp-ekf":
-                raise ConfigError(f"method '{m.name}': TDCP carries one receiver clock, GPS alone so far; with "
-                                  f"systems = {list(c.systems)} use tight-ekf (an inter-system offset per further "
-                                  "system) or set systems = [\"G\"]", file=source, key=f"methods[{i}].type")
     obs = read_observations(obs_files, get_reader("raw-gnss", c.format, key="raw_gnss.format", file=source),
                             ReadOptions(c, folder))
     if multi:   # every navigation file as one MultiEphemeris; a listed system without records is warned about
@@ -200,8 +198,27 @@ def read_rinex_ins(ds: Dataset, source: str, folder) -> RinexInputs:
         if m.type == "tdcp-ekf" and obs.carrier is None:
             raise ConfigError(f"method '{m.name}' is TDCP, but {obs.source} has no carrier phase (L1C/L1) of the "
                               "signals read: use type = \"tight-ekf\"", file=source, key=f"methods[{i}].type")
+    second = None
+    if c.second_signals and any(m.type == "tdcp-ekf" for m in ds.methods):
+        second = read_second_signals(c, obs_files, folder, obs, source)
     reference = read_reference(ds, folder)
-    return RinexInputs(imu, obs, eph, obs_files, nav_files, reference, _time.perf_counter() - t_read)
+    return RinexInputs(imu, obs, eph, obs_files, nav_files, reference, _time.perf_counter() - t_read, second)
+
+
+def read_second_signals(c, obs_files, folder, obs: RawPseudoranges, source) -> RawPseudoranges:
+    """The observation files read again for ``[raw_gnss] second_signals``: the systems named
+    there, each its named signal (codes in order of preference, as ``signals``), with the
+    GLONASS channels of the first read. Its carrier (and loss-of-lock indicator) is what the
+    geometry-free cycle-slip check sets against the first signal's. A file without a carrier
+    of those signals is a ConfigError naming the key."""
+    table = c.model_copy(update={"systems": [s for s in c.systems if s in c.second_signals],
+                                 "signals": dict(c.second_signals)})
+    second = read_observations(obs_files, get_reader("raw-gnss", c.format, key="raw_gnss.format", file=source),
+                               ReadOptions(table, folder))
+    if second.carrier is None or not np.isfinite(second.carrier).any():
+        raise ConfigError(f"{obs.source} has no carrier phase of the second signals "
+                          f"({second.code}) for the geometry-free check", file=source, key="raw_gnss.second_signals")
+    return second.with_glonass_channels(obs.glonass_channels) if obs.glonass_channels else second
 
 
 def several_systems(c) -> bool:
@@ -267,7 +284,7 @@ def run_rinex_ins(ds: Dataset, source: str, folder, inputs: RinexInputs):
     tight = replace(tight, time=t_rel[j_of])   # the epochs' own times on the run's axis
     slips = None
     if any(m.type == "tdcp-ekf" for m in ds.methods):
-        tight, slips = carrier_observations(obs, epochs, tight, j_of, rho, float(c.carrier_sigma))
+        tight, slips = carrier_observations(obs, epochs, tight, j_of, rho, float(c.carrier_sigma), inputs.second)
     # receiver velocity and clock drift of each RINEX epoch from its Doppler (NaN without)
     vel_e = np.full((len(t_rel), 3), np.nan)
     drift = np.full(len(t_rel), np.nan)
@@ -320,6 +337,7 @@ def run_rinex_ins(ds: Dataset, source: str, folder, inputs: RinexInputs):
     if slips is not None:
         checks["rinex"]["cycle_slips"] = slips.counts
         checks["rinex"]["doppler_slip_sigma_cycles"] = slips.doppler_sigma
+        checks["rinex"]["second_signals"] = None if inputs.second is None else inputs.second.code
     return ProcessOutput(ds, source, folder, t0, imu, fixes, all_fixes, reference, lever, results, init,
                          read_time + solve_time, filter_time, aiding.summary(),
                          installation_check(imu, ds.alignment.static_duration, results, aiding.stillness,
@@ -328,7 +346,7 @@ def run_rinex_ins(ds: Dataset, source: str, folder, inputs: RinexInputs):
                          checks=checks, observations=tight)
 
 
-def carrier_observations(obs: RawPseudoranges, epochs, tight, j_of, rho, sigma_cp: float):
+def carrier_observations(obs: RawPseudoranges, epochs, tight, j_of, rho, sigma_cp: float, second=None):
     """The tight observables with the RINEX carrier as TDCP needs it, and the cycle slips.
 
     Each slot's carrier [m] is ``lambda phi`` (its signal's wavelength, GLONASS by channel)
@@ -338,7 +356,7 @@ def carrier_observations(obs: RawPseudoranges, epochs, tight, j_of, rho, sigma_c
     opposite, an error of twice its change over an epoch, below a millimetre per second
     for the Klobuchar model). ``carrier_continuous``: the observation's carrier continues
     its satellite's previous one (:func:`mixnav.gnss.cycle_slips.slips_of_observations`:
-    loss of lock, gaps, Doppler).
+    loss of lock, gaps, Doppler; with ``second`` the geometry-free check too).
 
     Parameters
     ----------
@@ -352,6 +370,8 @@ def carrier_observations(obs: RawPseudoranges, epochs, tight, j_of, rho, sigma_c
         ``obs``'s pseudoranges with the clock-jump offset taken off [m] (what was corrected).
     sigma_cp : float
         Carrier 1-sigma the filter is told [m].
+    second : RawPseudoranges or None
+        The same files read for a second signal per system (:func:`read_second_signals`).
 
     Returns
     -------
@@ -363,7 +383,7 @@ def carrier_observations(obs: RawPseudoranges, epochs, tight, j_of, rho, sigma_c
     if obs.carrier is None:
         raise DataError("TDCP needs carrier phases, and the file has none of the signals read (L1C/L1 ...)",
                         file=obs.source)
-    slips = slips_of_observations(obs)
+    slips = slips_of_observations(obs, second)
     row_carrier, row_cont, _ = carrier_of_rows(obs, epochs, rho, j_of, slips)
     E, K = tight.valid.shape
     carrier = np.full((E, K), np.nan)

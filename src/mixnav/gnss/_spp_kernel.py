@@ -33,6 +33,17 @@ SEPARATION_SIGMAS = 3.0
 #: half its delay (ERR_BRDCI), 5 m without (ERR_ION); Saastamoinen 0.3 m / (sin el + 0.1)
 #: (ERR_SAAS), 3 m without (ERR_TROP). RTKLIB demo5 EX 2.5.1 src/pntpos.c, src/rtklib.h.
 RTKLIB_CODE_SIGMA = 0.9
+#: RTKLIB 2.4.3 b34's code sigma (``SppOptions.weights = "rtklib-2.4.3"``): its pntpos.c varerr
+#: scales err[1], err[2] (0.003 m) by err[0] = 100 (prcopt_default; no option key sets it in
+#: b34, stats-eratio1 writes eratio[0], which b34's pntpos does not read): 0.3 m. The other
+#: terms and the factors are the same in both versions.
+RTKLIB_243_CODE_SIGMA = 0.3
+#: the code sigma of each RTKLIB weights name
+RTKLIB_CODE_SIGMAS = {"rtklib": RTKLIB_CODE_SIGMA, "rtklib-2.4.3": RTKLIB_243_CODE_SIGMA}
+#: FDE: an exclusion is kept only if its post-fit residual RMS is at most this [m] and it
+#: leaves at least RTKLIB_FDE_MIN_SATELLITES used rows (RTKLIB raim_fde: rms = 100.0, nvsat < 5)
+RTKLIB_FDE_MAX_RMS = 100.0
+RTKLIB_FDE_MIN_SATELLITES = 5
 RTKLIB_MIN_ELEVATION = np.deg2rad(5.0)
 RTKLIB_SYSTEM_FACTOR = {"G": 1.0, "R": 1.5, "E": 1.0, "C": 1.0, "J": 1.0}
 RTKLIB_CODE_BIAS_SIGMA = 0.3
@@ -188,7 +199,8 @@ def _linearise(x, sat, rho_corr, col, iono_scale, e0, e1, with_atm, tow, tropo, 
 @njit(cache=True)
 def _weights(p, el, iono_d, scale, fact, var_eph, e0, n, w, gamma):
     """``w[:n]``: ``gamma`` / variance of rows ``e0:e0 + n`` (spp._sigma; ``gamma`` the
-    robust solution's factors): mixnav's elevation model (``p[7]`` 0) or RTKLIB's (1)."""
+    robust solution's factors): mixnav's elevation model (``p[7]`` 0) or RTKLIB's (``p[7]`` its
+    code sigma [m], RTKLIB_CODE_SIGMAS)."""
     for r in range(n):
         i = e0 + r
         if p[7] == 0.0:
@@ -196,8 +208,8 @@ def _weights(p, el, iono_d, scale, fact, var_eph, e0, n, w, gamma):
             sig = scale[i] * math.sqrt(p[1] ** 2 + p[2] ** 2 / s ** 2)
             w[r] = 1.0 / sig ** 2
         else:
-            code = (scale[i] * fact[i] * RTKLIB_CODE_SIGMA) ** 2 * (1.0 + 1.0 / math.sin(max(el[r],
-                                                                                            RTKLIB_MIN_ELEVATION)))
+            code = (scale[i] * fact[i] * p[7]) ** 2 * (1.0 + 1.0 / math.sin(max(el[r],
+                                                                          RTKLIB_MIN_ELEVATION)))
             ion = (RTKLIB_IONO_FACTOR * iono_d[r]) ** 2 if p[4] > 0 else RTKLIB_IONO_OFF_SIGMA ** 2
             if p[3] > 0:
                 trop = (RTKLIB_TROPO_SIGMA / (math.sin(max(el[r], 0.0)) + 0.1)) ** 2
@@ -489,8 +501,8 @@ def spp_epochs(sat, rho_corr, scale, fact, var_eph, iono_scale, sys_idx, bounds,
     """Plain WLS SPP at every epoch (module docstring); outputs filled in place.
 
     ``params``: elevation mask [rad], sigma_a, sigma_b [m], troposphere, ionosphere (1/0),
-    max_iter, tol [m], weights (0 elevation, 1 RTKLIB's: per row ``fact`` its system factor
-    and ``var_eph`` its ephemeris variance [m^2]), robust (1/0), k0, k1 (IGG-III); per epoch
+    max_iter, tol [m], weights (0 elevation, else RTKLIB's with this code sigma [m]: per row
+    ``fact`` its system factor and ``var_eph`` its ephemeris variance [m^2]), robust (1/0), k0, k1 (IGG-III); per epoch
     the robust status code, rows down-weighted and excluded. Per epoch: ``pos`` (k, 3), ``clock`` (k,), ``cov`` (k, 4, 4) position
     and clock, ``offsets`` (k, 5) per system in ``G R E C J`` (0 for the clock's, NaN for
     a system without a used row), ``clock_sys`` (k,) the clock's system (-1 none),
@@ -586,11 +598,13 @@ def spp_epochs(sat, rho_corr, scale, fact, var_eph, iono_scale, sys_idx, bounds,
             vcode = _verdict(chi2, n_use - n_unk, Q, params[13], chi2_table)
             if vcode != VALID_PASSED and params[12] > 0:
                 # FDE: each used row left out in turn, from this solution's position and
-                # clock; the passing solution of the smallest mean squared weighted residual
+                # clock; the passing solution of the smallest post-fit residual RMS [m], at most
+                # RTKLIB_FDE_MAX_RMS, with at least RTKLIB_FDE_MIN_SATELLITES rows, the later on
+                # a tie (RTKLIB raim_fde)
                 for r in range(n):
                     cand[r] = usedr[r]
                 xs[:] = x[:4]
-                best, best_score = -1, np.inf
+                best, best_score = -1, RTKLIB_FDE_MAX_RMS
                 for c in range(n):
                     if not cand[c]:
                         continue
@@ -609,10 +623,16 @@ def spp_epochs(sat, rho_corr, scale, fact, var_eph, iono_scale, sys_idx, bounds,
                     # a candidate with no spare row has nothing to check it by
                     if not ok2 or nuse2 - nu2 < 1:
                         continue
-                    if _verdict(chi2b, nuse2 - nu2, Q, params[13], chi2_table) != VALID_PASSED:
+                    if nuse2 < RTKLIB_FDE_MIN_SATELLITES or \
+                            _verdict(chi2b, nuse2 - nu2, Q, params[13], chi2_table) != VALID_PASSED:
                         continue
-                    if chi2b / nuse2 < best_score:
-                        best, best_score = c, chi2b / nuse2
+                    ss2 = 0.0
+                    for r in range(n):
+                        if usedr[r]:
+                            ss2 += dz[r] * dz[r]
+                    rms2 = math.sqrt(ss2 / nuse2)
+                    if rms2 <= best_score:
+                        best, best_score = c, rms2
                 if best >= 0:      # solved again: its quantities into the buffers
                     x = np.zeros(4 + n_off)
                     x[:4] = xs

@@ -77,7 +77,9 @@ else 1), the broadcast record's orbit + clock variance (URA, SISA, 5 m for GLONA
 :func:`mixnav.gnss.multi_ephemeris.ephemeris_variance`), the code bias, half the ionosphere
 delay applied (5 m without the model) and the Saastamoinen error (3 m without). It
 needs a MultiEphemeris; ``sigma_a``, ``sigma_b`` are not used; ``sigma_scale`` scales the
-code term. On urbannav-tst-static it reproduces RTKLIB demo5's single-point results
+code term. ``weights = "rtklib-2.4.3"``: RTKLIB 2.4.3 b34's variance, the same with a code sigma
+of 0.3 m instead of 0.9 m (b34's varerr scales 0.003 m by ``err[0]`` = 100, demo5's by its error
+ratio 300): the variances b34's chi-square validation judges the residuals by. On urbannav-tst-static it reproduces RTKLIB demo5's single-point results
 (tests/test_spp_multi.py). RTKLIB's rejection of records with URA beyond 300 m is not
 copied (the record choice stays mixnav's).
 
@@ -93,9 +95,10 @@ offsets' columns in the model) exceeds ``max_gdop`` (RTKLIB's 30). A failing epo
 Earth's centre; ``SppTrack.validation`` counts the epochs by outcome. FDE (``SppOptions.fde``,
 RTKLIB raim_fde's rule): a failing epoch is solved again (plain or robust, as the epoch) from
 its failed solution's position and clock with each used satellite left out in turn; among
-the solutions that pass validation with at least one spare row, the one of the smallest
-mean squared weighted residual ``chi2 / rows`` is kept (the first in row order on a tie);
-none passing: rejected.
+the solutions that pass validation with at least one spare row and at least 5 satellites,
+the one of the smallest post-fit residual RMS [m] (unweighted, over the rows it used) is
+kept if that RMS is at most 100 m (the later in row order on a tie: raim_fde keeps a
+candidate whose RMS is not above the best so far); none: rejected.
 
 Speed (``SppOptions.engine``): :func:`solve_epochs`' plain WLS goes by default through one
 compiled loop over all epochs (:mod:`mixnav.gnss._spp_kernel`) after one batched satellite
@@ -125,7 +128,9 @@ from ..noise.igg3 import igg3_factors
 # the import goes one way)
 from ._spp_kernel import (CODE_FEW, CODE_NOT_CONVERGED, CODE_OK, CODE_REJECTED, VALID_CHI2, VALID_FDE,
                           VALID_GDOP, VALID_PASSED, RTKLIB_CODE_BIAS_SIGMA,  # noqa: F401
-                          RTKLIB_CODE_SIGMA, RTKLIB_IONO_FACTOR, RTKLIB_IONO_OFF_SIGMA, RTKLIB_MIN_ELEVATION,
+                          RTKLIB_CODE_SIGMA, RTKLIB_243_CODE_SIGMA,  # noqa: F401
+                          RTKLIB_CODE_SIGMAS, RTKLIB_FDE_MAX_RMS, RTKLIB_FDE_MIN_SATELLITES, RTKLIB_IONO_FACTOR,
+                          RTKLIB_IONO_OFF_SIGMA, RTKLIB_MIN_ELEVATION,
                           RTKLIB_MAX_GDOP, RTKLIB_SYSTEM_FACTOR, RTKLIB_TROPO_OFF_SIGMA, RTKLIB_TROPO_SIGMA,
                           SEPARATION_SIGMAS, spp_epochs)
 from .geometry import C_LIGHT, F_L1, LAMBDA_L1, SatelliteStates, earth_rotation_correction, elevation_azimuth
@@ -159,11 +164,11 @@ class SppOptions:
     robust : tuple (k0, k1) or None
         IGG-III thresholds on standardised residuals: the robust solution
         (module docstring, "Robust solution"); None: plain WLS.
-    weights : {"elevation", "rtklib"}
+    weights : {"elevation", "rtklib", "rtklib-2.4.3"}
         The pseudorange variance: ``"elevation"`` mixnav's ``sigma_a^2 + sigma_b^2 /
-        sin^2(el)`` (module docstring); ``"rtklib"`` RTKLIB pntpos's (module docstring,
-        "RTKLIB's weights"; ``sigma_a``, ``sigma_b`` not used), which needs each
-        satellite's broadcast accuracy (a MultiEphemeris).
+        sin^2(el)`` (module docstring); ``"rtklib"`` RTKLIB demo5 pntpos's, ``"rtklib-2.4.3"``
+        RTKLIB 2.4.3 b34's (module docstring, "RTKLIB's weights"; ``sigma_a``, ``sigma_b`` not
+        used), which need each satellite's broadcast accuracy (a MultiEphemeris).
     engine : {"compiled", "numpy"}
         :func:`solve_epochs`'s plain WLS: satellite states of all epochs in one batched
         call and one compiled loop over the epochs (:mod:`mixnav.gnss._spp_kernel`), or
@@ -176,8 +181,8 @@ class SppOptions:
         epoch is not a solution (status :data:`STATUS_REJECTED`). Off: no epoch is tested.
     fde : bool
         With ``validate``: a failing epoch is solved again with each used satellite left out
-        in turn; the passing solution of the smallest weighted residual is kept (module
-        docstring, "Validation").
+        in turn; the passing solution of the smallest residual RMS (at most 100 m, 5
+        satellites or more) is kept (module docstring, "Validation").
     max_gdop : float
         Validation's GDOP limit (RTKLIB's default 30).
     """
@@ -201,8 +206,8 @@ class SppOptions:
             raise ValueError("fde: needs validate (an exclusion is tried when an epoch fails validation)")
         if not self.max_gdop > 0.0:
             raise ValueError(f"max_gdop: must be > 0, got {self.max_gdop}")
-        if self.weights not in ("elevation", "rtklib"):
-            raise ValueError(f"weights: must be 'elevation' or 'rtklib', not {self.weights!r}")
+        if self.weights not in ("elevation", *RTKLIB_CODE_SIGMAS):
+            raise ValueError(f"weights: must be 'elevation', 'rtklib' or 'rtklib-2.4.3', not {self.weights!r}")
         if self.engine not in ("compiled", "numpy"):
             raise ValueError(f"engine: must be 'compiled' or 'numpy', not {self.engine!r}")
         if self.robust is not None:
@@ -430,7 +435,7 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
             raise ValueError(f"iono_scale has shape {iono_scale.shape}, expected ({n},)")
     rho_corr = rho + C_LIGHT * sats.clock_bias                      # satellite clock removed
     rtk = None
-    if options.weights == "rtklib":
+    if options.weights != "elevation":
         if ephemeris_var is None:
             raise ValueError("weights = 'rtklib' needs ephemeris_var (each satellite's broadcast accuracy)")
         letters_n = np.full(n, "G") if system is None else np.asarray(system).astype(str)
@@ -488,10 +493,12 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
     if not options.fde:
         return dataclasses.replace(sol, validation=why)
     # FDE: each used satellite left out in turn, from this solution's position and clock;
-    # the passing solution of the smallest mean squared weighted residual (RTKLIB raim_fde)
+    # the passing solution of the smallest post-fit residual RMS [m], at most
+    # RTKLIB_FDE_MAX_RMS, with at least RTKLIB_FDE_MIN_SATELLITES rows, the later on a tie
+    # (RTKLIB raim_fde)
     inner = dataclasses.replace(options, validate=False, fde=False)
     start = np.append(sol.pos_ecef, sol.clock_bias)
-    best, best_score = None, np.inf
+    best, best_score = None, RTKLIB_FDE_MAX_RMS
     for i in sol.used_index.tolist():
         others = np.arange(n) != i
         try:
@@ -503,10 +510,11 @@ def wls_position(pseudorange, sats: SatelliteStates, options: SppOptions = SppOp
         except (ValueError, np.linalg.LinAlgError):
             continue
         # a candidate with no spare row has nothing to check it by: not a validated solution
-        if not cand.converged or cand.dof < 1 or _validation_failure(cand, options) is not None:
+        if not cand.converged or cand.dof < 1 or cand.n_sat < RTKLIB_FDE_MIN_SATELLITES or \
+                _validation_failure(cand, options) is not None:
             continue
-        score = cand.chi2 / cand.n_sat
-        if score < best_score:
+        score = float(np.sqrt(np.mean(cand.residuals ** 2)))
+        if score <= best_score:
             best, best_score = (i, cand), score
     if best is None:
         return dataclasses.replace(sol, validation=why)
@@ -589,7 +597,8 @@ def _sigma(options: SppOptions, el, scale, atm=None, iono=None):
     if options.weights == "elevation":
         return scale * np.sqrt(options.sigma_a**2 + options.sigma_b**2 / np.sin(np.maximum(el, 1e-3)) ** 2)
     fact, var_eph = atm[7]
-    code = (scale * fact * RTKLIB_CODE_SIGMA) ** 2 * (1.0 + 1.0 / np.sin(np.maximum(el, RTKLIB_MIN_ELEVATION)))
+    code = (scale * fact * RTKLIB_CODE_SIGMAS[options.weights]) ** 2 * \
+        (1.0 + 1.0 / np.sin(np.maximum(el, RTKLIB_MIN_ELEVATION)))
     ion = RTKLIB_IONO_OFF_SIGMA**2 if iono is None else (RTKLIB_IONO_FACTOR * iono) ** 2
     trop = ((RTKLIB_TROPO_SIGMA / (np.sin(np.maximum(el, 0.0)) + 0.1)) ** 2 if options.troposphere
             else RTKLIB_TROPO_OFF_SIGMA**2)
@@ -994,7 +1003,7 @@ def solve_epochs(ephemeris, week, tow_rx, epoch, prn, pseudorange, options: SppO
         Each epoch starts from the previous solution (the Earth's centre for
         the first and after a failed one).
     """
-    if options.weights == "rtklib" and not hasattr(ephemeris, "ephemeris_variances"):
+    if options.weights != "elevation" and not hasattr(ephemeris, "ephemeris_variances"):
         raise ValueError("weights = 'rtklib' needs each satellite's broadcast accuracy: a MultiEphemeris "
                          "(mixnav.gnss.multi_ephemeris), not GPS records read by georinex")
     compiled = options.engine == "compiled"
@@ -1109,7 +1118,7 @@ def _solve_epochs_multi(ephemeris, week, tow_rx, epoch, prn, rho, options, scale
             continue
         used_rows = rows[keep]
         var_eph = None
-        if options.weights == "rtklib":
+        if options.weights != "elevation":
             var_eph = ephemeris.ephemeris_variances(letters, sats.prn, week[j], tow_rx[j] - rho[used_rows] / C_LIGHT)
         try:
             sol = wls_position(rho[used_rows], sats, options, x0=x0, sigma_scale=scale[used_rows],
@@ -1187,10 +1196,11 @@ def _solve_compiled(ephemeris, week, tow_rx, epoch, prn, rho, options, scale, sy
     letters_used, inverse = np.unique(sysarr[rows], return_inverse=True)
     sys_idx = np.array([SYSTEM_ORDER.index(s) for s in letters_used.tolist()], np.int64)[inverse.ravel()]
     params = np.array([options.elevation_mask, options.sigma_a, options.sigma_b, float(options.troposphere),
-                       float(iono_on), float(options.max_iter), options.tol, float(options.weights == "rtklib"),
+                       float(iono_on), float(options.max_iter), options.tol,
+                       RTKLIB_CODE_SIGMAS.get(options.weights, 0.0),
                        float(options.robust is not None), *(options.robust or (0.0, 0.0)), float(options.validate),
                        float(options.fde), options.max_gdop])
-    if options.weights == "rtklib":
+    if options.weights != "elevation":
         fact = np.array([RTKLIB_SYSTEM_FACTOR.get(c, 1.0) for c in SYSTEM_ORDER])[sys_idx]
         var_eph = ephemeris.ephemeris_variances(sysarr[rows], prn[rows], week[epoch[rows]],
                                                 tow_rx[epoch[rows]] - rho[rows] / C_LIGHT)
