@@ -4,7 +4,7 @@
     python benchmarks/bench_estimator_cost.py --one                       # times the mixnav on the path
     python benchmarks/bench_estimator_cost.py --old DIR/src --only drive-0708-multipath smartloc-berlin
                                                   # only these cases (names as in CASES), results under
-                                                  # estimator_cost_<first case>... .md/.json
+                                                  # estimator_cost_subset.md/.json (or --out STEM)
 
 Made for issue 33 (the registry, pipelines and motion-seam redesign must keep every
 estimator's cost within 5 %). Only the public API is called (``mixnav.run_scenario``,
@@ -118,7 +118,7 @@ def main(argv) -> None:
         lines += ["", "In one version only: " + ", ".join(one_side)]
     if only:
         lines[2] = lines[2].replace("--rounds", "--only " + " ".join(only) + " --rounds")
-    stem = "estimator_cost" + ("_" + "_".join(only) if only else "")
+    stem = argv[argv.index("--out") + 1] if "--out" in argv else "estimator_cost" + ("_subset" if only else "")
     (HERE / "results" / f"{stem}.md").write_text("\n".join(lines) + "\n")
     (HERE / "results" / f"{stem}.json").write_text(json.dumps({"old": runs["old"], "new": runs["new"],
                                                                       "old_src": old}, indent=1))
