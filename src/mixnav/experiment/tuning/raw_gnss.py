@@ -33,7 +33,7 @@ import tomlkit
 
 from ... import units as u
 from .parameters import Parameter
-from .vehicle import VehicleScore, epoch_log_density
+from .vehicle import VehicleScore, _blocks, epoch_log_density, record_searched
 
 #: starts of the pipeline [s after the first epoch]: one every STARTS_EVERY, at most MAX_STARTS
 STARTS_EVERY = 30.0
@@ -183,8 +183,7 @@ def tune_raw(*, text: str, stripped: str, source: str, ds, out, data, data_folde
     """:func:`mixnav.tune` on a raw-GNSS dataset (module docstring). Returns the
     :class:`~mixnav.experiment.tuning.TuneResult` (its files written by the caller)."""
     from ...errors import ArgumentError
-    from . import TuneResult, _data_dir_from, _spread, _value_text, _write_tuned
-    from .parameters import get_value
+    from . import TuneResult, _data_dir_from, _write_tuned
     from .scoring import Scorer
     from .search import coordinate_search
     target = target_method(ds, method)
@@ -205,7 +204,7 @@ def tune_raw(*, text: str, stripped: str, source: str, ds, out, data, data_folde
     setup = ("mixnav.experiment.tuning.raw_gnss:RawEvaluator", stripped, source,
              None if data is None else str(data), target, starts, SETTLE)
     scorer = Scorer(setup, journal, workers, scheduler, progress, budget, len(starts))
-    n_blocks = max(1, int(sum(max(duration - s - SETTLE, 0.0) for s in starts) // 10.0))
+    n_blocks = _blocks(starts, duration, SETTLE)
     chosen, not_tuned, evaluations = {}, {}, []
     for p in params:
         if p.name in fix:
@@ -218,15 +217,7 @@ def tune_raw(*, text: str, stripped: str, source: str, ds, out, data, data_folde
         (given,) = scorer.score([tomlkit.dumps(doc)])
         evaluations.append({"changed": "the file as given", "score": given})
         cur_doc, cur, curves = coordinate_search(doc, given, searched, scorer, evaluations, grids=("coarse", "fine"))
-        for p in searched:
-            curve = curves.get(p.name, [])
-            if len(curve) < 2:
-                not_tuned[p.name] = "the budget ran out before the search reached it: the file's value kept"
-                continue
-            chosen[p.name] = {"value": _value_text(p, get_value(cur_doc, p)),
-                              "how": f"innovation log-likelihood over {len(starts)} starts "
-                                     f"({len(curve)} values tried along this key)",
-                              "spread": _spread(p, curve, n_blocks), "curve": [list(c) for c in curve]}
+        record_searched(searched, curves, cur_doc, chosen, not_tuned, "likelihood", starts, n_blocks, given)
     finally:
         scorer.close()
     tuned_text = _write_tuned(text, cur_doc, chosen, [p for p in searched if p.name in chosen])

@@ -339,13 +339,31 @@ def _criterion_text(criterion: str, starts) -> str:
     return f"withheld satellites' deviation over {len(starts)} starts x 2 folds"
 
 
+def record_searched(searched, curves: dict, cur_doc, chosen: dict, not_tuned: dict, criterion: str, starts,
+                    n_blocks: int, given: dict) -> None:
+    """Each searched key's value in ``cur_doc``, how it was found and its spread into ``chosen``
+    (a key the budget never reached into ``not_tuned``), for the tuners that run the whole
+    pipeline from several ``starts`` (this module's and :mod:`.raw_gnss`)."""
+    from . import _spread, _value_text
+    from .parameters import get_value
+    for p in searched:
+        curve = curves.get(p.name, [])
+        if len(curve) < 2:
+            not_tuned[p.name] = "the budget ran out before the search reached it: the file's value kept"
+            continue
+        chosen[p.name] = {"value": _value_text(p, get_value(cur_doc, p)),
+                          "how": f"{_criterion_text(criterion, starts)} ({len(curve)} values tried along this key)",
+                          "spread": _spread(p, curve, n_blocks if given.get("criterion_se") is None
+                                            else 2.0 / max(given["criterion_se"], 1e-9)),
+                          "curve": [list(c) for c in curve]}
+
+
 def tune_vehicle(*, text: str, stripped: str, source: str, ds, out, data, data_folder, journal, budget: int,
                  workers, scheduler, fix, method, progress: bool, header: dict, criterion: str = "likelihood"):
     """:func:`mixnav.tune` on an odometry + pseudorange dataset (module docstring). Returns the
     :class:`~mixnav.experiment.tuning.TuneResult` (its files written by the caller)."""
     from ...errors import ArgumentError
-    from . import TuneResult, _data_dir_from, _spread, _value_text, _write_tuned
-    from .parameters import get_value
+    from . import TuneResult, _data_dir_from, _write_tuned
     from .scoring import Scorer
     from .search import MIN_GAIN, coordinate_search
     unknown = [k for k in fix if k not in vehicle_keys()]
@@ -428,17 +446,7 @@ def tune_vehicle(*, text: str, stripped: str, source: str, ds, out, data, data_f
         cur_doc, cur = scan_edges(cur_doc, cur, 1)
         cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations, grids=("fine",),
                                                  curves=curves)
-        for p in searched:
-            curve = curves.get(p.name, [])
-            if len(curve) < 2:
-                not_tuned[p.name] = "the budget ran out before the search reached it: the file's value kept"
-                continue
-            chosen[p.name] = {"value": _value_text(p, get_value(cur_doc, p)),
-                              "how": f"{_criterion_text(criterion, starts)} "
-                                     f"({len(curve)} values tried along this key)",
-                              "spread": _spread(p, curve, n_blocks if given.get("criterion_se") is None
-                                                else 2.0 / max(given["criterion_se"], 1e-9)),
-                              "curve": [list(c) for c in curve]}
+        record_searched(searched, curves, cur_doc, chosen, not_tuned, criterion, starts, n_blocks, given)
     finally:
         scorer.close()
     not_tuned["correlation time of the LOS errors"] = (
