@@ -266,6 +266,15 @@ def test_the_builtins_are_found_in_their_modules_without_a_list(tmp_path):
     (tmp_path / "notes.py").write_text('"""How to:\n    @register_estimator("in-a-docstring")\n"""\n'
                                        'register_estimator("called", options=X, description="d")(Y)\n')
     assert registry.find_registrations(tmp_path, "pkg") == {"called": "pkg.notes", "new-one": "pkg.newfilter"}
+    # an IMM-only mode is read from its registration's own arguments, not from a list
+    (tmp_path / "mode.py").write_text('@register_estimator("a-mode", options=X, imm_child=f(g(1)),\n'
+                                      '                    standalone=False, description="(x)")\nclass M:\n    pass\n'
+                                      '@register_estimator("after", options=X, description="standalone=False "\n'
+                                      '                    "in another call\'s text is not this one\'s")\n'
+                                      'class A:\n    pass\n')
+    assert registry.find_imm_only(tmp_path, "pkg") == {"a-mode"}
+    assert registry.builtin_imm_only() == {"em-bias"}
+    assert "em-bias" not in registry.estimator_names() and "em-bias" in registry.estimator_names(False)
     with pytest.raises(ArgumentError, match="unknown estimator 'not-yet'"):
         registry.estimator_spec("not-yet")
 
@@ -293,3 +302,32 @@ def test_a_table_is_validated_by_its_owners_registered_model(tmp_path):
     with pytest.raises(ConfigError, match=r'estimator = "imm" and an \[imm\] table go together') as e:
         load_scenario(_scenario(tmp_path, 'estimator = "imm"\n'))
     assert e.value.key == "methods[0]"
+
+
+def test_the_training_stretch_is_what_each_estimator_says_it_needs(tmp_path, monkeypatch):
+    """One simulated training draw serves every learner: a method's offline mixture learner and
+    an IMM's mixture mode both ask (registry.training_needs through their options), the draw
+    takes the union of kinds, the largest sample count and whether any learns the process
+    noise; an online-only learner and a plain method ask for nothing."""
+    import mixnav.sim.training as training
+    from mixnav.experiment.run import _training
+    methods = ('estimator = "gaussian-mixture"\n[methods.mixture.learn]\nmethod = "vb"\n'
+               'observables = ["velocity"]\ntraining_samples = 700\nprocess = false\n\n'
+               '[[methods]]\nname = "i"\ntype = "loose-ekf"\nestimator = "imm"\n[methods.imm]\n'
+               'transition = [[0.9, 0.1], [0.1, 0.9]]\n'
+               '[[methods.imm.modes]]\nname = "a"\nmeasurements = ["gnss"]\n'
+               '[[methods.imm.modes]]\nname = "b"\nmeasurements = ["gnss"]\nestimator = "gaussian-mixture"\n'
+               '[methods.imm.modes.mixture.learn]\nmethod = "vb"\nobservables = ["position"]\n'
+               'training_samples = 500\n\n'
+               '[[methods]]\nname = "o"\ntype = "loose-ekf"\nestimator = "gaussian-mixture"\n'
+               '[methods.mixture.learn]\nmethod = "vb"\noffline = false\nobservables = ["position"]\n'
+               '[methods.mixture.learn.online]\nwindow = 60\n')
+    sc = load_scenario(_scenario(tmp_path, methods))[0]
+    asked = []
+    monkeypatch.setattr(training, "training_residuals", lambda sc, seed, kinds, n, process, source:
+                        asked.append((kinds, n, process)) or {})
+    assert _training(sc, 0, "sc.toml") == {}
+    assert asked == [(["position", "velocity"], 700, True)]   # the mode learns its process noise (default)
+    assert [need.residuals for need in registry.training_needs(sc.methods[1])] == [(("position",), 500, True)]
+    assert registry.training_needs(sc.methods[2]) == []
+    assert _training(load_scenario(_scenario(tmp_path, 'estimator = "ekf"\n'))[0], 0, "sc.toml") is None

@@ -61,29 +61,25 @@ def run_scenario(sc: Scenario, source: str | None = None, seed: int | None = Non
 
 def _training(sc: Scenario, seed: int, source):
     """Training residuals for the methods that learn their mixtures (one draw shared by all),
-    and training series for the coloured-noise methods (M6) that fit or whiten with them."""
-    mixture_tables = [m.mixture for m in sc.methods if m.mixture is not None]
-    mixture_tables += [mode.mixture for m in sc.methods if m.imm is not None for mode in m.imm.modes
-                       if mode.mixture is not None]           # an IMM's mixture modes learn too
-    learners = [mc.learn for mc in mixture_tables if mc.learn is not None and mc.learn.offline]
-    colored = [m.mixture for m in sc.methods if m.mixture is not None and m.mixture.colored is not None]
-    if not learners and not colored:
+    and training series for the coloured-noise methods (M6) that fit or whiten with them;
+    what each needs is its estimator's to say (registry.training_needs)."""
+    from ..filters.registry import training_needs
+    needs = [need for m in sc.methods for need in training_needs(m)]
+    residuals = [n.residuals for n in needs if n.residuals is not None]
+    series = [n.series for n in needs if n.series is not None]
+    if not residuals and not series:
         return None
     from ..sim.training import training_residuals, training_series
     out = {}
-    if learners:
-        kinds = sorted({k for lc in learners for k in lc.observables})
-        n = max(lc.training_samples for lc in learners)
-        out = training_residuals(sc, seed, kinds, n, any(lc.learn_process for lc in learners), source)
-    if colored:
+    if residuals:
+        kinds = sorted({k for r in residuals for k in r[0]})
+        out = training_residuals(sc, seed, kinds, max(r[1] for r in residuals), any(r[2] for r in residuals), source)
+    if series:
         from ..sim.training import TRAINING_CHANNELS
-        kinds = sorted({k for mc in colored for k in mc.colored.measurement} |
-                       {k for mc in colored if mc.learn is not None for k in mc.learn.observables})
-        process = any(mc.colored.process == "fit" or (mc.learn is not None and mc.learn.learn_process)
-                      for mc in colored)
-        n = max([mc.learn.training_samples for mc in colored if mc.learn is not None] + [2000])
+        kinds = sorted({k for r in series for k in r[0]})
+        n = max(r[1] for r in series)
         out["series"] = training_series(sc, seed, [k for k in kinds if k in ("pseudorange", "range_rate")],
-                                        -(-n // TRAINING_CHANNELS) + 1, process, source)
+                                        -(-n // TRAINING_CHANNELS) + 1, any(r[2] for r in series), source)
     return out
 
 

@@ -157,3 +157,18 @@ class MixtureOptions(BaseModel):
         Field(default_factory=dict)
     learn: LearnOptions | None = None
     colored: ColoredOptions | None = None
+
+    def training_needs(self) -> list:
+        """The training stretch these settings learn from (registry.TrainingNeed): the offline
+        learner's residuals, and the coloured variant's series (its measurement kinds and
+        the learner's; at least 2000 samples)."""
+        from .registry import TrainingNeed
+        learn = self.learn
+        residuals = series = None
+        if learn is not None and learn.offline:
+            residuals = (tuple(learn.observables), learn.training_samples, learn.learn_process)
+        if self.colored is not None:
+            kinds = set(self.colored.measurement) | (set(learn.observables) if learn is not None else set())
+            series = (tuple(sorted(kinds)), max(learn.training_samples, 2000) if learn is not None else 2000,
+                      self.colored.process == "fit" or (learn is not None and learn.learn_process))
+        return [TrainingNeed(residuals, series)] if residuals or series else []

@@ -14,7 +14,8 @@ from pydantic import BaseModel, Field, field_validator, model_validator
 from ..errors import ArgumentError
 from ..markov import check_transition
 from .option_fields import STRICT, Duration
-from .registry import check_entry, checked_options, estimator_spec, imm_mode_names, validate_table
+from .registry import (check_entry, checked_options, estimator_spec, imm_mode_names, training_needs,
+                       validate_table)
 
 #: the tables a mode may carry: each the settings of the registered estimator whose table it is
 MODE_TABLES = ("robust", "em", "mixture")
@@ -112,6 +113,10 @@ class ImmOptions(BaseModel):
         if len(set(names)) != len(names):
             raise ValueError(f"mode names must be unique, got {names}")
         return self
+
+    def training_needs(self) -> list:
+        """The modes' training needs (an IMM's mixture modes learn too; a mode is never coloured)."""
+        return [need for mode in self.modes for need in training_needs(mode)]
 
 
 def check_imm_entry(options: ImmOptions, measurements, mode: bool) -> None:

@@ -108,16 +108,51 @@ _REGISTRATION = re.compile(r'^@?register_estimator\(\s*"([^"]+)"', re.M)
 _VARIANT = re.compile(r'^register_variant\(\s*"([^"]+)"', re.M)
 
 
+#: ``standalone=False`` among a registration's arguments (an IMM-only mode)
+_NOT_STANDALONE = re.compile(r"\bstandalone\s*=\s*False\b")
+
+
+#: a string literal on one line (the registrations' descriptions)
+_STRING = re.compile(r""""(?:[^"\\\n]|\\.)*"|'(?:[^'\\\n]|\\.)*'""")
+
+
+def _call_arguments(text: str, start: int) -> str:
+    """The text of the call whose ``(`` is the first one at or after ``start``, up to its
+    matching ``)``, with the insides of its string literals blanked (a description may
+    hold parentheses or the words ``standalone=False``)."""
+    text = _STRING.sub(lambda m: m.group(0)[0] + " " * (len(m.group(0)) - 2) + m.group(0)[-1], text)
+    i = text.index("(", start)
+    depth = 0
+    for j in range(i, len(text)):
+        depth += {"(": 1, ")": -1}.get(text[j], 0)
+        if depth == 0:
+            return text[i:j + 1]
+    return text[i:]
+
+
+def _scan(folder, package: str) -> dict[str, tuple[str, bool]]:
+    """name -> (module, standalone) of every module-level registration in ``folder``'s source."""
+    found = {}
+    for path in sorted(Path(folder).glob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        for m in _REGISTRATION.finditer(text):
+            found.setdefault(m.group(1), (f"{package}.{path.stem}",
+                                          not _NOT_STANDALONE.search(_call_arguments(text, m.start()))))
+    return dict(sorted(found.items(), key=lambda item: (item[0] != "ekf", item[0])))
+
+
 def find_registrations(folder, package: str) -> dict[str, str]:
     """Estimator name -> module, for every module of ``folder`` (the files of ``package``)
     that registers an estimator at module level, read from the source text: nothing is
     imported, so listing the estimators compiles no kernel. ``"ekf"`` (the default) first,
     then by name."""
-    found = {}
-    for path in sorted(Path(folder).glob("*.py")):
-        for name in _REGISTRATION.findall(path.read_text(encoding="utf-8")):
-            found.setdefault(name, f"{package}.{path.stem}")
-    return dict(sorted(found.items(), key=lambda item: (item[0] != "ekf", item[0])))
+    return {name: module for name, (module, _) in _scan(folder, package).items()}
+
+
+def find_imm_only(folder, package: str) -> set[str]:
+    """The names among :func:`find_registrations` registered with ``standalone=False``
+    (a mode of an IMM only), read from the registration's own arguments."""
+    return {name for name, (_, standalone) in _scan(folder, package).items() if not standalone}
 
 
 @lru_cache(maxsize=1)
@@ -136,6 +171,12 @@ def builtin_modules() -> dict[str, str]:
     A new estimator is one module of this package that calls :func:`register_estimator`:
     it is found here, with no list to edit."""
     return find_registrations(Path(__file__).resolve().parent, BUILTIN_PACKAGE)
+
+
+@lru_cache(maxsize=1)
+def builtin_imm_only() -> set[str]:
+    """The built-in estimators that are only IMM modes (``standalone=False`` in their registration)."""
+    return find_imm_only(Path(__file__).resolve().parent, BUILTIN_PACKAGE)
 
 
 #: method types of a scenario's INS methods (``type = "..."``) -> one-line description
@@ -342,7 +383,7 @@ def _entry_points() -> dict:
 def estimator_names(standalone_only: bool = True) -> list[str]:
     """Every estimator name (built-in, then installed plug-ins, then registered at run time);
     imports no estimator module. ``standalone_only``: leave out the IMM-only modes."""
-    imm_only = {"em-bias"}  # the one built-in that is only an IMM mode (its spec says so too)
+    imm_only = builtin_imm_only()
     names = [n for n in builtin_modules() if not (standalone_only and n in imm_only)]
     names += [n for n in _entry_points() if n not in names]
     names += [n for n, s in _SPECS.items() if n not in names and (s.standalone or not standalone_only)]
@@ -440,6 +481,26 @@ def _article(word: str) -> str:
 
 def _go_together(estimator: str, table: str) -> str:
     return f'estimator = "{estimator}" and {_article(table)} [{table}] table go together'
+
+
+@dataclass(frozen=True)
+class TrainingNeed:
+    """What an estimator learns from a simulated training stretch before a scenario's runs
+    (:func:`mixnav.experiment.run` draws one stretch for all methods): ``residuals``, the
+    offline mixture learners' (observable kinds, samples, whether the process noise is
+    learned too); ``series``, the coloured-noise fit's (kinds, samples, process). An
+    estimator says what it needs through its options' ``training_needs()``."""
+    residuals: tuple[tuple[str, ...], int, bool] | None = None
+    series: tuple[tuple[str, ...], int, bool] | None = None
+
+
+def training_needs(entry) -> list[TrainingNeed]:
+    """The training a method's (or an IMM mode's) ``entry`` needs: its estimator's options
+    (:func:`entry_options`) asked through ``training_needs()``; none when they have no such
+    method."""
+    options = entry_options(entry, estimator_spec(entry.estimator))
+    ask = getattr(options, "training_needs", None)
+    return list(ask()) if ask is not None else []
 
 
 def entry_options(entry, spec: EstimatorSpec):
