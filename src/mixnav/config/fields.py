@@ -14,23 +14,7 @@ from typing import Annotated
 from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict
 
 from .. import units as u
-
-
-def quantity(dim, positive: bool = False, nonnegative: bool = False, below: tuple[float, str] | None = None):
-    """A float field written with a unit of dimension ``dim`` (``"2 deg/h"``), held in SI;
-    ``below``: ``(limit in SI, the limit as written)``, an exclusive upper bound."""
-    def parse(v):
-        if isinstance(v, bool):
-            raise ValueError("expected a quantity with a unit, e.g. '2 deg/h'")
-        x = u.parse_quantity(v, dim)
-        if positive and not x > 0:
-            raise ValueError(f"must be positive, got {v!r}")
-        if nonnegative and not x >= 0:
-            raise ValueError(f"must not be negative, got {v!r}")
-        if below is not None and not x < below[0]:
-            raise ValueError(f"must be below {below[1]}, got {v!r}")
-        return x
-    return Annotated[float, BeforeValidator(parse)]
+from ..filters.option_fields import quantity  # the one unit field (filters cannot import config)
 
 
 def vector(dim, positive: bool = False):
