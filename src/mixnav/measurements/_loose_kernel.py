@@ -47,6 +47,21 @@ def _radii_near(s):
 
 
 @njit(cache=True, inline="always")
+def _latitude_terms(lat, trig, lat0, s0, c0):
+    """The meridian and normal radii [m] and the cosine at ``lat`` [rad], by the ``trig`` mode
+    of :func:`antenna_from_fix` (the state's latitude and the antenna's take the same path)."""
+    if trig == TRIG_PLAIN:
+        rm, rn = radii(lat)
+        return rm, rn, math.cos(lat)
+    if trig == TRIG_SERIES:
+        sl, cl = _sincos_series(lat - lat0, s0, c0)
+    else:
+        sl, cl = _sincos_near(lat, lat0, s0, c0)
+    rm, rn = _radii_near(sl)
+    return rm, rn, cl
+
+
+@njit(cache=True, inline="always")
 def antenna_from_fix(lat, lon, h, cln, cle, cld, fix_lat, fix_lon, fix_h, trig, lat0, s0, c0):
     """The antenna of a state at ``lat, lon, h`` [rad, rad, m] whose lever arm rotated to
     NED is ``cln, cle, cld`` [m], relative to the fix ``fix_lat, fix_lon, fix_h``:
@@ -57,27 +72,11 @@ def antenna_from_fix(lat, lon, h, cln, cle, cld, fix_lat, fix_lon, fix_h, trig, 
     TRIG_PLAIN). ``held``: both latitudes within ``SMALL_DLAT`` of ``lat0`` and the
     longitude inside its wrap (with TRIG_SERIES the numbers are good only where it is
     True: no modulo there, so the loop vectorises). The modes differ in round-off only."""
-    if trig == TRIG_PLAIN:
-        rm, rn = radii(lat)
-        cl = math.cos(lat)
-    else:
-        if trig == TRIG_SERIES:
-            sl, cl = _sincos_series(lat - lat0, s0, c0)
-        else:
-            sl, cl = _sincos_near(lat, lat0, s0, c0)
-        rm, rn = _radii_near(sl)
+    rm, rn, cl = _latitude_terms(lat, trig, lat0, s0, c0)
     a_lat = lat + cln / (rm + h)
     a_lon = lon + cle / ((rn + h) * cl)
     a_h = h - cld
-    if trig == TRIG_PLAIN:
-        rm_a, rn_a = radii(a_lat)
-        ca = math.cos(a_lat)
-    else:
-        if trig == TRIG_SERIES:
-            sa, ca = _sincos_series(a_lat - lat0, s0, c0)
-        else:
-            sa, ca = _sincos_near(a_lat, lat0, s0, c0)
-        rm_a, rn_a = _radii_near(sa)
+    rm_a, rn_a, ca = _latitude_terms(a_lat, trig, lat0, s0, c0)
     t = fix_lon - a_lon + math.pi
     inside = (0.0 <= t) & (t < 2.0 * math.pi)
     if trig == TRIG_SERIES or inside:   # the wrap's own arithmetic, without the modulo
