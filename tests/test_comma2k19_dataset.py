@@ -123,3 +123,59 @@ def test_process_comma2k19_outages_against_the_withheld_fixes():
     assert all(np.isfinite(h) for h, _ in _window_errors(rr, "ekf"))
     scale = rr.results["aided"].estimates["odometer_scale"][-1, 0]
     assert -0.02 < scale < 0.0, scale     # the wheels read ~1 % low (comma2k19_odometer.md)
+
+
+#: comma's pose itself (the [reference]); frame_times and frame_gps_times stay: they are the
+#: segment's clock, boot time against GPS time, which puts the u-blox fixes on the IMU's time
+#: (mixnav.io.comma2k19.read_comma_clock), not the pose
+POSE_FILES = ("global_pose/frame_positions", "global_pose/frame_velocities", "global_pose/frame_orientations")
+
+
+def _tune_copy(tmp_path, with_pose: bool):
+    """The shipped file without its own withheld windows (on a minute they leave no
+    cross-validation window), on a symlinked segment, with or without comma's pose (the
+    reference's files)."""
+    seg = tmp_path / "seg"
+    for rel in SEGMENT_FILES:
+        if with_pose or rel not in POSE_FILES:
+            (seg / rel).parent.mkdir(parents=True, exist_ok=True)
+            (seg / rel).symlink_to(data_file("comma2k19-example1") / rel)
+    from pathlib import Path
+    text = (Path(__file__).resolve().parents[1] / "src" / "mixnav" / "config" / "datasets"
+            / "comma2k19-example1.toml").read_text()
+    text = text.replace('data_dir = "../shared/data/comma2k19-example1"', 'data_dir = "seg"')
+    text = text.replace('withhold = [["20 s", "30 s"], ["40 s", "50 s"]]', "")
+    import tomllib
+    assert tomllib.loads(text)["dataset"]["data_dir"] == "seg" and "withhold" not in tomllib.loads(text)["gnss"]
+    (tmp_path / "car.toml").write_text(text)
+    return tmp_path / "car.toml"
+
+
+@pytest.mark.slow   # two tunings of 3 evaluations: about 100 s on a shared 2-core machine
+def test_tune_comma2k19_never_reads_the_reference_and_says_what_it_cannot_tune(tmp_path):
+    """The same tuned.toml, byte for byte, with comma's pose (the [reference]: positions,
+    velocities, orientations) removed from the segment (and the pose reader then fails); the car never stops in this minute, so the Allan noise and the ZUPT
+    thresholds are listed as not tuned and the file's values kept."""
+    from mixnav.experiment.tuning import tune
+    fast = dict(budget=3, workers=1, window="10 s", folds=4)
+    (tmp_path / "a").mkdir(), (tmp_path / "b").mkdir()
+    ra = tune(str(_tune_copy(tmp_path / "a", True)), tmp_path / "a" / "out", **fast)
+    rb = tune(str(_tune_copy(tmp_path / "b", False)), tmp_path / "b" / "out", **fast)
+    ta = (tmp_path / "a" / "out" / "tuned.toml").read_bytes()
+    assert ta == (tmp_path / "b" / "out" / "tuned.toml").read_bytes()
+    with pytest.raises(DataError, match="frame_positions"):
+        get_reader("reference", "comma2k19")(tmp_path / "b" / "seg", ReadOptions())
+    assert ra.runs == rb.runs == 3 * 4
+    assert "no still segment" in ra.not_tuned["imu.errors.arw (Allan)"]
+    for k in ("aiding.zupt.accel_std", "aiding.zupt.gyro_rate"):
+        assert k in ra.not_tuned and k not in ra.chosen
+    assert 'accel_std' not in ta.decode().split("[aiding.zupt]")[1].split("[")[0]   # the default kept
+
+
+def test_tune_names_the_files_own_windows_when_they_leave_no_window(tmp_path):
+    from mixnav.errors import ArgumentError
+    from mixnav.experiment.tuning import tune
+    data_file("comma2k19-example1")
+    with pytest.raises(ArgumentError, match="own withheld windows") as e:
+        tune("comma2k19-example1", tmp_path / "out", budget=3, workers=1, window="10 s", folds=4)
+    assert e.value.argument == "span"
