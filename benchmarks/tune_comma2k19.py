@@ -25,6 +25,11 @@ fixes' own metre-level noise; what the tuner's criterion scores on the other hal
 ``global_pose`` (comma's own optimiser on the same sensors, NOT an independent truth; ~2 m from
 the u-blox fixes, so its errors carry that offset).
 
+Where the tuned file is worse than the default on the scored half (the causal ``aided``
+method's median against the u-blox fixes), each tuned key is put alone into the default file
+and scored by the same sweep ("one key at a time"): a diagnosis of which change hurt there,
+reported, never used to choose anything.
+
 Writes benchmarks/results/tune_comma2k19.md and .json: per fold, configuration, reference and
 method the median, p90 and worst of the windows' horizontal maxima and the share of windows
 whose mean position NEES is at most the chi-square(3) 99 % point; the tuning's wall time,
@@ -71,6 +76,33 @@ def summary(rows, method: str) -> dict:
             "worst_m": float(h.max()), "nees_in_band_share": float(np.mean(ne <= NEES_POS_99)),
             "per_window": {f"{a:g}": float(x) for a, x in zip(g.start_s, h)},
             "nees_per_window": {f"{a:g}": float(x) for a, x in zip(g.start_s, ne)}}
+
+
+def one_key_at_a_time(default: Path, tuned: Path, keys: list, work: Path, span, workers: int) -> dict:
+    """Per tuned key: the default file with that key alone set to its tuned value, scored by
+    the sweep on ``span`` (the ``aided`` method against the u-blox fixes)."""
+    import mixnav
+    from mixnav.experiment.tuning.installation import ANTENNA, MOUNTING
+    from mixnav.experiment.tuning.parameters import get_value, ins_parameters, set_value
+    params = {p.name: p for p in ins_parameters()} | {ANTENNA.name: ANTENNA, MOUNTING.name: MOUNTING}
+    dtext, ttext = default.read_text(), tuned.read_text()
+    work.mkdir(parents=True, exist_ok=True)
+    out, done = {}, set()
+    for k in keys:
+        p = params[k]
+        if p.path in done:        # the NHC sigmas are one key of the file (both rows)
+            continue
+        done.add(p.path)
+        doc = tomlkit.parse(dtext)
+        set_value(doc, p, get_value(tomlkit.parse(ttext), p))
+        f = work / (k.replace("[", "_").replace("]", "") + ".toml")
+        f.write_text(tomlkit.dumps(doc))
+        s = summary(mixnav.outage_sweep(str(f), "10 s", "5 s", span, workers=workers), "aided")
+        name = ".".join(p.path)
+        out[name] = s
+        print(f"    default + tuned {name}: median {s['median_m']:.2f}  p90 {s['p90_m']:.2f}  worst "
+              f"{s['worst_m']:.2f} m  NEES in band {100 * s['nees_in_band_share']:.0f} %", flush=True)
+    return out
 
 
 def main(argv=None):
@@ -122,6 +154,10 @@ def main(argv=None):
                     print(f"  {config:8s} {m:6s} vs {label}: median {s['median_m']:.2f}  p90 {s['p90_m']:.2f}  "
                           f"worst {s['worst_m']:.2f} m  NEES in band {100 * s['nees_in_band_share']:.0f} % "
                           f"({s['windows']} windows)", flush=True)
+        if fold["scores"]["tuned"]["ublox"]["aided"]["median_m"] > fold["scores"]["default"]["ublox"]["aided"]["median_m"]:
+            fold["one_key_at_a_time"] = one_key_at_a_time(
+                default[first_ref], work / f"tuned-on-{tune_half}-{REFERENCES[first_ref][0]}.toml",
+                list(fold["chosen"]), work / f"one-key-{tune_half}", HALVES[eval_half][1], a.workers)
         res["folds"][f"tuned-on-{tune_half}"] = fold
     Path(a.out + ".json").write_text(json.dumps(res, indent=1) + "\n")
     write_md(res, a)
@@ -157,6 +193,19 @@ def write_md(res: dict, a) -> None:
         lines += ["", "Not tuned (the file's value kept):", ""]
         lines += [f"- `{k}`: {v}" for k, v in f["not_tuned"].items()]
         lines.append("")
+        if "one_key_at_a_time" in f:
+            d = f["scores"]["default"]["ublox"]["aided"]
+            lines += ["Tuned worse than default here: one key at a time (the default file with that key alone at "
+                      "its tuned value; `aided`, against the u-blox fixes, the same windows). A diagnosis only.", "",
+                      "| file | median [m] | p90 [m] | worst [m] | NEES in band |", "|---|---|---|---|---|",
+                      f"| default | {d['median_m']:.2f} | {d['p90_m']:.2f} | {d['worst_m']:.2f} | "
+                      f"{100 * d['nees_in_band_share']:.0f} % |"]
+            for k, s in f["one_key_at_a_time"].items():
+                lines.append(f"| default + `{k}` | {s['median_m']:.2f} | {s['p90_m']:.2f} | {s['worst_m']:.2f} | "
+                             f"{100 * s['nees_in_band_share']:.0f} % |")
+            t = f["scores"]["tuned"]["ublox"]["aided"]
+            lines += [f"| tuned (all) | {t['median_m']:.2f} | {t['p90_m']:.2f} | {t['worst_m']:.2f} | "
+                      f"{100 * t['nees_in_band_share']:.0f} % |", ""]
     Path(a.out + ".md").write_text("\n".join(lines) + "\n")
 
 
