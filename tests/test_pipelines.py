@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from mixnav.config import dataset_schema, raw_gnss_schema, vehicle_schema
+from mixnav.config import aiding_schema, dataset_schema, raw_gnss_schema, vehicle_schema
 from mixnav.data import ImuData, RawPseudoranges
 from mixnav.errors import ConfigError, DataError
 from mixnav.experiment import pipelines
@@ -32,6 +32,7 @@ SCHEMA_FORMATS = {
     "raw-gnss": (_literal(dataset_schema.RawGnss) | _literal(dataset_schema.InsRawGnss)
                  | _literal(vehicle_schema.Pseudoranges)),
     "odometry": _literal(vehicle_schema.OdometryFile),
+    "odometer": _literal(aiding_schema.OdometerAidingConfig),
     "reference": _literal(dataset_schema.ReferenceFile) | _literal(vehicle_schema.VehicleReference)
     | _literal(raw_gnss_schema.RawReference),
 }

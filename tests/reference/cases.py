@@ -50,6 +50,7 @@ CASES = [
     ("drive-0708-multipath", "dataset", "drive-0708-multipath", None, None, False),
     ("android-static", "dataset", "android-static", None, None, False),
     ("android-static-filters", "dataset", "android-static-filters", None, None, False),
+    ("comma2k19-example1", "dataset", "comma2k19-example1", None, None, False),
     ("smartloc-berlin", "dataset", "smartloc-berlin", None, None, False),
     ("smartloc-berlin-gnss", "dataset", "smartloc-berlin-gnss", None, None, False),
 ]

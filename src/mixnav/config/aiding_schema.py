@@ -35,7 +35,8 @@ class NhcConfig(Strict):
 
 class OdometerAidingConfig(Strict):
     """Odometer aiding (``mixnav.measurements.vehicle.Odometer``). In a dataset,
-    ``format``/``file`` name the speeds (``csv``: docs/data_formats.md); in a
+    ``format``/``file`` name the speeds (``csv``: docs/data_formats.md; ``comma2k19``: a
+    comma2k19 segment's rear wheels, ``file`` the segment folder); in a
     scenario the simulated odometer is used. ``sigma`` [m/s] when the file gives
     none; ``scale`` a known scale error; ``scale_sigma`` the initial 1-sigma of
     the estimated one (method ``estimate = ["odometer_scale"]``); ``lever_arm``
@@ -44,7 +45,7 @@ class OdometerAidingConfig(Strict):
     warns and is counted (``odometer_gaps_accepted`` in metrics.json), or with
     ``gap_action = "fail"`` is an error naming the file and line (default: no limit)."""
 
-    format: Literal["csv"] = "csv"
+    format: Literal["csv", "comma2k19"] = "csv"
     file: str | None = None
     max_gap: Duration | None = None  # type: ignore[valid-type]
     gap_action: Literal["warn", "fail"] = "warn"

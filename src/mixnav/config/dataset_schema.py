@@ -42,7 +42,7 @@ class DatasetInfo(Strict):
 class ImuFile(Strict):
     """IMU file: format, file names (relative to the data folder), checks, filter noise model."""
 
-    format: Literal["drive-0708", "kf-gins", "psins", "csv"]
+    format: Literal["drive-0708", "kf-gins", "psins", "csv", "comma2k19"]
     file: str
     tag: str | None = None
     max_gap: Gap = 0.05
@@ -55,7 +55,7 @@ class ImuFile(Strict):
 
 
 class GnssFile(Strict):
-    format: Literal["rtklib-pos", "kf-gins", "csv"]
+    format: Literal["rtklib-pos", "kf-gins", "csv", "comma2k19"]
     file: str
     qualities: list[int] = Field(default_factory=lambda: [1, 2, 5])
     min_sigma: quantity(u.LENGTH, nonnegative=True) = 0.0  # type: ignore[valid-type]
@@ -79,7 +79,7 @@ class ReferenceFile(Strict):
     the GNSS antenna (an RTK solution) or the IMU (an INS/GNSS reference
     such as KF-GINS' truth.nav)."""
 
-    format: Literal["rtklib-pos", "kf-gins-nav", "csv"]
+    format: Literal["rtklib-pos", "kf-gins-nav", "csv", "comma2k19", "comma2k19-ublox"]
     file: str
     qualities: list[int] = Field(default_factory=lambda: [1])
     point: Literal["antenna", "imu"] = "antenna"

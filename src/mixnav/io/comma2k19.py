@@ -42,6 +42,17 @@ benchmarks/results/comma2k19_odometer.md):
   available but *not an independent truth* (it uses these same GNSS and IMU
   data). It is the pose of the camera, not of the IMU or the rear axle.
 
+**Registered readers** (:mod:`mixnav.io.registry`, format ``comma2k19``; a dataset
+table's ``file`` is the segment folder, e.g. ``file = "."`` with ``data_dir`` the
+segment): ``imu`` (:func:`read_comma_imu`, the calibrated gyro; ``max_gap``,
+``gap_action``), ``gnss-fixes`` (:func:`read_comma_gnss` at the fixes' UTC time,
+positions only, the default sigmas; ``max_gap``, ``gap_action``), ``odometer``
+(:func:`read_comma_odometer`, the rear wheels; ``sigma``, ``max_gap``,
+``gap_action``) and ``reference`` (:func:`read_comma_pose`, comma's pose, NOT an
+independent truth); ``reference`` in format ``comma2k19-ublox``: the u-blox fixes
+as a position-only reference (the truth of a window whose fixes the filter was
+denied, :func:`read_comma_ublox_reference`).
+
 All arrays are validated on the way in (:class:`~mixnav.errors.DataError`
 naming the file; for time checks the "line" is the 1-based row of the
 array): shapes, finiteness, strictly increasing times, gaps beyond
@@ -63,6 +74,7 @@ from ..errors import ArgumentError, DataError
 from ..geodesy.frames import dcm_ecef_to_ned, ecef_to_lla
 from ..units import DEG
 from .imu_checks import check_plausible, rates_to_increments
+from .registry import ReadOptions, register_reader
 from .tables import check_gap_action, check_times
 
 #: GPS - UTC [s] from 2017-01-01 until the next leap second (none announced as of 2024).
@@ -469,3 +481,53 @@ def read_comma_segment(segment, *, gnss_pos_sigma=(2.5, 2.5, 5.0), gnss_vel_sigm
         odometer=read_comma_odometer(segment, source=odometer_source, sigma=odometer_sigma,
                                      time_offset=odometer_time_offset),
         reference=read_comma_pose(segment), clock=clock)
+
+
+# ---------------------------------------------------------------------------
+# The registered readers (format "comma2k19": a table's file is the segment folder)
+# ---------------------------------------------------------------------------
+def read_comma_ublox_reference(segment, *, max_gap: float | None = None, gap_action: str = "warn") -> Trajectory:
+    """The u-blox fixes as a position-only Trajectory (the antenna; no velocity, no attitude).
+
+    Not an independent truth either: it is the same receiver the filter uses. It is the truth
+    of a window whose fixes the filter was *denied* (an outage), the way the tuner's
+    cross-validation and docs/evaluation.md's outage sweep use a recording's own GNSS.
+    """
+    fixes = read_comma_gnss(segment, max_gap=max_gap, gap_action=gap_action)
+    return Trajectory(time=fixes.time, lla=fixes.lla, v_n=None, q_nb=None,
+                      extra={"point": "antenna", "source": fixes.source})
+
+
+@register_reader("imu", "comma2k19")
+def _read_imu(path: Path, options: ReadOptions) -> ImuData:
+    """The registered IMU reader: the calibrated gyro (``options``: ``max_gap``, ``gap_action``)."""
+    return read_comma_imu(path, max_gap=options.get("max_gap", 0.05), gap_action=options.get("gap_action", "warn"))
+
+
+@register_reader("gnss-fixes", "comma2k19")
+def _read_fixes(path: Path, options: ReadOptions) -> GnssFixes:
+    """The registered GNSS reader: the u-blox fixes at their UTC time, positions only, the
+    default sigmas (``options``: ``max_gap``, ``gap_action``; the dataset's ``min_sigma``
+    floors them afterwards). No velocity: the log's speed and bearing are horizontal, and a
+    zero vertical velocity would be wrong by the road's grade (0.3-0.5 m/s at 2.7 %)."""
+    return read_comma_gnss(path, max_gap=options.get("max_gap"), gap_action=options.get("gap_action", "warn"))
+
+
+@register_reader("odometer", "comma2k19")
+def _read_odometer(path: Path, options: ReadOptions) -> OdometerData:
+    """The registered odometer reader: the rear-wheel mean (``options``: ``sigma`` [m/s],
+    ``max_gap``, ``gap_action``; CAN time as logged, ``time_offset`` 0)."""
+    return read_comma_odometer(path, sigma=options.get("sigma", 0.1), max_gap=options.get("max_gap", 0.1),
+                               gap_action=options.get("gap_action", "warn"))
+
+
+@register_reader("reference", "comma2k19")
+def _read_pose(path: Path, options: ReadOptions) -> Trajectory:
+    """The registered reference reader: comma's ``global_pose`` (NOT an independent truth)."""
+    return read_comma_pose(path)
+
+
+@register_reader("reference", "comma2k19-ublox")
+def _read_ublox_reference(path: Path, options: ReadOptions) -> Trajectory:
+    """The u-blox fixes as the reference (the truth of withheld windows)."""
+    return read_comma_ublox_reference(path)

@@ -48,6 +48,7 @@ import numpy as np
 from .. import units as u
 from ..data import MAX_VEHICLE_SPEED, OdometerData
 from ..errors import ArgumentError, DataError
+from .registry import ReadOptions, register_reader
 from .tables import check_gap_action, check_times, header_fields, read_numeric
 
 _COL = re.compile(r"^\s*([A-Za-z_]+)\s*(?:\[(.*)\])?\s*$")
@@ -197,3 +198,11 @@ def _check_samples(speed, sig, lines, src, signed, motion):
     if bad.any():
         k = int(np.argmax(bad))
         raise DataError(f"sigma must be positive, got {sig[k]:.6g} m/s", file=src, line=int(lines[k]))
+
+
+@register_reader("odometer", "csv")
+def _read(path: Path, options: ReadOptions) -> OdometerData:
+    """The registered odometer reader (``[aiding.odometer]``'s ``sigma``, ``max_gap``, ``gap_action``)."""
+    max_gap = options.get("max_gap")
+    return read_odometer_csv(path, sigma=options.get("sigma"), max_gap=None if max_gap is None else float(max_gap),
+                             gap_action=options.get("gap_action", "warn"))

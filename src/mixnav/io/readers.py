@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from . import android, drive0708, generic_csv, gps_week_csv, kfgins, psins, rinex_obs, rtklib, smartloc, ubx  # noqa: F401 (they register)
+from . import (android, comma2k19, drive0708, generic_csv, gps_week_csv, kfgins, odometer_csv, psins,  # noqa: F401
+               rinex_obs, rtklib, smartloc, ubx)  # (they register)
 from .registry import KIND_TYPES, ReadOptions, Reader, formats, get_reader
 
 __all__ = ["KIND_TYPES", "ReadOptions", "Reader", "formats", "get_reader", "read_table"]

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..data import GnssFixes, ImuData, RawPseudoranges, Trajectory, WheelOdometry
+from ..data import GnssFixes, ImuData, OdometerData, RawPseudoranges, Trajectory, WheelOdometry
 from ..errors import ConfigError
 
 #: kind -> the one type its readers return
@@ -35,7 +35,8 @@ KIND_TYPES: dict[str, type] = {
     "imu": ImuData,
     "gnss-fixes": GnssFixes,
     "raw-gnss": RawPseudoranges,   # broadcast (corrections to apply) or corrected (smartLoc: corrected=True)
-    "odometry": WheelOdometry,
+    "odometry": WheelOdometry,       # speed and yaw rate: the dead-reckoning input (odometry-gnss)
+    "odometer": OdometerData,        # wheel speeds: an INS's odometer aiding ([aiding.odometer])
     "reference": Trajectory,
 }
 

@@ -66,11 +66,7 @@ def read_odometer(ds: Dataset, folder: Path, t0: float) -> OdometerData | None:
     c = ds.aiding.odometer if ds.aiding is not None else None
     if c is None or c.file is None:
         return None
-    from ...io import odometer_csv
-    odo = odometer_csv.read_odometer_csv(folder / c.file, sigma=c.sigma,
-                                         max_gap=None if c.max_gap is None else float(c.max_gap),
-                                         gap_action=c.gap_action)
-    return _shift(odo, t0)
+    return _shift(read_table("odometer", c, folder, "aiding.odometer"), t0)
 
 
 def _corrupt(fixes: GnssFixes, process, rng) -> tuple[GnssFixes, np.ndarray]:
