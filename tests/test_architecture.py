@@ -18,6 +18,7 @@ FLOORS = {
     "names": 0,  # safe_name: the file-name rule of the config's method names and the output folders
     "markov": 0,  # check_transition: the IMM's transition matrix, checked by the filter and the config
     "_jit": 0,  # serial_and_parallel: the kernels' twin factory (numba only)
+    "formats": 0,  # the readers' formats, read from io's source: the config checks format keys without io
     "attitude": 1, "geodesy": 1, "data": 2,
     "ins": 3, "motion": 3, "gnss": 3, "noise": 3, "io": 3, "alignment": 4,
     "measurements": 4,

@@ -3,11 +3,13 @@ has a pipeline, the registered formats are the ones the schemas and the docs lis
 reader is chosen (and given its options) by the table's format."""
 
 import re
+import sys
 import typing
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
+import pydantic
 import pytest
 
 from mixnav.config import aiding_schema, dataset_schema, raw_gnss_schema, vehicle_schema
@@ -24,24 +26,75 @@ def _literal(model, field="format") -> set:
     return set(typing.get_args(model.model_fields[field].annotation))
 
 
-#: what each reader kind serves in the dataset schemas
-SCHEMA_FORMATS = {
-    "imu": _literal(dataset_schema.ImuFile),
-    "gnss-fixes": _literal(dataset_schema.GnssFile),
-    # every raw-GNSS reader, smartLoc's corrected pseudoranges (the odometry datasets' too) included
-    "raw-gnss": (_literal(dataset_schema.RawGnss) | _literal(dataset_schema.InsRawGnss)
-                 | _literal(vehicle_schema.Pseudoranges)),
+#: the schema fields that take any reader of their kind (config.fields.reader_format: the readers'
+#: own registrations, read by mixnav.formats): a new reader of these kinds is its module only
+REGISTRY_FIELDS = {
+    "imu": [dataset_schema.ImuFile],
+    "gnss-fixes": [dataset_schema.GnssFile],
+    "raw-gnss": [dataset_schema.RawGnss],
+    "odometer": [aiding_schema.OdometerAidingConfig],
+    "reference": [dataset_schema.ReferenceFile],
+}
+#: the fields that list what their pipeline can do with a kind (a subset of its readers)
+SUBSET_FIELDS = {
+    "raw-gnss": _literal(dataset_schema.InsRawGnss) | _literal(vehicle_schema.Pseudoranges),
     "odometry": _literal(vehicle_schema.OdometryFile),
-    "odometer": _literal(aiding_schema.OdometerAidingConfig),
-    "reference": _literal(dataset_schema.ReferenceFile) | _literal(vehicle_schema.VehicleReference)
-    | _literal(raw_gnss_schema.RawReference),
+    "reference": _literal(vehicle_schema.VehicleReference) | _literal(raw_gnss_schema.RawReference),
 }
 
 
+def _accepts(model, value) -> bool:
+    field = model.model_fields["format"]
+    try:
+        pydantic.TypeAdapter(typing.Annotated[(field.annotation, *field.metadata)]).validate_python(value)
+    except pydantic.ValidationError:
+        return False
+    return True
+
+
 def test_registered_formats_are_the_schemas_formats():
-    assert set(KIND_TYPES) == set(SCHEMA_FORMATS)
-    for kind, listed in SCHEMA_FORMATS.items():
-        assert set(formats(kind)) == listed, kind
+    assert set(KIND_TYPES) == set(REGISTRY_FIELDS) | set(SUBSET_FIELDS)
+    for kind, models in REGISTRY_FIELDS.items():
+        for model in models:
+            assert all(_accepts(model, f) for f in formats(kind)), (kind, model)
+            assert not _accepts(model, "no-such-format")
+    for kind, listed in SUBSET_FIELDS.items():
+        assert listed <= set(formats(kind)), kind
+    assert set(formats("odometry")) == SUBSET_FIELDS["odometry"]
+
+
+def test_a_new_reader_is_its_module_only(tmp_path, monkeypatch):
+    """A reader module dropped into io/ is found from its source (the config accepts its format at
+    load time, nothing imported) and imported when a file names the format; a format of no
+    module is refused by the schema naming the registered ones."""
+    from mixnav import formats as known
+    folder = tmp_path / "io"
+    folder.mkdir()
+    (folder / "sbg.py").write_text('from mixnav.io.registry import register_reader\n\n\n'
+                                   '@register_reader("imu", "sbg-log")\ndef read(path, options):\n    pass\n')
+    assert known.find_readers(folder, "pkg") == {("imu", "sbg-log"): "pkg.sbg"}
+    monkeypatch.setattr(known, "builtin_readers", lambda: {**known.find_readers(folder, "pkg"),
+                                                           ("imu", "psins"): "mixnav.io.psins"})
+    monkeypatch.setattr(known, "_ADDED", {})      # as in a process that has imported no reader yet
+    assert known.known_formats("imu") == ("sbg-log", "psins")
+    assert _accepts(dataset_schema.ImuFile, "sbg-log")
+    with pytest.raises(pydantic.ValidationError, match=r"unknown imu format 'xsens' \(registered: sbg-log, psins\)"):
+        dataset_schema.ImuFile(format="xsens", file="x")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    (tmp_path / "pkg").mkdir()
+    (tmp_path / "pkg" / "__init__.py").write_text("")
+    (tmp_path / "pkg" / "sbg.py").write_text((folder / "sbg.py").read_text())
+    monkeypatch.setattr(registry, "_READERS", dict(registry._READERS))
+    assert "pkg.sbg" not in sys.modules
+    assert get_reader("imu", "sbg-log").format == "sbg-log" and "pkg.sbg" in sys.modules
+
+
+def test_the_builtin_readers_are_found_in_their_modules():
+    """Every built-in reader is registered by the module mixnav.formats read it from."""
+    from mixnav import formats as known
+    for (kind, fmt), module in known.builtin_readers().items():
+        reader = get_reader(kind, fmt)
+        assert reader.function.__module__ == module, (kind, fmt)
 
 
 def test_registered_formats_are_the_docs_formats():
@@ -64,7 +117,9 @@ def test_unknown_format_names_the_key_and_the_registered_formats():
 
 
 def test_a_reader_returns_its_kinds_type(monkeypatch):
+    from mixnav import formats as known
     monkeypatch.setattr(registry, "_READERS", dict(registry._READERS))
+    monkeypatch.setattr(known, "_ADDED", dict(known._ADDED))
     registry.register_reader("imu", "wrong")(lambda path, options: "not ImuData")
     with pytest.raises(TypeError, match="ImuData"):
         get_reader("imu", "wrong")(Path("x"))

@@ -440,4 +440,6 @@ def test_the_old_corrected_pseudoranges_kind_is_deprecated(tmp_path):
         for name in ("time", "start", "pseudorange", "variance", "sat_ecef", "sat_id", "system", "elevation", "cn0"):
             assert np.array_equal(getattr(back, name), getattr(epochs, name), equal_nan=True), name
     finally:
+        from mixnav import formats as known
         registry._READERS.pop(("raw-gnss", "old-plugin"), None)
+        known._ADDED.pop(("raw-gnss", "old-plugin"), None)

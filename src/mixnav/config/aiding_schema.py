@@ -9,7 +9,7 @@ from typing import Literal
 
 from .. import units as u
 from .fields import (AngleVec, Duration, Fraction, Frequency, LengthVec, NonNegSpeed, PosAccel, PosAngle, PosLength,
-                     PosRate, PosSpeed, Strict, Time, quantity)
+                     PosRate, PosSpeed, Strict, Time, quantity, reader_format)
 
 #: an angle per acceleration (rad per m/s^2): ``"0.3 deg/(m/s^2)"``
 PitchPerAccel = quantity(u.Dimension(1.0, -1.0, 2.0))
@@ -45,7 +45,7 @@ class OdometerAidingConfig(Strict):
     warns and is counted (``odometer_gaps_accepted`` in metrics.json), or with
     ``gap_action = "fail"`` is an error naming the file and line (default: no limit)."""
 
-    format: Literal["csv", "comma2k19"] = "csv"
+    format: reader_format("odometer") = "csv"  # type: ignore[valid-type]
     file: str | None = None
     max_gap: Duration | None = None  # type: ignore[valid-type]
     gap_action: Literal["warn", "fail"] = "warn"

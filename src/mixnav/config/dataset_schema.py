@@ -13,7 +13,8 @@ from pydantic import Field, field_validator, model_validator
 from .evaluation_schema import Evaluation
 from .. import units as u
 from .aiding_schema import AidingConfig
-from .fields import AngleVec, AngSigma, ElevationMask, LengthVec, PosSigma, Strict, VelSigma, Windows, check_position, quantity
+from .fields import (AngleVec, AngSigma, ElevationMask, LengthVec, PosSigma, Strict, VelSigma, Windows, check_position,
+                     quantity, reader_format)
 from .method_schema import MethodConfig
 from ..errors import ArgumentError
 from ..gnss.signals import DEFAULT_SYSTEMS, check_signals, check_systems
@@ -42,7 +43,7 @@ class DatasetInfo(Strict):
 class ImuFile(Strict):
     """IMU file: format, file names (relative to the data folder), checks, filter noise model."""
 
-    format: Literal["drive-0708", "kf-gins", "psins", "csv", "comma2k19"]
+    format: reader_format("imu")  # type: ignore[valid-type]
     file: str
     tag: str | None = None
     max_gap: Gap = 0.05
@@ -55,7 +56,7 @@ class ImuFile(Strict):
 
 
 class GnssFile(Strict):
-    format: Literal["rtklib-pos", "kf-gins", "csv", "comma2k19"]
+    format: reader_format("gnss-fixes")  # type: ignore[valid-type]
     file: str
     qualities: list[int] = Field(default_factory=lambda: [1, 2, 5])
     min_sigma: quantity(u.LENGTH, nonnegative=True) = 0.0  # type: ignore[valid-type]
@@ -79,7 +80,7 @@ class ReferenceFile(Strict):
     the GNSS antenna (an RTK solution) or the IMU (an INS/GNSS reference
     such as KF-GINS' truth.nav)."""
 
-    format: Literal["rtklib-pos", "kf-gins-nav", "csv", "comma2k19", "comma2k19-ublox"]
+    format: reader_format("reference")  # type: ignore[valid-type]
     file: str
     qualities: list[int] = Field(default_factory=lambda: [1])
     point: Literal["antenna", "imu"] = "antenna"
@@ -166,7 +167,7 @@ class RawGnss(Strict):
     file's systems to use (``G``, ``R``...).
     """
 
-    format: Literal["android-gnsslogger", "rinex-obs", "ubx", "smartloc"]
+    format: reader_format("raw-gnss")  # type: ignore[valid-type]
     file: str
     navigation: str | list[str] | None = None
     elevation_mask: ElevationMask = 10.0 * u.DEG  # type: ignore[valid-type]

@@ -15,6 +15,13 @@ from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict
 
 from .. import units as u
 from ..filters.option_fields import quantity  # the one unit field (filters cannot import config)
+from ..formats import check_format
+
+
+def reader_format(kind: str):
+    """A ``format`` key naming any reader of ``kind`` (mixnav.formats: the readers' own
+    registrations, found without importing io); an unknown one lists the registered formats."""
+    return Annotated[str, AfterValidator(lambda v: check_format(kind, v))]
 
 
 def vector(dim, positive: bool = False):

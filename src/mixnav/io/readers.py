@@ -1,16 +1,14 @@
 """Every registered reader, and how a pipeline reads the file of a dataset table.
 
 Each reader module registers its readers (:func:`mixnav.io.registry.register_reader`);
-importing them here is what makes them known. A new reader is its module plus one name
-in the import line below.
+they are found in the source and imported when a file names their format
+(:mod:`mixnav.formats`): a new reader is its module, with no list to edit.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from . import (android, comma2k19, drive0708, generic_csv, gps_week_csv, kfgins, odometer_csv, psins,  # noqa: F401
-               rinex_obs, rtklib, smartloc, ubx)  # (they register)
 from .registry import KIND_TYPES, ReadOptions, Reader, formats, get_reader
 
 __all__ = ["KIND_TYPES", "ReadOptions", "Reader", "formats", "get_reader", "read_table"]

@@ -6,9 +6,10 @@ A reader declares the kind of data it gives and the format name a dataset file u
     @register_reader("imu", "psins")
     def read(path: Path, options: ReadOptions) -> ImuData: ...
 
-It registers itself in its own module; :mod:`mixnav.io.readers` imports every reader
-module (one line each), and :func:`mixnav.io.readers.read` is how a pipeline reads a
-file. Each kind returns one data type (:data:`KIND_TYPES`), checked on return: every raw-GNSS
+It registers itself in its own module, and that module is all a new reader is:
+:mod:`mixnav.formats` finds the registration in the source (the config checks a file's
+``format`` against it without importing io) and :func:`get_reader` imports the module when a
+file names its format; :func:`mixnav.io.readers.read_table` is how a pipeline reads a file. Each kind returns one data type (:data:`KIND_TYPES`), checked on return: every raw-GNSS
 reader (RINEX, Android, u-blox, smartLoc) returns :class:`~mixnav.data.RawPseudoranges`, its
 ``corrected`` flag saying whether the broadcast corrections are still to apply; the processed
 forms (:class:`~mixnav.gnss.pseudoranges.PseudorangeEpochs`,
@@ -24,9 +25,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from importlib import import_module
 from pathlib import Path
 from typing import Any
 
+from .. import formats as known
 from ..data import GnssFixes, ImuData, OdometerData, RawPseudoranges, Trajectory, WheelOdometry
 from ..errors import ConfigError
 
@@ -125,20 +128,26 @@ def register_reader(kind: str, format: str):
         if (kind, format) in _READERS:
             raise ValueError(f"a {kind} reader for format '{format}' is registered already")
         _READERS[(kind, format)] = Reader(kind, format, read)
+        known.add(kind, format, getattr(function, "__module__", None))   # the config accepts it now
         return function
     return add
 
 
 def formats(kind: str) -> tuple[str, ...]:
-    """The registered formats of ``kind``, in registration order."""
+    """The formats of ``kind``: every built-in reader's (mixnav.formats, read from the source,
+    nothing imported), then those registered at run time."""
     kind = _current_kind(kind)
-    return tuple(f for k, f in _READERS if k == kind)
+    names = list(known.known_formats(kind))
+    return tuple(names + [f for k, f in _READERS if k == kind and f not in names])
 
 
 def get_reader(kind: str, format: str, key: str | None = None, file: str | None = None) -> Reader:
-    """The reader of ``kind`` files in ``format``; an unknown format is a ConfigError naming
-    the config ``key`` (e.g. ``imu.format``) and the registered formats."""
+    """The reader of ``kind`` files in ``format`` (its module imported now, if it is a built-in
+    one not imported yet); an unknown format is a ConfigError naming the config ``key`` (e.g.
+    ``imu.format``) and the registered formats."""
     kind = _current_kind(kind)
+    if (kind, format) not in _READERS and (kind, format) in known.builtin_readers():
+        import_module(known.builtin_readers()[(kind, format)])   # it registers itself
     try:
         return _READERS[(kind, format)]
     except KeyError:
