@@ -186,7 +186,8 @@ def main(argv=None) -> None:
 
     lines = ["# smartloc-berlin tuned by `mixnav tune` (issue 35)", "",
              f"Produced by `benchmarks/tune_smartloc.py` ({platform.machine()}, Python {platform.python_version()}); "
-             f"numbers in the `.json`. The tuning: {tune_s:.0f} s wall on {a.workers} workers (other jobs on the "
+             f"numbers in the `.json`. The tuning: {tune_s:.0f} s wall on {a.workers} worker{'s' * (a.workers != 1)} "
+             "(other jobs on the "
              f"machine), {len(r.evaluations)} evaluations, {r.runs} pipeline runs, budget {a.budget}.", "",
              "Tuned from `benchmarks/configs/smartloc-berlin-untuned.toml` (the shipped file without its alignment "
              "window, C/N0 band edges and start sigmas: the schema's defaults, window 20 s, no bands, 10 m, "
@@ -238,7 +239,10 @@ def main(argv=None) -> None:
     out.mkdir(parents=True, exist_ok=True)
     (out / "tune_smartloc.json").write_text(json.dumps(
         {"tune_wall_s": tune_s, "budget": a.budget, "workers": a.workers, "evaluations": len(r.evaluations),
-         "runs": r.runs, "chosen": {k: {kk: vv for kk, vv in c.items() if kk != "curve"} for k, c in r.chosen.items()},
+         "runs": r.runs,
+         # the search's path: each candidate's move and its criterion, in the order evaluated
+         "search_path": [{"changed": e["changed"], "criterion": e["score"]["criterion"]} for e in r.evaluations],
+         "chosen": {k: {kk: vv for kk, vv in c.items() if kk != "curve"} for k, c in r.chosen.items()},
          "withheld_satellites": {"chosen": {k: c["value"] for k, c in r2.chosen.items()}, "given": r2.given,
                                  "tuned": r2.tuned, "runs": r2.runs},
          "criterion_given": r.given, "criterion_tuned": r.tuned, "against_reference": scores,

@@ -19,12 +19,15 @@ the alignment windows searched are at most that long). Two criteria (``criterion
   same buildings share their reflections) and it tuned worse than the likelihood
   (benchmarks/results/tune_smartloc.md).
 
-Neither reaches the hand-chosen file on smartLoc (the same results file): the criteria
-cannot tell the band edges apart within their noise, nor judge the LOS errors' correlation
-time, which is therefore not searched: the track alignment measures it on its window (the
-epoch mixture inflates its update's row variances by the correlation factor but scores each
-row's density as if the rows were independent, so the likelihood always prefers no
-correlation, while the filter gets worse against the reference).
+The likelihood is the criterion benchmarks/smartloc_choose_settings.py chose smartLoc's
+shipped window and bands by (the same rows and starts; a sum there, per row here, the rows the
+same for every candidate), and the search repeats its stages (window, bands, window again);
+from the file without them it finds the same window and bands (the results file above).
+Neither criterion can judge the LOS errors' correlation time, which is therefore not
+searched: the track alignment measures it on its window (the epoch mixture inflates its
+update's row variances by the correlation factor but scores each row's density as if the
+rows were independent, so the likelihood always prefers no correlation, while the filter
+gets worse against the reference).
 
 What is searched (:func:`vehicle_parameters`, in this order): the alignment window, the C/N0
 band edges (a discrete scan over the recording's own C/N0 quantiles: :func:`edge_candidates`;
