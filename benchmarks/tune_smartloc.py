@@ -12,7 +12,11 @@ Run::
    the untuned, the tuned and the shipped file, from each start 0, 30, ..., 150 s of the start
    sweep (each run scored from its own filter start, and all from start + 40 s, the longest
    window: the same epochs for every file), median and worst.
-3. Why not the innovation likelihood: for settings the two criteria judge differently (the
+3. The tuner's own criterion (minus the epoch mixture's innovation log-likelihood per row, the
+   likelihood tuner's VehicleEvaluator) of the shipped file, of the tuned file and of the values
+   the tuner chose before its band edges reached the filter (:data:`BEFORE_FIX`): a search
+   that ends above the shipped point on its own criterion has missed it.
+4. Why not the innovation likelihood: for settings the two criteria judge differently (the
    shipped file; its LOS correlation time off; its lateral velocity noise x16), the epoch
    mixture's prequential innovation log-likelihood (all satellites, summed over the starts 0,
    30, ..., 150 s, rows from start + 40 s, as benchmarks/smartloc_choose_settings.py), the
@@ -38,6 +42,11 @@ UNTUNED = HERE / "configs" / "smartloc-berlin-untuned.toml"
 STARTS = (0.0, 30.0, 60.0, 90.0, 120.0, 150.0)
 SCORE_FROM = 40.0
 METHOD = "epoch-mixture"
+#: what the likelihood tuner chose before its C/N0 band edges reached the epoch mixture
+#: (set_edges wrote them into [alignment] only; results/tune_smartloc.md of commit a2afe9c):
+#: (alignment keys, motion keys), scored here with the edges in the filter too
+BEFORE_FIX = ({"window": "37.5 s", "cn0_edges": [38.0], "position_sigma": "3.536 m", "heading_sigma": "5.73 deg"},
+              {"lateral_sigma": "1.6 m/s", "clock_q_drift": 6.25e-05})
 
 
 def _load(path_or_name, options=None, motion=None):
@@ -79,6 +88,25 @@ def score_against_reference(path_or_name, options=None, motion=None) -> dict:
             "worst_same_m": float(np.max(same)), "prequential_log_likelihood": ll}
 
 
+def _edited(path, alignment, motion, out: Path) -> Path:
+    """A copy of the dataset file ``path`` with the alignment and motion keys replaced (the band
+    edges by set_edges), written to ``out`` (its data_dir made absolute)."""
+    import tomlkit
+    from mixnav.experiment.tuning.vehicle import set_edges
+    doc = tomlkit.parse(Path(path).read_text())
+    doc["dataset"]["data_dir"] = str((Path(path).parent / doc["dataset"]["data_dir"]).resolve())
+    for k, v in alignment.items():
+        if k == "cn0_edges":
+            set_edges(doc, v, METHOD)
+        else:
+            doc["alignment"][k] = v
+    for k, v in motion.items():
+        doc["motion"][k] = v
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(tomlkit.dumps(doc))
+    return out
+
+
 def withheld_criterion(path_or_name, options=None, motion=None) -> dict:
     """The tuner's own criterion of a file (reference sections removed first)."""
     import tomlkit
@@ -102,6 +130,29 @@ def withheld_criterion(path_or_name, options=None, motion=None) -> dict:
     return ev.evaluate(stripped).as_dict()
 
 
+def own_criterion(path_or_name, alignment=None, motion=None) -> dict:
+    """The likelihood tuner's criterion of a file (reference sections removed first), the
+    alignment and motion keys given replaced (band edges by the tuner's own set_edges)."""
+    import tomlkit
+    from mixnav.config.loader import resolve
+    from mixnav.experiment.sweep import _dataset_ref
+    from mixnav.experiment.tuning.criterion import without_reference
+    from mixnav.experiment.tuning.vehicle import SCORE_AFTER, VehicleEvaluator, set_edges, starts_for
+    text, source = resolve(_dataset_ref(str(path_or_name)), "datasets", "dataset")
+    doc = tomlkit.parse(without_reference(text))
+    for k, v in (alignment or {}).items():
+        if k == "cn0_edges":
+            set_edges(doc, v, METHOD)
+        else:
+            doc["alignment"][k] = v
+    for k, v in (motion or {}).items():
+        doc["motion"][k] = v
+    stripped = tomlkit.dumps(doc)
+    ev = VehicleEvaluator(stripped, source, None, METHOD, [], SCORE_AFTER, "likelihood")
+    ev.starts = starts_for(ev.duration_s, "likelihood")
+    return ev.evaluate(stripped).as_dict()
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--budget", type=int, default=70)
@@ -121,6 +172,13 @@ def main(argv=None) -> None:
              "tuned (withheld satellites)": tune_dir.parent / "tune-withheld" / "tuned.toml",
              "shipped": "smartloc-berlin"}
     scores = {k: score_against_reference(v) for k, v in files.items()}
+    own = {"shipped": own_criterion("smartloc-berlin"),
+           "tuned (likelihood, the default)": own_criterion(tune_dir / "tuned.toml"),
+           "the tuner's choice before the fix (edges in [alignment] only), its edges in the filter too":
+               own_criterion(UNTUNED, *BEFORE_FIX),
+           "untuned": own_criterion(UNTUNED)}
+    own_rmse = {"the tuner's choice before the fix (edges in [alignment] only), its edges in the filter too":
+                score_against_reference(_edited(UNTUNED, *BEFORE_FIX, tune_dir.parent / "before_fix.toml"))}
     alts = {"shipped": ({}, {}), "shipped, LOS correlation time 0": ({"correlation_time": 0.0}, {}),
             "shipped, lateral velocity noise x16 (1.6 m/s)": ({}, {"lateral_sigma": 1.6})}
     alt = {k: {"reference": score_against_reference("smartloc-berlin", o, m),
@@ -128,7 +186,8 @@ def main(argv=None) -> None:
 
     lines = ["# smartloc-berlin tuned by `mixnav tune` (issue 35)", "",
              f"Produced by `benchmarks/tune_smartloc.py` ({platform.machine()}, Python {platform.python_version()}); "
-             f"numbers in the `.json`. The tuning: {tune_s:.0f} s wall on {a.workers} workers (other jobs on the "
+             f"numbers in the `.json`. The tuning: {tune_s:.0f} s wall on {a.workers} worker{'s' * (a.workers != 1)} "
+             "(other jobs on the "
              f"machine), {len(r.evaluations)} evaluations, {r.runs} pipeline runs, budget {a.budget}.", "",
              "Tuned from `benchmarks/configs/smartloc-berlin-untuned.toml` (the shipped file without its alignment "
              "window, C/N0 band edges and start sigmas: the schema's defaults, window 20 s, no bands, 10 m, "
@@ -156,6 +215,17 @@ def main(argv=None) -> None:
               f"scored from its own filter start: at most "
               f"{1.1 * scores['shipped']['rmse_own_start_m'][0]:.2f} m); tuned by the default criterion, from start 0: "
               f"{scores['tuned (likelihood, the default)']['rmse_own_start_m'][0]:.2f} m.", "",
+              "## The tuner's own criterion at the shipped point", "",
+              "Minus the epoch mixture's innovation log-likelihood per pseudorange row, over the rows from each "
+              "start + 40 s of the 6 starts (the rows every candidate shares), lower is better: the likelihood "
+              "tuner's criterion (`VehicleEvaluator`). A search that ends above the shipped file has missed it.", "",
+              "| file | criterion | rows | minus the log-likelihood, sum | RMSE own median / worst [m] "
+              "(afterwards) |", "|---|---|---|---|---|"]
+    rm = {**scores, **own_rmse}
+    for k, v in own.items():
+        lines.append(f"| {k} | {v['criterion']:.4f} | {v['rows_scored']} | {v['criterion'] * v['rows_scored']:.0f} | "
+                     f"{rm[k]['median_own_m']:.2f} / {rm[k]['worst_own_m']:.2f} |")
+    lines += ["",
               "## Which criterion sees what the reference sees", "",
               "| setting | prequential innovation log-likelihood (all satellites, 6 starts; higher is 'better') | "
               "withheld satellites' deviation [m] (lower is better) | RMSE own median / worst [m] |",
@@ -169,11 +239,15 @@ def main(argv=None) -> None:
     out.mkdir(parents=True, exist_ok=True)
     (out / "tune_smartloc.json").write_text(json.dumps(
         {"tune_wall_s": tune_s, "budget": a.budget, "workers": a.workers, "evaluations": len(r.evaluations),
-         "runs": r.runs, "chosen": {k: {kk: vv for kk, vv in c.items() if kk != "curve"} for k, c in r.chosen.items()},
+         "runs": r.runs,
+         # the search's path: each candidate's move and its criterion, in the order evaluated
+         "search_path": [{"changed": e["changed"], "criterion": e["score"]["criterion"]} for e in r.evaluations],
+         "chosen": {k: {kk: vv for kk, vv in c.items() if kk != "curve"} for k, c in r.chosen.items()},
          "withheld_satellites": {"chosen": {k: c["value"] for k, c in r2.chosen.items()}, "given": r2.given,
                                  "tuned": r2.tuned, "runs": r2.runs},
          "criterion_given": r.given, "criterion_tuned": r.tuned, "against_reference": scores,
-         "criteria_compared": alt}, indent=1, default=float))
+         "criteria_compared": alt, "own_criterion": own, "before_fix": {"values": BEFORE_FIX, **own_rmse}},
+        indent=1, default=float))
     (out / "tune_smartloc.md").write_text("\n".join(lines))
     print("\n".join(lines))
 

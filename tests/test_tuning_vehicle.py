@@ -185,3 +185,78 @@ def test_the_criterion_is_refused_for_an_imu_dataset(tmp_path):
     with pytest.raises(ArgumentError) as e:
         tune("drive-0708", tmp_path / "out", budget=2, criterion="likelihood")
     assert e.value.argument == "criterion"
+
+
+_OCTILES = [29.0, 32.0, 35.0, 38.0, 42.0, 45.0, 48.0]
+
+
+def test_set_edges_reaches_an_epoch_mixture_that_names_no_bands_of_its_own():
+    """The epoch mixture takes no band edges from the alignment's hand-over (only the weights
+    learned on its own bands), so the edges must be written into its options even when the
+    file gave it none: otherwise the scan scores the alignment's bands under a filter without
+    any. A method that is not an epoch mixture and names none is left alone."""
+    import tomlkit
+    from mixnav.experiment.tuning.vehicle import get_edges, set_edges
+    doc = tomlkit.parse('[alignment]\nmode = "track"\n\n[[methods]]\nname = "ekf"\nestimator = "ekf"\n\n'
+                        '[[methods]]\nname = "em"\nestimator = "epoch-mixture"\n')
+    set_edges(doc, _OCTILES, "em")
+    back = tomllib.loads(tomlkit.dumps(doc))
+    assert back["alignment"]["cn0_edges"] == _OCTILES == get_edges(doc)
+    assert back["methods"][1]["options"]["cn0_edges"] == _OCTILES
+    assert "options" not in back["methods"][0]
+    set_edges(doc, [], "em")                # and back to no bands
+    assert tomllib.loads(tomlkit.dumps(doc))["methods"][1]["options"]["cn0_edges"] == []
+
+
+@need_data
+def test_edges_set_by_the_tuner_score_as_the_shipped_file_that_names_them():
+    """The untuned file (no bands anywhere) given the shipped octiles and heading sigma by
+    set_edges is the shipped configuration written another way: the criterion must be the same
+    number (it was not, 4.33 against 3.94, while the edges reached the alignment only)."""
+    import tomlkit
+    from mixnav.experiment.tuning.criterion import without_reference
+    from mixnav.experiment.tuning.vehicle import VehicleEvaluator, set_edges
+    untuned = ROOT / "benchmarks" / "configs" / "smartloc-berlin-untuned.toml"
+    shipped = without_reference((SHIPPED / "smartloc-berlin.toml").read_text())
+    doc = tomlkit.parse(without_reference(untuned.read_text()))
+    set_edges(doc, _OCTILES, "epoch-mixture")
+    doc["alignment"]["heading_sigma"] = "6 deg"
+    ev = VehicleEvaluator(tomlkit.dumps(doc), str(untuned), None, "epoch-mixture", [0.0, 90.0], SCORE_AFTER)
+    a = ev.evaluate(tomlkit.dumps(doc)).as_dict()
+    ev_s = VehicleEvaluator(shipped, str(SHIPPED / "smartloc-berlin.toml"), None, "epoch-mixture", [0.0, 90.0],
+                            SCORE_AFTER)
+    b = ev_s.evaluate(shipped).as_dict()
+    assert a["error"] is None and a["rows_scored"] == b["rows_scored"] > 0
+    assert a["criterion"] == pytest.approx(b["criterion"], rel=1e-12)
+
+
+@need_data
+def test_the_search_revisits_the_window_once_the_bands_are_chosen(tmp_path, monkeypatch):
+    """A made-up criterion read from what the filter is given (the window, and the band edges
+    of the epoch mixture's own options): bands help (-1) at any window, and the best window is
+    40 s without bands but 20 s with them, the octiles best among the edges. From the untuned
+    file (20 s, no bands) the window's first visit goes to 40 s; the search must take the
+    octiles, then bring the window back to 20 s (the fine grid alone would stop at 37.5 s)."""
+    from mixnav.config.loader import load_dataset_text
+    from mixnav.experiment.tuning import vehicle as V
+    untuned = ROOT / "benchmarks" / "configs" / "smartloc-berlin-untuned.toml"
+    seen = []
+
+    def fake(self, doc_text):
+        ds, _, _ = load_dataset_text(doc_text, self.source)
+        m = next(m for m in ds.methods if m.name == self.method)
+        edges = list(m.options.get("cn0_edges", []))
+        w = float(ds.alignment.window)
+        best_w = 20.0 if edges else 40.0
+        crit = (w - best_w) ** 2 / 1000.0 + (0.01 * abs(len(edges) - 7) if edges else 1.0)
+        seen.append((w, len(edges)))
+        return V.VehicleScore(crit, None, -crit, [crit], 1, rows=1)
+
+    monkeypatch.setattr(V.VehicleEvaluator, "evaluate", fake)
+    r = tune(str(untuned), tmp_path / "out", budget=200, workers=1, progress=False)
+    tuned = tomllib.loads((tmp_path / "out" / "tuned.toml").read_text())
+    method = next(m for m in tuned["methods"] if m["name"] == "epoch-mixture")
+    assert method["options"]["cn0_edges"] == tuned["alignment"]["cn0_edges"] == _OCTILES
+    assert (40.0, 0) in seen                                  # the first visit went there
+    assert r.chosen["alignment.window"]["value"].startswith("20 s")
+    assert r.tuned["criterion"] == pytest.approx(0.0, abs=1e-12)

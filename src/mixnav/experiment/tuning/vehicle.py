@@ -19,16 +19,20 @@ the alignment windows searched are at most that long). Two criteria (``criterion
   same buildings share their reflections) and it tuned worse than the likelihood
   (benchmarks/results/tune_smartloc.md).
 
-Neither reaches the hand-chosen file on smartLoc (the same results file): the criteria
-cannot tell the band edges apart within their noise, nor judge the LOS errors' correlation
-time, which is therefore not searched: the track alignment measures it on its window (the
-epoch mixture inflates its update's row variances by the correlation factor but scores each
-row's density as if the rows were independent, so the likelihood always prefers no
-correlation, while the filter gets worse against the reference).
+The likelihood is the criterion benchmarks/smartloc_choose_settings.py chose smartLoc's
+shipped window and bands by (the same rows and starts; a sum there, per row here, the rows the
+same for every candidate), and the search repeats its stages (window, bands, window again);
+from the file without them it finds the same window and bands (the results file above).
+Neither criterion can judge the LOS errors' correlation time, which is therefore not
+searched: the track alignment measures it on its window (the epoch mixture inflates its
+update's row variances by the correlation factor but scores each row's density as if the
+rows were independent, so the likelihood always prefers no correlation, while the filter
+gets worse against the reference).
 
 What is searched (:func:`vehicle_parameters`, in this order): the alignment window, the C/N0
-band edges (a discrete scan over the recording's own C/N0 quantiles: :func:`edge_candidates`),
-the start sigmas of position and heading, the dead reckoning's lateral and vertical velocity
+band edges (a discrete scan over the recording's own C/N0 quantiles: :func:`edge_candidates`;
+written into the epoch mixture's options, :func:`set_edges`), the window again (coarse grid,
+with the bands), the start sigmas of position and heading, the dead reckoning's lateral and vertical velocity
 noise, the receiver clock's noise (coarse grid); then the band edges again and the fine grid
 over all.
 """
@@ -119,8 +123,11 @@ def starts_for(duration: float, criterion: str = "likelihood") -> list[float]:
 
 
 def set_edges(doc, edges: list[float], method: str, comment: str | None = None) -> None:
-    """Write the band edges into ``[alignment]`` and into the tuned method's options when it
-    names its own (a method's options win over the alignment's hand-over)."""
+    """Write the band edges into ``[alignment]`` and into the tuned method's options: always
+    for an epoch mixture (it takes no bands from the alignment's hand-over, only the weights
+    learned on its own bands: filters/epoch_mixture.py, ``_build_epoch_mixture``; written into
+    ``[alignment]`` alone, the filter would run without bands and the scan would score the
+    alignment's bands only), for another method when it names its own."""
     item = tomlkit.array()
     item.extend(float(e) for e in edges)
     if comment:
@@ -129,9 +136,15 @@ def set_edges(doc, edges: list[float], method: str, comment: str | None = None) 
         doc["alignment"] = tomlkit.table()
     doc["alignment"]["cn0_edges"] = item
     for m in doc.get("methods", []):
-        if m.get("name") == method and "options" in m and "cn0_edges" in m["options"]:
-            m["options"]["cn0_edges"] = tomlkit.array()
-            m["options"]["cn0_edges"].extend(float(e) for e in edges)
+        if m.get("name") != method:
+            continue
+        names_own = "options" in m and "cn0_edges" in m["options"]
+        if not (names_own or m.get("estimator") == "epoch-mixture"):
+            continue
+        if "options" not in m:
+            m["options"] = tomlkit.table()
+        m["options"]["cn0_edges"] = tomlkit.array()
+        m["options"]["cn0_edges"].extend(float(e) for e in edges)
 
 
 def get_edges(doc) -> list[float]:
@@ -439,6 +452,11 @@ def tune_vehicle(*, text: str, stripped: str, source: str, ds, out, data, data_f
             return cur_doc, cur
 
         cur_doc, cur = scan_edges(cur_doc, cur, 0)
+        # the window again on the coarse grid, now with the bands (benchmarks/smartloc_choose_settings.py's
+        # third stage): the window the first visit chose without bands is not the one with them
+        # (smartLoc: 40 s without bands, 20 s with the octiles), and the fine grid moves it 2.5 s only
+        cur_doc, cur, curves = coordinate_search(cur_doc, cur, first, scorer, evaluations, grids=("coarse",),
+                                                 curves=curves)
         cur_doc, cur, curves = coordinate_search(cur_doc, cur, rest, scorer, evaluations, grids=("coarse",),
                                                  curves=curves)
         # the second pass: the band edges scanned again from where the first left the others, then
