@@ -121,16 +121,32 @@ def target_method(ds, method: str | None) -> str:
     return filters[0].name
 
 
+def stage_key(ds) -> str:
+    """What the SPP stage of ``ds`` depends on (:func:`~mixnav.experiment.spp_process.solve_spp`
+    and :func:`~mixnav.experiment.spp_process.filter_inputs`): ``[raw_gnss]``, ``[reference]``,
+    ``[reference_point]``, the ``wls`` methods and ``motion.clock_jump``; never a searched key."""
+    import json
+    parts = [ds.raw_gnss, ds.reference, ds.reference_point,
+             [m for m in ds.run_methods() if m.estimator == "wls"], float(ds.motion.clock_jump)]
+    return json.dumps([p.model_dump(mode="json") if hasattr(p, "model_dump") else
+                       [q.model_dump(mode="json") for q in p] if isinstance(p, list) else p for p in parts],
+                      default=str, sort_keys=True)
+
+
 class RawEvaluator:
     """Runs candidate files of one raw-GNSS dataset from several starts and scores them
-    (module docstring). The files are read once. Same interface as
-    :class:`.criterion.Evaluator`."""
+    (module docstring). The files are read once, and the SPP stage (the SPP track, the
+    filters' corrected pseudoranges) computed once per :func:`stage_key`; each candidate and
+    start runs the filter alone (``cached=False``: the whole pipeline every time, the same
+    numbers). Same interface as :class:`.criterion.Evaluator`."""
 
-    def __init__(self, text: str, source: str, data: str | None, method: str, starts, settle: float):
+    def __init__(self, text: str, source: str, data: str | None, method: str, starts, settle: float,
+                 cached: bool = True):
         from ...config.loader import load_dataset_text
         from ..data_folder import find_data_dir
         from ..pipelines import gnss_raw
         self.source, self.method, self.starts, self.settle = source, method, list(starts), float(settle)
+        self.cached, self._stages = bool(cached), {}
         ds, _, _ = load_dataset_text(text, source)
         self.folder = find_data_dir(ds, data, source)
         self.inputs = gnss_raw.load(ds, source, self.folder)
@@ -141,13 +157,31 @@ class RawEvaluator:
         methods = [m.model_copy(update={"smooth": False}) for m in ds.methods if m.name == self.method]
         return ds.model_copy(update={"methods": methods})
 
+    def stage(self, ds):
+        """The SPP stage of ``ds`` (:func:`~mixnav.experiment.pipelines.gnss_raw.spp`), computed
+        once per distinct :func:`stage_key` and reused by every candidate and start."""
+        from ..pipelines import gnss_raw
+        key = stage_key(ds)
+        if key not in self._stages:
+            if len(self._stages) >= 2:
+                self._stages.clear()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                self._stages[key] = gnss_raw.spp(ds, self.source, self.folder, self.inputs)
+        return self._stages[key]
+
     def run(self, ds):
-        """The pipeline's output for ``ds`` (its own start), with the innovation densities recorded."""
+        """The pipeline's output for ``ds`` (its own start), with the innovation densities
+        recorded: the filters on the cached SPP stage (the same numbers as
+        :func:`~mixnav.experiment.pipelines.gnss_raw.run`, which ``cached=False`` runs)."""
         from ...filters.ekf import innovation_likelihood
         from ..pipelines import gnss_raw
+        stage = self.stage(ds) if self.cached else None
         with innovation_likelihood(), warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return gnss_raw.run(ds, self.source, self.folder, self.inputs)
+            if stage is None:
+                return gnss_raw.run(ds, self.source, self.folder, self.inputs)
+            return gnss_raw.filters(stage, ds)
 
     def evaluate(self, doc_text: str) -> VehicleScore:
         from ...errors import MixnavError
