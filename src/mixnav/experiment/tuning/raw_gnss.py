@@ -14,7 +14,10 @@ a zero velocity) is not tuned and every candidate's transient would otherwise we
 
 The SPP solutions do not depend on anything searched here (the pseudorange sigmas, which the
 SPP weights with, are not searched), so every candidate starts from the same fixes and
-scores the same rows.
+scores the same rows; they, and the filters' corrected pseudoranges, are computed once
+(:meth:`RawEvaluator.stage`, keyed by :func:`stage_key`: what they depend on) and every
+candidate and start runs the filter alone on them, with the same numbers as the whole
+pipeline (tests/test_tuning_raw.py).
 
 What is searched (:func:`raw_parameters`, in this order): the horizontal and vertical
 white-acceleration densities (a wide grid: a static receiver wants about 0.01, a car about
