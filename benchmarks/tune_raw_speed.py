@@ -1,9 +1,11 @@
 """Wall time of ``mixnav tune`` on the three raw-GNSS recordings, one worker, the default
 budget: the code on ``PYTHONPATH`` (run it once with the tree before a change, once after).
 
-    PYTHONPATH=SRC python benchmarks/tune_raw_speed.py --label before|after [--budget N] [--commit C]
+    PYTHONPATH=SRC python benchmarks/tune_raw_speed.py --label LABEL [--budget N] [--commit C] [--only NAME]
 
-(``--commit``: the commit an exported tree, ``git archive C src``, was taken from.)
+(``--commit``: the commit an exported tree, ``git archive C src``, was taken from; ``--only``:
+that recording alone, merged into the label's entry. A label ``before...`` is compared with
+``after...`` of the same suffix.)
 
 Each recording's untuned file (``tune_raw_gnss.untuned_text``: the shipped file without its
 ``[motion]`` noise keys) is tuned into the same folder every time, so the written
@@ -44,13 +46,16 @@ def main(argv) -> None:
                                     text=True, check=True).stdout.strip())
     except (OSError, subprocess.CalledProcessError):   # an exported tree (git archive): say which
         commit, dirty = argv[argv.index("--commit") + 1] if "--commit" in argv else "unknown", False
+    only = argv[argv.index("--only") + 1] if "--only" in argv else None
+    names = [only] if only else list(RECORDINGS)
+    res = json.loads(OUT.read_text()) if OUT.exists() else {}
     rec = {"src": str(src_dir), "commit": commit, "uncommitted_changes": dirty, "budget": budget or "default",
-           "workers": 1, "recordings": {}}
+           "workers": 1, "recordings": res.get(label, {}).get("recordings", {}) if only else {}}
     WORK.mkdir(exist_ok=True)
-    for name in RECORDINGS:   # untimed: numba's compilation and the files' first read
+    for name in names:   # untimed: numba's compilation and the files' first read
         (WORK / f"{name}-untuned.toml").write_text(untuned_text(name))
         mixnav.tune(WORK / f"{name}-untuned.toml", WORK / "warm-up", budget=2, workers=1, overwrite=True)
-    for name in RECORDINGS:
+    for name in names:
         src = WORK / f"{name}-untuned.toml"
         src.write_text(untuned_text(name))
         out = WORK / name
@@ -90,10 +95,14 @@ def markdown(res: dict) -> str:
             lines.append(f"| {name} | {label} | {r['wall_s']:.0f} | {r['evaluations']} | {r['filter_runs']} | "
                          f"{r['criterion_given']:.6f} -> {r['criterion_tuned']:.6f} | "
                          f"`{r['tuned_toml_sha256'][:16]}` | {r['load_before'][0]:.2f} / {r['load_after'][0]:.2f} |")
-    if "before" in res and "after" in res:
-        lines += ["", "| recording | speed-up (before / after wall) | tuned.toml identical |", "|---|---:|---|"]
+    for before in [k for k in res if k.startswith("before")]:
+        after = "after" + before.removeprefix("before")
+        if after not in res:
+            continue
+        lines += ["", f"`{before}` against `{after}`:", "",
+                  "| recording | speed-up (before / after wall) | tuned.toml identical |", "|---|---:|---|"]
         for name in RECORDINGS:
-            b, a = res["before"]["recordings"].get(name), res["after"]["recordings"].get(name)
+            b, a = res[before]["recordings"].get(name), res[after]["recordings"].get(name)
             if a and b:
                 lines.append(f"| {name} | {b['wall_s'] / a['wall_s']:.1f} | "
                              f"{'yes' if a['tuned_toml_sha256'] == b['tuned_toml_sha256'] else 'NO'} |")

@@ -84,6 +84,8 @@ def test_a_fixed_key_keeps_its_value_and_the_epoch_mixtures_start_is_searched(tm
     assert "motion.vertical_accel_sigma" in res.chosen
     names = [p["changed"] for p in res.evaluations]
     assert any(n.startswith("motion.vertical_accel_sigma") for n in names)
+    # the tuned method is the epoch mixture: the file's other filters are said to be untuned
+    assert res.not_tuned["the other filters"].startswith("ekf, robust, mixture, vb-akf: scored by no criterion")
 
 
 @need_data

@@ -248,6 +248,10 @@ def tune_raw(*, text: str, stripped: str, source: str, ds, out, data, data_folde
             not_tuned[p.name] = "fixed by the user (--fix)"
     if not mixture:
         not_tuned["options (mixture starting values)"] = f"the tuned method '{target}' is not an epoch mixture"
+    others = [m.name for m in ds.methods if m.estimator != "wls" and m.name != target]
+    if others:
+        not_tuned["the other filters"] = (f"{', '.join(others)}: scored by no criterion here; they run with the "
+                                          f"[motion] values tuned for '{target}' (tune one with --method NAME)")
     searched = [p for p in params if p.name not in fix]
     try:
         doc = tomlkit.parse(stripped)
