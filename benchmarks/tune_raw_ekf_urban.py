@@ -39,13 +39,17 @@ NAME = "urbannav-tst-static"
 STATIC = {"accel_sigma": "0.01 m/s^2/sqrt(Hz)", "vertical_accel_sigma": "0.01 m/s^2/sqrt(Hz)"}
 FREE = {"accel_sigma": "30 m/s^2/sqrt(Hz)", "vertical_accel_sigma": "30 m/s^2/sqrt(Hz)", "clock_q_bias": 1e8,
         "clock_q_drift": 1e6}
+DEFAULTS = dict.fromkeys(("accel_sigma", "vertical_accel_sigma", "clock_q_bias", "clock_q_drift"))   # keys removed
 
 
 def plain(text: str, motion: dict | None = None, raw: dict | None = None) -> str:
-    """``text`` with the SPP and the EKF only (no smoother), ``motion`` / ``raw`` keys set."""
+    """``text`` with the SPP and the EKF only (no smoother), ``motion`` / ``raw`` keys set (None: removed)."""
     doc = tomlkit.parse(text)
     for k, v in (motion or {}).items():
-        doc["motion"][k] = v
+        if v is None:
+            doc["motion"].pop(k, None)
+        else:
+            doc["motion"][k] = v
     for k, v in (raw or {}).items():
         doc["raw_gnss"][k] = v
     methods = tomlkit.aot()
@@ -89,7 +93,8 @@ def main() -> None:
         for walk in (0.01, 100.0):
             cvm.constant_velocity_layout = functools.partial(layout, offset_walk=walk)
             try:
-                for label, motion in (("static (0.01)", STATIC), ("schema defaults", {}), ("none (free)", FREE)):
+                for label, motion in (("static (0.01, as shipped)", STATIC), ("schema defaults", DEFAULTS),
+                                      ("none (free)", FREE)):
                     res["diagnosis"].append({"offset_walk": walk, "motion": label,
                                              **errors(plain(shipped, motion), tmp)})
                     print(res["diagnosis"][-1], flush=True)
