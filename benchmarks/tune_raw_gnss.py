@@ -1,7 +1,7 @@
 """``mixnav tune`` on raw-GNSS recordings (issue 35, "Other recordings"): default against tuned,
 scored against the reference only afterwards.
 
-    python benchmarks/tune_raw_gnss.py [--budget 60] [--workers 2]
+    python benchmarks/tune_raw_gnss.py [--budget 60] [--workers 1] [--only NAME] [--markdown]
 
 For each recording (the phone's static log, the u-blox static log among high-rises, the
 smartLoc drive as GNSS alone) three files are processed and scored:
@@ -21,7 +21,9 @@ The start sweep (``mixnav.start_sweep``, ``[motion] start``; the tuner scored it
 from its own starts, this asks whether the values hold from others): each of the three files
 run from the starts of :data:`SWEEP_STEP` over the first half of the recording, every method
 scored on the common span (from the latest filter start to the end: the same epochs for every
-start and file); per method the median and worst RMSE over the starts.
+start and file); per method the median and worst RMSE over the starts, whether tuned is at
+most shipped on both, and the tuned values with the comments ``mixnav tune`` wrote (a
+proposal for the shipped file; this script changes none).
 
 The wall time of the tuning itself, one worker, before and after the SPP stage was cached, is
 benchmarks/tune_raw_speed.py's (its table is copied in when its results file exists).
@@ -46,7 +48,7 @@ DATASETS = ROOT / "src" / "mixnav" / "config" / "datasets"
 RECORDINGS = ("android-static-filters", "urbannav-tst-static", "smartloc-berlin-gnss")
 MOTION_NOISE = ("accel_sigma", "vertical_accel_sigma", "clock_q_bias", "clock_q_drift")
 #: the start sweep's step per recording [s]: about eight starts over the first half
-SWEEP_STEP = {"android-static-filters": 15.0, "urbannav-tst-static": 60.0, "smartloc-berlin-gnss": 90.0}
+SWEEP_STEP = {"android-static-filters": 15.0, "urbannav-tst-static": 60.0, "smartloc-berlin-gnss": 20.0}
 
 
 def untuned_text(name: str) -> str:
@@ -95,11 +97,21 @@ def sweep(path, name: str) -> dict:
 
 def main(argv) -> None:
     import mixnav
+    if "--markdown" in argv:   # the results file's markdown again, from its JSON
+        (HERE / "results" / "tune_raw_gnss.md").write_text(markdown(json.loads(
+            (HERE / "results" / "tune_raw_gnss.json").read_text())))
+        return
     budget = int(argv[argv.index("--budget") + 1]) if "--budget" in argv else 60
     workers = int(argv[argv.index("--workers") + 1]) if "--workers" in argv else 1
+    only = argv[argv.index("--only") + 1] if "--only" in argv else None
+    out_json = HERE / "results" / "tune_raw_gnss.json"
     res = {"budget": budget, "workers": workers, "recordings": {}}
+    if only:   # that recording again, the others kept from the results file
+        res = json.loads(out_json.read_text())
+        if (res["budget"], res["workers"]) != (budget, workers):
+            raise SystemExit(f"--only: the results file is of --budget {res['budget']} --workers {res['workers']}")
     with tempfile.TemporaryDirectory() as tmp:
-        for name in RECORDINGS:
+        for name in [only] if only else RECORDINGS:
             src = Path(tmp) / f"{name}-untuned.toml"
             src.write_text(untuned_text(name))
             t0 = time.perf_counter()
@@ -119,7 +131,7 @@ def main(argv) -> None:
             res["recordings"][name] = rec
             print(name, "done", f"{wall:.0f} s", flush=True)
     res["load_average"] = os.getloadavg()
-    (HERE / "results" / "tune_raw_gnss.json").write_text(json.dumps(res, indent=1) + "\n")
+    out_json.write_text(json.dumps(res, indent=1) + "\n")
     (HERE / "results" / "tune_raw_gnss.md").write_text(markdown(res))
     print(markdown(res))
 
@@ -173,10 +185,38 @@ def sweep_table(rec: dict, name: str) -> list[str]:
             s = rec[f"{v}_sweep"].get(m)
             return "-" if s is None else f"{s['median_common_rmse_m']:.2f} / {s['worst_common_rmse_m']:.2f}"
         sh = rec["shipped_sweep"].get(m)
-        ok = "-" if sh is None else ("yes" if t["median_common_rmse_m"] <= sh["median_common_rmse_m"] and
-                                     t["worst_common_rmse_m"] <= sh["worst_common_rmse_m"] else "no")
+        ok = "-" if sh is None else ("yes" if at_most(t, sh) else "no")
         lines.append(f"| {m} | {cell('untuned')} | {cell('tuned')} | {cell('shipped')} | {ok} |")
-    return lines + [""]
+    filters = [m for m in tw if m in rec["shipped_sweep"] and m not in ("spp", "robust-spp")]
+    good = [m for m in filters if at_most(tw[m], rec["shipped_sweep"][m])]
+    target = rec["method"]
+    lines += ["", f"Tuned at most shipped (median and worst over the starts): the tuned method `{target}` "
+              f"{'yes' if target in good else 'no'}; {len(good)} of {len(filters)} filters "
+              f"({', '.join(good) or 'none'}). The tuned values, with the comments `mixnav tune` wrote "
+              "(a proposal: no shipped file is changed here):", "", "```toml"]
+    lines += tuned_lines(rec["tuned_toml"], target) + ["```", ""]
+    return lines
+
+
+def at_most(a: dict, b: dict) -> bool:
+    """Median and worst common-span RMSE of ``a`` at most those of ``b``."""
+    return a["median_common_rmse_m"] <= b["median_common_rmse_m"] and a["worst_common_rmse_m"] <= b["worst_common_rmse_m"]
+
+
+def tuned_lines(text: str, target: str) -> list[str]:
+    """The lines of a tuned.toml that ``mixnav tune`` wrote (a comment of its own), under their
+    table (a method's table: of the tuned method ``target``)."""
+    out, table = [], None
+    for ln in text.splitlines():
+        if ln.startswith("["):
+            table = ln
+        elif "# mixnav tune:" in ln:
+            if table is not None:
+                out.append(table + (f"   # of the [[methods]] named \"{target}\"" if table.startswith("[methods")
+                                    else ""))
+                table = None
+            out.append(ln)
+    return out
 
 
 if __name__ == "__main__":
