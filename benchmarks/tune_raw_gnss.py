@@ -143,7 +143,10 @@ def markdown(res: dict) -> str:
              "shipped file without its `[motion]` noise keys (the schema's defaults); `tuned`: `mixnav tune` on "
              "it (the innovation log-likelihood over several starts; no reference read); `shipped`: the shipped "
              "file (a-priori values, each documented in it). Scored afterwards against the reference: 2-D RMSE / "
-             "p95 / max over the method's epochs, and the plain SPP of the same file on the same epochs.", ""]
+             "p95 / max over the method's epochs, and the plain SPP of the same file on the same epochs. The tuner "
+             "scores the tuned method alone; the file's other filters run with the `[motion]` values tuned for it. "
+             "Why the plain EKF among the high-rises is no better than the SPP, tuned by its own likelihood or not: "
+             "`benchmarks/results/tune_raw_ekf_urban.md`.", ""]
     for name, rec in res["recordings"].items():
         lines += [f"## {name}", "",
                   f"Tuned method `{rec['method']}`; {rec['evaluations']} evaluations, {rec['filter_runs']} pipeline "
