@@ -84,6 +84,8 @@ def test_a_fixed_key_keeps_its_value_and_the_epoch_mixtures_start_is_searched(tm
     assert "motion.vertical_accel_sigma" in res.chosen
     names = [p["changed"] for p in res.evaluations]
     assert any(n.startswith("motion.vertical_accel_sigma") for n in names)
+    # the tuned method is the epoch mixture: the file's other filters are said to be untuned
+    assert res.not_tuned["the other filters"].startswith("ekf, robust, mixture, vb-akf: scored by no criterion")
 
 
 @need_data
@@ -99,3 +101,28 @@ def test_bad_input_names_the_argument(tmp_path, kwargs, argument, says):
         tune(_untuned(tmp_path), tmp_path / "out", workers=1, **{"budget": 4, **kwargs})
     assert e.value.argument == argument
     assert says in str(e.value)
+
+
+@need_data
+def test_the_cached_spp_stage_scores_as_the_whole_pipeline(tmp_path):
+    """The evaluator computes the SPP stage (the SPP, the filters' corrected pseudoranges) once
+    and runs the filter alone per candidate: every candidate's score equals, bitwise, the one of
+    the whole pipeline run afresh for it (``cached=False``), a candidate of other motion noise
+    and mixture start as the file as given; one changing ``[raw_gnss]`` (the pseudorange sigmas:
+    other corrected rows' variances) gets a stage of its own, and its score differs."""
+    from mixnav.experiment.tuning.criterion import without_reference
+    from mixnav.experiment.tuning.raw_gnss import stage_key
+    text = without_reference(_untuned(tmp_path).read_text())
+    doc = tomlkit.parse(text)
+    doc["motion"]["accel_sigma"] = "0.05 m/s^2/sqrt(Hz)"
+    doc["methods"][[m["name"] for m in doc["methods"]].index("epoch-mixture")]["options"] = {"los_weight": 0.7}
+    other = tomlkit.dumps(doc)
+    doc["raw_gnss"]["sigma_a"] = "6 m"
+    sigmas = tomlkit.dumps(doc)
+    args = (str(tmp_path / "phone.toml"), None, "epoch-mixture", [0.0, 30.0], SETTLE)
+    cached, whole = RawEvaluator(text, *args), RawEvaluator(text, *args, cached=False)
+    scores = [cached.evaluate(t).as_dict() for t in (text, other, sigmas)]
+    assert scores == [whole.evaluate(t).as_dict() for t in (text, other, sigmas)]
+    assert len({s["criterion"] for s in scores}) == 3 and all(s["error"] is None for s in scores)
+    keys = {stage_key(cached.dataset(t)) for t in (text, other, sigmas)}
+    assert len(keys) == 2 and len(cached._stages) == 2

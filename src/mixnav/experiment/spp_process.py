@@ -232,9 +232,23 @@ def _systems_of(obs, eph):
 def solve_raw(ds: RawGnssDataset, source: str, folder: Path, obs, eph: BroadcastEphemeris, read_time_s: float = 0.0,
               seed: int = 0) -> SppOutput:
     """SPP of every epoch of ``obs`` (read observations: GPS with a BroadcastEphemeris, any
-    systems with a MultiEphemeris; corrected pseudoranges without one) and the filter methods."""
+    systems with a MultiEphemeris; corrected pseudoranges without one) and the filter methods:
+    :func:`solve_spp`, then :func:`run_filters`."""
+    po = solve_spp(ds, source, folder, obs, eph, read_time_s)
+    filters = [(k, m) for k, m in enumerate(ds.run_methods()) if m.estimator != "wls"]
+    if filters:
+        run_filters(po, filters, seed)
+    return po
+
+
+def solve_spp(ds: RawGnssDataset, source: str, folder: Path, obs, eph: BroadcastEphemeris,
+              read_time_s: float = 0.0) -> SppOutput:
+    """The epoch-by-epoch part of :func:`solve_raw`: the SPP track, the robust SPP methods and
+    the moving reference, no filter run (``results`` empty). It depends on ``[raw_gnss]``,
+    ``[reference]``, ``[reference_point]`` and the ``wls`` methods only, never on ``[motion]``
+    or a filter method's settings (``mixnav tune`` computes it once for every candidate)."""
     if obs.corrected:
-        return _solve_corrected(ds, source, folder, obs, read_time_s, seed)
+        return _solve_corrected(ds, source, folder, obs, read_time_s)
     system, chan = _systems_of(obs, eph)
     c = ds.raw_gnss
     # the moving reference first: a file that does not cover the log is refused before the solve
@@ -258,15 +272,11 @@ def solve_raw(ds: RawGnssDataset, source: str, folder: Path, obs, eph: Broadcast
             po.robust_tracks[m.name] = solve_epochs(eph, obs.week, obs.tow, obs.epoch, obs.prn, obs.pseudorange,
                                                     options(ds, m), system=system, glonass_channel=chan)
             po.robust_time_s[m.name] = _time.perf_counter() - t3
-    filters = [(k, m) for k, m in enumerate(ds.run_methods()) if m.estimator != "wls"]
-    if filters:
-        run_filters(po, filters, seed)
     return po
 
 
-def _solve_corrected(ds, source: str, folder: Path, obs: RawPseudoranges, read_time_s: float,
-                     seed: int) -> SppOutput:
-    """:func:`solve_raw` of corrected pseudoranges (:mod:`mixnav.gnss.corrected_spp`, on their
+def _solve_corrected(ds, source: str, folder: Path, obs: RawPseudoranges, read_time_s: float) -> SppOutput:
+    """:func:`solve_spp` of corrected pseudoranges (:mod:`mixnav.gnss.corrected_spp`, on their
     epochs grouped by :meth:`~mixnav.gnss.pseudoranges.PseudorangeEpochs.from_raw`): times
     are the log's own seconds (week 0)."""
     from ..gnss.corrected_spp import solve_corrected
@@ -283,9 +293,6 @@ def _solve_corrected(ds, source: str, folder: Path, obs: RawPseudoranges, read_t
             t3 = _time.perf_counter()
             po.robust_tracks[m.name] = solve_corrected(pe, options(ds, m))
             po.robust_time_s[m.name] = _time.perf_counter() - t3
-    filters = [(k, m) for k, m in enumerate(ds.run_methods()) if m.estimator != "wls"]
-    if filters:
-        run_filters(po, filters, seed)
     return po
 
 
@@ -341,19 +348,26 @@ def filter_systems(tr: SppTrack) -> tuple[str, ...]:
     return tuple(s for s, v in tr.offsets.items() if np.isfinite(v).any())
 
 
-def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
-    """Run the ``(index, method)`` filters on the constant-velocity model (module docstring);
-    results into ``po``."""
+@dataclass(frozen=True)
+class FilterInputs:
+    """What the filters read that no filter setting changes: the corrected pseudorange epochs
+    and the clock jumps taken off them, from the SPP track, ``[raw_gnss]`` and
+    ``motion.clock_jump`` alone (:func:`filter_inputs`; :func:`run_filters` reuses them)."""
+
+    times: np.ndarray          # (n,) the epochs' times [s since the first epoch]
+    offset: np.ndarray         # (n,) clock jumps taken off the pseudoranges [m]
+    jumps: list
+    spikes: int
+    epochs: object             # PseudorangeEpochs
+    skipped: dict              # observations not filtered, by reason
+    elevation_mask: float
+
+
+def filter_inputs(po: SppOutput) -> FilterInputs:
+    """The filters' pseudoranges of ``po`` (module docstring): SPP's broadcast corrections at
+    the latest fix, the clock jumps the SPP saw taken off."""
     from ..gnss.spp import clock_jumps, corrected_pseudoranges
-    from ..ins.error_model import ClockModel
-    from ..measurements.pseudorange import PseudorangeGnss
-    from ..motion.constant_velocity import (ConstantVelocityMotion, ConstantVelocityNoise, clock_ticks,
-                                            constant_velocity_layout)
-    from .methods import run_methods
     ds, tr, obs = po.dataset, po.track, po.observations
-    mc = ds.motion
-    t_prep = _time.perf_counter()
-    init = filter_start(po)
     # the atmosphere at the latest fix (causal): a first fix is metres to tens of metres off,
     # which moves the delays by millimetres
     last = np.maximum.accumulate(np.where(tr.ok, np.arange(len(tr.tow)), -1))
@@ -362,7 +376,7 @@ def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
     times = _epoch_times(tr)
     # a receiver clock that jumps (millisecond steps) would throw every filter off: the
     # jumps seen by the SPP come off the pseudoranges first (the first fix has none)
-    offset, jumps, spikes = clock_jumps(times, tr.clock_bias, tr.ok, float(mc.clock_jump))
+    offset, jumps, spikes = clock_jumps(times, tr.clock_bias, tr.ok, float(ds.motion.clock_jump))
     if corrected(po):   # the file's pseudoranges, clock jumps off; the rows' own variances
         from dataclasses import replace
         from ..gnss.pseudoranges import PseudorangeEpochs
@@ -374,6 +388,26 @@ def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
         epochs, skipped = corrected_pseudoranges(po.ephemeris, obs.week, obs.tow, obs.epoch, obs.prn, rho,
                                                  rx, opts, cn0=getattr(obs, "cn0", None), source=obs.source,
                                                  system=system, glonass_channel=chan)
+    return FilterInputs(times, offset, jumps, spikes, epochs, skipped, opts.elevation_mask)
+
+
+def run_filters(po: SppOutput, methods, seed: int = 0, inputs: FilterInputs | None = None) -> None:
+    """Run the ``(index, method)`` filters on the constant-velocity model (module docstring);
+    results into ``po``. ``inputs``: :func:`filter_inputs` of an SppOutput of the same SPP
+    track, ``[raw_gnss]`` and ``motion.clock_jump`` (reused, not recomputed; the same numbers)."""
+    from ..ins.error_model import ClockModel
+    from ..measurements.pseudorange import PseudorangeGnss
+    from ..motion.constant_velocity import (ConstantVelocityMotion, ConstantVelocityNoise, clock_ticks,
+                                            constant_velocity_layout)
+    from .methods import run_methods
+    ds, tr, obs = po.dataset, po.track, po.observations
+    mc = ds.motion
+    t_prep = _time.perf_counter()
+    init = filter_start(po)
+    if inputs is None:
+        inputs = filter_inputs(po)
+    times, offset, jumps, spikes = inputs.times, inputs.offset, inputs.jumps, inputs.spikes
+    epochs, skipped = inputs.epochs, inputs.skipped
     end = float(times[-1])
     if not end > init.time:
         raise DataError("the first SPP fix is at the last epoch: nothing left to filter", file=obs.source)
@@ -382,7 +416,7 @@ def run_filters(po: SppOutput, methods, seed: int = 0) -> None:
     letters = filter_systems(tr)
     lay = constant_velocity_layout(clock=True, system_offsets=len(letters) - 1)
     model = PseudorangeGnss(epochs, lay, systems=tuple(codes[s] for s in letters), variance="given",
-                            elevation_mask=opts.elevation_mask)
+                            elevation_mask=inputs.elevation_mask)
     noise = ConstantVelocityNoise(float(mc.accel_sigma), float(mc.vertical_accel_sigma))
     clock = ClockModel(float(mc.clock_q_bias), float(mc.clock_q_drift))
     ticks = clock_ticks(init.time, end, float(mc.step))

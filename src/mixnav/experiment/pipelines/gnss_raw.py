@@ -10,9 +10,10 @@ from pathlib import Path
 import pandas as pd
 
 from ...config.raw_gnss_schema import RawGnssDataset
-from ..spp_process import SppOutput, method_metrics, raw_tables, read_raw, solve_raw, write_raw
+from ..spp_process import (FilterInputs, SppOutput, filter_inputs, method_metrics, raw_tables, read_raw, run_filters,
+                           solve_raw, solve_spp, write_raw)
 
-__all__ = ["load", "run", "tables", "metrics", "truth", "write", "with_start"]
+__all__ = ["load", "run", "spp", "filters", "tables", "metrics", "truth", "write", "with_start"]
 
 
 def load(ds: RawGnssDataset, source: str, folder: Path) -> tuple:
@@ -24,6 +25,28 @@ def run(ds: RawGnssDataset, source: str, folder: Path, inputs: tuple, seed: int 
     """SPP of every epoch (plain, robust) and the filter methods (``seed``: the engine's stream)."""
     obs, eph, read_time = inputs
     return solve_raw(ds, source, folder, obs, eph, read_time, seed)
+
+
+def spp(ds: RawGnssDataset, source: str, folder: Path, inputs: tuple) -> tuple[SppOutput, FilterInputs]:
+    """The part of :func:`run` no filter setting changes: the SPP (plain, robust), and the
+    filters' corrected pseudoranges; :func:`filters` runs the filters on them."""
+    obs, eph, read_time = inputs
+    po = solve_spp(ds, source, folder, obs, eph, read_time)
+    return po, filter_inputs(po)
+
+
+def filters(stage: tuple[SppOutput, FilterInputs], ds: RawGnssDataset, seed: int = 0) -> SppOutput:
+    """:func:`run` of ``ds`` from the :func:`spp` stage of a dataset with the same
+    ``[raw_gnss]``, references, ``wls`` methods and ``motion.clock_jump`` (``ds`` differs in
+    its filter settings, ``[motion]`` and its filter methods only): the same output, bitwise,
+    without the SPP."""
+    from dataclasses import replace
+    base, prepared = stage
+    po = replace(base, dataset=ds, results={}, checks={}, filter_time_s=0.0)
+    methods = [(k, m) for k, m in enumerate(ds.run_methods()) if m.estimator != "wls"]
+    if methods:
+        run_filters(po, methods, seed, prepared)
+    return po
 
 
 def tables(po: SppOutput) -> dict[str, pd.DataFrame]:

@@ -14,7 +14,10 @@ a zero velocity) is not tuned and every candidate's transient would otherwise we
 
 The SPP solutions do not depend on anything searched here (the pseudorange sigmas, which the
 SPP weights with, are not searched), so every candidate starts from the same fixes and
-scores the same rows.
+scores the same rows; they, and the filters' corrected pseudoranges, are computed once
+(:meth:`RawEvaluator.stage`, keyed by :func:`stage_key`: what they depend on) and every
+candidate and start runs the filter alone on them, with the same numbers as the whole
+pipeline (tests/test_tuning_raw.py).
 
 What is searched (:func:`raw_parameters`, in this order): the horizontal and vertical
 white-acceleration densities (a wide grid: a static receiver wants about 0.01, a car about
@@ -121,16 +124,32 @@ def target_method(ds, method: str | None) -> str:
     return filters[0].name
 
 
+def stage_key(ds) -> str:
+    """What the SPP stage of ``ds`` depends on (:func:`~mixnav.experiment.spp_process.solve_spp`
+    and :func:`~mixnav.experiment.spp_process.filter_inputs`): ``[raw_gnss]``, ``[reference]``,
+    ``[reference_point]``, the ``wls`` methods and ``motion.clock_jump``; never a searched key."""
+    import json
+    parts = [ds.raw_gnss, ds.reference, ds.reference_point,
+             [m for m in ds.run_methods() if m.estimator == "wls"], float(ds.motion.clock_jump)]
+    return json.dumps([p.model_dump(mode="json") if hasattr(p, "model_dump") else
+                       [q.model_dump(mode="json") for q in p] if isinstance(p, list) else p for p in parts],
+                      default=str, sort_keys=True)
+
+
 class RawEvaluator:
     """Runs candidate files of one raw-GNSS dataset from several starts and scores them
-    (module docstring). The files are read once. Same interface as
-    :class:`.criterion.Evaluator`."""
+    (module docstring). The files are read once, and the SPP stage (the SPP track, the
+    filters' corrected pseudoranges) computed once per :func:`stage_key`; each candidate and
+    start runs the filter alone (``cached=False``: the whole pipeline every time, the same
+    numbers). Same interface as :class:`.criterion.Evaluator`."""
 
-    def __init__(self, text: str, source: str, data: str | None, method: str, starts, settle: float):
+    def __init__(self, text: str, source: str, data: str | None, method: str, starts, settle: float,
+                 cached: bool = True):
         from ...config.loader import load_dataset_text
         from ..data_folder import find_data_dir
         from ..pipelines import gnss_raw
         self.source, self.method, self.starts, self.settle = source, method, list(starts), float(settle)
+        self.cached, self._stages = bool(cached), {}
         ds, _, _ = load_dataset_text(text, source)
         self.folder = find_data_dir(ds, data, source)
         self.inputs = gnss_raw.load(ds, source, self.folder)
@@ -141,13 +160,31 @@ class RawEvaluator:
         methods = [m.model_copy(update={"smooth": False}) for m in ds.methods if m.name == self.method]
         return ds.model_copy(update={"methods": methods})
 
+    def stage(self, ds):
+        """The SPP stage of ``ds`` (:func:`~mixnav.experiment.pipelines.gnss_raw.spp`), computed
+        once per distinct :func:`stage_key` and reused by every candidate and start."""
+        from ..pipelines import gnss_raw
+        key = stage_key(ds)
+        if key not in self._stages:
+            if len(self._stages) >= 2:
+                self._stages.clear()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                self._stages[key] = gnss_raw.spp(ds, self.source, self.folder, self.inputs)
+        return self._stages[key]
+
     def run(self, ds):
-        """The pipeline's output for ``ds`` (its own start), with the innovation densities recorded."""
+        """The pipeline's output for ``ds`` (its own start), with the innovation densities
+        recorded: the filters on the cached SPP stage (the same numbers as
+        :func:`~mixnav.experiment.pipelines.gnss_raw.run`, which ``cached=False`` runs)."""
         from ...filters.ekf import innovation_likelihood
         from ..pipelines import gnss_raw
+        stage = self.stage(ds) if self.cached else None
         with innovation_likelihood(), warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return gnss_raw.run(ds, self.source, self.folder, self.inputs)
+            if stage is None:
+                return gnss_raw.run(ds, self.source, self.folder, self.inputs)
+            return gnss_raw.filters(stage, ds)
 
     def evaluate(self, doc_text: str) -> VehicleScore:
         from ...errors import MixnavError
@@ -211,6 +248,10 @@ def tune_raw(*, text: str, stripped: str, source: str, ds, out, data, data_folde
             not_tuned[p.name] = "fixed by the user (--fix)"
     if not mixture:
         not_tuned["options (mixture starting values)"] = f"the tuned method '{target}' is not an epoch mixture"
+    others = [m.name for m in ds.methods if m.estimator != "wls" and m.name != target]
+    if others:
+        not_tuned["the other filters"] = (f"{', '.join(others)}: scored by no criterion here; they run with the "
+                                          f"[motion] values tuned for '{target}' (tune one with --method NAME)")
     searched = [p for p in params if p.name not in fix]
     try:
         doc = tomlkit.parse(stripped)
