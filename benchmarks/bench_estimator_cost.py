@@ -7,6 +7,9 @@
                                                   # estimator_cost_subset.md/.json (or --out STEM)
     python benchmarks/bench_estimator_cost.py --old DIR/src --as-of 2f27095 ...
                                                   # the datasets as configured at that commit, for both
+    python benchmarks/bench_estimator_cost.py --pool A B --out STEM
+                                                  # the rounds of runs A and B (results/A.json ...)
+                                                  # pooled: best and median of every round, per side
 
 Made for issue 33 (the registry, pipelines and motion-seam redesign must keep every
 estimator's cost within 5 %). Only the public API is called (``mixnav.run_scenario``,
@@ -120,7 +123,49 @@ def _run_one(src: str | None, only=(), files=None) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
+def pool(stems, out: str) -> None:
+    """Pool the rounds of several runs of this script (results/STEM.json, the same protocol:
+    old and new processes alternating) and write results/OUT.md/.json: per method the number
+    of rounds, the best and the median of each side and their ratios. Both statistics are
+    given because on a shared VM one process's times are off by 10-30 % as a whole: the best
+    of the rounds is the steady cost when the slow processes are the outliers, the median
+    when a lucky fast one is."""
+    import statistics
+    runs = [json.loads((HERE / "results" / f"{s}.json").read_text()) for s in stems]
+    sides = {w: [r for run in runs for r in run[w]] for w in ("old", "new")}
+    keys = sorted({k for r in sides["old"] for k in r if not k.startswith("rmse:")}
+                  & {k for r in sides["new"] for k in r if not k.startswith("rmse:")})
+    rows = []
+    for k in keys:
+        o = [r[k] for r in sides["old"] if k in r]
+        n = [r[k] for r in sides["new"] if k in r]
+        rows.append({"method": k, "rounds": min(len(o), len(n)), "old_best": min(o), "new_best": min(n),
+                     "best_ratio": min(n) / min(o), "old_median": statistics.median(o),
+                     "new_median": statistics.median(n),
+                     "median_ratio": statistics.median(n) / statistics.median(o)})
+    lines = ["# Estimator cost per GNSS epoch: the rounds of several runs pooled", "",
+             f"`benchmarks/bench_estimator_cost.py --pool {' '.join(stems)} --out {out}`: the rounds of "
+             + ", ".join(f"`{s}`" for s in stems) + " (each: old and new processes alternating, 3 timed runs "
+             "per process after a warm-up, the best of them per process) pooled per method: the best and the "
+             "median over the rounds of each side [us per GNSS epoch].", "",
+             "| case:method | rounds | old best | new best | best new / old | old median | new median | "
+             "median new / old |", "|---|---|---|---|---|---|---|---|"]
+    lines += [f"| {r['method']} | {r['rounds']} | {r['old_best']:.1f} | {r['new_best']:.1f} | {r['best_ratio']:.3f} | "
+              f"{r['old_median']:.1f} | {r['new_median']:.1f} | {r['median_ratio']:.3f} |" for r in rows]
+    (HERE / "results" / f"{out}.md").write_text("\n".join(lines) + "\n")
+    (HERE / "results" / f"{out}.json").write_text(json.dumps({"pooled": list(stems), "rows": rows}, indent=1))
+    print("\n".join(lines))
+
+
 def main(argv) -> None:
+    if "--pool" in argv:
+        stems = []
+        for a in argv[argv.index("--pool") + 1:]:
+            if a.startswith("--"):
+                break
+            stems.append(a)
+        pool(stems, argv[argv.index("--out") + 1])
+        return
     only = []
     if "--only" in argv:   # the names after --only, up to the next option
         for a in argv[argv.index("--only") + 1:]:
