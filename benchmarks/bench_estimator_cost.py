@@ -157,21 +157,21 @@ def pool(stems, out: str) -> None:
     print("\n".join(lines))
 
 
+def _names_after(argv, flag: str) -> list[str]:
+    """The arguments after ``flag``, up to the next option (none when ``flag`` is absent)."""
+    names = []
+    for a in argv[argv.index(flag) + 1:] if flag in argv else ():
+        if a.startswith("--"):
+            break
+        names.append(a)
+    return names
+
+
 def main(argv) -> None:
     if "--pool" in argv:
-        stems = []
-        for a in argv[argv.index("--pool") + 1:]:
-            if a.startswith("--"):
-                break
-            stems.append(a)
-        pool(stems, argv[argv.index("--out") + 1])
+        pool(_names_after(argv, "--pool"), argv[argv.index("--out") + 1])
         return
-    only = []
-    if "--only" in argv:   # the names after --only, up to the next option
-        for a in argv[argv.index("--only") + 1:]:
-            if a.startswith("--"):
-                break
-            only.append(a)
+    only = _names_after(argv, "--only")
     if only and not _cases(only):
         raise SystemExit(f"--only: no case named {only}; the cases: {[Path(n).stem for _, n in CASES]}")
     if "--one" in argv:

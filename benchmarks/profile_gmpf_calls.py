@@ -12,6 +12,7 @@ with the GMPF alone (500 particles), one warm-up run, then one profiled run.
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -21,6 +22,7 @@ HERE = Path(__file__).resolve().parent
 
 _CHILD = """
 import cProfile, json, pstats, sys
+from pathlib import Path
 import mixnav
 go = lambda: mixnav.run_scenario(sys.argv[1], seed=1)
 go()
@@ -29,7 +31,7 @@ st = pstats.Stats(pr)
 top = sorted(st.stats.items(), key=lambda kv: -kv[1][2])[:12]
 print(json.dumps({"calls": st.total_calls, "primitive": st.prim_calls,
                   "top": [[f"{Path(f).name}:{ln}({fn})", cc, nc, tt] for (f, ln, fn), (cc, nc, tt, ct, _) in top]}))
-""".replace("import mixnav", "import mixnav\nfrom pathlib import Path")
+"""
 
 
 def _gmpf_only() -> str:
@@ -42,7 +44,6 @@ def _gmpf_only() -> str:
 
 def run(src: str | None, cfg: str) -> dict:
     env = {"PYTHONPATH": src} if src else {}
-    import os
     out = subprocess.run([sys.executable, "-c", _CHILD, cfg], env={**os.environ, **env}, capture_output=True,
                          text=True, check=True).stdout
     return json.loads(out.strip().splitlines()[-1])

@@ -235,10 +235,16 @@ def solve_raw(ds: RawGnssDataset, source: str, folder: Path, obs, eph: Broadcast
     systems with a MultiEphemeris; corrected pseudoranges without one) and the filter methods:
     :func:`solve_spp`, then :func:`run_filters`."""
     po = solve_spp(ds, source, folder, obs, eph, read_time_s)
-    filters = [(k, m) for k, m in enumerate(ds.run_methods()) if m.estimator != "wls"]
-    if filters:
-        run_filters(po, filters, seed)
+    run_filter_methods(po, seed)
     return po
+
+
+def run_filter_methods(po: SppOutput, seed: int = 0, inputs: FilterInputs | None = None) -> None:
+    """:func:`run_filters` on every method of ``po.dataset`` that is not an SPP (``wls``);
+    ``inputs`` as there."""
+    methods = [(k, m) for k, m in enumerate(po.dataset.run_methods()) if m.estimator != "wls"]
+    if methods:
+        run_filters(po, methods, seed, inputs)
 
 
 def solve_spp(ds: RawGnssDataset, source: str, folder: Path, obs, eph: BroadcastEphemeris,

@@ -136,9 +136,7 @@ def register_reader(kind: str, format: str):
 def formats(kind: str) -> tuple[str, ...]:
     """The formats of ``kind``: every built-in reader's (mixnav.formats, read from the source,
     nothing imported), then those registered at run time."""
-    kind = _current_kind(kind)
-    names = list(known.known_formats(kind))
-    return tuple(names + [f for k, f in _READERS if k == kind and f not in names])
+    return known.known_formats(_current_kind(kind))   # register_reader adds every reader there
 
 
 def get_reader(kind: str, format: str, key: str | None = None, file: str | None = None) -> Reader:

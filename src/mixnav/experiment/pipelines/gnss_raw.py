@@ -10,8 +10,8 @@ from pathlib import Path
 import pandas as pd
 
 from ...config.raw_gnss_schema import RawGnssDataset
-from ..spp_process import (FilterInputs, SppOutput, filter_inputs, method_metrics, raw_tables, read_raw, run_filters,
-                           solve_raw, solve_spp, write_raw)
+from ..spp_process import (FilterInputs, SppOutput, filter_inputs, method_metrics, raw_tables, read_raw,
+                           run_filter_methods, solve_raw, solve_spp, write_raw)
 
 __all__ = ["load", "run", "spp", "filters", "tables", "metrics", "truth", "write", "with_start"]
 
@@ -43,9 +43,7 @@ def filters(stage: tuple[SppOutput, FilterInputs], ds: RawGnssDataset, seed: int
     from dataclasses import replace
     base, prepared = stage
     po = replace(base, dataset=ds, results={}, checks={}, filter_time_s=0.0)
-    methods = [(k, m) for k, m in enumerate(ds.run_methods()) if m.estimator != "wls"]
-    if methods:
-        run_filters(po, methods, seed, prepared)
+    run_filter_methods(po, seed, prepared)
     return po
 
 

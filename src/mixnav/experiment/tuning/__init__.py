@@ -211,13 +211,14 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
         t_first, t_last = max(a, t_first), min(b, t_last)
     own = [tuple(map(float, x)) for x in ds.gnss.withhold]
     windows = cv_windows(t_first, t_last, w, folds, avoid=own, step=w / 2.0)
-    if sum(len(f) for f in windows) < 2:   # folds left empty by a short span are dropped below
+    n_kept = sum(len(f) for f in windows)
+    if n_kept < 2:   # folds left empty by a short span are dropped below
         n_all = sum(len(f) for f in cv_windows(t_first, t_last, w, folds, step=w / 2.0))
         why = (f"; the file's own withheld windows ({', '.join(f'{a:g}-{b:g} s' for a, b in own)}, and "
-               f"{w:g} s of reconvergence after each) leave out {n_all - sum(len(f) for f in windows)} of "
+               f"{w:g} s of reconvergence after each) leave out {n_all - n_kept} of "
                f"{n_all}: they are the user's evaluation, never tuned on (remove gnss.withhold to tune there)"
-               ) if own and n_all > sum(len(f) for f in windows) else ""
-        raise ArgumentError(f"the span {t_first:.1f}-{t_last:.1f} s holds {sum(len(f) for f in windows)} "
+               ) if own and n_all > n_kept else ""
+        raise ArgumentError(f"the span {t_first:.1f}-{t_last:.1f} s holds {n_kept} "
                             f"cross-validation windows of {w:g} s; at least 2 are needed (a shorter "
                             f"window or a longer span){why}", argument="span")
     windows = [f for f in windows if f]
