@@ -13,7 +13,6 @@ from __future__ import annotations
 import dataclasses
 import shutil
 import signal
-import time
 import warnings
 from pathlib import Path
 
@@ -266,7 +265,6 @@ def test_reader_survives_damaged_copies(tmp_path, spec):
     assert _read_once(read, base / target, f"{name} (undamaged)") == "read"
     original = (base / target).read_bytes()
     rng = np.random.default_rng(sum(map(ord, name)))   # seeded per reader
-    t0 = time.perf_counter()
     seen = {"read": 0, "refused": 0}
     for i in range(cases):
         mutate = MUTATIONS[i % len(MUTATIONS)]
@@ -274,4 +272,5 @@ def test_reader_survives_damaged_copies(tmp_path, spec):
         seen[_read_once(read, base / target, f"{name} case {i} ({mutate.__name__})")] += 1
     print(name, seen)
     assert seen["refused"] > 0   # the damage is noticed at least sometimes
-    assert time.perf_counter() - t0 < 30.0
+    # no bound on the whole loop's wall time: a hang is caught per case (CASE_TIMEOUT_S), and a
+    # sum of times is a timed unit test that a loaded CI machine fails (it did, on multi-nav-g)
