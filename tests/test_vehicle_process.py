@@ -158,3 +158,38 @@ def test_alignment_start_discards_the_data_before_it(tmp_path):
     with pytest.raises(ConfigError) as exc:
         process_vehicle(late, source)
     assert exc.value.key == "alignment.start"
+
+
+def test_track_window_end_waits_for_the_distance():
+    """``[alignment] min_distance``: the window ends at ``window`` or, later, where the odometry
+    has counted the distance (closed form on a car parked 10 s, then 5 m/s); never reached:
+    a ConfigError naming the key."""
+    from mixnav.experiment.vehicle_process import track_window_end
+    from mixnav.motion.dead_reckoning import odometry_increments
+    t = np.arange(0.0, 60.0 + 1e-9, 0.1)
+    speed = np.where(t <= 10.0, 0.0, 5.0)
+    inc = odometry_increments(t, speed, np.zeros_like(t))
+    assert track_window_end(inc, 20.0) == pytest.approx(20.0)
+    assert track_window_end(inc, 20.0, 40.0) == pytest.approx(20.0)       # 50 m by 20 s
+    assert track_window_end(inc, 20.0, 100.0) == pytest.approx(30.0)      # 10 s parked + 100 m at 5 m/s
+    with pytest.raises(ConfigError) as exc:
+        track_window_end(inc, 20.0, 300.0, "ds.toml")
+    assert exc.value.key == "alignment.min_distance" and "250.0 m" in str(exc.value)
+
+
+def test_min_distance_moves_the_filter_start(tmp_path):
+    """On smartLoc from 120 s (the car crawls there: about 68 m in the 20 s window) a 100 m
+    track starts the filters later than the 20 s window; a negative distance names the key."""
+    data_file("smartloc-berlin", "Berlin_Potsdamer_Platz_Input.txt")
+    from mixnav.experiment.vehicle_process import process_vehicle
+    text = BASE.format(data=DATA_DIR / "smartloc-berlin") + ('[alignment]\nstart = "120 s"\nmin_distance = "{d}"\n'
+                                                            '[[methods]]\nname = "e"\n')
+    starts = {}
+    for d in ("0 m", "100 m"):
+        ds, source, _ = load_dataset(_config(tmp_path, text.format(d=d)))
+        starts[d] = process_vehicle(ds, source).init.time
+    assert 139.5 < starts["0 m"] < 140.5
+    assert starts["100 m"] > starts["0 m"] + 2.0
+    with pytest.raises(ConfigError) as exc:
+        load_dataset(_config(tmp_path, text.format(d="-5 m")))
+    assert exc.value.key.startswith("alignment.min_distance"), exc.value

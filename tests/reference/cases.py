@@ -92,7 +92,10 @@ def _table_numbers(table) -> dict:
             continue
         a = np.ascontiguousarray(values.to_numpy(dtype=float))
         finite = np.isfinite(a)
-        out[str(col)] = {"sum": float(a[finite].sum()), "finite": int(finite.sum()),
+        # abs_sum: the scale of the sum's rounding (a sum of signed values, yaw in degrees,
+        # can cancel to far below its terms: _diffs scales the sum's tolerance by it)
+        out[str(col)] = {"sum": float(a[finite].sum()), "abs_sum": float(np.abs(a[finite]).sum()),
+                         "finite": int(finite.sum()),
                          "sha256": hashlib.sha256(a.tobytes()).hexdigest()[:16]}
     return out
 
@@ -126,6 +129,33 @@ def compute(case, data_dir=None) -> dict:
 
 #: allowed difference of a stored float: relative, and absolute (states near zero)
 REL, ABS = 1e-6, 1e-8
+#: (case, method) -> why: runs that amplify a CPU's last bits into other numbers, compared by
+#: their horizontal RMSE alone within CHAOTIC_REL (``loose``). drive-0708-multipath's plain IMM
+#: (no bias state) follows the injected 10 m multipath in and out of its NHC mode, its
+#: attitude wandering by degrees (position NEES ~3e4): on an AMD EPYC it gave RMSE 4.33 m
+#: against the pins' 4.79 m (maximum 27.6 against 75.6 m) from the same commit, bit for bit
+#: repeatable on each machine. Its role in the case, failing where the EM-IMM (0.11 m) does
+#: not, holds on both.
+CHAOTIC = {("drive-0708-multipath", "imm"): "plain IMM under injected multipath: attitude wanders by degrees"}
+CHAOTIC_REL = 0.25
+
+
+def loose(case_id: str, stored: dict, now: dict) -> tuple[dict, dict, list]:
+    """``stored`` and ``now`` with each CHAOTIC method of the case cut to its horizontal RMSE,
+    and ``_diffs``' lines for those RMSEs beyond CHAOTIC_REL (the rest is compared as usual)."""
+    out = []
+    stored, now = dict(stored), dict(now)
+    for (cid, method), _why in CHAOTIC.items():
+        if cid != case_id or method not in stored:
+            continue
+        a = stored.pop(method)["metrics"]["horizontal_rmse_m"]
+        b = (now.pop(method, None) or {}).get("metrics", {}).get("horizontal_rmse_m")
+        if b is None or not abs(b - a) <= CHAOTIC_REL * abs(a):
+            out.append(f"{case_id}.{method}.metrics.horizontal_rmse_m: stored {a!r}, now {b!r} "
+                       f"(chaotic: allowed {100 * CHAOTIC_REL:.0f} %)")
+    return stored, now, out
+
+
 #: compare the solution tables' bytes too (only on the machine that stored them)
 BITWISE = os.environ.get("MIXNAV_BITWISE") == "1"
 
@@ -145,6 +175,12 @@ def _diffs(stored, now, where=""):
                 out.append(f"{where}.{k}: missing now")
             elif k not in stored:
                 continue  # a new output (e.g. a key the redesign adds) is not a regression
+            elif k == "sum" and isinstance(now.get("abs_sum"), float) and isinstance(stored[k], float):
+                # a column's sum rounds by its terms' size, not by the (possibly cancelled) sum
+                tol = REL * max(abs(stored[k]), now["abs_sum"]) + ABS
+                if not abs(now[k] - stored[k]) <= tol:
+                    out.append(f"{where}.{k}: stored {stored[k]!r}, now {now[k]!r} (diff {now[k] - stored[k]:.3g}, "
+                               f"allowed {tol:.3g})")
             else:
                 out += _diffs(stored[k], now[k], f"{where}.{k}")
     elif isinstance(stored, list):

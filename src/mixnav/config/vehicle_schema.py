@@ -107,11 +107,16 @@ class VehicleAlignment(Strict):
     discarded, as if the recording began there (the track window is then the ``window``
     after ``start``, the reference start the reference's first epoch at or after it); the
     reference is kept whole for scoring. A start that leaves no data after it is an error
-    naming ``alignment.start``."""
+    naming ``alignment.start``. ``min_distance``: the track window lasts at least
+    ``window`` and until the odometry has counted this distance since its start (a track's
+    heading needs travel: a recording that starts parked or crawling would otherwise align on
+    a few metres; default 0: ``window`` alone; no such distance in the data is an error
+    naming ``alignment.min_distance``)."""
 
     mode: Literal["track", "reference"] = "track"
     start: Time = 0.0  # type: ignore[valid-type]
     window: Duration = 20.0  # type: ignore[valid-type]
+    min_distance: NonNegLength = 0.0  # type: ignore[valid-type]
     cn0_edges: list[float] = Field(default_factory=list)
     position_sigma: PosLength = 10.0  # type: ignore[valid-type]
     heading_sigma: PosAngle = 0.1  # type: ignore[valid-type]

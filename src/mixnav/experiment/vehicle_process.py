@@ -189,6 +189,22 @@ def read_vehicle(ds: VehicleDataset, source: str, d: Path) -> VehicleInputs:
     return VehicleInputs(odo, inc, epochs, truth, _time.perf_counter() - t_read)
 
 
+def track_window_end(inc, window: float, min_distance: float = 0.0, source=None) -> float:
+    """End [s] of the track alignment's window over the odometry increments ``inc``: ``window``
+    [s] after the data's start, later when the odometry has not yet counted ``min_distance``
+    [m] by then (the first increment at which it has); a ConfigError naming
+    ``alignment.min_distance`` when the data never travel that far."""
+    end = float(inc.time[0] - inc.dt[0] + window)
+    if min_distance <= 0.0:
+        return end
+    travelled = np.cumsum(np.abs(inc.dvel[:, 0]))
+    k = int(np.searchsorted(travelled, min_distance))
+    if k >= len(inc.time):
+        raise ConfigError(f"the odometry counts only {travelled[-1]:.1f} m after the start: no track window "
+                          f"travels {min_distance:g} m", file=source, key="alignment.min_distance")
+    return max(end, float(inc.time[k]))
+
+
 def run_vehicle(ds: VehicleDataset, source: str, d: Path, inputs: VehicleInputs, seed: int = 0) -> VehicleOutput:
     """Alignment and every method on the files read (module docstring)."""
     oc, pc = ds.odometry, ds.pseudoranges
@@ -223,7 +239,8 @@ def run_vehicle(ds: VehicleDataset, source: str, d: Path, inputs: VehicleInputs,
     else:
         from ..alignment.track import align_track
         with config_keys("alignment", source):
-            init0, align = align_track(epochs, inc, float(inc.time[0] - inc.dt[0] + al.window), systems=systems,
+            init0, align = align_track(epochs, inc, track_window_end(inc, float(al.window), float(al.min_distance),
+                                                                     source), systems=systems,
                                        cn0_edges=tuple(al.cn0_edges))
         init = InitialState(time=init0.time, nav=init0.nav, sigma_att=np.array([0.0, 0.0, float(al.heading_sigma)]),
                             sigma_vel=np.ones(3), sigma_pos=np.full(3, float(al.position_sigma)),
