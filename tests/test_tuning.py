@@ -248,3 +248,60 @@ def test_the_command_line_writes_the_folder(tmp_path):
     assert body["fixed"] == ["imu.errors.arw"] and body["evaluations_spent"] == 2
     res = CliRunner().invoke(app, ["tune", "drive-0708", "--out", str(tmp_path / "out"), "--budget", "0"])
     assert res.exit_code != 0 and "budget" in res.output
+
+
+def test_criterion_se_is_the_windows_standard_error():
+    """The cluster-robust standard error of the mean NLPD per fix: with equal fix counts, the
+    plain standard error of the windows' mean NLPDs; None with fewer than two windows."""
+    from mixnav.experiment.tuning.criterion import criterion_se
+    x = np.array([4.4, 1.1, 0.5, 2.5, -0.3, 7.3])
+    n = np.full(len(x), 150)
+    assert criterion_se(x * n, n) == pytest.approx(np.std(x, ddof=1) / np.sqrt(len(x)), rel=1e-12)
+    # unequal counts: the ratio estimator's sandwich, by hand
+    s, n = np.array([10.0, 40.0, -5.0]), np.array([10.0, 20.0, 5.0])
+    c = s.sum() / n.sum()
+    assert criterion_se(s, n) == pytest.approx(np.sqrt(1.5 * np.sum((s - c * n) ** 2)) / n.sum())
+    assert criterion_se([3.0], [10]) is None and criterion_se([], []) is None
+
+
+class _RisingScorer:
+    """The k-th candidate scored scores ``best + rises[k]``."""
+
+    def __init__(self, best, rises, se):
+        self.best, self.rises, self.se, self.k = best, list(rises), se, 0
+
+    def left(self):
+        return len(self.rises) - self.k
+
+    def score(self, texts):
+        out = []
+        for _ in texts:
+            c = self.best + self.rises[self.k]
+            self.k += 1
+            out.append({"criterion": c, "nlpd": c, "criterion_se": self.se, "innovation_ll_per_update": 0.0})
+        return out
+
+
+@pytest.mark.parametrize("se, rises, factor, scored", [
+    (0.5, [0.3, 0.45, 0.6, 0.7], 4.0, 3),      # x2, x2 inside one standard error, the third x2 past it
+    (0.5, [0.1, 0.2, 0.3, 0.9], 8.0, 3),      # at most three doublings
+    (0.35, [0.4, 0.3, 0.1, 0.1], 2 ** 0.5, 2),  # the first x2 past it: x1.41 once, then done
+    (0.2, [0.3, 0.45, 0.6, 0.7], 1.0, 2),      # 2 / 14 = 0.14 would refuse as well; so does 0.2
+    (0.5, [0.6, 0.45, 0.1, 0.1], 2 ** 0.5, 2),  # x1.41 kept: no doubling after it
+])
+def test_the_conservative_pass_widens_within_one_standard_error(se, rises, factor, scored):
+    """The tolerance is the best's standard error from its windows' spread (the one-standard-error
+    rule), not 2 / n_windows; each key is doubled while inside it (a widening 0.3 above the best
+    is kept with a standard error of 0.5 over 14 windows, where 2 / 14 = 0.14 refuses it)."""
+    from mixnav.experiment.tuning.search import conservative_pass, conservative_tolerance
+    doc = tomlkit.parse((ROOT / "benchmarks" / "configs" / "drive-0708-untuned.toml").read_text())
+    arw = next(p for p in ins_parameters() if p.name == "imu.errors.arw")
+    before = get_value(doc, arw)
+    assert conservative_tolerance({"criterion_se": None}, 14) == pytest.approx(2 / 14)   # an old journal's score
+    best = {"criterion": 1.0, "nlpd": 1.0, "criterion_se": se, "innovation_ll_per_update": 0.0}
+    tol = conservative_tolerance(best, 14)
+    assert tol == se
+    scorer = _RisingScorer(1.0, rises, se)
+    out, sc = conservative_pass(doc, best, [arw], scorer, [], tol, {})
+    np.testing.assert_allclose(get_value(out, arw), before * factor, rtol=2e-3)
+    assert scorer.k == scored

@@ -226,7 +226,7 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
              target, windows, (t_first, t_last))
     scorer = Scorer(setup, journal, workers, scheduler, progress, budget, len(windows))
 
-    searched_best = None
+    searched_best = tolerance = None
     try:
         doc = tomlkit.parse(stripped)
         chosen, not_tuned, evaluations = {}, {}, []
@@ -251,7 +251,8 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
             for name in ("imu.errors.arw", "imu.errors.vrw", "imu.errors.gyro_bias_walk", "imu.errors.accel_bias_walk"):
                 if name in chosen and "data_how" in chosen[name]:
                     chosen[name]["data_how"] += " (not kept: the criterion preferred the file's value)"
-        from .search import CONSERVATIVE_KEYS, CONSERVATIVE_STEPS, conservative_pass, coordinate_search
+        from .search import (CONSERVATIVE_KEYS, CONSERVATIVE_STEPS, conservative_pass, conservative_tolerance,
+                             coordinate_search)
         CONSERVATIVE_RESERVE = len(CONSERVATIVE_KEYS) * len(CONSERVATIVE_STEPS) if budget >= 40 else 0
         searched = [p for p in ins_parameters() if p.name not in fix and _applies(cur_doc, p, ds)]
         for p in ins_parameters():
@@ -270,7 +271,8 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
         # the most cautious setting the criterion cannot tell from the best (search.conservative_pass)
         n_windows = sum(len(f) for f in windows)
         searched_best = cur["nlpd"]
-        cur_doc, cur = conservative_pass(cur_doc, cur, searched, scorer, evaluations, 2.0 / n_windows, curves)
+        tolerance = conservative_tolerance(cur, n_windows)
+        cur_doc, cur = conservative_pass(cur_doc, cur, searched, scorer, evaluations, tolerance, curves)
         for p in searched:
             if len(curves.get(p.name, [])) < 2:   # only the current point: the budget ran out first
                 not_tuned[p.name] = "the budget ran out before the search reached it: the file's value kept"
@@ -292,7 +294,8 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
     write_outputs(out, result, {"dataset": str(dataset), "source": source, "method": target, "budget": budget,
                                 "evaluations_spent": len(scorer.seen), "filter_runs": scorer.runs, "seed": seed,
                                 "span_s": [t_first, t_last], "window_s": w, "folds": len(windows),
-                                "cv_windows": windows, "fixed": fix, "criterion_best_searched": searched_best})
+                                "cv_windows": windows, "fixed": fix, "criterion_best_searched": searched_best,
+                                "conservative_tolerance": tolerance})
     write_marker(out, "tune", True, TUNE_FILES)
     return result
 

@@ -74,6 +74,8 @@ class Score:
     n_fixes: int
     n_updates: int
     error: str | None = None
+    window_nlpd: list = None    # per window: the sum of its withheld fixes' NLPD
+    window_fixes: list = None   # per window: how many withheld fixes it scored
 
     def as_dict(self) -> dict:
         h = np.asarray(self.window_hmax, float)
@@ -83,10 +85,29 @@ class Score:
                 "cv_p90_hmax_m": float(np.percentile(h, 90)) if len(h) else None,
                 "cv_worst_hmax_m": float(h.max()) if len(h) else None,
                 "cv_window_hmax_m": [float(x) for x in h], "cv_window_nees": [float(x) for x in self.window_nees],
+                "cv_window_nlpd_sum": [float(x) for x in (self.window_nlpd or [])],
+                "cv_window_fixes": [int(x) for x in (self.window_fixes or [])],
+                "criterion_se": criterion_se(self.window_nlpd or [], self.window_fixes or []),
                 "error": self.error}
 
 
 FAILED = Score(math.inf, -math.inf, [], [], 0, 0)
+
+
+def criterion_se(window_sums, window_counts) -> float | None:
+    """The standard error of the mean NLPD per withheld fix with the windows as the independent
+    units (the fixes inside a window are strongly correlated): the cluster-robust (sandwich)
+    standard error of a ratio of sums, ``sqrt(m / (m - 1) * sum_w (S_w - c n_w)^2) / N`` with
+    ``S_w`` and ``n_w`` window w's NLPD sum and fix count, ``N = sum n_w``, ``c`` the mean and
+    ``m`` the number of windows. Unlike ``2 / m`` (a likelihood-ratio interval, which holds
+    when the filter's model is the data's) it is measured from the windows' own spread, so it
+    stays honest when the model is wrong. None with fewer than two windows."""
+    s, n = np.asarray(window_sums, float), np.asarray(window_counts, float)
+    m = len(s)
+    if m < 2 or len(n) != m or n.sum() <= 0 or not np.isfinite(s).all():
+        return None
+    c = s.sum() / n.sum()
+    return float(math.sqrt(m / (m - 1) * np.sum((s - c * n) ** 2)) / n.sum())
 
 
 class Evaluator:
@@ -153,14 +174,16 @@ class Evaluator:
         from ...errors import MixnavError
         try:
             ds = self.dataset(doc_text)
-            nlpd_sum, n_fix, ll_sum, n_upd, hmax, nees = 0.0, 0, 0.0, 0, [], []
+            nlpd_sum, n_fix, ll_sum, n_upd, hmax, nees, w_sum, w_n = 0.0, 0, 0.0, 0, [], [], [], []
             for fold in self.windows:
                 po = self.run(ds, fold)
                 res = po.results[self.method]
-                s, n, h, ne = _withheld_scores(po, res, fold)
+                s, n, h, ne, ws, wn = _withheld_scores(po, res, fold)
                 nlpd_sum, n_fix = nlpd_sum + s, n_fix + n
                 hmax += h
                 nees += ne
+                w_sum += ws
+                w_n += wn
                 held = [tuple(w) for w in ds.gnss.withhold] + list(fold)
                 ll, m = _innovation_ll(res, self.span, held)
                 ll_sum, n_upd = ll_sum + ll, n_upd + m
@@ -168,7 +191,8 @@ class Evaluator:
             return Score(math.inf, -math.inf, [], [], 0, 0, error=f"{type(exc).__name__}: {exc}")
         if n_fix == 0:
             return Score(math.inf, -math.inf, [], [], 0, 0, error="no withheld fix was scored")
-        return Score(nlpd_sum / n_fix, ll_sum / max(n_upd, 1), hmax, nees, n_fix, n_upd)
+        return Score(nlpd_sum / n_fix, ll_sum / max(n_upd, 1), hmax, nees, n_fix, n_upd,
+                     window_nlpd=w_sum, window_fixes=w_n)
 
 
 def nearest(times: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -196,9 +220,10 @@ def _cropped(inputs, end: float):
                                  vel_n=cut(fx.vel_n, j), vel_sigma=cut(fx.vel_sigma, j)))
 
 
-def _withheld_scores(po, res, windows) -> tuple[float, int, list, list]:
+def _withheld_scores(po, res, windows) -> tuple[float, int, list, list, list, list]:
     """Sum of the withheld fixes' negative log predictive densities, their number, and per
-    window the horizontal maximum error and mean position NEES (against the fixes)."""
+    window the horizontal maximum error, mean position NEES (against the fixes), NLPD sum and
+    number of fixes."""
     from ...data import Trajectory
     from ..outputs import solution_table
     fx = po.all_fixes
@@ -207,13 +232,13 @@ def _withheld_scores(po, res, windows) -> tuple[float, int, list, list]:
     for a, b in windows:
         inside |= (res.time > a) & (res.time <= b)
     if not inside.any():
-        return 0.0, 0, [], []
+        return 0.0, 0, [], [], [], []
     tab = solution_table(res, truth, (), lever=po.lever)
     e = tab[["err_n_m", "err_e_m", "err_d_m"]].to_numpy()
     # the fix sigma nearest each record (the fixes are the truth, with their own noise)
     j = nearest(fx.time, res.time)
     sig = np.broadcast_to(np.asarray(fx.pos_sigma, float).reshape(len(fx.time), -1), (len(fx.time), 3))[j]
-    total, count, hmax, nees = 0.0, 0, [], []
+    total, count, hmax, nees, w_sum, w_n = 0.0, 0, [], [], [], []
     for a, b in windows:
         sel = np.flatnonzero((res.time > a) & (res.time <= b))
         if len(sel) == 0:
@@ -222,11 +247,14 @@ def _withheld_scores(po, res, windows) -> tuple[float, int, list, list]:
         L = np.linalg.cholesky(S)
         w = np.linalg.solve(L, e[sel][..., None])[..., 0]
         logdet = 2.0 * np.log(np.diagonal(L, axis1=1, axis2=2)).sum(axis=1)
-        total += float(np.sum(0.5 * (np.sum(w * w, axis=1) + logdet + 3 * _LOG2PI)))
+        part = float(np.sum(0.5 * (np.sum(w * w, axis=1) + logdet + 3 * _LOG2PI)))
+        total += part
         count += len(sel)
+        w_sum.append(part)
+        w_n.append(len(sel))
         hmax.append(float(np.max(np.hypot(e[sel, 0], e[sel, 1]))))
         nees.append(float(np.nanmean(tab["nees_pos"].to_numpy()[sel])))
-    return total, count, hmax, nees
+    return total, count, hmax, nees, w_sum, w_n
 
 
 def _innovation_ll(res, span, withheld) -> tuple[float, int]:

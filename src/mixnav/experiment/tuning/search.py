@@ -96,31 +96,48 @@ def _try(doc, cur, p, base, steps, scorer, evaluations, curves, reserve: int = 0
     return tomlkit.parse(best[0]), best[1], best_step
 
 
-#: the moves of the conservative pass, tried in this order per key (the first within the
-#: tolerance is kept)
+#: the moves of the conservative pass per key: x2 as long as it is kept (at most
+#: :data:`CONSERVATIVE_DOUBLINGS` times); when the first x2 is not, x1.41 once
 CONSERVATIVE_STEPS = (2.0, 2.0 ** 0.5)
+CONSERVATIVE_DOUBLINGS = 3
 #: the keys it widens: the process noises and the constraint sigmas
 CONSERVATIVE_KEYS = ("imu.errors.arw", "imu.errors.vrw", "imu.errors.gyro_bias_walk", "imu.errors.accel_bias_walk",
                      "aiding.nhc.sigma[0]", "aiding.nhc.sigma[1]")
+
+
+def conservative_tolerance(best: dict, n_windows: int) -> float:
+    """How far above the search's best the conservative pass may go: one standard error of the
+    best's criterion (the one-standard-error rule of cross-validation), the error measured from
+    the spread of its withheld windows (:func:`.criterion.criterion_se`: the windows are the
+    independent units). ``2 / n_windows`` (a likelihood-ratio interval counting each window as
+    one observation) when the score has no per-window values (a journal written before them)."""
+    se = best.get("criterion_se")
+    return float(se) if se is not None and se > 0 else 2.0 / max(n_windows, 1)
 
 
 def conservative_pass(doc, cur: dict, params: list[Parameter], scorer, evaluations: list, tolerance: float,
                       curves: dict):
     """Among the settings the criterion cannot tell from the best, take the most cautious.
 
-    Each noise key in turn (:data:`CONSERVATIVE_KEYS`) is widened by x2, else x1.41, and the
-    widening kept when the criterion stays within ``tolerance`` of the search's best (a fixed
-    bar: widenings do not add up past it). Why: a criterion minimised on one stretch of a drive
-    over-fits it; benchmarks/results/tune_search.md found the files that pushed the
-    criterion lowest the most overconfident on the other half (correlation -0.93 with the share
-    of windows out of the NEES band). Preferring the widest setting inside the criterion's own
-    spread is the one-standard-error rule of cross-validation, applied to noise scales."""
+    Each noise key in turn (:data:`CONSERVATIVE_KEYS`) is widened by x2 again and again (at
+    most :data:`CONSERVATIVE_DOUBLINGS` times) while the criterion stays within ``tolerance``
+    of the search's best; when the first x2 is already past it, by x1.41 once. The bar is
+    fixed: widenings do not add up past it, and the keys earlier in the order get it first.
+    ``tolerance`` is one standard error of the best's criterion (:func:`conservative_tolerance`).
+    Why: a criterion minimised on one stretch of a drive over-fits it;
+    benchmarks/results/tune_search.md found the files that pushed the criterion lowest the
+    most overconfident on the other half (correlation -0.93 with the share of windows out of
+    the NEES band). Preferring the widest setting inside the criterion's own spread is the
+    one-standard-error rule of cross-validation, applied to noise scales (the widest, not the
+    first widening inside it: one x2 per key was a cap of convenience)."""
     best = cur["criterion"]
     for p in params:
         if p.name not in CONSERVATIVE_KEYS or p.kind != "log":
             continue
         _point(curves, p, "current", get_value(doc, p), cur, new_visit=True)
-        for step in CONSERVATIVE_STEPS:
+        steps, doublings = list(CONSERVATIVE_STEPS), 0
+        while steps:
+            step = steps.pop(0)
             if scorer.left() <= 0:
                 return doc, cur
             value = moved(p, get_value(doc, p), step)
@@ -130,7 +147,11 @@ def conservative_pass(doc, cur: dict, params: list[Parameter], scorer, evaluatio
                 return doc, cur
             evaluations.append({"changed": f"{p.name} x{step:g} (conservative pass)", "score": sc})
             _point(curves, p, f"{step:g}", value, sc)
-            if sc["criterion"] <= best + tolerance:
-                doc, cur = tomlkit.parse(text), sc
+            if sc["criterion"] > best + tolerance:
+                continue             # past the bar: x1.41 next if nothing was kept yet, else done
+            doc, cur = tomlkit.parse(text), sc
+            if step != CONSERVATIVE_STEPS[0]:
                 break
+            doublings += 1
+            steps = [CONSERVATIVE_STEPS[0]] if doublings < CONSERVATIVE_DOUBLINGS else []
     return doc, cur
