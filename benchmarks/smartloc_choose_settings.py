@@ -123,14 +123,20 @@ def table(rows: list[tuple[str, dict]], chosen: str) -> list[str]:
     return out
 
 
-def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def logged_runner(argv, doc: str):
+    """A script's ``--data`` / ``--out`` arguments and its :class:`Runner`, with the epoch
+    mixture's updates logged (``_LOG``): the start of this script and of smartloc_min_distance.py."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
     ap.add_argument("--data", default=None)
     ap.add_argument("--out", default=str(Path(__file__).parent / "results"))
     a = ap.parse_args(argv)
     EpochMixtureEstimator.update = _logged_update(EpochMixtureEstimator.update)
+    return a, Runner(a.data)
+
+
+def main(argv=None) -> None:
     t_wall = time.perf_counter()
-    R = Runner(a.data)
+    a, R = logged_runner(argv, __doc__)
     pick = (lambda rows: max(rows, key=lambda kv: kv[1]["log_likelihood"]))
 
     stage1 = [(f"{w:g} s", R.run(w, OLD_EDGES)) for w in WINDOWS]

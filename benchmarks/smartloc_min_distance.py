@@ -16,7 +16,6 @@ Writes ``smartloc_min_distance.md`` and ``.json``.
 
 from __future__ import annotations
 
-import argparse
 import json
 import platform
 import time
@@ -25,10 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from smartloc_choose_settings import STARTS, Runner, _LOG, _logged_update
+from smartloc_choose_settings import STARTS, Runner, _LOG, logged_runner
 
 from mixnav.experiment.vehicle_process import run_vehicle, vehicle_tables
-from mixnav.filters.epoch_mixture import EpochMixtureEstimator
 
 DISTANCES = (0.0, 40.0, 60.0, 80.0, 100.0, 120.0, 150.0)
 SCORE_FROM = 60.0
@@ -55,13 +53,8 @@ def run(R: Runner, distance: float) -> dict:
 
 
 def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", default=None)
-    ap.add_argument("--out", default=str(Path(__file__).parent / "results"))
-    a = ap.parse_args(argv)
-    EpochMixtureEstimator.update = _logged_update(EpochMixtureEstimator.update)
     t0 = time.perf_counter()
-    R = Runner(a.data)
+    a, R = logged_runner(argv, __doc__)
     rows = [run(R, d) for d in DISTANCES]
     best = max(rows, key=lambda r: r["log_likelihood"])
     elapsed = time.perf_counter() - t0
