@@ -261,3 +261,23 @@ def test_los_correlation_time_leaves_out_what_an_epoch_shares():
     g = np.ones(t.size)
     assert los_correlation_time(t, key, 5.0 * e.ravel(), var, g) > 1.4 * tau
     assert abs(los_correlation_time(t, key, 5.0 * e.ravel(), var, g, common=True) - tau) < 0.2 * tau
+
+
+def test_a_filter_without_bands_of_its_own_takes_the_alignments():
+    """The hand-over (vehicle_process.mixture_handover): bands named in [alignment] only reach
+    an epoch mixture that sets no cn0_edges itself, with the LOS weights learned on them; its
+    own edges win (an explicit [] means none: the band weights are dropped)."""
+    from types import SimpleNamespace
+    from mixnav.filters.epoch_mixture import EpochMixtureOptions, _build_epoch_mixture
+    start = {"los_weight": 0.6, "delay_mean": 40.0, "delay_sd": 20.0, "correlation_time": 1.5,
+             "cn0_edges": [30.0, 40.0], "los_weight_bands": [0.2, 0.5, 0.8, 0.6]}
+    ctx = SimpleNamespace(extra={"mixture_start": start})
+    est = _build_epoch_mixture(EpochMixtureOptions(), 1e4, ctx)
+    np.testing.assert_array_equal(est.cn0_edges, [30.0, 40.0])
+    np.testing.assert_array_equal(est.w_band0, [0.2, 0.5, 0.8, 0.6])
+    assert est.start["mu"] == 40.0
+    none = _build_epoch_mixture(EpochMixtureOptions(cn0_edges=[]), 1e4, ctx)
+    assert len(none.cn0_edges) == 0 and none.w_band0 is None
+    own = _build_epoch_mixture(EpochMixtureOptions(cn0_edges=[35.0]), 1e4, ctx)
+    np.testing.assert_array_equal(own.cn0_edges, [35.0])
+    assert start["cn0_edges"] == [30.0, 40.0]      # the hand-over itself is not changed

@@ -101,8 +101,8 @@ class VehicleAlignment(Strict):
     ``cn0_edges``: C/N0 band edges [dB-Hz, plain numbers] for a line-of-sight weight per
     band in the window's fit (reflected signals arrive weaker). ``hand_over_mixture``: the
     epoch-mixture filters start from the LOS/NLOS mixture the window's fit learned (their
-    own options win; the LOS weight per band only when the filter's own ``cn0_edges`` option
-    names the same bands: the bands themselves are not handed over). ``start``: the run begins this long after the first odometry sample
+    own options win; a filter without a ``cn0_edges`` option of its own takes these bands and
+    their LOS weights, one with its own takes the weights only on the same bands). ``start``: the run begins this long after the first odometry sample
     (default 0: at the data's start); every odometry sample and pseudorange before it is
     discarded, as if the recording began there (the track window is then the ``window``
     after ``start``, the reference start the reference's first epoch at or after it); the

@@ -96,10 +96,16 @@ class EpochMixtureOptions(GateOptions):
 
 def _build_epoch_mixture(options: EpochMixtureOptions, absurd_sigma: float, context):
     """The options the file sets, over the mixture a track alignment handed over
-    (``context.extra["mixture_start"]``; its band weights only on the same bands)."""
+    (``context.extra["mixture_start"]``). A filter that sets no ``cn0_edges`` of its own takes
+    the alignment's bands with the weights learned on them (a file that names bands once, in
+    ``[alignment]``, gets them in the filter too); one that sets its own takes the weights only
+    on the same bands (``cn0_edges = []``: no bands)."""
     given = options.model_dump(exclude_unset=True, exclude={"absurd_sigma"})
     start = dict(context.extra.get("mixture_start") or {})
-    if list(given.get("cn0_edges", [])) != start.pop("cn0_edges", None):
+    edges = start.pop("cn0_edges", None)
+    if "cn0_edges" not in given and edges:
+        start["cn0_edges"] = edges
+    elif list(given.get("cn0_edges", [])) != edges:
         start.pop("los_weight_bands", None)      # learned on other bands
     return EpochMixtureEstimator(**{**start, **given}, absurd_sigma=absurd_sigma)
 
