@@ -178,8 +178,8 @@ class Evaluator:
             for fold in self.windows:
                 po = self.run(ds, fold)
                 res = po.results[self.method]
-                s, n, h, ne, ws, wn = _withheld_scores(po, res, fold)
-                nlpd_sum, n_fix = nlpd_sum + s, n_fix + n
+                ws, wn, h, ne = _withheld_scores(po, res, fold)
+                nlpd_sum, n_fix = nlpd_sum + sum(ws), n_fix + sum(wn)
                 hmax += h
                 nees += ne
                 w_sum += ws
@@ -220,10 +220,9 @@ def _cropped(inputs, end: float):
                                  vel_n=cut(fx.vel_n, j), vel_sigma=cut(fx.vel_sigma, j)))
 
 
-def _withheld_scores(po, res, windows) -> tuple[float, int, list, list, list, list]:
-    """Sum of the withheld fixes' negative log predictive densities, their number, and per
-    window the horizontal maximum error, mean position NEES (against the fixes), NLPD sum and
-    number of fixes."""
+def _withheld_scores(po, res, windows) -> tuple[list, list, list, list]:
+    """Per window: the sum of its withheld fixes' negative log predictive densities, their
+    number, the horizontal maximum error and the mean position NEES (against the fixes)."""
     from ...data import Trajectory
     from ..outputs import solution_table
     fx = po.all_fixes
@@ -232,13 +231,13 @@ def _withheld_scores(po, res, windows) -> tuple[float, int, list, list, list, li
     for a, b in windows:
         inside |= (res.time > a) & (res.time <= b)
     if not inside.any():
-        return 0.0, 0, [], [], [], []
+        return [], [], [], []
     tab = solution_table(res, truth, (), lever=po.lever)
     e = tab[["err_n_m", "err_e_m", "err_d_m"]].to_numpy()
     # the fix sigma nearest each record (the fixes are the truth, with their own noise)
     j = nearest(fx.time, res.time)
     sig = np.broadcast_to(np.asarray(fx.pos_sigma, float).reshape(len(fx.time), -1), (len(fx.time), 3))[j]
-    total, count, hmax, nees, w_sum, w_n = 0.0, 0, [], [], [], []
+    w_sum, w_n, hmax, nees = [], [], [], []
     for a, b in windows:
         sel = np.flatnonzero((res.time > a) & (res.time <= b))
         if len(sel) == 0:
@@ -247,14 +246,11 @@ def _withheld_scores(po, res, windows) -> tuple[float, int, list, list, list, li
         L = np.linalg.cholesky(S)
         w = np.linalg.solve(L, e[sel][..., None])[..., 0]
         logdet = 2.0 * np.log(np.diagonal(L, axis1=1, axis2=2)).sum(axis=1)
-        part = float(np.sum(0.5 * (np.sum(w * w, axis=1) + logdet + 3 * _LOG2PI)))
-        total += part
-        count += len(sel)
-        w_sum.append(part)
+        w_sum.append(float(np.sum(0.5 * (np.sum(w * w, axis=1) + logdet + 3 * _LOG2PI))))
         w_n.append(len(sel))
         hmax.append(float(np.max(np.hypot(e[sel, 0], e[sel, 1]))))
         nees.append(float(np.nanmean(tab["nees_pos"].to_numpy()[sel])))
-    return total, count, hmax, nees, w_sum, w_n
+    return w_sum, w_n, hmax, nees
 
 
 def _innovation_ll(res, span, withheld) -> tuple[float, int]:
