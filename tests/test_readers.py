@@ -413,6 +413,23 @@ def test_drive_imu_ticks_are_spread_linearly_over_the_tag(tmp_path):
     np.testing.assert_allclose(imu.dt, 0.01 * 2030 / 2020, rtol=0, atol=1e-6)
 
 
+def test_drive_imu_first_bytes_puts_the_first_tick_at_the_tags_first_pair(tmp_path):
+    """tag_start="first-bytes": the first tick at the tag's start plus its first pair's tick (the
+    stream's first bytes), the ticks spread from there to the tag's end; "tag" (the default) is
+    the README's rule, and another word is refused by name."""
+    rows = drive_rows()
+    p = write_drive(tmp_path / "imu.csv", rows)
+    end = int(rows[-1].split(",")[-1]) - int(rows[0].split(",")[-1])          # 2020 ms: the ticks' span
+    Path(str(p) + ".tag").write_bytes(tag_bytes(ticks=(60, end // 2, end + 60)))   # 60 ms lead
+    ticks = np.array([int(r.split(",")[-1]) for r in rows[2:-1]])
+    a = read_drive_imu(p, time_offset=0.0, tag_start="first-bytes")
+    np.testing.assert_allclose(a.time, TAG_SEC + TAG_FRAC + 0.060 + (ticks - TICK0) / 1000.0, rtol=0, atol=1e-6)
+    b = read_drive_imu(p, time_offset=0.0)
+    np.testing.assert_allclose(b.time, TAG_SEC + TAG_FRAC + (ticks - TICK0) / 2020 * 2.080, rtol=0, atol=1e-6)
+    with pytest.raises(ArgumentError, match="first-bytes"):
+        read_drive_imu(p, tag_start="lead")
+
+
 def test_drive_imu_scales_g_and_deg(tmp_path):
     # One sample per axis so that a swapped or unscaled column shows.
     rows = drive_rows()

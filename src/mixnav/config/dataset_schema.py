@@ -46,6 +46,10 @@ class ImuFile(Strict):
     format: reader_format("imu")  # type: ignore[valid-type]
     file: str
     tag: str | None = None
+    #: drive-0708 format: where the time tag puts the first IMU tick, "tag" (the tag's start: the
+    #: data README's rule) or "first-bytes" (the tag's first pair: when the first bytes came;
+    #: docs/data_formats.md, "drive-0708 time tags")
+    tag_start: Literal["tag", "first-bytes"] = "tag"
     max_gap: Gap = 0.05
     gap_action: Literal["warn", "fail"] = "warn"
     #: an IMU sample beyond 2000 deg/s or 50 g: "fail" (an error naming the line) or "reject"

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ..data import ImuData
-from ..errors import DataError
+from ..errors import ArgumentError, DataError
 from ..units import DEG
 from .imu_checks import G0, DataWarning, check_plausible, rates_to_increments
 from .registry import ReadOptions, register_reader
@@ -71,7 +71,7 @@ def read_time_tag(path) -> TimeTag:
 
 
 def read_drive_imu(csv_path, tag_path=None, time_offset: float = -0.125, max_gap: float | None = 0.05,
-                   gap_action: str = "warn", spike_action: str = "fail") -> ImuData:
+                   gap_action: str = "warn", spike_action: str = "fail", tag_start: str = "tag") -> ImuData:
     """IMU increments of the drive-0708 recording, in the IMU's own axes (SI).
 
     Parameters
@@ -84,7 +84,13 @@ def read_drive_imu(csv_path, tag_path=None, time_offset: float = -0.125, max_gap
         See :func:`mixnav.io.tables.check_times`.
     spike_action : {"fail", "reject"}
         See :func:`mixnav.io.imu_checks.check_spikes`.
+    tag_start : {"tag", "first-bytes"}
+        Where the first tick is put: at the tag's start (``"tag"``, the data README's rule), or
+        at its first pair's tick, when the stream's first bytes came (``"first-bytes"``). The
+        ticks are spread linearly from there to the tag's end.
     """
+    if tag_start not in ("tag", "first-bytes"):
+        raise ArgumentError(f"must be 'tag' or 'first-bytes', got {tag_start!r}", argument="tag_start")
     csv_path = Path(csv_path)
     tag = read_time_tag(tag_path or Path(str(csv_path) + ".tag"))
     # The first and last lines may be partial: drop them, but use their
@@ -132,7 +138,12 @@ def read_drive_imu(csv_path, tag_path=None, time_offset: float = -0.125, max_gap
                         f"{tick_span - allowed:.3f}..{tick_span + tag.first + allowed:.3f} s: the ticks' span, plus "
                         f"its first pair's lead of {tag.first:.3f} s, within {TAG_SPAN_TOLERANCE_S:g} s + "
                         f"{TAG_SPAN_DRIFT * 1e6:g} ppm)", file=str(tag_file))
-    t = tag.start + (ticks - first_tick) / span * (tag.end - tag.start) + time_offset
+    # "first-bytes": the first tick is when the stream's first bytes came (the tag's start plus its
+    # first pair's tick), not the tag's start; spreading the ticks from the tag's start instead
+    # stretches every IMU time by that lead over the recording (drive-0708: 131 ms over 549 s,
+    # 240 ppm, where the chunks' arrival times against the ticks drift by 13 ppm)
+    lead = tag.first if tag_start == "first-bytes" else 0.0
+    t = tag.start + lead + (ticks - first_tick) / span * (tag.end - tag.start - lead) + time_offset
     gaps = check_times(t, tab.lines, str(csv_path), max_gap=max_gap, gap_action=gap_action, what="IMU").gaps
     f = tab.values[:, 0:3] * G0
     w = tab.values[:, 3:6] * DEG
@@ -155,8 +166,9 @@ def _tick(line: str, neighbour: float, before: bool) -> float | None:
 
 @register_reader("imu", "drive-0708")
 def _read(path: Path, options: ReadOptions) -> ImuData:
-    """The registered reader (``options``: ``[imu]``'s ``tag``, a file of the data folder, ``max_gap``,
-    ``gap_action``, ``spike_action``); times as the tag gives them (no offset: the installation's)."""
+    """The registered reader (``options``: ``[imu]``'s ``tag``, a file of the data folder, ``tag_start``,
+    ``max_gap``, ``gap_action``, ``spike_action``); times as the tag gives them (no offset: the
+    installation's)."""
     tag = options.get("tag")
     return read_drive_imu(path, options.folder / tag if tag else None, time_offset=0.0,
-                          **options.imu_checks(max_gap=0.05))
+                          tag_start=options.get("tag_start", "tag"), **options.imu_checks(max_gap=0.05))
