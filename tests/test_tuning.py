@@ -89,6 +89,19 @@ def test_parameters_round_trip_through_the_file():
     assert isinstance(data["imu"]["errors"]["arw"], list) and isinstance(data["imu"]["errors"]["vrw"], str)
 
 
+def test_a_zero_sigma_floor_is_moved_from_the_fixes_own_sigma():
+    """gnss.min_sigma at the schema's 0: a x2 step gives twice the fixes' median sigma
+    (zero_from), not twice the 1 mm bound that left RTK's 1 cm sigmas untouched; a step below
+    one keeps the zero, and a non-zero floor is scaled as any other."""
+    from dataclasses import replace
+    p = next(q for q in ins_parameters() if q.name == "gnss.min_sigma")
+    np.testing.assert_allclose(moved(p, np.zeros(1), 2.0), [2e-3])
+    q = replace(p, zero_from=0.01)
+    np.testing.assert_allclose(moved(q, np.zeros(1), 4.0), [0.04])
+    np.testing.assert_allclose(moved(q, np.zeros(1), 0.5), [0.0])
+    np.testing.assert_allclose(moved(q, np.array([0.03]), 0.5), [0.015])
+
+
 def test_without_reference_removes_only_the_reference():
     text = (SHIPPED / "drive-0708.toml").read_text()
     d = tomllib.loads(without_reference(text))
@@ -305,3 +318,45 @@ def test_the_conservative_pass_widens_within_one_standard_error(se, rises, facto
     out, sc = conservative_pass(doc, best, [arw], scorer, [], tol, {})
     np.testing.assert_allclose(get_value(out, arw), before * factor, rtol=2e-3)
     assert scorer.k == scored
+
+
+class _TwoCriteriaScorer:
+    """Scores each candidate by the time offset or ARW it sets: the cross-validation NLPD is
+    lowest at -0.05 s from the file's value (or x0.5 ARW), the innovation log-likelihood highest
+    at +0.05 s (x2)."""
+
+    def __init__(self, p, base):
+        self.p, self.base, self.n = p, float(base[0]), 0
+
+    def left(self):
+        return 100
+
+    def score(self, texts):
+        out = []
+        for t in texts:
+            v = float(get_value(tomlkit.parse(t), self.p)[0])
+            x = v - self.base if self.p.kind == "shift" else np.log2(v / self.base) * 0.05
+            nlpd, ll = 1.0 + (x + 0.05) ** 2, 10.0 - 100 * (x - 0.05) ** 2
+            out.append({"criterion": nlpd, "nlpd": nlpd, "innovation_ll_per_update": ll, "criterion_se": 0.1})
+            self.n += 1
+        return out
+
+
+@pytest.mark.parametrize("name, expect", [("installation.imu_time_offset", 0.05),   # follows the innovation
+                                          ("imu.errors.arw", 0.5)])                 # follows the NLPD
+def test_a_timing_key_follows_the_innovation_likelihood_and_a_noise_key_the_cross_validation(name, expect):
+    """The search along the IMU time offset keeps the candidate the innovation log-likelihood prefers
+    (+0.05 s) although the cross-validation prefers another (-0.05 s); along ARW the other way."""
+    from mixnav.experiment.tuning.search import coordinate_search, judged
+    doc = tomlkit.parse((ROOT / "benchmarks" / "configs" / "drive-0708-untuned.toml").read_text())
+    p = next(q for q in ins_parameters() if q.name == name)
+    base = get_value(doc, p)
+    scorer = _TwoCriteriaScorer(p, base)
+    (cur,) = scorer.score([tomlkit.dumps(doc)])
+    out, sc, _ = coordinate_search(doc, cur, [p], scorer, [], grids=("coarse",))
+    got = get_value(out, p)[0]
+    if p.kind == "shift":
+        assert got - base[0] == pytest.approx(expect)
+    else:
+        assert got / base[0] == pytest.approx(expect, rel=1e-3)
+    assert judged(p, sc) == (-sc["innovation_ll_per_update"] if p.kind == "shift" else sc["criterion"])

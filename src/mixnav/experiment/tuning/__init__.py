@@ -254,11 +254,12 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
         from .search import (CONSERVATIVE_KEYS, CONSERVATIVE_STEPS, conservative_pass, conservative_tolerance,
                              coordinate_search)
         CONSERVATIVE_RESERVE = len(CONSERVATIVE_KEYS) * len(CONSERVATIVE_STEPS) if budget >= 40 else 0
-        searched = [p for p in ins_parameters() if p.name not in fix and _applies(cur_doc, p, ds)]
+        searched = [_scaled_to_fixes(p, po, (t_first, t_last))
+                    for p in ins_parameters() if p.name not in fix and _applies(cur_doc, p, ds)]
         for p in ins_parameters():
             if p.name in fix:
                 not_tuned[p.name] = "fixed by the user (--fix)"
-            elif p not in searched:
+            elif p.name not in {q.name for q in searched}:
                 not_tuned[p.name] = _why_not(cur_doc, p, ds)
         cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations, grids=("coarse",),
                                                  reserve=CONSERVATIVE_RESERVE)
@@ -396,6 +397,22 @@ def _installation_stage(cur_doc, cur: dict, fix, scorer, evaluations: list, chos
     return (pdoc, sc) if keep else (cur_doc, cur)
 
 
+def _scaled_to_fixes(p: Parameter, po, span) -> Parameter:
+    """``gnss.min_sigma`` moved from the fixes' own median horizontal sigma in the span when the
+    file's floor is zero (the schema's default): the log grid then tries x2, x4 (x16) of it. From
+    the 1 mm lower bound the candidates left RTK's 1 cm sigmas untouched: the key was never
+    searched."""
+    from dataclasses import replace
+    if p.name != "gnss.min_sigma":
+        return p
+    fx = po.all_fixes
+    sel = (fx.time >= span[0]) & (fx.time <= span[1])
+    sig = np.asarray(fx.pos_sigma, float).reshape(len(fx.time), -1)[sel][:, :2]
+    if not sig.size or not np.isfinite(sig).all():
+        return p
+    return replace(p, zero_from=float(np.clip(np.median(sig), p.lower, p.upper)))
+
+
 def _applies(doc, p: Parameter, ds) -> bool:
     return _why_not(doc, p, ds) is None
 
@@ -419,15 +436,20 @@ def _last_visit(curve) -> list:
 
 
 def _spread(p: Parameter, curve, n_windows: int) -> str | None:
-    """The values tried in the key's last visit whose criterion is within 2 / n_windows of that
-    visit's best (a likelihood-ratio interval counting each window as one independent
-    observation: the fixes within a window are strongly correlated); the other keys are the
-    same across a visit's points."""
+    """The values tried in the key's last visit whose criterion (for a timing key: minus the
+    innovation log-likelihood per update) is within 2 / n_windows of that visit's best (a
+    likelihood-ratio interval counting each window as one independent observation: the fixes
+    within a window are strongly correlated); the other keys are the same across a visit's
+    points."""
     pts = _last_visit(curve)
     if len(pts) < 2:
         return None
-    best = min(c[2] for c in pts)
-    ok = [c[1] for c in pts if c[2] <= best + 2.0 / max(n_windows, 1)]
+    # a timing key follows the innovation log-likelihood per update (Parameter.judged_by), read
+    # with the same count of independent observations (the windows)
+    val = ((lambda c: -c[3] if c[3] is not None else math.inf) if p.judged_by == "innovation"
+           else (lambda c: c[2]))
+    best = min(val(c) for c in pts)
+    ok = [c[1] for c in pts if val(c) <= best + 2.0 / max(n_windows, 1)]
     what = "" if p.index is not None or p.kind != "log" else " (x axis; the search scales all)"
     return f"{min(ok):.4g}-{max(ok):.4g} {p.unit}{what}"
 
@@ -435,7 +457,9 @@ def _spread(p: Parameter, curve, n_windows: int) -> str | None:
 def _how(p: Parameter, curve, cur: dict, entry: dict) -> str:
     base = entry.get("data_how")
     n = len(curve)
-    s = f"cross-validation on the recording's own GNSS ({n} values tried along this key)"
+    s = (f"GNSS innovation log-likelihood of the cross-validation runs ({n} values tried along this key)"
+         if p.judged_by == "innovation" else
+         f"cross-validation on the recording's own GNSS ({n} values tried along this key)")
     return f"start: {base}; then {s}" if base else s
 
 

@@ -89,7 +89,9 @@ def _report(result, h: dict) -> str:
     lines += _chosen_lines(result)
     lines += ["", "## Where the two criteria disagree", "",
               "Per key, in the search's last visit of it (the other keys the same across its points), the value "
-              "each criterion prefers. The search follows the cross-validation: it scores positions after seconds "
+              "each criterion prefers. The search follows the cross-validation (the IMU time offset and the GNSS "
+              "velocity delay excepted: they follow the innovation likelihood, which a timing error shows in every "
+              "update): it scores positions after seconds "
               "without GNSS, which is what the bias walks and the constraint sigmas act on; the innovation "
               "likelihood scores 0.25-1 s predictions.", "",
               "| key | cross-validation best | innovation-likelihood best | agree |", "|---|---|---|---|"]

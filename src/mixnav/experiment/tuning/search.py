@@ -18,6 +18,8 @@ a lower criterion than scipy's Powell and Nelder-Mead and optuna's TPE. Then
 
 from __future__ import annotations
 
+import math
+
 import tomlkit
 
 from .parameters import Parameter, get_value, moved, set_value
@@ -71,6 +73,15 @@ def _point(curves: dict, p: Parameter, label: str, value, score: dict, new_visit
     pts.append((label, _shown(p, value), score["criterion"], score["innovation_ll_per_update"], visit))
 
 
+def judged(p: Parameter, score: dict) -> float:
+    """What the search minimises along ``p`` (:attr:`Parameter.judged_by`): the score's
+    criterion, or minus its innovation log-likelihood per update (a run without one: +inf)."""
+    if p.judged_by == "innovation":
+        ll = score.get("innovation_ll_per_update")
+        return -float(ll) if ll is not None and math.isfinite(ll) else math.inf
+    return score["criterion"]
+
+
 def _try(doc, cur, p, base, steps, scorer, evaluations, curves, reserve: int = 0):
     """Score ``base`` moved by each step (as many as the budget less ``reserve`` allows); keep
     the best if it beats ``cur``. Returns the (possibly new) document, its score and the
@@ -89,7 +100,7 @@ def _try(doc, cur, p, base, steps, scorer, evaluations, curves, reserve: int = 0
                             f"{p.name} {s / p.scale:+g} {p.unit}",
                             "score": sc})
         _point(curves, p, f"{s:g}" if p.kind == "log" else f"{s / p.scale:+g}", v, sc)
-        if sc["criterion"] < (cur["criterion"] - MIN_GAIN if best is None else best[1]["criterion"]):
+        if judged(p, sc) < (judged(p, cur) - MIN_GAIN if best is None else judged(p, best[1])):
             best, best_step = (text, sc), s
     if best is None:
         return doc, cur, None
