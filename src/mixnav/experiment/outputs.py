@@ -26,7 +26,6 @@ from ..filters.ekf import FilterResult
 from ..geodesy.frames import displace, ned_displacement
 from ..io.atomic import atomic_write_dataframe, atomic_write_json
 from ..io.outdir import staged_output
-from ..measurements.loose import antenna_lla
 from ..sim.gnss import in_windows
 from . import figures
 from .webmap import map_html
@@ -89,10 +88,10 @@ def solution_table(res: FilterResult, truth: Trajectory | None = None, outages=(
             lever = np.broadcast_to(np.asarray(lever, dtype=float), (len(res.time), 3))
             if "gnss_lever" in res.estimates:
                 lever = lever + res.estimates["gnss_lever"]
-            nav = res.nav.copy()
-            nav[:, 7:10] = lla_out
-            pos = np.array([antenna_lla(n, la) for n, la in zip(nav, lever)])
-            vel = vel + np.einsum("kij,kj->ki", quat_to_dcm(res.nav[:, 0:4]), np.cross(res.w_b, lever))
+            # antenna_lla for every record at once (a loop of it was 40 % of a tuning evaluation)
+            c_nb = quat_to_dcm(res.nav[:, 0:4])
+            pos = displace(lla_out, np.einsum("kij,kj->ki", c_nb, lever))
+            vel = vel + np.einsum("kij,kj->ki", c_nb, np.cross(res.w_b, lever))
         e_pos = -ned_displacement(tt.lla, pos)  # estimate - truth
         for i, ax in enumerate("ned"):
             d[f"err_{ax}_m"] = e_pos[:, i]
