@@ -44,8 +44,11 @@ RULES = ("tag", "first-bytes")
 
 def arrival_against_ticks(folder: Path) -> dict:
     """Part 1: the IMU clock's rate against the logger's from the tag's pairs (module docstring)."""
+    from mixnav.io.drive0708 import _FIXED, _HEADER, read_time_tag
+    tag = read_time_tag(folder / "imu_1934.csv.tag")      # validated: start, end, the first pair's lead
+    # the reader keeps no pairs: read them past its header and fixed part
     b = (folder / "imu_1934.csv.tag").read_bytes()
-    pairs = np.frombuffer(b, dtype="<u4", offset=76).reshape(-1, 2).astype(np.int64)
+    pairs = np.frombuffer(b, dtype="<u4", offset=_HEADER + _FIXED).reshape(-1, 2).astype(np.int64)
     data = (folder / "imu_1934.csv").read_bytes()
     starts = np.concatenate([[0], np.flatnonzero(np.frombuffer(data, dtype=np.uint8) == 10) + 1])
     stream_starts = starts + np.arange(len(starts))          # CRLF in the stream: one byte more a line
@@ -69,8 +72,8 @@ def arrival_against_ticks(folder: Path) -> dict:
     slope, icpt = np.polyfit(env[:, 0], env[:, 1], 1)
     resid = arrival - (slope * tick + icpt)
     tick_span = (np.nanmax(ticks) - np.nanmin(ticks))
-    tag_span = pairs[-1, 0] / 1000.0
-    lead = pairs[0, 0] / 1000.0
+    # the span from the last pair's tick (end - start would lose 0.05 us to the epoch's size)
+    tag_span, lead = pairs[-1, 0] / 1000.0, tag.first
     return {"pairs": int(len(tick)), "envelope_rate_ppm": float((slope - 1) * 1e6),
             "jitter_median_s": float(np.median(resid)), "jitter_p90_s": float(np.percentile(resid, 90)),
             "jitter_min_s": float(resid.min()), "tick_span_s": float(tick_span), "tag_span_s": tag_span,

@@ -73,18 +73,18 @@ def write_docs(res: dict) -> None:
     DOCS.write_text(head + START + "\n" + docs_table(res) + "\n" + END + rest.split(END, 1)[1])
 
 
-def _with_tag_start(path: Path, work: Path, rule: str) -> str:
-    """A copy of the dataset file ``path`` in ``work`` with ``[imu] tag_start = rule`` and its
-    data folder absolute."""
+def _with_tag_start(name_or_path: str, work: Path, rule: str) -> str:
+    """A copy of the dataset file (a shipped name or a path) in ``work`` with
+    ``[imu] tag_start = rule`` and its data folder absolute."""
     import tomlkit
     from mixnav.config import load_dataset
     from mixnav.experiment.data_folder import find_data_dir
-    ds, src, _ = load_dataset(str(path))
-    doc = tomlkit.parse(path.read_text())
+    ds, src, text = load_dataset(str(name_or_path))
+    doc = tomlkit.parse(text)
     doc["imu"]["tag_start"] = rule
     doc["dataset"]["data_dir"] = str(Path(find_data_dir(ds, None, src)).resolve())
     work.mkdir(parents=True, exist_ok=True)
-    out = work / f"{path.stem}-{rule}.toml"
+    out = work / f"{Path(src).stem}-{rule}.toml"
     out.write_text(tomlkit.dumps(doc))
     return str(out)
 
@@ -105,8 +105,7 @@ def main(argv=None):
     import mixnav
     untuned, hand = str(UNTUNED), HAND
     if a.tag_start != "tag":
-        untuned, hand = (_with_tag_start(Path(f), Path(a.work), a.tag_start)
-                         for f in (UNTUNED, ROOT / "src" / "mixnav" / "config" / "datasets" / f"{HAND}.toml"))
+        untuned, hand = (_with_tag_start(f, Path(a.work), a.tag_start) for f in (str(UNTUNED), HAND))
     res = {"budget": a.budget, "workers": a.workers, "tag_start": a.tag_start, "folds": {}}
     for tune_half, eval_half in (("first", "second"), ("second", "first")):
         out = Path(a.work) / f"tuned-on-{tune_half}"

@@ -141,7 +141,8 @@ def read_drive_imu(csv_path, tag_path=None, time_offset: float = -0.125, max_gap
     # "first-bytes": the first tick is when the stream's first bytes came (the tag's start plus its
     # first pair's tick), not the tag's start; spreading the ticks from the tag's start instead
     # stretches every IMU time by that lead over the recording (drive-0708: 131 ms over 549 s,
-    # 240 ppm, where the chunks' arrival times against the ticks drift by 13 ppm)
+    # 257 ppm, where the chunks' arrival times against the ticks drift by 12 ppm:
+    # benchmarks/results/drive0708_time_tags.md)
     lead = tag.first if tag_start == "first-bytes" else 0.0
     t = tag.start + lead + (ticks - first_tick) / span * (tag.end - tag.start - lead) + time_offset
     gaps = check_times(t, tab.lines, str(csv_path), max_gap=max_gap, gap_action=gap_action, what="IMU").gaps

@@ -256,10 +256,11 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
         CONSERVATIVE_RESERVE = len(CONSERVATIVE_KEYS) * len(CONSERVATIVE_STEPS) if budget >= 40 else 0
         searched = [_scaled_to_fixes(p, po, (t_first, t_last))
                     for p in ins_parameters() if p.name not in fix and _applies(cur_doc, p, ds)]
+        searched_names = {q.name for q in searched}
         for p in ins_parameters():
             if p.name in fix:
                 not_tuned[p.name] = "fixed by the user (--fix)"
-            elif p.name not in {q.name for q in searched}:
+            elif p.name not in searched_names:
                 not_tuned[p.name] = _why_not(cur_doc, p, ds)
         cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations, grids=("coarse",),
                                                  reserve=CONSERVATIVE_RESERVE)
@@ -444,12 +445,12 @@ def _spread(p: Parameter, curve, n_windows: int) -> str | None:
     pts = _last_visit(curve)
     if len(pts) < 2:
         return None
-    # a timing key follows the innovation log-likelihood per update (Parameter.judged_by), read
-    # with the same count of independent observations (the windows)
-    val = ((lambda c: -c[3] if c[3] is not None else math.inf) if p.judged_by == "innovation"
-           else (lambda c: c[2]))
-    best = min(val(c) for c in pts)
-    ok = [c[1] for c in pts if val(c) <= best + 2.0 / max(n_windows, 1)]
+    from .search import judged
+    # what the search followed along this key (a timing key: the innovation log-likelihood per
+    # update), read with the same count of independent observations (the windows)
+    val = [judged(p, {"criterion": c[2], "innovation_ll_per_update": c[3]}) for c in pts]
+    best = min(val)
+    ok = [c[1] for c, v in zip(pts, val) if v <= best + 2.0 / max(n_windows, 1)]
     what = "" if p.index is not None or p.kind != "log" else " (x axis; the search scales all)"
     return f"{min(ok):.4g}-{max(ok):.4g} {p.unit}{what}"
 
