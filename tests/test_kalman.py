@@ -36,3 +36,23 @@ def test_not_positive_definite_innovation_is_reported_not_applied():
     assert status == S_NOT_POSITIVE_DEFINITE
     np.testing.assert_array_equal(Pp, P)
     np.testing.assert_array_equal(xp, x)
+
+
+@pytest.mark.parametrize("n,m,full_r", [(15, 6, False), (17, 3, True), (21, 1, False)])
+def test_innovation_logdet_matches_slogdet(rng, n, m, full_r):
+    from mixnav.filters.kalman import innovation_logdet
+    a = rng.normal(size=(n, n))
+    P = a @ a.T + np.eye(n)
+    H = rng.normal(size=(m, n)) * (rng.random((m, n)) < 0.3)     # sparse, as the models' H are
+    b = rng.normal(size=(m, m))
+    r = b @ b.T + 0.1 * np.eye(m) if full_r else rng.random(m) + 0.01
+    R = r if full_r else np.diag(r)
+    sign, expect = np.linalg.slogdet(H @ P @ H.T + R)
+    assert sign > 0
+    assert innovation_logdet(P, H, r) == pytest.approx(expect, rel=1e-12, abs=1e-12)
+
+
+def test_innovation_logdet_is_nan_when_s_is_not_positive_definite():
+    from mixnav.filters.kalman import innovation_logdet
+    P, H = np.zeros((3, 3)), np.eye(2, 3)
+    assert np.isnan(innovation_logdet(P, H, np.array([1.0, -0.5])))

@@ -173,3 +173,20 @@ def test_mean_specific_force_averages_the_increments_before_each_epoch():
     np.testing.assert_allclose(out[0], f[t <= 0.5 + 1e-9].mean(0), atol=1e-12)
     with pytest.raises(ArgumentError, match="span"):
         mean_specific_force(imu, [1.0], 0.0)
+
+
+def test_nhc_forward_acceleration_is_the_matrix_form_at_any_attitude_and_mounting(rng):
+    """``a_x = C_vb[0] (f_b + C_bn g_n)``, the written-out row of C_nb against the whole DCM,
+    at random attitudes (roll included) and a mounting that is not zero."""
+    from mixnav.attitude import quat_to_dcm
+    from mixnav.geodesy.earth import normal_gravity
+    lay = StateLayout("plain")
+    mounting = np.radians([1.5, -2.0, 3.0])
+    f = rng.normal(size=(5, 3)) + [0.0, 0.0, -9.8]
+    nhc = NonHolonomic(np.arange(5.0), lay, mounting=mounting, pitch_per_accel=0.005, specific_force=f)
+    for i in range(5):
+        nav = nav_vector(euler_to_quat(rng.uniform(-0.5, 0.5, 3) * [1, 1, 6]), rng.normal(size=3),
+                         np.array([0.7, -1.9, 300.0]))
+        g_n = np.array([0.0, 0.0, normal_gravity(0.7, 300.0)])
+        expect = euler_to_dcm(mounting)[0] @ (f[i] + quat_to_dcm(nav[0:4]).T @ g_n)
+        assert nhc.forward_acceleration(i, nav) == pytest.approx(expect, rel=1e-12, abs=1e-12)

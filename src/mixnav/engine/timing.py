@@ -43,41 +43,26 @@ def split_at_times(imu: ImuData, times: np.ndarray) -> tuple[ImuData, np.ndarray
     k = np.minimum(k, len(t_end) - 1)
     on_sample = np.abs(t_end[k] - times) <= TIME_TOLERANCE
     split = ~on_sample & (times > t_start[k])
-    ks = k[split]
-    # Several events may fall in one increment: split it into several parts.
-    frac_lo = {}
-    for kk, t in zip(ks, times[split]):
-        frac_lo.setdefault(int(kk), []).append((t - t_start[kk]) / imu.dt[kk])
-    if not frac_lo:
+    if not split.any():
         return imu, k.astype(np.int64)
-    n_extra = sum(len(v) for v in frac_lo.values())
-    n = len(imu) + n_extra
-    time = np.empty(n)
-    dt = np.empty(n)
-    dth = np.empty((n, 3))
-    dv = np.empty((n, 3))
-    src = 0
-    dst = 0
-    for kk in sorted(frac_lo):
-        m = kk - src
-        time[dst:dst + m] = t_end[src:kk]
-        dt[dst:dst + m] = imu.dt[src:kk]
-        dth[dst:dst + m] = imu.dtheta[src:kk]
-        dv[dst:dst + m] = imu.dvel[src:kk]
-        dst += m
-        edges = np.concatenate([[0.0], np.sort(frac_lo[kk]), [1.0]])
-        for a, b in zip(edges[:-1], edges[1:]):
-            time[dst] = t_start[kk] + b * imu.dt[kk] if b < 1.0 else t_end[kk]
-            dt[dst] = (b - a) * imu.dt[kk]
-            dth[dst] = (b - a) * imu.dtheta[kk]
-            dv[dst] = (b - a) * imu.dvel[kk]
-            dst += 1
-        src = kk + 1
-    m = len(imu) - src
-    time[dst:] = t_end[src:]
-    dt[dst:] = imu.dt[src:]
-    dth[dst:] = imu.dtheta[src:]
-    dv[dst:] = imu.dvel[src:]
+    # Several events may fall in one increment: it is cut into several parts. Every part is
+    # named by its increment and the fraction of it where the part ends (1 for the last part);
+    # sorted, each part starts where the one before it in the same increment ended. Vectorised:
+    # a Python loop over the cuts was most of a 10 Hz constraint run's set-up.
+    ks = k[split]
+    cut = (times[split] - t_start[ks]) / imu.dt[ks]
+    inc = np.concatenate([ks, np.arange(len(imu))])
+    hi = np.concatenate([cut, np.ones(len(imu))])
+    order = np.lexsort((hi, inc))
+    inc, hi = inc[order], hi[order]
+    lo = np.zeros_like(hi)
+    same = inc[1:] == inc[:-1]
+    lo[1:][same] = hi[:-1][same]
+    share = hi - lo
+    time = np.where(hi < 1.0, t_start[inc] + hi * imu.dt[inc], t_end[inc])
+    dt = share * imu.dt[inc]
+    dth = share[:, None] * imu.dtheta[inc]
+    dv = share[:, None] * imu.dvel[inc]
     out = ImuData(time=time, dt=dt, dtheta=dth, dvel=dv, source=imu.source)
     end_index = np.searchsorted(time, times - TIME_TOLERANCE)
     return out, end_index.astype(np.int64)

@@ -31,6 +31,7 @@ from ..ins.imu_model import ImuErrorModel
 from ..ins._error_kernels import covariance_predict
 from ..ins.strapdown import StrapdownMotion
 from ._ekf_kernels import NEEDS_REPAIR, OK, kalman_correct
+from .kalman import innovation_logdet
 from .registry import GateOptions, register_estimator
 from .registry import ABSURD_SIGMA
 
@@ -54,10 +55,10 @@ def innovation_likelihood():
 
 
 def _logdet(P, H, r) -> float:
-    """log det (H P H^T + diag(r)); NaN when it is not positive definite (then the
-    correction is refused anyway)."""
-    sign, ld = np.linalg.slogdet(H @ P @ H.T + np.diag(r))
-    return float(ld) if sign > 0 else float("nan")
+    """log det (H P H^T + R) (``r``: the variances or R); NaN when it is not positive
+    definite (then the correction is refused anyway). Compiled
+    (:func:`.kalman.innovation_logdet`)."""
+    return float(innovation_logdet(np.ascontiguousarray(P), np.ascontiguousarray(H), np.asarray(r, dtype=float)))
 
 
 def repair_covariance(P: np.ndarray) -> None:
