@@ -360,3 +360,85 @@ def test_a_timing_key_follows_the_innovation_likelihood_and_a_noise_key_the_cros
     else:
         assert got / base[0] == pytest.approx(expect, rel=1e-3)
     assert judged(p, sc) == (-sc["innovation_ll_per_update"] if p.kind == "shift" else sc["criterion"])
+
+
+def test_the_clock_drift_stretches_the_stamps_about_the_first_increment():
+    """``installation.imu_clock_drift``: a stamp t becomes t + offset + drift (t - t_0) and every
+    increment's length scales by 1 + drift (the stamps stay the running sum of the lengths); a
+    zero drift leaves the arrays as the offset alone makes them."""
+    from types import SimpleNamespace
+    from mixnav.config.dataset_schema import Installation
+    from mixnav.experiment.ins_common import install
+    rng = np.random.default_rng(3)
+    dt = 0.01 + rng.uniform(-1e-4, 1e-4, 500)
+    t = 1000.0 + np.cumsum(dt)
+    imu = ImuData(time=t, dt=dt, dtheta=rng.normal(size=(500, 3)) * 1e-3, dvel=rng.normal(size=(500, 3)) * 1e-2)
+    d = -250e-6
+    out = install(imu, SimpleNamespace(installation=Installation(imu_time_offset="-0.1 s", imu_clock_drift="-250 ppm")))
+    t0 = t[0] - dt[0]
+    np.testing.assert_allclose(out.time, t - 0.1 + d * (t - t0), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(out.dt, dt * (1 + d), rtol=1e-15)
+    np.testing.assert_allclose(np.diff(out.time), out.dt[1:], rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(out.dtheta, imu.dtheta)      # no rotation installed: the increments as read
+    plain = install(imu, SimpleNamespace(installation=Installation(imu_time_offset="-0.1 s")))
+    np.testing.assert_array_equal(plain.time, t + -0.1)
+    assert plain.dt is imu.dt
+    with pytest.raises(ValueError, match="250 ppm"):
+        Installation(imu_clock_drift="250")                   # a unit left out: 250 = 25000 %
+
+
+def test_a_clock_drift_step_turns_the_clock_about_the_spans_middle():
+    """The tuner's drift carries the time offset by minus the span's centre: a +100 ppm step at a
+    400 s centre moves the offset by -0.04 s, so the stamps at 400 s stay where they were; with
+    the offset fixed by the user it carries nothing."""
+    from mixnav.experiment.tuning import _pivoted
+    from mixnav.experiment.tuning.search import _with
+    doc = tomlkit.parse((ROOT / "benchmarks" / "configs" / "drive-0708-untuned.toml").read_text())
+    drift = next(q for q in ins_parameters() if q.name == "installation.imu_clock_drift")
+    offset = next(q for q in ins_parameters() if q.name == "installation.imu_time_offset")
+    p = _pivoted(drift, (300.0, 500.0), fix=())
+    new = tomlkit.parse(_with(doc, p, moved(p, get_value(doc, p), 100e-6)))
+    assert get_value(new, p)[0] == pytest.approx(100e-6)
+    assert get_value(new, offset)[0] == pytest.approx(get_value(doc, offset)[0] - 0.04)
+    stamp = lambda d, t: get_value(d, offset)[0] + get_value(d, p)[0] * t   # noqa: E731
+    assert stamp(new, 400.0) == pytest.approx(stamp(doc, 400.0), abs=1e-12)
+    assert stamp(new, 500.0) - stamp(doc, 500.0) == pytest.approx(0.01)
+    assert _pivoted(drift, (300.0, 500.0), fix=["installation.imu_time_offset"]).carries == ()
+
+
+@need_data
+def test_drive0708_read_by_the_readme_rule_shows_its_clock_drift_in_the_innovations():
+    """The data README's reading of drive-0708's tags stretches the IMU clock by some 250 ppm
+    (benchmarks/drive0708_time_tags.py, from the tags alone): the plain EKF's GNSS innovation
+    log-likelihood over the whole drive is higher with -250 ppm (the offset turned about the
+    drive's middle, 300 s) than without a drift or with +250 ppm. Independent of the tags: only
+    the GNSS innovations judge."""
+    from mixnav.config import load_dataset
+    from mixnav.experiment.tuning import _pivoted
+    from mixnav.experiment.tuning.criterion import Evaluator
+    from mixnav.experiment.tuning.search import _with
+    text = without_reference((SHIPPED / "drive-0708-plain.toml").read_text())
+    _, src, _ = load_dataset("drive-0708-plain")
+    doc = tomlkit.parse(text)
+    for t in list(doc["gnss"]):
+        if t == "withhold":
+            del doc["gnss"][t]
+    drift = _pivoted(next(q for q in ins_parameters() if q.name == "installation.imu_clock_drift"), (0, 600), ())
+    ev = Evaluator(tomlkit.dumps(doc), src, None, "ekf", [[]], (0.0, np.inf))
+    ll = {}
+    for d in (-250e-6, 0.0, 250e-6):
+        po = ev.run(ev.dataset(_with(doc, drift, np.array([d]))), [])
+        r = po.results["ekf"]
+        ll[d] = float(np.nansum(-0.5 * (r.nis + r.nis_logdet + r.nis_dim * np.log(2 * np.pi))))
+    assert ll[-250e-6] > ll[0.0] + 50 > ll[250e-6] + 50      # thousands of updates: far beyond chance
+
+
+def test_the_vertical_gyro_moves_alone_and_is_fixed_with_its_key():
+    """``imu.errors.arw[2]`` scales the z element only; a one-value ARW is spread to three axes
+    first; ``--fix imu.errors.arw`` keeps it too."""
+    from mixnav.experiment.tuning import _fixed
+    p = next(q for q in ins_parameters() if q.name == "imu.errors.arw[2]")
+    np.testing.assert_allclose(moved(p, np.array([1e-3]), 0.25), [1e-3, 1e-3, 2.5e-4])
+    np.testing.assert_allclose(moved(p, np.array([1e-3, 2e-3, 4e-3]), 2.0), [1e-3, 2e-3, 8e-3])
+    assert _fixed("imu.errors.arw[2]", ["imu.errors.arw"]) and _fixed("imu.errors.arw", ["imu.errors.arw"])
+    assert not _fixed("imu.errors.arw[2]", ["imu.errors.vrw"])

@@ -13,7 +13,7 @@ from pydantic import Field, field_validator, model_validator
 from .evaluation_schema import Evaluation
 from .. import units as u
 from .aiding_schema import AidingConfig
-from .fields import (AngleVec, AngSigma, ElevationMask, LengthVec, PosSigma, Strict, VelSigma, Windows, check_position,
+from .fields import (AngleVec, AngSigma, ElevationMask, Fraction, LengthVec, PosSigma, Strict, VelSigma, Windows, check_position,
                      quantity, reader_format)
 from .method_schema import MethodConfig
 from ..errors import ArgumentError
@@ -100,7 +100,11 @@ class Installation(Strict):
     yaw) applied after it: ``C_b_imu = C(misalignment) C(rotation)`` with
     ``C(r, p, y) = Rz(y) Ry(p) Rx(r)``. ``imu_position`` and
     ``antenna_position`` in the body frame; ``imu_time_offset`` added to
-    every IMU time stamp.
+    every IMU time stamp; ``imu_clock_drift`` (a fraction, written in ppm) the rate at
+    which that offset grows: a stamp ``t`` becomes ``t + imu_time_offset + imu_clock_drift
+    (t - t_0)``, ``t_0`` the first increment's start, and each increment's length is
+    scaled by ``1 + imu_clock_drift`` (a free-running IMU clock, or time tags spread over
+    the wrong span, against GNSS time). Default 0.
     """
 
     imu_rotation: AngleVec = (0.0, 0.0, 0.0)
@@ -108,6 +112,15 @@ class Installation(Strict):
     imu_position: LengthVec = (0.0, 0.0, 0.0)
     antenna_position: LengthVec = (0.0, 0.0, 0.0)
     imu_time_offset: Offset = 0.0
+    imu_clock_drift: Fraction = 0.0
+
+    @field_validator("imu_clock_drift")
+    @classmethod
+    def _drift_small(cls, v):
+        # 1 % is 36 s an hour: beyond any crystal; more likely a unit left out ("300" for 300 ppm)
+        if not abs(v) < 1e-2:
+            raise ValueError(f"must be below 1 % (10000 ppm) in size, got {v:g}: give the unit, e.g. \"250 ppm\"")
+        return v
 
 
 class Alignment(Strict):

@@ -67,10 +67,16 @@ def _shift(obj, t0):
 
 
 def install(imu: ImuData, ds: Dataset) -> ImuData:
-    """IMU axes to body axes, and the IMU time offset."""
+    """IMU axes to body axes, and the IMU time offset and clock drift
+    (``installation.imu_clock_drift``: the stamps stretched about the first increment's start)."""
     inst = ds.installation
     c_bi = euler_to_dcm(np.asarray(inst.imu_misalignment)) @ euler_to_dcm(np.asarray(inst.imu_rotation))
-    return ImuData(time=imu.time + inst.imu_time_offset, dt=imu.dt, dtheta=imu.dtheta @ c_bi.T,
+    time, dt = imu.time + inst.imu_time_offset, imu.dt
+    if inst.imu_clock_drift:
+        t0 = imu.time[0] - imu.dt[0]
+        time = time + inst.imu_clock_drift * (imu.time - t0)
+        dt = imu.dt * (1.0 + inst.imu_clock_drift)
+    return ImuData(time=time, dt=dt, dtheta=imu.dtheta @ c_bi.T,
                    dvel=imu.dvel @ c_bi.T, source=imu.source, gaps=imu.gaps, spikes=imu.spikes,
                    partial_lines=imu.partial_lines)
 

@@ -254,11 +254,11 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
         from .search import (CONSERVATIVE_KEYS, CONSERVATIVE_STEPS, conservative_pass, conservative_tolerance,
                              coordinate_search)
         CONSERVATIVE_RESERVE = len(CONSERVATIVE_KEYS) * len(CONSERVATIVE_STEPS) if budget >= 40 else 0
-        searched = [_scaled_to_fixes(p, po, (t_first, t_last))
-                    for p in ins_parameters() if p.name not in fix and _applies(cur_doc, p, ds)]
+        searched = [_pivoted(_scaled_to_fixes(p, po, (t_first, t_last)), (t_first, t_last), fix)
+                    for p in ins_parameters() if not _fixed(p.name, fix) and _applies(cur_doc, p, ds)]
         searched_names = {q.name for q in searched}
         for p in ins_parameters():
-            if p.name in fix:
+            if _fixed(p.name, fix):
                 not_tuned[p.name] = "fixed by the user (--fix)"
             elif p.name not in searched_names:
                 not_tuned[p.name] = _why_not(cur_doc, p, ds)
@@ -412,6 +412,24 @@ def _scaled_to_fixes(p: Parameter, po, span) -> Parameter:
     if not sig.size or not np.isfinite(sig).all():
         return p
     return replace(p, zero_from=float(np.clip(np.median(sig), p.lower, p.upper)))
+
+
+def _fixed(name: str, fix) -> bool:
+    """``name`` kept as the file gives it: named in ``fix``, or an element (``X[i]``) of a key
+    named there (fixing ``imu.errors.arw`` fixes its vertical element too)."""
+    return name in fix or name.split("[", 1)[0] in fix
+
+
+def _pivoted(p: Parameter, span, fix) -> Parameter:
+    """The IMU clock drift turned about the span's middle (it carries the time offset,
+    :func:`.parameters.pivoted`) unless the user fixed the offset; any other key as it is. From
+    the stamps' start a drift step would move the whole span and be refused by the offset's
+    misfit (the two keys are nearly one along the drive)."""
+    from .parameters import IMU_CLOCK_DRIFT, pivoted
+    if p.name != IMU_CLOCK_DRIFT.name or "installation.imu_time_offset" in fix:
+        return p
+    offset = next(q for q in ins_parameters() if q.name == "installation.imu_time_offset")
+    return pivoted(p, offset, 0.5 * (span[0] + span[1]))
 
 
 def _applies(doc, p: Parameter, ds) -> bool:

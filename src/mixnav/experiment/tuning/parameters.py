@@ -62,6 +62,14 @@ class Parameter:
         cross-validation NLPD for fixes) or ``"innovation"`` (minus the GNSS innovation
         log-likelihood per update of the same runs): the timing keys, which a misregistration
         shows in every update (docs/tuning.md, "Which criterion a key follows").
+    carries : tuple of (Parameter, float)
+        Keys moved with this one (a ``"shift"`` key): each by its coefficient times this
+        key's shift. The IMU clock drift carries the time offset by minus the tuning span's
+        centre, so that a drift step turns the clock about the span's middle instead of
+        its start (set by the tuner, which knows the span: ``pivoted``).
+    length : int or None
+        With ``index``: the vector's length a one-value key is spread to before its element is
+        moved (a scalar ARW is the same on three axes).
     """
 
     name: str
@@ -79,6 +87,8 @@ class Parameter:
     plain: bool = False
     zero_from: float | None = None
     judged_by: str = "criterion"
+    carries: tuple = ()
+    length: int | None = None
 
     @property
     def scale(self) -> float:
@@ -87,6 +97,22 @@ class Parameter:
 
 
 _LOG_COARSE, _LOG_FINE = (0.25, 0.5, 2.0, 4.0), (1 / _SQRT2, _SQRT2)
+
+#: the IMU clock against GNSS time (``installation.imu_clock_drift``): over a 4-minute span,
+#: 100 ppm moves the stamps at its ends by 12 ms against its middle, half the time offset's
+#: fine step; the coarse steps reach the 257 ppm drive-0708's tags show under the data
+#: README's reading (docs/data_formats.md, "drive-0708 time tags")
+IMU_CLOCK_DRIFT = Parameter(
+    "installation.imu_clock_drift", ("installation", "imu_clock_drift"), u.DIMENSIONLESS, "ppm", "shift",
+    (-300e-6, -100e-6, 100e-6, 300e-6), (-50e-6, 50e-6), -5e-3, 5e-3, default=0.0, judged_by="innovation",
+    about="the rate at which the IMU time offset grows (the IMU clock against GNSS time)")
+
+
+def pivoted(p: Parameter, offset: Parameter, centre: float) -> Parameter:
+    """``p`` (the clock drift) carrying ``offset`` so that a drift step leaves the stamps at
+    ``centre`` [s since the first IMU sample] where they were."""
+    from dataclasses import replace
+    return replace(p, carries=((offset, -float(centre)),))
 
 
 def ins_parameters() -> list[Parameter]:
@@ -101,11 +127,16 @@ def ins_parameters() -> list[Parameter]:
         Parameter("installation.imu_time_offset", ("installation", "imu_time_offset"), u.TIME, "s", "shift",
                   (-0.1, -0.05, 0.05, 0.1), (-0.025, 0.025), -1.0, 1.0, default=0.0, judged_by="innovation",
                   about="IMU time tags minus GNSS time"),
+        IMU_CLOCK_DRIFT,
         Parameter("gnss.velocity_delay", ("gnss", "velocity_delay"), u.TIME, "s", "shift",
                   (-0.1, -0.05, 0.05, 0.1), (-0.025, 0.025), 0.0, 1.0, default=0.0, judged_by="innovation",
                   about="how much earlier than its epoch a GNSS velocity is valid"),
         Parameter("imu.errors.arw", ("imu", "errors", "arw"), arw, "deg/s/sqrt(Hz)", "log", _LOG_COARSE,
                   _LOG_FINE, 1e-7, 1e-1, about="gyro white noise (ARW), per axis; the search scales all axes"),
+        # the vertical gyro on its own after the three together: a car's body shakes in roll and
+        # pitch far more than in yaw (drive-0708's still segments: z a third to a seventh of x, y)
+        Parameter("imu.errors.arw[2]", ("imu", "errors", "arw"), arw, "deg/s/sqrt(Hz)", "log", _LOG_COARSE,
+                  _LOG_FINE, 1e-7, 1e-1, index=2, length=3, about="the vertical (z) gyro's white noise alone"),
         Parameter("imu.errors.vrw", ("imu", "errors", "vrw"), vrw, "ug/sqrt(Hz)", "log", _LOG_COARSE, _LOG_FINE,
                   1e-7, 1.0, about="accelerometer white noise (VRW), per axis; the search scales all axes"),
         Parameter("aiding.nhc.sigma[0]", ("aiding", "nhc", "sigma"), u.VELOCITY, "m/s", "log", _LOG_COARSE,
@@ -190,6 +221,8 @@ def moved(p: Parameter, value: np.ndarray, step: float) -> np.ndarray:
     """``value`` moved by one search step (the whole key, or its element ``p.index``), clipped
     to the bounds."""
     v = np.array(value, float)
+    if p.index is not None and p.length is not None and v.size == 1:
+        v = np.full(p.length, v[0])
     sel = slice(None) if p.index is None else p.index
     if p.kind == "log":
         base = v[sel]

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import tomlkit
 
 from .parameters import Parameter, get_value, moved, set_value
@@ -31,7 +32,12 @@ MIN_GAIN = 1e-3
 
 
 def _with(doc, p: Parameter, value) -> str:
+    """``doc`` with ``p`` at ``value`` (and the keys it carries moved with it, clipped)."""
     d = tomlkit.parse(tomlkit.dumps(doc))
+    if p.carries:
+        shift = float(np.atleast_1d(value)[0] - get_value(d, p)[0])
+        for q, coefficient in p.carries:
+            set_value(d, q, np.clip(get_value(d, q) + coefficient * shift, q.lower, q.upper))
     set_value(d, p, value)
     return tomlkit.dumps(d)
 
@@ -111,9 +117,10 @@ def _try(doc, cur, p, base, steps, scorer, evaluations, curves, reserve: int = 0
 #: :data:`CONSERVATIVE_DOUBLINGS` times); when the first x2 is not, x1.41 once
 CONSERVATIVE_STEPS = (2.0, 2.0 ** 0.5)
 CONSERVATIVE_DOUBLINGS = 3
-#: the keys it widens: the process noises and the constraint sigmas
-CONSERVATIVE_KEYS = ("imu.errors.arw", "imu.errors.vrw", "imu.errors.gyro_bias_walk", "imu.errors.accel_bias_walk",
-                     "aiding.nhc.sigma[0]", "aiding.nhc.sigma[1]")
+#: the keys it widens, in the order they get the bar: the constraint sigmas first, then the
+#: process noises
+CONSERVATIVE_KEYS = ("aiding.nhc.sigma[1]", "aiding.nhc.sigma[0]", "imu.errors.arw", "imu.errors.vrw",
+                     "imu.errors.gyro_bias_walk", "imu.errors.accel_bias_walk")
 
 
 def conservative_tolerance(best: dict, n_windows: int) -> float:
@@ -142,9 +149,8 @@ def conservative_pass(doc, cur: dict, params: list[Parameter], scorer, evaluatio
     one-standard-error rule of cross-validation, applied to noise scales (the widest, not the
     first widening inside it: one x2 per key was a cap of convenience)."""
     best = cur["criterion"]
-    for p in params:
-        if p.name not in CONSERVATIVE_KEYS or p.kind != "log":
-            continue
+    order = {k: i for i, k in enumerate(CONSERVATIVE_KEYS)}
+    for p in sorted((q for q in params if q.name in order and q.kind == "log"), key=lambda q: order[q.name]):
         _point(curves, p, "current", get_value(doc, p), cur, new_visit=True)
         steps, doublings = list(CONSERVATIVE_STEPS), 0
         while steps:
