@@ -442,3 +442,112 @@ def test_the_vertical_gyro_moves_alone_and_is_fixed_with_its_key():
     np.testing.assert_allclose(moved(p, np.array([1e-3, 2e-3, 4e-3]), 2.0), [1e-3, 2e-3, 8e-3])
     assert _fixed("imu.errors.arw[2]", ["imu.errors.arw"]) and _fixed("imu.errors.arw", ["imu.errors.arw"])
     assert not _fixed("imu.errors.arw[2]", ["imu.errors.vrw"])
+
+
+def test_an_nhc_rate_step_carries_the_sigmas_by_its_square_root():
+    """1 -> 4 Hz doubles both NHC sigmas (the same information per second); the rate is
+    bounded at 5 Hz."""
+    from mixnav.experiment.tuning.search import _with
+    doc = tomlkit.parse((ROOT / "benchmarks" / "configs" / "drive-0708-untuned.toml").read_text())
+    rate = next(q for q in ins_parameters() if q.name == "aiding.nhc.rate")
+    sigma = next(q for q in ins_parameters() if q.name == "aiding.nhc.sigma[0]")
+    assert get_value(doc, rate)[0] == 1.0                       # the schema's default: the file has none
+    new = tomlkit.parse(_with(doc, rate, moved(rate, get_value(doc, rate), 4.0)))
+    assert get_value(new, rate)[0] == pytest.approx(4.0)
+    np.testing.assert_allclose(get_value(new, sigma), 2.0 * get_value(doc, sigma))
+    assert moved(rate, np.array([2.0]), 4.0)[0] == 5.0
+
+
+def test_the_suspension_pitch_is_read_from_the_fixes_vertical_velocity():
+    """A car whose vertical velocity in the vehicle frame is ``k a_x v_x`` (k = 0.33 deg per
+    m/s^2) under 2 cm/s of fix noise, turning and speeding up and down: the fit gives k within
+    its stated standard error x3; at walking pace (too few records above 3 m/s) or without a
+    squat (k = 0) it gives no value and says why."""
+    from types import SimpleNamespace
+    from mixnav.attitude import euler_to_dcm, euler_to_quat
+    from mixnav.experiment.tuning.data_stage import suspension_pitch
+    rng = np.random.default_rng(7)
+    t = np.arange(0.0, 300.0, 0.25)
+    yaw = 0.02 * t + 0.3 * np.sin(0.05 * t)
+
+    def case(k, speed):
+        v = speed * (1.0 + 0.25 * np.sin(0.1 * t))
+        a = 0.025 * speed * np.cos(0.1 * t)
+        C = euler_to_dcm(np.column_stack([np.zeros_like(t), np.zeros_like(t), yaw]))
+        v_n = np.einsum("kij,kj->ki", C, np.column_stack([v, np.zeros_like(t), k * a * v]))
+        v_n += rng.normal(0.0, 0.02, v_n.shape)
+        nav = np.zeros((len(t), 10))
+        nav[:, 0:4] = euler_to_quat(np.column_stack([np.zeros_like(t), np.zeros_like(t), yaw]))
+        return suspension_pitch(SimpleNamespace(time=t, nav=nav), SimpleNamespace(time=t, vel_n=v_n), (10.0, 290.0))
+
+    k0 = np.radians(0.33)
+    got, how = case(k0, 12.0)
+    se = np.radians(float(how.split("+-")[1].split()[0]))
+    assert abs(got - k0) < 3 * se and se < 0.1 * k0
+    slow = case(k0, 2.0)
+    assert slow[0] is None and "too few" in slow[1]
+    got, how = case(0.0, 12.0)
+    assert got is None and "standard errors from zero" in how
+
+
+def test_a_one_value_arw_is_searched_along_its_vertical_element(tmp_path):
+    """A file whose ARW is one value for all axes (comma2k19-example1's): the vertical gyro's
+    search shows and moves it without an index error (a curve point of a one-value key is its
+    value), and writes three axes when z moves."""
+    from mixnav.experiment.tuning.search import _shown, coordinate_search
+    doc = tomlkit.parse((ROOT / "benchmarks" / "configs" / "drive-0708-untuned.toml").read_text())
+    doc["imu"]["errors"]["arw"] = "0.004 deg/s/sqrt(Hz)"
+    p = next(q for q in ins_parameters() if q.name == "imu.errors.arw[2]")
+    assert _shown(p, get_value(doc, p)) == pytest.approx(0.004)
+    z0 = get_value(doc, p)[0]
+
+    class LowerZ:                  # the criterion lowest at half the z gyro's noise
+        def left(self):
+            return 100
+
+        def score(self, texts):
+            out = []
+            for t in texts:
+                v = get_value(tomlkit.parse(t), p)
+                c = 1.0 + (np.log2(v[-1] / z0) + 1.0) ** 2
+                out.append({"criterion": c, "nlpd": c, "innovation_ll_per_update": 0.0, "criterion_se": 0.1})
+            return out
+
+    scorer = LowerZ()
+    (cur,) = scorer.score([tomlkit.dumps(doc)])
+    out, _, curves = coordinate_search(doc, cur, [p], scorer, [], grids=("coarse",))
+    v = get_value(out, p)
+    assert len(v) == 3 and v[0] == v[1] == pytest.approx(z0) and v[2] == pytest.approx(0.5 * z0, rel=1e-3)
+    assert [c[1] for c in curves[p.name]][0] == pytest.approx(0.004)
+
+
+@pytest.mark.parametrize("n_updates, moves", [(686, False), (20000, True)])
+def test_a_timing_move_needs_a_significant_rise_of_the_innovation_likelihood(n_updates, moves):
+    """The time offset's best move raises the innovation log-likelihood by 0.0031 per update
+    (comma2k19-example1's second half): over 686 updates that is 2.1, below the one-parameter
+    likelihood-ratio bound 3.32 (chi-square(1) 99 % / 2), and the file's value stays; over
+    20 000 updates (62) the move is kept."""
+    from mixnav.experiment.tuning.search import INNOVATION_LR, coordinate_search
+    from scipy.stats import chi2
+    assert INNOVATION_LR == pytest.approx(chi2.ppf(0.99, 1) / 2, rel=1e-4)
+    doc = tomlkit.parse((ROOT / "benchmarks" / "configs" / "drive-0708-untuned.toml").read_text())
+    p = next(q for q in ins_parameters() if q.name == "installation.imu_time_offset")
+    base = get_value(doc, p)[0]
+
+    class Flat:
+        def left(self):
+            return 100
+
+        def score(self, texts):
+            out = []
+            for t in texts:
+                x = get_value(tomlkit.parse(t), p)[0] - base
+                ll = -6.2423 - 0.0031 * (((x + 0.1) / 0.1) ** 2 - 1.0)    # 0.0031 higher at -0.1 s than at 0
+                out.append({"criterion": 1.0, "nlpd": 1.0, "innovation_ll_per_update": ll, "n_updates": n_updates,
+                            "criterion_se": 0.1})
+            return out
+
+    scorer = Flat()
+    (cur,) = scorer.score([tomlkit.dumps(doc)])
+    out, _, _ = coordinate_search(doc, cur, [p], scorer, [], grids=("coarse",))
+    assert (get_value(out, p)[0] - base == pytest.approx(-0.1)) if moves else (get_value(out, p)[0] == base)

@@ -251,16 +251,19 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
             for name in ("imu.errors.arw", "imu.errors.vrw", "imu.errors.gyro_bias_walk", "imu.errors.accel_bias_walk"):
                 if name in chosen and "data_how" in chosen[name]:
                     chosen[name]["data_how"] += " (not kept: the criterion preferred the file's value)"
+            # a measured suspension gain goes back to the search from the file's value
+            chosen.pop("aiding.nhc.pitch_per_accel", None)
         from .search import (CONSERVATIVE_KEYS, CONSERVATIVE_STEPS, conservative_pass, conservative_tolerance,
                              coordinate_search)
         CONSERVATIVE_RESERVE = len(CONSERVATIVE_KEYS) * len(CONSERVATIVE_STEPS) if budget >= 40 else 0
         searched = [_pivoted(_scaled_to_fixes(p, po, (t_first, t_last)), (t_first, t_last), fix)
-                    for p in ins_parameters() if not _fixed(p.name, fix) and _applies(cur_doc, p, ds)]
+                    for p in ins_parameters() if not _fixed(p.name, fix) and _applies(cur_doc, p, ds)
+                    and not chosen.get(p.name, {}).get("measured")]
         searched_names = {q.name for q in searched}
         for p in ins_parameters():
             if _fixed(p.name, fix):
                 not_tuned[p.name] = "fixed by the user (--fix)"
-            elif p.name not in searched_names:
+            elif p.name not in searched_names and not chosen.get(p.name, {}).get("measured"):
                 not_tuned[p.name] = _why_not(cur_doc, p, ds)
         cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations, grids=("coarse",),
                                                  reserve=CONSERVATIVE_RESERVE)
@@ -340,6 +343,7 @@ def _data_stage(doc, po, span, fix, chosen: dict, not_tuned: dict, local: Evalua
                 item.comment(f"mixnav tune: {how}")
                 start_doc["aiding"]["zupt"][k] = item
                 chosen[name] = {"value": f"{val:.4g} {unit}", "how": how, "spread": None}
+    _suspension_stage(doc, start_doc, po, span, fix, chosen, not_tuned, local)
     wanted = [n for n in ("imu.errors.gyro_bias_walk", "imu.errors.accel_bias_walk") if n not in fix]
     if not wanted:
         return start_doc
@@ -358,6 +362,36 @@ def _data_stage(doc, po, span, fix, chosen: dict, not_tuned: dict, local: Evalua
                                  f"({walks['increments']} increments; the file's walks loosened "
                                  f"x{LOOSEN:g} for that run)"}
     return start_doc
+
+
+def _suspension_stage(doc, start_doc, po, span, fix, chosen: dict, not_tuned: dict, local: Evaluator) -> None:
+    """``[aiding.nhc] pitch_per_accel`` measured from the data (:func:`.data_stage.suspension_pitch`,
+    a run of the tuned method without the NHC) into ``start_doc``; a measured gain is not searched
+    (``chosen[...]["measured"]``): over a flat or steady span the criterion hardly sees it (on
+    drive-0708's parking lot it moved by 0.01 across 0-0.4 deg per m/s^2, inside its standard
+    error of 0.3) and would pick it by rounding, while the fit is a property of the car."""
+    from .data_stage import suspension_pitch
+    name = "aiding.nhc.pitch_per_accel"
+    if "aiding" not in doc or "nhc" not in doc["aiding"]:
+        return
+    if name in fix:
+        not_tuned[name] = "fixed by the user (--fix)"
+        return
+    ds = local.dataset(tomlkit.dumps(start_doc))
+    if not ds.methods or not hasattr(ds.methods[0], "aiding") or "nhc" not in (ds.methods[0].aiding or []):
+        return
+    m = ds.methods[0]
+    ds = ds.model_copy(update={"methods": [m.model_copy(update={"aiding": [a for a in m.aiding if a != "nhc"]})]})
+    res = local.run(ds, []).results.get(local.method)
+    if res is None:
+        return
+    k, how = suspension_pitch(res, po.all_fixes, span, ds.aiding.vehicle_mounting)
+    if k is None:
+        not_tuned[name + " (data)"] = how + "; searched by the criterion instead"
+        return
+    p = next(q for q in ins_parameters() if q.name == name)
+    set_value(start_doc, p, np.array([k]), comment=f"mixnav tune: {how}")
+    chosen[name] = {"value": _value_text(p, np.array([k])), "how": how, "spread": None, "measured": True}
 
 
 def _installation_stage(cur_doc, cur: dict, fix, scorer, evaluations: list, chosen: dict, not_tuned: dict,
@@ -516,6 +550,10 @@ def _write_tuned(text: str, cur_doc, chosen: dict, searched) -> str:
     for p in (ANTENNA, MOUNTING):
         if p.name in chosen:
             set_value(doc, p, get_value(cur_doc, p), comment=f"mixnav tune: {chosen[p.name]['how']}")
+    params = {p.name: p for p in ins_parameters()}
+    for name, c in chosen.items():
+        if c.get("measured") and name in params:      # from the data stage, not searched
+            set_value(doc, params[name], get_value(cur_doc, params[name]), comment=f"mixnav tune: {c['how']}")
     for name, c in chosen.items():
         if name.startswith("aiding.zupt.") and "value" in c and "aiding" in doc and "zupt" in doc["aiding"]:
             item = tomlkit.string(c["value"])

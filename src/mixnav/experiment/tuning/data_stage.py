@@ -115,3 +115,55 @@ def bias_walks(evaluator, doc_text: str, span) -> dict | None:
         d = np.diff(b, axis=0)
         out[key] = np.sqrt(np.mean(d * d, axis=0) / BIAS_INCREMENT_S)
     return out
+
+
+#: the suspension-pitch fit uses the records moving faster than this [m/s] (below it the
+#: vertical velocity a pitch makes is lost in the fixes' noise) and forward accelerations
+#: below :data:`SQUAT_MAX_ACCEL` [m/s^2] (a GNSS velocity jump is not an acceleration)
+SQUAT_MIN_SPEED, SQUAT_MAX_ACCEL = 3.0, 5.0
+#: at least this many records, and the slope at least this many standard errors from zero
+SQUAT_MIN_RECORDS, SQUAT_MIN_T = 200, 3.0
+
+
+def suspension_pitch(res, fixes, span, mounting=(0.0, 0.0, 0.0)):
+    """``[aiding.nhc] pitch_per_accel`` [rad per m/s^2] from the recording's own GNSS velocity.
+
+    The fixes' velocity is turned into the vehicle frame by the attitude of ``res`` (a run of
+    the tuned method without the NHC, which would otherwise pull the attitude towards the
+    constraint it is to measure) and ``mounting``; over the records inside ``span`` moving
+    faster than :data:`SQUAT_MIN_SPEED`, the vertical velocity is regressed on speed times
+    forward acceleration (the acceleration from the velocity's gradient): the body's pitch on
+    its suspension per m/s^2 is the slope (drive-0708: 0.30-0.36 deg per m/s^2 on either
+    half, benchmarks/results/drive0708_drift.md). Returns ``(k, note)``, or ``(None, why)``
+    with too few records or a slope within :data:`SQUAT_MIN_T` standard errors of zero."""
+    from ...attitude import euler_to_dcm, quat_to_dcm
+    t = np.asarray(res.time, float)
+    if fixes.vel_n is None or len(fixes.time) < 2:
+        return None, "the fixes carry no velocity"
+    j = nearest(fixes.time, t)
+    near = np.abs(fixes.time[j] - t) <= 0.3
+    v_n = np.column_stack([np.interp(t, fixes.time, fixes.vel_n[:, k]) for k in range(3)])
+    c_vn = euler_to_dcm(np.asarray(mounting, float)) @ np.swapaxes(quat_to_dcm(res.nav[:, 0:4]), -1, -2)
+    v_v = np.einsum("kij,kj->ki", c_vn, v_n)
+    a_x = np.gradient(v_v[:, 0], t)
+    sel = (near & (t >= span[0]) & (t <= span[1]) & (v_v[:, 0] > SQUAT_MIN_SPEED)
+           & (np.abs(a_x) < SQUAT_MAX_ACCEL) & np.isfinite(v_v).all(axis=1))
+    n = int(sel.sum())
+    if n < SQUAT_MIN_RECORDS:
+        return None, (f"{n} records moving faster than {SQUAT_MIN_SPEED:g} m/s with a fix: too few to fit "
+                      f"the suspension pitch (at least {SQUAT_MIN_RECORDS})")
+    X = np.column_stack([np.ones(n), v_v[sel, 0] * a_x[sel]])
+    y = v_v[sel, 2]
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    e = y - X @ coef
+    # the records (0.25 s apart) are correlated (the fixes' errors, the attitude's): the standard
+    # error counts one independent sample a second
+    per_second = max(1.0, 1.0 / float(np.median(np.diff(t))))
+    cov = np.linalg.inv(X.T @ X) * (e @ e) / (n - 2) * per_second
+    k, se = float(coef[1]), float(np.sqrt(cov[1, 1]))
+    if abs(k) < SQUAT_MIN_T * se:
+        return None, (f"the suspension pitch fit {np.degrees(k):.3f} +- {np.degrees(se):.3f} deg/(m/s^2) over "
+                      f"{n} records is not {SQUAT_MIN_T:g} standard errors from zero")
+    return k, (f"the fixes' vertical velocity in the vehicle frame (attitude of a run without the NHC) "
+               f"regressed on speed x forward acceleration over {n} records above {SQUAT_MIN_SPEED:g} m/s: "
+               f"+-{np.degrees(se):.3f} deg/(m/s^2) (1 sigma, one sample a second)")

@@ -63,8 +63,9 @@ class Parameter:
         log-likelihood per update of the same runs): the timing keys, which a misregistration
         shows in every update (docs/tuning.md, "Which criterion a key follows").
     carries : tuple of (Parameter, float)
-        Keys moved with this one (a ``"shift"`` key): each by its coefficient times this
-        key's shift. The IMU clock drift carries the time offset by minus the tuning span's
+        Keys moved with this one: for a ``"shift"`` key each by its coefficient times this
+        key's shift; for a ``"log"`` key each multiplied by this key's factor to the power of
+        its coefficient (the NHC rate carries its sigmas by the square root). The IMU clock drift carries the time offset by minus the tuning span's
         centre, so that a drift step turns the clock about the span's middle instead of
         its start (set by the tuner, which knows the span: ``pivoted``).
     length : int or None
@@ -106,6 +107,20 @@ IMU_CLOCK_DRIFT = Parameter(
     "installation.imu_clock_drift", ("installation", "imu_clock_drift"), u.DIMENSIONLESS, "ppm", "shift",
     (-300e-6, -100e-6, 100e-6, 300e-6), (-50e-6, 50e-6), -5e-3, 5e-3, default=0.0, judged_by="innovation",
     about="the rate at which the IMU time offset grows (the IMU clock against GNSS time)")
+
+
+#: the NHC rate, last in the order (a 5 Hz run costs two 1 Hz ones: the keys before it are
+#: searched at the file's rate). A rate step carries both sigmas by its square root, so that
+#: the constraint's information per second stays: the candidates differ in how evenly the
+#: constraint is spread over time, not in how hard it holds. Up to 5 Hz: on drive-0708 the
+#: innovation likelihood is flat from 2 to 50 Hz and lower at 1 Hz
+#: (benchmarks/results/drive0708_drift.md, "The NHC rate"), while the cost grows with the rate
+#: (up to 10 Hz the whole drive took 121 s to tune, past the 2-minute bound)
+NHC_RATE = Parameter(
+    "aiding.nhc.rate", ("aiding", "nhc", "rate"), u.FREQUENCY, "Hz", "log", (2.0, 5.0), _LOG_FINE, 0.1, 5.0,
+    default=1.0, about="NHC updates per second (its sigmas carried by the square root of the step)",
+    carries=((Parameter("aiding.nhc.sigma", ("aiding", "nhc", "sigma"), u.VELOCITY, "m/s", "log", (), (), 1e-3, 10.0,
+                        default=(0.1, 0.1)), 0.5),))
 
 
 def pivoted(p: Parameter, offset: Parameter, centre: float) -> Parameter:
@@ -159,6 +174,7 @@ def ins_parameters() -> list[Parameter]:
                   about="accelerometer bias random walk"),
         Parameter("gnss.min_sigma", ("gnss", "min_sigma"), u.LENGTH, "m", "log", _LOG_COARSE, _LOG_FINE,
                   1e-3, 100.0, default=0.0, about="floor of the fixes' position sigmas"),
+        NHC_RATE,
     ]
 
 
