@@ -46,6 +46,17 @@ def summary(rows, method="aided") -> dict:
             "per_window": {f"{a:g}": float(x) for a, x in zip(g.start_s, h)}}
 
 
+def pooled(res: dict) -> dict:
+    """Per config, median / p90 / worst over both folds' held-out windows together (each window
+    scored by the fold that did not tune on it)."""
+    out = {}
+    for label in ("tuned", "untuned", "hand-tuned"):
+        h = np.array([x for f in res["folds"].values() for x in f[label]["per_window"].values()], float)
+        out[label] = {"windows": int(len(h)), "median_m": float(np.median(h)), "p90_m": float(np.percentile(h, 90)),
+                      "worst_m": float(h.max())}
+    return out
+
+
 DOCS = ROOT / "docs" / "tuning.md"
 START, END = "<!-- results: benchmarks/tune_drive0708.py -->", "<!-- /results -->"
 
@@ -89,6 +100,39 @@ def _with_tag_start(name_or_path: str, work: Path, rule: str) -> str:
     return str(out)
 
 
+def write_md(res: dict, out: str) -> None:
+    """The results table (``out``.md) from the results dict."""
+    lines = ["# mixnav tune on drive-0708, two-fold (issue 35)", "",
+             f"`python benchmarks/tune_drive0708.py --budget {res['budget']} --workers {res['workers']}"
+             + (f" --tag-start {res['tag_start']}`" if res["tag_start"] != "tag" else "`") + "; start "
+             "`benchmarks/configs/drive-0708-untuned.toml`; tuned on one half of 60-530 s, scored on the other by "
+             "the outage sweep (30 s windows every 10 s) against the reference; causal `aided` in every row. "
+             "The hand-tuned row is the shipped drive-0708-aided.toml, fitted on the whole drive (partly with the "
+             "reference in view): the bar, not a peer.", "",
+             "| tuned on | scored on | config | windows | median [m] | p90 [m] | worst [m] | NEES in band |",
+             "|---|---|---|---|---|---|---|---|"]
+    for name, f in res["folds"].items():
+        for label in ("tuned", "untuned", "hand-tuned"):
+            s = f[label]
+            lines.append(f"| {name.split('-')[-1]} | {f['scored_on']} | {label} | {s['windows']} | "
+                         f"{s['median_m']:.2f} | {s['p90_m']:.2f} | {s['worst_m']:.2f} | "
+                         f"{100 * s['nees_in_band_share']:.0f} % |")
+    if "pooled" in res:
+        lines += ["", "Both halves pooled (each window scored by the fold that did not tune on it):", "",
+                  "| config | windows | median [m] | p90 [m] | worst [m] |", "|---|---|---|---|---|"]
+        for label, s in res["pooled"].items():
+            lines.append(f"| {label} | {s['windows']} | {s['median_m']:.2f} | {s['p90_m']:.2f} | {s['worst_m']:.2f} |")
+    lines += ["", "| tuned on | wall time [s] | evaluations | filter runs | criterion as given -> tuned |",
+              "|---|---|---|---|---|"]
+    for name, f in res["folds"].items():
+        lines.append(f"| {name.split('-')[-1]} | {f['tune_wall_s']:.1f} | {f['evaluations']} | {f['filter_runs']} | "
+                     f"{f['criterion_given']:.3f} -> {f['criterion_tuned']:.3f} |")
+    lines += ["", "Chosen values:", ""]
+    for name, f in res["folds"].items():
+        lines.append(f"- {name}: " + "; ".join(f"`{k}` = {v}" for k, v in f["chosen"].items()))
+    Path(out + ".md").write_text("\n".join(lines) + "\n")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--write-docs", action="store_true",
@@ -126,31 +170,9 @@ def main(argv=None):
                   f"worst {s['worst_m']:.2f} m  NEES in band {100 * s['nees_in_band_share']:.0f} % "
                   f"({s['windows']} windows)", flush=True)
         res["folds"][f"tuned-on-{tune_half}"] = fold
+    res["pooled"] = pooled(res)
     Path(a.out + ".json").write_text(json.dumps(res, indent=1) + "\n")
-    lines = ["# mixnav tune on drive-0708, two-fold (issue 35)", "",
-             f"`python benchmarks/tune_drive0708.py --budget {a.budget} --workers {a.workers}"
-             + (f" --tag-start {a.tag_start}`" if a.tag_start != "tag" else "`") + "; start "
-             "`benchmarks/configs/drive-0708-untuned.toml`; tuned on one half of 60-530 s, scored on the other by "
-             "the outage sweep (30 s windows every 10 s) against the reference; causal `aided` in every row. "
-             "The hand-tuned row is the shipped drive-0708-aided.toml, fitted on the whole drive (partly with the "
-             "reference in view): the bar, not a peer.", "",
-             "| tuned on | scored on | config | windows | median [m] | p90 [m] | worst [m] | NEES in band |",
-             "|---|---|---|---|---|---|---|---|"]
-    for name, f in res["folds"].items():
-        for label in ("tuned", "untuned", "hand-tuned"):
-            s = f[label]
-            lines.append(f"| {name.split('-')[-1]} | {f['scored_on']} | {label} | {s['windows']} | "
-                         f"{s['median_m']:.2f} | {s['p90_m']:.2f} | {s['worst_m']:.2f} | "
-                         f"{100 * s['nees_in_band_share']:.0f} % |")
-    lines += ["", "| tuned on | wall time [s] | evaluations | filter runs | criterion as given -> tuned |",
-              "|---|---|---|---|---|"]
-    for name, f in res["folds"].items():
-        lines.append(f"| {name.split('-')[-1]} | {f['tune_wall_s']:.1f} | {f['evaluations']} | {f['filter_runs']} | "
-                     f"{f['criterion_given']:.3f} -> {f['criterion_tuned']:.3f} |")
-    lines += ["", "Chosen values:", ""]
-    for name, f in res["folds"].items():
-        lines.append(f"- {name}: " + "; ".join(f"`{k}` = {v}" for k, v in f["chosen"].items()))
-    Path(a.out + ".md").write_text("\n".join(lines) + "\n")
+    write_md(res, a.out)
     if Path(a.out) == ROOT / "benchmarks" / "results" / "tune_drive0708":
         write_docs(res)
 

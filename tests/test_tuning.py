@@ -551,3 +551,33 @@ def test_a_timing_move_needs_a_significant_rise_of_the_innovation_likelihood(n_u
     (cur,) = scorer.score([tomlkit.dumps(doc)])
     out, _, _ = coordinate_search(doc, cur, [p], scorer, [], grids=("coarse",))
     assert (get_value(out, p)[0] - base == pytest.approx(-0.1)) if moves else (get_value(out, p)[0] == base)
+
+
+def test_a_file_rate_above_the_search_bound_is_kept():
+    """drive-0708-aided runs its NHC at 10 Hz: the rate search (at most 5 Hz, a bound of cost) does
+    not apply and says why, instead of moving the user's rate down to its bound."""
+    from mixnav.config import load_dataset
+    from mixnav.experiment.tuning import _why_not
+    ds, _, text = load_dataset("drive-0708-aided")
+    doc = tomlkit.parse(text)
+    rate = next(q for q in ins_parameters() if q.name == "aiding.nhc.rate")
+    assert "at or above the 5 Hz" in _why_not(doc, rate, ds)
+    doc["aiding"]["nhc"]["rate"] = "2 Hz"
+    assert _why_not(doc, rate, ds) is None
+
+
+def test_the_sigmas_a_rate_step_moved_are_written_as_scored():
+    """tuned.toml holds the NHC sigmas as the rate step left them, also when the sigmas were not
+    searched themselves (fixed elements keep the rate out: it would move them)."""
+    from mixnav.experiment.tuning import _carries_fixed, _write_tuned
+    from mixnav.experiment.tuning.search import _with
+    text = (ROOT / "benchmarks" / "configs" / "drive-0708-untuned.toml").read_text()
+    doc = tomlkit.parse(text)
+    rate = next(q for q in ins_parameters() if q.name == "aiding.nhc.rate")
+    cur = tomlkit.parse(_with(doc, rate, np.array([4.0])))
+    chosen = {rate.name: {"value": "4 Hz", "how": "test", "spread": None}}
+    out = tomllib.loads(_write_tuned(text, cur, chosen, [rate]))
+    assert out["aiding"]["nhc"]["rate"] == "4 Hz"
+    assert out["aiding"]["nhc"]["sigma"] == ["0.2 m/s", "0.2 m/s"]      # 0.1 m/s x sqrt(4)
+    assert _carries_fixed(rate, ["aiding.nhc.sigma[1]"]) and not _carries_fixed(rate, ["imu.errors.arw"])
+

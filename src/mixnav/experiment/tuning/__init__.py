@@ -54,7 +54,8 @@ TUNE_FILES = ("tuned.toml", "tune.json", "report.md", "tune.png", "tune_journal.
 
 def tunable_keys() -> list[str]:
     """The names ``--fix`` accepts (IMU + GNSS-fixes datasets), plus the data-stage keys."""
-    return [p.name for p in ins_parameters()] + ["aiding.zupt.accel_std", "aiding.zupt.gyro_rate",
+    # an element with a ``length`` (the vertical gyro's ARW) is fixed with its whole key
+    return [p.name for p in ins_parameters() if p.length is None] + ["aiding.zupt.accel_std", "aiding.zupt.gyro_rate",
                                                  "installation.antenna_position", "aiding.vehicle_mounting"]
 
 
@@ -255,14 +256,23 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
             chosen.pop("aiding.nhc.pitch_per_accel", None)
         from .search import (CONSERVATIVE_KEYS, CONSERVATIVE_STEPS, conservative_pass, conservative_tolerance,
                              coordinate_search)
-        CONSERVATIVE_RESERVE = len(CONSERVATIVE_KEYS) * len(CONSERVATIVE_STEPS) if budget >= 40 else 0
+        from .parameters import NHC_RATE
         searched = [_pivoted(_scaled_to_fixes(p, po, (t_first, t_last)), (t_first, t_last), fix)
                     for p in ins_parameters() if not _fixed(p.name, fix) and _applies(cur_doc, p, ds)
-                    and not chosen.get(p.name, {}).get("measured")]
+                    and not chosen.get(p.name, {}).get("measured") and not _carries_fixed(p, fix)]
+        # the NHC rate last of all, after the conservative pass (below): its step carries the
+        # sigmas so that the information per second stays, so the other keys' optima hardly move
+        # with it, and every evaluation after a faster rate would cost more
         searched_names = {q.name for q in searched}
+        rate = [p for p in searched if p.name == NHC_RATE.name]
+        searched = [p for p in searched if p.name != NHC_RATE.name]
+        RATE_RESERVE = len(NHC_RATE.coarse) + 1 if rate and budget >= 40 else 0
+        CONSERVATIVE_RESERVE = (len(CONSERVATIVE_KEYS) * len(CONSERVATIVE_STEPS) if budget >= 40 else 0) + RATE_RESERVE
         for p in ins_parameters():
             if _fixed(p.name, fix):
                 not_tuned[p.name] = "fixed by the user (--fix)"
+            elif _carries_fixed(p, fix):
+                not_tuned[p.name] = "a key its step moves with it is fixed by the user (--fix)"
             elif p.name not in searched_names and not chosen.get(p.name, {}).get("measured"):
                 not_tuned[p.name] = _why_not(cur_doc, p, ds)
         cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations, grids=("coarse",),
@@ -277,7 +287,11 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
         n_windows = sum(len(f) for f in windows)
         searched_best = cur["nlpd"]
         tolerance = conservative_tolerance(cur, n_windows)
-        cur_doc, cur = conservative_pass(cur_doc, cur, searched, scorer, evaluations, tolerance, curves)
+        cur_doc, cur = conservative_pass(cur_doc, cur, searched, scorer, evaluations, tolerance, curves,
+                                         reserve=RATE_RESERVE)
+        cur_doc, cur, curves = coordinate_search(cur_doc, cur, rate, scorer, evaluations, grids=("coarse",),
+                                                 curves=curves)
+        searched = searched + rate
         for p in searched:
             if len(curves.get(p.name, [])) < 2:   # only the current point: the budget ran out first
                 not_tuned[p.name] = "the budget ran out before the search reached it: the file's value kept"
@@ -454,6 +468,13 @@ def _fixed(name: str, fix) -> bool:
     return name in fix or name.split("[", 1)[0] in fix
 
 
+def _carries_fixed(p: Parameter, fix) -> bool:
+    """A key whose step moves a key the user fixed (the NHC rate carries the NHC sigmas), other
+    than the clock drift's time offset (the drift then turns about the stamps' start)."""
+    return any(_fixed(q.name, fix) or any(_fixed(f"{q.name}[{i}]", fix) for i in range(3))
+               for q, _ in p.carries) and p.name != "installation.imu_clock_drift"
+
+
 def _pivoted(p: Parameter, span, fix) -> Parameter:
     """The IMU clock drift turned about the span's middle (it carries the time offset,
     :func:`.parameters.pivoted`) unless the user fixed the offset; any other key as it is. From
@@ -480,6 +501,9 @@ def _why_not(doc, p: Parameter, ds) -> str | None:
         return "the fixes' velocities are not used, or their format is not rtklib-pos"
     if get_value(doc, p) is None:
         return "not in the file (the IMU grade's value is used)"
+    if p.name == "aiding.nhc.rate" and get_value(doc, p)[0] >= p.upper:
+        # the bound is the search's cost, not the data's: a faster rate the user chose stays
+        return f"the file's rate is at or above the {p.upper:g} Hz the search tries: kept"
     return None
 
 
@@ -546,6 +570,11 @@ def _write_tuned(text: str, cur_doc, chosen: dict, searched) -> str:
             notes.append(f"{c.get('how', '')}" + (f"; within the criterion's spread: {c['spread']}"
                                                    if c.get("spread") else ""))
         set_value(doc, p, v, comment="mixnav tune: " + " | ".join(notes))
+    for p in searched:           # a carried key as it was scored, searched itself or not
+        for q, _ in p.carries:
+            if q.path not in seen:
+                seen.add(q.path)
+                set_value(doc, q, get_value(cur_doc, q), comment=f"mixnav tune: moved with {p.name}")
     from .installation import ANTENNA, MOUNTING
     for p in (ANTENNA, MOUNTING):
         if p.name in chosen:

@@ -109,8 +109,9 @@ IMU_CLOCK_DRIFT = Parameter(
     about="the rate at which the IMU time offset grows (the IMU clock against GNSS time)")
 
 
-#: the NHC rate, last in the order (a 5 Hz run costs two 1 Hz ones: the keys before it are
-#: searched at the file's rate). A rate step carries both sigmas by its square root, so that
+#: the NHC rate, searched last of all, after the conservative pass, on its coarse grid only (a 5 Hz
+#: run costs two 1 Hz ones: every other key is searched at the file's rate). A rate step carries
+#: both sigmas by its square root, so that
 #: the constraint's information per second stays: the candidates differ in how evenly the
 #: constraint is spread over time, not in how hard it holds. Up to 5 Hz: on drive-0708 the
 #: innovation likelihood is flat from 2 to 50 Hz and lower at 1 Hz
