@@ -581,3 +581,22 @@ def test_the_sigmas_a_rate_step_moved_are_written_as_scored():
     assert out["aiding"]["nhc"]["sigma"] == ["0.2 m/s", "0.2 m/s"]      # 0.1 m/s x sqrt(4)
     assert _carries_fixed(rate, ["aiding.nhc.sigma[1]"]) and not _carries_fixed(rate, ["imu.errors.arw"])
 
+
+
+def test_a_losing_data_stage_leaves_nothing_of_its_own_in_the_tuned_file():
+    """When the data stage's file scores worse than the file as given, the search starts from the
+    file as given, and what only the data stage's file held is withdrawn: the stillness
+    thresholds move to "not tuned" (they would otherwise be written though never scored), the
+    measured suspension gain goes back to the search; a winning start keeps them."""
+    from mixnav.experiment.tuning import _start_kept
+    def found():
+        return ({"aiding.zupt.accel_std": {"value": "0.12 m/s^2", "how": "stillness", "spread": None},
+                 "aiding.nhc.pitch_per_accel": {"value": "0.33 deg/(m/s^2)", "how": "fit", "measured": True},
+                 "imu.errors.arw": {"from_data": "x", "data_how": "Allan"}}, {})
+    chosen, not_tuned = found()
+    assert not _start_kept({"nlpd": 2.0}, {"nlpd": 1.0}, chosen, not_tuned)
+    assert set(chosen) == {"imu.errors.arw"} and "not kept" in chosen["imu.errors.arw"]["data_how"]
+    assert "not kept" in not_tuned["aiding.zupt.accel_std"]
+    chosen, not_tuned = found()
+    assert _start_kept({"nlpd": 1.0}, {"nlpd": 2.0}, chosen, not_tuned)
+    assert len(chosen) == 3 and not not_tuned

@@ -245,15 +245,10 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
                                 "and the data's start", argument="budget")
         evaluations += [{"changed": "the file as given", "score": given},
                         {"changed": "the data stage (Allan noise, smoothed bias walks, stillness thresholds)", "score": started}]
-        if started["nlpd"] <= given["nlpd"]:
+        if _start_kept(started, given, chosen, not_tuned):
             cur_doc, cur = start_doc, started
         else:
             cur_doc, cur = tomlkit.parse(given_text), given
-            for name in ("imu.errors.arw", "imu.errors.vrw", "imu.errors.gyro_bias_walk", "imu.errors.accel_bias_walk"):
-                if name in chosen and "data_how" in chosen[name]:
-                    chosen[name]["data_how"] += " (not kept: the criterion preferred the file's value)"
-            # a measured suspension gain goes back to the search from the file's value
-            chosen.pop("aiding.nhc.pitch_per_accel", None)
         from .search import (CONSERVATIVE_KEYS, CONSERVATIVE_STEPS, conservative_pass, conservative_tolerance,
                              coordinate_search)
         from .parameters import NHC_RATE
@@ -376,6 +371,25 @@ def _data_stage(doc, po, span, fix, chosen: dict, not_tuned: dict, local: Evalua
                                  f"({walks['increments']} increments; the file's walks loosened "
                                  f"x{LOOSEN:g} for that run)"}
     return start_doc
+
+
+def _start_kept(started: dict, given: dict, chosen: dict, not_tuned: dict) -> bool:
+    """Whether the data stage's file (score ``started``) starts the search rather than the file
+    as given (``given``). When it does not, what the data stage found is marked or withdrawn in
+    ``chosen`` (``tuned.toml`` is the file that was scored): the noise values say they were not
+    kept, a measured suspension gain goes back to the search from the file's value, and the
+    stillness thresholds move to ``not_tuned`` with the reason."""
+    if started["nlpd"] <= given["nlpd"]:
+        return True
+    for name in ("imu.errors.arw", "imu.errors.vrw", "imu.errors.gyro_bias_walk", "imu.errors.accel_bias_walk"):
+        if name in chosen and "data_how" in chosen[name]:
+            chosen[name]["data_how"] += " (not kept: the criterion preferred the file's value)"
+    chosen.pop("aiding.nhc.pitch_per_accel", None)
+    for name in ("aiding.zupt.accel_std", "aiding.zupt.gyro_rate"):
+        if name in chosen:
+            not_tuned[name] = (f"{chosen.pop(name)['how']}; not kept: the data stage's file as a whole "
+                               "scored worse than the file as given")
+    return False
 
 
 def _suspension_stage(doc, start_doc, po, span, fix, chosen: dict, not_tuned: dict, local: Evaluator) -> None:
