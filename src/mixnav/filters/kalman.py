@@ -52,6 +52,20 @@ def _solve_upper_t(L, b):
 
 
 @njit(cache=True)
+def sparse_left_product(H, P):
+    """``H P`` (m, n) skipping the zeros of ``H`` (a measurement Jacobian is mostly zeros)."""
+    m, n = H.shape
+    HP = np.zeros((m, P.shape[1]))
+    for i in range(m):
+        for k in range(n):
+            h = H[i, k]
+            if h != 0.0:
+                for j in range(P.shape[1]):
+                    HP[i, j] += h * P[k, j]
+    return HP
+
+
+@njit(cache=True)
 def kalman_update(x, P, z, H, R):
     """Kalman measurement update, Joseph form.
 
@@ -87,13 +101,7 @@ def kalman_update(x, P, z, H, R):
     """
     n = P.shape[0]
     m = z.shape[0]
-    HP = np.zeros((m, n))  # H P; (P H^T) = HP^T since P is symmetric
-    for i in range(m):
-        for k in range(n):
-            h = H[i, k]
-            if h != 0.0:
-                for j in range(n):
-                    HP[i, j] += h * P[k, j]
+    HP = sparse_left_product(H, P)  # H P; (P H^T) = HP^T since P is symmetric
     S = R.copy()
     diag_r = True  # a diagonal R (independent measurements, the common case) saves O(n m^2)
     for i in range(m):
@@ -198,14 +206,8 @@ def innovation_logdet(P, H, r):
     ``slogdet`` of the same product was a fifth of a tuning run, its Python calls, not the
     arithmetic (m <= 6 rows here). ``H`` is mostly zeros: its zero entries are skipped."""
     m, n = H.shape
-    HP = np.zeros((m, n))
-    for i in range(m):
-        for k in range(n):
-            h = H[i, k]
-            if h != 0.0:
-                for j in range(n):
-                    HP[i, j] += h * P[k, j]
-    S = np.empty((m, m))
+    HP = sparse_left_product(H, P)
+    S = np.zeros((m, m))
     for i in range(m):
         for j in range(i + 1):
             acc = 0.0
@@ -218,20 +220,10 @@ def innovation_logdet(P, H, r):
             else:
                 acc += 0.5 * (r[i, j] + r[j, i])
             S[i, j] = acc
-    # Cholesky in place on the lower triangle
+    L = np.empty((m, m))
+    if not cholesky_lower(S, L):      # reads the lower triangle filled above
+        return np.nan
     out = 0.0
     for j in range(m):
-        d = S[j, j]
-        for k in range(j):
-            d -= S[j, k] * S[j, k]
-        if not d > 0.0:
-            return np.nan
-        L = np.sqrt(d)
-        S[j, j] = L
-        out += 2.0 * np.log(L)
-        for i in range(j + 1, m):
-            acc = S[i, j]
-            for k in range(j):
-                acc -= S[i, k] * S[j, k]
-            S[i, j] = acc / L
+        out += 2.0 * np.log(L[j, j])
     return out
