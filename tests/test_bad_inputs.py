@@ -1243,3 +1243,22 @@ def test_stale_temporary_files_go_a_live_writers_stay(tmp_path):
         live.kill()
         live.wait()
     assert [p.name for p in tmp_path.glob(".*.tmp")] == [".cache.tmp"]
+
+
+@pytest.mark.parametrize("key, line", [("tag", 'tag = "imu_1934.csv.tag"'), ("tag_start", 'tag_start = "first-bytes"')])
+def test_time_tag_keys_with_another_imu_format_are_refused(tmp_path, key, line):
+    """``tag`` and ``tag_start`` are drive-0708's reader's (its time-tag file): with another IMU
+    format they would be ignored without a word, so the file is refused, naming the key; the
+    same keys with format = "drive-0708" load."""
+    from mixnav.config import load_dataset
+    from mixnav.errors import ConfigError
+    text, _ = resolve("drive-0708", "datasets", "dataset")
+    text = text.replace('tag = "imu_1934.csv.tag"\n', line + "\n", 1)
+    p = tmp_path / "d.toml"
+    p.write_text(text)
+    ds, _, _ = load_dataset(str(p))
+    assert ds.imu.format == "drive-0708"
+    p.write_text(text.replace('format = "drive-0708"', 'format = "psins"', 1))
+    with pytest.raises(ConfigError, match=rf"{key}: read by format = \"drive-0708\" only") as ei:
+        load_dataset(str(p))
+    assert ei.value.key == "imu" and str(p) in str(ei.value)

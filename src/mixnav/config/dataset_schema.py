@@ -58,6 +58,17 @@ class ImuFile(Strict):
     grade: str | None = None
     errors: dict[str, str | list[str]] = Field(default_factory=dict)
 
+    @model_validator(mode="after")
+    def _tag_keys(self):
+        # only drive-0708's reader has a time-tag companion file: elsewhere the keys would be
+        # ignored without a word, and a user would believe the time base was changed
+        if self.format != "drive-0708":
+            for key in ("tag", "tag_start"):
+                if key in self.model_fields_set:
+                    raise ValueError(f"{key}: read by format = \"drive-0708\" only (its time-tag file); "
+                                     f"format \"{self.format}\" has no time tag")
+        return self
+
 
 class GnssFile(Strict):
     format: reader_format("gnss-fixes")  # type: ignore[valid-type]
