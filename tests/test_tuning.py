@@ -600,3 +600,54 @@ def test_a_losing_data_stage_leaves_nothing_of_its_own_in_the_tuned_file():
     chosen, not_tuned = found()
     assert _start_kept({"nlpd": 1.0}, {"nlpd": 2.0}, chosen, not_tuned)
     assert len(chosen) == 3 and not not_tuned
+
+
+@need_data
+def test_a_folds_installation_estimate_never_sees_its_withheld_fixes():
+    """Cross-fitting (tuning/installation.py): fold k's estimate is made without fold k's
+    fixes, so moving those fixes by 5 m leaves it bit for bit as it was, while the whole span's
+    estimate (which sees them) moves. And only the components beyond SIGNIFICANT_Z of their own
+    sigmas are written: the rest keep the file's values exactly. Also: scoring the same file
+    in every fold (``evaluate``) is ``evaluate_per_fold`` with that file repeated."""
+    from mixnav.config import load_dataset
+    from mixnav.experiment.tuning.criterion import Evaluator
+    from mixnav.experiment.tuning.installation import ANTENNA, MOUNTING, SIGNIFICANT_Z, proposal
+    text = without_reference((SHIPPED / "drive-0708-aided.toml").read_text())
+    _, src, _ = load_dataset("drive-0708-aided")
+    # the antenna 0.5 m off along x: one component clearly significant
+    text = text.replace('antenna_position = ["0 m", "-0.05 m", "-0.65 m"]', 'antenna_position = ["0.5 m", "-0.05 m", "-0.65 m"]')
+    fold = [(100.0, 120.0), (150.0, 170.0)]
+    ev = Evaluator(text, src, None, "aided", [fold, [(125.0, 145.0)]], (60.0, 180.0))
+    base_fold = proposal(ev, text, withheld=fold)
+    base_all = proposal(ev, text)
+    mask = base_all[2]
+    assert mask[0] and mask.sum() < 5
+    given = tomlkit.parse(text)
+    for p, idx in ((ANTENNA, [0, 1, 2]), (MOUNTING, [1, 2])):
+        old, new = get_value(given, p), get_value(base_all[0], p)
+        if old is None:
+            continue
+        for j, m in zip(idx, mask[:3] if p is ANTENNA else mask[3:]):
+            if not m:
+                assert new[j] == old[j]
+    assert abs(get_value(base_all[0], ANTENNA)[0]) < 0.1        # the recorder's 0 m, within 0.1 m
+    assert SIGNIFICANT_Z >= 2
+    # move the fold's withheld fixes by 5 m north (in place, in the evaluator's cached read)
+    ds = ev.dataset(text)
+    inputs = ev._load(ds)
+    fx = inputs.fixes
+    t = fx.time - inputs.imu.start_time
+    inside = np.zeros(len(t), bool)
+    for a, b in fold:
+        inside |= (t > a) & (t <= b)
+    assert inside.sum() > 100
+    fx.lla[inside, 0] += 5.0 / 6.37e6
+    moved_fold = proposal(ev, text, withheld=fold, mask=base_fold[2])
+    moved_all = proposal(ev, text, mask=mask)
+    assert tomlkit.dumps(moved_fold[0]) == tomlkit.dumps(base_fold[0])
+    assert tomlkit.dumps(moved_all[0]) != tomlkit.dumps(base_all[0])
+    fx.lla[inside, 0] -= 5.0 / 6.37e6
+    a, b = ev.evaluate(text), ev.evaluate_per_fold([text, text])
+    assert a.nlpd == b.nlpd and a.window_hmax == b.window_hmax
+    with pytest.raises(ValueError, match="2 folds"):
+        ev.evaluate_per_fold([text])

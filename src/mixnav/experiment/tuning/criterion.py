@@ -173,12 +173,19 @@ class Evaluator:
 
     def evaluate(self, doc_text: str) -> Score:
         """Every fold's run of the candidate file ``doc_text``, scored."""
+        return self.evaluate_per_fold([doc_text] * len(self.windows))
+
+    def evaluate_per_fold(self, doc_texts: list) -> Score:
+        """Fold k run with the candidate file ``doc_texts[k]`` (one per fold; a quantity fitted
+        without fold k's fixes is scored on them: :func:`.installation.cross_fitted_score`)."""
         from ...errors import MixnavError
+        if len(doc_texts) != len(self.windows):
+            raise ValueError(f"{len(doc_texts)} files for {len(self.windows)} folds")
         try:
-            ds = self.dataset(doc_text)
             nlpd_sum, n_fix, ll_sum, n_upd, hmax, nees, w_sum, w_n = 0.0, 0, 0.0, 0, [], [], [], []
             upd_times = []
-            for fold in self.windows:
+            for doc_text, fold in zip(doc_texts, self.windows):
+                ds = self.dataset(doc_text)
                 po = self.run(ds, fold)
                 res = po.results[self.method]
                 ws, wn, h, ne = _withheld_scores(po, res, fold)
