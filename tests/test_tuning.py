@@ -622,6 +622,10 @@ def test_a_folds_installation_estimate_never_sees_its_withheld_fixes():
     base_all = proposal(ev, text)
     mask = base_all[2]
     assert mask[0] and mask.sum() < 5
+    # every key is either written (with its value) or listed as not written, never both
+    assert set(base_all[1]) | set(base_all[3]) == {ANTENNA.name, MOUNTING.name}
+    assert not set(base_all[1]) & set(base_all[3])
+    assert (MOUNTING.name in base_all[1]) == bool(mask[3:].any())
     given = tomlkit.parse(text)
     for p, idx in ((ANTENNA, [0, 1, 2]), (MOUNTING, [1, 2])):
         old, new = get_value(given, p), get_value(base_all[0], p)

@@ -440,16 +440,15 @@ def _installation_stage(cur_doc, cur: dict, fix, scorer, evaluations: list, chos
     if prop is None:
         not_tuned[ANTENNA.name] = "the tuned method cannot estimate the installation (not a loose EKF)"
         return cur_doc, cur
-    pdoc, notes, mask = prop
+    pdoc, notes, mask, unwritten = prop
+    for k, how in unwritten.items():
+        not_tuned[k] = f"{how}: no component beyond it, so the file's value stands"
     for k in (ANTENNA.name, MOUNTING.name):
         if k in fix:
             notes.pop(k, None)
             not_tuned[k] = "fixed by the user (--fix)"
     pdoc = kept_as_given(pdoc, given_text, fix)
-    if "none" in notes or not notes:
-        for k in (ANTENNA.name, MOUNTING.name):
-            if k not in fix:
-                not_tuned[k] = notes.get("none", ("", "no component to write"))[1]
+    if not notes:
         return cur_doc, cur
     # judged cross-fitted: the whole span's estimate has seen every fold's withheld fixes; run
     # here (two runs per fold), not journaled: deterministic, a resumed tuning computes the same

@@ -38,8 +38,9 @@ SIGNIFICANT_Z = 3.0
 
 
 def proposal(evaluator, doc_text: str, withheld=(), mask=None):
-    """``(document with the estimates written in, {key: (value text, how)}, mask)`` or None when
-    the method cannot estimate them (not a loose EKF, or no estimate came out).
+    """``(document with the estimates written in, {key: (value text, how)}, mask, {key: how}
+    of the keys with no component written)`` or None when the method cannot estimate them (not
+    a loose EKF, or no estimate came out).
 
     Only the components of the correction (antenna x, y, z; mounting pitch, yaw) beyond
     :data:`SIGNIFICANT_Z` of their final causal sigmas are written (``mask``, five booleans:
@@ -68,28 +69,28 @@ def proposal(evaluator, doc_text: str, withheld=(), mask=None):
     mask = np.asarray(mask, bool)
     ant = get_value(doc, ANTENNA) + np.where(mask[:3], dl, 0.0)
     ratio = lambda d, s: ", ".join(f"{x / y:+.1f}" for x, y in zip(d, s))   # noqa: E731
+    rule = f"written where beyond {SIGNIFICANT_Z:g}"
+    unwritten = {}
+    how = ("estimated as a state (gnss_lever) over the span, final causal estimate; correction "
+           f"[{', '.join(f'{x:+.3f}' for x in dl)}] +- [{', '.join(f'{x:.3f}' for x in sl)}] m "
+           f"([{ratio(dl, sl)}] sigmas; {rule})")
     if mask[:3].any():
         set_value(doc, ANTENNA, ant)
-        notes[ANTENNA.name] = (f"[{', '.join(f'{x:.3f}' for x in ant)}] m",
-                               "estimated as a state (gnss_lever) over the span, final causal estimate; correction "
-                               f"[{', '.join(f'{x:+.3f}' for x in dl)}] +- [{', '.join(f'{x:.3f}' for x in sl)}] m "
-                               f"([{ratio(dl, sl)}] sigmas; written where beyond {SIGNIFICANT_Z:g})")
-    if mounted and mask[3:].any():
-        mount = get_value(doc, MOUNTING)
-        mount[1:3] += np.where(mask[3:], dm, 0.0)
-        set_value(doc, MOUNTING, mount)
-        notes[MOUNTING.name] = (f"[{', '.join(f'{np.degrees(x):.3f}' for x in mount)}] deg",
-                                "estimated as states (mounting pitch, yaw) over the span, final causal estimate; "
-                                f"correction [{np.degrees(dm[0]):+.3f}, {np.degrees(dm[1]):+.3f}] +- "
-                                f"[{np.degrees(sm[0]):.3f}, {np.degrees(sm[1]):.3f}] deg ([{ratio(dm, sm)}] sigmas; "
-                                f"written where beyond {SIGNIFICANT_Z:g})")
-    if not mask.any():
-        notes["none"] = ("", "estimated as states over the span: correction antenna "
-                             f"[{', '.join(f'{x:+.3f}' for x in dl)}] +- [{', '.join(f'{x:.3f}' for x in sl)}] m"
-                         + (f", mounting pitch, yaw [{np.degrees(dm[0]):+.3f}, {np.degrees(dm[1]):+.3f}] +- "
-                            f"[{np.degrees(sm[0]):.3f}, {np.degrees(sm[1]):.3f}] deg" if mounted else "")
-                         + f"; no component beyond {SIGNIFICANT_Z:g} of its sigmas, so the file's values stand")
-    return doc, notes, mask
+        notes[ANTENNA.name] = (f"[{', '.join(f'{x:.3f}' for x in ant)}] m", how)
+    else:
+        unwritten[ANTENNA.name] = how
+    if mounted:
+        how = ("estimated as states (mounting pitch, yaw) over the span, final causal estimate; "
+               f"correction [{np.degrees(dm[0]):+.3f}, {np.degrees(dm[1]):+.3f}] +- "
+               f"[{np.degrees(sm[0]):.3f}, {np.degrees(sm[1]):.3f}] deg ([{ratio(dm, sm)}] sigmas; {rule})")
+        if mask[3:].any():
+            mount = get_value(doc, MOUNTING)
+            mount[1:3] += np.where(mask[3:], dm, 0.0)
+            set_value(doc, MOUNTING, mount)
+            notes[MOUNTING.name] = (f"[{', '.join(f'{np.degrees(x):.3f}' for x in mount)}] deg", how)
+        else:
+            unwritten[MOUNTING.name] = how
+    return doc, notes, mask, unwritten
 
 
 def cross_fitted_score(evaluator, doc_text: str, mask, keep_as_given=()):
