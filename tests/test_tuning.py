@@ -603,7 +603,7 @@ def test_a_losing_data_stage_leaves_nothing_of_its_own_in_the_tuned_file():
 
 
 @need_data
-def test_a_folds_installation_estimate_never_sees_its_withheld_fixes():
+def test_a_folds_installation_estimate_never_sees_its_withheld_fixes(tmp_path):
     """Cross-fitting (tuning/installation.py): fold k's estimate is made without fold k's
     fixes, so moving those fixes by 5 m leaves it bit for bit as it was, while the whole span's
     estimate (which sees them) moves. And only the components beyond SIGNIFICANT_Z of their own
@@ -655,3 +655,15 @@ def test_a_folds_installation_estimate_never_sees_its_withheld_fixes():
     assert a.nlpd == b.nlpd and a.window_hmax == b.window_hmax
     with pytest.raises(ValueError, match="2 folds"):
         ev.evaluate_per_fold([text])
+    # the cross-fitted score on two worker processes is the one computed here, bit for bit
+    from mixnav.experiment.tuning.installation import cross_fitted_score
+    from mixnav.experiment.tuning.scoring import Scorer
+    setup = ("mixnav.experiment.tuning.criterion:Evaluator", text, src, None, "aided", ev.windows, ev.span)
+    scorer = Scorer(setup, tmp_path / "journal.jsonl", 2, None, False, 1, 2)
+    try:
+        here = cross_fitted_score(ev, text, mask)
+        there = cross_fitted_score(ev, text, mask, scorer=scorer)
+    finally:
+        scorer.close()
+    assert here.error is None and here.as_dict() == there.as_dict()
+    assert scorer.left() == 1                                   # not counted against the budget

@@ -450,10 +450,11 @@ def _installation_stage(cur_doc, cur: dict, fix, scorer, evaluations: list, chos
     pdoc = kept_as_given(pdoc, given_text, fix)
     if not notes:
         return cur_doc, cur
-    # judged cross-fitted: the whole span's estimate has seen every fold's withheld fixes; run
-    # here (two runs per fold), not journaled: deterministic, a resumed tuning computes the same
-    crossed = cross_fitted_score(local, given_text, mask, keep_as_given=fix)
-    if crossed is None or not math.isfinite(crossed.nlpd):
+    # judged cross-fitted: the whole span's estimate has seen every fold's withheld fixes; on
+    # the scorer's workers (two runs per fold), not journaled: deterministic, a resumed tuning
+    # computes the same
+    crossed = cross_fitted_score(local, given_text, mask, keep_as_given=fix, scorer=scorer)
+    if not math.isfinite(crossed.nlpd):
         for k in notes:
             not_tuned[k] = "a fold's run could not estimate the installation"
         return cur_doc, cur

@@ -178,35 +178,61 @@ class Evaluator:
     def evaluate_per_fold(self, doc_texts: list) -> Score:
         """Fold k run with the candidate file ``doc_texts[k]`` (one per fold; a quantity fitted
         without fold k's fixes is scored on them: :func:`.installation.cross_fitted_score`)."""
-        from ...errors import MixnavError
         if len(doc_texts) != len(self.windows):
             raise ValueError(f"{len(doc_texts)} files for {len(self.windows)} folds")
+        return combined([self.fold_part(t, k) for k, t in enumerate(doc_texts)])
+
+    def fold_part(self, doc_text: str, k: int):
+        """Fold ``k``'s run of the candidate file ``doc_text``, scored: a :class:`FoldPart`, or
+        the error's text when the file cannot run (:func:`combined` makes the Score)."""
+        from ...errors import MixnavError
+        fold = self.windows[k]
         try:
-            nlpd_sum, n_fix, ll_sum, n_upd, hmax, nees, w_sum, w_n = 0.0, 0, 0.0, 0, [], [], [], []
-            upd_times = []
-            for doc_text, fold in zip(doc_texts, self.windows):
-                ds = self.dataset(doc_text)
-                po = self.run(ds, fold)
-                res = po.results[self.method]
-                ws, wn, h, ne = _withheld_scores(po, res, fold)
-                nlpd_sum, n_fix = nlpd_sum + sum(ws), n_fix + sum(wn)
-                hmax += h
-                nees += ne
-                w_sum += ws
-                w_n += wn
-                held = [tuple(w) for w in ds.gnss.withhold] + list(fold)
-                ll, m, t_upd = _innovation_ll(res, self.span, held)
-                ll_sum, n_upd = ll_sum + ll, n_upd + m
-                upd_times.append(t_upd)
+            ds = self.dataset(doc_text)
+            po = self.run(ds, fold)
+            res = po.results[self.method]
+            ws, wn, h, ne = _withheld_scores(po, res, fold)
+            held = [tuple(w) for w in ds.gnss.withhold] + list(fold)
+            ll, m, t_upd = _innovation_ll(res, self.span, held)
         except (MixnavError, np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
-            return Score(math.inf, -math.inf, [], [], 0, 0, error=f"{type(exc).__name__}: {exc}")
-        if n_fix == 0:
-            return Score(math.inf, -math.inf, [], [], 0, 0, error="no withheld fix was scored")
-        # an update outside a fold's windows is in most folds' runs: how many distinct ones the
-        # likelihood sum stands for (search.gain_needed's likelihood-ratio bound counts these)
-        distinct = len(np.unique(np.round(np.concatenate(upd_times), 6))) if upd_times else 0
-        return Score(nlpd_sum / n_fix, ll_sum / max(n_upd, 1), hmax, nees, n_fix, n_upd,
-                     window_nlpd=w_sum, window_fixes=w_n, n_distinct_updates=distinct)
+            return f"{type(exc).__name__}: {exc}"
+        return FoldPart(ws, wn, h, ne, ll, m, t_upd)
+
+
+@dataclass
+class FoldPart:
+    """One fold's run, scored (:meth:`Evaluator.fold_part`): per withheld window its NLPD sum,
+    fix count, horizontal maximum and mean NEES; the innovation log-likelihood sum, the number
+    of updates and their times."""
+
+    window_nlpd: list
+    window_fixes: list
+    window_hmax: list
+    window_nees: list
+    ll: float
+    n_updates: int
+    update_times: np.ndarray
+
+
+def combined(parts: list) -> Score:
+    """The candidate's :class:`Score` from its folds' parts (an error text: a failed Score)."""
+    for p in parts:
+        if isinstance(p, str):
+            return Score(math.inf, -math.inf, [], [], 0, 0, error=p)
+    w_sum = [x for p in parts for x in p.window_nlpd]
+    w_n = [x for p in parts for x in p.window_fixes]
+    n_fix = sum(w_n)
+    if n_fix == 0:
+        return Score(math.inf, -math.inf, [], [], 0, 0, error="no withheld fix was scored")
+    n_upd = sum(p.n_updates for p in parts)
+    # an update outside a fold's windows is in most folds' runs: how many distinct ones the
+    # likelihood sum stands for (search.gain_needed's likelihood-ratio bound counts these)
+    times = [p.update_times for p in parts]
+    distinct = len(np.unique(np.round(np.concatenate(times), 6))) if times else 0
+    nlpd_sum = sum(sum(p.window_nlpd) for p in parts)   # fold by fold: the same rounding as the journal's
+    return Score(nlpd_sum / n_fix, sum(p.ll for p in parts) / max(n_upd, 1),
+                 [x for p in parts for x in p.window_hmax], [x for p in parts for x in p.window_nees], n_fix, n_upd,
+                 window_nlpd=w_sum, window_fixes=w_n, n_distinct_updates=distinct)
 
 
 def nearest(times: np.ndarray, t: np.ndarray) -> np.ndarray:

@@ -93,20 +93,41 @@ def proposal(evaluator, doc_text: str, withheld=(), mask=None):
     return doc, notes, mask, unwritten
 
 
-def cross_fitted_score(evaluator, doc_text: str, mask, keep_as_given=()):
+def cross_fitted_part(evaluator, doc_text: str, k: int, mask, keep_as_given=()):
+    """Fold ``k`` of :func:`cross_fitted_score`: the installation estimated with fold k's windows
+    withheld, written into ``doc_text`` (``mask``: the components, the whole span's; the keys
+    ``keep_as_given`` put back), and fold k's run of that file scored
+    (:meth:`~.criterion.Evaluator.fold_part`); an error text when it cannot be estimated."""
+    prop = proposal(evaluator, doc_text, withheld=evaluator.windows[k], mask=mask)
+    if prop is None:
+        return "no installation estimate came out of the fold's run"
+    return evaluator.fold_part(tomlkit.dumps(kept_as_given(prop[0], doc_text, keep_as_given)), k)
+
+
+def cross_fitted_task(setup: tuple, doc_text: str, k: int, mask, keep_as_given) -> tuple:
+    """``(k, cross_fitted_part(...))`` on a worker (its evaluator built once per process from ``setup``,
+    :mod:`.scoring`)."""
+    from .scoring import _evaluator
+    return k, cross_fitted_part(_evaluator(setup), doc_text, k, list(mask), tuple(keep_as_given))
+
+
+def cross_fitted_score(evaluator, doc_text: str, mask, keep_as_given=(), scorer=None):
     """The criterion of "estimate the installation, then predict": fold k's withheld windows
     scored by the file whose installation was estimated with them withheld too (every fold's
-    estimate from the other folds' fixes), as a :class:`~.criterion.Score`; None when a fold's
-    run cannot estimate it. ``mask``: the components written (:func:`proposal`'s, from the whole
-    span). ``keep_as_given``: keys (:data:`ANTENNA`, :data:`MOUNTING` names)
-    put back to ``doc_text``'s values (fixed by the user)."""
-    texts = []
-    for fold in evaluator.windows:
-        prop = proposal(evaluator, doc_text, withheld=fold, mask=mask)
-        if prop is None:
-            return None
-        texts.append(tomlkit.dumps(kept_as_given(prop[0], doc_text, keep_as_given)))
-    return evaluator.evaluate_per_fold(texts)
+    estimate from the other folds' fixes), as a :class:`~.criterion.Score` (failed, with the
+    error, when a fold's run cannot estimate it). ``mask``: the components written
+    (:func:`proposal`'s, from the whole span). ``keep_as_given``: keys (:data:`ANTENNA`,
+    :data:`MOUNTING` names) put back to ``doc_text``'s values (fixed by the user). ``scorer``:
+    the folds run on its workers (:meth:`~.scoring.Scorer.map`), else here."""
+    from .criterion import combined
+    n = len(evaluator.windows)
+    if scorer is not None:
+        done = scorer.map(cross_fitted_task, [(doc_text, k, [bool(x) for x in mask], tuple(keep_as_given))
+                                              for k in range(n)])
+        parts = [part for _, part in sorted(done, key=lambda kp: kp[0])]   # they come as they finish
+    else:
+        parts = [cross_fitted_part(evaluator, doc_text, k, mask, keep_as_given) for k in range(n)]
+    return combined(parts)
 
 
 def kept_as_given(doc, given_text: str, keys):

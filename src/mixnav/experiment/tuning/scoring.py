@@ -98,25 +98,34 @@ class Scorer:
             self.runs += len(todo) * self.runs_per_candidate
         return [self.cache.get(k) if k in self.seen else None for k in map(self.key, texts)]
 
+    def map(self, fn, args: list) -> list:
+        """``fn(setup, *a)`` for each ``a`` of ``args`` on the same workers (or Dask cluster) as
+        the candidates, the results in completion order (``fn`` returns what orders them); not journaled, not counted against the budget (a step such
+        as :func:`.installation.cross_fitted_score` that is deterministic and cheap to redo)."""
+        from ..parallel import Progress
+        return self._run(fn, [(self.setup, *a) for a in args], Progress(len(args), False, label="tune"))
+
     def _map(self, texts):
+        return self._run(_evaluate_task, [(self.setup, t) for t in texts], self.bar)
+
+    def _run(self, fn, tasks, bar):
         from concurrent.futures import ProcessPoolExecutor
         from ..parallel import dask_client, dask_map, pool_map
-        tasks = [(self.setup, t) for t in texts]
         if self.scheduler:
             if self._client is None:
                 self._client = dask_client(self.scheduler.strip())
-            return dask_map(self._client, _evaluate_task, tasks, self.bar)
+            return dask_map(self._client, fn, tasks, bar)
         n = self.workers or os.cpu_count() or 1
         if n <= 1 or len(tasks) == 1 and self._pool is None:
             out = []
             for t in tasks:
-                out.append(_evaluate_task(*t))
-                self.bar.advance()
+                out.append(fn(*t))
+                bar.advance()
             return out
         if self._pool is None:
             self._pool = ProcessPoolExecutor(max_workers=n, initializer=_worker_init, initargs=(self.setup,))
         try:
-            return pool_map(_evaluate_task, tasks, n, self.bar, pool=self._pool)
+            return pool_map(fn, tasks, n, bar, pool=self._pool)
         except BaseException:
             self._pool = None     # pool_map ended its workers
             raise
