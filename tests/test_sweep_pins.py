@@ -1,6 +1,6 @@
 """The sweep summaries of issue 34, pinned (tests/data/sweep_pins.json, made by
-tests/reference/make_sweep_pins.py): the drive-0708-aided outage sweep (47 windows of 30 s
-every 10 s, one withheld at a time) and the smartloc-berlin start sweep (every 30 s from 0
+tests/reference/make_sweep_pins.py): the drive-0708-aided outage sweep (30 s windows
+every 20 s, one withheld at a time) and the smartloc-berlin start sweep (every 30 s from 0
 to 150 s). An error statistic (median, p90, worst, RMSE) more than 10 % above its pin, or a
 share of NEES-inconsistent windows more than 5 points above it, fails; so does the loss of
 a method or a window. Numbers that improve pass (re-pin to keep the gain)."""

@@ -2,7 +2,7 @@
 
     python tests/reference/make_sweep_pins.py [--data ../shared/data]
 
-The drive-0708-aided outage sweep (30 s windows every 10 s across the drive) and the
+The drive-0708-aided outage sweep (30 s windows every 20 s across the drive) and the
 smartloc-berlin start sweep (every 30 s from 0 to 150 s), the same calls as the test.
 Re-pin only after a change that is meant to move these numbers, and say so in the commit.
 """

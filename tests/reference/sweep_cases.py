@@ -5,9 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 #: name -> (dataset, kind, arguments): the drive-0708 outage sweep across the whole drive and
-#: the smartLoc start sweep of issue 34
+#: the smartLoc start sweep of issue 34. The outage windows start every 20 s, not every 10 s
+#: as in the benchmarks: the same guard at half the cost (the default test run's 15 minutes)
 SWEEP_CASES = {
-    "drive-0708-aided/outage-30s-10s": ("drive-0708-aided", "outage", ("30 s", "10 s", None), "drive-0708"),
+    "drive-0708-aided/outage-30s-20s": ("drive-0708-aided", "outage", ("30 s", "20 s", None), "drive-0708"),
     "smartloc-berlin/start-30s-0-150s": ("smartloc-berlin", "start", ("30 s", ("0 s", "150 s")), "smartloc-berlin"),
 }
 
