@@ -615,7 +615,8 @@ def test_a_folds_installation_estimate_never_sees_its_withheld_fixes(tmp_path):
     text = without_reference((SHIPPED / "drive-0708-aided.toml").read_text())
     _, src, _ = load_dataset("drive-0708-aided")
     # the antenna 0.5 m off along x: one component clearly significant
-    text = text.replace('antenna_position = ["0 m", "-0.05 m", "-0.65 m"]', 'antenna_position = ["0.5 m", "-0.05 m", "-0.65 m"]')
+    text = text.replace('antenna_position = ["0 m", "-0.05 m", "-0.65 m"]',
+                        'antenna_position = ["0.5 m", "-0.05 m", "-0.65 m"]')
     fold = [(100.0, 120.0), (150.0, 170.0)]
     ev = Evaluator(text, src, None, "aided", [fold, [(125.0, 145.0)]], (60.0, 180.0))
     base_fold = proposal(ev, text, withheld=fold)

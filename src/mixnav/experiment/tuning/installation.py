@@ -108,7 +108,7 @@ def cross_fitted_task(setup: tuple, doc_text: str, k: int, mask, keep_as_given) 
     """``(k, cross_fitted_part(...))`` on a worker (its evaluator built once per process from ``setup``,
     :mod:`.scoring`)."""
     from .scoring import _evaluator
-    return k, cross_fitted_part(_evaluator(setup), doc_text, k, list(mask), tuple(keep_as_given))
+    return k, cross_fitted_part(_evaluator(setup), doc_text, k, mask, keep_as_given)
 
 
 def cross_fitted_score(evaluator, doc_text: str, mask, keep_as_given=(), scorer=None):

@@ -100,8 +100,9 @@ class Scorer:
 
     def map(self, fn, args: list) -> list:
         """``fn(setup, *a)`` for each ``a`` of ``args`` on the same workers (or Dask cluster) as
-        the candidates, the results in completion order (``fn`` returns what orders them); not journaled, not counted against the budget (a step such
-        as :func:`.installation.cross_fitted_score` that is deterministic and cheap to redo)."""
+        the candidates, the results in completion order (``fn`` returns what orders them); not
+        journaled, not counted against the budget (a step such as
+        :func:`.installation.cross_fitted_score` that is deterministic and cheap to redo)."""
         from ..parallel import Progress
         return self._run(fn, [(self.setup, *a) for a in args], Progress(len(args), False, label="tune"))
 
