@@ -53,7 +53,11 @@ SCRATCH = 11
 def _mechanize_one(nav, prev, sensor, scr, gth, gdv, gdt, S, trig, mode):
     """One state over the first ``S`` merged sub-intervals (as ``mechanize_members``);
     ``trig`` (>= S, TRIG_POINTS, 3) the reference's latitudes with their sin and cos per
-    sub-interval, written (``mode`` RECORD: the nominal) or read (NEAR: the particles)."""
+    sub-interval, written (``mode`` RECORD: the nominal) or read (NEAR: the particles).
+
+    Inlined on purpose: called instead, the mechanization of 5000 particles was 30-50 %
+    slower (one sub-interval serial 2.7 -> 3.7 ms, two threads 0.84 -> 1.33 ms), though the
+    two ``pf_step`` twins then compiled in 35 s instead of 75 s."""
     dth, dv, dvn = scr[0:3], scr[3:6], scr[6:9]
     for k in range(S):
         h = gdt[k]
