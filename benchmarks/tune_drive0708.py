@@ -84,20 +84,28 @@ def write_docs(res: dict) -> None:
     DOCS.write_text(head + START + "\n" + docs_table(res) + "\n" + END + rest.split(END, 1)[1])
 
 
-def _with_tag_start(name_or_path: str, work: Path, rule: str) -> str:
-    """A copy of the dataset file (a shipped name or a path) in ``work`` with
-    ``[imu] tag_start = rule`` and its data folder absolute."""
+def edited_copy(name_or_path: str, work: Path, suffix: str, edit) -> str:
+    """A copy of the dataset file (a shipped name or a path) in ``work``, named
+    ``<stem>-<suffix>.toml``, with ``edit(doc)`` applied to its parsed TOML and its data
+    folder absolute."""
     import tomlkit
     from mixnav.config import load_dataset
     from mixnav.experiment.data_folder import find_data_dir
     ds, src, text = load_dataset(str(name_or_path))
     doc = tomlkit.parse(text)
-    doc["imu"]["tag_start"] = rule
+    edit(doc)
     doc["dataset"]["data_dir"] = str(Path(find_data_dir(ds, None, src)).resolve())
     work.mkdir(parents=True, exist_ok=True)
-    out = work / f"{Path(src).stem}-{rule}.toml"
+    out = work / f"{Path(src).stem}-{suffix}.toml"
     out.write_text(tomlkit.dumps(doc))
     return str(out)
+
+
+def _with_tag_start(name_or_path: str, work: Path, rule: str) -> str:
+    """:func:`edited_copy` with ``[imu] tag_start = rule``."""
+    def edit(doc):
+        doc["imu"]["tag_start"] = rule
+    return edited_copy(name_or_path, work, rule, edit)
 
 
 def write_md(res: dict, out: str) -> None:

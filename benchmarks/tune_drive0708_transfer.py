@@ -36,24 +36,16 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
-from tune_drive0708 import HALVES, HAND, UNTUNED, summary  # noqa: E402
+from tune_drive0708 import HALVES, HAND, UNTUNED, edited_copy, summary  # noqa: E402
 
 LABELS = ("untuned", "tuned", "hand-tuned")
 
 
 def hand_without_withhold(work: Path) -> str:
     """drive-0708-aided.toml with ``gnss.withhold`` emptied and its data folder absolute."""
-    import tomlkit
-    from mixnav.config import load_dataset
-    from mixnav.experiment.data_folder import find_data_dir
-    ds, src, text = load_dataset(HAND)
-    doc = tomlkit.parse(text)
-    doc["gnss"]["withhold"] = []
-    doc["dataset"]["data_dir"] = str(Path(find_data_dir(ds, None, src)).resolve())
-    work.mkdir(parents=True, exist_ok=True)
-    out = work / "drive-0708-aided-no-withhold.toml"
-    out.write_text(tomlkit.dumps(doc))
-    return str(out)
+    def edit(doc):
+        doc["gnss"]["withhold"] = []
+    return edited_copy(HAND, work, "no-withhold", edit)
 
 
 def own_criteria(cfg: str, half: str, out: Path, workers: int) -> dict:
