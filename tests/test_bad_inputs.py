@@ -779,8 +779,8 @@ def test_out_experiment_into_run_folder_and_back(box):
     expect_error(code, out, "mixnav run", "--overwrite")
     assert files(box.out) == before
     exp = box.root / "exp"
-    code, out = invoke("experiment", p, "--runs", "1", "--workers", "1", "--no-progress", "--out", exp,
-                       cwd=box.root)
+    code, out = invoke("experiment", p, "--runs", "1", "--workers", "1", "--no-progress", "--no-figures",
+                       "--out", exp, cwd=box.root)
     assert code == 0, out
     before = files(exp)
     code, out = invoke("run", p, "--out", exp, cwd=box.root)
@@ -829,15 +829,16 @@ def _experiment(box, *extra, runs=2):
     p = box.inp / "sc.toml"
     if not p.exists():
         box.write("sc.toml", TINY)
-    return invoke("experiment", p, "--runs", runs, "--workers", "1", "--no-progress", "--out", box.out,
-                  *extra, cwd=box.root)
+    # without figures: these tests are about the records and the folder (figures: tests/test_cli.py)
+    return invoke("experiment", p, "--runs", runs, "--workers", "1", "--no-progress", "--no-figures",
+                  "--out", box.out, *extra, cwd=box.root)
 
 
 def test_resume_redoes_a_planted_record_of_another_scenario(box):
     assert _experiment(box)[0] == 0
     other = box.root / "other"
     box.write("other.toml", tiny(**{'seed = 1': 'seed = 7', 'rate = "1 Hz"': 'rate = "2 Hz"'}))
-    assert invoke("experiment", box.inp / "other.toml", "--runs", "2", "--workers", "1", "--no-progress",
+    assert invoke("experiment", box.inp / "other.toml", "--runs", "2", "--workers", "1", "--no-progress", "--no-figures",
                   "--out", other, cwd=box.root)[0] == 0
     shutil.copy(other / "runs" / "run_1.parquet", box.out / "runs" / "run_1.parquet")
     code, out = _experiment(box, "--resume")

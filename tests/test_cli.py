@@ -151,6 +151,18 @@ def test_experiment_command_writes_results_and_summary(tmp_path):
     assert (tmp_path / "x" / "boxplots.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     bad = runner.invoke(app, ["experiment", "loose-demo", "--runs", "0", "--out", str(tmp_path / "y")])
     assert bad.exit_code == 2 and "--runs" in bad.output
+    # rewritten without figures (resumed: nothing rerun): the same tables, no PNG left behind
+    # from the first write (it would show the figures of another write), the report says why
+    res = runner.invoke(app, ["experiment", "loose-demo", "--runs", "2", "--out", str(tmp_path / "x"),
+                              "--workers", "1", "--no-progress", "--resume", "--no-figures"])
+    assert res.exit_code == 0, res.output
+    pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "x" / "results.parquet"), results)
+    assert not list((tmp_path / "x").glob("*.png"))
+    html = (tmp_path / "x" / "report.html").read_text()
+    assert "Figures not drawn" in html and "<img" not in html
+    assert f"{row['mean']:.4g} ± {row['ci95_half']:.2g}" in html
+    marker = json.loads((tmp_path / "x" / ".mixnav-output.json").read_text())
+    assert marker["complete"] and not [f for f in marker["files"] if f.endswith(".png")]
 
 
 def test_the_command_needs_no_click_of_its_own():

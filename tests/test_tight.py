@@ -164,7 +164,7 @@ def test_tight_method_needs_satellites_and_clock_states(tmp_path):
 def tight20(tmp_path_factory):
     out = tmp_path_factory.mktemp("tight20")
     df = run_experiment("tight-demo", 20, out, workers=2, progress=False)
-    return df, write_experiment_outputs("tight-demo", df, out)
+    return df, write_experiment_outputs("tight-demo", df, out, figures=False)
 
 
 def test_tight_ekf_is_consistent_over_20_runs(tight20):

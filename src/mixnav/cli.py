@@ -311,6 +311,9 @@ def experiment(scenario: str = typer.Argument(..., help="Shipped scenario name o
                                              help="Dask scheduler address (tcp://host:8786): run there "
                                                   "instead of on local cores; needs mixnav[dask]."),
                progress: bool = typer.Option(True, "--progress/--no-progress"),
+               figures: bool = typer.Option(True, "--figures/--no-figures",
+                                            help="Draw the report's PNG figures (about 1 s each; without "
+                                                 "them report.html holds the tables alone)."),
                overwrite: bool = _OVERWRITE):
     """Run every method of a scenario over N seeded runs on all local cores (or a Dask cluster); keep partial results."""
     from .experiment.montecarlo import run_experiment, write_experiment_outputs
@@ -318,7 +321,7 @@ def experiment(scenario: str = typer.Argument(..., help="Shipped scenario name o
     with _errors():
         df = run_experiment(scenario, runs, out_dir, workers=workers, resume=resume, seeds_from=seeds_from,
                             progress=progress, scheduler=scheduler, overwrite=overwrite)
-        paths = write_experiment_outputs(scenario, df, out_dir)
+        paths = write_experiment_outputs(scenario, df, out_dir, figures=figures)
     summary = paths["summary"]
     sweep = "sweep_value" in summary.columns
     t = Table(*(["sweep"] if sweep else []), "method", "metric", "mean", "95 % CI", "n",

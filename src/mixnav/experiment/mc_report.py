@@ -238,11 +238,16 @@ def segment_columns(segments: Sequence[str]) -> dict[str, str]:
     return {f"segment_{g}_{k}": _label(f"segment_{g}_{k}", segments) for g in segments for k in SEGMENT_METRICS}
 
 
+#: the figures an experiment's report may draw (``<name>.png`` beside ``report.html``)
+EXPERIMENT_FIGURES = ("sweep", "boxplots", "rms_error_position", "rms_error_velocity", "rms_error_attitude",
+                      "nees", "nis")
+
+
 def write_experiment_report(out_dir: Path, scenario: str, results: pd.DataFrame, summary: pd.DataFrame,
                             config_text: str | None = None, series: pd.DataFrame | None = None,
                             consistency: pd.DataFrame | None = None, outages=(),
                             sweep_name: str | None = None, headline: Sequence[str] = (),
-                            segments: Sequence[str] = ()) -> Path:
+                            segments: Sequence[str] = (), figures: bool = True) -> Path:
     """``report.html`` of an experiment folder.
 
     Parameters
@@ -262,6 +267,10 @@ def write_experiment_report(out_dir: Path, scenario: str, results: pd.DataFrame,
     segments : sequence of str
         Names of the scenario's scored segments (``[scoring]``): a table of their
         metrics (means over runs), after the headline table.
+    figures : bool
+        Draw the PNG figures (the report's time to write is mostly theirs: about 1 s each);
+        without them the report holds the tables alone, says so, and figures an earlier
+        write of the folder left are removed (they would show other results).
     """
     sweep = "sweep_value" in results.columns
     runs = int(results["seed"].nunique())
@@ -285,12 +294,16 @@ def write_experiment_report(out_dir: Path, scenario: str, results: pd.DataFrame,
     if consistency is not None and not consistency.empty:
         sections.append(("Monte Carlo consistency", _table(consistency)))
     figs: dict[str, Figure] = {}
-    if sweep:
+    if not figures:
+        notes.append("Figures not drawn (--no-figures): the tables above hold the numbers.")
+        for name in EXPERIMENT_FIGURES:
+            (Path(out_dir) / f"{name}.png").unlink(missing_ok=True)
+    elif sweep:
         figs["sweep"] = sweep_figure(summary, headline_columns(headline, segments) if headline else BOX_METRICS,
                                      sweep_name or "sweep value")
     else:
         figs["boxplots"] = boxplot_figure(results, BOX_METRICS)
-    if series is not None and not series.empty and not sweep:
+    if figures and series is not None and not series.empty and not sweep:
         for kind in ("position", "velocity", "attitude"):
             f = rms_error_figure(series, kind, outages)
             if f is not None:

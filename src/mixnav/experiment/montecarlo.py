@@ -560,12 +560,13 @@ def series_files(out_dir: Path) -> tuple[list[Path], list[float] | None]:
     return files, (vals if values is not None else None)
 
 
-def write_experiment_outputs(scenario: str, results: pd.DataFrame, out_dir: Path) -> dict:
+def write_experiment_outputs(scenario: str, results: pd.DataFrame, out_dir: Path, figures: bool = True) -> dict:
     """Summaries and report of an experiment folder after :func:`run_experiment`.
 
     Writes ``summary.csv`` (:func:`aggregate`), ``series_summary.parquet``
     (per-epoch RMS errors, sigmas, NEES, NIS over runs), ``consistency.csv``
-    and ``report.html`` with its PNG figures. Returns the tables written
+    and ``report.html`` with its PNG figures (``figures=False``: the tables alone,
+    :func:`~.mc_report.write_experiment_report`). Returns the tables written
     (``summary``, ``series``, ``consistency``).
     """
     from ..config.loader import resolve
@@ -588,7 +589,7 @@ def write_experiment_outputs(scenario: str, results: pd.DataFrame, out_dir: Path
                             outages=[tuple(o) for o in sc.gnss.outages],
                             sweep_name=None if sweep is None else sweep.name,
                             headline=sc.scenario.report_table,
-                            segments=[g for g, _, _ in sc.scored_segments])
+                            segments=[g for g, _, _ in sc.scored_segments], figures=figures)
     from ..io.outdir import write_marker
     write_marker(out_dir, "experiment", True, [p.name for p in out_dir.iterdir()])
     return {"summary": summary, "series": series, "consistency": consistency}
