@@ -127,7 +127,7 @@ def test_linear_step_drawn_is_the_linear_step_of_its_normals_on_any_thread_count
     N, n = 1001, 4
     D = rng.standard_normal((N, n))
     FT = rng.standard_normal((n, n))
-    SQT = np.linalg.cholesky(np.eye(n) + 0.3).T
+    SQT = np.ascontiguousarray(np.linalg.cholesky(np.eye(n) + 0.3).T)   # C order, as the filter passes it (no extra compile)
     seeds = rng.integers(0, 2 ** 64, size=K.CHUNKS, dtype=np.uint64)
     Z, Dn = np.empty((N, n)), np.empty((N, n))
     K.pf_linear_step_drawn_serial(D, FT, SQT, seeds, Z, Dn)

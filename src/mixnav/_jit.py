@@ -68,6 +68,12 @@ def serial_and_parallel(py_func, name: str | None = None, *, serial_name: str | 
     parallel : bool
         Compile the parallel twin with ``parallel=True`` (default); False when the
         body has no ``prange`` of its own and only its ``calls`` differ.
+
+    Notes
+    -----
+    A ``prange`` index is ``uint64`` in the parallel twin and ``int64`` in the serial one,
+    so a kernel the body calls with it would compile once per type (measured: 0.5-2.8 s
+    each on a cold cache); the bodies pass ``np.int64(index)``, one compile for both.
     """
     base = name or py_func.__name__
     ser = {k: v.serial for k, v in (calls or {}).items()}

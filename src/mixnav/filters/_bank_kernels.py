@@ -446,7 +446,13 @@ def bank_reduce(lw, X, P, max_components, n):
 _OK, _NOT_PD, _ABSURD, _NON_FINITE, _NEEDS_REPAIR = 0, 1, 2, 3, 4
 
 
-@njit(cache=True)
+# bank_epoch and bank_epoch_collect are Python wrappers of bank_epoch_guarded, not kernels: a
+# kernel passing the constant False/True would compile _epoch once more per constant (numba
+# specialises a literal argument; measured 4-5 s each on a cold cache), and the filter calls
+# only bank_epoch_guarded. The wrappers' own cost is a Python call (< 1 us against 63 us).
+_NO_ROWS = np.empty(0)
+
+
 def bank_epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n):
     """One measurement of the bank in one call: gate the merged prediction,
     NIS, per-row mixture update, reduction, merged correction.
@@ -455,12 +461,10 @@ def bank_epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max
     new bank re-centred on its merged mean and that mean ``dx`` (na,), which
     the caller feeds back; otherwise the bank unchanged and ``dx`` zero.
     """
-    empty = np.empty(0)
-    return _epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n,
-                  False, empty, empty, np.inf, np.inf)
+    return bank_epoch_guarded(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n,
+                              np.inf, np.inf, False, _NO_ROWS, _NO_ROWS)
 
 
-@njit(cache=True)
 def bank_epoch_collect(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n,
                        u, q):
     """:func:`bank_epoch` that also writes, per row ``k``, the standardised
@@ -470,8 +474,8 @@ def bank_epoch_collect(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_si
     online mixture learner (:mod:`mixnav.noise.learn.online`) collects. Written
     before the gate, so also for a rejected epoch. The returned values are
     bitwise those of :func:`bank_epoch`."""
-    return _epoch(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n,
-                  True, u, q, np.inf, np.inf)
+    return bank_epoch_guarded(lw, X, P, z, H, r, kinds, mix_logw, mix_mu, mix_var, n_sigma, max_components, n,
+                              np.inf, np.inf, True, u, q)
 
 
 @njit(cache=True)

@@ -193,10 +193,10 @@ def _pf_moments(D, w, x, P, part):
     partial sums in ``part`` (CHUNKS, >= n + n n), scratch) added in chunk order serially:
     the result does not depend on the thread count."""
     for c in prange(CHUNKS):
-        _mean_chunk(c, D, w, part)
+        _mean_chunk(np.int64(c), D, w, part)
     _sum_mean(part, x)
     for c in prange(CHUNKS):
-        _cov_chunk(c, D, w, x, part)
+        _cov_chunk(np.int64(c), D, w, x, part)
     _sum_cov(part, P)
 
 
@@ -243,7 +243,7 @@ def _pf_jitter(D, idx, a, h, x, hL, ZT, Dn):
     (n, N) standard normals drawn by the caller, ``z_j`` its column ``j``); ``h = 0``:
     the plain copy. Over the :data:`CHUNKS` chunks (in parallel in :func:`pf_jitter`)."""
     for c in prange(CHUNKS):
-        _jitter_chunk(c, D, idx, a, h, x, hL, ZT, Dn)
+        _jitter_chunk(np.int64(c), D, idx, a, h, x, hL, ZT, Dn)
 
 
 pf_jitter_serial, pf_jitter = serial_and_parallel(_pf_jitter, "pf_jitter")
@@ -269,8 +269,8 @@ def _pf_jitter_drawn(D, idx, a, h, x, hL, seeds, ZT, Dn):
     thread count (each chunk's stream is its own)."""
     for c in prange(CHUNKS):
         if h != 0.0:
-            _draw_chunk(c, seeds, ZT)
-        _jitter_chunk(c, D, idx, a, h, x, hL, ZT, Dn)
+            _draw_chunk(np.int64(c), seeds, ZT)
+        _jitter_chunk(np.int64(c), D, idx, a, h, x, hL, ZT, Dn)
 
 
 pf_jitter_drawn_serial, pf_jitter_drawn = serial_and_parallel(_pf_jitter_drawn, "pf_jitter_drawn")
@@ -293,7 +293,7 @@ def _pf_linear_step(D, FT, SQT, Z, Dn):
     normals): the propagation of a linear-Gaussian model (over particles in parallel in
     :func:`pf_linear_step`)."""
     for j in prange(D.shape[0]):
-        _linear_one(j, D, FT, SQT, Z, Dn)
+        _linear_one(np.int64(j), D, FT, SQT, Z, Dn)
 
 
 pf_linear_step_serial, pf_linear_step = serial_and_parallel(_pf_linear_step, "pf_linear_step")
@@ -309,7 +309,7 @@ def _pf_linear_step_drawn(D, FT, SQT, seeds, Z, Dn):
         j0, j1 = c * N // CHUNKS, (c + 1) * N // CHUNKS
         standard_normals_into(seeds[c], Z[j0:j1].reshape(-1), np.empty(1, dtype=np.uint64))
         for j in range(j0, j1):
-            _linear_one(j, D, FT, SQT, Z, Dn)
+            _linear_one(np.int64(j), D, FT, SQT, Z, Dn)
 
 
 pf_linear_step_drawn_serial, pf_linear_step_drawn = serial_and_parallel(_pf_linear_step_drawn,

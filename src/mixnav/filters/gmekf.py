@@ -56,7 +56,7 @@ from ..ins.imu_model import ImuErrorModel
 from ..measurements.kinds import KINDS, MAX_KINDS, kind_code
 from ..noise.learn.offline import learn_mixture  # noqa: F401  (re-exported)
 from ..noise.mixture import BankMixtures, GaussianMixture, StandardMixture  # noqa: F401  (re-exported)
-from ._bank_kernels import (bank_epoch, bank_epoch_collect, bank_epoch_guarded, bank_log_likelihood, bank_moments,
+from ._bank_kernels import (bank_epoch_guarded, bank_log_likelihood, bank_moments,
                             bank_propagate, bank_reduce, bank_split, bank_update, predicted_nis)
 from ._ekf_kernels import NEEDS_REPAIR, OK
 from .ekf import repair_covariance
@@ -547,14 +547,10 @@ class BankEstimator:
         bank_reduce(lw, X, P, 1, n)
         bank_log_likelihood(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
                             np.zeros((1, 1)), np.ones((1, 1)))
-        bank_epoch(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
-                   np.zeros((1, 1)), np.ones((1, 1)), 1e4, 1, n)
         for collect in (False, True):
             bank_epoch_guarded(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
                                np.zeros((1, 1)), np.ones((1, 1)), 1e4, 1, n, 2.0, 4.0, collect, np.empty(1),
                                np.empty(1))
-        bank_epoch_collect(lw, X, P, np.zeros(1), H, np.ones(1), np.zeros(1, dtype=np.int64), np.zeros((1, 1)),
-                           np.zeros((1, 1)), np.ones((1, 1)), 1e4, 1, n, np.empty(1), np.empty(1))
         _BANK_WARM.append(True)
 
 

@@ -140,7 +140,7 @@ def _pf_step(nav0, prev0, sensor0, D, SQT, Z, dtheta, dvel, dt, substeps, layout
     _start_member(N, nav0, prev0, sensor0, D, layout, navs, prevs, sensors, scr)
     _mechanize_one(navs[N], prevs[N], sensors[N], scr[N], gth, gdv, gdt, S, trig, RECORD)
     for j in prange(N):
-        _start_member(j, nav0, prev0, sensor0, D, layout, navs, prevs, sensors, scr)
+        _start_member(np.int64(j), nav0, prev0, sensor0, D, layout, navs, prevs, sensors, scr)
         _mechanize_one(navs[j], prevs[j], sensors[j], scr[j], gth, gdv, gdt, S, trig, NEAR)
         _finish_member(j, D, navs, layout, fdec, T, SQT, Z, Dn)
 
@@ -197,7 +197,7 @@ def _pf_member_navs(nav, D, layout, navs, sensors, scr):
     and ``scr`` (>= N, 11) receive the sensor and clock parts (scratch, not used).
     Parallel over particles."""
     for j in prange(D.shape[0]):
-        _member_nav(j, nav, D, layout, navs, sensors, scr)
+        _member_nav(np.int64(j), nav, D, layout, navs, sensors, scr)
 
 
 pf_member_navs_serial, pf_member_navs = serial_and_parallel(_pf_member_navs, "pf_member_navs")

@@ -220,7 +220,7 @@ def pf_loose_predict(D, layout, nav, w_b, lever, fix, YT):
     _loose_constants(nav, w_b, lever, fix, g, C0, np.empty(m), np.empty(m))
     DT = np.empty((n, N))
     _transpose_into(D, 0, N, DT)
-    _loose_predict_soa(0, N, DT, D, layout[L_BG], g, C0, lever, fix, YT)
+    _loose_predict_soa(np.int64(0), N, DT, D, layout[L_BG], g, C0, lever, fix, YT)   # not a literal 0: one compile with _loose_chunk's call
 
 
 @njit(cache=True, error_model="numpy", fastmath={"reassoc"})
@@ -413,16 +413,16 @@ def _pf_loose_update(D, nav, w_b, logw0, w0, thr, YT, logw, w, ym, Pyy, x, P, yp
     degenerate): the contract of :class:`~mixnav.measurements.base.MemberUpdate`."""
     i_bg, g, C0, y, r, ir, yk0, DT, S = _loose_prologue(D, layout, nav, w_b, lever, fix, w0, YT.shape[0], work)
     for c in prange(CHUNKS):
-        _loose_chunk(c, D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, YT, logw, yp, DT, S)
+        _loose_chunk(np.int64(c), D, i_bg, g, C0, lever, fix, y, ir, logw0, w0, yk0, YT, logw, yp, DT, S)
     best, top = _sum_loose(yp, yk0, ym, Pyy)
     nis = _nis(y, ym, Pyy, r)
     if not np.isfinite(top) or not best <= thr:
         return best, 0.0, nis
     for c in prange(CHUNKS):
-        _exp_chunk(c, logw, top, w, DT, pa)
+        _exp_chunk(np.int64(c), logw, top, w, DT, pa)
     tot, sq = _sum_exp(pa, x)
     for c in prange(CHUNKS):
-        _normalise_cov_chunk(c, w, tot, x, DT, part)
+        _normalise_cov_chunk(np.int64(c), w, tot, x, DT, part)
     _sum_cov(part, P)
     return best, tot * tot / sq, nis
 

@@ -558,7 +558,7 @@ def _e_pass(XT, w, Li, b, const, hnu, m, acc_t, acc0, acc1, acc2):
     # chunks are independent and write their own slots; the caller sums the slots in chunk
     # order, so the result does not depend on the number of threads or their schedule
     for c in numba.prange(acc_t.shape[0]):
-        _e_chunk(c, XT, w, Li, b, const, hnu, m, acc_t, acc0, acc1, acc2)
+        _e_chunk(np.int64(c), XT, w, Li, b, const, hnu, m, acc_t, acc0, acc1, acc2)
 
 
 _e_passes = serial_and_parallel(_e_pass, "_e_pass_parallel", serial_name="_e_pass_serial")
