@@ -10,6 +10,7 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
+import mixnav
 from mixnav.cli import app
 from mixnav.experiment.metrics import METRIC_KEYS_DOC
 
@@ -163,6 +164,11 @@ def test_experiment_command_writes_results_and_summary(tmp_path):
     assert f"{row['mean']:.4g} ± {row['ci95_half']:.2g}" in html
     marker = json.loads((tmp_path / "x" / ".mixnav-output.json").read_text())
     assert marker["complete"] and not [f for f in marker["files"] if f.endswith(".png")]
+    # the same folder from Python (resumed: nothing rerun): the command's tables, returned
+    r = mixnav.run_experiment("loose-demo", 2, tmp_path / "x", workers=1, resume=True, figures=False)
+    pd.testing.assert_frame_equal(r.results, results)
+    got = r.summary[(r.summary.method == "ekf") & (r.summary.metric == "horizontal_rmse_m")].iloc[0]
+    assert (got["mean"], got["ci95_half"], got["n"]) == pytest.approx((row["mean"], row["ci95_half"], row["n"]))
 
 
 def test_the_command_needs_no_click_of_its_own():

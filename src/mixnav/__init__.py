@@ -61,8 +61,8 @@ def _numba_without_cache() -> None:
 if not _numba_cache_usable():
     _numba_without_cache()
 
-_API = ("run_scenario", "process_dataset", "outage_sweep", "start_sweep", "tune", "filter_loose", "imu_grade", "export_rinex", "RunResult",
-        "LooseResult")
+_API = ("run_scenario", "process_dataset", "run_experiment", "outage_sweep", "start_sweep", "tune", "filter_loose", "imu_grade", "export_rinex", "RunResult",
+        "LooseResult", "ExperimentResult")
 
 
 def __getattr__(name):

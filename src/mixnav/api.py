@@ -23,8 +23,8 @@ import numpy as np
 from .data import GnssFixes, ImuData, InitialState
 from .errors import ArgumentError
 
-__all__ = ["RunResult", "LooseResult", "run_scenario", "process_dataset", "outage_sweep", "start_sweep", "filter_loose",
-           "imu_grade", "export_rinex"]
+__all__ = ["RunResult", "LooseResult", "ExperimentResult", "run_scenario", "process_dataset", "run_experiment",
+           "tune", "outage_sweep", "start_sweep", "filter_loose", "imu_grade", "export_rinex"]
 
 
 @dataclass
@@ -136,6 +136,50 @@ def process_dataset(name_or_path: str, data: str | None = None) -> RunResult:
     out = process(ds, source, data)
     tables = p.tables(out)
     return RunResult(tables, _metrics_frame(p.metrics(out, tables)), out.results, p.truth(out), out, text)
+
+
+@dataclass
+class ExperimentResult:
+    """A Monte Carlo experiment's tables (:func:`run_experiment`), as written into its folder.
+
+    Attributes
+    ----------
+    results : pandas.DataFrame
+        One row per seed and method (``results.parquet``; columns in docs/outputs.md).
+    summary : pandas.DataFrame
+        Per method and metric the mean over runs and its 95 % interval (``summary.csv``).
+    series : pandas.DataFrame or None
+        Per epoch the RMS errors, sigmas, NEES and NIS over runs (``series_summary.parquet``).
+    consistency : pandas.DataFrame or None
+        The Monte Carlo consistency checks (``consistency.csv``).
+    out : pathlib.Path
+        The folder (``report.html`` there).
+    """
+
+    results: "object"
+    summary: "object"
+    series: "object"
+    consistency: "object"
+    out: Path
+
+
+def run_experiment(scenario: str, runs: int, out, *, workers: int | None = None, resume: bool = False,
+                   seeds_from: int = 0, scheduler: str | None = None, overwrite: bool = False,
+                   progress: bool = False, figures: bool = True) -> ExperimentResult:
+    """What ``mixnav experiment`` does: every method of ``scenario`` over seeds ``seeds_from ..
+    seeds_from + runs - 1`` on local cores (or a Dask ``scheduler``), the records kept in ``out``
+    (resumable), then the summaries and ``report.html`` (``figures=False``: the tables alone).
+    Arguments as :func:`mixnav.experiment.montecarlo.run_experiment`.
+
+        r = mixnav.run_experiment("loose-demo", 20, "runs/mc")
+        r.summary.query("metric == 'horizontal_rmse_m'")
+    """
+    from .experiment.montecarlo import run_experiment as _run, write_experiment_outputs
+    out = Path(out)
+    results = _run(scenario, runs, out, workers=workers, resume=resume, seeds_from=seeds_from, progress=progress,
+                   scheduler=scheduler, overwrite=overwrite)
+    tables = write_experiment_outputs(scenario, results, out, figures=figures)
+    return ExperimentResult(results, tables["summary"], tables.get("series"), tables.get("consistency"), out)
 
 
 def tune(name_or_path: str, out, *, budget: int = 96, workers: int | None = None, scheduler: str | None = None,
