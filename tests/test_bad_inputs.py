@@ -915,9 +915,10 @@ def test_interrupted_rewrite_keeps_the_old_complete_folder(box, sig, status):
     p = box.write("long.toml", long)
     box.snapshot()
     proc = _cli("run", p, "--out", box.out, cwd=box.root)
-    # interrupted while running or while writing its temporary sibling
-    _wait_for(lambda: any(".mixnav-" in n for n in os.listdir(box.root)), timeout=30)
-    time.sleep(0.3)
+    # interrupted as soon as it writes its temporary sibling (writing the folder, figures
+    # included, takes over a second: a fixed wait after it let a fast machine finish first)
+    assert _wait_for(lambda: any(".mixnav-" in n for n in os.listdir(box.root)), timeout=60), \
+        proc.communicate()[1]
     proc.send_signal(sig)
     out, err = proc.communicate(timeout=60)
     if proc.returncode == 0:
