@@ -148,10 +148,11 @@ class ExperimentResult:
         One row per seed and method (``results.parquet``; columns in docs/outputs.md).
     summary : pandas.DataFrame
         Per method and metric the mean over runs and its 95 % interval (``summary.csv``).
-    series : pandas.DataFrame or None
-        Per epoch the RMS errors, sigmas, NEES and NIS over runs (``series_summary.parquet``).
-    consistency : pandas.DataFrame or None
-        The Monte Carlo consistency checks (``consistency.csv``).
+    series : pandas.DataFrame
+        Per epoch the RMS errors, sigmas, NEES and NIS over runs (``series_summary.parquet``;
+        empty when the runs kept no series).
+    consistency : pandas.DataFrame
+        The Monte Carlo consistency checks (``consistency.csv``; empty without them).
     out : pathlib.Path
         The folder (``report.html`` there).
     """
@@ -179,7 +180,7 @@ def run_experiment(scenario: str, runs: int, out, *, workers: int | None = None,
     results = _run(scenario, runs, out, workers=workers, resume=resume, seeds_from=seeds_from, progress=progress,
                    scheduler=scheduler, overwrite=overwrite)
     tables = write_experiment_outputs(scenario, results, out, figures=figures)
-    return ExperimentResult(results, tables["summary"], tables.get("series"), tables.get("consistency"), out)
+    return ExperimentResult(results, tables["summary"], tables["series"], tables["consistency"], out)
 
 
 def tune(name_or_path: str, out, *, budget: int = 96, workers: int | None = None, scheduler: str | None = None,

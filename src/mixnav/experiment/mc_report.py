@@ -295,7 +295,7 @@ def write_experiment_report(out_dir: Path, scenario: str, results: pd.DataFrame,
         sections.append(("Monte Carlo consistency", _table(consistency)))
     figs: dict[str, Figure] = {}
     if not figures:
-        notes.append("Figures not drawn (--no-figures): the tables above hold the numbers.")
+        notes.append("Figures not drawn (--no-figures, or figures=False from Python): the tables above hold the numbers.")
         for name in EXPERIMENT_FIGURES:
             (Path(out_dir) / f"{name}.png").unlink(missing_ok=True)
     elif sweep:
