@@ -916,9 +916,9 @@ def test_interrupted_rewrite_keeps_the_old_complete_folder(box, sig, status):
     box.snapshot()
     proc = _cli("run", p, "--out", box.out, cwd=box.root)
     # interrupted as soon as it writes its temporary sibling (writing the folder, figures
-    # included, takes over a second: a fixed wait after it let a fast machine finish first)
-    assert _wait_for(lambda: any(".mixnav-" in n for n in os.listdir(box.root)), timeout=60), \
-        proc.communicate()[1]
+    # included, takes over a second: a fixed wait after it let a fast machine finish first);
+    # still running without one after 60 s (a cold cache compiling): interrupted while running
+    _wait_for(lambda: any(".mixnav-" in n for n in os.listdir(box.root)), timeout=60)
     proc.send_signal(sig)
     out, err = proc.communicate(timeout=60)
     if proc.returncode == 0:
