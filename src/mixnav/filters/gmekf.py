@@ -465,7 +465,7 @@ class BankEstimator:
 
     def epoch(self, z, H, r, kinds):
         """The bank's measurement epoch in one compiled call, ``(status, nis, lw, X, P, dx)``
-        of :func:`~mixnav.filters._bank_kernels.bank_epoch` (the bank itself unchanged).
+        of :func:`~mixnav.filters._bank_kernels.bank_epoch_guarded` (the bank itself unchanged).
 
         With online learning the collecting variant also returns each row's
         standardised innovation and prediction share, which go to the learner;
