@@ -13,7 +13,7 @@ import pytest
 
 from .conftest import reproducible as _reproducible
 
-from mixnav.errors import ConfigError
+from mixnav.errors import ArgumentError, ConfigError
 from mixnav.experiment.montecarlo import run_experiment
 
 SCENARIO = "loose-demo"
@@ -85,8 +85,9 @@ def test_unreachable_scheduler_fails_fast(tmp_path, address):
 
 
 def test_bad_scheduler_argument(tmp_path):
-    with pytest.raises(ConfigError, match="--scheduler"):
+    with pytest.raises(ArgumentError, match="scheduler") as exc:
         run_experiment(SCENARIO, 2, tmp_path, scheduler="", progress=False)
+    assert exc.value.argument == "scheduler"
     assert not (tmp_path / "manifest.json").exists()
 
 

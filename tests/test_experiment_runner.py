@@ -10,7 +10,7 @@ import pytest
 from .conftest import reproducible as _reproducible
 from scipy import stats
 
-from mixnav.errors import ConfigError
+from mixnav.errors import ArgumentError, ConfigError
 from mixnav.experiment import montecarlo as mc
 from mixnav.experiment.montecarlo import (aggregate, flatten_metrics,
                                           paired_comparison, run_experiment)
@@ -105,14 +105,18 @@ def test_existing_experiment_needs_resume(serial):
     assert str(out) in str(exc.value)
 
 
-@pytest.mark.parametrize("kw, word", [({"runs": 0}, "--runs"), ({"runs": -3}, "--runs"),
-                                      ({"runs": 2.5}, "--runs"), ({"workers": 0}, "--workers"),
-                                      ({"seeds_from": -1}, "--seeds-from")])
+@pytest.mark.parametrize("kw, word", [({"runs": 0}, "runs"), ({"runs": -3}, "runs"),
+                                      ({"runs": 2.5}, "runs"), ({"runs": 10 ** 9}, "runs"),
+                                      ({"workers": 0}, "workers"), ({"seeds_from": -1}, "seeds_from"),
+                                      ({"seeds_from": 2 ** 63 - 1}, "seeds_from")])
 def test_bad_input(tmp_path, kw, word):
+    # called from Python, the error names the Python argument (the command names its option:
+    # tests/test_bad_inputs.py)
     args = {"scenario": SCENARIO, "runs": 2, "out_dir": tmp_path, "workers": 1, "progress": False}
     args.update(kw)
-    with pytest.raises(ConfigError, match=word):
+    with pytest.raises(ArgumentError) as exc:
         run_experiment(**args)
+    assert exc.value.argument == word and "--" not in str(exc.value)
     assert not (tmp_path / "manifest.json").exists()
 
 

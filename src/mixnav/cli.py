@@ -318,7 +318,8 @@ def experiment(scenario: str = typer.Argument(..., help="Shipped scenario name o
     """Run every method of a scenario over N seeded runs on all local cores (or a Dask cluster); keep partial results."""
     from .experiment.montecarlo import run_experiment, write_experiment_outputs
 
-    with _errors():
+    with _errors(), _as_options(runs="--runs", workers="--workers", seeds_from="--seeds-from",
+                                scheduler="--scheduler"):
         df = run_experiment(scenario, runs, out_dir, workers=workers, resume=resume, seeds_from=seeds_from,
                             progress=progress, scheduler=scheduler, overwrite=overwrite)
         paths = write_experiment_outputs(scenario, df, out_dir, figures=figures)

@@ -384,31 +384,35 @@ def run_experiment(scenario: str, runs: int, out_dir: Path, workers: int | None 
 
     Raises
     ------
+    ArgumentError
+        Bad ``runs``/``workers``/``seeds_from``/``scheduler`` (it names the
+        argument), or more than :data:`MAX_RUNS` runs in one call.
     ConfigError
-        Bad ``runs``/``workers``/``seeds_from``/``scheduler``, an unknown or
-        invalid scenario (from the loader), an ``out_dir`` that does not
+        An unknown or invalid scenario (from the loader), an ``out_dir`` that does not
         match, ``distributed`` not installed, or a scheduler that cannot be
         reached within :data:`DASK_CONNECT_TIMEOUT_S` (or has no worker).
     """
+    # the Python argument is named (mixnav.cli says it as the option the user wrote)
     if isinstance(runs, bool) or not isinstance(runs, (int, np.integer)) or runs < 1:
-        raise ConfigError(f"--runs must be a positive integer, got {runs!r}")
+        raise ArgumentError(f"must be a positive integer, got {runs!r}", argument="runs")
     if workers is None:
         workers = os.cpu_count() or 1
     if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
-        raise ConfigError(f"--workers must be a positive integer, got {workers!r}")
+        raise ArgumentError(f"must be a positive integer, got {workers!r}", argument="workers")
     if isinstance(seeds_from, bool) or not isinstance(seeds_from, (int, np.integer)) or seeds_from < 0:
-        raise ConfigError(f"--seeds-from must be a non-negative integer, got {seeds_from!r}")
+        raise ArgumentError(f"must be a non-negative integer, got {seeds_from!r}", argument="seeds_from")
     if int(seeds_from) + int(runs) - 1 > 2**63 - 1:   # seeds are stored as 64-bit integers
-        raise ConfigError(f"--seeds-from {seeds_from} + --runs {runs} goes beyond the largest seed, 2**63 - 1")
+        raise ArgumentError(f"{seeds_from} with {runs} runs goes beyond the largest seed, 2**63 - 1",
+                            argument="seeds_from")
     if scheduler is not None and (not isinstance(scheduler, str) or not scheduler.strip()):
-        raise ConfigError(f"--scheduler must be a Dask scheduler address such as "
-                          f"'tcp://127.0.0.1:8786', got {scheduler!r}")
+        raise ArgumentError(f"must be a Dask scheduler address such as 'tcp://127.0.0.1:8786', got {scheduler!r}",
+                            argument="scheduler")
     variants, source, sha, sweep = _load(scenario)  # unknown scenario: the loader's ConfigError
     sc = variants[0][1]
     out_dir = Path(out_dir)
     if int(runs) * len(variants) > MAX_RUNS:
-        raise ConfigError(f"--runs {runs} asks for {int(runs) * len(variants)} runs; at most {MAX_RUNS} per "
-                          "call (continue with --resume and a larger --runs)")
+        raise ArgumentError(f"{runs} asks for {int(runs) * len(variants)} runs; at most {MAX_RUNS} per call "
+                            "(continue with resume and a larger number of runs)", argument="runs")
     seeds = [int(seeds_from) + i for i in range(int(runs))]
     methods = [m.name for m in sc.methods]
     # (seed, variant) of every run asked for; variant None when there is no sweep
