@@ -111,14 +111,27 @@ class Epoch:
 
     def rows(self):
         """The model's :class:`~mixnav.measurements.base.Rows` at the nominal state (computed
-        once), or None when it has no data."""
+        once), or None when it has no data; ``z``, ``H`` and ``R`` float64 in C order."""
         if not self._done:
             if self.aux:
-                self._rows = self.model.rows(self.index, self.nav, self.w_b, self.clock, self.memory, aux=self.aux)
+                rows = self.model.rows(self.index, self.nav, self.w_b, self.clock, self.memory, aux=self.aux)
             else:
-                self._rows = self.model.rows(self.index, self.nav, self.w_b, self.clock, self.memory)
+                rows = self.model.rows(self.index, self.nav, self.w_b, self.clock, self.memory)
+            self._rows = None if rows is None else _c_order(rows)
             self._done = True
         return self._rows
+
+
+def _c_order(rows):
+    """``rows`` with ``z``, ``H`` and ``R`` float64 in C order, once here for every estimator:
+    a model's sliced H (layout 'A') would otherwise compile each estimator's kernels a second
+    time (about 8 s on a cold cache for ``kalman_correct`` and its callees). An array already
+    so is not copied."""
+    c = np.ascontiguousarray
+    z, H, R = c(rows.z, dtype=np.float64), c(rows.H, dtype=np.float64), c(rows.R, dtype=np.float64)
+    if z is rows.z and H is rows.H and R is rows.R:
+        return rows
+    return rows._replace(z=z, H=H, R=R)
 
 
 @runtime_checkable

@@ -144,8 +144,9 @@ class KalmanEstimator:
 
     def correct(self, P, z, H, r):
         """One gated Kalman correction: ``(P_post, dx, nis, status)`` (no feedback)."""
-        # C order always: a model's sliced H (layout 'A') would compile kalman_correct and its
-        # callees a second time (about 8 s on a cold cache); a contiguous H is not copied
+        # C order always (an epoch's rows are, Epoch.rows; a caller's H may not be): a sliced H
+        # (layout 'A') would compile kalman_correct and its callees a second time (about 8 s on
+        # a cold cache); a contiguous H is not copied
         return kalman_correct(P, z, np.ascontiguousarray(H), r, self.absurd_sigma)
 
     def update(self, epoch: Epoch) -> Correction | None:

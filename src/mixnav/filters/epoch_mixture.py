@@ -252,8 +252,7 @@ class EpochMixtureEstimator(KalmanEstimator):
         self._ll_trace.append((epoch.time, ll, len(z)))
         inflate = np.where(mix, self._correlation_factor(epoch.time), 1.0)
         P_new, x, nis, status, e, g, converged = epoch_em(
-            np.ascontiguousarray(P0), np.ascontiguousarray(z, dtype=float), np.ascontiguousarray(H, dtype=float),
-            np.ascontiguousarray(r), mix, w_row, self.s, self.mu, self.sd, inflate, self.iterations,
+            np.ascontiguousarray(P0), z, H, r, mix, w_row, self.s, self.mu, self.sd, inflate, self.iterations,
             self.tolerance, self.absurd_sigma)
         if status != OK and status != NEEDS_REPAIR:
             return Correction(np.zeros(self.n), math.inf, status, len(z))

@@ -382,7 +382,6 @@ class BankEstimator:
         if self.Qw_pending:
             self._split()
         kinds = np.asarray(rows.kinds, dtype=np.int64)
-        H = np.ascontiguousarray(H)
         if self.divergence_window and self._diverged(z, H, r, kinds):
             self._reset()
         status, nis, lw, X, Pb, dx = self.epoch(z, H, r, kinds)
@@ -461,7 +460,7 @@ class BankEstimator:
         if self.Qw_pending:
             lw, X, Pb = bank_split(lw, X, Pb, self.Qw, self.proc_logw, self.proc_scale)
         kinds = np.asarray(rows.kinds, dtype=np.int64)
-        return bank_log_likelihood(lw, X, Pb, z, np.ascontiguousarray(rows.H), r, kinds, *self.tables)
+        return bank_log_likelihood(lw, X, Pb, z, rows.H, r, kinds, *self.tables)   # rows in C order: Epoch.rows
 
     def epoch(self, z, H, r, kinds):
         """The bank's measurement epoch in one compiled call, ``(status, nis, lw, X, P, dx)``

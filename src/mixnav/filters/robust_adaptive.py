@@ -128,7 +128,7 @@ class RobustEstimator(KalmanEstimator):
         if alpha < 1.0:
             self.counts["adaptive_epochs"] += 1
             P = P / alpha
-        return kalman_correct(P, z[keep], np.ascontiguousarray(H[keep]), r[keep] / g[keep], self.absurd_sigma)
+        return kalman_correct(P, z[keep], H[keep], r[keep] / g[keep], self.absurd_sigma)   # a mask's copy: C order
 
 
 #: The old name of :class:`RobustEstimator`.
