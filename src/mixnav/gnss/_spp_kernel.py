@@ -281,7 +281,9 @@ def _normal(H, dz, w, sel, act, n_rows, n_unk, N, b):
 def _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, use, mask_on, p, alpha, beta,
                   tow, H, dz, el, az, iono_d, w, sel, act, N, L, b, dx, gamma):
     """As spp._gauss_newton: ``(status, iterations)``, status 1 converged, 0 not, -1 too few
-    rows; ``sel`` the last step's rows."""
+    rows; ``sel`` the last step's rows. Callers pass ``mask_on`` as ``bool(True)`` /
+    ``bool(False)``: a bare literal is typed ``Literal[bool]`` and each value compiles this
+    kernel (and ``_linearise``) once more on a cold cache."""
     elevation_mask, tropo, iono, max_iter, tol = p[0], p[3], p[4], p[5], p[6]
     n = e1 - e0
     n_off = x.shape[0] - 4
@@ -399,7 +401,7 @@ def _igg3(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, sel, 
         touched[worst] = True
         for r in range(n):
             keep[r] = sel[r] and gamma[r] > 0.0
-        st, _ = _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, keep, True, p, alpha,
+        st, _ = _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, keep, bool(True), p, alpha,
                               beta, tow, H, dz, el, az, iono_d, w, sel2, act, N, L, b, dx, gamma)
         if st < 0:
             return -1
@@ -418,13 +420,13 @@ def _solve_rows(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1,
     for r in range(n):
         use[r] = use0[r]
         gamma[r] = 1.0
-    st, _ = _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, use, True, p,
+    st, _ = _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, use, bool(True), p,
                           alpha, beta, tow, H, dz, el, az, iono_d, w, sel, act, N, L, b, dx, gamma)
     if st == 0 and _near_surface(x):
         # a satellite at the mask entering and leaving: keep the last set, iterate on
         for r in range(n):
             use[r] = sel[r]
-        st, _ = _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, use, False,
+        st, _ = _gauss_newton(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, use, bool(False),
                               p, alpha, beta, tow, H, dz, el, az, iono_d, w, sel, act, N, L, b, dx, gamma)
     if st < 0:
         return -1, ROBUST_OFF
@@ -450,7 +452,7 @@ def _postfit(x, sat, rho_corr, col, scale, fact, var_eph, iono_scale, e0, e1, p,
     n_off = x.shape[0] - 4
     for r in range(n):
         usedr[r] = sel[r] and gamma[r] > 0.0
-    _linearise(x, sat, rho_corr, col, iono_scale, e0, e1, True, tow, p[3] > 0, p[4] > 0, alpha, beta, H, dz, el,
+    _linearise(x, sat, rho_corr, col, iono_scale, e0, e1, bool(True), tow, p[3] > 0, p[4] > 0, alpha, beta, H, dz, el,
                az, iono_d)
     n_unk = _active(usedr, col, e0, e1, n_off, act)
     _weights(p, el, iono_d, scale, fact, var_eph, e0, n, w, gamma)

@@ -228,9 +228,11 @@ class TightGnss(MeasurementModel):
             return None
         navs = np.ascontiguousarray(np.atleast_2d(np.asarray(navs, dtype=float)))
         N = len(navs)
-        w = np.ascontiguousarray(np.broadcast_to(np.asarray(w_b, dtype=float), (N, 3)))
+        # copies, writable: a broadcast view is read-only (and for N = 1 already contiguous), and
+        # a read-only array is another type to numba, so the kernel would compile twice
+        w = np.array(np.broadcast_to(np.asarray(w_b, dtype=float), (N, 3)), order="C")
         c = np.zeros(2) if clocks is None else np.asarray(clocks, dtype=float)
-        c = np.ascontiguousarray(np.broadcast_to(c, (N, 2)))
+        c = np.array(np.broadcast_to(c, (N, 2)), order="C")
         off = np.zeros((N, len(self.systems)))                           # column 0: the reference system
         if self._i_off >= 0 and aux is not None and "system_offset" in aux:
             off[:, 1:] = np.broadcast_to(np.asarray(aux["system_offset"], dtype=float), (N, len(self.systems) - 1))
