@@ -5,6 +5,7 @@ tuned.toml without the reference file), --fix, resume, and bad input."""
 
 from __future__ import annotations
 
+import json
 import shutil
 import tomllib
 from pathlib import Path
@@ -172,6 +173,7 @@ def test_tune_never_reads_the_reference(tmp_path):
     ta = (tmp_path / "a" / "out" / "tuned.toml").read_bytes()
     assert ta == (tmp_path / "b" / "out" / "tuned.toml").read_bytes()
     assert b"mixnav tune:" in ta and ra.runs == rb.runs == 3 * 4
+    assert ra.tuned["nlpd"] <= ra.given["nlpd"]           # never handed back worse than given, by its criterion
     assert 'file = "reference.pos"' in ta.decode()       # the user's reference section is kept as written
     again = tune(str(a), tmp_path / "a" / "out", resume=True, **FAST)
     assert again.runs == 0
@@ -275,6 +277,39 @@ def test_criterion_se_is_the_windows_standard_error():
     c = s.sum() / n.sum()
     assert criterion_se(s, n) == pytest.approx(np.sqrt(1.5 * np.sum((s - c * n) ** 2)) / n.sum())
     assert criterion_se([3.0], [10]) is None and criterion_se([], []) is None
+
+
+def test_the_file_as_given_is_kept_when_the_criterion_cannot_tell_it_from_the_best():
+    """Kept when within one standard error of the search's best (the bar inclusive), not when
+    beyond it or when either criterion is not finite (a failed run is never "as good")."""
+    from mixnav.experiment.tuning import _kept_as_given
+    assert _kept_as_given({"nlpd": 1.10}, {"nlpd": 0.73}, 0.50) is not None
+    assert _kept_as_given({"nlpd": 1.23}, {"nlpd": 0.73}, 0.50) is not None      # at the bar
+    assert _kept_as_given({"nlpd": 1.24}, {"nlpd": 0.73}, 0.50) is None
+    assert _kept_as_given({"nlpd": 608.0}, {"nlpd": 1.39}, 0.50) is None
+    assert _kept_as_given({"nlpd": float("inf")}, {"nlpd": 1.0}, 0.5) is None
+    assert _kept_as_given({"nlpd": 1.0}, {"nlpd": float("nan")}, 0.5) is None
+
+
+@need_data
+def test_a_file_the_search_cannot_beat_is_handed_back_as_given(tmp_path):
+    """The shipped drive-0708 file (fitted by hand) on a short span: the search finds nothing
+    the criterion can tell from it, so tuned.toml holds the file's own values, says why at its
+    top, and scores as the file given; the untuned file of the same car is tuned (its criterion
+    falls far beyond one standard error) and the tuned file never scores worse than the given."""
+    import tomllib
+    r = tune("drive-0708", tmp_path / "kept", **FAST)
+    assert r.kept_as_given and r.chosen == {} and r.tuned == r.given
+    text = (tmp_path / "kept" / "tuned.toml").read_text()
+    assert text.startswith("# mixnav tune: the file as given, kept: its criterion")
+    tuned, given = tomllib.loads(text), tomllib.loads((SHIPPED / "drive-0708.toml").read_text())
+    tuned["dataset"].pop("data_dir"), given["dataset"].pop("data_dir")   # re-pointed from the output folder
+    assert tuned == given
+    assert "tuned.toml is the file as given" in (tmp_path / "kept" / "report.md").read_text()
+    assert json.loads((tmp_path / "kept" / "tune.json").read_text())["kept_as_given"] == r.kept_as_given
+    u = tune(str(ROOT / "benchmarks" / "configs" / "drive-0708-untuned.toml"), tmp_path / "tuned", **FAST)
+    assert u.kept_as_given is None and u.chosen
+    assert u.tuned["nlpd"] < u.given["nlpd"] - u.given["criterion_se"]
 
 
 class _RisingScorer:

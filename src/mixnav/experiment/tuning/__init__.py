@@ -71,6 +71,8 @@ class TuneResult:
     not_tuned: dict = field(default_factory=dict)     # key -> why it kept its value
     runs: int = 0                     # filter runs made (evaluations x folds; journal hits excluded)
     out: Path | None = None
+    kept_as_given: str | None = None  # why tuned.toml is the file as given (None: it was tuned)
+    found: dict = field(default_factory=dict)   # kept as given: what the search's best had, key -> value text
 
 
 def _seconds(value, argument: str) -> float:
@@ -227,7 +229,8 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
              target, windows, (t_first, t_last))
     scorer = Scorer(setup, journal, workers, scheduler, progress, budget, len(windows))
 
-    searched_best = tolerance = None
+    searched_best = tolerance = kept_as_given = None
+    found: dict = {}
     try:
         doc = tomlkit.parse(stripped)
         chosen, not_tuned, evaluations = {}, {}, []
@@ -278,15 +281,31 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
         cur_doc, cur = _installation_stage(cur_doc, cur, fix, scorer, evaluations, chosen, not_tuned, local)
         cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations, grids=("fine",),
                                                  curves=curves, reserve=CONSERVATIVE_RESERVE)
-        # the most cautious setting the criterion cannot tell from the best (search.conservative_pass)
+        # the most cautious setting the criterion cannot tell from the best (search.conservative_pass),
+        # unless the file as given is one of those (_kept_as_given)
         n_windows = sum(len(f) for f in windows)
         searched_best = cur["nlpd"]
         tolerance = conservative_tolerance(cur, n_windows)
-        cur_doc, cur = conservative_pass(cur_doc, cur, searched, scorer, evaluations, tolerance, curves,
-                                         reserve=RATE_RESERVE)
-        cur_doc, cur, curves = coordinate_search(cur_doc, cur, rate, scorer, evaluations, grids=("coarse",),
-                                                 curves=curves)
-        searched = searched + rate
+        kept_as_given = _kept_as_given(given, cur, tolerance)
+        if kept_as_given:
+            as_given = tomlkit.parse(given_text)
+            found = {p.name: _value_text(p, get_value(cur_doc, p)) for p in searched + rate
+                     if get_value(cur_doc, p) is not None and get_value(as_given, p) is not None
+                     and not np.array_equal(get_value(cur_doc, p), get_value(as_given, p))}
+            cur_doc, cur = tomlkit.parse(given_text), given
+            for name, c in list(chosen.items()):
+                chosen.pop(name)
+                not_tuned[name] = f"{c.get('value', c.get('from_data', ''))} found, not written: the file as given is kept"
+            for p in searched + rate:
+                not_tuned.setdefault(p.name, "the file as given is kept (its value stands)")
+            searched = []
+        else:
+            found = {}
+            cur_doc, cur = conservative_pass(cur_doc, cur, searched, scorer, evaluations, tolerance, curves,
+                                             reserve=RATE_RESERVE)
+            cur_doc, cur, curves = coordinate_search(cur_doc, cur, rate, scorer, evaluations, grids=("coarse",),
+                                                     curves=curves)
+            searched = searched + rate
         for p in searched:
             if len(curves.get(p.name, [])) < 2:   # only the current point: the budget ran out first
                 not_tuned[p.name] = "the budget ran out before the search reached it: the file's value kept"
@@ -301,17 +320,34 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
     finally:
         scorer.close()
     tuned_text = _write_tuned(text, cur_doc, chosen, [p for p in searched if p.name in chosen])
+    if kept_as_given:
+        tuned_text = f"# mixnav tune: the file as given, kept: {kept_as_given}\n" + tuned_text
     tuned_text = _data_dir_from(tuned_text, ds.dataset.data_dir, data_folder, out)
     result = TuneResult(tuned_text=tuned_text, chosen=chosen, given=given, tuned=cur, evaluations=evaluations,
-                        not_tuned=not_tuned, runs=scorer.runs, out=out)
+                        not_tuned=not_tuned, runs=scorer.runs, out=out, kept_as_given=kept_as_given, found=found)
     from .report import write_outputs
     write_outputs(out, result, {"dataset": str(dataset), "source": source, "method": target, "budget": budget,
                                 "evaluations_spent": len(scorer.seen), "filter_runs": scorer.runs, "seed": seed,
                                 "span_s": [t_first, t_last], "window_s": w, "folds": len(windows),
                                 "cv_windows": windows, "fixed": fix, "criterion_best_searched": searched_best,
-                                "conservative_tolerance": tolerance})
+                                "conservative_tolerance": tolerance, "kept_as_given": kept_as_given,
+                                "found_not_written": found})
     write_marker(out, "tune", True, TUNE_FILES)
     return result
+
+
+def _kept_as_given(given: dict, best: dict, tolerance: float) -> str | None:
+    """Why the file as given is the tuned file (None: it is not): its criterion is within
+    ``tolerance`` (one standard error, :func:`.search.conservative_tolerance`) of the search's
+    best. The criterion cannot tell the two apart, and the user's file carries what the data
+    cannot (a data sheet, a fit by hand); the conservative pass would otherwise widen from the
+    best up to the bar and could hand back a file the criterion scores worse than the one given
+    (the shipped drive-0708 file: 1.102 as given, 1.221 tuned)."""
+    g, b = given.get("nlpd"), best.get("nlpd")
+    if g is None or b is None or not (math.isfinite(g) and math.isfinite(b)) or g > b + tolerance:
+        return None
+    return (f"its criterion ({g:.3f}) is within one standard error ({tolerance:.3f}) of the search's best "
+            f"({b:.3f}): the cross-validation cannot tell them apart")
 
 
 def _data_stage(doc, po, span, fix, chosen: dict, not_tuned: dict, local: Evaluator):

@@ -86,6 +86,10 @@ def _report(result, h: dict) -> str:
         lines.append(f"| {name} | {_f(s['nlpd'])} | {_f(s['innovation_ll_per_update'])} | "
                      f"{_f(s['cv_median_hmax_m'], '.2f')} / {_f(s['cv_p90_hmax_m'], '.2f')} / "
                      f"{_f(s['cv_worst_hmax_m'], '.2f')} |")
+    if getattr(result, "kept_as_given", None):
+        lines += ["", f"**tuned.toml is the file as given.** {result.kept_as_given[0].upper()}"
+                  f"{result.kept_as_given[1:]}. What the search's best had (not written):", ""]
+        lines += [f"- `{k}` = {v}" for k, v in result.found.items()] or ["- (nothing moved)"]
     lines += _chosen_lines(result)
     lines += ["", "## Where the two criteria disagree", "",
               "Per key, in the search's last visit of it (the other keys the same across its points), the value "
