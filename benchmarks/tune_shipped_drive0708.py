@@ -45,6 +45,9 @@ def main(argv=None):
         r = mixnav.tune("drive-0708", Path(tmp) / "tune", workers=a.workers)
         res = {"criterion_as_shipped": r.given, "criterion_tuned": r.tuned,
                "chosen": {k: c.get("value") for k, c in r.chosen.items()},
+               "kept_as_given": r.kept_as_given, "found_not_written": r.found,
+               **{k: json.loads((Path(tmp) / "tune" / "tune.json").read_text())[k]
+                  for k in ("criterion_best_searched", "conservative_tolerance")},
                "as_shipped": windows("drive-0708", Path(tmp)),
                "tuned": windows(str(Path(tmp) / "tune" / "tuned.toml"), Path(tmp))}
     Path(a.out + ".json").write_text(json.dumps(res, indent=1, default=float) + "\n")
@@ -61,7 +64,11 @@ def main(argv=None):
         for m, ws in res[label].items():
             lines.append(f"| {label.replace('_', ' ')} | {m} | " + ", ".join(
                 f"{w['horizontal_max_m']:.2f} ({w['nees_pos_mean']:.1f})" for w in ws) + " |")
-    lines += ["", "Chosen: " + "; ".join(f"`{k}` = {v}" for k, v in res["chosen"].items())]
+    if res["kept_as_given"]:
+        lines += ["", f"tuned.toml is the file as shipped: {res['kept_as_given']}. The search's best had (not "
+                  "written): " + ("; ".join(f"`{k}` = {v}" for k, v in res["found_not_written"].items()) or "nothing moved")]
+    else:
+        lines += ["", "Chosen: " + "; ".join(f"`{k}` = {v}" for k, v in res["chosen"].items())]
     Path(a.out + ".md").write_text("\n".join(lines) + "\n")
 
 
