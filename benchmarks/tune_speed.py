@@ -43,19 +43,31 @@ def main(argv=None):
         print(f"repeat {k}: {wall:.1f} s, {len(r.evaluations)} evaluations, {r.runs} filter runs "
               f"(load {load:.1f} before)", flush=True)
     res = {"config": str(CONFIG.relative_to(ROOT)), "budget": a.budget, "workers": a.workers,
-           "cpu_count": os.cpu_count(), "runs": runs}
+           "cpu_count": os.cpu_count(), "cpu": _cpu(), "runs": runs}
     Path(a.out + ".json").write_text(json.dumps(res, indent=1) + "\n")
     best = min(runs, key=lambda x: x["wall_s"])
     lines = ["# mixnav tune: speed (issue 35)", "",
              f"`python benchmarks/tune_speed.py --budget {a.budget} --workers {a.workers} --repeat {a.repeat}`: "
              f"the whole of drive-0708 (549 s, 100 Hz IMU, 4 Hz RTK) from `{res['config']}`, on "
-             f"{os.cpu_count()} cores. The bound: 2 minutes for a 10-minute recording.", "",
+             f"{os.cpu_count()} cores ({res['cpu']}). The bound: 2 minutes for a 10-minute recording.", "",
              "| repeat | wall [s] | evaluations | filter runs | load average before |", "|---|---|---|---|---|"]
     for k, x in enumerate(runs):
         lines.append(f"| {k} | {x['wall_s']:.1f} | {x['evaluations']} | {x['filter_runs']} | {x['load_before']:.1f} |")
     lines += ["", f"Fastest: {best['wall_s']:.1f} s for {best['filter_runs']} filter runs "
                   f"({1000 * best['wall_s'] / best['filter_runs']:.0f} ms of wall time per run on {a.workers} workers)."]
     Path(a.out + ".md").write_text("\n".join(lines) + "\n")
+
+
+def _cpu() -> str:
+    """The processor's model name (Linux), for comparing machines."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    import platform
+    return platform.processor() or "unknown processor"
 
 
 if __name__ == "__main__":
