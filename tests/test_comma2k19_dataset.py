@@ -179,3 +179,42 @@ def test_tune_names_the_files_own_windows_when_they_leave_no_window(tmp_path):
     with pytest.raises(ArgumentError, match="own withheld windows") as e:
         tune("comma2k19-example1", tmp_path / "out", budget=3, workers=1, window="10 s", folds=4)
     assert e.value.argument == "span"
+
+
+def test_odometer_time_offset_moves_the_stamps_as_the_reader_argument_does():
+    """``[aiding.odometer] time_offset`` added to the speeds' stamps: the samples the pipeline
+    reads are those of ``read_comma_odometer(..., time_offset=-0.08)`` (the CAN lag the
+    segment measures, benchmarks/results/comma2k19_odometer.md), sample for sample, on the
+    processing time axis; the speeds themselves are untouched."""
+    import tomlkit
+    from mixnav.config.loader import load_dataset_text, resolve
+    from mixnav.experiment.data_folder import find_data_dir
+    from mixnav.experiment.pipelines.ins_fixes import read_odometer
+    seg = data_file("comma2k19-example1")
+    text, source = resolve("comma2k19-example1", "datasets", "dataset")
+    doc = tomlkit.parse(text)
+    doc["aiding"]["odometer"]["time_offset"] = "-0.08 s"
+    ds, src, _ = load_dataset_text(tomlkit.dumps(doc), source)
+    base, _, _ = load_dataset_text(text, source)
+    folder = find_data_dir(ds, None, src)
+    t0 = 100.0
+    got, plain = read_odometer(ds, folder, t0), read_odometer(base, folder, t0)
+    want = comma2k19.read_comma_odometer(seg, sigma=0.1, time_offset=-0.08)
+    np.testing.assert_array_equal(got.time, want.time - t0)
+    np.testing.assert_array_equal(got.speed, plain.speed)
+    np.testing.assert_allclose(got.time - plain.time, -0.08, atol=1e-9)
+
+
+def test_a_simulated_odometer_refuses_a_time_offset(tmp_path):
+    """A scenario's odometer is simulated with exact stamps: the key is refused by name."""
+    import tomlkit
+    from mixnav.config import load_scenario
+    from mixnav.config.loader import resolve
+    from mixnav.errors import ConfigError
+    text, _ = resolve("vehicle-demo", "scenarios", "scenario")
+    doc = tomlkit.parse(text)
+    doc["aiding"]["odometer"]["time_offset"] = "0.05 s"
+    (tmp_path / "s.toml").write_text(tomlkit.dumps(doc))
+    with pytest.raises(ConfigError) as e:
+        load_scenario(str(tmp_path / "s.toml"))
+    assert e.value.key == "aiding.odometer.time_offset"

@@ -43,7 +43,10 @@ class OdometerAidingConfig(Strict):
     the wheel (axle centre) in the body frame from the IMU, default the
     vehicle point. ``max_gap``: a hole between the file's samples longer than this
     warns and is counted (``odometer_gaps_accepted`` in metrics.json), or with
-    ``gap_action = "fail"`` is an error naming the file and line (default: no limit)."""
+    ``gap_action = "fail"`` is an error naming the file and line (default: no limit).
+    ``time_offset`` [s] is added to the file's stamps (a dataset only): a speed stamped when
+    it arrived lags the IMU (a comma2k19 segment's CAN speeds by about 0.08 s, so -0.08 s;
+    benchmarks/results/comma2k19_odometer.md)."""
 
     format: reader_format("odometer") = "csv"  # type: ignore[valid-type]
     file: str | None = None
@@ -54,6 +57,7 @@ class OdometerAidingConfig(Strict):
     scale_sigma: Fraction = 0.01
     lever_arm: LengthVec | None = None
     rate: Frequency | None = None
+    time_offset: quantity(u.TIME) = 0.0  # type: ignore[valid-type]
 
 
 class ZuptConfig(Strict):

@@ -190,7 +190,12 @@ def _check_windows(sc, source) -> None:
 
 
 def _check_odometer(sc, source) -> None:
-    """``odometer.rate``: samples fall on IMU samples (the IMU rate a whole multiple of it)."""
+    """``odometer.rate``: samples fall on IMU samples (the IMU rate a whole multiple of it);
+    no ``aiding.odometer.time_offset`` (a simulated odometer's stamps are exact)."""
+    a = sc.aiding.odometer if sc.aiding is not None else None
+    if a is not None and a.time_offset:
+        raise ConfigError("a simulated odometer's stamps are exact: time_offset is for a dataset's speeds file",
+                          file=source, key="aiding.odometer.time_offset")
     o = sc.odometer
     if o is None:
         return

@@ -66,7 +66,10 @@ def read_odometer(ds: Dataset, folder: Path, t0: float) -> OdometerData | None:
     c = ds.aiding.odometer if ds.aiding is not None else None
     if c is None or c.file is None:
         return None
-    return _shift(read_table("odometer", c, folder, "aiding.odometer"), t0)
+    od = read_table("odometer", c, folder, "aiding.odometer")
+    if c.time_offset:
+        od = replace(od, time=od.time + c.time_offset)   # the stamps' lag ([aiding.odometer] time_offset)
+    return _shift(od, t0)
 
 
 def _corrupt(fixes: GnssFixes, process, rng) -> tuple[GnssFixes, np.ndarray]:
