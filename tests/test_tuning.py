@@ -291,13 +291,20 @@ def test_the_file_as_given_is_kept_when_the_criterion_cannot_tell_it_from_the_be
     assert _kept_as_given({"nlpd": 1.0}, {"nlpd": float("nan")}, 0.5) is None
 
 
+def _rescored(tuned_toml: Path, out: Path) -> float:
+    """The criterion of the written ``tuned.toml`` itself, on FAST's span and windows (its score
+    as the file given to another tuning)."""
+    return tune(str(tuned_toml), out, **{**FAST, "budget": 2}).given["nlpd"]
+
+
 @need_data
 def test_a_file_the_search_cannot_beat_is_handed_back_as_given(tmp_path):
-    """The shipped drive-0708 file (fitted by hand) on a short span: the search finds nothing
-    the criterion can tell from it, so tuned.toml holds the file's own values, says why at its
-    top, and scores as the file given; the untuned file of the same car is tuned (its criterion
-    falls far beyond one standard error) and the tuned file never scores worse than the given."""
-    import tomllib
+    """The shipped drive-0708 file (fitted by hand) with a budget that leaves the search's best
+    at the file itself (three evaluations: the file, the data stage's start, one move): tuned.toml
+    holds the file's own values, says why at its top, and scores as the file given. The untuned
+    file of the same car is tuned (its criterion falls far beyond one standard error), with the
+    search cut short by the same budget: tuned.toml is then the file that was scored (the data
+    stage's values written, not the file's), and never scores worse than the file given."""
     r = tune("drive-0708", tmp_path / "kept", **FAST)
     assert r.kept_as_given and r.chosen == {} and r.tuned == r.given
     text = (tmp_path / "kept" / "tuned.toml").read_text()
@@ -307,9 +314,13 @@ def test_a_file_the_search_cannot_beat_is_handed_back_as_given(tmp_path):
     assert tuned == given
     assert "tuned.toml is the file as given" in (tmp_path / "kept" / "report.md").read_text()
     assert json.loads((tmp_path / "kept" / "tune.json").read_text())["kept_as_given"] == r.kept_as_given
+    assert _rescored(tmp_path / "kept" / "tuned.toml", tmp_path / "kept-rescored") == pytest.approx(r.given["nlpd"])
     u = tune(str(ROOT / "benchmarks" / "configs" / "drive-0708-untuned.toml"), tmp_path / "tuned", **FAST)
     assert u.kept_as_given is None and u.chosen
     assert u.tuned["nlpd"] < u.given["nlpd"] - u.given["criterion_se"]
+    assert any("budget ran out" in c.get("how", "") for c in u.chosen.values())   # a data-stage value, written
+    assert _rescored(tmp_path / "tuned" / "tuned.toml", tmp_path / "tuned-rescored") == \
+        pytest.approx(u.tuned["nlpd"], rel=1e-9)
 
 
 class _RisingScorer:

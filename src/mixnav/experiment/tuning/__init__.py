@@ -72,7 +72,9 @@ class TuneResult:
     runs: int = 0                     # filter runs made (evaluations x folds; journal hits excluded)
     out: Path | None = None
     kept_as_given: str | None = None  # why tuned.toml is the file as given (None: it was tuned)
-    found: dict = field(default_factory=dict)   # kept as given: what the search's best had, key -> value text
+    found: dict = field(default_factory=dict)   # kept as given: what the search's best had moved,
+    #                                             key -> {"value", "how", "curve"} (not written)
+    curves: dict = field(default_factory=dict)  # per searched key, its evaluated points (the report's figure)
 
 
 def _seconds(value, argument: str) -> float:
@@ -231,6 +233,7 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
 
     searched_best = tolerance = kept_as_given = None
     found: dict = {}
+    searched_curves: dict = {}
     try:
         doc = tomlkit.parse(stripped)
         chosen, not_tuned, evaluations = {}, {}, []
@@ -287,35 +290,45 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
         searched_best = cur["nlpd"]
         tolerance = conservative_tolerance(cur, n_windows)
         kept_as_given = _kept_as_given(given, cur, tolerance)
-        if kept_as_given:
-            as_given = tomlkit.parse(given_text)
-            found = {p.name: _value_text(p, get_value(cur_doc, p)) for p in searched + rate
-                     if get_value(cur_doc, p) is not None and get_value(as_given, p) is not None
-                     and not np.array_equal(get_value(cur_doc, p), get_value(as_given, p))}
-            cur_doc, cur = tomlkit.parse(given_text), given
-            for name, c in list(chosen.items()):
-                chosen.pop(name)
-                not_tuned[name] = f"{c.get('value', c.get('from_data', ''))} found, not written: the file as given is kept"
-            for p in searched + rate:
-                not_tuned.setdefault(p.name, "the file as given is kept (its value stands)")
-            searched = []
-        else:
-            found = {}
+        if not kept_as_given:
             cur_doc, cur = conservative_pass(cur_doc, cur, searched, scorer, evaluations, tolerance, curves,
                                              reserve=RATE_RESERVE)
             cur_doc, cur, curves = coordinate_search(cur_doc, cur, rate, scorer, evaluations, grids=("coarse",),
                                                      curves=curves)
-            searched = searched + rate
+        searched = searched + rate
+        searched_curves = {p.name: [list(c) for c in curves.get(p.name, [])] for p in searched}
+        as_given = tomlkit.parse(given_text)
         for p in searched:
-            if len(curves.get(p.name, [])) < 2:   # only the current point: the budget ran out first
+            curve = curves.get(p.name, [])
+            v = get_value(cur_doc, p)
+            if len(curve) < 2:   # only the current point: the budget ran out first
+                entry = chosen.get(p.name)
+                if entry and "from_data" in entry and v is not None and not np.array_equal(v, get_value(as_given, p)):
+                    # the data stage's value, scored with the rest: tuned.toml holds what was scored
+                    entry.update({"value": _value_text(p, v), "spread": None,
+                                  "how": f"{entry['data_how']}; the budget ran out before the search reached it"})
+                    continue
                 not_tuned[p.name] = "the budget ran out before the search reached it: the file's value kept"
                 chosen.pop(p.name, None)
                 continue
-            v = get_value(cur_doc, p)
-            spread = _spread(p, curves.get(p.name, []), n_windows)
+            spread = _spread(p, curve, n_windows)
             entry = chosen.setdefault(p.name, {})
-            entry.update({"value": _value_text(p, v), "how": _how(p, curves.get(p.name, []), cur, entry),
-                          "spread": spread, "curve": [list(c) for c in curves.get(p.name, [])]})
+            entry.update({"value": _value_text(p, v), "how": _how(p, curve, cur, entry),
+                          "spread": spread, "curve": [list(c) for c in curve]})
+        if kept_as_given:
+            # what the search's best (and the data and installation stages) had, for the report;
+            # then the file as given, as it was scored
+            params = {q.name: q for q in searched}
+            for name, c in list(chosen.items()):
+                q = params.get(name)
+                moved_ = q is None or not np.array_equal(get_value(cur_doc, q), get_value(as_given, q))
+                if moved_ and "value" in c:
+                    found[name] = {"value": c["value"], "how": c.get("how", ""), "curve": c.get("curve")}
+                not_tuned[name] = (f"{c['value']} found, not written: the file as given is kept" if name in found
+                                   else "the file as given is kept (its value stands)")
+                chosen.pop(name)
+            cur_doc, cur = as_given, given
+            searched = []
 
     finally:
         scorer.close()
@@ -324,7 +337,8 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
         tuned_text = f"# mixnav tune: the file as given, kept: {kept_as_given}\n" + tuned_text
     tuned_text = _data_dir_from(tuned_text, ds.dataset.data_dir, data_folder, out)
     result = TuneResult(tuned_text=tuned_text, chosen=chosen, given=given, tuned=cur, evaluations=evaluations,
-                        not_tuned=not_tuned, runs=scorer.runs, out=out, kept_as_given=kept_as_given, found=found)
+                        not_tuned=not_tuned, runs=scorer.runs, out=out, kept_as_given=kept_as_given, found=found,
+                        curves=searched_curves)
     from .report import write_outputs
     write_outputs(out, result, {"dataset": str(dataset), "source": source, "method": target, "budget": budget,
                                 "evaluations_spent": len(scorer.seen), "filter_runs": scorer.runs, "seed": seed,

@@ -89,7 +89,7 @@ def _report(result, h: dict) -> str:
     if getattr(result, "kept_as_given", None):
         lines += ["", f"**tuned.toml is the file as given.** {result.kept_as_given[0].upper()}"
                   f"{result.kept_as_given[1:]}. What the search's best had (not written):", ""]
-        lines += [f"- `{k}` = {v}" for k, v in result.found.items()] or ["- (nothing moved)"]
+        lines += [f"- `{k}` = {v['value']} ({v['how']})" for k, v in result.found.items()] or ["- (nothing moved)"]
     lines += _chosen_lines(result)
     lines += ["", "## Where the two criteria disagree", "",
               "Per key, in the search's last visit of it (the other keys the same across its points), the value "
@@ -99,8 +99,7 @@ def _report(result, h: dict) -> str:
               "without GNSS, which is what the bias walks and the constraint sigmas act on; the innovation "
               "likelihood scores 0.25-1 s predictions.", "",
               "| key | cross-validation best | innovation-likelihood best | agree |", "|---|---|---|---|"]
-    for k, c in result.chosen.items():
-        curve = c.get("curve") or []
+    for k, curve in _curves(result).items():
         if not curve:
             continue
         pts = [x for x in curve if x[4] == curve[-1][4]]
@@ -111,12 +110,19 @@ def _report(result, h: dict) -> str:
     return "\n".join(lines)
 
 
+def _curves(result) -> dict:
+    """Per searched key its evaluated points: the search's record (also when the file as given
+    was kept and nothing is in ``chosen``), else the chosen values' own."""
+    got = {k: c for k, c in (getattr(result, "curves", None) or {}).items() if len(c) >= 2}
+    return got or {k: c["curve"] for k, c in result.chosen.items() if c.get("curve")}
+
+
 def _figure(path: Path, result) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from ...io.atomic import atomic_savefig
-    curves = {k: c["curve"] for k, c in result.chosen.items() if c.get("curve")}
+    curves = _curves(result)
     ylabel = "criterion" if "per_start" in (result.given or {}) else "CV mean NLPD"
     n = max(len(curves), 1)
     cols = min(3, n)
