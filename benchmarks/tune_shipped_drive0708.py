@@ -66,7 +66,8 @@ def main(argv=None):
                 f"{w['horizontal_max_m']:.2f} ({w['nees_pos_mean']:.1f})" for w in ws) + " |")
     if res["kept_as_given"]:
         lines += ["", f"tuned.toml is the file as shipped: {res['kept_as_given']}. The search's best had (not "
-                  "written): " + ("; ".join(f"`{k}` = {v}" for k, v in res["found_not_written"].items()) or "nothing moved")]
+                  "written): " + ("; ".join(f"`{k}` = {v['value']}" for k, v in res["found_not_written"].items())
+                                  or "nothing moved")]
     else:
         lines += ["", "Chosen: " + "; ".join(f"`{k}` = {v}" for k, v in res["chosen"].items())]
     Path(a.out + ".md").write_text("\n".join(lines) + "\n")
