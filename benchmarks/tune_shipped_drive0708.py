@@ -45,7 +45,8 @@ def main(argv=None):
         r = mixnav.tune("drive-0708", Path(tmp) / "tune", workers=a.workers)
         res = {"criterion_as_shipped": r.given, "criterion_tuned": r.tuned,
                "chosen": {k: c.get("value") for k, c in r.chosen.items()},
-               "kept_as_given": r.kept_as_given, "found_not_written": r.found,
+               "kept_as_given": r.kept_as_given,
+               "found_not_written": {k: {"value": v["value"], "how": v["how"]} for k, v in r.found.items()},
                **{k: json.loads((Path(tmp) / "tune" / "tune.json").read_text())[k]
                   for k in ("criterion_best_searched", "conservative_tolerance")},
                "as_shipped": windows("drive-0708", Path(tmp)),
