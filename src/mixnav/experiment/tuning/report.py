@@ -41,6 +41,9 @@ WITHHELD = ("withheld satellites: half the satellites withheld per run (two fold
 
 def _chosen_lines(result) -> list[str]:
     lines = ["", "## Chosen values", "", "| key | value | how | spread |", "|---|---|---|---|"]
+    if not result.chosen:
+        lines.append("| - | - | none written" + (": the file as given is kept" if getattr(result, "kept_as_given", None)
+                                                 else "") + " | - |")
     for k, c in result.chosen.items():
         lines.append(f"| `{k}` | {c.get('value', c.get('from_data', '-'))} | {c.get('how', c.get('data_how', ''))} "
                      f"| {c.get('spread') or '-'} |")
