@@ -108,7 +108,9 @@ def test_existing_experiment_needs_resume(serial):
 @pytest.mark.parametrize("kw, word", [({"runs": 0}, "runs"), ({"runs": -3}, "runs"),
                                       ({"runs": 2.5}, "runs"), ({"runs": 10 ** 9}, "runs"),
                                       ({"workers": 0}, "workers"), ({"seeds_from": -1}, "seeds_from"),
-                                      ({"seeds_from": 2 ** 63 - 1}, "seeds_from")])
+                                      ({"seeds_from": 2 ** 63 - 1}, "seeds_from"),
+                                      ({"resume": True, "overwrite": True}, "resume"),
+                                      ({"out_dir": "x\x00y"}, "out_dir")])
 def test_bad_input(tmp_path, kw, word):
     # called from Python, the error names the Python argument (the command names its option:
     # tests/test_bad_inputs.py)

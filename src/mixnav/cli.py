@@ -319,7 +319,9 @@ def experiment(scenario: str = typer.Argument(..., help="Shipped scenario name o
     from .experiment.montecarlo import run_experiment, write_experiment_outputs
 
     with _errors(), _as_options(runs="--runs", workers="--workers", seeds_from="--seeds-from",
-                                scheduler="--scheduler"):
+                                scheduler="--scheduler", out_dir="--out"):
+        if resume and overwrite:   # said in the options' own words (the library names its arguments)
+            raise ArgumentError("--resume continues the experiment in --out and --overwrite clears it: give one")
         df = run_experiment(scenario, runs, out_dir, workers=workers, resume=resume, seeds_from=seeds_from,
                             progress=progress, scheduler=scheduler, overwrite=overwrite)
         paths = write_experiment_outputs(scenario, df, out_dir, figures=figures)

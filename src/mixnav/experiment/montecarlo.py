@@ -385,8 +385,9 @@ def run_experiment(scenario: str, runs: int, out_dir: Path, workers: int | None 
     Raises
     ------
     ArgumentError
-        Bad ``runs``/``workers``/``seeds_from``/``scheduler`` (it names the
-        argument), or more than :data:`MAX_RUNS` runs in one call.
+        Bad ``runs``/``workers``/``seeds_from``/``scheduler``/``out_dir``, or
+        ``resume`` with ``overwrite`` (it names the argument), or more than
+        :data:`MAX_RUNS` runs in one call.
     ConfigError
         An unknown or invalid scenario (from the loader), an ``out_dir`` that does not
         match, ``distributed`` not installed, or a scheduler that cannot be
@@ -407,6 +408,11 @@ def run_experiment(scenario: str, runs: int, out_dir: Path, workers: int | None 
     if scheduler is not None and (not isinstance(scheduler, str) or not scheduler.strip()):
         raise ArgumentError(f"must be a Dask scheduler address such as 'tcp://127.0.0.1:8786', got {scheduler!r}",
                             argument="scheduler")
+    if resume and overwrite:
+        raise ArgumentError("continues the experiment in out_dir and overwrite clears it: pass one of the two",
+                            argument="resume")
+    if "\x00" in str(out_dir):
+        raise ArgumentError("holds a NUL byte", argument="out_dir")
     variants, source, sha, sweep = _load(scenario)  # unknown scenario: the loader's ConfigError
     sc = variants[0][1]
     out_dir = Path(out_dir)
@@ -419,10 +425,6 @@ def run_experiment(scenario: str, runs: int, out_dir: Path, workers: int | None 
     tasks = [(s, v) for s in seeds
              for v in ([None] if sweep is None else range(len(variants)))]
 
-    if resume and overwrite:
-        raise ConfigError("--resume continues the experiment in --out and --overwrite clears it: give one")
-    if isinstance(out_dir, str) and "\x00" in out_dir:
-        raise ConfigError("--out holds a NUL byte")
     manifest_path = out_dir / MANIFEST
     old_seeds: list[int] = []
     if manifest_path.is_file() and not overwrite:
