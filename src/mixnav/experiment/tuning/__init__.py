@@ -308,7 +308,16 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
                     entry.update({"value": _value_text(p, v), "spread": None,
                                   "how": f"{entry['data_how']}; the budget ran out before the search reached it"})
                     continue
-                not_tuned[p.name] = "the budget ran out before the search reached it: the file's value kept"
+                if kept_as_given and scorer.left() > 0:
+                    why = ("not reached: the search's last evaluations were held for the conservative pass, "
+                           "which does not run when the file as given is kept")
+                else:
+                    why = "the budget ran out before the search reached it"
+                if v is not None and not np.array_equal(v, get_value(as_given, p)) and not kept_as_given:
+                    # an element of a key another parameter moved (the vertical gyro's ARW with the ARW)
+                    not_tuned[p.name] = f"{why}; its value moved with the key it is part of: {_value_text(p, v)}"
+                else:
+                    not_tuned[p.name] = f"{why}: the file's value kept"
                 chosen.pop(p.name, None)
                 continue
             spread = _spread(p, curve, n_windows)

@@ -177,6 +177,8 @@ def conservative_pass(doc, cur: dict, params: list[Parameter], scorer, evaluatio
     best = cur["criterion"]
     order = {k: i for i, k in enumerate(CONSERVATIVE_KEYS)}
     for p in sorted((q for q in params if q.name in order and q.kind == "log"), key=lambda q: order[q.name]):
+        if scorer.left() <= reserve:     # before its "current" point: a visit of one point says nothing
+            return doc, cur
         _point(curves, p, "current", get_value(doc, p), cur, new_visit=True)
         steps, doublings = list(CONSERVATIVE_STEPS), 0
         while steps:
