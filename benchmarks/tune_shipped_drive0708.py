@@ -46,7 +46,7 @@ def main(argv=None):
         res = {"criterion_as_shipped": r.given, "criterion_tuned": r.tuned,
                "chosen": {k: c.get("value") for k, c in r.chosen.items()},
                "kept_as_given": r.kept_as_given,
-               "found_not_written": {k: {"value": v["value"], "how": v["how"]} for k, v in r.found.items()},
+               "found_not_written": r.found,
                **{k: json.loads((Path(tmp) / "tune" / "tune.json").read_text())[k]
                   for k in ("criterion_best_searched", "conservative_tolerance")},
                "as_shipped": windows("drive-0708", Path(tmp)),

@@ -386,7 +386,7 @@ def tune(dataset: str = typer.Argument(..., help="Shipped dataset config name or
         for name, s in (("as given", r.given), ("tuned", r.tuned)):
             t.add_row(name, f"{s['criterion']:.4f}", f"{s['innovation_ll_per_update']:.3f}")
     out.print(t)
-    if getattr(r, "kept_as_given", None):
+    if r.kept_as_given:
         out.print(f"the file as given is kept: {r.kept_as_given}")
     for k, c in r.chosen.items():
         out.print(f"  {k} = {c.get('value', c.get('from_data'))}")

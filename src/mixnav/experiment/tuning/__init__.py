@@ -73,7 +73,7 @@ class TuneResult:
     out: Path | None = None
     kept_as_given: str | None = None  # why tuned.toml is the file as given (None: it was tuned)
     found: dict = field(default_factory=dict)   # kept as given: what the search's best had moved,
-    #                                             key -> {"value", "how", "curve"} (not written)
+    #                                             key -> {"value", "how"} (not written)
     curves: dict = field(default_factory=dict)  # per searched key, its evaluated points (the report's figure)
 
 
@@ -298,12 +298,15 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
         searched = searched + rate
         searched_curves = {p.name: [list(c) for c in curves.get(p.name, [])] for p in searched}
         as_given = tomlkit.parse(given_text)
+        # per searched key: does the scored file hold another value than the file as given
+        moved = {p.name: get_value(cur_doc, p) is not None and
+                 not np.array_equal(get_value(cur_doc, p), get_value(as_given, p)) for p in searched}
         for p in searched:
             curve = curves.get(p.name, [])
             v = get_value(cur_doc, p)
             if len(curve) < 2:   # only the current point: the budget ran out first
                 entry = chosen.get(p.name)
-                if entry and "from_data" in entry and v is not None and not np.array_equal(v, get_value(as_given, p)):
+                if entry and "from_data" in entry and moved[p.name]:
                     # the data stage's value, scored with the rest: tuned.toml holds what was scored
                     entry.update({"value": _value_text(p, v), "spread": None,
                                   "how": f"{entry['data_how']}; the budget ran out before the search reached it"})
@@ -313,7 +316,7 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
                            "which does not run when the file as given is kept")
                 else:
                     why = "the budget ran out before the search reached it"
-                if v is not None and not np.array_equal(v, get_value(as_given, p)) and not kept_as_given:
+                if moved[p.name] and not kept_as_given:
                     # an element of a key another parameter moved (the vertical gyro's ARW with the ARW)
                     not_tuned[p.name] = f"{why}; its value moved with the key it is part of: {_value_text(p, v)}"
                 else:
@@ -327,12 +330,10 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
         if kept_as_given:
             # what the search's best (and the data and installation stages) had, for the report;
             # then the file as given, as it was scored
-            params = {q.name: q for q in searched}
             for name, c in list(chosen.items()):
-                q = params.get(name)
-                moved_ = q is None or not np.array_equal(get_value(cur_doc, q), get_value(as_given, q))
-                if moved_ and "value" in c:
-                    found[name] = {"value": c["value"], "how": c.get("how", ""), "curve": c.get("curve")}
+                # a key not searched (installation, stillness, suspension) is in chosen only when moved
+                if moved.get(name, True) and "value" in c:
+                    found[name] = {"value": c["value"], "how": c.get("how", "")}
                 not_tuned[name] = (f"{c['value']} found, not written: the file as given is kept" if name in found
                                    else "the file as given is kept (its value stands)")
                 chosen.pop(name)

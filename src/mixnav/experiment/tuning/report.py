@@ -42,7 +42,7 @@ WITHHELD = ("withheld satellites: half the satellites withheld per run (two fold
 def _chosen_lines(result) -> list[str]:
     lines = ["", "## Chosen values", "", "| key | value | how | spread |", "|---|---|---|---|"]
     if not result.chosen:
-        lines.append("| - | - | none written" + (": the file as given is kept" if getattr(result, "kept_as_given", None)
+        lines.append("| - | - | none written" + (": the file as given is kept" if result.kept_as_given
                                                  else "") + " | - |")
     for k, c in result.chosen.items():
         lines.append(f"| `{k}` | {c.get('value', c.get('from_data', '-'))} | {c.get('how', c.get('data_how', ''))} "
@@ -89,7 +89,7 @@ def _report(result, h: dict) -> str:
         lines.append(f"| {name} | {_f(s['nlpd'])} | {_f(s['innovation_ll_per_update'])} | "
                      f"{_f(s['cv_median_hmax_m'], '.2f')} / {_f(s['cv_p90_hmax_m'], '.2f')} / "
                      f"{_f(s['cv_worst_hmax_m'], '.2f')} |")
-    if getattr(result, "kept_as_given", None):
+    if result.kept_as_given:
         lines += ["", f"**tuned.toml is the file as given.** {result.kept_as_given[0].upper()}"
                   f"{result.kept_as_given[1:]}. What the search's best had (not written):", ""]
         lines += [f"- `{k}` = {v['value']} ({v['how']})" for k, v in result.found.items()] or ["- (nothing moved)"]
@@ -116,7 +116,7 @@ def _report(result, h: dict) -> str:
 def _curves(result) -> dict:
     """Per searched key its evaluated points: the search's record (also when the file as given
     was kept and nothing is in ``chosen``), else the chosen values' own."""
-    got = {k: c for k, c in (getattr(result, "curves", None) or {}).items() if len(c) >= 2}
+    got = {k: c for k, c in result.curves.items() if len(c) >= 2}
     return got or {k: c["curve"] for k, c in result.chosen.items() if c.get("curve")}
 
 
