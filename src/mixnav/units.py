@@ -122,6 +122,8 @@ GYRO_BIAS_DRIFT = Dimension(1.0, 0.0, -1.5)
 #: random walk of an accelerometer bias: accel/sqrt(time), e.g. ug/s/sqrt(Hz),
 #: m/s^3/sqrt(Hz). Note "ug/sqrt(Hz)" alone is VELOCITY_RANDOM_WALK, not this.
 ACCEL_BIAS_DRIFT = Dimension(0.0, 1.0, -2.5)
+#: random walk of a time offset (a clock's phase): time/sqrt(time), e.g. ms/sqrt(s)
+TIME_RANDOM_WALK = Dimension(0.0, 0.0, 0.5)
 
 # (dimension, name in words, accepted spellings shown in error messages);
 # every spelling here is checked by the tests to parse to its dimension.
@@ -138,6 +140,7 @@ _NAMED: tuple[tuple[Dimension, str, tuple[str, ...]], ...] = (
     (VELOCITY_RANDOM_WALK, "velocity random walk", ("ug/sqrt(Hz)", "m/s/sqrt(h)", "m/s^1.5")),
     (GYRO_BIAS_DRIFT, "gyro bias drift", ("deg/h/sqrt(h)", "deg/s^2/sqrt(Hz)", "rad/s^1.5")),
     (ACCEL_BIAS_DRIFT, "accelerometer bias drift", ("ug/s/sqrt(Hz)", "m/s^3/sqrt(Hz)", "m/s^2.5")),
+    (TIME_RANDOM_WALK, "time random walk", ("ms/sqrt(s)", "s/sqrt(s)", "s^0.5")),
 )
 
 # Base units: name -> (factor to SI, dimension). Case-sensitive on purpose:

@@ -9,7 +9,7 @@ from typing import Literal
 
 from .. import units as u
 from .fields import (AngleVec, Duration, Fraction, Frequency, LengthVec, NonNegSpeed, PosAccel, PosAngle, PosLength,
-                     PosRate, PosSpeed, Strict, Time, quantity, reader_format)
+                     PosRate, PosSpeed, Strict, Time, TimeWalk, quantity, reader_format)
 
 #: an angle per acceleration (rad per m/s^2): ``"0.3 deg/(m/s^2)"``
 PitchPerAccel = quantity(u.Dimension(1.0, -1.0, 2.0))
@@ -98,7 +98,11 @@ class AidingConfig(Strict):
     ``gnss_lever_sigma`` and ``time_offset_sigma``: initial 1-sigma of the
     estimated corrections of the antenna lever arm (``estimate = ["gnss_lever"]``)
     and of the IMU time offset (``estimate = ["imu_time_offset"]``), loose
-    coupling (:mod:`mixnav.measurements.loose`).
+    coupling (:mod:`mixnav.measurements.loose`). ``time_offset_walk``: the offset
+    state's random-walk density [s/sqrt(s), written e.g. ``"1 ms/sqrt(s)"``]; 0, the
+    default, holds the offset constant (a fixed latency). An IMU clock whose offset
+    wanders against GNSS time (a free-running logger) needs a walk, or the state settles
+    on a mean and is over-confident (docs/aiding.md, "Installation states").
     """
 
     vehicle_mounting: AngleVec | None = None
@@ -106,6 +110,7 @@ class AidingConfig(Strict):
     mounting_sigma: PosAngle = 0.05
     gnss_lever_sigma: PosLength = 0.5
     time_offset_sigma: Duration = 0.1
+    time_offset_walk: TimeWalk = 0.0
     nhc: NhcConfig | None = None
     odometer: OdometerAidingConfig | None = None
     zupt: ZuptConfig | None = None

@@ -59,6 +59,7 @@ PosLength = quantity(u.LENGTH, positive=True)
 NonNegRate = quantity(u.ANGULAR_RATE, nonnegative=True)
 NonNegLength = quantity(u.LENGTH, nonnegative=True)
 NonNegAngle = quantity(u.ANGLE, nonnegative=True)
+TimeWalk = quantity(u.TIME_RANDOM_WALK, nonnegative=True)
 #: an elevation mask: 0 (the horizon) up to, not including, the zenith (a mask of 90 deg or more
 #: leaves no satellite: every epoch would be unsolvable)
 ElevationMask = quantity(u.ANGLE, nonnegative=True, below=(math.pi / 2, "90 deg (the zenith)"))

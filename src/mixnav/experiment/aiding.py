@@ -95,7 +95,7 @@ def method_layout(method: MethodConfig, inputs: AidingInputs | None, source=None
                                   file=source, key=f"methods[{index}].estimate")
             c = cfg if cfg is not None else AidingConfig()
             blocks.append(gnss_lever_block(c.gnss_lever_sigma) if e == "gnss_lever"
-                          else time_offset_block(c.time_offset_sigma))
+                          else time_offset_block(c.time_offset_sigma, c.time_offset_walk))
     return StateLayout(base.name + "+" + "+".join(method.estimate), blocks)
 
 
