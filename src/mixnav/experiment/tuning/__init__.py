@@ -259,7 +259,7 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
                              coordinate_search)
         from .parameters import NHC_RATE
         searched = [_pivoted(_scaled_to_fixes(p, po, (t_first, t_last)), (t_first, t_last), fix)
-                    for p in ins_parameters() if not _fixed(p.name, fix) and _applies(cur_doc, p, ds)
+                    for p in ins_parameters() if not _fixed(p.name, fix) and _applies(cur_doc, p, pds)
                     and not chosen.get(p.name, {}).get("measured") and not _carries_fixed(p, fix)]
         # the NHC rate last of all, after the conservative pass (below): its step carries the
         # sigmas so that the information per second stays, so the other keys' optima hardly move
@@ -275,7 +275,7 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
             elif _carries_fixed(p, fix):
                 not_tuned[p.name] = "a key its step moves with it is fixed by the user (--fix)"
             elif p.name not in searched_names and not chosen.get(p.name, {}).get("measured"):
-                not_tuned[p.name] = _why_not(cur_doc, p, ds)
+                not_tuned[p.name] = _why_not(cur_doc, p, pds)
         cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations, grids=("coarse",),
                                                  reserve=CONSERVATIVE_RESERVE)
         # the installation mixnav estimates as states, kept when the criterion agrees; between the
@@ -589,6 +589,9 @@ def _why_not(doc, p: Parameter, ds) -> str | None:
         table = p.path[1] if len(p.path) > 2 else "nhc"   # aiding.vehicle_point serves the NHC
         if "aiding" not in doc or table not in doc["aiding"]:
             return f"no [aiding.{table}] in the file"
+    if p.path[:2] == ("aiding", "odometer") and not any("odometer" in (getattr(m, "aiding", None) or [])
+                                                        for m in ds.methods):   # ds: the tuned method only
+        return "the tuned method does not use the odometer"
     if p.name == "gnss.velocity_delay" and (not ds.gnss.use_velocity or ds.gnss.format != "rtklib-pos"):
         return "the fixes' velocities are not used, or their format is not rtklib-pos"
     if get_value(doc, p) is None:
