@@ -139,7 +139,9 @@ def main(argv=None):
                 "filter_runs": r.runs, "criterion_given": r.given["nlpd"], "criterion_tuned": r.tuned["nlpd"],
                 "chosen": {k: c.get("value") for k, c in r.chosen.items() if c.get("value")},
                 "how": {k: c.get("how") for k, c in r.chosen.items() if c.get("value")},
-                "not_tuned": dict(r.not_tuned), "scores": {"default": {}, "tuned": {}}}
+                "not_tuned": dict(r.not_tuned), "kept_as_given": r.kept_as_given,
+                "found_not_written": {k: c.get("value") for k, c in (r.found or {}).items()},
+                "scores": {"default": {}, "tuned": {}}}
         print(f"tuned on the {tune_half} half: {wall:.1f} s, {len(r.evaluations)} evaluations, {r.runs} filter runs, "
               f"criterion {r.given['nlpd']:.3f} -> {r.tuned['nlpd']:.3f}", flush=True)
         tuned_text = (out / "tuned.toml").read_text()
@@ -189,6 +191,9 @@ def write_md(res: dict, a) -> None:
         lines += ["", f"Tuning: {f['tune_wall_s']:.1f} s wall, {f['evaluations']} evaluations, {f['filter_runs']} "
                   f"filter runs ({res['workers']} worker), criterion (mean NLPD of the withheld fixes) "
                   f"{f['criterion_given']:.3f} -> {f['criterion_tuned']:.3f}.", "", "Chosen:", ""]
+        if f.get("kept_as_given"):
+            lines += [f"None: the file as given is kept, {f['kept_as_given']}. The search's best had (not written): "
+                      + "; ".join(f"`{k}` = {v}" for k, v in f.get("found_not_written", {}).items()) + "."]
         lines += [f"- `{k}` = {v}" for k, v in f["chosen"].items()]
         lines += ["", "Not tuned (the file's value kept):", ""]
         lines += [f"- `{k}`: {v}" for k, v in f["not_tuned"].items()]

@@ -279,6 +279,18 @@ def test_criterion_se_is_the_windows_standard_error():
     assert criterion_se([3.0], [10]) is None and criterion_se([], []) is None
 
 
+def test_the_bar_is_one_standard_error_never_below_the_windows_likelihood_interval():
+    """The conservative pass's bar (and the kept-as-given one): the measured standard error of
+    the best's criterion, floored at 2 / n_windows; 2 / n_windows alone when the score has none.
+    comma2k19-example1's second half (4 windows, standard error 0.005) gets the floor, 0.5;
+    drive-0708's first half (14 windows, 0.44) its standard error."""
+    from mixnav.experiment.tuning.search import conservative_tolerance
+    assert conservative_tolerance({"criterion_se": 0.005}, 4) == pytest.approx(0.5)
+    assert conservative_tolerance({"criterion_se": 0.44}, 14) == pytest.approx(0.44)
+    assert conservative_tolerance({"criterion_se": None}, 10) == pytest.approx(0.2)
+    assert conservative_tolerance({}, 0) == pytest.approx(2.0)
+
+
 def test_the_file_as_given_is_kept_when_the_criterion_cannot_tell_it_from_the_best():
     """Kept when within one standard error of the search's best (the bar inclusive), not when
     beyond it or when either criterion is not finite (a failed run is never "as good")."""

@@ -362,7 +362,7 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
 
 def _kept_as_given(given: dict, best: dict, tolerance: float) -> str | None:
     """Why the file as given is the tuned file (None: it is not): its criterion is within
-    ``tolerance`` (one standard error, :func:`.search.conservative_tolerance`) of the search's
+    ``tolerance`` (one standard error, at least 2 / n_windows: :func:`.search.conservative_tolerance`) of the search's
     best. The criterion cannot tell the two apart, and the user's file carries what the data
     cannot (a data sheet, a fit by hand); the conservative pass would otherwise widen from the
     best up to the bar and could hand back a file the criterion scores worse than the one given
@@ -370,7 +370,8 @@ def _kept_as_given(given: dict, best: dict, tolerance: float) -> str | None:
     g, b = given.get("nlpd"), best.get("nlpd")
     if g is None or b is None or not (math.isfinite(g) and math.isfinite(b)) or g > b + tolerance:
         return None
-    return (f"its criterion ({g:.3f}) is within one standard error ({tolerance:.3f}) of the search's best "
+    return (f"its criterion ({g:.3f}) is within the criterion's bar ({tolerance:.3f}: one standard error, at "
+            f"least 2 / windows) of the search's best "
             f"({b:.3f}): the cross-validation cannot tell them apart")
 
 
