@@ -292,7 +292,7 @@ def test_the_bar_is_one_standard_error_never_below_the_windows_likelihood_interv
 
 
 def test_the_file_as_given_is_kept_when_the_criterion_cannot_tell_it_from_the_best():
-    """Kept when within one standard error of the search's best (the bar inclusive), not when
+    """Kept when within the bar of the search's best (the bar inclusive), not when
     beyond it or when either criterion is not finite (a failed run is never "as good")."""
     from mixnav.experiment.tuning import _kept_as_given
     assert _kept_as_given({"nlpd": 1.10}, {"nlpd": 0.73}, 0.50) is not None
@@ -367,8 +367,9 @@ class _RisingScorer:
 ])
 def test_the_conservative_pass_widens_within_one_standard_error(se, rises, factor, scored):
     """The tolerance is the best's standard error from its windows' spread (the one-standard-error
-    rule), not 2 / n_windows; each key is doubled while inside it (a widening 0.3 above the best
-    is kept with a standard error of 0.5 over 14 windows, where 2 / 14 = 0.14 refuses it)."""
+    rule) where that is above the floor 2 / n_windows; each key is doubled while inside it (a
+    widening 0.3 above the best is kept with a standard error of 0.5 over 14 windows, where
+    2 / 14 = 0.14 alone would refuse it)."""
     from mixnav.experiment.tuning.search import conservative_pass, conservative_tolerance
     doc = tomlkit.parse((ROOT / "benchmarks" / "configs" / "drive-0708-untuned.toml").read_text())
     arw = next(p for p in ins_parameters() if p.name == "imu.errors.arw")
@@ -739,8 +740,8 @@ def test_an_odometer_lag_is_tuned_back_by_the_cross_validation(tmp_path):
     time_offset``), every other key fixed: the search moves the offset back to 0 within its
     fine step (0.025 s). Why 0 is the answer: over the minute the filter's own odometer and GNSS
     innovation likelihoods both peak at 0 and fall symmetrically (measured at -0.1, -0.05, 0,
-    +0.05, +0.1 s: odometer NIS per dof 0.41, 0.33, 0.27, 0.32, 0.38). A file whose method
-    does not use the odometer leaves the key out and says why."""
+    +0.05, +0.1 s: odometer NIS per dof 0.41, 0.33, 0.27, 0.32, 0.38). A tuned method that does
+    not use the odometer (or the NHC) leaves its keys out and says why."""
     from .conftest import data_file
     data = data_file("comma2k19-example1")
     doc = tomlkit.parse((SHIPPED / "comma2k19-example1.toml").read_text())
@@ -760,3 +761,6 @@ def test_an_odometer_lag_is_tuned_back_by_the_cross_validation(tmp_path):
     (tmp_path / "no_odo.toml").write_text(tomlkit.dumps(doc))
     r = tune(str(tmp_path / "no_odo.toml"), tmp_path / "out2", budget=2, workers=1, fix=fix, window="10 s", folds=4)
     assert r.not_tuned[key] == "the tuned method does not use the odometer"
+    r = tune(str(tmp_path / "late.toml"), tmp_path / "out3", budget=2, workers=1, method="ekf", window="10 s", folds=4)
+    assert r.not_tuned[key] == "the tuned method does not use the odometer"
+    assert r.not_tuned["aiding.nhc.sigma[0]"] == r.not_tuned["aiding.nhc.rate"] == "the tuned method does not use the NHC"

@@ -289,7 +289,7 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
         n_windows = sum(len(f) for f in windows)
         searched_best = cur["nlpd"]
         tolerance = conservative_tolerance(cur, n_windows)
-        kept_as_given = _kept_as_given(given, cur, tolerance)
+        kept_as_given = _kept_as_given(given, cur, tolerance, n_windows)
         if not kept_as_given:
             cur_doc, cur = conservative_pass(cur_doc, cur, searched, scorer, evaluations, tolerance, curves,
                                              reserve=RATE_RESERVE)
@@ -360,7 +360,7 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
     return result
 
 
-def _kept_as_given(given: dict, best: dict, tolerance: float) -> str | None:
+def _kept_as_given(given: dict, best: dict, tolerance: float, n_windows: int | None = None) -> str | None:
     """Why the file as given is the tuned file (None: it is not): its criterion is within
     ``tolerance`` (one standard error, at least 2 / n_windows: :func:`.search.conservative_tolerance`) of the search's
     best. The criterion cannot tell the two apart, and the user's file carries what the data
@@ -370,9 +370,11 @@ def _kept_as_given(given: dict, best: dict, tolerance: float) -> str | None:
     g, b = given.get("nlpd"), best.get("nlpd")
     if g is None or b is None or not (math.isfinite(g) and math.isfinite(b)) or g > b + tolerance:
         return None
-    return (f"its criterion ({g:.3f}) is within the criterion's bar ({tolerance:.3f}: one standard error, at "
-            f"least 2 / windows) of the search's best "
-            f"({b:.3f}): the cross-validation cannot tell them apart")
+    se = best.get("criterion_se")
+    parts = (f"the larger of one standard error, {se:.3f}, and 2 / {n_windows} windows"
+             if se is not None and n_windows else "one standard error, at least 2 / n_windows")
+    return (f"its criterion ({g:.3f}) is within the criterion's bar ({tolerance:.3f}: {parts}) of the "
+            f"search's best ({b:.3f}): the cross-validation cannot tell them apart")
 
 
 def _data_stage(doc, po, span, fix, chosen: dict, not_tuned: dict, local: Evaluator):
@@ -585,14 +587,16 @@ def _applies(doc, p: Parameter, ds) -> bool:
 
 
 def _why_not(doc, p: Parameter, ds) -> str | None:
-    """Why a parameter is not searched on this file (None: it is)."""
+    """Why a parameter is not searched on this file (None: it is); ``ds``: the dataset with the
+    tuned method only."""
     if p.path[0] == "aiding":
         table = p.path[1] if len(p.path) > 2 else "nhc"   # aiding.vehicle_point serves the NHC
         if "aiding" not in doc or table not in doc["aiding"]:
             return f"no [aiding.{table}] in the file"
-    if p.path[:2] == ("aiding", "odometer") and not any("odometer" in (getattr(m, "aiding", None) or [])
-                                                        for m in ds.methods):   # ds: the tuned method only
-        return "the tuned method does not use the odometer"
+        # a constraint the tuned method does not apply: moving it could not change the criterion
+        if table in ("nhc", "odometer") and not any(table in (getattr(m, "aiding", None) or [])
+                                                    for m in ds.methods):   # ds: the tuned method only
+            return f"the tuned method does not use the {'NHC' if table == 'nhc' else 'odometer'}"
     if p.name == "gnss.velocity_delay" and (not ds.gnss.use_velocity or ds.gnss.format != "rtklib-pos"):
         return "the fixes' velocities are not used, or their format is not rtklib-pos"
     if get_value(doc, p) is None:

@@ -147,8 +147,9 @@ def ins_parameters() -> list[Parameter]:
         Parameter("gnss.velocity_delay", ("gnss", "velocity_delay"), u.TIME, "s", "shift",
                   (-0.1, -0.05, 0.05, 0.1), (-0.025, 0.025), 0.0, 1.0, default=0.0, judged_by="innovation",
                   about="how much earlier than its epoch a GNSS velocity is valid"),
-        # the odometer's stamps against the IMU's (a CAN speed arrives after the wheel turned:
-        # comma2k19-example1's 0.08 s, benchmarks/results/comma2k19_odometer.md). It follows the
+        # the odometer's stamps against the IMU's (a CAN speed can arrive after the wheel turned;
+        # on comma2k19-example1 a cross-correlation says 0.08 s, benchmarks/results/comma2k19_odometer.md,
+        # while the filter's own innovations and this criterion peak at 0: docs/tuning.md). It follows the
         # cross-validation: the odometer carries the dead reckoning of the withheld windows, while
         # the innovation likelihood counts the GNSS updates only, which the odometer hardly moves
         Parameter("aiding.odometer.time_offset", ("aiding", "odometer", "time_offset"), u.TIME, "s", "shift",

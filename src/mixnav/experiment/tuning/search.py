@@ -159,7 +159,7 @@ def conservative_tolerance(best: dict, n_windows: int) -> float:
     Why the floor: a standard error measured from a handful of windows can be small by chance
     (four windows give it three degrees of freedom), and then a gain far below what one
     window's worth of evidence can carry would move the file (comma2k19-example1's half minute:
-    standard error 0.005 from 4 windows, the search's best 0.019 per fix below the file as
+    standard error 0.005 from 4 windows, the search's best 0.023 per fix below the file as
     given, and its outages on the other half twice as large)."""
     floor = 2.0 / max(n_windows, 1)
     se = best.get("criterion_se")
@@ -174,7 +174,8 @@ def conservative_pass(doc, cur: dict, params: list[Parameter], scorer, evaluatio
     most :data:`CONSERVATIVE_DOUBLINGS` times) while the criterion stays within ``tolerance``
     of the search's best; when the first x2 is already past it, by x1.41 once. The bar is
     fixed: widenings do not add up past it, and the keys earlier in the order get it first.
-    ``tolerance`` is one standard error of the best's criterion (:func:`conservative_tolerance`).
+    ``tolerance`` is one standard error of the best's criterion, floored at 2 / n_windows
+    (:func:`conservative_tolerance`).
     Why: a criterion minimised on one stretch of a drive over-fits it;
     benchmarks/results/tune_search.md found the files that pushed the criterion lowest the
     most overconfident on the other half (correlation -0.93 with the share of windows out of
