@@ -186,3 +186,16 @@ def test_the_command_needs_no_click_of_its_own():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.strip().splitlines()[-1] == "2"
+
+
+def test_python_dash_m_runs_the_same_command_line(tmp_path):
+    """``python -m mixnav`` is the ``mixnav`` command (an environment without its scripts folder
+    on PATH): the version it prints is the package's, and a bad argument exits with the CLI's
+    usage code 2, naming the option."""
+    import subprocess
+    import sys
+    out = subprocess.run([sys.executable, "-m", "mixnav", "--version"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and mixnav.__version__ in out.stdout, out
+    bad = subprocess.run([sys.executable, "-m", "mixnav", "tune", "drive-0708", "--out", str(tmp_path / "t"),
+                          "--budget", "-1"], capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and "budget" in (bad.stdout + bad.stderr), bad
