@@ -261,6 +261,7 @@ def tune(dataset, out, *, budget: int = 96, workers: int | None = None, schedule
         searched = [_pivoted(_scaled_to_fixes(p, po, (t_first, t_last)), (t_first, t_last), fix)
                     for p in ins_parameters() if not _fixed(p.name, fix) and _applies(cur_doc, p, pds)
                     and not chosen.get(p.name, {}).get("measured") and not _carries_fixed(p, fix)]
+        searched = [_with_turn_rate_lag(p, po, (t_first, t_last), chosen, not_tuned) for p in searched]
         # the NHC rate last of all, after the conservative pass (below): its step carries the
         # sigmas so that the information per second stays, so the other keys' optima hardly move
         # with it, and every evaluation after a faster rate would cost more
@@ -555,6 +556,31 @@ def _scaled_to_fixes(p: Parameter, po, span) -> Parameter:
     if not sig.size or not np.isfinite(sig).all():
         return p
     return replace(p, zero_from=float(np.clip(np.median(sig), p.lower, p.upper)))
+
+
+def _with_turn_rate_lag(p: Parameter, po, span, chosen: dict, not_tuned: dict) -> Parameter:
+    """The IMU time offset with the move the turn-rate cross-correlation measured
+    (:func:`.data_stage.turn_rate_lag`) tried beside its coarse grid, when that move lies beyond
+    the grid's reach (a logger's latency of half a second: from the grid's +-0.1 s steps the
+    search would stop a few tenths short, and every key after it would absorb the rest). Any
+    other key, or a lag within reach, as it is; a lag the data cannot show is said in
+    ``not_tuned``."""
+    from dataclasses import replace
+    from .data_stage import turn_rate_lag
+    if p.name != "installation.imu_time_offset":
+        return p
+    found = turn_rate_lag(po.imu, po.all_fixes, span)
+    if found[0] is None:
+        not_tuned[p.name + " (turn-rate lag)"] = found[1]
+        return p
+    lag, corr, pairs = found
+    move = round(-lag, 3)
+    if abs(move) <= max(abs(s) for s in p.coarse):
+        return p
+    chosen.setdefault(p.name, {})["data_how"] = (
+        f"the IMU's turn rate against the fixes' course rate peaks {lag:+.3f} s late (correlation {corr:.2f}, "
+        f"{pairs} chord pairs): a move of {move:+g} s tried beside the grid")
+    return replace(p, data_steps=(move,))
 
 
 def _fixed(name: str, fix) -> bool:

@@ -1,5 +1,7 @@
-"""What the data says before any filter runs: the still segments' IMU noise (Allan deviation)
-and the ZUPT/ZARU thresholds from the stillness statistics, both inside the tuning span."""
+"""What the data says before any filter runs: the still segments' IMU noise (Allan deviation),
+the ZUPT/ZARU thresholds from the stillness statistics and the IMU's latency against the fixes
+(the turn-rate lag), all inside the tuning span; and, from one run, the bias walks and the
+NHC's suspension pitch."""
 
 from __future__ import annotations
 
@@ -167,3 +169,61 @@ def suspension_pitch(res, fixes, span, mounting=(0.0, 0.0, 0.0)):
     return k, (f"the fixes' vertical velocity in the vehicle frame (attitude of a run without the NHC) "
                f"regressed on speed x forward acceleration over {n} records above {SQUAT_MIN_SPEED:g} m/s: "
                f"+-{np.degrees(se):.3f} deg/(m/s^2) (1 sigma, one sample a second)")
+
+
+#: the turn-rate cross-correlation (:func:`turn_rate_lag`): lags searched [s], their step [s], the
+#: slowest chord counted [m/s] (below it the fixes' noise swamps the course), and what a peak
+#: must reach to be used: its correlation and the number of chord pairs behind it
+LAG_RANGE_S, LAG_STEP_S, LAG_MIN_SPEED, LAG_MIN_CORR, LAG_MIN_PAIRS = 1.0, 0.01, 3.0, 0.5, 30
+
+
+def turn_rate_lag(imu, fixes, span):
+    """How much later the IMU's rotation shows than the fixes' turns, from the data alone:
+    ``(lag [s], peak correlation, chord pairs)``, or ``(None, why)``.
+
+    The fixes' course between consecutive positions (chords, not the receiver's velocity,
+    which may be a filtered, delayed one) changes from one chord to the next by the turn in
+    between; the IMU's angular-rate magnitude averaged over the same interval, shifted by a
+    lag, is compared with it (Pearson correlation, lags within +-:data:`LAG_RANGE_S` in
+    :data:`LAG_STEP_S` steps, the peak refined by a parabola). The magnitude needs no
+    mounting: in a car the body turns about its vertical far more than about the others.
+    The lag is on the run's time axis, so ``-lag`` is the correction of the configured
+    ``imu_time_offset`` at the span's middle (drive-0708: the innovation likelihood's offset
+    -0.07 s on the first half and -0.19 s on the second, where the innovation likelihood's
+    quarters prefer -0.125 to -0.175 and -0.2 to -0.225 s; the same offset within 3 ms whether
+    the file had configured -0.125 s or +0.4 s). A coarse start, which the search refines."""
+    from ...geodesy.frames import ned_displacement
+    t = np.asarray(fixes.time, float)
+    if len(t) < 3 or len(imu.time) < 3:
+        return None, "too few fixes or IMU samples"
+    p = ned_displacement(fixes.lla, fixes.lla[0])
+    dt = np.diff(t)
+    gap = 1.5 * float(np.median(dt))
+    v = np.diff(p[:, :2], axis=0) / dt[:, None]
+    course = np.unwrap(np.arctan2(v[:, 1], v[:, 0]))
+    mid = 0.5 * (t[1:] + t[:-1])
+    ok = ((dt[1:] < gap) & (dt[:-1] < gap) & (np.hypot(*v[1:].T) > LAG_MIN_SPEED)
+          & (np.hypot(*v[:-1].T) > LAG_MIN_SPEED))
+    a, b = mid[:-1][ok], mid[1:][ok]
+    turn = np.abs(np.diff(course)[ok] / (b - a))
+    # the IMU's rotation angle accumulated, to average |omega| over any interval
+    tc = np.r_[imu.time[0] - imu.dt[0], imu.time]
+    angle = np.r_[0.0, np.cumsum(np.linalg.norm(imu.dtheta, axis=1))]
+    L = LAG_RANGE_S
+    sel = (a >= max(span[0], tc[0]) + L) & (b <= min(span[1], tc[-1]) - L)
+    a, b, turn = a[sel], b[sel], turn[sel]
+    if len(turn) < LAG_MIN_PAIRS or np.std(turn) == 0:
+        return None, f"{len(turn)} chord pairs above {LAG_MIN_SPEED:g} m/s in the span (at least {LAG_MIN_PAIRS})"
+    lags = np.arange(-L, L + LAG_STEP_S / 2, LAG_STEP_S)
+    corr = np.array([np.corrcoef((np.interp(b + x, tc, angle) - np.interp(a + x, tc, angle)) / (b - a), turn)[0, 1]
+                     for x in lags])
+    corr = np.where(np.isfinite(corr), corr, -1.0)
+    k = int(np.argmax(corr))
+    if k in (0, len(lags) - 1):
+        return None, f"the correlation peaks at the edge of +-{L:g} s: no lag found inside it"
+    if corr[k] < LAG_MIN_CORR:
+        return None, f"peak correlation {corr[k]:.2f} below {LAG_MIN_CORR:g} (too few turns, or noisy fixes)"
+    c0, c1, c2 = corr[k - 1:k + 2]
+    den = c0 - 2 * c1 + c2
+    frac = 0.5 * (c0 - c2) / den if den < 0 else 0.0
+    return float(lags[k] + frac * LAG_STEP_S), float(c1), int(len(turn))

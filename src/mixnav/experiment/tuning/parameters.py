@@ -71,6 +71,10 @@ class Parameter:
     length : int or None
         With ``index``: the vector's length a one-value key is spread to before its element is
         moved (a scalar ARW is the same on three axes).
+    data_steps : tuple of float
+        Moves measured from the data, tried with the coarse grid (set by the tuner: the IMU
+        time offset's turn-rate lag when it lies beyond the grid's reach); when one wins, the
+        coarse grid is tried again about it.
     """
 
     name: str
@@ -90,6 +94,7 @@ class Parameter:
     judged_by: str = "criterion"
     carries: tuple = ()
     length: int | None = None
+    data_steps: tuple = ()
 
     @property
     def scale(self) -> float:

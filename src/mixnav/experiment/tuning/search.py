@@ -70,9 +70,14 @@ def coordinate_search(doc, cur: dict, params: list[Parameter], scorer, evaluatio
                 return doc, cur, curves
             base = get_value(doc, p)
             _point(curves, p, "current", base, cur, new_visit=True)
-            steps = list(p.coarse if grid == "coarse" else p.fine)
-            doc, cur, best_step = _try(doc, cur, p, base, steps, scorer, evaluations, curves, reserve)
-            if grid == "coarse" and best_step is not None and best_step in (min(steps), max(steps)):
+            grid_steps = list(p.coarse if grid == "coarse" else p.fine)
+            data = [s for s in p.data_steps if s not in grid_steps] if grid == "coarse" else []
+            doc, cur, best_step = _try(doc, cur, p, base, grid_steps + data, scorer, evaluations, curves, reserve)
+            if best_step is not None and best_step in data:
+                # a move the data measured, beyond the grid's reach: the grid again about it
+                base = get_value(doc, p)
+                doc, cur, best_step = _try(doc, cur, p, base, grid_steps, scorer, evaluations, curves, reserve)
+            if grid == "coarse" and best_step is not None and best_step in (min(grid_steps), max(grid_steps)):
                 further = best_step * best_step if p.kind == "log" else 2 * best_step
                 doc, cur, _ = _try(doc, cur, p, base, [further], scorer, evaluations, curves, reserve)
     return doc, cur, curves
