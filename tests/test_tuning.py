@@ -826,3 +826,12 @@ def test_a_latency_beyond_the_grid_is_reached_through_the_turn_rate_lag(tmp_path
     got = get_value(tomlkit.parse(r.tuned_text), next(p for p in ins_parameters() if p.name == key))[0]
     assert abs(got - (-0.15)) <= 0.1 + 1e-9, (got, r.chosen.get(key))
     assert "turn rate" in r.chosen[key]["how"]
+
+
+def test_a_misregistration_beyond_the_lag_range_is_named():
+    """The IMU's stamps 18 s late (GPS time read as UTC): the correlation peaks at the edge of
+    the +-1 s searched, no lag is claimed, and the reason names the likely cause."""
+    from mixnav.experiment.tuning.data_stage import turn_rate_lag
+    imu, fixes = _slalom(18.0)
+    found, why = turn_rate_lag(imu, fixes, (0.0, 140.0))[:2]
+    assert found is None and "edge" in why and "18 s" in why, why

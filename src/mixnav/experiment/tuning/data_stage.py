@@ -220,7 +220,9 @@ def turn_rate_lag(imu, fixes, span):
     corr = np.where(np.isfinite(corr), corr, -1.0)
     k = int(np.argmax(corr))
     if k in (0, len(lags) - 1):
-        return None, f"the correlation peaks at the edge of +-{L:g} s: no lag found inside it"
+        return None, (f"the correlation peaks at the edge of +-{L:g} s: no lag found inside it (too few turns, "
+                      "or the IMU and the fixes misregistered by more than that: GPS and UTC time differ "
+                      "by 18 s)")
     if corr[k] < LAG_MIN_CORR:
         return None, f"peak correlation {corr[k]:.2f} below {LAG_MIN_CORR:g} (too few turns, or noisy fixes)"
     c0, c1, c2 = corr[k - 1:k + 2]
