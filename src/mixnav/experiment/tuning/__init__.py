@@ -569,7 +569,8 @@ def _with_turn_rate_lag(p: Parameter, po, span, chosen: dict, not_tuned: dict) -
     from .data_stage import turn_rate_lag
     if p.name != "installation.imu_time_offset":
         return p
-    found = turn_rate_lag(po.imu, po.all_fixes, span)
+    # the fixes the filter uses: the file's own withheld windows are the user's evaluation
+    found = turn_rate_lag(po.imu, po.fixes, span)
     if found[0] is None:
         not_tuned[p.name + " (turn-rate lag)"] = found[1]
         return p

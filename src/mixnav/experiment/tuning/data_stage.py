@@ -188,8 +188,8 @@ def turn_rate_lag(imu, fixes, span):
     :data:`LAG_STEP_S` steps, the peak refined by a parabola). The magnitude needs no
     mounting: in a car the body turns about its vertical far more than about the others.
     The lag is on the run's time axis, so ``-lag`` is the correction of the configured
-    ``imu_time_offset`` at the span's middle (drive-0708: the innovation likelihood's offset
-    -0.07 s on the first half and -0.19 s on the second, where the innovation likelihood's
+    ``imu_time_offset`` at the span's middle (drive-0708: an offset of -0.07 s on the first
+    half and -0.19 s on the second, where the innovation likelihood's
     quarters prefer -0.125 to -0.175 and -0.2 to -0.225 s; the same offset within 3 ms whether
     the file had configured -0.125 s or +0.4 s). A coarse start, which the search refines."""
     from ...geodesy.frames import ned_displacement
