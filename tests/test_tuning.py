@@ -835,3 +835,56 @@ def test_a_misregistration_beyond_the_lag_range_is_named():
     imu, fixes = _slalom(18.0)
     found, why = turn_rate_lag(imu, fixes, (0.0, 140.0))[:2]
     assert found is None and "edge" in why and "18 s" in why, why
+
+
+UNTUNED = ROOT / "benchmarks" / "configs" / "drive-0708-untuned.toml"
+
+
+def _gpst_seconds(line: str) -> float:
+    """Seconds of the day of an RTKLIB .pos line's GPST stamp."""
+    h, m, s = line.split()[1].split(":")
+    return 3600.0 * int(h) + 60.0 * int(m) + float(s)
+
+
+@need_data
+def test_the_files_own_withheld_windows_never_reach_the_tuning(tmp_path):
+    """The file's own ``withhold`` windows are the user's evaluation: the fixes inside them
+    must not enter the tuning, the data stage included. drive-0708-untuned with a withheld
+    window over the first half's only still segment (198-205 s): the same tuned.toml, byte for
+    byte, when the fixes inside it claim 3 m/s north. Read by the stillness detector, that
+    speed vetoes the stop, the Allan noise could not be read and the tuned file would differ;
+    the fixes outside the window are untouched."""
+    lines = (DATA / "gnss_1934_sf.pos").read_text().splitlines(keepends=True)
+    body = [i for i, ln in enumerate(lines) if ln.strip() and not ln.startswith("%")]
+    doc = tomlkit.parse(UNTUNED.read_text())
+    # the run's time axis (the IMU's first stamp is 0): where the first fix falls on it
+    from mixnav.experiment.tuning.criterion import Evaluator
+    probe = Evaluator(without_reference(tomlkit.dumps(doc)), str(UNTUNED), str(DATA), "ekf",
+                      [[]], (0.0, np.inf))
+    first_fix = float(probe.run(probe.dataset(probe.text), []).all_fixes.time[0])
+    first = _gpst_seconds(lines[body[0]])
+    t_run = lambda ln: _gpst_seconds(ln) - first + first_fix   # noqa: E731
+    moving = list(lines)
+    hit = 0
+    for i in body:
+        if 193.0 <= t_run(lines[i]) <= 212.0:
+            cols = lines[i].split()
+            cols[15] = "3.0000000"                                 # vn [m/s]
+            moving[i] = " ".join(cols) + "\n"
+            hit += 1
+    assert hit > 50                                                # 4 Hz fixes over 19 s
+    doc["gnss"]["withhold"] = [["190 s", "215 s"]]
+    out = {}
+    for label, text in (("still", lines), ("moving", moving)):
+        d = tmp_path / label / "data"
+        d.mkdir(parents=True)
+        for f in ("imu_1934.csv", "imu_1934.csv.tag"):
+            (d / f).symlink_to(DATA / f)
+        (d / "gnss_1934_sf.pos").write_text("".join(text))
+        doc["dataset"]["data_dir"] = "data"
+        (tmp_path / label / "car.toml").write_text(tomlkit.dumps(doc))
+        r = tune(str(tmp_path / label / "car.toml"), tmp_path / label / "out", budget=2, workers=1,
+                 span=("150 s", "290 s"), window="20 s", folds=4)
+        out[label] = (r, (tmp_path / label / "out" / "tuned.toml").read_bytes())
+    assert "from_data" in out["still"][0].chosen["imu.errors.arw"]   # the still segment was read
+    assert out["still"][1] == out["moving"][1]

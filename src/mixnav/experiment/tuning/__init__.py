@@ -384,7 +384,9 @@ def _data_stage(doc, po, span, fix, chosen: dict, not_tuned: dict, local: Evalua
     the probe run (its IMU and fixes on the run's time axis); ``local``: an evaluator on the
     span. What was found goes into ``chosen``, what could not be into ``not_tuned``."""
     from .data_stage import BIAS_INCREMENT_S, LOOSEN, bias_walks, imu_noise, stillness_thresholds
-    noise = imu_noise(po.imu, po.all_fixes, span)
+    # the fixes the filter uses, throughout the data stage: the file's own withheld windows are
+    # the user's evaluation and stay out of the tuning, as the cross-validation keeps them out
+    noise = imu_noise(po.imu, po.fixes, span)
     params = {p.name: p for p in ins_parameters()}
     start_doc = tomlkit.parse(tomlkit.dumps(doc))
     for name, attr, rel in (("imu.errors.arw", "arw", "arw_rel_sigma"), ("imu.errors.vrw", "vrw", "vrw_rel_sigma")):
@@ -404,7 +406,7 @@ def _data_stage(doc, po, span, fix, chosen: dict, not_tuned: dict, local: Evalua
                         "data_how": f"Allan deviation at 1 s over {noise.segments} still segments "
                                     f"({noise.still_s:.0f} s), +-{100 * getattr(noise, rel):.0f} % (1 sigma)"}
     if "aiding" in doc and "zupt" in doc["aiding"]:
-        for k, (val, how) in stillness_thresholds(po.imu, po.all_fixes, span).items():
+        for k, (val, how) in stillness_thresholds(po.imu, po.fixes, span).items():
             name = f"aiding.zupt.{k}"
             if name in fix:
                 not_tuned[name] = "fixed by the user (--fix)"
@@ -477,7 +479,7 @@ def _suspension_stage(doc, start_doc, po, span, fix, chosen: dict, not_tuned: di
     res = local.run(ds, []).results.get(local.method)
     if res is None:
         return
-    k, how = suspension_pitch(res, po.all_fixes, span, ds.aiding.vehicle_mounting)
+    k, how = suspension_pitch(res, po.fixes, span, ds.aiding.vehicle_mounting)
     if k is None:
         not_tuned[name + " (data)"] = how + "; searched by the criterion instead"
         return
@@ -550,7 +552,7 @@ def _scaled_to_fixes(p: Parameter, po, span) -> Parameter:
     from dataclasses import replace
     if p.name != "gnss.min_sigma":
         return p
-    fx = po.all_fixes
+    fx = po.fixes
     sel = (fx.time >= span[0]) & (fx.time <= span[1])
     sig = np.asarray(fx.pos_sigma, float).reshape(len(fx.time), -1)[sel][:, :2]
     if not sig.size or not np.isfinite(sig).all():
