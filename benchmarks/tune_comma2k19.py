@@ -1,6 +1,6 @@
 """Issue 35 on comma2k19-example1: the shipped file (default) against `mixnav tune`'s, two-fold.
 
-    python benchmarks/tune_comma2k19.py [--budget 60] [--workers 1] [--out FILE]
+    python benchmarks/tune_comma2k19.py [--budget 160] [--workers 1] [--out FILE]
 
 Start: src/mixnav/config/datasets/comma2k19-example1.toml as shipped (the data README, a
 consumer-MEMS data sheet and values measured from the data; nothing fitted on a reference),
@@ -107,7 +107,7 @@ def one_key_at_a_time(default: Path, tuned: Path, keys: list, work: Path, span, 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--budget", type=int, default=60)
+    ap.add_argument("--budget", type=int, default=160)
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--data", default=str(DATA))
     ap.add_argument("--work", default="/tmp/tune_comma2k19", help="folder for the tune outputs")

@@ -1,6 +1,6 @@
 """Issue 35's two-fold check on drive-0708: tuned on one half, scored on the other.
 
-    python benchmarks/tune_drive0708.py [--budget 60] [--workers 2] [--out FILE] [--tag-start first-bytes]
+    python benchmarks/tune_drive0708.py [--budget 160] [--workers 2] [--out FILE] [--tag-start first-bytes]
 
 Start: benchmarks/configs/drive-0708-untuned.toml (the data README's values, the aiding at
 docs/aiding.md's defaults, nothing fitted by hand). For each fold, :func:`mixnav.tune` tunes it
@@ -145,7 +145,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--write-docs", action="store_true",
                     help="only put the recorded results' table into docs/tuning.md (no run)")
-    ap.add_argument("--budget", type=int, default=96)
+    ap.add_argument("--budget", type=int, default=160)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--work", default="/tmp/tune_drive0708", help="folder for the tune outputs")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "tune_drive0708"))

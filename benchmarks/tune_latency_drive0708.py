@@ -1,6 +1,6 @@
 """``mixnav tune`` from a latency beyond its grid: drive-0708 configured with the IMU 0.4 s late.
 
-    python benchmarks/tune_latency_drive0708.py [--budget 96] [--workers 2]
+    python benchmarks/tune_latency_drive0708.py [--budget 160] [--workers 2]
 
 Start: benchmarks/configs/drive-0708-untuned.toml with ``imu_time_offset = "0.4 s"`` (the data
 README says -0.125 s; the innovation likelihood prefers about -0.15 s on the first half and
@@ -28,7 +28,7 @@ DATA = ROOT.parent / "shared" / "data" / "drive-0708"
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--budget", type=int, default=96)
+    ap.add_argument("--budget", type=int, default=160)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--work", default="/tmp/tune_latency_drive0708")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "tune_latency_drive0708"))

@@ -1,6 +1,6 @@
 """How long `mixnav tune` takes on a 9-minute IMU + GNSS recording (issue 35: <= 2 minutes on two cores).
 
-    python benchmarks/tune_speed.py [--budget 96] [--workers 2] [--repeat 2]
+    python benchmarks/tune_speed.py [--budget 160] [--workers 2] [--repeat 2]
 
 Tunes benchmarks/configs/drive-0708-untuned.toml (549 s of 100 Hz IMU and 4 Hz RTK; the whole
 drive) with the default settings into a fresh folder each time, and records the wall time of
@@ -25,7 +25,7 @@ CONFIG = ROOT / "benchmarks" / "configs" / "drive-0708-untuned.toml"
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--budget", type=int, default=96)
+    ap.add_argument("--budget", type=int, default=160)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "tune_speed"))

@@ -301,6 +301,7 @@ def test_the_file_as_given_is_kept_when_the_criterion_cannot_tell_it_from_the_be
     assert _kept_as_given({"nlpd": 608.0}, {"nlpd": 1.39}, 0.50) is None
     assert _kept_as_given({"nlpd": float("inf")}, {"nlpd": 1.0}, 0.5) is None
     assert _kept_as_given({"nlpd": 1.0}, {"nlpd": float("nan")}, 0.5) is None
+    assert "nothing the search found beats it" in _kept_as_given({"nlpd": 1.10}, {"nlpd": 1.22}, 0.68)
 
 
 def _rescored(out: Path) -> float:
@@ -888,3 +889,63 @@ def test_the_files_own_withheld_windows_never_reach_the_tuning(tmp_path):
         out[label] = (r, (tmp_path / label / "out" / "tuned.toml").read_bytes())
     assert "from_data" in out["still"][0].chosen["imu.errors.arw"]   # the still segment was read
     assert out["still"][1] == out["moving"][1]
+
+
+class _RateScorer:
+    """Scores a candidate by the NHC rate it sets: the faster the better."""
+
+    def __init__(self):
+        self.rates = []
+
+    def left(self):
+        return 100
+
+    def score(self, texts):
+        out = []
+        for t in texts:
+            r = float(tomllib.loads(t)["aiding"]["nhc"]["rate"].split()[0])
+            self.rates.append(r)
+            out.append({"criterion": 10.0 - r, "nlpd": 10.0 - r, "innovation_ll_per_update": 0.0})
+        return out
+
+
+def test_a_grid_edge_clipped_to_the_value_held_is_not_scored_again():
+    """The NHC rate from 1 Hz: x5 (5 Hz, its bound) wins at the grid's edge; the step one further
+    (x25) is clipped to the same 5 Hz and is not scored twice."""
+    from mixnav.experiment.tuning.search import coordinate_search
+    doc = tomlkit.parse((ROOT / "benchmarks" / "configs" / "drive-0708-untuned.toml").read_text())
+    doc["aiding"]["nhc"]["rate"] = "1 Hz"
+    rate = next(q for q in ins_parameters() if q.name == "aiding.nhc.rate")
+    scorer = _RateScorer()
+    out, _, _ = coordinate_search(doc, {"criterion": 9.0, "nlpd": 9.0, "innovation_ll_per_update": 0.0}, [rate], scorer, [], grids=("coarse",))
+    assert scorer.rates == [2.0, 5.0]
+    assert get_value(out, rate)[0] == 5.0
+
+
+@need_data
+@pytest.mark.parametrize("budget, coarse_visits", [(60, 2), (24, 1)])
+def test_the_second_coarse_pass_runs_only_when_the_fine_pass_keeps_its_budget(tmp_path, budget, coarse_visits):
+    """Three keys searched (ARW, the vertical gyro's alone, VRW; the rest fixed) on a drive-0708
+    span: the coarse grid is run twice, then the fine one, when the budget allows; a budget that
+    cannot hold the whole second pass besides the fine pass drops it (24: the first pass spends
+    15, the file as given one, 8 are left; the second pass needs 12, the fine pass 7), and the
+    fine pass still visits every key."""
+    keep = {"imu.errors.arw", "imu.errors.arw[2]", "imu.errors.vrw"}
+    r = tune(str(ROOT / "benchmarks" / "configs" / "drive-0708-untuned.toml"), tmp_path / "out", budget=budget,
+             workers=1, span=("60 s", "185 s"), window="20 s", folds=4, fix=[k for k in tunable_keys() if k not in keep])
+    changed = [e["changed"] for e in r.evaluations]
+    for k in sorted(keep):
+        assert changed.count(f"{k} x0.25") == coarse_visits, changed
+        assert f"{k} x1.41421" in changed and f"{k} x0.707107" in changed, changed
+
+
+def test_the_command_line_and_the_api_share_the_tuners_default_budget():
+    import inspect
+
+    import mixnav
+    from mixnav import cli
+    from mixnav.experiment.tuning import DEFAULT_BUDGET
+    from mixnav.experiment.tuning import tune as tune_impl
+    assert inspect.signature(tune_impl).parameters["budget"].default == DEFAULT_BUDGET
+    assert inspect.signature(mixnav.tune).parameters["budget"].default == DEFAULT_BUDGET
+    assert inspect.signature(cli.tune).parameters["budget"].default.default == DEFAULT_BUDGET
