@@ -183,7 +183,7 @@ def run_experiment(scenario: str, runs: int, out, *, workers: int | None = None,
     return ExperimentResult(results, tables["summary"], tables["series"], tables["consistency"], out)
 
 
-def tune(name_or_path: str, out, *, budget: int = 160, workers: int | None = None, scheduler: str | None = None,
+def tune(name_or_path: str, out, *, budget: int | None = None, workers: int | None = None, scheduler: str | None = None,
          data: str | None = None, fix=(), span=None, window="30 s", folds: int = 6, method: str | None = None,
          criterion: str | None = None, resume: bool = False, overwrite: bool = False, progress: bool = False,
          seed: int = 0):

@@ -344,8 +344,9 @@ def experiment(scenario: str = typer.Argument(..., help="Shipped scenario name o
 def tune(dataset: str = typer.Argument(..., help="Shipped dataset config name or path of a .toml file "
                                                "(IMU + GNSS fixes, odometry + pseudoranges, or raw GNSS)."),
          out_dir: Path = typer.Option(..., "--out", help="Folder for tuned.toml, tune.json, report.md, tune.png."),
-         budget: int = typer.Option(160, "--budget", help="Candidate settings scored at most (each is --folds "
-                                                         "filter runs; at least 1)."),
+         budget: int = typer.Option(None, "--budget", help="Candidate settings scored at most (each is --folds "
+                                                          "filter runs; at least 1; default 160 for IMU + GNSS "
+                                                          "fixes, 96 for odometry + pseudoranges and raw GNSS)."),
          workers: int = typer.Option(None, "--workers", min=1, help="Local worker processes (default: all cores)."),
          scheduler: str = typer.Option(None, "--scheduler", help="Dask scheduler address (tcp://host:8786) to run "
                                                                "the candidates on; needs mixnav[dask]."),

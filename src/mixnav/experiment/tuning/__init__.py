@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -46,14 +46,23 @@ from .parameters import Parameter, get_value, ins_parameters, set_value
 from .scoring import Scorer
 from .search import MIN_GAIN
 
-__all__ = ["tune", "TuneResult", "tunable_keys"]
+__all__ = ["tune", "TuneResult", "tunable_keys", "default_budget"]
 
-#: the evaluations a tuning may spend unless told: drive-0708's half (235 s, 13 search keys)
-#: spends 145 with the second coarse pass (search's module docstring), 95 without; the whole
-#: drive is tuned well inside the 2-minute bound (benchmarks/results/tune_speed.md). A smaller
-#: budget drops the second coarse pass first, then the fine pass's last keys. The CLI and
-#: :func:`mixnav.tune` say the same number (tests/test_tuning.py)
+#: the evaluations an IMU + GNSS-fixes tuning may spend unless told: on drive-0708's halves the
+#: search spends about 145 with its second coarse pass (search's module docstring), 95 without;
+#: the whole drive took 63-65 s on two cores here (benchmarks/results/tune_speed.md; a machine
+#: half as fast would pass the 2-minute bound). A smaller budget drops the second coarse pass
+#: first, then the fine pass's last keys
 DEFAULT_BUDGET = 160
+#: the same for odometry + pseudorange and raw-GNSS datasets: their searches end by themselves
+#: within it (50-70 evaluations on the recordings in benchmarks/results/tune_raw_gnss.md and
+#: tune_smartloc.md) and have no second coarse pass; the budget their results were measured at
+PSEUDORANGE_DEFAULT_BUDGET = 96
+
+
+def default_budget(kind: str) -> int:
+    """The budget :func:`tune` spends unless told, for a dataset of ``kind`` (``[dataset] kind``)."""
+    return PSEUDORANGE_DEFAULT_BUDGET if kind in ("odometry-gnss", "gnss-raw") else DEFAULT_BUDGET
 
 #: what a tune folder holds
 TUNE_FILES = ("tuned.toml", "tune.json", "report.md", "tune.png", "tune_journal.jsonl")
@@ -106,7 +115,7 @@ def _target_method(ds, method: str | None) -> str:
     return max(ds.methods, key=lambda m: len(getattr(m, "aiding", None) or ())).name
 
 
-def tune(dataset, out, *, budget: int = DEFAULT_BUDGET, workers: int | None = None, scheduler: str | None = None,
+def tune(dataset, out, *, budget: int | None = None, workers: int | None = None, scheduler: str | None = None,
          data: str | None = None, fix=(), span=None, window="30 s", folds: int = 6, method: str | None = None,
          criterion: str | None = None, resume: bool = False, overwrite: bool = False, progress: bool = False, seed: int = 0) -> TuneResult:
     """Tune a dataset file from its own data (never its reference) and write ``out``.
@@ -122,7 +131,8 @@ def tune(dataset, out, *, budget: int = DEFAULT_BUDGET, workers: int | None = No
     budget : int
         Largest number of candidate settings evaluated by the criterion (each is ``folds``
         filter runs; odometry + pseudoranges: six pipeline runs); at least 1. Default
-        :data:`DEFAULT_BUDGET` (160).
+        (None): :func:`default_budget`, 160 for IMU + GNSS fixes, 96 for odometry +
+        pseudoranges and raw GNSS.
     workers : int, optional
         Local worker processes (default: all cores); ``scheduler``: a Dask scheduler
         address instead.
@@ -155,7 +165,7 @@ def tune(dataset, out, *, budget: int = DEFAULT_BUDGET, workers: int | None = No
     """
     from ...config.loader import load_dataset_text, resolve
     from ...io.outdir import check_out_dir, clear_folder, write_marker
-    if isinstance(budget, bool) or not isinstance(budget, (int, np.integer)) or budget < 1:
+    if budget is not None and (isinstance(budget, bool) or not isinstance(budget, (int, np.integer)) or budget < 1):
         raise ArgumentError(f"must be a whole number of evaluations >= 1, got {budget!r}", argument="budget")
     if isinstance(folds, bool) or not isinstance(folds, (int, np.integer)) or folds < 4:
         raise ArgumentError(f"must be a whole number >= 4 (windows start every half window; a fold's must "
@@ -171,6 +181,7 @@ def tune(dataset, out, *, budget: int = DEFAULT_BUDGET, workers: int | None = No
     ds, _, _ = load_dataset_text(stripped, source)
     vehicle = ds.dataset.kind == "odometry-gnss"
     raw = ds.dataset.kind == "gnss-raw"
+    budget = default_budget(ds.dataset.kind) if budget is None else int(budget)
     if not (vehicle or raw) and (getattr(ds, "gnss", None) is None or getattr(ds, "imu", None) is None):
         raise ConfigError("mixnav tune needs an IMU + GNSS-fixes dataset ([imu] and [gnss]), an odometry + "
                           "pseudorange one or a raw-GNSS one; tuning an IMU with raw GNSS (RINEX) is not built yet "
@@ -285,18 +296,19 @@ def tune(dataset, out, *, budget: int = DEFAULT_BUDGET, workers: int | None = No
                 not_tuned[p.name] = "a key its step moves with it is fixed by the user (--fix)"
             elif p.name not in searched_names and not chosen.get(p.name, {}).get("measured"):
                 not_tuned[p.name] = _why_not(cur_doc, p, pds)
-        before = tomlkit.dumps(cur_doc)
+        before, left_before = tomlkit.dumps(cur_doc), scorer.left()
         cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations, grids=("coarse",),
                                                  reserve=CONSERVATIVE_RESERVE)
-        # the coarse grid again from where the first pass left every key, when the budget holds the
-        # whole pass besides the installation's, the fine pass's and the reserves' evaluations: the
-        # first pass set the timing keys before the noise scales it visits next had moved from the
-        # data stage's start, and each noise scale before the keys after it (search's docstring)
+        # the coarse grid again from where the first pass left every key (search's module docstring),
+        # when the budget holds as many evaluations as the first pass spent besides the installation's,
+        # the fine pass's and the reserves'. Without the data's moves (the turn-rate lag): they were
+        # measured from the file's values, which the first pass has left
+        first_cost = left_before - scorer.left()
         fine_cost = 1 + sum(len(p.fine) for p in searched)
-        coarse_cost = sum(len(p.coarse) for p in searched)
-        if tomlkit.dumps(cur_doc) != before and scorer.left() >= CONSERVATIVE_RESERVE + fine_cost + coarse_cost:
-            cur_doc, cur, curves = coordinate_search(cur_doc, cur, searched, scorer, evaluations, grids=("coarse",),
-                                                     curves=curves, reserve=CONSERVATIVE_RESERVE + fine_cost)
+        if tomlkit.dumps(cur_doc) != before and scorer.left() >= CONSERVATIVE_RESERVE + fine_cost + first_cost:
+            cur_doc, cur, curves = coordinate_search(cur_doc, cur, [replace(p, data_steps=()) for p in searched],
+                                                     scorer, evaluations, grids=("coarse",), curves=curves,
+                                                     reserve=CONSERVATIVE_RESERVE + fine_cost)
         # the installation mixnav estimates as states, kept when the criterion agrees; between the
         # passes, after the time offset and velocity delay (a lever arm would otherwise absorb a
         # timing error along the track)
@@ -392,9 +404,10 @@ def _kept_as_given(given: dict, best: dict, tolerance: float, n_windows: int | N
     se = best.get("criterion_se")
     parts = (f"the larger of one standard error, {se:.3f}, and 2 / {n_windows} windows"
              if se is not None and n_windows else "one standard error, at least 2 / n_windows")
-    if g <= b:   # the timing keys follow the innovation likelihood: the search can end above its start
+    if g <= b:   # keys judged otherwise (timing: the innovation likelihood) can take the search above its start
         return (f"its criterion ({g:.3f}) is at or below the search's best ({b:.3f}; the timing keys follow "
-                f"the innovation likelihood, not this criterion): nothing the search found beats it")
+                f"the innovation likelihood and the installation its cross-fitted score, not this criterion): "
+                f"nothing the search found beats it")
     return (f"its criterion ({g:.3f}) is within the criterion's bar ({tolerance:.3f}: {parts}) of the "
             f"search's best ({b:.3f}): the cross-validation cannot tell them apart")
 
@@ -405,8 +418,9 @@ def _data_stage(doc, po, span, fix, chosen: dict, not_tuned: dict, local: Evalua
     the probe run (its IMU and fixes on the run's time axis); ``local``: an evaluator on the
     span. What was found goes into ``chosen``, what could not be into ``not_tuned``."""
     from .data_stage import BIAS_INCREMENT_S, LOOSEN, bias_walks, imu_noise, stillness_thresholds
-    # the fixes the filter uses, throughout the data stage: the file's own withheld windows are
-    # the user's evaluation and stay out of the tuning, as the cross-validation keeps them out
+    # the fixes the filter uses, throughout the data stage: the fixes in the file's own withheld
+    # windows are the user's truth and stay out of the tuning, as the cross-validation keeps them
+    # out (the IMU inside those windows is data the filter runs on, and is used)
     noise = imu_noise(po.imu, po.fixes, span)
     params = {p.name: p for p in ins_parameters()}
     start_doc = tomlkit.parse(tomlkit.dumps(doc))
@@ -570,7 +584,6 @@ def _scaled_to_fixes(p: Parameter, po, span) -> Parameter:
     file's floor is zero (the schema's default): the log grid then tries x2, x4 (x16) of it. From
     the 1 mm lower bound the candidates left RTK's 1 cm sigmas untouched: the key was never
     searched."""
-    from dataclasses import replace
     if p.name != "gnss.min_sigma":
         return p
     fx = po.fixes

@@ -40,7 +40,7 @@ class Parameter:
     kind : str
         ``"log"`` (scaled by factors) or ``"shift"`` (offsets in SI).
     coarse, fine : tuple of float
-        The moves of the search's first and second pass (factors or SI offsets).
+        The moves of the search's coarse and fine passes (factors or SI offsets).
     lower, upper : float
         Bounds in SI.
     index : int or None
