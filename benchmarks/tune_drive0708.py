@@ -10,7 +10,10 @@ no later data), never reading the reference. Then the outage sweep (30 s windows
 :func:`mixnav.outage_sweep`) scores, on the OTHER half and against the reference: the tuned
 file, the untuned start, and the shipped hand-tuned drive-0708-aided.toml (whose values were
 fitted on the whole drive, partly with the reference in view: its row is the bar, not a
-peer). Causal filters only (the ``aided`` method, unsmoothed, in all three).
+peer). A fourth row, ``issue-day``, is that file as issue 35 quoted it (3.5 / 14.4 m over the
+whole drive, at a10f2d3): the same values without the NHC suspension pitch gain
+(``aiding.nhc.pitch_per_accel``), which came a day later. Causal filters only (the ``aided``
+method, unsmoothed, in every row).
 
 ``--tag-start first-bytes`` reads the IMU time tags from their first pair in all three files
 (docs/data_formats.md, "drive-0708 time tags"; the hand-tuned file keeps its time offset, which
@@ -35,6 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 UNTUNED = ROOT / "benchmarks" / "configs" / "drive-0708-untuned.toml"
 HAND = "drive-0708-aided"
 HALVES = {"first": ("60 s", "295 s"), "second": ("295 s", "530 s")}
+LABELS = ("tuned", "untuned", "hand-tuned", "issue-day")
 
 
 def summary(rows, method="aided") -> dict:
@@ -50,7 +54,7 @@ def pooled(res: dict) -> dict:
     """Per config, median / p90 / worst over both folds' held-out windows together (each window
     scored by the fold that did not tune on it)."""
     out = {}
-    for label in ("tuned", "untuned", "hand-tuned"):
+    for label in LABELS:
         h = np.array([x for f in res["folds"].values() for x in f[label]["per_window"].values()], float)
         out[label] = {"windows": int(len(h)), "median_m": float(np.median(h)), "p90_m": float(np.percentile(h, 90)),
                       "worst_m": float(h.max())}
@@ -66,11 +70,11 @@ def docs_table(res: dict) -> str:
     def cell(s):
         return (f"{s['median_m']:.1f} / {s['p90_m']:.1f} / {s['worst_m']:.1f} m, "
                 f"{100 * s['nees_in_band_share']:.0f} %")
-    lines = ["| tuned on, scored on | untuned: median / p90 / worst, NEES in band | tuned | hand-tuned |",
-             "|---|---|---|---|"]
+    lines = ["| tuned on, scored on | untuned: median / p90 / worst, NEES in band | tuned | hand-tuned | "
+             "hand-tuned as issue 35 quoted it |", "|---|---|---|---|---|"]
     for name, f in res["folds"].items():
         lines.append(f"| {name.split('-')[-1]}, {f['scored_on']} | {cell(f['untuned'])} | {cell(f['tuned'])} | "
-                     f"{cell(f['hand-tuned'])} |")
+                     f"{cell(f['hand-tuned'])} | {cell(f['issue-day'])} |")
     return "\n".join(lines)
 
 
@@ -101,6 +105,14 @@ def edited_copy(name_or_path: str, work: Path, suffix: str, edit) -> str:
     return str(out)
 
 
+def _issue_day(name_or_path: str, work: Path) -> str:
+    """:func:`edited_copy` without ``[aiding.nhc] pitch_per_accel``: drive-0708-aided.toml's values
+    as issue 35 quoted them (a10f2d3; the suspension pitch gain was added at a9296f6)."""
+    def edit(doc):
+        doc["aiding"]["nhc"].pop("pitch_per_accel", None)
+    return edited_copy(name_or_path, work, "issue-day", edit)
+
+
 def _with_tag_start(name_or_path: str, work: Path, rule: str) -> str:
     """:func:`edited_copy` with ``[imu] tag_start = rule``."""
     def edit(doc):
@@ -116,11 +128,12 @@ def write_md(res: dict, out: str) -> None:
              "`benchmarks/configs/drive-0708-untuned.toml`; tuned on one half of 60-530 s, scored on the other by "
              "the outage sweep (30 s windows every 10 s) against the reference; causal `aided` in every row. "
              "The hand-tuned row is the shipped drive-0708-aided.toml, fitted on the whole drive (partly with the "
-             "reference in view): the bar, not a peer.", "",
+             "reference in view): the bar, not a peer. The issue-day row is that file as issue 35 quoted it "
+             "(a10f2d3: the same values without the NHC suspension pitch gain, added a day later).", "",
              "| tuned on | scored on | config | windows | median [m] | p90 [m] | worst [m] | NEES in band |",
              "|---|---|---|---|---|---|---|---|"]
     for name, f in res["folds"].items():
-        for label in ("tuned", "untuned", "hand-tuned"):
+        for label in LABELS:
             s = f[label]
             lines.append(f"| {name.split('-')[-1]} | {f['scored_on']} | {label} | {s['windows']} | "
                          f"{s['median_m']:.2f} | {s['p90_m']:.2f} | {s['worst_m']:.2f} | "
@@ -158,6 +171,7 @@ def main(argv=None):
     untuned, hand = str(UNTUNED), HAND
     if a.tag_start != "tag":
         untuned, hand = (_with_tag_start(f, Path(a.work), a.tag_start) for f in (str(UNTUNED), HAND))
+    issue_day = _issue_day(hand, Path(a.work))
     res = {"budget": a.budget, "workers": a.workers, "tag_start": a.tag_start, "folds": {}}
     for tune_half, eval_half in (("first", "second"), ("second", "first")):
         out = Path(a.work) / f"tuned-on-{tune_half}"
@@ -170,7 +184,8 @@ def main(argv=None):
                 "chosen": {k: c.get("value") for k, c in r.chosen.items()}, "scored_on": eval_half}
         print(f"tuned on the {tune_half} half: {wall:.1f} s, {r.runs} filter runs, criterion "
               f"{r.given['nlpd']:.3f} -> {r.tuned['nlpd']:.3f}", flush=True)
-        for label, cfg in (("tuned", str(out / "tuned.toml")), ("untuned", untuned), ("hand-tuned", hand)):
+        for label, cfg in (("tuned", str(out / "tuned.toml")), ("untuned", untuned), ("hand-tuned", hand),
+                           ("issue-day", issue_day)):
             rows = mixnav.outage_sweep(cfg, "30 s", "10 s", HALVES[eval_half], workers=a.workers)
             fold[label] = summary(rows)
             s = fold[label]
