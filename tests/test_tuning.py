@@ -456,19 +456,27 @@ def test_a_clock_drift_step_turns_the_clock_about_the_spans_middle():
     """The tuner's drift carries the time offset by minus the span's centre: a +100 ppm step at a
     400 s centre moves the offset by -0.04 s, so the stamps at 400 s stay where they were; with
     the offset fixed by the user it carries nothing."""
-    from mixnav.experiment.tuning import _pivoted
+    from mixnav.experiment.tuning.adapt import Recording, adapted
     from mixnav.experiment.tuning.search import _with
     doc = tomlkit.parse((ROOT / "benchmarks" / "configs" / "drive-0708-untuned.toml").read_text())
     drift = next(q for q in ins_parameters() if q.name == "installation.imu_clock_drift")
     offset = next(q for q in ins_parameters() if q.name == "installation.imu_time_offset")
-    p = _pivoted(drift, (300.0, 500.0), fix=())
+    p = adapted(drift, Recording(None, (300.0, 500.0), fix=()))
     new = tomlkit.parse(_with(doc, p, moved(p, get_value(doc, p), 100e-6)))
     assert get_value(new, p)[0] == pytest.approx(100e-6)
     assert get_value(new, offset)[0] == pytest.approx(get_value(doc, offset)[0] - 0.04)
     stamp = lambda d, t: get_value(d, offset)[0] + get_value(d, p)[0] * t   # noqa: E731
     assert stamp(new, 400.0) == pytest.approx(stamp(doc, 400.0), abs=1e-12)
     assert stamp(new, 500.0) - stamp(doc, 500.0) == pytest.approx(0.01)
-    assert _pivoted(drift, (300.0, 500.0), fix=["installation.imu_time_offset"]).carries == ()
+    assert adapted(drift, Recording(None, (300.0, 500.0), fix=["installation.imu_time_offset"])).carries == ()
+
+
+def test_every_adapter_is_registered_under_a_tuned_key():
+    """An adapter under a name no tuned key has would never run (a key renamed in
+    parameters.py and not here): every name in ADAPTERS is one of ins_parameters()."""
+    from mixnav.experiment.tuning.adapt import ADAPTERS
+    names = {q.name for q in ins_parameters()}
+    assert set(ADAPTERS) <= names, sorted(set(ADAPTERS) - names)
 
 
 @need_data
@@ -479,7 +487,7 @@ def test_drive0708_read_by_the_readme_rule_shows_its_clock_drift_in_the_innovati
     drive's middle, 300 s) than without a drift or with +250 ppm. Independent of the tags: only
     the GNSS innovations judge."""
     from mixnav.config import load_dataset
-    from mixnav.experiment.tuning import _pivoted
+    from mixnav.experiment.tuning.adapt import Recording, adapted
     from mixnav.experiment.tuning.criterion import Evaluator
     from mixnav.experiment.tuning.search import _with
     text = without_reference((SHIPPED / "drive-0708-plain.toml").read_text())
@@ -488,7 +496,8 @@ def test_drive0708_read_by_the_readme_rule_shows_its_clock_drift_in_the_innovati
     for t in list(doc["gnss"]):
         if t == "withhold":
             del doc["gnss"][t]
-    drift = _pivoted(next(q for q in ins_parameters() if q.name == "installation.imu_clock_drift"), (0, 600), ())
+    drift = adapted(next(q for q in ins_parameters() if q.name == "installation.imu_clock_drift"),
+                    Recording(None, (0, 600)))
     ev = Evaluator(tomlkit.dumps(doc), src, None, "ekf", [[]], (0.0, np.inf))
     ll = {}
     for d in (-250e-6, 0.0, 250e-6):

@@ -41,6 +41,7 @@ import numpy as np
 import tomlkit
 
 from ...errors import ArgumentError, ConfigError
+from .adapt import Recording, adapted
 from .criterion import Evaluator, cv_windows, without_reference
 from .parameters import Parameter, get_value, ins_parameters, set_value
 from .scoring import Scorer
@@ -277,10 +278,11 @@ def tune(dataset, out, *, budget: int | None = None, workers: int | None = None,
         from .search import (CONSERVATIVE_KEYS, CONSERVATIVE_STEPS, conservative_pass, conservative_tolerance,
                              coordinate_search)
         from .parameters import NHC_RATE
-        searched = [_pivoted(_scaled_to_fixes(p, po, (t_first, t_last)), (t_first, t_last), fix)
+        # each key's search fitted to this recording where it needs to be (.adapt)
+        recording = Recording(po, (t_first, t_last), fix, chosen, not_tuned)
+        searched = [adapted(p, recording)
                     for p in ins_parameters() if not _fixed(p.name, fix) and _applies(cur_doc, p, pds)
                     and not chosen.get(p.name, {}).get("measured") and not _carries_fixed(p, fix)]
-        searched = [_with_turn_rate_lag(p, po, (t_first, t_last), chosen, not_tuned) for p in searched]
         # the NHC rate last of all, after the conservative pass (below): its step carries the
         # sigmas so that the information per second stays, so the other keys' optima hardly move
         # with it, and every evaluation after a faster rate would cost more
@@ -579,47 +581,6 @@ def _installation_stage(cur_doc, cur: dict, fix, scorer, evaluations: list, chos
     return (pdoc, sc) if keep else (cur_doc, cur)
 
 
-def _scaled_to_fixes(p: Parameter, po, span) -> Parameter:
-    """``gnss.min_sigma`` moved from the fixes' own median horizontal sigma in the span when the
-    file's floor is zero (the schema's default): the log grid then tries x2, x4 (x16) of it. From
-    the 1 mm lower bound the candidates left RTK's 1 cm sigmas untouched: the key was never
-    searched."""
-    if p.name != "gnss.min_sigma":
-        return p
-    fx = po.fixes
-    sel = (fx.time >= span[0]) & (fx.time <= span[1])
-    sig = np.asarray(fx.pos_sigma, float).reshape(len(fx.time), -1)[sel][:, :2]
-    if not sig.size or not np.isfinite(sig).all():
-        return p
-    return replace(p, zero_from=float(np.clip(np.median(sig), p.lower, p.upper)))
-
-
-def _with_turn_rate_lag(p: Parameter, po, span, chosen: dict, not_tuned: dict) -> Parameter:
-    """The IMU time offset with the move the turn-rate cross-correlation measured
-    (:func:`.data_stage.turn_rate_lag`) tried beside its coarse grid, when that move lies beyond
-    the grid's reach (a logger's latency of half a second: from the grid's +-0.1 s steps the
-    search would stop a few tenths short, and every key after it would absorb the rest). Any
-    other key, or a lag within reach, as it is; a lag the data cannot show is said in
-    ``not_tuned``."""
-    from dataclasses import replace
-    from .data_stage import turn_rate_lag
-    if p.name != "installation.imu_time_offset":
-        return p
-    # the fixes the filter uses: the file's own withheld windows are the user's evaluation
-    found = turn_rate_lag(po.imu, po.fixes, span)
-    if found[0] is None:
-        not_tuned[p.name + " (turn-rate lag)"] = found[1]
-        return p
-    lag, corr, pairs = found
-    move = round(-lag, 3)
-    if abs(move) <= max(abs(s) for s in p.coarse):
-        return p
-    chosen.setdefault(p.name, {})["data_how"] = (
-        f"the IMU's turn rate against the fixes' course rate peaks {lag:+.3f} s late (correlation {corr:.2f}, "
-        f"{pairs} chord pairs): a move of {move:+g} s tried beside the grid")
-    return replace(p, data_steps=(move,))
-
-
 def _fixed(name: str, fix) -> bool:
     """``name`` kept as the file gives it: named in ``fix``, or an element (``X[i]``) of a key
     named there (fixing ``imu.errors.arw`` fixes its vertical element too)."""
@@ -631,18 +592,6 @@ def _carries_fixed(p: Parameter, fix) -> bool:
     than the clock drift's time offset (the drift then turns about the stamps' start)."""
     return any(_fixed(q.name, fix) or any(_fixed(f"{q.name}[{i}]", fix) for i in range(3))
                for q, _ in p.carries) and p.name != "installation.imu_clock_drift"
-
-
-def _pivoted(p: Parameter, span, fix) -> Parameter:
-    """The IMU clock drift turned about the span's middle (it carries the time offset,
-    :func:`.parameters.pivoted`) unless the user fixed the offset; any other key as it is. From
-    the stamps' start a drift step would move the whole span and be refused by the offset's
-    misfit (the two keys are nearly one along the drive)."""
-    from .parameters import IMU_CLOCK_DRIFT, pivoted
-    if p.name != IMU_CLOCK_DRIFT.name or "installation.imu_time_offset" in fix:
-        return p
-    offset = next(q for q in ins_parameters() if q.name == "installation.imu_time_offset")
-    return pivoted(p, offset, 0.5 * (span[0] + span[1]))
 
 
 def _applies(doc, p: Parameter, ds) -> bool:
